@@ -1,0 +1,90 @@
+// deformbench SDK: declared parameters. Each model declares every parameter once (key, SI unit,
+// default, valid range, one-line description); the harness validates scenes against the list,
+// prints it in `deformbench plugins` and writes the resolved values into results.json.
+#pragma once
+
+#include <deform/error.h>
+#include <deform/types.h>
+
+#include <limits>
+#include <map>
+#include <string>
+#include <utility>
+#include <variant>
+#include <vector>
+
+namespace deform {
+
+enum class ParamType { Real, Int, Bool, Choice };
+
+using ParamValue = std::variant<bool, long long, double, std::string>;
+
+struct ParamSpec {
+  std::string key;
+  std::string unit;  ///< SI unit ("Pa", "m", "s", "1" for dimensionless, "" for counts/choices)
+  ParamType type = ParamType::Real;
+  ParamValue defaultValue = 0.0;
+  double min = -std::numeric_limits<double>::infinity();  ///< inclusive, Real and Int
+  double max = std::numeric_limits<double>::infinity();   ///< inclusive, Real and Int
+  std::vector<std::string> choices;                       ///< Choice only
+  std::string description;
+
+  static ParamSpec real(std::string key, std::string unit, double def, double lo, double hi,
+                        std::string description) {
+    return {std::move(key), std::move(unit), ParamType::Real, def, lo, hi, {},
+            std::move(description)};
+  }
+  static ParamSpec integer(std::string key, long long def, long long lo, long long hi,
+                           std::string description) {
+    return {std::move(key), "", ParamType::Int, def, double(lo), double(hi), {},
+            std::move(description)};
+  }
+  static ParamSpec flag(std::string key, bool def, std::string description) {
+    return {std::move(key), "", ParamType::Bool, def, 0, 1, {}, std::move(description)};
+  }
+  static ParamSpec choice(std::string key, std::string def, std::vector<std::string> choices,
+                          std::string description) {
+    return {std::move(key), "", ParamType::Choice, std::move(def), 0, 0, std::move(choices),
+            std::move(description)};
+  }
+};
+
+/// Resolved parameter values: every declared key present (scene value or default), already
+/// validated. Accessors assert on a key that was not declared (a programmer error).
+class ParamValues {
+ public:
+  ParamValues() = default;
+  explicit ParamValues(std::map<std::string, ParamValue> values) : m_values(std::move(values)) {}
+
+  double real(const std::string& key) const;
+  long long integer(const std::string& key) const;
+  bool flag(const std::string& key) const;
+  const std::string& choice(const std::string& key) const;
+
+  /// Maps a Choice value to an enum through a table; throws InputError on a value not in it
+  /// (cannot happen after validation unless the table and the declared choices disagree).
+  template <class Enum>
+  Enum choiceAs(const std::string& key,
+                const std::vector<std::pair<std::string, Enum>>& table) const {
+    const std::string& v = choice(key);
+    for (const auto& [name, e] : table) {
+      if (name == v) return e;
+    }
+    throw InputError("", "params." + key, "unknown choice '" + v + "'");
+  }
+
+  bool has(const std::string& key) const { return m_values.count(key) != 0; }
+  void set(const std::string& key, ParamValue v) { m_values[key] = std::move(v); }
+  const std::map<std::string, ParamValue>& all() const { return m_values; }
+
+  /// Defaults of a declaration list.
+  static ParamValues defaults(const std::vector<ParamSpec>& specs);
+
+ private:
+  std::map<std::string, ParamValue> m_values;
+};
+
+/// "key=value,key=value" of the values that differ from the defaults, for run labels.
+std::string formatNonDefault(const ParamValues& values, const std::vector<ParamSpec>& specs);
+
+}  // namespace deform

@@ -1,0 +1,68 @@
+// deformbench SDK: plugin registration. A plugin is a shared object exporting two C symbols:
+//
+//   extern "C" int  deform_abi_version();               // must equal DEFORM_ABI_VERSION
+//   extern "C" void deform_register(deform::Registry&); // registers one or more model factories
+//
+// Use the DEFORM_PLUGIN macro below to define both. Registration is explicit, in one place; no
+// static self-registration.
+#pragma once
+
+#include <deform/model.h>
+#include <deform/params.h>
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+/// Bumped whenever model.h, registry.h or anything they include changes layout.
+#define DEFORM_ABI_VERSION 1
+
+namespace deform {
+
+enum class Capability {
+  Grasp,            ///< "grasp": honours GraspInput
+  PointForce,       ///< "point_force": honours PointLoad
+  Gravity,          ///< "gravity": honours StepInput::gravity
+  Cut,              ///< "cut": implements cut()
+  ReactionForce,    ///< "reaction_force": implements graspForces()
+  NeedsPrecompute,  ///< "needs_precompute": init() does expensive, cached work
+  TetInput,         ///< "tet_input": uses Organ::volume when present
+  QuasiStatic,      ///< "quasi_static": each step is an equilibrium solve (no inertia)
+};
+
+/// Name used in scene files, `deformbench plugins` and results.json ("point_force", ...).
+const char* capabilityName(Capability c);
+
+struct ModelInfo {
+  std::string name;         ///< as named in scenes ("pbd")
+  std::string description;  ///< one line
+  std::string citation;     ///< paper (+ DOI where one exists)
+  std::string version;      ///< plugin version, e.g. "1.0"
+  std::vector<Capability> capabilities;
+  std::vector<ParamSpec> params;
+  std::function<std::unique_ptr<Model>()> create;
+
+  bool has(Capability c) const;
+  const ParamSpec* param(const std::string& key) const;
+};
+
+class Registry {
+ public:
+  /// Adds a model; asserts on a duplicate name within one registry.
+  void add(ModelInfo info);
+  const std::vector<ModelInfo>& models() const { return m_models; }
+  const ModelInfo* find(const std::string& name) const;
+
+ private:
+  std::vector<ModelInfo> m_models;
+};
+
+}  // namespace deform
+
+#define DEFORM_PLUGIN_EXPORT extern "C" __attribute__((visibility("default")))
+
+/// Defines the two exported symbols. Usage: DEFORM_PLUGIN(registry) { registry.add({...}); }
+#define DEFORM_PLUGIN(registryName)                                       \
+  DEFORM_PLUGIN_EXPORT int deform_abi_version() { return DEFORM_ABI_VERSION; } \
+  DEFORM_PLUGIN_EXPORT void deform_register(deform::Registry& registryName)

@@ -1,0 +1,102 @@
+// deformbench SDK: scene files (JSON, SI units; see DESIGN.md "Scene file"). Parsing is strict:
+// an unknown key, a wrong type or an out-of-range value is an InputError naming the file and the
+// JSON path (e.g. "scenes/x.json: /models/0/params/iterations: must be >= 1, got 0").
+#pragma once
+
+#include <deform/model.h>
+#include <deform/params.h>
+
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace deform {
+
+struct KeyFrame {
+  Real t = 0;                  ///< s
+  Vec3 pos = Vec3::Zero();     ///< m
+  bool jawClosed = false;      ///< grasper jaws ("open" | "closed"); held until the next frame
+};
+
+enum class ToolType { Grasper, Probe };
+
+struct ToolSpec {
+  ToolType type = ToolType::Grasper;
+  Real radius = 0.005;  ///< m: grasp radius (grasper) or tip radius (probe)
+  std::vector<KeyFrame> trajectory;  ///< times strictly increasing
+};
+
+enum class LoadType { PointForce, PinHead };
+
+/// point_force: constant `force` at the surface vertex nearest `at`, between start and end.
+/// pin_head: f = k (x(t) - x0) at the vertex nearest `at`, where x(t) is the keyframed pin
+/// position and x0 = `at` (hybrid paper's experiments).
+struct LoadSpec {
+  LoadType type = LoadType::PointForce;
+  Vec3 at = Vec3::Zero();
+  Vec3 force = Vec3::Zero();   ///< N (point_force)
+  Real stiffness = 0;          ///< N/m (pin_head)
+  std::vector<KeyFrame> path;  ///< pin positions (pin_head)
+  Real start = 0, end = 1e30;  ///< s
+};
+
+struct ModelSpec {
+  std::string plugin;       ///< plugin file name (deform_<plugin>.so)
+  std::string model;        ///< model within the plugin (default: plugin)
+  std::string label;        ///< optional; default "model(nondefault params)"
+  nlohmann::json params = nlohmann::json::object();
+  std::string jsonPath;     ///< where this spec sits in the scene, for error messages
+};
+
+struct OrganSpec {
+  std::string mesh;          ///< "phantom:NAME" or a path (resolved relative to the scene file)
+  Real scale = 1.0;          ///< mesh units -> metres
+  Real resolution = 1.0;     ///< phantoms only
+  bool repair = false;
+  Material material;
+  FixedRegion fixed;
+};
+
+enum class SurfaceOutput { Final, Every, None };
+
+struct Scene {
+  std::string name;
+  std::string file;    ///< path of the scene file ("" when parsed from memory)
+  std::string sha256;  ///< of the file's bytes
+  OrganSpec organ;
+  Vec3 gravity = Vec3(0, 0, -9.81);
+  Real dt = 1e-3;
+  Real duration = 1.0;
+  std::vector<ToolSpec> tools;
+  std::vector<LoadSpec> loads;
+  std::vector<ModelSpec> models;
+  std::optional<ModelSpec> reference;
+  std::vector<int> nearest = {10, 50};
+  std::vector<Real> compareAt;  ///< empty: the end of the run
+  SurfaceOutput surfaces = SurfaceOutput::Final;
+  int surfaceEvery = 0;         ///< for SurfaceOutput::Every
+
+  int numSteps() const;  ///< round(duration / dt)
+};
+
+/// Parses and validates a scene file. Throws InputError.
+Scene parseSceneFile(const std::string& path);
+/// Same from a JSON value; `file` names it in errors and resolves relative mesh paths.
+Scene parseScene(const nlohmann::json& j, const std::string& file);
+
+/// Validates a model's params object against its declaration; fills defaults. jsonPath is the
+/// params object's path in the scene (e.g. "/models/0/params"). Throws InputError.
+ParamValues resolveParams(const std::vector<ParamSpec>& specs, const nlohmann::json& given,
+                          const std::string& file, const std::string& jsonPath);
+
+/// Loads the organ: phantom or file, scaled to metres, validated (or repaired when the scene
+/// asks; each change is appended to repairLog). Throws InputError naming the mesh file.
+Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog = nullptr);
+
+/// JSON of resolved parameter values (for results.json).
+nlohmann::json paramsToJson(const ParamValues& values);
+/// JSON description of a parameter declaration (for `deformbench plugins --json`).
+nlohmann::json paramSpecToJson(const ParamSpec& spec);
+
+}  // namespace deform

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Installs the Debian packages deformbench needs, only those missing. Safe to rerun.
+set -euo pipefail
+PACKAGES=(
+  build-essential cmake pkg-config git
+  libeigen3-dev libsuitesparse-dev libbullet-dev libode-dev libgmsh-dev libqhull-dev
+  libnanoflann-dev nlohmann-json3-dev libcli11-dev libssl-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  clang libclang-rt-14-dev clang-format
+  python3-matplotlib python3-numpy
+)
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} Debian packages present"
+  exit 0
+fi
+echo "install-deps: installing ${missing[*]}"
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+$SUDO apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
