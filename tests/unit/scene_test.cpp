@@ -472,3 +472,52 @@ TEST(Organ, PhantomIsValidAndScaled) {
 
 }  // namespace
 }  // namespace deform
+
+namespace deform {
+namespace {
+
+// Every shipped scene parses, its organ loads, each grasp closes within its radius of the organ's
+// surface and each load point lies on it (within 3 mm), so the scenes exercise what they claim.
+TEST(ShippedScenes, ToolsAndLoadsMeetTheOrgan) {
+  const fs::path dir = fs::path(DEFORM_SOURCE_DIR) / "scenes";
+  int checked = 0;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    if (entry.path().extension() != ".json") continue;
+    SCOPED_TRACE(entry.path().filename().string());
+    const Scene scene = parseSceneFile(entry.path().string());
+    if (scene.organ.mesh.rfind("phantom:", 0) != 0 && !fs::exists(scene.organ.mesh)) continue;
+    const Organ organ = loadOrgan(scene);
+    ++checked;
+    EXPECT_GE(scene.models.size(), 1u);
+    const MatX3& V = organ.surface.V;
+    for (size_t i = 0; i < scene.tools.size(); ++i) {
+      const ToolSpec& tool = scene.tools[i];
+      for (const KeyFrame& k : tool.trajectory) {
+        if (!k.jawClosed) continue;
+        const Real d = (V.row(nearestVertex(V, k.pos)).transpose() - k.pos).norm();
+        EXPECT_LE(d, tool.radius) << "tool " << i << " closes " << d << " m from the surface";
+        break;  // the closing frame
+      }
+    }
+    for (size_t i = 0; i < scene.loads.size(); ++i) {
+      const Vec3 at = scene.loads[i].at;
+      const Real d = (V.row(nearestVertex(V, at)).transpose() - at).norm();
+      EXPECT_LE(d, 0.003) << "load " << i << " is " << d << " m from the surface";
+    }
+    // The fixed region pins part of the organ, not all of it.
+    int fixed = 0;
+    for (Eigen::Index v = 0; v < V.rows(); ++v)
+      for (const Box& b : organ.fixed.boxes)
+        if (b.contains(V.row(v).transpose())) {
+          ++fixed;
+          break;
+        }
+    fixed += static_cast<int>(organ.fixed.surfaceVertices.size());
+    EXPECT_GT(fixed, 0);
+    EXPECT_LT(fixed, V.rows() / 2);
+  }
+  EXPECT_GE(checked, 3);
+}
+
+}  // namespace
+}  // namespace deform
