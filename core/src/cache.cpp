@@ -352,13 +352,17 @@ std::optional<std::vector<char>> Cache::get(const std::string& kind, const Cache
     return std::nullopt;
   }
   const fs::path path = entryPath(kind, hex);
-  std::ifstream in(path, std::ios::binary);
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) {
     m_events.push_back({kind, hex, EventKind::Miss});
     return std::nullopt;
   }
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const bool readOk = !in.bad();
+  // Payloads can be large (dense BEM matrices): read once, straight into the result buffer.
+  const std::streamoff size = in.tellg();
+  std::vector<char> bytes(size > 0 ? size_t(size) : 0);
+  in.seekg(0);
+  in.read(bytes.data(), std::streamsize(bytes.size()));
+  const bool readOk = size >= 0 && in.gcount() == std::streamsize(bytes.size());
   in.close();
 
   Digest keyDigest{};
@@ -379,7 +383,8 @@ std::optional<std::vector<char>> Cache::get(const std::string& kind, const Cache
     return std::nullopt;
   }
   m_events.push_back({kind, hex, EventKind::Hit});
-  return std::vector<char>(bytes.begin() + kHeaderSize, bytes.end());
+  bytes.erase(bytes.begin(), bytes.begin() + kHeaderSize);
+  return bytes;
 }
 
 void Cache::put(const std::string& kind, const CacheKey& key, const std::vector<char>& payload) {
