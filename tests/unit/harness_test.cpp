@@ -320,3 +320,121 @@ TEST(Results, NoReferenceMeansNoErrorKey) {
 
 }  // namespace
 }  // namespace deform::harness
+
+// ------------------------------------------------------------- the whole pipeline, via a plugin
+#ifdef DEFORM_FIXTURE_PLUGIN_DIR
+namespace deform::harness {
+namespace {
+
+class Pipeline : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    m_dir = fs::temp_directory_path() /
+            ("deform_pipeline_" +
+             std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(m_dir);
+    fs::create_directories(m_dir);
+  }
+  void TearDown() override { fs::remove_all(m_dir); }
+
+  /// Toy scene on the cube phantom: a grasp on the top face lifting 1 cm.
+  json scene() const {
+    return json::parse(R"({
+      "name": "toy-lift",
+      "organ": {"mesh": "phantom:cube", "resolution": 0.3,
+                "fixed": {"box": [[-1, -1, -1], [1, 1, -0.04]]}},
+      "gravity": [0, 0, 0], "dt": 0.01, "duration": 0.5,
+      "tools": [{"type": "grasper", "radius": 0.02,
+                 "trajectory": [{"t": 0, "pos": [0, 0, 0.05], "jaw": "closed"},
+                                {"t": 0.4, "pos": [0, 0, 0.06]}]}],
+      "models": [{"plugin": "toy", "params": {"gain": 0.5}}],
+      "reference": {"plugin": "toy", "label": "exact", "params": {}},
+      "compare_at": [0.2, 0.5]
+    })");
+  }
+  std::string write(const json& j) const {
+    const fs::path p = m_dir / "scene.json";
+    std::ofstream(p) << j.dump(2);
+    return p.string();
+  }
+  BenchmarkOptions options() const {
+    BenchmarkOptions o;
+    o.outDir = m_dir / "out";
+    o.cacheDir = fs::path();
+    return o;
+  }
+  fs::path m_dir;
+};
+
+TEST_F(Pipeline, RunsModelsAndReferenceAndWritesResults) {
+  PluginLoader loader({DEFORM_FIXTURE_PLUGIN_DIR});
+  std::vector<std::string> explained;
+  BenchmarkOptions o = options();
+  o.explain = [&](const std::string& s) { explained.push_back(s); };
+  const BenchmarkResult r = runBenchmark(write(scene()), loader, o);
+  ASSERT_EQ(r.runs.size(), 2u);
+  EXPECT_EQ(r.runs[0].label, "toy(gain=0.5)");
+  EXPECT_EQ(r.runs[1].label, "exact");
+  EXPECT_TRUE(r.runs[1].isReference);
+  ASSERT_TRUE(r.runs[0].error.has_value());
+  // Half the grasp motion: 0.5 cm behind a reference that follows 1 cm (at the end).
+  EXPECT_GT(r.runs[0].error->max, 0.001);
+  EXPECT_LT(r.runs[0].error->max, 0.01);
+  EXPECT_GT(r.runs[0].error->lossRatio, 0.0);
+  std::ifstream in(r.resultsPath);
+  const json doc = json::parse(in);
+  EXPECT_EQ(doc["scene"]["name"], "toy-lift");
+  EXPECT_EQ(doc["scene"]["sha256"].get<std::string>().size(), 64u);
+  EXPECT_EQ(doc["runs"][0]["params"]["gain"], 0.5);
+  EXPECT_EQ(doc["runs"][0]["params"]["iterations"], 20) << "defaults are written too";
+  EXPECT_EQ(doc["runs"][0]["error"]["reference"], "toy");
+  EXPECT_TRUE(fs::exists(m_dir / "out" / doc["runs"][0]["final_surface"].get<std::string>()));
+  const auto has = [&](const std::string& prefix) {
+    return std::any_of(explained.begin(), explained.end(),
+                       [&](const std::string& s) { return s.rfind(prefix, 0) == 0; });
+  };
+  EXPECT_TRUE(has("loaded plugin "));
+  EXPECT_TRUE(has("built model toy(gain=0.5)"));
+  EXPECT_TRUE(has("built reference exact"));
+}
+
+TEST_F(Pipeline, NoReferenceMeansNoError) {
+  PluginLoader loader({DEFORM_FIXTURE_PLUGIN_DIR});
+  BenchmarkOptions o = options();
+  o.noReference = true;
+  const BenchmarkResult r = runBenchmark(write(scene()), loader, o);
+  ASSERT_EQ(r.runs.size(), 1u);
+  EXPECT_FALSE(r.runs[0].error.has_value());
+}
+
+TEST_F(Pipeline, BadParameterStopsBeforeAnyOutput) {
+  PluginLoader loader({DEFORM_FIXTURE_PLUGIN_DIR});
+  json j = scene();
+  j["models"][0]["params"]["gain"] = 2;
+  try {
+    runBenchmark(write(j), loader, options());
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.place(), "/models/0/params/gain");
+    EXPECT_NE(std::string(e.what()).find("must be <= 1, got 2"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(m_dir / "out"));
+}
+
+TEST_F(Pipeline, MissingPluginAndOnlyFilter) {
+  PluginLoader loader({DEFORM_FIXTURE_PLUGIN_DIR});
+  json j = scene();
+  j["models"][0]["plugin"] = "absent";
+  EXPECT_THROW(runBenchmark(write(j), loader, options()), PluginError);
+  EXPECT_FALSE(fs::exists(m_dir / "out"));
+
+  BenchmarkOptions o = options();
+  o.only = {"nothing"};
+  EXPECT_THROW(runBenchmark(write(scene()), loader, o), InputError);
+  o.only = {"toy(gain=0.5)"};
+  EXPECT_EQ(runBenchmark(write(scene()), loader, o).runs.size(), 2u) << "the reference stays";
+}
+
+}  // namespace
+}  // namespace deform::harness
+#endif
