@@ -377,9 +377,10 @@ TEST_F(Pipeline, RunsModelsAndReferenceAndWritesResults) {
   EXPECT_EQ(r.runs[1].label, "exact");
   EXPECT_TRUE(r.runs[1].isReference);
   ASSERT_TRUE(r.runs[0].error.has_value());
-  // Half the grasp motion: 0.5 cm behind a reference that follows 1 cm (at the end).
-  EXPECT_GT(r.runs[0].error->max, 0.001);
-  EXPECT_LT(r.runs[0].error->max, 0.01);
+  // gain 0.5 lags the tool: e <- (1 - g)(e + v) settles at e = v = 0.25 mm per step while the
+  // tool moves (t = 0.2) and decays to ~0 after it stops (t = 0.5).
+  EXPECT_GT(r.runs[0].error->max, 1e-4);
+  EXPECT_LT(r.runs[0].error->max, 5e-4);
   EXPECT_GT(r.runs[0].error->lossRatio, 0.0);
   std::ifstream in(r.resultsPath);
   const json doc = json::parse(in);
