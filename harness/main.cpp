@@ -229,8 +229,7 @@ int cmdRun(const RunArgs& a) {
 
 int cmdPhantom(const std::string& name, const std::string& out, double resolution, bool list) {
   if (list) {
-    for (const std::string& n : phantomNames())
-      std::cout << n << ": " << phantomDescription(n) << "\n";
+    for (const std::string& n : phantomNames()) std::cout << phantomDescription(n) << "\n";
     return 0;
   }
   if (name.empty())

@@ -25,7 +25,7 @@
 namespace deform::harness {
 
 namespace fs = std::filesystem;
-using nlohmann::json;
+using json = nlohmann::ordered_json;
 
 namespace {
 
@@ -181,7 +181,7 @@ json runJson(const RunRecord& run) {
   j["plugin"] = run.plugin;
   j["label"] = run.label;
   j["role"] = run.isReference ? "reference" : "model";
-  j["params"] = run.params;
+  j["params"] = json::parse(run.params.dump());
   j["status"] = statusName(run.status);
   j["message"] = run.message;
   if (!run.notes.empty()) j["notes"] = run.notes;

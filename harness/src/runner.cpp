@@ -420,8 +420,7 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
   computeRunErrors(scene, result.organ, result.runs);
 
   writeRunSurfaces(options.outDir, scene, result.organ, result.runs);
-  const nlohmann::json doc =
-      resultsJson(scene, result.organ, result.organLog, result.runs, machineInfo());
+  const auto doc = resultsJson(scene, result.organ, result.organLog, result.runs, machineInfo());
   result.resultsPath = writeResults(options.outDir, doc);
   return result;
 }

@@ -272,7 +272,7 @@ TEST(Results, WrittenAtomicallyAndParseable) {
   fs::remove_all(out);
   fs::create_directories(out);
   writeRunSurfaces(out, f.scene, f.organ, runs);
-  const json doc = resultsJson(f.scene, f.organ, {"a log line"}, runs, machineInfo());
+  const auto doc = resultsJson(f.scene, f.organ, {"a log line"}, runs, machineInfo());
   const fs::path path = writeResults(out, doc);
   EXPECT_EQ(path, out / "results.json");
 

@@ -28,15 +28,16 @@ std::string sanitizeLabel(const std::string& label);
 void writeRunSurfaces(const std::filesystem::path& outDir, const Scene& scene, const Organ& organ,
                       std::vector<RunRecord>& runs);
 
-/// The results document.
-nlohmann::json resultsJson(const Scene& scene, const Organ& organ,
-                           const std::vector<std::string>& organLog,
-                           const std::vector<RunRecord>& runs, const MachineInfo& machine);
+/// The results document (keys in the order DESIGN.md shows them).
+nlohmann::ordered_json resultsJson(const Scene& scene, const Organ& organ,
+                                   const std::vector<std::string>& organLog,
+                                   const std::vector<RunRecord>& runs, const MachineInfo& machine);
 
 /// JSON of one run (an element of "runs").
-nlohmann::json runJson(const RunRecord& run);
+nlohmann::ordered_json runJson(const RunRecord& run);
 
 /// Writes outDir/results.json atomically; returns its path.
-std::filesystem::path writeResults(const std::filesystem::path& outDir, const nlohmann::json& doc);
+std::filesystem::path writeResults(const std::filesystem::path& outDir,
+                                   const nlohmann::ordered_json& doc);
 
 }  // namespace deform::harness
