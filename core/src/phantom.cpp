@@ -187,15 +187,16 @@ const PhantomEntry kPhantoms[] = {
      "organ-like wedge: thick right lobe (-x) tapering to a thin left lobe (+x), domed top, "
      "shallow concave underside",
      makeLiver},
-    {"gallbladder", "pear along a gently bent axis: 17 mm fundus radius tapering to a 5.5 mm neck",
+    {"gallbladder",
+     "pear 0.090 m along a gently bent axis: 17 mm fundus radius tapering to a 5.5 mm neck",
      makeGallbladder},
     {"stomach",
-     "J-shaped bag: fundus at the top, body down, antrum turning 150 degrees up to the pylorus, "
-     "flattened front to back",
+     "J-shaped bag 0.245 m along its curve: fundus at the top, body down, antrum turning 150 "
+     "degrees up to the pylorus, flattened front to back",
      makeStomach},
     {"intestine",
-     "tubular segment of radius 13.5 mm along an S-curve (two 45 mm-radius arcs of 100 degrees), "
-     "rounded closed ends",
+     "tubular segment of radius 13.5 mm, 0.184 m along an S-curve (two 45 mm-radius arcs of 100 "
+     "degrees), rounded closed ends",
      makeIntestine},
     {"cube", "0.1 m cube centred at the origin, uniform grid on every face", makeCube},
     {"sphere", "sphere of radius 0.05 m centred at the origin, geodesic-like triangulation",

@@ -20,7 +20,7 @@
 namespace deform {
 namespace {
 
-constexpr Real kMinQuality = 0.25;
+constexpr Real kMinQuality = 0.4;  // phantom.h promises 0.45
 
 // 4 sqrt(3) area / (sum of squared edge lengths): 1 for an equilateral triangle, 0 degenerate.
 Real triangleQuality(const Vec3& a, const Vec3& b, const Vec3& c) {
