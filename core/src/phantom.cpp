@@ -42,7 +42,8 @@ SurfaceMesh capsuleMesh(const CapsuleShape& shape, int defaultCount, Real resolu
 // thick right lobe (-x) to the thin left lobe (+x); the depth in y narrows from 0.084 to 0.038
 // and the ends swing forward (+y) so the posterior side is concave. Vertically, the top half-
 // thickness ht and bottom half-thickness hb shrink toward the left lobe, and a midsurface that
-// rises toward the middle (c d_z^2) makes the underside shallowly concave. z is monotone in d_z
+// rises toward the middle (c d_z^2, c > hb / 2 over the right lobe) makes the underside shallowly
+// concave. z is monotone in d_z
 // (C1 blend of ht and hb), so the surface is the union of two graphs over the outline and is
 // embedded.
 Vec3 liverPoint(const Vec3& d) {
@@ -52,9 +53,9 @@ Vec3 liverPoint(const Vec3& d) {
   const Real depth = 0.038 + 0.046 * right;
   const Real y = depth * eta + 0.012 * xi * xi;
   const Real thin = 1 - 0.2 * eta;  // thinner toward the anterior border
-  const Real ht = (0.013 + 0.037 * right) * thin;
-  const Real hb = (0.009 + 0.032 * right) * thin;
-  const Real mid = 0.014 * zeta * zeta + 0.012 * (1 - right);
+  const Real ht = (0.013 + 0.036 * right) * thin;
+  const Real hb = (0.009 + 0.027 * right) * thin;
+  const Real mid = (0.014 + 0.016 * right) * zeta * zeta + 0.012 * (1 - right);
   const Real z = mid + 0.5 * (ht + hb) * zeta + 0.5 * (ht - hb) * zeta * std::abs(zeta);
   return Vec3(x, y, z);
 }

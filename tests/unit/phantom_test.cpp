@@ -344,6 +344,20 @@ TEST(Phantom, OrganShapesAreNotConvexBlobs) {
     }
   }
   EXPECT_GT(zHiR - zLoR, 2.0 * (zHiL - zLoL));
+  // Its underside is concave across the right lobe: along x = -0.03, the downward-facing surface
+  // is higher at y = 0 than at its lowest point (a convex blob would be lowest near the middle).
+  const MatX3 N = vertexNormals(liver.V, liver.F);
+  Real zMin = 1, zMid = 1, yMid = 1;
+  for (int v = 0; v < liver.numVertices(); ++v) {
+    const Vec3 p = liver.V.row(v);
+    if (std::abs(p.x() + 0.03) > 0.003 || N(v, 2) > -0.3) continue;
+    zMin = std::min(zMin, p.z());
+    if (std::abs(p.y()) < yMid) {
+      yMid = std::abs(p.y());
+      zMid = p.z();
+    }
+  }
+  EXPECT_GT(zMid, zMin + 0.002);
   // The stomach and intestine are curved: the volume is well below that of their bounding box.
   for (const char* name : {"stomach", "intestine"}) {
     const SurfaceMesh m = makePhantom(name);

@@ -16,7 +16,7 @@ namespace deform {
 /// At resolution 1 (bounding-box sizes in m; every organ is centred on its bounding box):
 ///   liver        8122 V  0.200 x 0.150 x 0.090  wedge: thick right lobe at -x (0.09 m) tapering
 ///                        to a thin left lobe at +x (~0.02 m), domed top (+z), shallow concave
-///                        underside, concave posterior (-y) side; volume 1.0 L.
+///                        underside, concave posterior (-y) side; volume 0.98 L.
 ///   gallbladder  1472 V  0.086 x 0.042 x 0.029  pear, 0.090 m along its gently bent axis in the
 ///                        xy plane: fundus (radius 17 mm) at -x, neck (5.5 mm) at +x; 38 mL.
 ///   stomach      3362 V  0.170 x 0.164 x 0.059  J-shaped bag in the xy plane, 0.245 m along its
