@@ -264,8 +264,13 @@ TEST_P(Conformance, NoNanOnTheShippedScenes) {
     for (const ModelInfo& info : models()) {
       SCOPED_TRACE(info.name);
       if (!unsupportedReason(info, scene).empty()) continue;
-      const RunRecord r =
-          runModel(info, ParamValues::defaults(info.params), scene, organ, cache(), o);
+      // The scene's own parameters for this model when it lists it, else the defaults.
+      ParamValues params = ParamValues::defaults(info.params);
+      for (const ModelSpec& spec : scene.models) {
+        if (spec.plugin == GetParam() && spec.model == info.name)
+          params = resolveParams(info.params, spec.params, scene.file, spec.jsonPath + "/params");
+      }
+      const RunRecord r = runModel(info, params, scene, organ, cache(), o);
       ++ran;
       EXPECT_EQ(r.status, RunStatus::Ok) << r.message;
       EXPECT_TRUE(r.finalSurface.allFinite());
