@@ -431,9 +431,47 @@ Scene parseSceneFile(const std::string& path) {
   if (!in) throw InputError(path, "", "cannot open the scene file");
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (in.bad()) throw InputError(path, "", "cannot read the scene file");
+  // JSON itself lets a key repeat (the last one wins); a scene must not, so a typo'd copy of
+  // "dt" cannot silently override the first. Track the path while parsing to name the place.
+  struct Frame {
+    bool array = false;
+    long index = -1;
+    std::string key;
+    std::set<std::string> keys;
+  };
+  std::vector<Frame> stack;
+  const auto pathOf = [&stack]() {
+    std::string p;
+    for (const Frame& f : stack) p += "/" + (f.array ? std::to_string(f.index) : f.key);
+    return p;
+  };
+  const json::parser_callback_t noDuplicates = [&](int, json::parse_event_t event, json& parsed) {
+    switch (event) {
+      case json::parse_event_t::object_start:
+      case json::parse_event_t::array_start:
+        if (!stack.empty() && stack.back().array) ++stack.back().index;
+        stack.push_back(Frame{event == json::parse_event_t::array_start, -1, {}, {}});
+        break;
+      case json::parse_event_t::object_end:
+      case json::parse_event_t::array_end:
+        if (!stack.empty()) stack.pop_back();
+        break;
+      case json::parse_event_t::key: {
+        Frame& f = stack.back();
+        f.key = parsed.get<std::string>();
+        if (!f.keys.insert(f.key).second)
+          throw InputError(path, pathOf(), "duplicate key '" + f.key + "'");
+        break;
+      }
+      case json::parse_event_t::value:
+        if (!stack.empty() && stack.back().array) ++stack.back().index;
+        break;
+    }
+    return true;
+  };
   json j;
   try {
-    j = json::parse(text);
+    j = json::parse(text, noDuplicates);
   } catch (const json::parse_error& e) {
     // nlohmann reports a byte offset (1-based, one past the offending character); turn it into
     // line and column, and keep only the explanation from its message.

@@ -521,3 +521,33 @@ TEST(ShippedScenes, ToolsAndLoadsMeetTheOrgan) {
 
 }  // namespace
 }  // namespace deform
+
+namespace deform {
+namespace {
+
+TEST(SceneFile, DuplicateKeysAreErrorsWithTheirPath) {
+  const fs::path p = fs::temp_directory_path() / "deform_scene_duplicate.json";
+  const auto expectDuplicate = [&](const std::string& text, const std::string& place) {
+    std::ofstream(p) << text;
+    try {
+      parseSceneFile(p.string());
+      ADD_FAILURE() << "no error for " << text;
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.place(), place) << e.what();
+      EXPECT_NE(std::string(e.what()).find("duplicate key"), std::string::npos) << e.what();
+    }
+  };
+  expectDuplicate(R"({"organ": {"mesh": "phantom:cube"}, "dt": 0.001, "dt": 0.01,
+                      "models": [{"plugin": "pbd"}]})",
+                  "/dt");
+  expectDuplicate(R"({"organ": {"mesh": "phantom:cube"}, "models": [{"plugin": "pbd"},
+                      {"plugin": "pbd", "params": {"a": 1, "b": [1, {"c": 2, "c": 3}]}}]})",
+                  "/models/1/params/b/1/c");
+  std::ofstream(p) << R"({"organ": {"mesh": "phantom:cube"}, "models": [{"plugin": "pbd"},
+                         {"plugin": "pbd", "params": {"a": [1, 2], "b": {"a": 1}}}]})";
+  EXPECT_NO_THROW(parseSceneFile(p.string())) << "the same key in different objects is fine";
+  fs::remove(p);
+}
+
+}  // namespace
+}  // namespace deform
