@@ -192,12 +192,13 @@ int countNonManifoldVertices(const MatX3i& F, const std::vector<int>& faces) {
 /// first appearance) and the number of components.
 std::vector<int> components(const MatX3i& F, const std::vector<int>& faces,
                             const std::vector<HalfEdge>& he, int& numComponents) {
-  std::unordered_map<int, int> position;  // face -> index in `faces`
-  position.reserve(faces.size());
-  for (size_t i = 0; i < faces.size(); ++i) position.emplace(faces[i], int(i));
+  std::vector<int> position(size_t(F.rows()), -1);  // face -> index in `faces`
+  for (size_t i = 0; i < faces.size(); ++i) position[size_t(faces[i])] = int(i);
   UnionFind uf(faces.size());
   forEachEdge(he, [&](size_t b, size_t e) {
-    for (size_t k = b + 1; k < e; ++k) uf.unite(position[he[b].face], position[he[k].face]);
+    for (size_t k = b + 1; k < e; ++k) {
+      uf.unite(position[size_t(he[b].face)], position[size_t(he[k].face)]);
+    }
   });
   std::vector<int> comp(faces.size(), -1), rootId(faces.size(), -1);
   numComponents = 0;
@@ -477,13 +478,12 @@ RepairReport repairSurface(SurfaceMesh& mesh) {
 
   // Orientation: flip[f] says whether triangle f is reversed. Across an edge shared by exactly
   // two triangles, they agree when they traverse it in opposite directions.
-  std::unordered_map<int, int> position;
-  position.reserve(faces.size());
-  for (size_t i = 0; i < faces.size(); ++i) position.emplace(faces[i], int(i));
+  std::vector<int> position(size_t(F.rows()), -1);
+  for (size_t i = 0; i < faces.size(); ++i) position[size_t(faces[i])] = int(i);
   std::vector<std::vector<std::pair<int, bool>>> adj(faces.size());  // (neighbour, same dir)
   forEachEdge(he, [&](size_t b, size_t e) {
     if (e - b != 2) return;
-    const int p = position[he[b].face], q = position[he[b + 1].face];
+    const int p = position[size_t(he[b].face)], q = position[size_t(he[b + 1].face)];
     const bool same = he[b].forward == he[b + 1].forward;
     adj[size_t(p)].emplace_back(q, same);
     adj[size_t(q)].emplace_back(p, same);

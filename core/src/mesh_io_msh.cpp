@@ -27,7 +27,7 @@ int cornerCount(long long type) {
 
 class MshReader {
  public:
-  MshReader(const std::string& data, const std::string& path) : m_cur(data, path) {}
+  MshReader(std::string_view data, const std::string& path) : m_cur(data, path) {}
 
   LoadedMesh read() {
     bool sawFormat = false;
@@ -196,9 +196,12 @@ class MshReader {
 
 }  // namespace
 
-LoadedMesh readMsh(const std::string& path) {
-  const std::string data = io::readWholeFile(path);
+LoadedMesh io::readMshData(std::string_view data, const std::string& path) {
   return MshReader(data, path).read();
+}
+
+LoadedMesh readMsh(const std::string& path) {
+  return io::readMshData(io::readWholeFile(path), path);
 }
 
 }  // namespace deform

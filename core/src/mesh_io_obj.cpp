@@ -8,8 +8,7 @@
 
 namespace deform {
 
-SurfaceMesh readObj(const std::string& path) {
-  const std::string data = io::readWholeFile(path);
+SurfaceMesh io::readObjData(std::string_view data, const std::string& path) {
   io::Cursor cur(data, path);
   io::SurfaceBuilder mesh;
   std::vector<size_t> faceLine;  // byte offset of each triangle's line, for late range errors
@@ -62,6 +61,10 @@ SurfaceMesh readObj(const std::string& path) {
     }
   }
   return mesh.build(path);
+}
+
+SurfaceMesh readObj(const std::string& path) {
+  return io::readObjData(io::readWholeFile(path), path);
 }
 
 }  // namespace deform

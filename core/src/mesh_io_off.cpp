@@ -6,8 +6,7 @@
 
 namespace deform {
 
-SurfaceMesh readOff(const std::string& path) {
-  const std::string data = io::readWholeFile(path);
+SurfaceMesh io::readOffData(std::string_view data, const std::string& path) {
   io::Cursor cur(data, path);
   std::vector<std::string_view> tok;
   std::string_view line;
@@ -86,6 +85,10 @@ SurfaceMesh readOff(const std::string& path) {
     mesh.addPolygon(poly.data(), poly.size());
   }
   return mesh.build(path);
+}
+
+SurfaceMesh readOff(const std::string& path) {
+  return io::readOffData(io::readWholeFile(path), path);
 }
 
 }  // namespace deform

@@ -45,8 +45,7 @@ enum class PlyFormat { Ascii, BinaryLittle, BinaryBig };
 
 }  // namespace
 
-SurfaceMesh readPly(const std::string& path) {
-  const std::string data = io::readWholeFile(path);
+SurfaceMesh io::readPlyData(std::string_view data, const std::string& path) {
   io::Cursor cur(data, path);
   std::vector<std::string_view> tok;
   std::string_view line;
@@ -210,6 +209,10 @@ SurfaceMesh readPly(const std::string& path) {
     }
   }
   return mesh.build(path);
+}
+
+SurfaceMesh readPly(const std::string& path) {
+  return io::readPlyData(io::readWholeFile(path), path);
 }
 
 }  // namespace deform

@@ -117,8 +117,7 @@ SurfaceMesh readAsciiStl(io::Cursor& cur) {
 
 }  // namespace
 
-SurfaceMesh readStl(const std::string& path) {
-  const std::string data = io::readWholeFile(path);
+SurfaceMesh io::readStlData(std::string_view data, const std::string& path) {
   io::Cursor cur(data, path);
   // Binary if the size matches 84 + 50 n exactly; the header is free text (OpenHELP files start
   // with "COLOR="), so its first word proves nothing.
@@ -150,6 +149,10 @@ SurfaceMesh readStl(const std::string& path) {
               std::to_string(84 + 50 * static_cast<unsigned long long>(n)) +
               " bytes, but the file has " + std::to_string(data.size()) +
               (84 + 50 * static_cast<unsigned long long>(n) > data.size() ? " (truncated)" : ""));
+}
+
+SurfaceMesh readStl(const std::string& path) {
+  return io::readStlData(io::readWholeFile(path), path);
 }
 
 }  // namespace deform

@@ -125,6 +125,14 @@ struct SurfaceBuilder {
 /// negative tets get nodes 1 and 2 swapped and are counted, surface = tetBoundary(volume).
 LoadedMesh loadedFromTets(const std::vector<double>& xyz, const std::vector<int>& tets);
 
+/// The readers on a file's contents already in memory; `file` names it in errors.
+SurfaceMesh readObjData(std::string_view data, const std::string& file);
+SurfaceMesh readStlData(std::string_view data, const std::string& file);
+SurfaceMesh readOffData(std::string_view data, const std::string& file);
+SurfaceMesh readPlyData(std::string_view data, const std::string& file);
+LoadedMesh readVtkData(std::string_view data, const std::string& file);
+LoadedMesh readMshData(std::string_view data, const std::string& file);
+
 /// Throws at the cursor's last place when x is NaN or Inf.
 void requireFinite(const Cursor& c, double x, double y, double z);
 

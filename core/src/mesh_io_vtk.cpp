@@ -64,7 +64,7 @@ struct CellList {
 
 class VtkReader {
  public:
-  VtkReader(const std::string& data, const std::string& path) : m_cur(data, path) {}
+  VtkReader(std::string_view data, const std::string& path) : m_cur(data, path) {}
 
   LoadedMesh read() {
     std::string_view line;
@@ -331,9 +331,12 @@ class VtkReader {
 
 }  // namespace
 
-LoadedMesh readVtk(const std::string& path) {
-  const std::string data = io::readWholeFile(path);
+LoadedMesh io::readVtkData(std::string_view data, const std::string& path) {
   return VtkReader(data, path).read();
+}
+
+LoadedMesh readVtk(const std::string& path) {
+  return io::readVtkData(io::readWholeFile(path), path);
 }
 
 }  // namespace deform

@@ -33,6 +33,10 @@ struct LoadedMesh {
 /// (case-insensitive). Coordinates are returned unscaled, in file units.
 LoadedMesh readMesh(const std::string& path);
 
+/// readMesh on a file's contents already in memory: `name` picks the format by its extension and
+/// names the input in errors.
+LoadedMesh readMeshFromMemory(const std::string& data, const std::string& name);
+
 SurfaceMesh readObj(const std::string& path);
 SurfaceMesh readStl(const std::string& path);
 SurfaceMesh readOff(const std::string& path);
