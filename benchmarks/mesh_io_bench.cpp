@@ -110,6 +110,7 @@ BENCHMARK_CAPTURE(readOnly, sphere32k_stl, sphereStl())->Unit(benchmark::kMillis
 BENCHMARK_CAPTURE(validateOnly, sphere32k_stl, sphereStl())->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(readAndValidate, sphere32k_stl, sphereStl())->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(repairOnly, sphere32k_stl, sphereStl())->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(readOnly, Liver_stl, liverStl())->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(readAndValidate, Liver_stl, liverStl())->Unit(benchmark::kMillisecond);
 
 }  // namespace

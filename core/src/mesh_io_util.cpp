@@ -6,19 +6,28 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 
 namespace deform::io {
 
 std::string readWholeFile(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw InputError(path, "", "is a directory");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path, "", std::string("cannot open file: ") + std::strerror(errno));
-  in.seekg(0, std::ios::end);
-  const std::streamoff size = in.tellg();
-  if (size < 0) throw InputError(path, "", "cannot read file (not a regular file?)");
-  in.seekg(0, std::ios::beg);
-  std::string data(static_cast<size_t>(size), '\0');
-  if (size > 0 && !in.read(data.data(), size)) throw InputError(path, "", "cannot read file");
+  // Read in chunks rather than trusting a seek to the end, so pipes and odd files work too.
+  constexpr size_t kChunk = size_t(1) << 20;
+  constexpr size_t kMaxBytes = size_t(1) << 34;
+  std::string data;
+  while (in) {
+    const size_t old = data.size();
+    if (old >= kMaxBytes) throw InputError(path, "", "file larger than 16 GiB");
+    data.resize(old + kChunk);
+    in.read(data.data() + old, static_cast<std::streamsize>(kChunk));
+    data.resize(old + static_cast<size_t>(in.gcount()));
+  }
+  if (in.bad()) throw InputError(path, "", "cannot read file");
   return data;
 }
 

@@ -533,6 +533,8 @@ TEST(MeshIoRead, ReadMeshDispatchesOnExtension) {
   EXPECT_NE(problem.find("unknown mesh extension"), std::string::npos) << problem;
   const std::string missing = dir.file("missing.stl");
   expectInputError([&] { readMesh(missing); }, missing, "");
+  std::filesystem::create_directory(dir.file("folder.obj"));
+  expectInputError([&] { readMesh(dir.file("folder.obj")); }, dir.file("folder.obj"), "");
 }
 
 // ---------------------------------------------------------------- malformed input
