@@ -278,11 +278,12 @@ void MassSpringModel::springForces(const MatX3& x, const MatX3& v, MatX3& f) {
       continue;
     }
     const Real l = std::sqrt(l2);
+    const Real il = 1.0 / l;  // one division per spring: the loop is bound by sqrt/div throughput
     const Real* va = V + 3 * s.a;
     const Real* vb = V + 3 * s.b;
-    const Real vn = ((vb[0] - va[0]) * d0 + (vb[1] - va[1]) * d1 + (vb[2] - va[2]) * d2) / l;
+    const Real vn = ((vb[0] - va[0]) * d0 + (vb[1] - va[1]) * d1 + (vb[2] - va[2]) * d2) * il;
     // springForce(): (k (l - L) + c (vb - va).n) n, with n = d / l folded into one factor.
-    const Real m = (s.k * (l - s.rest) + s.c * vn) / l;
+    const Real m = (s.k * (l - s.rest) + s.c * vn) * il;
     Real* fa = Fp + 3 * s.a;
     Real* fb = Fp + 3 * s.b;
     fa[0] += m * d0;

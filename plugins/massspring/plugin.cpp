@@ -11,7 +11,7 @@ DEFORM_PLUGIN(registry) {
       "or on tet edges; explicit, symplectic or implicit Euler";
   info.citation =
       "van Gelder 1998, Approximate simulation of elastic membranes by triangulated spring "
-      "meshes, J. Graphics Tools 3(2), doi:10.1080/10867651.1998.10487490; Baraff & Witkin 1998, "
+      "meshes, J. Graphics Tools 3(2); Baraff & Witkin 1998, "
       "Large steps in cloth simulation, SIGGRAPH '98, doi:10.1145/280814.280821";
   info.version = "1.0";
   using C = deform::Capability;
