@@ -74,14 +74,23 @@ struct DistanceBatch {
   const Real* alphaTilde;
   const Real* scale;
   Real* lambda;
+  const Real* wa;  ///< inverse mass of a, per constraint
+  const Real* wb;  ///< inverse mass of b, per constraint
 };
 
 /// Projects constraints [begin, end) of a batch whose constraints share no particle (one colour of
 /// a greedy colouring), so that projecting them together equals projecting them one after the
-/// other with projectDistance(). x: 3N packed positions (updated), w: N inverse masses. Returns the
-/// number of degenerate (skipped) constraints.
-long long projectDistanceColour(Real* x, const Real* w, const DistanceBatch& batch, size_t begin,
-                                size_t end);
+/// other with projectDistance(). Positions x4 are padded to four doubles per particle
+/// (x, y, z, 0) and the inverse masses come from batch.wa / batch.wb. With simd (and a CPU with
+/// AVX2) four constraints are projected per vector step: one vector load and store per particle
+/// instead of three scalar ones. Arithmetic is the same operation for operation (no FMA
+/// contraction), so the SIMD and scalar paths give identical results. Returns the number of
+/// degenerate (skipped) constraints.
+long long projectDistanceColourPadded(Real* x4, const DistanceBatch& batch, size_t begin,
+                                      size_t end, bool simd = true);
+
+/// Whether projectDistanceColourPadded(simd = true) uses AVX2 on this CPU.
+bool distanceSimdAvailable();
 
 /// Dihedral-angle bending constraint across an interior edge, C = theta - theta0 wrapped to
 /// (-pi, pi] (Mueller et al. 2007, Appendix A defines C = acos(n1.n2) - phi0). We keep the angle

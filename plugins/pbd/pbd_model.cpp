@@ -173,6 +173,11 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
   }
   m_distAlphaTilde.resize(m_distance.size());
   m_distScale.resize(m_distance.size());
+  m_distWa.resize(m_distance.size());
+  m_distWb.resize(m_distance.size());
+  m_p4Storage.assign(4 * static_cast<size_t>(N) + 4, 0.0);
+  const auto base = reinterpret_cast<std::uintptr_t>(m_p4Storage.data());
+  m_p4Offset = ((32 - base % 32) % 32) / sizeof(Real);
   m_graspMask.assign(N, 0);
   reset();
 }
@@ -353,26 +358,58 @@ void PbdModel::refreshHotData(Real dt) {
     m_distAlphaTilde[i] = c.compliance * invDt2;
     const Real denom = m_w[c.a] + m_w[c.b] + m_distAlphaTilde[i];
     m_distScale[i] = denom > 0 ? m_kStretch / denom : 0.0;
+    m_distWa[i] = m_w[c.a];
+    m_distWb[i] = m_w[c.b];
   }
   m_hotDt = dt;
 }
 
+void PbdModel::packPositions() {
+  const Real* P = m_p.data();
+  Real* m_p4 = p4();
+  for (Eigen::Index i = 0; i < m_p.rows(); ++i) {
+    m_p4[4 * i] = P[3 * i];
+    m_p4[4 * i + 1] = P[3 * i + 1];
+    m_p4[4 * i + 2] = P[3 * i + 2];
+  }
+}
+
+void PbdModel::unpackPositions() {
+  Real* P = m_p.data();
+  const Real* m_p4 = p4();
+  for (Eigen::Index i = 0; i < m_p.rows(); ++i) {
+    P[3 * i] = m_p4[4 * i];
+    P[3 * i + 1] = m_p4[4 * i + 1];
+    P[3 * i + 2] = m_p4[4 * i + 2];
+  }
+}
+
 void PbdModel::projectAll(Real dt) {
   const Real invDt2 = 1.0 / (dt * dt);
-  Real* X = m_p.data();
   const Real* W = m_w.data();
   const DistanceBatch batch{m_distA.data(),          m_distB.data(),     m_distRest.data(),
-                            m_distAlphaTilde.data(), m_distScale.data(), m_lambdaDist.data()};
+                            m_distAlphaTilde.data(), m_distScale.data(), m_lambdaDist.data(),
+                            m_distWa.data(),         m_distWb.data()};
   const size_t nColours = m_distColours.empty() ? 0 : m_distColours.size() - 1;
+  Real* x4 = p4();
+  bool packed = false;
   for (int it = 0; it < m_config.iterations; ++it) {
+    if (!packed) packPositions();
+    packed = true;
     for (size_t c = 0; c < nColours; ++c) {
       const size_t b = m_distColours[c], e = m_distColours[c + 1];
       if (c == 63) {  // overflow colour: not independent, go one at a time
-        for (size_t i = b; i < e; ++i) m_degenerate += projectDistanceColour(X, W, batch, i, i + 1);
+        for (size_t i = b; i < e; ++i)
+          m_degenerate += projectDistanceColourPadded(x4, batch, i, i + 1);
       } else {
-        m_degenerate += projectDistanceColour(X, W, batch, b, e);
+        m_degenerate += projectDistanceColourPadded(x4, batch, b, e);
       }
     }
+    const bool volumeNow =
+        m_hasVolume && (m_config.volumeEverySweep || it + 1 == m_config.iterations);
+    if (m_dihedral.empty() && m_tet.empty() && !volumeNow) continue;
+    unpackPositions();
+    packed = false;
     for (size_t i = 0; i < m_dihedral.size(); ++i) {
       const DihedralConstraint& c = m_dihedral[i];
       Vec3 x[4], dx[4];
@@ -403,13 +440,14 @@ void PbdModel::projectAll(Real dt) {
       }
       for (int k = 0; k < 4; ++k) m_p.row(c.p[k]) += dx[k];
     }
-    if (m_hasVolume && (m_config.volumeEverySweep || it + 1 == m_config.iterations)) {
+    if (volumeNow) {
       if (!projectSurfaceVolumeInPlace(m_p, m_w, m_surfaceF, m_restVolume,
                                        m_volumeCompliance * invDt2, m_kVolume, m_lambdaVolume,
                                        m_volumeGrad))
         ++m_degenerate;
     }
   }
+  if (packed) unpackPositions();
 }
 
 StepStatus PbdModel::step(const StepInput& in) {

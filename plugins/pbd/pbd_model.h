@@ -73,6 +73,8 @@ class PbdModel final : public Model {
   void buildTets(const Organ& organ);
   void refreshHotData(Real dt);
   void projectAll(Real dt);
+  void packPositions();
+  void unpackPositions();
   void computeGraspForces(const StepInput& in, Real dt);
 
   PbdConfig m_config;
@@ -103,7 +105,12 @@ class PbdModel final : public Model {
   // and multiplier scale k / (w_a + w_b + alphaTilde), refreshed only when dt or the immovable
   // set changes. m_distColours: start of each colour, plus the end.
   std::vector<int> m_distA, m_distB;
-  std::vector<Real> m_distRest, m_distAlphaTilde, m_distScale;
+  std::vector<Real> m_distRest, m_distAlphaTilde, m_distScale, m_distWa, m_distWb;
+  // Positions padded to (x, y, z, 0) for the distance kernel, starting m_p4Offset entries into
+  // m_p4Storage (32-byte aligned).
+  std::vector<Real> m_p4Storage;
+  size_t m_p4Offset = 0;
+  Real* p4() { return m_p4Storage.data() + m_p4Offset; }
   std::vector<size_t> m_distColours;
   std::vector<Real> m_lambdaDist, m_lambdaBend, m_lambdaTet;
   Real m_lambdaVolume = 0;
