@@ -82,15 +82,6 @@ Metaballs constructMetaballs(const SurfaceMesh& surface, const ConstructionParam
   return m;
 }
 
-CacheKey constructionKey(const SurfaceMesh& surface, const ConstructionParams& p) {
-  CacheKey k;
-  k.add(kConstructionVersion).add(surface.V).add(surface.F);
-  k.add(p.targetSpheres).add(p.voxelResolution).add(p.fillNeighbours).add(p.fillMinRadiusRatio);
-  k.add(p.fillMaxGenerations).add(p.attractionRangeVoxels).add(p.maxOptimisationMoves);
-  k.add(p.topologyNeighbours);
-  return k;
-}
-
 std::vector<char> serialiseMetaballs(const Metaballs& m) {
   ByteWriter w;
   w.string(kConstructionVersion);
@@ -130,24 +121,6 @@ Metaballs deserialiseMetaballs(const std::vector<char>& bytes) {
       if (m.topology.links(l, c) < 0 || m.topology.links(l, c) >= n)
         throw std::runtime_error("metaballs payload: link index");
   if (!rd.atEnd()) throw std::runtime_error("metaballs payload: trailing bytes");
-  return m;
-}
-
-Metaballs constructMetaballsCached(const SurfaceMesh& surface, const ConstructionParams& p,
-                                   Cache& cache, bool* hit) {
-  const CacheKey key = constructionKey(surface, p);
-  if (auto bytes = cache.get("metaballs.construction", key)) {
-    try {
-      Metaballs m = deserialiseMetaballs(*bytes);
-      if (hit) *hit = true;
-      return m;
-    } catch (const std::runtime_error&) {
-      // Unreadable entry: rebuild and overwrite it.
-    }
-  }
-  Metaballs m = constructMetaballs(surface, p);
-  cache.put("metaballs.construction", key, serialiseMetaballs(m));
-  if (hit) *hit = false;
   return m;
 }
 

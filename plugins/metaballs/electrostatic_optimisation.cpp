@@ -88,19 +88,22 @@ ElectrostaticResult optimiseElectrostatic(SphereSet& spheres, const VoxelGrid& g
     const Vec3 c = spheres.center(j);
     const Real r = spheres.radii(j);
     const Vec3 cn = c + grid.h * force[size_t(j)] / bestF;
-    if (-dist.signedDistance(cn) < r) continue;  // would reach outside the surface
+    // Stay inside: the radius is kept unless the surface is nearer than r at the new centre.
+    const Real rn = std::min(r, -dist.signedDistance(cn));
+    if (rn < 0.5 * grid.h) continue;
     long long gained = 0, lost = 0;
-    forVoxelsInBall(grid, cn, r, [&](int v, const Vec3&) { gained += st.isHollow(v) ? 1 : 0; });
+    forVoxelsInBall(grid, cn, rn, [&](int v, const Vec3&) { gained += st.isHollow(v) ? 1 : 0; });
     forVoxelsInBall(grid, c, r, [&](int v, const Vec3&) {
       if (grid.inside[size_t(v)] && st.cover[size_t(v)] == 1 &&
-          (grid.centerOf(v) - cn).squaredNorm() > r * r)
+          (grid.centerOf(v) - cn).squaredNorm() > rn * rn)
         ++lost;
     });
     if (gained - lost <= 0) continue;
     forVoxelsInBall(grid, c, r, [&](int v, const Vec3&) { --st.cover[size_t(v)]; });
-    forVoxelsInBall(grid, cn, r, [&](int v, const Vec3&) { ++st.cover[size_t(v)]; });
+    forVoxelsInBall(grid, cn, rn, [&](int v, const Vec3&) { ++st.cover[size_t(v)]; });
     st.hollow -= gained - lost;
     spheres.centers.row(j) = cn.transpose();
+    spheres.radii(j) = rn;
     ++res.moves;
     // Spheres whose force or trial outcome may have changed: near the moved sphere.
     for (int k = 0; k < n; ++k) {

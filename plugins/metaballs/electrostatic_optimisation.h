@@ -8,8 +8,10 @@
 // drops, keep the move and recompute; stop when no attracted sphere's move lowers the count.
 // Choices where the paper is silent:
 //  - the attracted spheres are tried in order of decreasing |f_j| (ties by index);
-//  - a move is only allowed when the moved sphere stays inside the surface (D(c') >= r, radius
-//    fixed), so stage 2's "no sphere outside" survives the optimisation;
+//  - the radius is fixed unless the surface is nearer at the new centre: r' = min(r, D(c')), so
+//    stage 2's "no sphere outside" survives the optimisation (with a strictly fixed radius, a sphere
+//    that touches the surface, as every sphere does after eq. 1, could never move towards the
+//    hollow voxels, which lie between the spheres and the surface);
 //  - a sphere whose trial failed is not retried until a move nearby changes its neighbourhood
 //    (its outcome cannot change before), which makes the loop affordable; this is exact;
 //  - at most maxMoves accepted moves.

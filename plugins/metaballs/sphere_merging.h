@@ -3,8 +3,8 @@
 // they are replaced by one sphere at the midpoint of their centres with radius
 //     r_new = min(r, D(c_new)),                                              (3)
 // r the bigger radius. Pairs are merged most-overlapping first (smallest d / r_small, ties by
-// index); a sphere merges at most once per pass; passes repeat until no pair is left (or
-// maxPasses).
+// index); a sphere merges at most once per pass. One pass by default: repeating to a fixed point
+// collapses chains of medial spheres (each merged sphere again overlaps its neighbour extremely).
 #pragma once
 
 #include "sphere_set.h"
@@ -19,6 +19,6 @@ struct MergeResult {
 };
 
 MergeResult mergeOverlappingSpheres(SphereSet& spheres, const MeshDistance& dist,
-                                    int maxPasses = 20);
+                                    int maxPasses = 1);
 
 }  // namespace deform::metaballs

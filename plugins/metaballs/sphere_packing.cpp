@@ -85,7 +85,6 @@ PackingResult packSpheres(const SurfaceMesh& surface, const MeshDistance& dist,
                           const VoxelGrid& grid, int target) {
   PackingResult res;
   const MedialCandidates cand = medialCandidates(surface, dist, 0.5 * grid.h);
-  res.candidates = cand.poleBalls.size();
   res.degenerateTets = cand.degenerateTets;
   // Samples: inside voxel centres, then surface vertices.
   std::vector<int> insideIdx;
@@ -99,17 +98,35 @@ PackingResult packSpheres(const SurfaceMesh& surface, const MeshDistance& dist,
   res.samples = nVox + surface.numVertices();
   const Real slack = grid.h;
 
-  const int nc = cand.poleBalls.size();
+  // Candidates: the inner poles, then the inside voxel centres (their ball is the largest empty
+  // ball there, radius D(c)), so that spheres can also be placed off the medial axis.
+  SphereSet all = cand.poleBalls;
+  std::vector<Real> dall(cand.distance.data(), cand.distance.data() + cand.distance.size());
+  for (size_t i = 0; i < insideIdx.size(); ++i) {
+    const Vec3 x = vox.row(Eigen::Index(i)).transpose();
+    const Real d = dist.distance(x);
+    if (d < 0.5 * grid.h) continue;
+    all.append(x, d);
+    dall.push_back(d);
+  }
+  res.candidates = all.size();
+  // A candidate covers samples only up to the radius at which `target` balls of equal size would
+  // fill the organ twice over: the budget then spreads over the whole body instead of a few
+  // medial balls covering everything.
+  const Real volume = Real(nVox) * grid.h * grid.h * grid.h;
+  const Real cap = std::cbrt(2.0 * volume * 3.0 / (4.0 * 3.14159265358979 * std::max(target, 1)));
+  const int nc = all.size();
   std::vector<std::vector<int>> covers(static_cast<size_t>(nc));
   std::vector<int> tmp;
   for (int c = 0; c < nc; ++c) {
-    const Vec3 x = cand.poleBalls.center(c);
-    const Real d = cand.distance(c);
+    const Vec3 x = all.center(c);
+    const Real d = std::min(dall[size_t(c)], cap);
     voxTree.radius(x, d, tmp);
     auto& list = covers[size_t(c)];
     list = tmp;
-    surfTree.radius(x, d + slack, tmp);
-    for (int s : tmp) list.push_back(nVox + s);
+    surfTree.radius(x, dall[size_t(c)] + slack, tmp);
+    for (int s : tmp)
+      if ((surface.V.row(s).transpose() - x).norm() <= cap + slack) list.push_back(nVox + s);
   }
   std::vector<uint8_t> covered(size_t(res.samples), 0);
   // Lazy greedy: gains only shrink, so a popped entry whose recomputed gain still equals its key
@@ -137,7 +154,7 @@ PackingResult packSpheres(const SurfaceMesh& surface, const MeshDistance& dist,
     }
   }
   std::sort(chosen.begin(), chosen.end());
-  for (int c : chosen) res.spheres.append(cand.poleBalls.center(c), cand.poleBalls.radii(c));
+  for (int c : chosen) res.spheres.append(all.center(c), all.radii(c));
   return res;
 }
 
