@@ -87,7 +87,8 @@ MeshDistance::MeshDistance(const SurfaceMesh& mesh) : m_mesh(mesh) {
         const Real angle = std::acos(std::clamp(e1.dot(e2) / (l1 * l2), Real(-1), Real(1)));
         m_vertexNormal.row(mesh.F(f, k)) += angle * n;
       }
-      edgeSum[key(mesh.F(f, k), mesh.F(f, (k + 1) % 3))] += n;
+      // Eigen vectors are not zero-initialised by operator[]: insert an explicit zero.
+      edgeSum.try_emplace(key(mesh.F(f, k), mesh.F(f, (k + 1) % 3)), Vec3::Zero()).first->second += n;
     }
   }
   for (int f = 0; f < nf; ++f)

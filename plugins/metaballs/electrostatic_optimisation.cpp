@@ -13,9 +13,10 @@ template <class Fn>
 void forVoxelsInBall(const VoxelGrid& g, const Vec3& c, Real radius, Fn&& fn) {
   const Vec3 lo = (c - g.origin).array() / g.h - radius / g.h;
   const Vec3 hi = (c - g.origin).array() / g.h + radius / g.h;
-  const int i0 = std::max(0, int(std::ceil(lo.x()))), i1 = std::min(g.nx - 1, int(std::floor(hi.x())));
-  const int j0 = std::max(0, int(std::ceil(lo.y()))), j1 = std::min(g.ny - 1, int(std::floor(hi.y())));
-  const int k0 = std::max(0, int(std::ceil(lo.z()))), k1 = std::min(g.nz - 1, int(std::floor(hi.z())));
+  // One voxel of margin: the exact distance test below decides, not the rounded index range.
+  const int i0 = std::max(0, int(std::floor(lo.x()))), i1 = std::min(g.nx - 1, int(std::ceil(hi.x())));
+  const int j0 = std::max(0, int(std::floor(lo.y()))), j1 = std::min(g.ny - 1, int(std::ceil(hi.y())));
+  const int k0 = std::max(0, int(std::floor(lo.z()))), k1 = std::min(g.nz - 1, int(std::ceil(hi.z())));
   const Real r2 = radius * radius;
   for (int k = k0; k <= k1; ++k)
     for (int j = j0; j <= j1; ++j)
@@ -115,7 +116,8 @@ ElectrostaticResult optimiseElectrostatic(SphereSet& spheres, const VoxelGrid& g
       }
     }
   }
-  res.hollowAfter = st.hollow;
+  // Report a recount from scratch (the running count only steers the search).
+  res.hollowAfter = State(grid, spheres).hollow;
   return res;
 }
 

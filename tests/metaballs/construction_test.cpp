@@ -114,6 +114,7 @@ TEST(MetaballsConstruction, ElectrostaticOptimisationReducesHollowVoxels) {
   // Incremental bookkeeping agrees with a recount from scratch.
   const MeshDistance dist(testOrgan());
   const VoxelGrid g = voxelizeInside(dist, smallParams().voxelResolution);
+  EXPECT_EQ(g.numInside(), r.insideVoxels);
   EXPECT_EQ(countHollowVoxels(built().spheres, g), r.hollowAfter);
   EXPECT_EQ(countSpheresOutside(built().spheres, dist, 1e-9 * 0.2), 0);
 }
