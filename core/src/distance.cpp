@@ -88,7 +88,8 @@ MeshDistance::MeshDistance(const SurfaceMesh& mesh) : m_mesh(mesh) {
         m_vertexNormal.row(mesh.F(f, k)) += angle * n;
       }
       // Eigen vectors are not zero-initialised by operator[]: insert an explicit zero.
-      edgeSum.try_emplace(key(mesh.F(f, k), mesh.F(f, (k + 1) % 3)), Vec3::Zero()).first->second += n;
+      edgeSum.try_emplace(key(mesh.F(f, k), mesh.F(f, (k + 1) % 3)), Vec3::Zero()).first->second +=
+          n;
     }
   }
   for (int f = 0; f < nf; ++f)
@@ -191,13 +192,27 @@ Real MeshDistance::signedDistance(const Vec3& p) const {
   const int f = r.triangle;
   Vec3 n;
   switch (r.feature) {
-    case TriangleFeature::VertexA: n = m_vertexNormal.row(m_mesh.F(f, 0)); break;
-    case TriangleFeature::VertexB: n = m_vertexNormal.row(m_mesh.F(f, 1)); break;
-    case TriangleFeature::VertexC: n = m_vertexNormal.row(m_mesh.F(f, 2)); break;
-    case TriangleFeature::EdgeAB: n = m_edgeNormal.row(3 * f + 0); break;
-    case TriangleFeature::EdgeBC: n = m_edgeNormal.row(3 * f + 1); break;
-    case TriangleFeature::EdgeCA: n = m_edgeNormal.row(3 * f + 2); break;
-    default: n = m_faceNormal.row(f); break;
+    case TriangleFeature::VertexA:
+      n = m_vertexNormal.row(m_mesh.F(f, 0));
+      break;
+    case TriangleFeature::VertexB:
+      n = m_vertexNormal.row(m_mesh.F(f, 1));
+      break;
+    case TriangleFeature::VertexC:
+      n = m_vertexNormal.row(m_mesh.F(f, 2));
+      break;
+    case TriangleFeature::EdgeAB:
+      n = m_edgeNormal.row(3 * f + 0);
+      break;
+    case TriangleFeature::EdgeBC:
+      n = m_edgeNormal.row(3 * f + 1);
+      break;
+    case TriangleFeature::EdgeCA:
+      n = m_edgeNormal.row(3 * f + 2);
+      break;
+    default:
+      n = m_faceNormal.row(f);
+      break;
   }
   return (p - r.point).dot(n) < 0 ? -r.distance : r.distance;
 }

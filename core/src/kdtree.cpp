@@ -46,8 +46,12 @@ struct KdTree3::Impl {
   }
 };
 
-KdTree3::KdTree3() : m_impl(std::make_unique<Impl>()) { m_impl->build(); }
-KdTree3::KdTree3(const MatX3& points) : m_impl(std::make_unique<Impl>()) { build(points); }
+KdTree3::KdTree3() : m_impl(std::make_unique<Impl>()) {
+  m_impl->build();
+}
+KdTree3::KdTree3(const MatX3& points) : m_impl(std::make_unique<Impl>()) {
+  build(points);
+}
 KdTree3::~KdTree3() = default;
 KdTree3::KdTree3(KdTree3&&) noexcept = default;
 KdTree3& KdTree3::operator=(KdTree3&&) noexcept = default;
@@ -57,11 +61,14 @@ void KdTree3::build(const MatX3& points) {
   m_impl->build();
 }
 
-int KdTree3::size() const { return int(m_impl->cloud.pts.rows()); }
-const MatX3& KdTree3::points() const { return m_impl->cloud.pts; }
+int KdTree3::size() const {
+  return int(m_impl->cloud.pts.rows());
+}
+const MatX3& KdTree3::points() const {
+  return m_impl->cloud.pts;
+}
 
-void KdTree3::knn(const Vec3& p, int k, std::vector<int>& indices,
-                  std::vector<Real>* dist2) const {
+void KdTree3::knn(const Vec3& p, int k, std::vector<int>& indices, std::vector<Real>* dist2) const {
   indices.clear();
   if (dist2) dist2->clear();
   k = std::min(k, size());

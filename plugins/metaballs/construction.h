@@ -23,14 +23,14 @@ namespace deform::metaballs {
 inline constexpr const char* kConstructionVersion = "metaballs-construction/1";
 
 struct ConstructionParams {
-  int targetSpheres = 512;       ///< stage 1 selection budget
-  int voxelResolution = 48;      ///< voxels along the longest side (stages 1 and 5)
-  int fillNeighbours = 6;        ///< k of Algorithm 1
-  Real fillMinRadiusRatio = 0.5; ///< stage 3 minimum radius, as a fraction of the median radius
+  int targetSpheres = 900;        ///< stage 1 selection budget (liver: ~580 after merging)
+  int voxelResolution = 48;       ///< voxels along the longest side (stages 1 and 5)
+  int fillNeighbours = 6;         ///< k of Algorithm 1
+  Real fillMinRadiusRatio = 0.5;  ///< stage 3 minimum radius, as a fraction of the median radius
   int fillMaxGenerations = 4;
   Real attractionRangeVoxels = 2.0;
   int maxOptimisationMoves = 20000;
-  int topologyNeighbours = 9;    ///< N of eq. (5)
+  int topologyNeighbours = 9;  ///< N of eq. (5)
 };
 
 struct ConstructionReport {

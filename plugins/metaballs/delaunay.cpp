@@ -45,7 +45,8 @@ std::vector<std::array<int, 4>> delaunayTetrahedra(const MatX3& points) {
   qh_freeqhull(qh, !qh_ALL);
   int curlong = 0, totlong = 0;
   qh_memfreeshort(qh, &curlong, &totlong);
-  if (code != 0) throw std::runtime_error("Qhull Delaunay failed with exit code " + std::to_string(code));
+  if (code != 0)
+    throw std::runtime_error("Qhull Delaunay failed with exit code " + std::to_string(code));
   return tets;
 }
 

@@ -14,9 +14,12 @@ void forVoxelsInBall(const VoxelGrid& g, const Vec3& c, Real radius, Fn&& fn) {
   const Vec3 lo = (c - g.origin).array() / g.h - radius / g.h;
   const Vec3 hi = (c - g.origin).array() / g.h + radius / g.h;
   // One voxel of margin: the exact distance test below decides, not the rounded index range.
-  const int i0 = std::max(0, int(std::floor(lo.x()))), i1 = std::min(g.nx - 1, int(std::ceil(hi.x())));
-  const int j0 = std::max(0, int(std::floor(lo.y()))), j1 = std::min(g.ny - 1, int(std::ceil(hi.y())));
-  const int k0 = std::max(0, int(std::floor(lo.z()))), k1 = std::min(g.nz - 1, int(std::ceil(hi.z())));
+  const int i0 = std::max(0, int(std::floor(lo.x()))),
+            i1 = std::min(g.nx - 1, int(std::ceil(hi.x())));
+  const int j0 = std::max(0, int(std::floor(lo.y()))),
+            j1 = std::min(g.ny - 1, int(std::ceil(hi.y())));
+  const int k0 = std::max(0, int(std::floor(lo.z()))),
+            k1 = std::min(g.nz - 1, int(std::ceil(hi.z())));
   const Real r2 = radius * radius;
   for (int k = k0; k <= k1; ++k)
     for (int j = j0; j <= j1; ++j)
@@ -31,11 +34,10 @@ struct State {
   std::vector<int> cover;  // spheres containing each voxel centre
   long long hollow = 0;
 
-  explicit State(const VoxelGrid& grid, const SphereSet& s) : g(grid), cover(grid.inside.size(), 0) {
+  explicit State(const VoxelGrid& grid, const SphereSet& s)
+      : g(grid), cover(grid.inside.size(), 0) {
     for (int i = 0; i < s.size(); ++i)
-      forVoxelsInBall(g, s.center(i), s.radii(i), [&](int v, const Vec3&) {
-        ++cover[size_t(v)];
-      });
+      forVoxelsInBall(g, s.center(i), s.radii(i), [&](int v, const Vec3&) { ++cover[size_t(v)]; });
     for (size_t v = 0; v < cover.size(); ++v) hollow += (g.inside[v] && cover[v] == 0) ? 1 : 0;
   }
   bool isHollow(int v) const { return g.inside[size_t(v)] && cover[size_t(v)] == 0; }
@@ -59,8 +61,7 @@ long long countHollowVoxels(const SphereSet& spheres, const VoxelGrid& grid) {
 }
 
 ElectrostaticResult optimiseElectrostatic(SphereSet& spheres, const VoxelGrid& grid,
-                                          const MeshDistance& dist,
-                                          const ElectrostaticParams& p) {
+                                          const MeshDistance& dist, const ElectrostaticParams& p) {
   ElectrostaticResult res;
   res.insideVoxels = grid.numInside();
   State st(grid, spheres);
@@ -69,7 +70,8 @@ ElectrostaticResult optimiseElectrostatic(SphereSet& spheres, const VoxelGrid& g
   const Real range = p.rangeVoxels * grid.h;
   std::vector<Vec3> force(static_cast<size_t>(n));
   std::vector<uint8_t> stale(size_t(n), 1);
-  for (int j = 0; j < n; ++j) force[size_t(j)] = attraction(st, spheres.center(j), spheres.radii(j), range);
+  for (int j = 0; j < n; ++j)
+    force[size_t(j)] = attraction(st, spheres.center(j), spheres.radii(j), range);
   while (res.moves < p.maxMoves) {
     // The strongest attracted sphere not known to fail.
     int best = -1;

@@ -9,9 +9,9 @@
 // Choices where the paper is silent:
 //  - the attracted spheres are tried in order of decreasing |f_j| (ties by index);
 //  - the radius is fixed unless the surface is nearer at the new centre: r' = min(r, D(c')), so
-//    stage 2's "no sphere outside" survives the optimisation (with a strictly fixed radius, a sphere
-//    that touches the surface, as every sphere does after eq. 1, could never move towards the
-//    hollow voxels, which lie between the spheres and the surface);
+//    stage 2's "no sphere outside" survives the optimisation (with a strictly fixed radius, a
+//    sphere that touches the surface, as every sphere does after eq. 1, could never move towards
+//    the hollow voxels, which lie between the spheres and the surface);
 //  - a sphere whose trial failed is not retried until a move nearby changes its neighbourhood
 //    (its outcome cannot change before), which makes the loop affordable; this is exact;
 //  - at most maxMoves accepted moves.
@@ -41,7 +41,6 @@ struct ElectrostaticResult {
 };
 
 ElectrostaticResult optimiseElectrostatic(SphereSet& spheres, const VoxelGrid& grid,
-                                          const MeshDistance& dist,
-                                          const ElectrostaticParams& p);
+                                          const MeshDistance& dist, const ElectrostaticParams& p);
 
 }  // namespace deform::metaballs

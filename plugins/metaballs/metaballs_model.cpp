@@ -18,7 +18,7 @@ double msSince(Clock::time_point t) {
 
 std::vector<ParamSpec> metaballsParams() {
   return {
-      ParamSpec::integer("spheres", 512, 8, 20000,
+      ParamSpec::integer("spheres", 900, 8, 20000,
                          "sphere budget of the medial-axis packing (stage 1); the final count "
                          "changes by filling and merging"),
       ParamSpec::integer("voxel_resolution", 48, 8, 256,
@@ -88,8 +88,8 @@ void MetaballsModel::init(const ModelSetup& setup) {
     throw InputError(organ.source, "metaballs construction", e.what());
   }
   m_iterations = int(p.integer("iterations"));
-  m_mode = p.choiceAs<StiffnessMode>("stiffness_mode",
-                                     {{"xpbd", StiffnessMode::Xpbd}, {"classic", StiffnessMode::Classic}});
+  m_mode = p.choiceAs<StiffnessMode>(
+      "stiffness_mode", {{"xpbd", StiffnessMode::Xpbd}, {"classic", StiffnessMode::Classic}});
   // Classic PBD: make the effective stiffness independent of the iteration count.
   m_stiffness = 1.0 - std::pow(1.0 - p.real("stiffness"), 1.0 / m_iterations);
   m_laplacian = p.flag("laplacian");
@@ -198,7 +198,8 @@ void MetaballsModel::computeRotations() {
       const int i = m_adj[size_t(k)];
       A += (m_x.row(i).transpose() - xm) * (m_x0.row(i).transpose() - x0m).transpose();
     }
-    extractRotation(A, m_q[size_t(m)], 8);
+    // Warm-started from the previous step: a few iterations track the rotation.
+    extractRotation(A, m_q[size_t(m)], 3);
     const Mat3 R = m_q[size_t(m)].toRotationMatrix();
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c) m_rot[size_t(9 * m + 3 * r + c)] = R(r, c);
@@ -257,24 +258,39 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   long long degenerate = 0;
   for (int it = 0; it < m_iterations; ++it) {
     auto ts = Clock::now();
+    Real* P = m_p.data();
+    const int* LL = L.data();
     for (int l = 0; l < nl; ++l) {
-      const int a = L(l, 0), b = L(l, 1);
+      const int a = LL[2 * l], b = LL[2 * l + 1];
       const Real wa = m_wEff[size_t(a)], wb = m_wEff[size_t(b)];
       if (wa + wb == 0) continue;
-      Vec3 da, db;
-      const Vec3 pa = m_p.row(a).transpose(), pb = m_p.row(b).transpose();
-      const bool ok = m_mode == StiffnessMode::Xpbd
-                          ? projectStretchXpbd(pa, pb, wa, wb, m_linkRest[size_t(l)],
-                                               m_linkAlpha[size_t(l)] / dt2, m_lambda[size_t(l)],
-                                               da, db)
-                          : projectStretch(pa, pb, wa, wb, m_linkRest[size_t(l)], m_stiffness, da,
-                                           db);
-      if (!ok) {
+      Real* pa = P + 3 * a;
+      Real* pb = P + 3 * b;
+      const Real dx = pa[0] - pb[0], dy = pa[1] - pb[1], dz = pa[2] - pb[2];
+      const Real len = std::sqrt(dx * dx + dy * dy + dz * dz);
+      if (!(len > 1e-12)) {
         ++degenerate;
         continue;
       }
-      m_p.row(a) += da.transpose();
-      m_p.row(b) += db.transpose();
+      // Eqs. (7)-(8) (classic) or their XPBD form; same maths as projectStretch*, inlined on raw
+      // arrays for speed.
+      const Real C = len - m_linkRest[size_t(l)];
+      Real s;
+      if (m_mode == StiffnessMode::Xpbd) {
+        const Real at = m_linkAlpha[size_t(l)] / dt2;
+        const Real dl = (-C - at * m_lambda[size_t(l)]) / (wa + wb + at);
+        m_lambda[size_t(l)] += dl;
+        s = -dl;
+      } else {
+        s = m_stiffness * C / (wa + wb);
+      }
+      const Real f = s / len;
+      pa[0] -= wa * f * dx;
+      pa[1] -= wa * f * dy;
+      pa[2] -= wa * f * dz;
+      pb[0] += wb * f * dx;
+      pb[1] += wb * f * dy;
+      pb[2] += wb * f * dz;
     }
     tStretch += msSince(ts);
     if (!m_laplacian) continue;
@@ -294,7 +310,9 @@ StepStatus MetaballsModel::step(const StepInput& in) {
       if (wm + wsum == 0) continue;
       centre /= Real(cnt);
       Vec3 Lm = m_lapRest.row(m).transpose();
-      if (lapRot) Lm = Eigen::Map<const Eigen::Matrix<Real, 3, 3, Eigen::RowMajor>>(&m_rot[size_t(9 * m)]) * Lm;
+      if (lapRot)
+        Lm = Eigen::Map<const Eigen::Matrix<Real, 3, 3, Eigen::RowMajor>>(&m_rot[size_t(9 * m)]) *
+             Lm;
       const Vec3 C = m_p.row(m).transpose() - centre - Lm;
       Vec3 dl;
       if (m_mode == StiffnessMode::Xpbd) {
@@ -399,8 +417,8 @@ NumericCounters MetaballsModel::numericCounters() const {
   c["hollow_voxels_after_optimisation"] = r.hollowAfter;
   c["optimisation_moves"] = r.optimisationMoves;
   c["bridge_links"] = r.bridges;
-  const char* stages[6] = {"packing", "radius_adjustment", "filling", "merging", "optimisation",
-                           "topology"};
+  const char* stages[6] = {"packing", "radius_adjustment", "filling",
+                           "merging", "optimisation",      "topology"};
   for (int i = 0; i < 6; ++i)
     c[std::string("construction_us_") + stages[i]] = (long long)std::llround(r.seconds[i] * 1e6);
   return c;

@@ -67,7 +67,7 @@ class MetaballsModel final : public Model {
 
   // rest data
   MatX3 m_x0;
-  VecX m_invMass;               // 1 / m_i
+  VecX m_invMass;  // 1 / m_i
   std::vector<uint8_t> m_fixed;
   std::vector<int> m_fixedList;
   std::vector<Real> m_linkRest, m_linkAlpha;  // per link: d (eq. 6), XPBD compliance (m/N)

@@ -49,8 +49,8 @@ nlohmann::json metaballsConstructionTable(int steps) {
       in.grasps[0].targets(0, 2) = x0(top, 2) + 0.02 * (s + 1) / steps;
       const auto t = std::chrono::steady_clock::now();
       model.step(in);
-      ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t)
-                       .count());
+      ms.push_back(
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count());
     }
     std::sort(ms.begin(), ms.end());
     const Counts c = model.counts();
@@ -70,9 +70,8 @@ nlohmann::json metaballsConstructionTable(int steps) {
                       {"construction_s", paper.constructionSeconds},
                       {"deformation_ms", paper.deformationMs}}}});
   }
-  return {{"table", "metaballs-construction"},
-          {"source", "Pan et al. 2015, Table 1"},
-          {"rows", rows}};
+  return {
+      {"table", "metaballs-construction"}, {"source", "Pan et al. 2015, Table 1"}, {"rows", rows}};
 }
 
 }  // namespace deform::metaballs

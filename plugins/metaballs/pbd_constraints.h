@@ -82,13 +82,12 @@ inline Real volumeRadiusScale(Real restSum, Real currentSum) {
 inline void extractRotation(const Mat3& A, Eigen::Quaternion<Real>& q, int maxIter) {
   for (int it = 0; it < maxIter; ++it) {
     const Mat3 R = q.matrix();
-    const Vec3 omega = (R.col(0).cross(A.col(0)) + R.col(1).cross(A.col(1)) +
-                        R.col(2).cross(A.col(2))) /
-                       (std::abs(R.col(0).dot(A.col(0)) + R.col(1).dot(A.col(1)) +
-                                 R.col(2).dot(A.col(2))) +
-                        1e-30);
+    const Vec3 omega =
+        (R.col(0).cross(A.col(0)) + R.col(1).cross(A.col(1)) + R.col(2).cross(A.col(2))) /
+        (std::abs(R.col(0).dot(A.col(0)) + R.col(1).dot(A.col(1)) + R.col(2).dot(A.col(2))) +
+         1e-30);
     const Real w = omega.norm();
-    if (w < 1e-12) break;
+    if (w < 1e-9) break;
     q = Eigen::Quaternion<Real>(Eigen::AngleAxis<Real>(w, omega / w)) * q;
     q.normalize();
   }

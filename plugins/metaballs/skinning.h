@@ -26,13 +26,13 @@ inline Real fieldStrength(Real d, Real r) {
 
 struct Skinning {
   int numVertices = 0;
-  int slots = 0;               ///< K
-  std::vector<int> sphere;     ///< #V*K, vertex-major
-  std::vector<Real> weight;    ///< #V*K, f_i / sum f (eq. 14), 0 in padding slots
-  std::vector<Real> restRadiusSum;  ///< #V: sum_i r_i over the attached spheres at rest
+  int slots = 0;                          ///< K
+  std::vector<int> sphere;                ///< #V*K, vertex-major
+  std::vector<Real> weight;               ///< #V*K, f_i / sum f (eq. 14), 0 in padding slots
+  std::vector<Real> restRadiusSum;        ///< #V: sum_i r_i over the attached spheres at rest
   std::vector<Real> dispX, dispY, dispZ;  ///< #V each: eq. (15)
-  int fallbacks = 0;           ///< vertices with no sphere at f >= T (took the strongest)
-  int attachments = 0;         ///< total attached (vertex, sphere) pairs
+  int fallbacks = 0;    ///< vertices with no sphere at f >= T (took the strongest)
+  int attachments = 0;  ///< total attached (vertex, sphere) pairs
 };
 
 /// V: #V by 3 rest surface vertices. threshold T in (0, 1].

@@ -8,8 +8,7 @@
 
 namespace deform::metaballs {
 
-MergeResult mergeOverlappingSpheres(SphereSet& spheres, const MeshDistance& dist,
-                                    int maxPasses) {
+MergeResult mergeOverlappingSpheres(SphereSet& spheres, const MeshDistance& dist, int maxPasses) {
   MergeResult res;
   std::vector<int> hits;
   for (int pass = 0; pass < maxPasses && spheres.size() > 1; ++pass) {

@@ -91,7 +91,8 @@ PackingResult packSpheres(const SurfaceMesh& surface, const MeshDistance& dist,
   for (size_t i = 0; i < grid.inside.size(); ++i)
     if (grid.inside[i]) insideIdx.push_back(int(i));
   MatX3 vox(Eigen::Index(insideIdx.size()), 3);
-  for (size_t i = 0; i < insideIdx.size(); ++i) vox.row(Eigen::Index(i)) = grid.centerOf(insideIdx[i]);
+  for (size_t i = 0; i < insideIdx.size(); ++i)
+    vox.row(Eigen::Index(i)) = grid.centerOf(insideIdx[i]);
   const KdTree3 voxTree(vox);
   const KdTree3 surfTree(surface.V);
   const int nVox = int(insideIdx.size());

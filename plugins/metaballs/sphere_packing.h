@@ -19,8 +19,8 @@
 namespace deform::metaballs {
 
 struct MedialCandidates {
-  SphereSet poleBalls;  ///< centres = inner poles; radii = Voronoi-ball (circum)radius
-  VecX distance;        ///< D(c) of each centre (eq. 1)
+  SphereSet poleBalls;     ///< centres = inner poles; radii = Voronoi-ball (circum)radius
+  VecX distance;           ///< D(c) of each centre (eq. 1)
   int degenerateTets = 0;  ///< flat Delaunay tetrahedra skipped
   int delaunayTets = 0;
 };

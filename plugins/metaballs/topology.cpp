@@ -31,7 +31,8 @@ struct UnionFind {
 int countComponents(int n, const MatX2i& links) {
   UnionFind uf(n);
   int comps = n;
-  for (Eigen::Index l = 0; l < links.rows(); ++l) comps -= uf.unite(links(l, 0), links(l, 1)) ? 1 : 0;
+  for (Eigen::Index l = 0; l < links.rows(); ++l)
+    comps -= uf.unite(links(l, 0), links(l, 1)) ? 1 : 0;
   return comps;
 }
 

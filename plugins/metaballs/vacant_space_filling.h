@@ -22,8 +22,8 @@ namespace deform::metaballs {
 Vec3 gapMidpoint(const Vec3& c1, Real r1, const Vec3& c2, Real r2);
 
 struct FillParams {
-  int neighbours = 6;       ///< k of the k-nearest-neighbour search
-  Real minRadius = 0;       ///< m
+  int neighbours = 6;  ///< k of the k-nearest-neighbour search
+  Real minRadius = 0;  ///< m
   int maxGenerations = 6;
 };
 

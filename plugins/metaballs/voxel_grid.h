@@ -20,9 +20,7 @@ struct VoxelGrid {
 
   int index(int i, int j, int k) const { return i + nx * (j + ny * k); }
   Vec3 center(int i, int j, int k) const { return origin + h * Vec3(i, j, k); }
-  Vec3 centerOf(int idx) const {
-    return center(idx % nx, (idx / nx) % ny, idx / (nx * ny));
-  }
+  Vec3 centerOf(int idx) const { return center(idx % nx, (idx / nx) % ny, idx / (nx * ny)); }
   long long numInside() const;
 };
 

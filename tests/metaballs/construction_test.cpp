@@ -144,7 +144,7 @@ TEST(MetaballsConstruction, TopologyFollowsEquation5AndIsConnected) {
         nearestUnselected = std::min(nearestUnselected, d);
     }
     EXPECT_EQ(int(sel.size()), std::min(overlapping, N));  // L or L' of eq. (5)
-    EXPECT_LE(farthestSelected, nearestUnselected);         // L' takes the nearest
+    EXPECT_LE(farthestSelected, nearestUnselected);        // L' takes the nearest
   }
   EXPECT_EQ(countComponents(s.size(), mb.topology.links), 1);
   EXPECT_EQ(mb.report.links, mb.topology.links.rows());
