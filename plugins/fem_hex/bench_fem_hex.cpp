@@ -1,0 +1,162 @@
+// fem_hex speed: time per implicit step on a liver-sized organ (grasp lifting the top, gravity,
+// lower part pinned), by element count, formulation and solver. Each benchmark iteration is one
+// step; the counters report the median step time (the headline, as in DESIGN.md) and per-phase
+// means.
+//
+//   bench_fem_hex --benchmark_filter=Liver967
+//   bench_fem_hex --benchmark_filter=Scaling
+#include "hex_fem_model.h"
+
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace {
+
+using namespace deform;
+using namespace deform::fem_hex;
+
+class BenchModel final : public HexFemModel {
+ public:
+  void init(const ModelSetup&) override {}
+};
+
+// Liver-sized stand-in (0.2 x 0.15 x 0.09 m ellipsoid), until the liver phantom is on main.
+SurfaceMesh liverLike() {
+  const Vec3 r(0.1, 0.075, 0.045);
+  const int stacks = 40, slices = 80;
+  SurfaceMesh m;
+  const int nv = (stacks - 1) * slices + 2;
+  m.V.resize(nv, 3);
+  m.V.row(0) << 0, 0, -r.z();
+  for (int i = 1; i < stacks; ++i) {
+    const Real th = M_PI * i / stacks;
+    for (int j = 0; j < slices; ++j) {
+      const Real ph = 2 * M_PI * j / slices;
+      m.V.row(1 + (i - 1) * slices + j) << r.x() * std::sin(th) * std::cos(ph),
+          r.y() * std::sin(th) * std::sin(ph), -r.z() * std::cos(th);
+    }
+  }
+  m.V.row(nv - 1) << 0, 0, r.z();
+  auto ring = [&](int i, int j) { return 1 + (i - 1) * slices + (j % slices); };
+  std::vector<Eigen::Vector3i> f;
+  for (int j = 0; j < slices; ++j) f.emplace_back(0, ring(1, j), ring(1, j + 1));
+  for (int i = 1; i < stacks - 1; ++i) {
+    for (int j = 0; j < slices; ++j) {
+      f.emplace_back(ring(i, j), ring(i + 1, j + 1), ring(i, j + 1));
+      f.emplace_back(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1));
+    }
+  }
+  for (int j = 0; j < slices; ++j)
+    f.emplace_back(nv - 1, ring(stacks - 1, j + 1), ring(stacks - 1, j));
+  m.F.resize(f.size(), 3);
+  for (size_t i = 0; i < f.size(); ++i) m.F.row(i) = f[i].transpose();
+  if (signedVolume(m.V, m.F) < 0) m.F.col(1).swap(m.F.col(2));
+  return m;
+}
+
+void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
+              CorotationalSolver solver, bool simplicial) {
+  Organ organ;
+  organ.source = "liver-like";
+  organ.surface = liverLike();
+  HexFemConfig c;
+  c.elements = elements;
+  c.elastic = elastic;
+  c.solver = solver;
+  c.rayleighMass = 0.1;
+  c.rayleighStiffness = 0.01;
+  c.simplicialCholesky = simplicial;
+  BenchModel m;
+  m.initialize(organ, c, 1e-3, [](const MatX3& nodes) {
+    std::vector<int> f;
+    for (int n = 0; n < nodes.rows(); ++n)
+      if (nodes(n, 2) < -0.03) f.push_back(n);
+    return f;
+  });
+  GraspInput grasp;
+  for (int n = 0; n < m.nodes().rows(); ++n)
+    if ((m.nodes().row(n) - Eigen::RowVector3d(0, 0, 0.045)).norm() < 0.015)
+      grasp.nodes.push_back(n);
+  MatX3 rest(grasp.nodes.size(), 3);
+  for (size_t k = 0; k < grasp.nodes.size(); ++k) rest.row(k) = m.nodes().row(grasp.nodes[k]);
+  grasp.targets = rest;
+  StepInput in;
+  in.dt = 1e-3;
+  in.gravity = Vec3(0, 0, -9.81);
+  in.grasps = {grasp};
+  std::vector<double> times;
+  times.reserve(1 << 16);
+  double assembly = 0, solve = 0, surface = 0;
+  long long iterations = 0, step = 0;
+  for (auto _ : state) {
+    // Triangle wave: lift 2 cm over 500 steps, then back.
+    const int phase = static_cast<int>(step % 1000);
+    const Real lift = 0.02 * (phase < 500 ? phase : 1000 - phase) / 500.0;
+    in.grasps[0].targets.col(2) = rest.col(2).array() + lift;
+    const auto t0 = std::chrono::steady_clock::now();
+    const StepStatus s = m.step(in);
+    times.push_back(
+        std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count());
+    if (s != StepStatus::Ok) {
+      state.SkipWithError("diverged");
+      break;
+    }
+    const PhaseTimes p = m.phaseTimes();
+    assembly += p.at("assembly");
+    solve += p.at("solve");
+    surface += p.at("surface");
+    iterations += m.lastIterations();
+    ++step;
+  }
+  if (times.empty()) return;
+  std::sort(times.begin(), times.end());
+  const double median = times[times.size() / 2];
+  const double n = static_cast<double>(step);
+  state.counters["hexes"] = static_cast<double>(m.grid().numHexes());
+  state.counters["nodes"] = static_cast<double>(m.grid().numNodes());
+  state.counters["median_us"] = median;
+  state.counters["us_per_hex"] = median / m.grid().numHexes();
+  state.counters["assembly_us"] = 1e3 * assembly / n;
+  state.counters["solve_us"] = 1e3 * solve / n;
+  state.counters["surface_us"] = 1e3 * surface / n;
+  state.counters["cg_iters"] = static_cast<double>(iterations) / n;
+}
+
+void Liver967(benchmark::State& state) {
+  const auto elastic = state.range(0) ? ElasticModel::Corotational : ElasticModel::Linear;
+  const auto solver = state.range(1) ? CorotationalSolver::Refactor : CorotationalSolver::Pcg;
+  runSteps(state, 967, elastic, solver, state.range(2) != 0);
+}
+// (corotational?, refactor?, simplicial?)
+BENCHMARK(Liver967)
+    ->ArgNames({"corot", "refactor", "simplicial"})
+    ->Args({1, 0, 0})
+    ->Args({1, 0, 1})
+    ->Args({1, 1, 0})
+    ->Args({1, 1, 1})
+    ->Args({0, 0, 0})
+    ->Args({0, 0, 1})
+    ->Unit(benchmark::kMicrosecond)
+    ->MinTime(2.0);
+
+void Scaling(benchmark::State& state) {
+  runSteps(state, state.range(0), ElasticModel::Corotational,
+           state.range(1) ? CorotationalSolver::Refactor : CorotationalSolver::Pcg,
+           state.range(2) != 0);
+}
+BENCHMARK(Scaling)
+    ->ArgNames({"elements", "refactor", "simplicial"})
+    ->ArgsProduct({{100, 300, 1000, 3000, 10000}, {0}, {0, 1}})
+    ->Args({100, 1, 0})
+    ->Args({300, 1, 0})
+    ->Args({1000, 1, 0})
+    ->Args({3000, 1, 0})
+    ->Unit(benchmark::kMicrosecond)
+    ->MinTime(1.0);
+
+}  // namespace
+
+BENCHMARK_MAIN();
