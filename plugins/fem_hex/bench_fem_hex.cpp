@@ -58,7 +58,8 @@ SurfaceMesh liverLike() {
 }
 
 void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
-              CorotationalSolver solver, bool simplicial) {
+              CorotationalSolver solver, bool simplicial, bool allOrderings = true,
+              Real tolerance = 1e-6) {
   Organ organ;
   organ.source = "liver-like";
   organ.surface = liverLike();
@@ -69,6 +70,8 @@ void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
   c.rayleighMass = 0.1;
   c.rayleighStiffness = 0.01;
   c.simplicialCholesky = simplicial;
+  c.tryAllOrderings = allOrderings;
+  c.pcgTolerance = tolerance;
   BenchModel m;
   m.initialize(organ, c, 1e-3, [](const MatX3& nodes) {
     std::vector<int> f;
@@ -122,6 +125,7 @@ void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
   state.counters["assembly_us"] = 1e3 * assembly / n;
   state.counters["solve_us"] = 1e3 * solve / n;
   state.counters["surface_us"] = 1e3 * surface / n;
+  state.counters["L_nnz"] = static_cast<double>(m.counts().at("cholesky_factor_nonzeros"));
   state.counters["cg_iters"] = static_cast<double>(iterations) / n;
 }
 
@@ -141,6 +145,20 @@ BENCHMARK(Liver967)
     ->Args({0, 0, 1})
     ->Unit(benchmark::kMicrosecond)
     ->MinTime(2.0);
+
+void Tuning(benchmark::State& state) {
+  runSteps(state, 967, ElasticModel::Corotational, CorotationalSolver::Pcg, state.range(0) != 0,
+           state.range(1) != 0, std::pow(10.0, -static_cast<double>(state.range(2))));
+}
+BENCHMARK(Tuning)
+    ->ArgNames({"simplicial", "all_orderings", "neg_log10_tol"})
+    ->ArgsProduct({{0, 1}, {0, 1}, {6}})
+    ->Args({1, 1, 4})
+    ->Args({1, 1, 5})
+    ->Args({1, 1, 7})
+    ->Args({1, 1, 8})
+    ->Unit(benchmark::kMicrosecond)
+    ->MinTime(1.0);
 
 void Scaling(benchmark::State& state) {
   runSteps(state, state.range(0), ElasticModel::Corotational,

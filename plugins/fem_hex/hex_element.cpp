@@ -112,7 +112,11 @@ int extractRotation(const Mat3& F, Quat& q, int maxIterations, Real tolerance) {
     const Vec3 omega = num / den;
     const Real w = omega.norm();
     if (!(w > tolerance)) break;  // also stops on NaN
-    q = Quat(Eigen::AngleAxis<Real>(w, omega / w)) * q;
+    // Near convergence (the usual case when warm-started) the first-order quaternion of the
+    // axis-angle update avoids sin/cos; the fixed point omega = 0 is the same either way.
+    q = (w < 1e-3 ? Quat(1, 0.5 * omega.x(), 0.5 * omega.y(), 0.5 * omega.z())
+                  : Quat(Eigen::AngleAxis<Real>(w, omega / w))) *
+        q;
     q.normalize();
   }
   return it;

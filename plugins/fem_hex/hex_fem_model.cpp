@@ -97,6 +97,9 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   m_baseValues = Eigen::Map<const VecX>(m_A.valuePtr(), m_A.nonZeros());
   m_chol.setSimplicial(config.simplicialCholesky);
   if (m_numDofs > 0) {
+    // Analysed once per model: worth trying every ordering CHOLMOD has (AMD, METIS, nested
+    // dissection, ...) and keeping the one with the least fill, since every step solves with it.
+    m_chol.cholmod().nmethods = config.tryAllOrderings ? 9 : 0;
     m_chol.analyzePattern(m_A);
     if (m_chol.info() != Eigen::Success) {
       throw InputError(where, "fem_hex", "CHOLMOD could not analyse the system matrix");
@@ -110,6 +113,8 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   m_elemMark.assign(E, 0);
   m_target = MatX3::Zero(N, 3);
   for (VecX* v : {&m_v0, &m_vOld, &m_r, &m_z, &m_p, &m_w, &m_fext}) v->setZero(3 * N);
+  m_U.setZero(24, E);
+  m_KU.setZero(24, E);
   m_rd.setZero(m_numDofs);
   m_zd.setZero(m_numDofs);
   m_totalMass = m_mass.sum() / 3.0;
@@ -124,7 +129,8 @@ Counts HexFemModel::counts() const {
   return {{"elements", m_grid.numHexes()},
           {"nodes", m_grid.numNodes()},
           {"fixed_nodes", static_cast<long long>(m_fixedList.size())},
-          {"dofs", m_numDofs}};
+          {"dofs", m_numDofs},
+          {"cholesky_factor_nonzeros", m_factorNonZeros}};
 }
 
 PhaseTimes HexFemModel::phaseTimes() const {
@@ -239,6 +245,7 @@ void HexFemModel::constrainAndFactorize() {
   }
   m_chol.factorize(m_A);
   m_factorOk = m_chol.info() == Eigen::Success;
+  m_factorNonZeros = static_cast<long long>(m_chol.cholmod().lnz);
   m_factorGrasped = m_grasped;
 }
 
@@ -268,7 +275,11 @@ void HexFemModel::filter(VecX& r) const {
 void HexFemModel::applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b,
                                 Real scale, VecX& out) const {
   const bool rotated = m_config.elastic == ElasticModel::Corotational;
-  const int count = elems ? static_cast<int>(elems->size()) : m_grid.numHexes();
+  if (!elems) {
+    applyAllElements(in, a, b, scale, out, rotated);
+    return;
+  }
+  const int count = static_cast<int>(elems->size());
   Vec24 local, f;
   for (int k = 0; k < count; ++k) {
     const int e = elems ? (*elems)[k] : k;
@@ -296,13 +307,52 @@ void HexFemModel::applyElements(const std::vector<int>* elems, const VecX& in, R
   }
 }
 
+void HexFemModel::applyAllElements(const VecX& in, Real a, Real b, Real scale, VecX& out,
+                                   bool rotated) const {
+  // Same as the per-element loop, but K0 is applied to all elements at once as one matrix product
+  // (24 x 24 times 24 x E), several times faster than E matrix-vector products. Columns go in
+  // chunks so Eigen's blocking workspace stays on the stack (no allocation in the step loop).
+  const int E = m_grid.numHexes();
+  for (int e = 0; e < E; ++e) {
+    const auto& hex = m_grid.hexes[e];
+    auto u = m_U.col(e);
+    if (rotated) {
+      const Mat3 Rt = m_R[e].transpose();
+      for (int i = 0; i < 8; ++i) {
+        u.segment<3>(3 * i).noalias() = Rt * (a * in.segment<3>(3 * hex[i]));
+        if (b != 0) u.segment<3>(3 * i) -= b * m_rest.row(hex[i]).transpose();
+      }
+    } else {
+      for (int i = 0; i < 8; ++i) {
+        u.segment<3>(3 * i) = a * in.segment<3>(3 * hex[i]);
+        if (b != 0) u.segment<3>(3 * i) -= b * m_rest.row(hex[i]).transpose();
+      }
+    }
+  }
+  constexpr int kChunk = 128;
+  for (int j = 0; j < E; j += kChunk) {
+    const int n = std::min(kChunk, E - j);
+    m_KU.middleCols(j, n).noalias() = m_K0 * m_U.middleCols(j, n);
+  }
+  for (int e = 0; e < E; ++e) {
+    const auto& hex = m_grid.hexes[e];
+    const auto f = m_KU.col(e);
+    if (rotated) {
+      const Mat3 R = scale * m_R[e];
+      for (int i = 0; i < 8; ++i) out.segment<3>(3 * hex[i]).noalias() += R * f.segment<3>(3 * i);
+    } else {
+      for (int i = 0; i < 8; ++i) out.segment<3>(3 * hex[i]) += scale * f.segment<3>(3 * i);
+    }
+  }
+}
+
 void HexFemModel::updateRotations() {
   const Mat38 G = hexShapeGradients(Vec3::Constant(m_grid.cellSize), Vec3::Zero());
   for (int e = 0; e < m_grid.numHexes(); ++e) {
     const auto& hex = m_grid.hexes[e];
     Mat3 F = Mat3::Zero();
     for (int a = 0; a < 8; ++a) F.noalias() += m_x.row(hex[a]).transpose() * G.col(a).transpose();
-    const int it = extractRotation(F, m_q[e], m_config.rotationIterations);
+    const int it = extractRotation(F, m_q[e], m_config.rotationIterations, 1e-9);
     if (it >= m_config.rotationIterations) ++m_rotationNotConverged;
     m_R[e] = m_q[e].toRotationMatrix();
   }

@@ -40,6 +40,7 @@ struct HexFemConfig {
   int pcgMaxIterations = 50;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
   bool simplicialCholesky = false;
+  bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
 };
 
 class HexFemModel : public Model {
@@ -78,6 +79,7 @@ class HexFemModel : public Model {
   /// out += scale * sum_e R_e K0 (R_e^T (a in_e) - b X_e) over elements (all when elems is null).
   void applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b, Real scale,
                      VecX& out) const;
+  void applyAllElements(const VecX& in, Real a, Real b, Real scale, VecX& out, bool rotated) const;
   void updateRotations();
   void filter(VecX& r) const;
 
@@ -103,6 +105,7 @@ class HexFemModel : public Model {
   std::vector<int> m_nodeOfDof;                   // reduced DOF -> node
   std::vector<int> m_nodeElemStart, m_nodeElems;  // node -> elements (CSR)
   bool m_factorOk = false;
+  long long m_factorNonZeros = 0;
   Real m_totalMass = 0;
   Vec3 m_restCenter = Vec3::Zero();
   Real m_divergenceRadius = 0;
@@ -122,7 +125,8 @@ class HexFemModel : public Model {
   std::vector<int> m_graspOwner;  // N, grasp index owning a node or -1
   std::vector<int> m_touched;     // elements touching grasped nodes
   std::vector<char> m_elemMark;
-  MatX3 m_target;  // N by 3, targets of grasped nodes
+  MatX3 m_target;          // N by 3, targets of grasped nodes
+  mutable MatX m_U, m_KU;  // 24 x E element vectors in, K0 times them out
   VecX m_v0, m_vOld, m_r, m_z, m_p, m_w, m_fext, m_rd, m_zd;
   std::vector<Vec3> m_graspForces;
   int m_lastIterations = 0;
