@@ -40,6 +40,7 @@ class CacheKey {
 
  private:
   void raw(const void* data, size_t n);
+  void addReals(const double* data, size_t n);
   struct State;
   State* m_state;
 };
