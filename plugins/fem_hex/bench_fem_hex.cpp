@@ -7,6 +7,8 @@
 //   bench_fem_hex --benchmark_filter=Scaling
 #include "hex_fem_model.h"
 
+#include <deform/phantom.h>
+
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -23,46 +25,12 @@ class BenchModel final : public HexFemModel {
   void init(const ModelSetup&) override {}
 };
 
-// Liver-sized stand-in (0.2 x 0.15 x 0.09 m ellipsoid), until the liver phantom is on main.
-SurfaceMesh liverLike() {
-  const Vec3 r(0.1, 0.075, 0.045);
-  const int stacks = 40, slices = 80;
-  SurfaceMesh m;
-  const int nv = (stacks - 1) * slices + 2;
-  m.V.resize(nv, 3);
-  m.V.row(0) << 0, 0, -r.z();
-  for (int i = 1; i < stacks; ++i) {
-    const Real th = M_PI * i / stacks;
-    for (int j = 0; j < slices; ++j) {
-      const Real ph = 2 * M_PI * j / slices;
-      m.V.row(1 + (i - 1) * slices + j) << r.x() * std::sin(th) * std::cos(ph),
-          r.y() * std::sin(th) * std::sin(ph), -r.z() * std::cos(th);
-    }
-  }
-  m.V.row(nv - 1) << 0, 0, r.z();
-  auto ring = [&](int i, int j) { return 1 + (i - 1) * slices + (j % slices); };
-  std::vector<Eigen::Vector3i> f;
-  for (int j = 0; j < slices; ++j) f.emplace_back(0, ring(1, j), ring(1, j + 1));
-  for (int i = 1; i < stacks - 1; ++i) {
-    for (int j = 0; j < slices; ++j) {
-      f.emplace_back(ring(i, j), ring(i + 1, j + 1), ring(i, j + 1));
-      f.emplace_back(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1));
-    }
-  }
-  for (int j = 0; j < slices; ++j)
-    f.emplace_back(nv - 1, ring(stacks - 1, j + 1), ring(stacks - 1, j));
-  m.F.resize(f.size(), 3);
-  for (size_t i = 0; i < f.size(); ++i) m.F.row(i) = f[i].transpose();
-  if (signedVolume(m.V, m.F) < 0) m.F.col(1).swap(m.F.col(2));
-  return m;
-}
-
 void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
               CorotationalSolver solver, bool simplicial, bool allOrderings = true,
               Real tolerance = 1e-6) {
   Organ organ;
-  organ.source = "liver-like";
-  organ.surface = liverLike();
+  organ.source = "phantom:liver";
+  organ.surface = makePhantom("liver");
   HexFemConfig c;
   c.elements = elements;
   c.elastic = elastic;
