@@ -36,10 +36,10 @@ struct HexFemConfig {
   CorotationalSolver solver = CorotationalSolver::Pcg;
   Real rayleighMass = 0;       ///< alpha, 1/s
   Real rayleighStiffness = 0;  ///< beta, s
-  Real pcgTolerance = 1e-8;    ///< relative residual of the filtered system
+  Real pcgTolerance = 1e-4;    ///< m/s, on sqrt(r^T D^-1 r / total mass), D = diag(A0)
   int pcgMaxIterations = 50;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
-  bool simplicialCholesky = false;
+  bool simplicialCholesky = true;
   bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
 };
 
@@ -81,6 +81,7 @@ class HexFemModel : public Model {
                      VecX& out) const;
   void applyAllElements(const VecX& in, Real a, Real b, Real scale, VecX& out, bool rotated) const;
   void updateRotations();
+  void updateInverseDiagonal();
   void filter(VecX& r) const;
 
   HexFemConfig m_config;
@@ -90,7 +91,8 @@ class HexFemModel : public Model {
   HexGrid m_grid;
   Embedding m_embedding;
   Mat24 m_K0;
-  VecX m_mass;  // 3N, lumped, per DOF
+  VecX m_mass;     // 3N, lumped, per DOF
+  VecX m_invDiag;  // 3N, inverse diagonal of the rest system (1/mass on fixed nodes)
   MatX3 m_rest;
   std::vector<int> m_fixedList;
   std::vector<char> m_isFixed;   // N
