@@ -227,13 +227,13 @@ void HexFemModel::assembleValues(bool rotated) {
   }
 }
 
-void HexFemModel::constrainAndFactorize() {
+void HexFemModel::constrainAndFactorize(bool constrained) {
   // Symmetric elimination of the grasped DOFs: their rows and columns become identity, so the
   // pattern (and CHOLMOD's symbolic analysis) never changes.
   Real* val = m_A.valuePtr();
   const int* outer = m_A.outerIndexPtr();
   const int* inner = m_A.innerIndexPtr();
-  for (int c = 0; c < m_numDofs; ++c) {
+  for (int c = 0; c < m_numDofs && constrained; ++c) {
     const bool cg = m_isGrasped[m_nodeOfDof[c]];
     for (int p = outer[c]; p < outer[c + 1]; ++p) {
       const int r = inner[p];
@@ -247,7 +247,7 @@ void HexFemModel::constrainAndFactorize() {
   m_chol.factorize(m_A);
   m_factorOk = m_chol.info() == Eigen::Success;
   m_factorNonZeros = static_cast<long long>(m_chol.cholmod().lnz);
-  m_factorGrasped = m_grasped;
+  m_factorGrasped = constrained ? m_grasped : std::vector<int>{};
 }
 
 bool HexFemModel::precondition(const VecX& r, VecX& z) {
@@ -376,14 +376,16 @@ void HexFemModel::reset() {
     m_graspOwner[n] = -1;
   }
   m_grasped.clear();
+  for (int e : m_touched) m_elemMark[e] = 0;
   m_touched.clear();
+  m_touchedGrasped.clear();
   m_graspForces.clear();
   m_lastIterations = 0;
   m_rotationNotConverged = m_pcgNotConverged = m_ignoredGraspNodes = 0;
   m_msAssembly = m_msSolve = m_msSurface = 0;
   if (m_numDofs > 0) {
     Eigen::Map<VecX>(m_A.valuePtr(), m_A.nonZeros()) = m_baseValues;
-    constrainAndFactorize();
+    constrainAndFactorize(false);
   }
   evaluateEmbedding(m_embedding, m_x, m_surface);
 }
@@ -429,8 +431,8 @@ StepStatus HexFemModel::step(const StepInput& in) {
     }
   }
   std::sort(m_grasped.begin(), m_grasped.end());
-  const bool graspChanged = m_grasped != m_factorGrasped;
-  if (graspChanged) {
+  if (m_grasped != m_touchedGrasped) {
+    m_touchedGrasped = m_grasped;
     for (int e : m_touched) m_elemMark[e] = 0;
     m_touched.clear();
     for (int n : m_grasped) {
@@ -473,11 +475,15 @@ StepStatus HexFemModel::step(const StepInput& in) {
   m_v = m_v0;
   m_lastIterations = 0;
   if (m_numDofs > 0) {
+    // The factor must be of the constrained system except for PCG with the plain rest
+    // preconditioner, which stays valid (filtered) whatever is grasped.
+    const bool constrained =
+        !corot || refactorEveryStep || m_config.pcgPreconditioner == PcgPreconditioner::RestGrasped;
     if (refactorEveryStep) {
-      constrainAndFactorize();
-    } else if (graspChanged) {
+      constrainAndFactorize(true);
+    } else if (constrained ? m_grasped != m_factorGrasped : !m_factorGrasped.empty()) {
       Eigen::Map<VecX>(m_A.valuePtr(), m_A.nonZeros()) = m_baseValues;
-      constrainAndFactorize();
+      constrainAndFactorize(constrained);
     }
     ok = m_factorOk;
     if (ok && (!corot || refactorEveryStep)) {

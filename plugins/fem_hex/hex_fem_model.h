@@ -28,6 +28,10 @@ namespace deform::fem_hex {
 
 enum class ElasticModel { Linear, Corotational };
 enum class CorotationalSolver { Refactor, Pcg };
+/// PCG preconditioner: Cholesky of the rest system A0 = c1 M + c2 K0, either factored once and
+/// applied filtered (Rest: never refactorised, so a grasp closing costs nothing), or refactorised
+/// with the grasped rows and columns eliminated whenever the grasp set changes (RestGrasped).
+enum class PcgPreconditioner { Rest, RestGrasped };
 
 struct HexFemConfig {
   long long elements = 967;  ///< target hexahedron count (used when cellSize == 0)
@@ -38,6 +42,7 @@ struct HexFemConfig {
   Real rayleighStiffness = 0;  ///< beta, s
   Real pcgTolerance = 1e-4;    ///< m/s, on sqrt(r^T D^-1 r / total mass), D = diag(A0)
   int pcgMaxIterations = 50;
+  PcgPreconditioner pcgPreconditioner = PcgPreconditioner::Rest;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
   bool simplicialCholesky = true;
   bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
@@ -74,7 +79,7 @@ class HexFemModel : public Model {
   using Vec24i = Eigen::Matrix<int, 24, 1>;
   void buildPattern();
   void assembleValues(bool rotated);
-  void constrainAndFactorize();
+  void constrainAndFactorize(bool constrained);
   bool precondition(const VecX& r, VecX& z);
   /// out += scale * sum_e R_e K0 (R_e^T (a in_e) - b X_e) over elements (all when elems is null).
   void applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b, Real scale,
@@ -122,10 +127,11 @@ class HexFemModel : public Model {
   MatX3 m_surface;
 
   // Per-step work (allocated once).
-  std::vector<char> m_isGrasped;  // N
-  std::vector<int> m_grasped;     // sorted grasped nodes of this step
-  std::vector<int> m_graspOwner;  // N, grasp index owning a node or -1
-  std::vector<int> m_touched;     // elements touching grasped nodes
+  std::vector<char> m_isGrasped;      // N
+  std::vector<int> m_grasped;         // sorted grasped nodes of this step
+  std::vector<int> m_graspOwner;      // N, grasp index owning a node or -1
+  std::vector<int> m_touched;         // elements touching grasped nodes
+  std::vector<int> m_touchedGrasped;  // grasp set m_touched was built for
   std::vector<char> m_elemMark;
   MatX3 m_target;          // N by 3, targets of grasped nodes
   mutable MatX m_U, m_KU;  // 24 x E element vectors in, K0 times them out

@@ -28,6 +28,10 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::real("pcg_tolerance", "m/s", 1e-4, 1e-15, 1.0,
                       "CG stops when the velocity error estimate sqrt(r^T D^-1 r / total mass) "
                       "falls below this (r residual, D diagonal of the system matrix)"),
+      ParamSpec::choice("pcg_preconditioner", "rest", {"rest", "rest_grasped"},
+                        "rest: Cholesky of the rest system, factored once and applied filtered; "
+                        "rest_grasped: refactorised with the grasped nodes eliminated whenever "
+                        "the grasp set changes"),
       ParamSpec::integer("pcg_max_iterations", 50, 1, 100000, "CG iteration cap per step"),
       ParamSpec::integer("rotation_iterations", 8, 1, 1000,
                          "iteration cap of the warm-started element rotation extraction"),
@@ -49,6 +53,9 @@ HexFemConfig configFromParams(const ParamValues& p) {
   c.rayleighMass = p.real("rayleigh_mass");
   c.rayleighStiffness = p.real("rayleigh_stiffness");
   c.pcgTolerance = p.real("pcg_tolerance");
+  c.pcgPreconditioner = p.choiceAs<PcgPreconditioner>(
+      "pcg_preconditioner",
+      {{"rest", PcgPreconditioner::Rest}, {"rest_grasped", PcgPreconditioner::RestGrasped}});
   c.pcgMaxIterations = static_cast<int>(p.integer("pcg_max_iterations"));
   c.rotationIterations = static_cast<int>(p.integer("rotation_iterations"));
   c.simplicialCholesky =

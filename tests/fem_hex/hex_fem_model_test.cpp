@@ -50,8 +50,15 @@ HexFemConfig config(ElasticModel m, CorotationalSolver s = CorotationalSolver::P
   return c;
 }
 
+HexFemConfig graspedPreconditioner() {
+  HexFemConfig c = config(ElasticModel::Corotational, CorotationalSolver::Pcg);
+  c.pcgPreconditioner = PcgPreconditioner::RestGrasped;
+  return c;
+}
+
 const std::vector<HexFemConfig> kAllConfigs = {
-    config(ElasticModel::Linear), config(ElasticModel::Corotational, CorotationalSolver::Pcg),
+    graspedPreconditioner(), config(ElasticModel::Linear),
+    config(ElasticModel::Corotational, CorotationalSolver::Pcg),
     config(ElasticModel::Corotational, CorotationalSolver::Refactor)};
 
 std::vector<int> nodesNear(const MatX3& nodes, const Vec3& p, Real r) {
