@@ -26,7 +26,7 @@ class BenchModel final : public HexFemModel {
 };
 
 void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
-              CorotationalSolver solver, bool simplicial, bool allOrderings = true,
+              CorotationalSolver solver, CholeskySolver::Kind kind, bool allOrderings = true,
               Real tolerance = 1e-4, bool graspedPreconditioner = false) {
   Organ organ;
   organ.source = "phantom:liver";
@@ -37,7 +37,7 @@ void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
   c.solver = solver;
   c.rayleighMass = 0.1;
   c.rayleighStiffness = 0.01;
-  c.simplicialCholesky = simplicial;
+  c.cholesky = kind;
   c.tryAllOrderings = allOrderings;
   c.pcgTolerance = tolerance;
   c.pcgPreconditioner =
@@ -100,52 +100,47 @@ void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
   state.counters["cg_iters"] = static_cast<double>(iterations) / n;
 }
 
+CholeskySolver::Kind kindOf(long long k) {
+  return k == 0   ? CholeskySolver::Kind::Simplicial
+         : k == 1 ? CholeskySolver::Kind::Supernodal
+                  : CholeskySolver::Kind::Auto;
+}
+
+// cholesky: 0 simplicial, 1 supernodal, 2 auto.
 void Liver967(benchmark::State& state) {
   const auto elastic = state.range(0) ? ElasticModel::Corotational : ElasticModel::Linear;
   const auto solver = state.range(1) ? CorotationalSolver::Refactor : CorotationalSolver::Pcg;
-  runSteps(state, 967, elastic, solver, state.range(2) != 0);
+  runSteps(state, 967, elastic, solver, kindOf(state.range(2)));
 }
-// (corotational?, refactor?, simplicial?)
 BENCHMARK(Liver967)
-    ->ArgNames({"corot", "refactor", "simplicial"})
-    ->Args({1, 0, 0})
-    ->Args({1, 0, 1})
-    ->Args({1, 1, 0})
-    ->Args({1, 1, 1})
-    ->Args({0, 0, 0})
-    ->Args({0, 0, 1})
+    ->ArgNames({"corot", "refactor", "cholesky"})
+    ->ArgsProduct({{1}, {0, 1}, {0, 1, 2}})
+    ->ArgsProduct({{0}, {0}, {0, 1, 2}})
     ->Unit(benchmark::kMicrosecond)
     ->MinTime(2.0);
 
 void Tuning(benchmark::State& state) {
-  runSteps(state, 967, ElasticModel::Corotational, CorotationalSolver::Pcg, state.range(0) != 0,
+  runSteps(state, 967, ElasticModel::Corotational, CorotationalSolver::Pcg, kindOf(state.range(0)),
            state.range(1) != 0, std::pow(10.0, -static_cast<double>(state.range(2))),
            state.range(3) != 0);
 }
 BENCHMARK(Tuning)
-    ->ArgNames({"simplicial", "all_orderings", "neg_log10_tol", "grasp_prec"})
+    ->ArgNames({"cholesky", "all_orderings", "neg_log10_tol", "grasp_prec"})
     ->ArgsProduct({{0, 1}, {0, 1}, {4}, {0}})
-    ->Args({1, 1, 4, 1})
-    ->Args({1, 1, 6, 1})
-    ->Args({1, 1, 3, 0})
-    ->Args({1, 1, 5, 0})
-    ->Args({1, 1, 6, 0})
-    ->Args({1, 1, 8, 0})
+    ->ArgsProduct({{2}, {1}, {3, 4, 5, 6}, {0, 1}})
     ->Unit(benchmark::kMicrosecond)
-    ->MinTime(1.0);
+    ->MinTime(2.0);
 
 void Scaling(benchmark::State& state) {
   runSteps(state, state.range(0), ElasticModel::Corotational,
            state.range(1) ? CorotationalSolver::Refactor : CorotationalSolver::Pcg,
-           state.range(2) != 0);
+           kindOf(state.range(2)));
 }
 BENCHMARK(Scaling)
-    ->ArgNames({"elements", "refactor", "simplicial"})
-    ->ArgsProduct({{100, 300, 1000, 3000, 10000}, {0}, {0, 1}})
-    ->Args({100, 1, 0})
-    ->Args({300, 1, 0})
-    ->Args({1000, 1, 0})
-    ->Args({3000, 1, 0})
+    ->ArgNames({"elements", "refactor", "cholesky"})
+    ->ArgsProduct({{100, 300, 1000, 3000, 10000}, {0}, {2}})
+    ->ArgsProduct({{100, 300, 1000, 3000}, {0}, {0, 1}})
+    ->ArgsProduct({{100, 300, 1000, 3000}, {1}, {2}})
     ->Unit(benchmark::kMicrosecond)
     ->MinTime(1.0);
 

@@ -11,9 +11,14 @@ CholeskySolver::~CholeskySolver() {
   if (m_E) cholmod_free_dense(&m_E, &cholmod());
 }
 
-void CholeskySolver::setSimplicial(bool simplicial) {
-  cholmod().supernodal = simplicial ? CHOLMOD_SIMPLICIAL : CHOLMOD_SUPERNODAL;
-  cholmod().final_ll = simplicial ? 0 : 1;
+void CholeskySolver::setKind(Kind kind) {
+  cholmod().supernodal = kind == Kind::Simplicial   ? CHOLMOD_SIMPLICIAL
+                         : kind == Kind::Supernodal ? CHOLMOD_SUPERNODAL
+                                                    : CHOLMOD_AUTO;
+}
+
+bool CholeskySolver::isSupernodal() const {
+  return m_cholmodFactor && m_cholmodFactor->is_super;
 }
 
 bool CholeskySolver::solveInto(const VecX& b, VecX& x) {

@@ -13,9 +13,11 @@ class CholeskySolver : public SparseCholesky {
   CholeskySolver& operator=(const CholeskySolver&) = delete;
   ~CholeskySolver();
 
-  /// Use CHOLMOD's simplicial (true) or supernodal (false, the default) factorisation; call
-  /// before analyzePattern().
-  void setSimplicial(bool simplicial);
+  enum class Kind { Simplicial, Supernodal, Auto };
+  /// CHOLMOD's factorisation kind; Auto lets CHOLMOD pick supernodal when flops / nnz(L) >= 40.
+  /// Call before analyzePattern().
+  void setKind(Kind kind);
+  bool isSupernodal() const;
 
   /// x = A^{-1} b. No allocation after the first call. Returns false if CHOLMOD failed.
   bool solveInto(const VecX& b, VecX& x);

@@ -95,7 +95,7 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   buildPattern();
   assembleValues(false);
   m_baseValues = Eigen::Map<const VecX>(m_A.valuePtr(), m_A.nonZeros());
-  m_chol.setSimplicial(config.simplicialCholesky);
+  m_chol.setKind(config.cholesky);
   if (m_numDofs > 0) {
     // Analysed once per model: worth trying every ordering CHOLMOD has (AMD, METIS, nested
     // dissection, ...) and keeping the one with the least fill, since every step solves with it.
@@ -131,7 +131,8 @@ Counts HexFemModel::counts() const {
           {"nodes", m_grid.numNodes()},
           {"fixed_nodes", static_cast<long long>(m_fixedList.size())},
           {"dofs", m_numDofs},
-          {"cholesky_factor_nonzeros", m_factorNonZeros}};
+          {"cholesky_factor_nonzeros", m_factorNonZeros},
+          {"cholesky_supernodal", m_chol.isSupernodal() ? 1 : 0}};
 }
 
 PhaseTimes HexFemModel::phaseTimes() const {

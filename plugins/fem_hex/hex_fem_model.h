@@ -44,7 +44,7 @@ struct HexFemConfig {
   int pcgMaxIterations = 50;
   PcgPreconditioner pcgPreconditioner = PcgPreconditioner::Rest;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
-  bool simplicialCholesky = true;
+  CholeskySolver::Kind cholesky = CholeskySolver::Kind::Auto;
   bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
 };
 

@@ -35,9 +35,9 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::integer("pcg_max_iterations", 50, 1, 100000, "CG iteration cap per step"),
       ParamSpec::integer("rotation_iterations", 8, 1, 1000,
                          "iteration cap of the warm-started element rotation extraction"),
-      ParamSpec::choice("cholesky", "simplicial", {"simplicial", "supernodal"},
-                        "CHOLMOD factorisation kind (simplicial is faster with the reference "
-                        "BLAS at these sizes)"),
+      ParamSpec::choice("cholesky", "auto", {"auto", "simplicial", "supernodal"},
+                        "CHOLMOD factorisation kind (auto: CHOLMOD picks supernodal when the "
+                        "factor is dense enough)"),
   };
 }
 
@@ -58,8 +58,10 @@ HexFemConfig configFromParams(const ParamValues& p) {
       {{"rest", PcgPreconditioner::Rest}, {"rest_grasped", PcgPreconditioner::RestGrasped}});
   c.pcgMaxIterations = static_cast<int>(p.integer("pcg_max_iterations"));
   c.rotationIterations = static_cast<int>(p.integer("rotation_iterations"));
-  c.simplicialCholesky =
-      p.choiceAs<bool>("cholesky", {{"supernodal", false}, {"simplicial", true}});
+  c.cholesky = p.choiceAs<CholeskySolver::Kind>("cholesky",
+                                                {{"auto", CholeskySolver::Kind::Auto},
+                                                 {"simplicial", CholeskySolver::Kind::Simplicial},
+                                                 {"supernodal", CholeskySolver::Kind::Supernodal}});
   return c;
 }
 
