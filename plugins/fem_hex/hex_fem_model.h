@@ -72,6 +72,7 @@ class HexFemModel : public Model {
   Eigen::Map<const MatX3> velocities() const {
     return Eigen::Map<const MatX3>(m_v.data(), m_x.rows(), 3);
   }
+  const CholeskySolver& cholesky() const { return m_chol; }
   /// CG iterations of the last step (0 outside the pcg solver).
   int lastIterations() const { return m_lastIterations; }
 
