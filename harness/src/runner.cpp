@@ -44,14 +44,15 @@ void forceSingleThreadedNumerics() {
   }
 }
 
-std::vector<int> comparedSteps(const Scene& scene) {
-  const int n = scene.numSteps();
+std::vector<int> comparedSteps(const Scene& scene, int lastStep) {
+  const int n = lastStep >= 0 ? std::min(lastStep, scene.numSteps()) : scene.numSteps();
   std::vector<int> steps;
   for (Real t : scene.compareAt) {
-    const int k = std::clamp(static_cast<int>(std::llround(t / scene.dt)), 1, n);
+    const int k = std::max(static_cast<int>(std::llround(t / scene.dt)), 1);
+    if (k > n) break;  // the run stops before this instant (--steps)
     if (steps.empty() || k > steps.back()) steps.push_back(k);
   }
-  if (steps.empty()) steps.push_back(n);
+  if (scene.compareAt.empty() && n >= 1) steps.push_back(n);
   return steps;
 }
 
@@ -109,7 +110,7 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
 
   const Box box = boundingBox(organ.surface.V);
   const Real halfSide = 0.5 * tol::kDivergenceBoxFactor * std::max(box.size().maxCoeff(), 1e-9);
-  const std::vector<int> compareSteps = comparedSteps(scene);
+  const std::vector<int> compareSteps = comparedSteps(scene, n);
   const int every =
       options.keepSeries && scene.surfaces == SurfaceOutput::Every ? scene.surfaceEvery : 0;
   const int nv = organ.surface.numVertices();
@@ -357,6 +358,13 @@ void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRec
   }
   const Interaction interaction(scene, organ.surface);
   const Vec3 focus = interaction.focusPoint();
+  if (ref->compared.empty()) {
+    for (RunRecord& r : runs) {
+      if (!r.isReference)
+        r.notes.push_back("no error: the run ended before every compared instant");
+    }
+    return;
+  }
   std::vector<MatX3> refSurfaces;
   for (const auto& s : ref->compared) refSurfaces.push_back(s.positions);
   for (RunRecord& r : runs) {

@@ -223,8 +223,15 @@ TEST(Runner, MaxStepsAndComparedSteps) {
       runModel(info, ParamValues::defaults(info.params), f.scene, f.organ, cache, o);
   EXPECT_EQ(r.steps, 10);
   EXPECT_EQ(comparedSteps(f.scene), (std::vector<int>{50, 100}));
+  EXPECT_EQ(comparedSteps(f.scene, 60), (std::vector<int>{50})) << "a run cut short at step 60";
+  EXPECT_EQ(r.compared.size(), 0u) << "10 steps reach no compared instant";
   f.scene.compareAt.clear();
   EXPECT_EQ(comparedSteps(f.scene), (std::vector<int>{100}));
+  EXPECT_EQ(comparedSteps(f.scene, 10), (std::vector<int>{10})) << "the end of a shortened run";
+  const RunRecord shortRun =
+      runModel(info, ParamValues::defaults(info.params), f.scene, f.organ, cache, o);
+  ASSERT_EQ(shortRun.compared.size(), 1u);
+  EXPECT_EQ(shortRun.compared[0].step, 10);
 }
 
 TEST(Runner, ErrorsAgainstTheReferenceRun) {

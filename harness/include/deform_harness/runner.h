@@ -83,8 +83,8 @@ struct RunOptions {
 };
 
 /// Steps (counts of completed steps) at which the scene compares surfaces: round(t / dt) for
-/// each compare_at instant, else the last step.
-std::vector<int> comparedSteps(const Scene& scene);
+/// each compare_at instant up to lastStep, else lastStep itself. lastStep < 0: the scene's last.
+std::vector<int> comparedSteps(const Scene& scene, int lastStep = -1);
 
 /// Why a model cannot run this scene ("" when it can): a grasp or probe tool without the grasp
 /// capability, a load without point_force.
