@@ -209,19 +209,19 @@ struct Editor {
     };
     int f = kNone;
     for (int g : vf[v]) {
-      int n, p;
+      int n = -1, p = -1;
       nextPrev(g, n, p);
       if (n == b) f = g;
     }
     std::vector<int> fan;
     for (size_t guard = 0; f != kNone && guard <= vf[v].size(); ++guard) {
       fan.push_back(f);
-      int n, p;
+      int n = -1, p = -1;
       nextPrev(f, n, p);
       if (p == a) return fan;
       int g2 = kNone;
       for (int g : vf[v]) {
-        int n2, p2;
+        int n2 = -1, p2 = -1;
         nextPrev(g, n2, p2);
         if (n2 == p) g2 = g;
       }
@@ -320,7 +320,8 @@ CutReport cutSurface(CuttableSurface& surface, const CutPath& path, const CutOpt
       Eigen::Matrix<Real, 3, 2> A;
       A.col(0) = bestDir;
       A.col(1) = -e;
-      const Eigen::Matrix<Real, 2, 1> sol = (A.transpose() * A).ldlt().solve(A.transpose() * (xu - xc));
+      const Eigen::Matrix<Real, 2, 1> sol =
+          (A.transpose() * A).ldlt().solve(A.transpose() * (xu - xc));
       const Real t = std::clamp<Real>(sol[1], 0, 1);
       int next;
       if (t <= snap) {
@@ -408,14 +409,13 @@ SurfaceConstraints constraintsAfterCut(const CuttableSurface& s,
     const int fa = EF(e, 0), fb = EF(e, 1);
     const int pa = s.parentFace[fa];
     const int A = s.originalF(pa, 0), B = s.originalF(pa, 1), C = s.originalF(pa, 2);
-    const bool originalEdge = d.a < s.originalVertices && d.b < s.originalVertices &&
-                              restLength.count(key(d.a, d.b));
+    const bool originalEdge =
+        d.a < s.originalVertices && d.b < s.originalVertices && restLength.count(key(d.a, d.b));
     if (originalEdge) {
       d.rest = restLength[key(d.a, d.b)];
     } else {
       d.rest = restDistanceInTriangle(origLength(A, B), origLength(B, C), origLength(C, A),
-                                      s.baryInOriginalFace(d.a, pa),
-                                      s.baryInOriginalFace(d.b, pa));
+                                      s.baryInOriginalFace(d.a, pa), s.baryInOriginalFace(d.b, pa));
     }
     out.stretch.push_back(d);
     if (fb < 0) continue;
@@ -430,8 +430,8 @@ SurfaceConstraints constraintsAfterCut(const CuttableSurface& s,
       for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j)
           if (s.originalF(pa, i) == s.originalF(pb, j)) shared.push_back(s.originalF(pa, i));
-      const auto it = shared.size() == 2 ? restAngle.find(key(shared[0], shared[1]))
-                                         : restAngle.end();
+      const auto it =
+          shared.size() == 2 ? restAngle.find(key(shared[0], shared[1])) : restAngle.end();
       if (it != restAngle.end()) {
         h.restAngle = it->second;
       } else {

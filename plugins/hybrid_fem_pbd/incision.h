@@ -53,12 +53,12 @@ struct VertexOrigin {
 /// A triangle surface that can be cut: current and rest positions, triangles, and the
 /// bookkeeping that maps everything back to the original surface.
 struct CuttableSurface {
-  MatX3 x;                          ///< #V by 3 current positions, m
-  MatX3 rest;                       ///< #V by 3 rest positions, m
-  std::vector<Vec3i> F;             ///< current triangles (counter-clockwise seen from outside)
-  std::vector<int> parentFace;      ///< #F: original triangle each triangle lies in
-  std::vector<VertexOrigin> origin; ///< #V
-  MatX3i originalF;                 ///< the triangles before any cut
+  MatX3 x;                           ///< #V by 3 current positions, m
+  MatX3 rest;                        ///< #V by 3 rest positions, m
+  std::vector<Vec3i> F;              ///< current triangles (counter-clockwise seen from outside)
+  std::vector<int> parentFace;       ///< #F: original triangle each triangle lies in
+  std::vector<VertexOrigin> origin;  ///< #V
+  MatX3i originalF;                  ///< the triangles before any cut
   int originalVertices = 0;
 
   static CuttableSurface fromMesh(const MatX3& x, const MatX3& rest, const MatX3i& F);

@@ -67,8 +67,7 @@ CoarseAttachment attachToCoarseSurface(const Vec3& p, const MatX3& V, const MatX
   Real best = std::numeric_limits<Real>::infinity();
   for (Eigen::Index f = 0; f < F.rows(); ++f) {
     Vec3 bary;
-    const Vec3 q = closestPointOnTriangle(p, V.row(F(f, 0)).transpose(),
-                                          V.row(F(f, 1)).transpose(),
+    const Vec3 q = closestPointOnTriangle(p, V.row(F(f, 0)).transpose(), V.row(F(f, 1)).transpose(),
                                           V.row(F(f, 2)).transpose(), bary);
     const Real d = (q - p).squaredNorm();
     if (d < best) {

@@ -20,8 +20,7 @@
 namespace deform::hybrid {
 
 /// Closest point on triangle (a, b, c) to p, with its barycentric coordinates (sum 1, each >= 0).
-Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c,
-                            Vec3& bary);
+Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, Vec3& bary);
 
 /// Where a fine node sits on the coarse surface: up to three coarse vertices and their linear
 /// shape-function weights (count 1 when the fine node is a control node).

@@ -79,8 +79,8 @@ ActiveConstraints activeConstraints(const SurfaceConstraints& c, const VecX& w) 
 }
 
 long long projectSurfaceConstraints(MatX3& p, const VecX& w, const SurfaceConstraints& c,
-                                    const ActiveConstraints& active, Real kStretch,
-                                    Real kBending, int iterations) {
+                                    const ActiveConstraints& active, Real kStretch, Real kBending,
+                                    int iterations) {
   const Real ks = pbd::classicStiffness(std::clamp<Real>(kStretch, 0, 1), iterations);
   const Real kb = pbd::classicStiffness(std::clamp<Real>(kBending, 0, 1), iterations);
   long long degenerate = 0;

@@ -44,7 +44,7 @@ ActiveConstraints activeConstraints(const SurfaceConstraints& c, const VecX& w);
 /// values, Mueller et al. 2007 Sec. 3.3). p: #V by 3 predicted positions, updated in place;
 /// w: #V inverse masses. Returns the number of degenerate projections skipped.
 long long projectSurfaceConstraints(MatX3& p, const VecX& w, const SurfaceConstraints& c,
-                                    const ActiveConstraints& active, Real kStretch,
-                                    Real kBending, int iterations);
+                                    const ActiveConstraints& active, Real kStretch, Real kBending,
+                                    int iterations);
 
 }  // namespace deform::hybrid

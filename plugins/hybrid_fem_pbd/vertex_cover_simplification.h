@@ -43,17 +43,17 @@ bool isVertexCover(const MatX2i& E, const std::vector<char>& cover);
 Real triangleQuality(const Vec3& a, const Vec3& b, const Vec3& c);
 
 struct SimplificationOptions {
-  int levels = 1;             ///< how many cover-and-merge passes (the paper does one)
-  Real minQuality = 0.1;      ///< reject a collapse leaving a triangle of lower quality
-  Real minNormalDot = 0.2;    ///< reject a collapse turning a normal further than acos(this)
+  int levels = 1;           ///< how many cover-and-merge passes (the paper does one)
+  Real minQuality = 0.1;    ///< reject a collapse leaving a triangle of lower quality
+  Real minNormalDot = 0.2;  ///< reject a collapse turning a normal further than acos(this)
 };
 
 struct SimplificationResult {
-  SurfaceMesh coarse;              ///< the coarse surface MS' (closed, manifold, outward)
-  std::vector<int> coarseToFine;   ///< #Vc: fine vertex index of each coarse vertex (ascending)
-  std::vector<char> firstCover;    ///< #V fine: the first pass's cover, before any merging
-  long long collapsed = 0;         ///< vertices merged away (all passes)
-  long long rejected = 0;          ///< non-cover vertices kept because no collapse was valid
+  SurfaceMesh coarse;             ///< the coarse surface MS' (closed, manifold, outward)
+  std::vector<int> coarseToFine;  ///< #Vc: fine vertex index of each coarse vertex (ascending)
+  std::vector<char> firstCover;   ///< #V fine: the first pass's cover, before any merging
+  long long collapsed = 0;        ///< vertices merged away (all passes)
+  long long rejected = 0;         ///< non-cover vertices kept because no collapse was valid
 };
 
 /// Simplifies a closed, manifold, outward-oriented surface. Coarse vertices keep the fine

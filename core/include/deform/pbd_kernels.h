@@ -131,5 +131,4 @@ inline bool projectDihedral(const Vec3 x[4], const Real w[4], Real restAngle, Re
   return true;
 }
 
-
 }  // namespace deform::pbd
