@@ -16,8 +16,9 @@
 // with Z = K^-1 C^T built from the cached node columns and S factorised (complete orthogonal
 // decomposition, so dependent rows are harmless) only when the set of rows changes.
 //
-// Paper: "A Hybrid Mesh Deformation Method for Accurate Surface Deformation Based on FEM and PBD
-// with Small Incision" (/work/shared/papers/hybrid-fem-pbd-incision.md).
+// Paper: "A Hybrid Model Method for Accurate Surface Deformation and Incision Based on FEM and
+// PBD", Scientific Programming 2021, article 8343312
+// (/work/shared/papers/hybrid-fem-pbd-incision.md).
 #pragma once
 
 #include <deform/mesh.h>

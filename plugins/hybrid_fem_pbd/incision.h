@@ -27,8 +27,9 @@
 //    is l_AP = lambda_B l_AB. Bending rest angles are kept: the original angle across (pieces
 //    of) original edges, zero (flat) across edges inside an original triangle.
 //
-// Paper: "A Hybrid Mesh Deformation Method for Accurate Surface Deformation Based on FEM and PBD
-// with Small Incision", Sec. 7 (/work/shared/papers/hybrid-fem-pbd-incision.md).
+// Paper: "A Hybrid Model Method for Accurate Surface Deformation and Incision Based on FEM and
+// PBD", Scientific Programming 2021, article 8343312, Sec. 7
+// (/work/shared/papers/hybrid-fem-pbd-incision.md).
 #pragma once
 
 #include <deform/mesh.h>

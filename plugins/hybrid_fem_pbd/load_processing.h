@@ -9,8 +9,9 @@
 // so the total force is kept, and so is its moment about p' (sum_k (x_k - p') x f_k =
 // (sum_k N_k x_k - p') x f = 0).
 //
-// Paper: "A Hybrid Mesh Deformation Method for Accurate Surface Deformation Based on FEM and PBD
-// with Small Incision", Sec. 6.1 (/work/shared/papers/hybrid-fem-pbd-incision.md).
+// Paper: "A Hybrid Model Method for Accurate Surface Deformation and Incision Based on FEM and
+// PBD", Scientific Programming 2021, article 8343312, Sec. 6.1
+// (/work/shared/papers/hybrid-fem-pbd-incision.md).
 #pragma once
 
 #include <deform/mesh.h>

@@ -4,8 +4,9 @@
 // V (the edge p_i p_j collapses onto p_j; edges p_i p_k to a common neighbour disappear, the
 // others become p_j p_k).
 //
-// Paper: "A Hybrid Mesh Deformation Method for Accurate Surface Deformation Based on FEM and PBD
-// with Small Incision" (file /work/shared/papers/hybrid-fem-pbd-incision.md), Sec. 5, Fig. 5.
+// Paper: "A Hybrid Model Method for Accurate Surface Deformation and Incision Based on FEM and
+// PBD", Scientific Programming 2021, article 8343312 (file
+// /work/shared/papers/hybrid-fem-pbd-incision.md), Sec. 5, Fig. 5.
 //
 // The paper takes V from "the method of [22]" (a minimum vertex cover algorithm it does not name)
 // and picks p_j by a rule on the average neighbour distance d_avg whose formula is missing from
