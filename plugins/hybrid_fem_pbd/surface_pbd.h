@@ -32,7 +32,8 @@ SurfaceConstraints buildSurfaceConstraints(const MatX3& restV, const MatX3i& F,
 bool orderHinge(const MatX3i& F, int fa, int fb, int a, int b, pbd::DihedralConstraint& h);
 
 /// Indices of the constraints that touch at least one movable particle (w > 0): the only ones
-/// worth projecting.
+/// worth projecting, each list in greedy-colour order (constraints next to each other rarely
+/// share a movable particle; the order is fixed and deterministic).
 struct ActiveConstraints {
   std::vector<int> stretch;
   std::vector<int> bending;
