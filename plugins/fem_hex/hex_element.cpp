@@ -1,0 +1,132 @@
+#include "hex_element.h"
+
+#include <cmath>
+
+namespace deform::fem_hex {
+
+namespace {
+
+const Real kGauss = 1.0 / std::sqrt(3.0);
+
+template <class Fn>
+void forEachGaussPoint(const Vec3& size, Fn&& fn) {
+  const Real detJ = size.prod() / 8.0;  // weights are all 1
+  for (int g = 0; g < 8; ++g) {
+    const Vec3i c = hexCorner(g);
+    const Vec3 xi = kGauss * (2 * c.cast<Real>() - Vec3::Ones());
+    fn(hexShapeGradients(size, xi), detJ);
+  }
+}
+
+Mat3 stress(const Mat3& gradU, Real lambda, Real mu) {
+  const Mat3 eps = 0.5 * (gradU + gradU.transpose());
+  return lambda * eps.trace() * Mat3::Identity() + 2 * mu * eps;
+}
+
+}  // namespace
+
+Eigen::Vector2d lameParameters(Real E, Real nu) {
+  return {E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))};
+}
+
+Mat38 hexShapeGradients(const Vec3& size, const Vec3& xi) {
+  Mat38 G;
+  for (int a = 0; a < 8; ++a) {
+    const Vec3 s = 2 * hexCorner(a).cast<Real>() - Vec3::Ones();
+    const Vec3 f = (Vec3::Ones() + s.cwiseProduct(xi));
+    // dN/dxi_d = s_d / 8 * prod_{e != d} f_e, and dxi_d/dx_d = 2 / size_d.
+    G(0, a) = s.x() / 8.0 * f.y() * f.z() * 2.0 / size.x();
+    G(1, a) = s.y() / 8.0 * f.x() * f.z() * 2.0 / size.y();
+    G(2, a) = s.z() / 8.0 * f.x() * f.y() * 2.0 / size.z();
+  }
+  return G;
+}
+
+Eigen::Matrix<Real, 8, 1> hexTrilinearWeights(const Vec3& t) {
+  Eigen::Matrix<Real, 8, 1> w;
+  for (int a = 0; a < 8; ++a) {
+    const Vec3i c = hexCorner(a);
+    w[a] = (c.x() ? t.x() : 1 - t.x()) * (c.y() ? t.y() : 1 - t.y()) * (c.z() ? t.z() : 1 - t.z());
+  }
+  return w;
+}
+
+Mat24 hexStiffness(const Vec3& size, Real young, Real poisson) {
+  const Eigen::Vector2d lm = lameParameters(young, poisson);
+  Eigen::Matrix<Real, 6, 6> D = Eigen::Matrix<Real, 6, 6>::Zero();
+  D.topLeftCorner<3, 3>().setConstant(lm[0]);
+  D.topLeftCorner<3, 3>().diagonal().array() += 2 * lm[1];
+  D.bottomRightCorner<3, 3>().diagonal().setConstant(lm[1]);  // engineering shear strains
+  Mat24 K = Mat24::Zero();
+  forEachGaussPoint(size, [&](const Mat38& G, Real w) {
+    Eigen::Matrix<Real, 6, 24> B = Eigen::Matrix<Real, 6, 24>::Zero();
+    for (int a = 0; a < 8; ++a) {
+      const Real gx = G(0, a), gy = G(1, a), gz = G(2, a);
+      B(0, 3 * a) = gx;
+      B(1, 3 * a + 1) = gy;
+      B(2, 3 * a + 2) = gz;
+      B(3, 3 * a) = gy;  // gamma_xy
+      B(3, 3 * a + 1) = gx;
+      B(4, 3 * a + 1) = gz;  // gamma_yz
+      B(4, 3 * a + 2) = gy;
+      B(5, 3 * a) = gz;  // gamma_zx
+      B(5, 3 * a + 2) = gx;
+    }
+    K.noalias() += w * B.transpose() * D * B;
+  });
+  return 0.5 * (K + K.transpose());
+}
+
+Real hexStrainEnergy(const Vec3& size, Real young, Real poisson, const Mat38& u) {
+  const Eigen::Vector2d lm = lameParameters(young, poisson);
+  Real W = 0;
+  forEachGaussPoint(size, [&](const Mat38& G, Real w) {
+    const Mat3 gradU = u * G.transpose();  // du_i/dx_j = sum_a u_a,i dN_a/dx_j
+    const Mat3 eps = 0.5 * (gradU + gradU.transpose());
+    W += 0.5 * w * (eps.cwiseProduct(stress(gradU, lm[0], lm[1]))).sum();
+  });
+  return W;
+}
+
+Mat38 hexElasticForce(const Vec3& size, Real young, Real poisson, const Mat38& u) {
+  const Eigen::Vector2d lm = lameParameters(young, poisson);
+  Mat38 f = Mat38::Zero();
+  forEachGaussPoint(size, [&](const Mat38& G, Real w) {
+    const Mat3 gradU = u * G.transpose();
+    f.noalias() -= w * stress(gradU, lm[0], lm[1]) * G;
+  });
+  return f;
+}
+
+Mat3 hexCentreGradient(const Vec3& size, const Mat38& x) {
+  return x * hexShapeGradients(size, Vec3::Zero()).transpose();
+}
+
+int extractRotation(const Mat3& F, Quat& q, int maxIterations, Real tolerance) {
+  int it = 0;
+  for (; it < maxIterations; ++it) {
+    const Mat3 R = q.toRotationMatrix();
+    const Vec3 num = R.col(0).cross(F.col(0)) + R.col(1).cross(F.col(1)) + R.col(2).cross(F.col(2));
+    const Real den =
+        std::abs(R.col(0).dot(F.col(0)) + R.col(1).dot(F.col(1)) + R.col(2).dot(F.col(2))) + 1e-300;
+    const Vec3 omega = num / den;
+    const Real w = omega.norm();
+    if (!(w > tolerance)) break;  // also stops on NaN
+    // Near convergence (the usual case when warm-started) the first-order quaternion of the
+    // axis-angle update avoids sin/cos; the fixed point omega = 0 is the same either way.
+    q = (w < 1e-3 ? Quat(1, 0.5 * omega.x(), 0.5 * omega.y(), 0.5 * omega.z())
+                  : Quat(Eigen::AngleAxis<Real>(w, omega / w))) *
+        q;
+    q.normalize();
+  }
+  return it;
+}
+
+Mat38 hexCorotationalForce(const Mat24& K0, const Mat3& R, const Mat38& x, const Mat38& X) {
+  Mat38 local = R.transpose() * x - X;
+  Vec24 f = -K0 * Eigen::Map<const Vec24>(local.data());
+  Mat38 out = R * Eigen::Map<const Mat38>(f.data());
+  return out;
+}
+
+}  // namespace deform::fem_hex

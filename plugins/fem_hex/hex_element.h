@@ -1,0 +1,67 @@
+// fem_hex kernels: the 8-node trilinear hexahedron (axis-aligned box of edge lengths
+// size = (hx, hy, hz)) for linear and corotational elasticity.
+//
+// Local node a (0..7) sits at corner (a & 1, (a >> 1) & 1, (a >> 2) & 1) of the box, natural
+// coordinates xi_a = 2 * corner - 1. Shape functions N_a(xi) = 1/8 prod_d (1 + xi_a,d xi_d).
+// Element vectors are 24 long, node a's x, y, z at 3a, 3a+1, 3a+2.
+//
+// Linear small strain:   eps = sym(grad u), sigma = lambda tr(eps) I + 2 mu eps,
+//   W(u) = 1/2 int eps : sigma dV,   f = -dW/du = -K0 u,   K0 = int B^T D B dV,
+// integrated with 2x2x2 Gauss points (+-1/sqrt(3)), exact for the trilinear element.
+// Corotational (Müller & Gross 2004, "Interactive virtual materials", Graphics Interface;
+// Nesme et al. 2005, "Efficient, physically plausible finite elements", Eurographics short):
+//   f = -R K0 (R^T x - X),   K = R K0 R^T   (R block-diagonal with the element rotation),
+// R the rotation of the polar decomposition F = R S of the deformation gradient at the element
+// centre, F = sum_a x_a (grad N_a(0))^T.
+#pragma once
+
+#include <deform/types.h>
+
+#include <Eigen/Geometry>
+
+namespace deform::fem_hex {
+
+using Mat24 = Eigen::Matrix<Real, 24, 24>;
+using Vec24 = Eigen::Matrix<Real, 24, 1>;
+using Mat38 = Eigen::Matrix<Real, 3, 8>;  ///< node positions/displacements, one node a column
+using Quat = Eigen::Quaternion<Real>;
+
+/// Lamé parameters (lambda, mu) from Young's modulus E (Pa) and Poisson ratio nu.
+Eigen::Vector2d lameParameters(Real young, Real poisson);
+
+/// Corner (0/1 per axis) of local node a.
+inline Vec3i hexCorner(int a) {
+  return Vec3i(a & 1, (a >> 1) & 1, (a >> 2) & 1);
+}
+
+/// Gradients (1/m) of the 8 shape functions at natural point xi, one column per node.
+Mat38 hexShapeGradients(const Vec3& size, const Vec3& xi);
+
+/// Trilinear weights N_a at local coordinates t in [0,1]^3 (t = (p - corner0) / size).
+Eigen::Matrix<Real, 8, 1> hexTrilinearWeights(const Vec3& t);
+
+/// Rest stiffness K0 (N/m), 24 x 24, symmetric positive semi-definite with the 6 rigid modes
+/// (3 translations, 3 infinitesimal rotations) as its null space.
+Mat24 hexStiffness(const Vec3& size, Real young, Real poisson);
+
+/// Strain energy W(u) (J) of displacement u by quadrature of 1/2 eps : sigma (no B matrix:
+/// an independent path for testing K0).
+Real hexStrainEnergy(const Vec3& size, Real young, Real poisson, const Mat38& u);
+
+/// Elastic force -dW/du (N) by quadrature of -int (grad N_a) . sigma dV (no B matrix).
+Mat38 hexElasticForce(const Vec3& size, Real young, Real poisson, const Mat38& u);
+
+/// Deformation gradient at the element centre: F = sum_a x_a (grad N_a(0))^T.
+Mat3 hexCentreGradient(const Vec3& size, const Mat38& x);
+
+/// Rotation of the polar decomposition of F, by the iteration of Müller et al. 2016 ("A robust
+/// method to extract the rotational part of deformations", MIG): maximise tr(R^T F) by repeated
+/// axis-angle updates omega = sum_i r_i x f_i / |sum_i r_i . f_i| of the quaternion q, warm-started
+/// from q (so a few iterations per step suffice; always returns a rotation, even for inverted F).
+/// Returns the number of iterations used.
+int extractRotation(const Mat3& F, Quat& q, int maxIterations, Real tolerance = 1e-12);
+
+/// Corotational element force f = -R K0 (R^T x - X) (N), x, X: current and rest positions.
+Mat38 hexCorotationalForce(const Mat24& K0, const Mat3& R, const Mat38& x, const Mat38& X);
+
+}  // namespace deform::fem_hex

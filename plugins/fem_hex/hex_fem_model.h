@@ -1,0 +1,146 @@
+// fem_hex: hexahedral FEM on a voxel grid embedding the organ surface (the FEM baseline of the
+// metaballs paper, /work/shared/papers/metaballs-pbd-skinning.md, Table 2: 967 hexahedra on the
+// liver, 819 on the gallbladder).
+//
+// Implicit Euler with Rayleigh damping D = alpha M + beta K, linearised once per step (one Newton
+// step, the standard real-time choice of Baraff & Witkin 1998 / Müller & Gross 2004):
+//   (c1 M + c2 K) v+ = M v + h (f(x) + f_ext),   c1 = 1 + h alpha,   c2 = h beta + h^2,
+//   x+ = x + h v+,
+// with f(x) = -K (x - X) (linear) or sum_e -R_e K0 (R_e^T x_e - X_e) and K = sum_e R_e K0 R_e^T
+// (corotational, Müller & Gross 2004; Nesme et al. 2005). All hexahedra are equal cubes, so K0
+// and the element mass are computed once. M is lumped: rho h^3 / 8 per node and element.
+// Fixed nodes are eliminated from the unknowns; grasped nodes get the prescribed velocity
+// (target - x) / h, imposed by symmetric elimination (their rows and columns replaced by identity).
+// The reaction of a grasp is the residual of its nodes' rows: f_tissue_on_tool = (b - A v+)_G / h.
+#pragma once
+
+#include "cholesky_solver.h"
+#include "hex_element.h"
+#include "hex_grid.h"
+
+#include <deform/model.h>
+
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace deform::fem_hex {
+
+enum class ElasticModel { Linear, Corotational };
+enum class CorotationalSolver { Refactor, Pcg };
+/// PCG preconditioner: Cholesky of the rest system A0 = c1 M + c2 K0, either factored once and
+/// applied filtered (Rest: never refactorised, so a grasp closing costs nothing), or refactorised
+/// with the grasped rows and columns eliminated whenever the grasp set changes (RestGrasped).
+enum class PcgPreconditioner { Rest, RestGrasped };
+
+struct HexFemConfig {
+  long long elements = 967;  ///< target hexahedron count (used when cellSize == 0)
+  Real cellSize = 0;         ///< m; 0 = choose from elements
+  ElasticModel elastic = ElasticModel::Corotational;
+  CorotationalSolver solver = CorotationalSolver::Pcg;
+  Real rayleighMass = 0;       ///< alpha, 1/s
+  Real rayleighStiffness = 0;  ///< beta, s
+  Real pcgTolerance = 1e-4;    ///< m/s, on sqrt(r^T D^-1 r / total mass), D = diag(A0)
+  int pcgMaxIterations = 50;
+  PcgPreconditioner pcgPreconditioner = PcgPreconditioner::Rest;
+  int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
+  CholeskySolver::Kind cholesky = CholeskySolver::Kind::Auto;
+  bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
+};
+
+class HexFemModel : public Model {
+ public:
+  /// Builds grid, embedding, K0, mass, sparsity pattern and factorisation. fixedNodesOf maps the
+  /// rest node positions to the pinned node indices. Throws InputError for unusable input.
+  void initialize(const Organ& organ, const HexFemConfig& config, Real dt,
+                  const std::function<std::vector<int>(const MatX3&)>& fixedNodesOf);
+
+  StepStatus step(const StepInput& in) override;
+  const MatX3& nodes() const override { return m_x; }
+  const MatX3& surface() const override { return m_surface; }
+  void reset() override;
+  Counts counts() const override;
+  PhaseTimes phaseTimes() const override;
+  NumericCounters numericCounters() const override;
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
+
+  const HexGrid& grid() const { return m_grid; }
+  const VoxelGrid& voxels() const { return m_voxels; }
+  const Mat24& elementStiffness() const { return m_K0; }
+  const std::vector<int>& fixedNodes() const { return m_fixedList; }
+  /// Node velocities (#N by 3, m/s).
+  Eigen::Map<const MatX3> velocities() const {
+    return Eigen::Map<const MatX3>(m_v.data(), m_x.rows(), 3);
+  }
+  const CholeskySolver& cholesky() const { return m_chol; }
+  /// CG iterations of the last step (0 outside the pcg solver).
+  int lastIterations() const { return m_lastIterations; }
+
+ private:
+  using Vec24i = Eigen::Matrix<int, 24, 1>;
+  void buildPattern();
+  void assembleValues(bool rotated);
+  void constrainAndFactorize(bool constrained);
+  bool precondition(const VecX& r, VecX& z);
+  /// out += scale * sum_e R_e K0 (R_e^T (a in_e) - b X_e) over elements (all when elems is null).
+  void applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b, Real scale,
+                     VecX& out) const;
+  void applyAllElements(const VecX& in, Real a, Real b, Real scale, VecX& out, bool rotated) const;
+  void updateRotations();
+  void updateInverseDiagonal();
+  void filter(VecX& r) const;
+
+  HexFemConfig m_config;
+  Real m_dt = 0;
+  Real m_c1 = 1, m_c2 = 0;
+  VoxelGrid m_voxels;
+  HexGrid m_grid;
+  Embedding m_embedding;
+  Mat24 m_K0;
+  VecX m_mass;     // 3N, lumped, per DOF
+  VecX m_invDiag;  // 3N, inverse diagonal of the rest system (1/mass on fixed nodes)
+  MatX3 m_rest;
+  std::vector<int> m_fixedList;
+  std::vector<char> m_isFixed;   // N
+  std::vector<int> m_dofOfNode;  // N, first reduced DOF or -1 when fixed
+  int m_numDofs = 0;             // reduced (free) DOFs
+
+  // System matrix: lower triangle over the free DOFs, values scattered by m_valueIndex.
+  SparseMatrix m_A;
+  std::vector<int> m_valueIndex;                  // E * 576, position in m_A's values or -1
+  std::vector<int> m_diagIndex;                   // reduced DOF -> position of its diagonal
+  VecX m_baseValues;                              // c1 M + c2 K0 (unrotated, unconstrained)
+  std::vector<int> m_nodeOfDof;                   // reduced DOF -> node
+  std::vector<int> m_nodeElemStart, m_nodeElems;  // node -> elements (CSR)
+  bool m_factorOk = false;
+  long long m_factorNonZeros = 0;
+  Real m_totalMass = 0;
+  Vec3 m_restCenter = Vec3::Zero();
+  Real m_divergenceRadius = 0;
+  CholeskySolver m_chol;
+  std::vector<int> m_factorGrasped;  // grasped nodes the factorisation was built for
+
+  // State.
+  MatX3 m_x;
+  VecX m_v;
+  std::vector<Quat> m_q;
+  std::vector<Mat3> m_R;
+  MatX3 m_surface;
+
+  // Per-step work (allocated once).
+  std::vector<char> m_isGrasped;      // N
+  std::vector<int> m_grasped;         // sorted grasped nodes of this step
+  std::vector<int> m_graspOwner;      // N, grasp index owning a node or -1
+  std::vector<int> m_touched;         // elements touching grasped nodes
+  std::vector<int> m_touchedGrasped;  // grasp set m_touched was built for
+  std::vector<char> m_elemMark;
+  MatX3 m_target;          // N by 3, targets of grasped nodes
+  mutable MatX m_U, m_KU;  // 24 x E element vectors in, K0 times them out
+  VecX m_v0, m_vOld, m_r, m_z, m_p, m_w, m_fext, m_rd, m_zd;
+  std::vector<Vec3> m_graspForces;
+  int m_lastIterations = 0;
+  double m_msAssembly = 0, m_msSolve = 0, m_msSurface = 0;
+  long long m_rotationNotConverged = 0, m_pcgNotConverged = 0, m_ignoredGraspNodes = 0;
+};
+
+}  // namespace deform::fem_hex

@@ -1,0 +1,200 @@
+#include "hex_element.h"
+#include "hex_grid.h"
+
+#include <gtest/gtest.h>
+#include <Eigen/Dense>
+
+#include <random>
+
+namespace deform::fem_hex {
+namespace {
+
+Mat38 boxNodes(const Vec3& size) {
+  Mat38 X;
+  for (int a = 0; a < 8; ++a) X.col(a) = hexCorner(a).cast<Real>().cwiseProduct(size);
+  return X;
+}
+
+Mat38 randomMat38(std::mt19937& rng, Real scale) {
+  std::uniform_real_distribution<Real> u(-scale, scale);
+  Mat38 m;
+  for (int i = 0; i < 24; ++i) m.data()[i] = u(rng);
+  return m;
+}
+
+Mat3 rotation(const Vec3& axis, Real angle) {
+  return Eigen::AngleAxis<Real>(angle, axis.normalized()).toRotationMatrix();
+}
+
+const Real kE = 5500, kNu = 0.3;
+
+TEST(HexElement, UnitCubeStiffnessHasExactlySixRigidModes) {
+  for (Real nu : {0.0, 0.3, 0.45}) {
+    const Mat24 K = hexStiffness(Vec3::Ones(), 1.0, nu);
+    EXPECT_LT((K - K.transpose()).norm(), 1e-14);
+    Eigen::SelfAdjointEigenSolver<Mat24> es(K);
+    const auto& ev = es.eigenvalues();  // ascending
+    const Real top = ev[23];
+    int zeros = 0;
+    for (int i = 0; i < 24; ++i) zeros += std::abs(ev[i]) < 1e-10 * top;
+    EXPECT_EQ(zeros, 6) << "nu=" << nu;
+    EXPECT_GT(ev[6], 1e-3 * top) << "nu=" << nu;
+    EXPECT_GT(ev[0], -1e-10 * top);
+  }
+}
+
+TEST(HexElement, StiffnessTimesDisplacementEqualsQuadratureForce) {
+  std::mt19937 rng(7);
+  const Vec3 size(0.01, 0.012, 0.009);
+  const Mat24 K = hexStiffness(size, kE, kNu);
+  for (int trial = 0; trial < 5; ++trial) {
+    const Mat38 u = randomMat38(rng, 1e-3);
+    const Mat38 f = hexElasticForce(size, kE, kNu, u);
+    const Vec24 Ku = K * Eigen::Map<const Vec24>(u.data());
+    EXPECT_LT((Ku + Eigen::Map<const Vec24>(f.data())).norm(), 1e-12 * Ku.norm());
+  }
+}
+
+TEST(HexElement, ForceIsMinusEnergyGradientAndStiffnessIsMinusForceJacobian) {
+  std::mt19937 rng(11);
+  const Vec3 size(0.01, 0.01, 0.01);
+  const Mat24 K = hexStiffness(size, kE, kNu);
+  const Mat38 u = randomMat38(rng, 1e-3);
+  const Mat38 f = hexElasticForce(size, kE, kNu, u);
+  const Real eps = 1e-7;
+  Mat24 Kfd;
+  for (int i = 0; i < 24; ++i) {
+    Mat38 up = u, um = u;
+    up.data()[i] += eps;
+    um.data()[i] -= eps;
+    const Real dW =
+        (hexStrainEnergy(size, kE, kNu, up) - hexStrainEnergy(size, kE, kNu, um)) / (2 * eps);
+    EXPECT_NEAR(-dW, f.data()[i], 1e-6 * f.norm());
+    const Mat38 df =
+        (hexElasticForce(size, kE, kNu, up) - hexElasticForce(size, kE, kNu, um)) / (2 * eps);
+    Kfd.col(i) = -Eigen::Map<const Vec24>(df.data());
+  }
+  EXPECT_LT((Kfd - K).norm(), 1e-6 * K.norm());
+}
+
+TEST(HexElement, RigidRotationGivesZeroCorotationalForceButNonzeroLinearForce) {
+  const Vec3 size = Vec3::Constant(0.01);
+  const Mat24 K = hexStiffness(size, kE, kNu);
+  const Mat38 X = boxNodes(size);
+  for (Real angle : {0.3, 1.2, 2.5}) {
+    const Mat3 Rtrue = rotation(Vec3(1, 2, 3), angle);
+    const Mat38 x = (Rtrue * X).colwise() + Vec3(0.02, -0.01, 0.03);
+    Quat q = Quat::Identity();
+    extractRotation(hexCentreGradient(size, x), q, 100);
+    EXPECT_LT((q.toRotationMatrix() - Rtrue).norm(), 1e-10);
+    const Mat38 fCo = hexCorotationalForce(K, q.toRotationMatrix(), x, X);
+    const Mat38 u = x - X;
+    const Vec24 fLin = -K * Eigen::Map<const Vec24>(u.data());
+    const Real scale = K.norm() * u.norm();
+    EXPECT_LT(fCo.norm(), 1e-10 * scale) << "angle " << angle;
+    EXPECT_GT(fLin.norm(), 1e-3 * scale) << "angle " << angle;
+  }
+}
+
+TEST(HexElement, CorotationalStiffnessMatchesFiniteDifferencesAtARotatedRestState) {
+  // At x = R X the derivative of R drops out (K0 annihilates infinitesimal rotations), so the
+  // exact Jacobian of the corotational force is -R K0 R^T.
+  const Vec3 size = Vec3::Constant(0.01);
+  const Mat24 K = hexStiffness(size, kE, kNu);
+  const Mat38 X = boxNodes(size);
+  const Mat3 Rtrue = rotation(Vec3(-1, 0.5, 2), 0.8);
+  const Mat38 x = Rtrue * X;
+  auto force = [&](const Mat38& y) {
+    Quat q(Rtrue);
+    extractRotation(hexCentreGradient(size, y), q, 200, 1e-15);
+    return hexCorotationalForce(K, q.toRotationMatrix(), y, X);
+  };
+  Mat24 RB = Mat24::Zero();
+  for (int a = 0; a < 8; ++a) RB.block<3, 3>(3 * a, 3 * a) = Rtrue;
+  const Mat24 Kr = RB * K * RB.transpose();
+  const Real eps = 1e-8;
+  Mat24 Kfd;
+  for (int i = 0; i < 24; ++i) {
+    Mat38 xp = x, xm = x;
+    xp.data()[i] += eps;
+    xm.data()[i] -= eps;
+    const Mat38 df = (force(xp) - force(xm)) / (2 * eps);
+    Kfd.col(i) = -Eigen::Map<const Vec24>(df.data());
+  }
+  EXPECT_LT((Kfd - Kr).norm(), 1e-5 * Kr.norm());
+}
+
+TEST(HexElement, RotationExtractionHandlesStretchAndInversion) {
+  const Mat3 R = rotation(Vec3(0.3, -1, 0.2), 2.0);
+  const Mat3 S = (Mat3() << 1.3, 0.1, 0, 0.1, 0.8, 0.05, 0, 0.05, 1.1).finished();
+  Quat q = Quat::Identity();
+  extractRotation(R * S, q, 200);
+  EXPECT_LT((q.toRotationMatrix() - R).norm(), 1e-9);
+  // An inverted F still yields a proper rotation.
+  Mat3 F = R;
+  F.col(0) *= -0.5;
+  Quat q2 = Quat::Identity();
+  extractRotation(F, q2, 200);
+  EXPECT_NEAR(q2.toRotationMatrix().determinant(), 1.0, 1e-12);
+}
+
+TEST(HexElement, PatchTestLinearFieldIsReproducedAtInteriorNodes) {
+  // 4 x 4 x 4 cells: impose u = A X + c on the boundary nodes, solve K_ii u_i = -K_ib u_b.
+  VoxelGrid vox;
+  vox.cellSize = 0.01;
+  vox.origin = Vec3(0.1, -0.2, 0.05);
+  vox.dims = Vec3i(4, 4, 4);
+  vox.state.assign(64, CellState::Inside);
+  for (int k = 0; k < 4; ++k)
+    for (int j = 0; j < 4; ++j)
+      for (int i = 0; i < 4; ++i) vox.cells.emplace_back(i, j, k);
+  const HexGrid g = hexGridFromVoxels(vox);
+  ASSERT_EQ(g.numNodes(), 125);
+  const Mat24 K0 = hexStiffness(Vec3::Constant(vox.cellSize), kE, kNu);
+  const int n = 3 * g.numNodes();
+  MatX K = MatX::Zero(n, n);
+  for (const auto& hex : g.hexes)
+    for (int a = 0; a < 8; ++a)
+      for (int b = 0; b < 8; ++b)
+        K.block<3, 3>(3 * hex[a], 3 * hex[b]) += K0.block<3, 3>(3 * a, 3 * b);
+  const Mat3 A = (Mat3() << 0.01, -0.02, 0.005, 0.03, 0.0, -0.01, 0.002, 0.015, -0.02).finished();
+  const Vec3 c(1e-3, -2e-3, 5e-4);
+  std::vector<int> interior, boundary;
+  const Box bb = boundingBox(g.nodes);
+  for (int v = 0; v < g.numNodes(); ++v) {
+    const Vec3 p = g.nodes.row(v);
+    const bool onBoundary =
+        ((p - bb.lo).cwiseAbs().minCoeff() < 1e-9) || ((p - bb.hi).cwiseAbs().minCoeff() < 1e-9);
+    (onBoundary ? boundary : interior).push_back(v);
+  }
+  ASSERT_EQ(interior.size(), 27u);
+  const int ni = 3 * static_cast<int>(interior.size()), nb = 3 * static_cast<int>(boundary.size());
+  MatX Kii(ni, ni), Kib(ni, nb);
+  VecX ub(nb);
+  for (size_t a = 0; a < interior.size(); ++a) {
+    for (size_t b = 0; b < interior.size(); ++b)
+      Kii.block<3, 3>(3 * a, 3 * b) = K.block<3, 3>(3 * interior[a], 3 * interior[b]);
+    for (size_t b = 0; b < boundary.size(); ++b)
+      Kib.block<3, 3>(3 * a, 3 * b) = K.block<3, 3>(3 * interior[a], 3 * boundary[b]);
+  }
+  for (size_t b = 0; b < boundary.size(); ++b)
+    ub.segment<3>(3 * b) = A * g.nodes.row(boundary[b]).transpose() + c;
+  const VecX ui = Kii.ldlt().solve(-Kib * ub);
+  for (size_t a = 0; a < interior.size(); ++a) {
+    const Vec3 expected = A * g.nodes.row(interior[a]).transpose() + c;
+    EXPECT_LT((ui.segment<3>(3 * a) - expected).norm(), 1e-12) << "node " << interior[a];
+  }
+}
+
+TEST(HexElement, TrilinearWeightsPartitionUnityAndReproduceCorners) {
+  const Eigen::Matrix<Real, 8, 1> w = hexTrilinearWeights(Vec3(0.2, 0.7, 0.4));
+  EXPECT_NEAR(w.sum(), 1.0, 1e-15);
+  for (int a = 0; a < 8; ++a) {
+    const Eigen::Matrix<Real, 8, 1> wa = hexTrilinearWeights(hexCorner(a).cast<Real>());
+    EXPECT_EQ(wa[a], 1.0);
+    EXPECT_EQ(wa.sum(), 1.0);
+  }
+}
+
+}  // namespace
+}  // namespace deform::fem_hex
