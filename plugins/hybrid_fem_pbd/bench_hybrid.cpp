@@ -68,6 +68,8 @@ void BM_HybridStep(benchmark::State& state) {
 }
 BENCHMARK(BM_HybridStep)
     ->Arg(10)
+    ->Arg(5)
+    ->Arg(2)
     ->Arg(1)
     ->Unit(benchmark::kMillisecond)
     ->Repetitions(5)

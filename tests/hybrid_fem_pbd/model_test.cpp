@@ -142,6 +142,21 @@ TEST_F(HybridModelTest, PointLoadMovesAlongTheForceAndScalesLinearly) {
   EXPECT_GT(along, 0);
 }
 
+TEST_F(HybridModelTest, GravitySagsTheOrganAsABodyForce) {
+  StepInput in = input();
+  in.gravity = Vec3(0, 0, -9.81);
+  for (int s = 0; s < 200; ++s) ASSERT_EQ(model.step(in), StepStatus::Ok);
+  const int top = topVertex(organ.surface);
+  EXPECT_LT(model.surface()(top, 2) - organ.surface.V(top, 2), -1e-4);
+  // Linear FEM: doubling g doubles every control node's displacement.
+  const MatX3 u1 = model.volumePositions() - model.hybridMesh().volume.V;
+  model.reset();
+  in.gravity *= 2;
+  model.step(in);
+  const MatX3 u2 = model.volumePositions() - model.hybridMesh().volume.V;
+  EXPECT_LT((u2 - 2 * u1).norm(), 1e-9 * u2.norm());
+}
+
 TEST_F(HybridModelTest, GraspMovesTheGraspedRegion) {
   const int top = topVertex(organ.surface);
   GraspInput g;
