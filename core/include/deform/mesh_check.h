@@ -12,19 +12,23 @@
 namespace deform {
 
 enum class MeshDefect {
-  Empty,               ///< no vertices or no triangles
-  NonFinite,           ///< NaN or Inf coordinate
-  IndexOutOfRange,     ///< a triangle names a vertex that does not exist
-  DuplicateVertices,   ///< coincident vertices (within tol::kRelativeWeld of the diagonal)
-  DegenerateTriangles, ///< zero area or repeated index
-  BoundaryEdges,       ///< edges used by one triangle (holes)
-  NonManifoldEdges,    ///< edges used by more than two triangles
-  NonManifoldVertices, ///< vertices whose triangle fan is not a single disc
+  Empty,                    ///< no vertices or no triangles
+  NonFinite,                ///< NaN or Inf coordinate
+  IndexOutOfRange,          ///< a triangle names a vertex that does not exist
+  DuplicateVertices,        ///< coincident vertices (within tol::kRelativeWeld of the diagonal)
+  DegenerateTriangles,      ///< zero area or repeated index
+  BoundaryEdges,            ///< edges used by one triangle (holes)
+  NonManifoldEdges,         ///< edges used by more than two triangles
+  NonManifoldVertices,      ///< vertices whose triangle fan is not a single disc
   InconsistentOrientation,  ///< an edge traversed in the same direction by both its triangles
-  InwardOrientation,   ///< closed and consistent but negative signed volume
-  MultipleComponents,  ///< more than one connected component
-  UnreferencedVertices ///< vertices used by no triangle (a warning: dropped by the loader)
+  InwardOrientation,        ///< closed and consistent but negative signed volume
+  MultipleComponents,       ///< more than one connected component
+  UnreferencedVertices      ///< vertices used by no triangle (a warning: readers keep them,
+                            ///< requireValidSurface accepts them, repairSurface drops them)
 };
+
+/// True for defects that do not make a surface unusable (only UnreferencedVertices).
+bool isWarning(MeshDefect d);
 
 struct MeshIssue {
   MeshDefect defect;
@@ -36,12 +40,19 @@ struct MeshReport {
   std::vector<MeshIssue> issues;  ///< empty when the mesh is valid
   bool ok() const { return issues.empty(); }
   bool has(MeshDefect d) const;
+  /// No issue other than warnings (see isWarning): what requireValidSurface accepts.
+  bool usable() const;
 };
 
-/// Checks every defect above (UnreferencedVertices included).
+/// Checks every defect above (UnreferencedVertices included). Issues are listed in the enum's
+/// order, which is also their priority. Geometric checks (duplicates, zero area, volume sign)
+/// are skipped when a coordinate is not finite; topological checks use only the triangles whose
+/// indices are in range and distinct. Components are edge-connected. The inward check needs a
+/// closed, edge-manifold, consistently oriented surface.
 MeshReport validateSurface(const SurfaceMesh& mesh);
 
-/// Throws InputError(file, "", first defect's message) unless the mesh is valid.
+/// Throws InputError(file, "", first defect's message) unless the mesh is valid; warnings
+/// (UnreferencedVertices) are accepted.
 void requireValidSurface(const SurfaceMesh& mesh, const std::string& file);
 
 struct RepairReport {
@@ -50,13 +61,23 @@ struct RepairReport {
   int droppedComponents = 0;
   int flippedTriangles = 0;
   int droppedUnreferenced = 0;
-  bool reversedWhole = false;  ///< every triangle flipped because the volume was negative
+  bool reversedWhole = false;         ///< every triangle flipped because the volume was negative
+  int droppedInvalid = 0;             ///< triangles with an index out of range or a NaN/Inf corner
+  int droppedDuplicateTriangles = 0;  ///< triangles on the same three vertices as an earlier one
+  int droppedComponentTriangles = 0;  ///< triangles in the dropped components
   std::vector<std::string> lines() const;  ///< one human-readable line per change made
 };
 
 /// Welds duplicates, drops degenerate triangles, keeps the largest component, orients
 /// consistently and outward, drops unreferenced vertices. Holes and non-manifold edges are not
 /// repaired: validate afterwards. The vertex order of kept vertices is preserved.
+/// In order: drop triangles with an out-of-range index or a non-finite corner; weld vertices
+/// within tol::kRelativeWeld * diagonal onto the first-seen one (hash grid); drop triangles with
+/// a repeated index or zero area, then repeated triangles (same vertex set, first kept); keep the
+/// edge-connected component with the most triangles (ties: the one met first); orient by BFS
+/// across two-triangle edges, then reverse all if the signed volume is negative (reversedWhole
+/// is reported when more than half of the triangles end up reversed; flippedTriangles counts the
+/// others that changed); drop unreferenced vertices.
 RepairReport repairSurface(SurfaceMesh& mesh);
 
 }  // namespace deform
