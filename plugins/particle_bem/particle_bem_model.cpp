@@ -199,7 +199,6 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
   }();
   m_repulsionDistance = 0.5 * meanEdge;
   m_repulsionStiffness = m_material.young * m_repulsionDistance;
-  m_hash.setCellSize(m_repulsionDistance);
 
   m_interiorNodes.resize(interior.points.rows());
   m_interiorWeights.resize(interior.points.rows());
@@ -247,6 +246,8 @@ void ParticleBemModel::reset() {
   m_times.clear();
   m_graspSolver = GraspSolver();
   m_F.assign(m_rest.rows(), Mat3::Identity());
+  m_verletValid = false;
+  m_verlet.clear();
 }
 
 Counts ParticleBemModel::counts() const {
@@ -295,22 +296,37 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
     }
   }
   if (m_repulsion) {
-    // Surface particles closer than the repulsion distance that were farther apart at rest
-    // (mesh neighbours excluded) push each other apart.
-    m_surfaceParticles = m_x.topRows(nc);
-    m_hash.build(m_surfaceParticles);
-    m_pairs.clear();
-    m_hash.pairsWithin(m_repulsionDistance, m_pairs);
-    for (const auto& [i, j] : m_pairs) {
-      if ((m_restCoarse.row(i) - m_restCoarse.row(j)).norm() < 2 * m_repulsionDistance) continue;
-      const Vec3 d = (m_surfaceParticles.row(i) - m_surfaceParticles.row(j)).transpose();
+    // Surface particles closer than the repulsion distance d that were at least 2d apart at
+    // rest (mesh neighbours excluded) push each other apart. Candidate pairs come from a Verlet
+    // list: pairs within d + skin (skin = d) found with the spatial hash, rebuilt only when a
+    // particle has moved more than skin / 2 since the last build, so no pair closer than d is
+    // ever missed.
+    const Real skin = m_repulsionDistance;
+    Real maxMove2 = 0;
+    for (int i = 0; m_verletValid && i < nc && maxMove2 <= 0.25 * skin * skin; ++i)
+      maxMove2 = std::max(maxMove2, (m_x.row(i) - m_verletRef.row(i)).squaredNorm());
+    if (!m_verletValid || maxMove2 > 0.25 * skin * skin) {
+      m_verletRef = m_x.topRows(nc);
+      m_hash.setCellSize(m_repulsionDistance + skin);
+      m_hash.build(m_verletRef);
+      m_pairs.clear();
+      m_hash.pairsWithin(m_repulsionDistance + skin, m_pairs);
+      m_verlet.clear();
+      for (const auto& [i, j] : m_pairs)
+        if ((m_restCoarse.row(i) - m_restCoarse.row(j)).norm() >= 2 * m_repulsionDistance)
+          m_verlet.emplace_back(i, j);
+      m_verletValid = true;
+      ++m_numeric["repulsion_list_builds"];
+    }
+    for (const auto& [i, j] : m_verlet) {
+      const Vec3 d = (m_x.row(i) - m_x.row(j)).transpose();
       const Real len = d.norm();
-      if (!(len > 0)) continue;
+      if (!(len > 0) || len >= m_repulsionDistance) continue;
       const Vec3 f = m_repulsionStiffness * (m_repulsionDistance - len) * d / len;
       if (!m_fixedMask[i]) m_P.add(i, f / m_nodalArea[i]);
       if (!m_fixedMask[j]) m_P.add(j, -f / m_nodalArea[j]);
+      ++m_numeric["repulsion_pairs"];
     }
-    m_numeric["repulsion_pairs"] += (long long)m_pairs.size();
   }
   m_U.setZero();
   accumulateDisplacement(m_bem.M, m_P, m_U);

@@ -81,10 +81,13 @@ class ParticleBemModel final : public Model {
   MatX3 m_restCoarse;
   SpatialHash m_hash;
   std::vector<std::pair<int, int>> m_pairs;
+  std::vector<std::pair<int, int>> m_verlet;
+  MatX3 m_verletRef;
+  bool m_verletValid = false;
   SparseTraction m_P;
   VecX m_U, m_graspRhs, m_graspP;
   GraspSolver m_graspSolver;
-  MatX3 m_coarseDisp, m_surfaceParticles;
+  MatX3 m_coarseDisp;
 
   // pure particles
   MlsElasticity m_mls;

@@ -7,8 +7,14 @@ namespace deform::particle_bem {
 void SpatialHash::build(const MatX3& P) {
   m_points = &P;
   const int n = int(P.rows());
-  m_tableUsed = m_table > 0 ? m_table : std::max(1, 2 * n + 1);
+  const int wanted = m_table > 0 ? m_table : std::max(1, 2 * n);
+  m_tableUsed = 1;
+  while (m_tableUsed < wanted) m_tableUsed *= 2;
   m_start.assign(m_tableUsed + 1, 0);
+  if (int(m_bucketStamp.size()) != m_tableUsed) {
+    m_bucketStamp.assign(m_tableUsed, 0);
+    m_query = 0;
+  }
   m_bucketOf.resize(n);
   for (int q = 0; q < n; ++q) {
     m_bucketOf[q] = bucket(cellCoord(P(q, 0)), cellCoord(P(q, 1)), cellCoord(P(q, 2)));

@@ -1,8 +1,8 @@
 // particle_bem: spatial hashing for neighbour search and particle collisions (Teschner et al.
 // 2003, "Optimized spatial hashing for collision detection of deformable objects", the paper's
 // ref. [15]). Space is cut into cubic cells of size `cellSize`; cell (i, j, k) goes to bucket
-// (i*73856093 xor j*19349663 xor k*83492791) mod tableSize. build() sorts the points into
-// buckets by counting sort (O(N), no allocation after the first build of a given size).
+// (i*73856093 xor j*19349663 xor k*83492791) mod tableSize (a power of two here). build() sorts the
+// points into buckets by counting sort (O(N), no allocation after the first build of a given size).
 #pragma once
 
 #include <deform/types.h>
@@ -14,7 +14,8 @@ namespace deform::particle_bem {
 
 class SpatialHash {
  public:
-  /// tableSize <= 0: chosen at build() as twice the point count (prime-ish odd number).
+  /// Table sizes are rounded up to a power of two (the bucket is the hash masked, no division);
+  /// tableSize <= 0: chosen at build() as >= twice the point count.
   explicit SpatialHash(Real cellSize = 1, int tableSize = 0)
       : m_cell(cellSize), m_table(tableSize) {}
 
@@ -32,16 +33,14 @@ class SpatialHash {
     const int r = int(std::ceil(radius / m_cell));
     const long long ci = cellCoord(p[0]), cj = cellCoord(p[1]), ck = cellCoord(p[2]);
     const Real r2 = radius * radius;
-    m_visited.clear();
+    ++m_query;
     for (long long i = ci - r; i <= ci + r; ++i)
       for (long long j = cj - r; j <= cj + r; ++j)
         for (long long k = ck - r; k <= ck + r; ++k) {
           const int b = bucket(i, j, k);
           // Two cells of the search box may share a bucket: visit each bucket once.
-          bool seen = false;
-          for (int v : m_visited) seen = seen || v == b;
-          if (seen) continue;
-          m_visited.push_back(b);
+          if (m_bucketStamp[b] == m_query) continue;
+          m_bucketStamp[b] = m_query;
           for (int t = m_start[b]; t < m_start[b + 1]; ++t) {
             const int q = m_sorted[t];
             const Real d2 = (m_points->row(q).transpose() - p).squaredNorm();
@@ -61,14 +60,15 @@ class SpatialHash {
     const unsigned long long h = (unsigned long long)(i * 73856093LL) ^
                                  (unsigned long long)(j * 19349663LL) ^
                                  (unsigned long long)(k * 83492791LL);
-    return int(h % (unsigned long long)m_tableUsed);
+    return int(h & (unsigned long long)(m_tableUsed - 1));
   }
   Real m_cell;
   int m_table;
   int m_tableUsed = 1;
   const MatX3* m_points = nullptr;
   std::vector<int> m_start, m_sorted, m_bucketOf;
-  mutable std::vector<int> m_visited;
+  mutable std::vector<unsigned> m_bucketStamp;
+  mutable unsigned m_query = 0;
 };
 
 }  // namespace deform::particle_bem

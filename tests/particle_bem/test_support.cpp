@@ -1,30 +1,8 @@
 #include "test_support.h"
 
+#include <algorithm>
+#include <cmath>
 #include <map>
-
-namespace deform {
-
-// Temporary local copy of fixedNodeIndices (model.h) until core implements it on main; core's
-// shared library definition takes over silently once it lands. Semantics from model.h: nodes
-// inside any box, plus the node nearest each listed surface vertex; sorted, unique.
-__attribute__((weak)) std::vector<int> fixedNodeIndices(const MatX3& nodes,
-                                                        const FixedRegion& region,
-                                                        const SurfaceMesh& restSurface) {
-  std::vector<int> out;
-  for (Eigen::Index i = 0; i < nodes.rows(); ++i)
-    for (const Box& b : region.boxes)
-      if (b.contains(nodes.row(i).transpose())) {
-        out.push_back(int(i));
-        break;
-      }
-  for (int v : region.surfaceVertices)
-    out.push_back(nearestVertex(nodes, restSurface.V.row(v).transpose()));
-  std::sort(out.begin(), out.end());
-  out.erase(std::unique(out.begin(), out.end()), out.end());
-  return out;
-}
-
-}  // namespace deform
 
 namespace deform::particle_bem::testing {
 
