@@ -7,6 +7,7 @@ PACKAGES=(
   libnanoflann-dev nlohmann-json3-dev libcli11-dev libssl-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev clang-format
+  libopenblas0-serial liblapack3
   python3-matplotlib python3-numpy
 )
 missing=()

@@ -1,0 +1,205 @@
+#include <deform/fem_tet.h>
+
+#include <Eigen/Dense>
+#include <Eigen/SVD>
+
+namespace deform {
+
+namespace {
+
+Mat3 basis(int k) {  // E with a single 1 at vec index k = i + 3 j
+  Mat3 E = Mat3::Zero();
+  E(k % 3, k / 3) = 1.0;
+  return E;
+}
+
+Vec9 vec(const Mat3& A) {
+  return Eigen::Map<const Vec9>(A.data());
+}
+
+Mat3 cofactor(const Mat3& F) {
+  Mat3 H;
+  H.col(0) = F.col(1).cross(F.col(2));
+  H.col(1) = F.col(2).cross(F.col(0));
+  H.col(2) = F.col(0).cross(F.col(1));
+  return H;
+}
+
+Mat3 cofactorDerivative(const Mat3& F, const Mat3& dF) {
+  Mat3 dH;
+  dH.col(0) = dF.col(1).cross(F.col(2)) + F.col(1).cross(dF.col(2));
+  dH.col(1) = dF.col(2).cross(F.col(0)) + F.col(2).cross(dF.col(0));
+  dH.col(2) = dF.col(0).cross(F.col(1)) + F.col(0).cross(dF.col(1));
+  return dH;
+}
+
+Mat3 cross(const Vec3& w) {
+  Mat3 W;
+  W << 0, -w(2), w(1), w(2), 0, -w(0), -w(1), w(0), 0;
+  return W;
+}
+
+}  // namespace
+
+LameParameters LameParameters::fromYoungPoisson(Real young, Real poisson) {
+  LameParameters l;
+  l.mu = young / (2.0 * (1.0 + poisson));
+  l.lambda = young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
+  return l;
+}
+
+Eigen::Matrix<Real, 3, 4> TetRest::gradients() const {
+  Eigen::Matrix<Real, 3, 4> g;
+  g.rightCols<3>() = Bm.transpose();
+  g.col(0) = -(g.col(1) + g.col(2) + g.col(3));
+  return g;
+}
+
+bool makeTetRest(const Vec3& X0, const Vec3& X1, const Vec3& X2, const Vec3& X3, TetRest& rest) {
+  Mat3 Dm;
+  Dm << X1 - X0, X2 - X0, X3 - X0;
+  rest.volume = Dm.determinant() / 6.0;
+  // Relative test: a sliver whose volume is round-off compared with its edges is degenerate.
+  const Real scale = std::max({Dm.col(0).norm(), Dm.col(1).norm(), Dm.col(2).norm()});
+  if (!(rest.volume > 1e-14 * scale * scale * scale)) {
+    rest.volume = std::min<Real>(rest.volume, 0.0);
+    return false;
+  }
+  rest.Bm = Dm.inverse();
+  return true;
+}
+
+Mat3 deformationGradient(const TetRest& rest, const std::array<Vec3, 4>& x) {
+  Mat3 Ds;
+  Ds << x[1] - x[0], x[2] - x[0], x[3] - x[0];
+  return Ds * rest.Bm;
+}
+
+void polarDecomposition(const Mat3& F, Mat3& R, Mat3& S) {
+  Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 U = svd.matrixU();
+  const Mat3 V = svd.matrixV();
+  if ((U * V.transpose()).determinant() < 0) U.col(2) = -U.col(2);
+  R = U * V.transpose();
+  S = R.transpose() * F;
+  S = 0.5 * (S + S.transpose());
+}
+
+Mat9 projectPositiveSemiDefinite(const Mat9& A) {
+  Eigen::SelfAdjointEigenSolver<Mat9> es(0.5 * (A + A.transpose()));
+  Vec9 ev = es.eigenvalues().cwiseMax(0.0);
+  return es.eigenvectors() * ev.asDiagonal() * es.eigenvectors().transpose();
+}
+
+// ---- linear -------------------------------------------------------------------------------
+
+Real LinearMaterial::energyDensity(const Mat3& F) const {
+  const Mat3 eps = 0.5 * (F + F.transpose()) - Mat3::Identity();
+  const Real tr = eps.trace();
+  return lame.mu * eps.squaredNorm() + 0.5 * lame.lambda * tr * tr;
+}
+
+Mat3 LinearMaterial::stress(const Mat3& F) const {
+  const Mat3 eps = 0.5 * (F + F.transpose()) - Mat3::Identity();
+  return 2.0 * lame.mu * eps + lame.lambda * eps.trace() * Mat3::Identity();
+}
+
+Mat9 LinearMaterial::stressDerivative(const Mat3& /*F*/) const {
+  Mat9 D;
+  for (int k = 0; k < 9; ++k) {
+    const Mat3 dF = basis(k);
+    D.col(k) = vec(lame.mu * (dF + dF.transpose()) + lame.lambda * dF.trace() * Mat3::Identity());
+  }
+  return D;
+}
+
+// ---- corotational -------------------------------------------------------------------------
+
+Real CorotationalMaterial::energyDensity(const Mat3& F) const {
+  Mat3 R, S;
+  polarDecomposition(F, R, S);
+  const Mat3 E = S - Mat3::Identity();
+  const Real tr = E.trace();
+  return lame.mu * E.squaredNorm() + 0.5 * lame.lambda * tr * tr;
+}
+
+Mat3 CorotationalMaterial::stress(const Mat3& F) const {
+  Mat3 R, S;
+  polarDecomposition(F, R, S);
+  const Mat3 E = S - Mat3::Identity();
+  return R * (2.0 * lame.mu * E + lame.lambda * E.trace() * Mat3::Identity());
+}
+
+Mat9 CorotationalMaterial::stressDerivative(const Mat3& F) const {
+  Mat3 R, S;
+  polarDecomposition(F, R, S);
+  Mat9 D;
+  if (tangent == CorotationalTangent::FixedRotation) {
+    // dP = R C[R^T dF]: the Mueller-Gross tangent R K0 R^T at the element level.
+    for (int k = 0; k < 9; ++k) {
+      const Mat3 Y = R.transpose() * basis(k);
+      D.col(k) =
+          vec(R * (lame.mu * (Y + Y.transpose()) + lame.lambda * Y.trace() * Mat3::Identity()));
+    }
+    return D;
+  }
+  // Exact: dP = 2 mu dF + (lambda tr(S - I) - 2 mu) dR + lambda tr(R^T dF) R, with
+  // dR = R [w]x, (tr(S) I - S) w = axial(Y - Y^T), Y = R^T dF.
+  const Mat3 A = S.trace() * Mat3::Identity() - S;
+  Eigen::FullPivLU<Mat3> lu(A);
+  const bool invertible = lu.isInvertible();
+  const Real c = lame.lambda * (S.trace() - 3.0) - 2.0 * lame.mu;
+  for (int k = 0; k < 9; ++k) {
+    const Mat3 dF = basis(k);
+    const Mat3 Y = R.transpose() * dF;
+    const Mat3 K = Y - Y.transpose();
+    const Vec3 w = invertible ? Vec3(lu.solve(Vec3(K(2, 1), K(0, 2), K(1, 0)))) : Vec3::Zero();
+    const Mat3 dR = R * cross(w);
+    D.col(k) = vec(2.0 * lame.mu * dF + c * dR + lame.lambda * Y.trace() * R);
+  }
+  return D;
+}
+
+// ---- Neo-Hookean --------------------------------------------------------------------------
+
+Real NeoHookeanMaterial::energyDensity(const Mat3& F) const {
+  const Real J = F.determinant();
+  if (!(J > 0)) return std::numeric_limits<Real>::infinity();
+  const Real I1 = F.squaredNorm();
+  return 0.5 * lame.mu * (std::pow(J, -2.0 / 3.0) * I1 - 3.0) +
+         0.5 * lame.bulk() * (J - 1.0) * (J - 1.0);
+}
+
+Mat3 NeoHookeanMaterial::stress(const Mat3& F) const {
+  // P = mu J^{-2/3} F - mu/3 I1 J^{-5/3} H + kappa (J - 1) H, H = cof F = J F^{-T}.
+  const Real J = F.determinant();
+  const Real I1 = F.squaredNorm();
+  const Mat3 H = cofactor(F);
+  const Real a = std::pow(J, -2.0 / 3.0);
+  return lame.mu * a * F + (-lame.mu / 3.0 * I1 * a / J + lame.bulk() * (J - 1.0)) * H;
+}
+
+Mat9 NeoHookeanMaterial::stressDerivative(const Mat3& F) const {
+  const Real J = F.determinant();
+  const Real I1 = F.squaredNorm();
+  const Mat3 H = cofactor(F);
+  const Real kappa = lame.bulk(), mu = lame.mu;
+  const Real a = std::pow(J, -2.0 / 3.0);  // J^{-2/3}
+  const Real a5 = a / J;                   // J^{-5/3}
+  const Real a8 = a5 / J;                  // J^{-8/3}
+  const Real b = -mu / 3.0 * I1 * a5;
+  const Real c = kappa * (J - 1.0);
+  Mat9 D;
+  for (int k = 0; k < 9; ++k) {
+    const Mat3 dF = basis(k);
+    const Real dJ = (H.array() * dF.array()).sum();
+    const Real dI1 = 2.0 * (F.array() * dF.array()).sum();
+    const Real da = -2.0 / 3.0 * a5 * dJ;
+    const Real db = -mu / 3.0 * (dI1 * a5 - 5.0 / 3.0 * I1 * a8 * dJ);
+    const Real dc = kappa * dJ;
+    D.col(k) = vec(mu * a * dF + mu * da * F + (db + dc) * H + (b + c) * cofactorDerivative(F, dF));
+  }
+  return D;
+}
+
+}  // namespace deform

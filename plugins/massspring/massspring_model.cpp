@@ -1,0 +1,513 @@
+#include "massspring_model.h"
+
+#include <deform/mesh.h>
+
+#include <Eigen/IterativeLinearSolvers>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+
+namespace deform::massspring {
+
+std::vector<ParamSpec> paramSpecs() {
+  return {
+      ParamSpec::choice("integrator", "symplectic_euler",
+                        {"explicit_euler", "symplectic_euler", "implicit_euler"},
+                        "time integration: explicit Euler (the papers' baseline), symplectic "
+                        "Euler, or implicit Euler with one Newton step (Baraff & Witkin 1998)"),
+      ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
+                      "surface input: membrane thickness t in the spring rule k = E t sum|T|/L^2"),
+      ParamSpec::real("bending_ratio", "1", 0.1, 0.0, 100.0,
+                      "bending spring stiffness relative to the spring on the hinge edge"),
+      ParamSpec::real("damping_ratio", "1", 0.1, 0.0, 100.0,
+                      "damping ratio of each spring's axial dashpot, c = 2 zeta sqrt(k mu)"),
+      ParamSpec::real("mass_damping", "1/s", 1.0, 0.0, 1e4,
+                      "mass-proportional damping: force -mass_damping * m * v on every node"),
+      ParamSpec::real("cg_tolerance", "1", 1e-6, 1e-14, 1.0,
+                      "implicit Euler: relative residual of the conjugate gradient solve"),
+      ParamSpec::integer("cg_max_iterations", 200, 1, 100000,
+                         "implicit Euler: conjugate gradient iteration cap"),
+  };
+}
+
+MassSpringConfig configFromParams(const ParamValues& p) {
+  MassSpringConfig c;
+  c.integrator =
+      p.choiceAs<Integrator>("integrator", {{"explicit_euler", Integrator::ExplicitEuler},
+                                            {"symplectic_euler", Integrator::SymplecticEuler},
+                                            {"implicit_euler", Integrator::ImplicitEuler}});
+  c.thickness = p.real("thickness");
+  c.bendingRatio = p.real("bending_ratio");
+  c.dampingRatio = p.real("damping_ratio");
+  c.massDamping = p.real("mass_damping");
+  c.cgTolerance = p.real("cg_tolerance");
+  c.cgMaxIterations = static_cast<int>(p.integer("cg_max_iterations"));
+  return c;
+}
+
+namespace {
+
+Real triangleArea(const MatX3& V, const MatX3i& F, Eigen::Index f) {
+  const Vec3 a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
+  return 0.5 * (b - a).cross(c - a).norm();
+}
+
+}  // namespace
+
+void MassSpringModel::init(const ModelSetup& setup) {
+  init(setup.organ, configFromParams(setup.params));
+}
+
+void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
+  const Material& mat = organ.material;
+  if (!(mat.young > 0) || !(mat.density > 0))
+    throw InputError(organ.source, "organ.material", "massspring needs young > 0, density > 0");
+  m_config = config;
+  m_springs.clear();
+  m_edgeSprings = m_bendingSprings = 0;
+  if (organ.volume) {
+    buildTets(organ);
+  } else {
+    buildSurface(organ);
+  }
+  const int N = static_cast<int>(m_rest.rows());
+  for (Spring& s : m_springs)
+    s.c = springDamping(m_config.dampingRatio, s.k, m_mass[s.a], m_mass[s.b]);
+  // Springs in the order of their first node: neighbouring springs then touch nearby memory.
+  std::stable_sort(m_springs.begin(), m_springs.end(), [](const Spring& p, const Spring& q) {
+    return std::min(p.a, p.b) < std::min(q.a, q.b);
+  });
+
+  m_fixed.clear();
+  if (!organ.fixed.empty()) m_fixed = fixedNodeIndices(m_rest, organ.fixed, organ.surface);
+  m_invMass.resize(N);
+  for (int i = 0; i < N; ++i) m_invMass[i] = m_mass[i] > 0 ? 1.0 / m_mass[i] : 0.0;
+  for (int i : m_fixed) m_invMass[i] = 0.0;
+
+  const Box box = boundingBox(m_rest);
+  m_boxCenter = box.center();
+  m_boxHalf = 0.5 * tol::kDivergenceBoxFactor * std::max(box.size().maxCoeff(), Real(1e-9));
+  m_graspMask.assign(N, 0);
+  if (m_config.integrator == Integrator::ImplicitEuler) buildPattern();
+  reset();
+}
+
+void MassSpringModel::buildSurface(const Organ& organ) {
+  const SurfaceMesh& S = organ.surface;
+  const int N = S.numVertices();
+  if (N == 0 || S.numFaces() == 0)
+    throw InputError(organ.source, "organ.surface", "massspring needs a non-empty surface");
+  m_rest = S.V;
+  m_surfaceIdentity = true;
+  m_elements = S.numFaces();
+  const Material& mat = organ.material;
+
+  VecX area = VecX::Zero(N), faceArea(S.numFaces());
+  for (int f = 0; f < S.numFaces(); ++f) {
+    faceArea[f] = triangleArea(S.V, S.F, f);
+    for (int k = 0; k < 3; ++k) area[S.F(f, k)] += faceArea[f] / 3.0;
+  }
+  const Real totalArea = faceArea.sum();
+  const MatX2i E = uniqueEdges(S.F);
+  const MatX2i EF = edgeFaces(S.F, E);
+  const bool closed = (EF.array() >= 0).all();
+  const Real enclosed = std::abs(signedVolume(S.V, S.F));
+  const Real totalMass =
+      mat.density * (closed && enclosed > 0 ? enclosed : totalArea * m_config.thickness);
+  m_mass = area * (totalMass / totalArea);
+
+  std::vector<Real> edgeK(E.rows());
+  for (Eigen::Index e = 0; e < E.rows(); ++e) {
+    Spring s;
+    s.a = E(e, 0);
+    s.b = E(e, 1);
+    s.rest = (S.V.row(s.a) - S.V.row(s.b)).norm();
+    Real adj = 0;
+    for (int k = 0; k < 2; ++k)
+      if (EF(e, k) >= 0) adj += faceArea[EF(e, k)];
+    if (s.rest <= tol::kDegenerateLength)
+      throw InputError(organ.source, "organ.surface edge " + std::to_string(e), "zero-length edge");
+    s.k = membraneSpringStiffness(mat.young, m_config.thickness, s.rest, adj);
+    edgeK[e] = s.k;
+    m_springs.push_back(s);
+  }
+  m_edgeSprings = E.rows();
+  if (m_config.bendingRatio > 0) {
+    for (Eigen::Index e = 0; e < E.rows(); ++e) {
+      const int f0 = EF(e, 0), f1 = EF(e, 1);
+      if (f0 < 0 || f1 < 0) continue;
+      auto wing = [&](int f) {
+        for (int k = 0; k < 3; ++k)
+          if (S.F(f, k) != E(e, 0) && S.F(f, k) != E(e, 1)) return S.F(f, k);
+        return -1;
+      };
+      Spring s;
+      s.a = wing(f0);
+      s.b = wing(f1);
+      s.rest = (S.V.row(s.a) - S.V.row(s.b)).norm();
+      if (s.a == s.b || s.rest <= tol::kDegenerateLength) continue;
+      s.k = m_config.bendingRatio * edgeK[e];
+      m_springs.push_back(s);
+      ++m_bendingSprings;
+    }
+  }
+}
+
+void MassSpringModel::buildTets(const Organ& organ) {
+  const TetMesh& T = *organ.volume;
+  const int N = T.numVertices();
+  if (N == 0 || T.numTets() == 0)
+    throw InputError(organ.source, "organ.volume", "massspring needs a non-empty tet mesh");
+  m_rest = T.V;
+  m_elements = T.numTets();
+  const SurfaceMesh& S = organ.surface;
+  m_surfaceIdentity = S.numVertices() == N && S.V == T.V;
+  m_surfaceRows.clear();
+  if (!m_surfaceIdentity) {
+    const Real weld = tol::kRelativeWeld * std::max(boundingBox(T.V).diagonal(), Real(1e-9));
+    for (int i = 0; i < S.numVertices(); ++i) {
+      const int nd = nearestVertex(T.V, S.V.row(i).transpose());
+      if (nd < 0 || (T.V.row(nd) - S.V.row(i)).norm() > weld)
+        throw InputError(organ.source, "organ.surface vertex " + std::to_string(i),
+                         "surface vertex is not a node of the tetrahedral mesh");
+      m_surfaceRows.push_back(nd);
+    }
+  }
+  const Material& mat = organ.material;
+  m_mass = VecX::Zero(N);
+  std::map<std::pair<int, int>, Real> edgeVolume;
+  for (int t = 0; t < T.numTets(); ++t) {
+    int p[4];
+    for (int i = 0; i < 4; ++i) {
+      p[i] = T.T(t, i);
+      if (p[i] < 0 || p[i] >= N)
+        throw InputError(organ.source, "organ.volume tet " + std::to_string(t),
+                         "node index out of range");
+    }
+    const Real vol = tetVolume(T.V.row(p[0]), T.V.row(p[1]), T.V.row(p[2]), T.V.row(p[3]));
+    if (!(vol > 0))
+      throw InputError(organ.source, "organ.volume tet " + std::to_string(t),
+                       "tetrahedron is degenerate or inverted at rest");
+    for (int i = 0; i < 4; ++i) m_mass[p[i]] += mat.density * vol / 4.0;
+    for (int i = 0; i < 4; ++i)
+      for (int j = i + 1; j < 4; ++j)
+        edgeVolume[{std::min(p[i], p[j]), std::max(p[i], p[j])}] += vol;
+  }
+  for (const auto& [e, vol] : edgeVolume) {
+    Spring s;
+    s.a = e.first;
+    s.b = e.second;
+    s.rest = (T.V.row(s.a) - T.V.row(s.b)).norm();
+    s.k = volumeSpringStiffness(mat.young, s.rest, vol);
+    m_springs.push_back(s);
+  }
+  m_edgeSprings = static_cast<long long>(m_springs.size());
+}
+
+void MassSpringModel::buildPattern() {
+  const int N = static_cast<int>(m_rest.rows());
+  std::vector<Triplet> trip;
+  trip.reserve(9 * (N + 4 * m_springs.size()));
+  auto block = [&](int r, int c) {
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) trip.emplace_back(3 * r + i, 3 * c + j, 0.0);
+  };
+  for (int i = 0; i < N; ++i) block(i, i);
+  for (const Spring& s : m_springs) {
+    block(s.a, s.b);
+    block(s.b, s.a);
+  }
+  m_A.resize(3 * N, 3 * N);
+  m_A.setFromTriplets(trip.begin(), trip.end());
+  m_A.makeCompressed();
+  auto slot = [&](int r, int c, int j) {
+    const int col = 3 * c + j;
+    const int* begin = m_A.innerIndexPtr() + m_A.outerIndexPtr()[col];
+    const int* end = m_A.innerIndexPtr() + m_A.outerIndexPtr()[col + 1];
+    return static_cast<int>(std::lower_bound(begin, end, 3 * r) - m_A.innerIndexPtr());
+  };
+  m_nodeSlots.resize(N);
+  for (int i = 0; i < N; ++i)
+    for (int j = 0; j < 3; ++j) m_nodeSlots[i][j] = slot(i, i, j);
+  m_springSlots.resize(m_springs.size());
+  for (size_t k = 0; k < m_springs.size(); ++k) {
+    const Spring& s = m_springs[k];
+    for (int j = 0; j < 3; ++j) {
+      m_springSlots[k][j] = slot(s.a, s.a, j);
+      m_springSlots[k][3 + j] = slot(s.b, s.b, j);
+      m_springSlots[k][6 + j] = slot(s.a, s.b, j);
+      m_springSlots[k][9 + j] = slot(s.b, s.a, j);
+    }
+  }
+  m_constrainedDof.assign(3 * N, 0);
+}
+
+void MassSpringModel::reset() {
+  const int N = static_cast<int>(m_rest.rows());
+  m_x = m_rest;
+  m_v.setZero(N, 3);
+  m_f.setZero(N, 3);
+  m_xOld = m_rest;
+  m_dv = VecX::Zero(3 * N);
+  m_rhs = VecX::Zero(3 * N);
+  m_prescribed = VecX::Zero(3 * N);
+  std::fill(m_graspMask.begin(), m_graspMask.end(), 0);
+  m_degenerate = m_cgNotConverged = m_cgIterations = 0;
+  m_graspForces.clear();
+  m_phase.clear();
+  if (!m_surfaceIdentity) {
+    m_surface.resize(static_cast<Eigen::Index>(m_surfaceRows.size()), 3);
+    for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);
+  }
+}
+
+void MassSpringModel::springForces(const MatX3& x, const MatX3& v, MatX3& f) {
+  f.setZero(x.rows(), 3);
+  const Real* X = x.data();
+  const Real* V = v.data();
+  Real* Fp = f.data();
+  for (const Spring& s : m_springs) {
+    const Real* xa = X + 3 * s.a;
+    const Real* xb = X + 3 * s.b;
+    const Real d0 = xb[0] - xa[0], d1 = xb[1] - xa[1], d2 = xb[2] - xa[2];
+    const Real l2 = d0 * d0 + d1 * d1 + d2 * d2;
+    if (l2 <= tol::kDegenerateLength * tol::kDegenerateLength) [[unlikely]] {
+      ++m_degenerate;
+      continue;
+    }
+    const Real l = std::sqrt(l2);
+    const Real il = 1.0 / l;  // one division per spring: the loop is bound by sqrt/div throughput
+    const Real* va = V + 3 * s.a;
+    const Real* vb = V + 3 * s.b;
+    const Real vn = ((vb[0] - va[0]) * d0 + (vb[1] - va[1]) * d1 + (vb[2] - va[2]) * d2) * il;
+    // springForce(): (k (l - L) + c (vb - va).n) n, with n = d / l folded into one factor.
+    const Real m = (s.k * (l - s.rest) + s.c * vn) * il;
+    Real* fa = Fp + 3 * s.a;
+    Real* fb = Fp + 3 * s.b;
+    fa[0] += m * d0;
+    fa[1] += m * d1;
+    fa[2] += m * d2;
+    fb[0] -= m * d0;
+    fb[1] -= m * d1;
+    fb[2] -= m * d2;
+  }
+}
+
+StepStatus MassSpringModel::checkDivergence() const {
+  // Velocities too: explicit Euler moves positions with the previous velocity, so trouble shows
+  // there one step earlier.
+  Real sum = m_v.sum(), far = 0;
+  const Real* X = m_x.data();
+  for (Eigen::Index i = 0; i < m_x.rows(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const Real p = X[3 * i + k];
+      sum += p;
+      far = std::max(far, std::abs(p - m_boxCenter[k]));
+    }
+  }
+  return (std::isfinite(sum) && far <= m_boxHalf) ? StepStatus::Ok : StepStatus::Diverged;
+}
+
+// Grasped nodes end the step on their targets, moving with the tool's velocity.
+void MassSpringModel::applyConstraints(const StepInput& in, Real h, const MatX3& xOld) {
+  for (const GraspInput& g : in.grasps) {
+    for (size_t k = 0; k < g.nodes.size(); ++k) {
+      const int i = g.nodes[k];
+      m_x.row(i) = g.targets.row(k);
+      m_v.row(i) = (g.targets.row(k) - xOld.row(i)) / h;
+    }
+  }
+}
+
+StepStatus MassSpringModel::step(const StepInput& in) {
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
+  const Real h = in.dt;
+  for (size_t i = 0; i < m_graspMask.size(); ++i) m_graspMask[i] = 0;
+  for (const GraspInput& g : in.grasps)
+    for (int i : g.nodes) m_graspMask[i] = 1;
+  for (const GraspInput& g : in.grasps)
+    for (int i : g.nodes) m_xOld.row(i) = m_x.row(i);
+
+  StepStatus status;
+  if (m_config.integrator == Integrator::ImplicitEuler) {
+    status = stepImplicit(in, h);
+  } else {
+    springForces(m_x, m_v, m_f);
+    for (const PointLoad& l : in.loads) {
+      const int node = m_surfaceIdentity ? l.surfaceVertex : m_surfaceRows.at(l.surfaceVertex);
+      m_f.row(node) += l.force.transpose();
+    }
+    const auto t1 = Clock::now();
+    const int N = static_cast<int>(m_x.rows());
+    const Real alpha = m_config.massDamping;
+    const bool symplectic = m_config.integrator == Integrator::SymplecticEuler;
+    Real* X = m_x.data();
+    Real* V = m_v.data();
+    const Real* Fp = m_f.data();
+    for (int i = 0; i < N; ++i) {
+      const Real w = m_invMass[i];
+      if (w == 0.0) continue;  // fixed (or massless): stays at rest
+      for (int k = 0; k < 3; ++k) {
+        // a = f/m + g - alpha v (mass-proportional damping)
+        const Real a = Fp[3 * i + k] * w + in.gravity[k] - alpha * V[3 * i + k];
+        if (symplectic) {
+          V[3 * i + k] += h * a;
+          X[3 * i + k] += h * V[3 * i + k];
+        } else {
+          X[3 * i + k] += h * V[3 * i + k];
+          V[3 * i + k] += h * a;
+        }
+      }
+    }
+    applyConstraints(in, h, m_xOld);
+    const auto t2 = Clock::now();
+    m_phase["forces"] = std::chrono::duration<double, std::milli>(t1 - t0).count();
+    m_phase["integrate"] = std::chrono::duration<double, std::milli>(t2 - t1).count();
+    status = checkDivergence();
+  }
+  if (!m_surfaceIdentity)
+    for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);
+  computeGraspForces(in);
+  return status;
+}
+
+// Baraff & Witkin 1998, Eq. (16) with df/dx = -Kglob, df/dv = -Dglob - alpha M:
+//   ((1 + h alpha) M + h Dglob + h^2 Kglob) dv = h (f0 - h Kglob v0),
+// dv prescribed on fixed and grasped nodes (moved to the right-hand side).
+StepStatus MassSpringModel::stepImplicit(const StepInput& in, Real h) {
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
+  const int N = static_cast<int>(m_x.rows());
+  springForces(m_x, m_v, m_f);
+  for (const PointLoad& l : in.loads) {
+    const int node = m_surfaceIdentity ? l.surfaceVertex : m_surfaceRows.at(l.surfaceVertex);
+    m_f.row(node) += l.force.transpose();
+  }
+  const Real alpha = m_config.massDamping;
+  for (int i = 0; i < N; ++i)
+    m_f.row(i) += m_mass[i] * (in.gravity.transpose() - alpha * m_v.row(i));
+
+  // Assemble values into the fixed pattern and Kglob v0 on the way.
+  Real* val = m_A.valuePtr();
+  std::fill(val, val + m_A.nonZeros(), 0.0);
+  for (int i = 0; i < N; ++i)
+    for (int j = 0; j < 3; ++j) val[m_nodeSlots[i][j] + j] += (1.0 + h * alpha) * m_mass[i];
+  VecX& rhs = m_rhs;
+  for (int i = 0; i < N; ++i) rhs.segment<3>(3 * i) = h * m_f.row(i).transpose();
+  for (size_t k = 0; k < m_springs.size(); ++k) {
+    const Spring& s = m_springs[k];
+    const Vec3 xa = m_x.row(s.a), xb = m_x.row(s.b);
+    Mat3 K;
+    if (!springStiffness(xa, xb, s.k, s.rest, true, K)) continue;  // counted in springForces
+    const Vec3 n = (xb - xa).normalized();
+    const Mat3 B = h * h * K + (h * s.c) * (n * n.transpose());
+    const Vec3 Kv = K * (m_v.row(s.a) - m_v.row(s.b)).transpose();
+    rhs.segment<3>(3 * s.a) -= h * h * Kv;
+    rhs.segment<3>(3 * s.b) += h * h * Kv;
+    const auto& sl = m_springSlots[k];
+    for (int j = 0; j < 3; ++j) {
+      for (int i = 0; i < 3; ++i) {
+        val[sl[j] + i] += B(i, j);
+        val[sl[3 + j] + i] += B(i, j);
+        val[sl[6 + j] + i] -= B(i, j);
+        val[sl[9 + j] + i] -= B(i, j);
+      }
+    }
+  }
+  // Prescribed dv: fixed/massless nodes stop, grasped nodes reach their targets.
+  std::fill(m_constrainedDof.begin(), m_constrainedDof.end(), 0);
+  m_prescribed.setZero();
+  for (int i = 0; i < N; ++i) {
+    if (m_invMass[i] == 0.0) {
+      for (int k = 0; k < 3; ++k) m_constrainedDof[3 * i + k] = 1;
+      m_prescribed.segment<3>(3 * i) = -m_v.row(i).transpose();
+    }
+  }
+  for (const GraspInput& g : in.grasps) {
+    for (size_t k = 0; k < g.nodes.size(); ++k) {
+      const int i = g.nodes[k];
+      for (int c = 0; c < 3; ++c) m_constrainedDof[3 * i + c] = 1;
+      m_prescribed.segment<3>(3 * i) =
+          ((g.targets.row(k) - m_x.row(i)) / h - m_v.row(i)).transpose();
+    }
+  }
+  rhs.noalias() -= m_A * m_prescribed;
+  for (int col = 0; col < m_A.outerSize(); ++col) {
+    for (int p = m_A.outerIndexPtr()[col]; p < m_A.outerIndexPtr()[col + 1]; ++p) {
+      const int row = m_A.innerIndexPtr()[p];
+      if (m_constrainedDof[col] || m_constrainedDof[row]) val[p] = (row == col) ? 1.0 : 0.0;
+    }
+  }
+  for (int d = 0; d < 3 * N; ++d)
+    if (m_constrainedDof[d]) rhs[d] = m_prescribed[d];
+  const auto t1 = Clock::now();
+
+  // Conjugate gradients, Jacobi-preconditioned, warm-started with the previous step's dv.
+  Eigen::ConjugateGradient<SparseMatrix, Eigen::Lower | Eigen::Upper> cg;
+  cg.setTolerance(m_config.cgTolerance);
+  cg.setMaxIterations(m_config.cgMaxIterations);
+  cg.compute(m_A);
+  for (int d = 0; d < 3 * N; ++d)
+    if (m_constrainedDof[d]) m_dv[d] = m_prescribed[d];
+  m_dv = cg.solveWithGuess(rhs, m_dv);
+  m_cgIterations += cg.iterations();
+  if (cg.info() != Eigen::Success) ++m_cgNotConverged;
+  const auto t2 = Clock::now();
+
+  for (int i = 0; i < N; ++i) {
+    m_v.row(i) += m_dv.segment<3>(3 * i).transpose();
+    if (m_invMass[i] == 0.0) {
+      m_v.row(i).setZero();
+      continue;
+    }
+    m_x.row(i) += h * m_v.row(i);
+  }
+  applyConstraints(in, h, m_xOld);
+  const auto t3 = Clock::now();
+  auto ms = [](auto a, auto b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
+  m_phase["assembly"] = ms(t0, t1);
+  m_phase["solve"] = ms(t1, t2);
+  m_phase["integrate"] = ms(t2, t3);
+  if (!m_dv.allFinite()) return StepStatus::Diverged;
+  return checkDivergence();
+}
+
+// Force the tissue exerts on each grasp: the internal spring forces (elastic + axial damping) on
+// the grasped nodes at the end of the step.
+void MassSpringModel::computeGraspForces(const StepInput& in) {
+  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
+  if (in.grasps.empty()) return;
+  m_f.setZero();
+  for (const Spring& s : m_springs) {
+    if (!(m_graspMask[s.a] | m_graspMask[s.b])) continue;
+    Vec3 fa;
+    if (!springForce(m_x.row(s.a), m_x.row(s.b), m_v.row(s.a), m_v.row(s.b), s.k, s.c, s.rest, fa))
+      continue;
+    m_f.row(s.a) += fa.transpose();
+    m_f.row(s.b) -= fa.transpose();
+  }
+  for (size_t g = 0; g < in.grasps.size(); ++g)
+    for (int node : in.grasps[g].nodes) m_graspForces[g] += m_f.row(node).transpose();
+}
+
+Counts MassSpringModel::counts() const {
+  return {{"nodes", m_x.rows()},
+          {"elements", m_elements},
+          {"springs", static_cast<long long>(m_springs.size())},
+          {"edge_springs", m_edgeSprings},
+          {"bending_springs", m_bendingSprings}};
+}
+
+NumericCounters MassSpringModel::numericCounters() const {
+  NumericCounters c{{"degenerate_springs", m_degenerate}};
+  if (m_config.integrator == Integrator::ImplicitEuler) {
+    c["cg_not_converged"] = m_cgNotConverged;
+    c["cg_iterations"] = m_cgIterations;
+  }
+  return c;
+}
+
+}  // namespace deform::massspring

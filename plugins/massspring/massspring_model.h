@@ -1,0 +1,98 @@
+// Mass-spring model of an organ: the thin stateful layer over spring_kernels.h. Nodes are the
+// organ's surface vertices, with springs on mesh edges and bending springs across every interior
+// edge (between the two opposite vertices), or, for tetrahedral input, the tet nodes with springs
+// on the tet edges. Masses are lumped. Time integration: explicit Euler (the papers' baseline),
+// symplectic Euler, or implicit Euler with one Newton step per time step (Baraff & Witkin 1998,
+// "Large steps in cloth simulation", SIGGRAPH '98, Eqs. (15)-(18)) solved by conjugate gradients.
+// See README.md for every modelling choice.
+#pragma once
+
+#include "spring_kernels.h"
+
+#include <deform/model.h>
+#include <deform/params.h>
+#include <deform/sparse.h>
+
+#include <array>
+#include <vector>
+
+namespace deform::massspring {
+
+enum class Integrator { ExplicitEuler, SymplecticEuler, ImplicitEuler };
+
+struct MassSpringConfig {
+  Integrator integrator = Integrator::SymplecticEuler;
+  Real thickness = 0.01;    ///< m, membrane thickness for the surface rule
+  Real bendingRatio = 0.1;  ///< bending spring stiffness / stiffness of the hinge edge's spring
+  Real dampingRatio = 0.1;  ///< zeta of each spring's axial dashpot
+  Real massDamping = 1.0;   ///< 1/s, force -massDamping * m * v on every node
+  Real cgTolerance = 1e-6;  ///< relative residual of the implicit solve
+  int cgMaxIterations = 200;
+};
+
+std::vector<ParamSpec> paramSpecs();
+/// Reads validated parameters; throws InputError on an unknown integrator.
+MassSpringConfig configFromParams(const ParamValues& params);
+
+class MassSpringModel final : public Model {
+ public:
+  void init(const ModelSetup& setup) override;
+  /// init() without the parameter layer (tests and benchmarks).
+  void init(const Organ& organ, const MassSpringConfig& config);
+
+  StepStatus step(const StepInput& in) override;
+  const MatX3& nodes() const override { return m_x; }
+  const MatX3& surface() const override { return m_surfaceIdentity ? m_x : m_surface; }
+  void reset() override;
+  Counts counts() const override;
+  PhaseTimes phaseTimes() const override { return m_phase; }
+  NumericCounters numericCounters() const override;
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
+
+  const MassSpringConfig& config() const { return m_config; }
+  const VecX& masses() const { return m_mass; }
+  const std::vector<Spring>& springs() const { return m_springs; }
+  const MatX3& velocities() const { return m_v; }
+
+  /// Internal spring forces (elastic + axial damping) at positions x, velocities v: #N by 3, N.
+  /// Counts degenerate springs.
+  void springForces(const MatX3& x, const MatX3& v, MatX3& f);
+
+ private:
+  void buildSurface(const Organ& organ);
+  void buildTets(const Organ& organ);
+  void buildPattern();
+  StepStatus stepImplicit(const StepInput& in, Real h);
+  void applyConstraints(const StepInput& in, Real h, const MatX3& xOld);
+  void computeGraspForces(const StepInput& in);
+  StepStatus checkDivergence() const;
+
+  MassSpringConfig m_config;
+  MatX3 m_rest, m_x, m_v, m_f, m_xOld;
+  VecX m_mass, m_invMass;  // invMass 0 for fixed or massless nodes
+  std::vector<int> m_fixed;
+  std::vector<Spring> m_springs;
+  long long m_edgeSprings = 0, m_bendingSprings = 0, m_elements = 0;
+
+  bool m_surfaceIdentity = true;
+  std::vector<int> m_surfaceRows;
+  MatX3 m_surface;
+
+  // Implicit Euler: the system matrix with a fixed pattern, and where each spring's four 3x3
+  // blocks and each node's diagonal block live in its value array (index of the block's first
+  // row, per block column; the block's three rows follow).
+  SparseMatrix m_A;
+  std::vector<std::array<int, 12>> m_springSlots;  // (aa, bb, ab, ba) x 3 columns
+  std::vector<std::array<int, 3>> m_nodeSlots;
+  VecX m_dv, m_rhs, m_prescribed;
+  std::vector<unsigned char> m_constrainedDof;
+
+  std::vector<unsigned char> m_graspMask;
+  Vec3 m_boxCenter = Vec3::Zero();
+  Real m_boxHalf = 0;
+  long long m_degenerate = 0, m_cgNotConverged = 0, m_cgIterations = 0;
+  std::vector<Vec3> m_graspForces;
+  PhaseTimes m_phase;
+};
+
+}  // namespace deform::massspring

@@ -1,0 +1,22 @@
+// The "massspring" plugin: registers MassSpringModel (massspring_model.h) with the harness.
+#include "massspring_model.h"
+
+#include <deform/registry.h>
+
+DEFORM_PLUGIN(registry) {
+  deform::ModelInfo info;
+  info.name = "massspring";
+  info.description =
+      "Mass-spring network on the organ surface (edge + bending springs, van Gelder stiffness) "
+      "or on tet edges; explicit, symplectic or implicit Euler";
+  info.citation =
+      "van Gelder 1998, Approximate simulation of elastic membranes by triangulated spring "
+      "meshes, J. Graphics Tools 3(2); Baraff & Witkin 1998, "
+      "Large steps in cloth simulation, SIGGRAPH '98, doi:10.1145/280814.280821";
+  info.version = "1.0";
+  using C = deform::Capability;
+  info.capabilities = {C::Grasp, C::PointForce, C::Gravity, C::ReactionForce, C::TetInput};
+  info.params = deform::massspring::paramSpecs();
+  info.create = [] { return std::make_unique<deform::massspring::MassSpringModel>(); };
+  registry.add(std::move(info));
+}

@@ -1,0 +1,83 @@
+// Google Benchmark of the metaballs model on the liver phantom (~8.1k surface vertices, ~580
+// spheres): one step (PBD + Laplacian + volume + skinning) while a grasp drags the organ, and the
+// whole offline construction. Targets: step median <= 0.5 ms (paper: 7.5 ms), construction
+// <= 10 s (paper: 2207 s).
+#include "metaballs_model.h"
+
+#include <benchmark/benchmark.h>
+#include <deform/phantom.h>
+
+#include <algorithm>
+#include <filesystem>
+
+namespace deform {
+// TEMPORARY stand-in for fixedNodeIndices (declared in model.h, implemented on another branch);
+// the benchmark pins nothing. Remove when it lands in core.
+std::vector<int> fixedNodeIndices(const MatX3&, const FixedRegion&, const SurfaceMesh&) {
+  return {};
+}
+}  // namespace deform
+
+namespace {
+using namespace deform;
+using namespace deform::metaballs;
+
+const SurfaceMesh& liver() {
+  static const SurfaceMesh m = makePhantom("liver");
+  return m;
+}
+
+void BM_MetaballsStep(benchmark::State& state) {
+  Organ organ;
+  organ.source = "phantom:liver";
+  organ.surface = liver();
+  const ParamValues params = ParamValues::defaults(metaballsParams());
+  Cache cache(Cache::defaultDir());
+  MetaballsModel model;
+  model.init(ModelSetup{organ, params, cache, 1e-3, Vec3(0, 0, -9.81)});
+  const MatX3 x0 = model.nodes();
+  Eigen::Index top = 0;
+  x0.col(2).maxCoeff(&top);
+  StepInput in;
+  in.dt = 1e-3;
+  in.gravity = Vec3(0, 0, -9.81);
+  GraspInput g;
+  g.nodes = {int(top)};
+  g.targets = x0.row(top);
+  in.grasps = {g};
+  long long i = 0;
+  for (auto _ : state) {
+    in.grasps[0].targets(0, 2) = x0(top, 2) + 0.02 * std::min(1.0, double(i++) / 1000.0);
+    benchmark::DoNotOptimize(model.step(in));
+  }
+  const Counts c = model.counts();
+  state.counters["spheres"] = double(c.at("spheres"));
+  state.counters["links"] = double(c.at("links"));
+  state.counters["vertices"] = double(organ.surface.numVertices());
+  for (const auto& [k, v] : model.phaseTimes()) state.counters[k + "_ms"] = v;
+}
+BENCHMARK(BM_MetaballsStep)
+    ->Unit(benchmark::kMillisecond)
+    ->Repetitions(5)
+    ->ReportAggregatesOnly(true);
+
+void BM_MetaballsConstruction(benchmark::State& state) {
+  ConstructionParams p = constructionParams(ParamValues::defaults(metaballsParams()));
+  Metaballs mb;
+  for (auto _ : state) {
+    mb = constructMetaballs(liver(), p);
+    benchmark::DoNotOptimize(mb.spheres.radii.data());
+  }
+  state.counters["spheres"] = mb.report.spheres;
+  state.counters["links"] = mb.report.links;
+  state.counters["hollow_before"] = double(mb.report.hollowBefore);
+  state.counters["hollow_after"] = double(mb.report.hollowAfter);
+}
+BENCHMARK(BM_MetaballsConstruction)
+    ->Unit(benchmark::kSecond)
+    ->Iterations(1)
+    ->Repetitions(3)
+    ->ReportAggregatesOnly(true);
+}  // namespace
+
+BENCHMARK_MAIN();

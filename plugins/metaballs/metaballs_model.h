@@ -1,0 +1,94 @@
+// Metaballs plugin: the model class (state only; the maths is in the kernels). Pan, Zhao, Zhao,
+// Hao, Qin 2015, "Metaballs-based physical modeling and deformation of organs for virtual
+// surgery", The Visual Computer 31, doi:10.1007/s00371-015-1092-2.
+//
+// nodes() are the sphere centres; surface() is the organ's input surface skinned to the spheres
+// (eqs. 13-16). Each step (Algorithm 3): explicit prediction of the centres under gravity and
+// point loads (distributed over the loaded vertex's skinning spheres by their weights), damping,
+// then `iterations` Gauss-Seidel sweeps of the stretching constraints (eqs. 6-8) and the Laplacian
+// coordinate constraints (eqs. 9-11); velocities from the position change; local volume
+// preservation (eq. 12) on the spheres under interaction (grasped or loaded) and their linked
+// spheres; skinning. Fixed and grasped spheres are kinematic (inverse mass 0).
+#pragma once
+
+#include "construction.h"
+#include "skinning.h"
+
+#include <deform/model.h>
+#include <deform/registry.h>
+
+#include <vector>
+
+namespace deform::metaballs {
+
+enum class StiffnessMode { Classic, Xpbd };
+enum class Frame { Rotated, Fixed };
+
+std::vector<ParamSpec> metaballsParams();
+ModelInfo metaballsModelInfo();
+/// Construction parameters from resolved plugin parameters.
+ConstructionParams constructionParams(const ParamValues& p);
+
+class MetaballsModel final : public Model {
+ public:
+  void init(const ModelSetup& setup) override;
+  StepStatus step(const StepInput& in) override;
+  const MatX3& nodes() const override { return m_x; }
+  const MatX3& surface() const override { return m_surface; }
+  void reset() override;
+  Counts counts() const override;
+  PhaseTimes phaseTimes() const override { return m_phase; }
+  NumericCounters numericCounters() const override;
+
+  const Metaballs& metaballs() const { return m_mb; }
+  const VecX& radii() const { return m_r; }
+  const VecX& restRadii() const { return m_mb.spheres.radii; }
+  const Skinning& skinning() const { return m_skin; }
+  bool constructionCacheHit() const { return m_cacheHit; }
+
+ private:
+  void computeRotations();
+
+  Metaballs m_mb;
+  Skinning m_skin;
+  MatX3 m_restSurface;
+  bool m_cacheHit = false;
+
+  // parameters
+  int m_iterations = 10;
+  StiffnessMode m_mode = StiffnessMode::Xpbd;
+  Real m_stiffness = 1.0;  // classic, corrected for the iteration count
+  bool m_laplacian = true;
+  Real m_lapStiffness = 0.5;
+  Frame m_lapFrame = Frame::Rotated;
+  Frame m_skinFrame = Frame::Rotated;
+  bool m_volume = true;
+  Real m_damping = 5.0;
+
+  // rest data
+  MatX3 m_x0;
+  VecX m_invMass;  // 1 / m_i
+  std::vector<uint8_t> m_fixed;
+  std::vector<int> m_fixedList;
+  std::vector<Real> m_linkRest, m_linkAlpha;  // per link: d (eq. 6), XPBD compliance (m/N)
+  std::vector<int> m_adjStart, m_adj;         // CSR adjacency of the links
+  MatX3 m_lapRest;                            // L_m (eq. 10), #S by 3
+  VecX m_lapAlpha;                            // XPBD compliance of each Laplacian constraint
+  VecX m_restSumD;                            // sum d(c_m) over linked spheres (eq. 12)
+
+  // state
+  MatX3 m_x, m_v, m_p, m_f;
+  VecX m_r;
+  std::vector<Eigen::Quaternion<Real>> m_q;
+  std::vector<Real> m_rot;  // #S*9 row-major rotations
+  std::vector<uint8_t> m_kin;
+  std::vector<Real> m_wEff, m_lambda;
+  std::vector<Vec3> m_lapLambda;
+  std::vector<Real> m_volFactorSum;
+  std::vector<int> m_volCount, m_contacted;
+  MatX3 m_surface;
+  PhaseTimes m_phase;
+  long long m_degenerate = 0;
+};
+
+}  // namespace deform::metaballs

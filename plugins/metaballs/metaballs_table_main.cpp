@@ -1,0 +1,31 @@
+// Prints the `metaballs-construction` table (paper Table 1 beside ours) as JSON:
+//   metaballs_table [OUT.json]
+#include "metaballs_table.h"
+
+#include <deform/cache.h>
+#include <deform/model.h>
+
+#include <exception>
+#include <iostream>
+
+namespace deform {
+// TEMPORARY stand-in for fixedNodeIndices (declared in model.h, implemented on another branch);
+// the table's runs pin nothing. Remove when it lands in core.
+std::vector<int> fixedNodeIndices(const MatX3&, const FixedRegion&, const SurfaceMesh&) {
+  return {};
+}
+}  // namespace deform
+
+int main(int argc, char** argv) {
+  try {
+    const std::string text = deform::metaballs::metaballsConstructionTable().dump(2) + "\n";
+    if (argc > 1)
+      deform::writeFileAtomic(argv[1], text);
+    else
+      std::cout << text;
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "metaballs_table: " << e.what() << "\n";
+    return 1;
+  }
+}

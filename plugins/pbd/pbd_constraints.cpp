@@ -1,0 +1,188 @@
+#include "pbd_constraints.h"
+
+#include <algorithm>
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#define DEFORM_PBD_HAVE_AVX2_PATH 1
+#endif
+
+namespace deform::pbd {
+
+namespace {
+
+// Volume and gradient of a closed surface in one pass over the triangles.
+Real volumeAndGradient(const MatX3& x, const MatX3i& F, MatX3& grad) {
+  grad.setZero(x.rows(), 3);
+  Real six = 0;
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    const int a = F(f, 0), b = F(f, 1), c = F(f, 2);
+    const Vec3 xa = x.row(a), xb = x.row(b), xc = x.row(c);
+    const Vec3 bc = xb.cross(xc);
+    six += xa.dot(bc);
+    grad.row(a) += bc;
+    grad.row(b) += xc.cross(xa);
+    grad.row(c) += xa.cross(xb);
+  }
+  grad /= 6.0;
+  return six / 6.0;
+}
+
+bool volumeMultiplier(const MatX3& x, const VecX& w, const MatX3i& F, Real restVolume,
+                      Real alphaTilde, Real k, Real& lambda, MatX3& grad, Real& dl) {
+  const Real vol = volumeAndGradient(x, F, grad);
+  Real denom = 0;
+  for (Eigen::Index i = 0; i < x.rows(); ++i) denom += w[i] * grad.row(i).squaredNorm();
+  // Gradients are ~ area; a vanishing denominator means every particle is immovable or the
+  // surface collapsed.
+  if (!(denom > 0) || !std::isfinite(denom)) return false;
+  dl = multiplierUpdate(vol - restVolume, denom, alphaTilde, k, lambda);
+  lambda += dl;
+  return true;
+}
+
+}  // namespace
+
+namespace {
+
+// One constraint on padded positions, the scalar reference of the SIMD path below.
+inline long long projectPaddedOne(Real* x4, const DistanceBatch& batch, size_t i) {
+  constexpr Real kTiny = tol::kDegenerateLength * tol::kDegenerateLength;
+  Real* xa = x4 + 4 * static_cast<size_t>(batch.a[i]);
+  Real* xb = x4 + 4 * static_cast<size_t>(batch.b[i]);
+  const Real d0 = xa[0] - xb[0], d1 = xa[1] - xb[1], d2 = xa[2] - xb[2];
+  const Real len2 = d0 * d0 + d1 * d1 + d2 * d2;
+  const bool ok = len2 > kTiny;
+  const Real len = std::sqrt(std::max(len2, kTiny));
+  const Real dl =
+      ok ? batch.scale[i] * (batch.rest[i] - len - batch.alphaTilde[i] * batch.lambda[i]) : 0.0;
+  batch.lambda[i] += dl;
+  const Real s = dl / len;
+  const Real sa = batch.wa[i] * s, sb = batch.wb[i] * s;
+  xa[0] += sa * d0;
+  xa[1] += sa * d1;
+  xa[2] += sa * d2;
+  xb[0] -= sb * d0;
+  xb[1] -= sb * d1;
+  xb[2] -= sb * d2;
+  return ok ? 0 : 1;
+}
+
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+// Four constraints of one colour: loads and arithmetic (compute), then the stores (commit). The
+// caller computes two groups before committing either, so that the two sqrt/div latency chains
+// overlap.
+struct Group4 {
+  Real* pa[4];
+  Real* pb[4];
+  __m256d xa[4], xb[4], d[4];
+  alignas(32) Real sa[4];
+  alignas(32) Real sb[4];
+  int ok = 0;
+};
+
+__attribute__((target("avx2"), always_inline)) inline void computeGroup4(Real* x4,
+                                                                         const DistanceBatch& batch,
+                                                                         size_t i, Group4& g) {
+  const __m256d tiny = _mm256_set1_pd(tol::kDegenerateLength * tol::kDegenerateLength);
+  for (int k = 0; k < 4; ++k) {
+    g.pa[k] = x4 + 4 * static_cast<size_t>(batch.a[i + k]);
+    g.pb[k] = x4 + 4 * static_cast<size_t>(batch.b[i + k]);
+    g.xa[k] = _mm256_loadu_pd(g.pa[k]);
+    g.xb[k] = _mm256_loadu_pd(g.pb[k]);
+    g.d[k] = _mm256_sub_pd(g.xa[k], g.xb[k]);  // lane 3: 0 - 0
+  }
+  // Transpose the four (dx, dy, dz, 0) rows into dx, dy, dz columns.
+  const __m256d t0 = _mm256_unpacklo_pd(g.d[0], g.d[1]);  // d0x d1x d0z d1z
+  const __m256d t1 = _mm256_unpackhi_pd(g.d[0], g.d[1]);  // d0y d1y d0w d1w
+  const __m256d t2 = _mm256_unpacklo_pd(g.d[2], g.d[3]);
+  const __m256d t3 = _mm256_unpackhi_pd(g.d[2], g.d[3]);
+  const __m256d dx = _mm256_permute2f128_pd(t0, t2, 0x20);
+  const __m256d dy = _mm256_permute2f128_pd(t1, t3, 0x20);
+  const __m256d dz = _mm256_permute2f128_pd(t0, t2, 0x31);
+  const __m256d len2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                                     _mm256_mul_pd(dz, dz));
+  const __m256d ok = _mm256_cmp_pd(len2, tiny, _CMP_GT_OQ);
+  const __m256d len = _mm256_sqrt_pd(_mm256_max_pd(len2, tiny));
+  __m256d lambda = _mm256_loadu_pd(batch.lambda + i);
+  const __m256d inner = _mm256_sub_pd(_mm256_sub_pd(_mm256_loadu_pd(batch.rest + i), len),
+                                      _mm256_mul_pd(_mm256_loadu_pd(batch.alphaTilde + i), lambda));
+  const __m256d dl = _mm256_and_pd(ok, _mm256_mul_pd(_mm256_loadu_pd(batch.scale + i), inner));
+  lambda = _mm256_add_pd(lambda, dl);
+  _mm256_storeu_pd(batch.lambda + i, lambda);
+  const __m256d s = _mm256_div_pd(dl, len);
+  _mm256_store_pd(g.sa, _mm256_mul_pd(_mm256_loadu_pd(batch.wa + i), s));
+  _mm256_store_pd(g.sb, _mm256_mul_pd(_mm256_loadu_pd(batch.wb + i), s));
+  g.ok = __builtin_popcount(_mm256_movemask_pd(ok));
+}
+
+__attribute__((target("avx2"), always_inline)) inline void commitGroup4(const Group4& g) {
+  for (int k = 0; k < 4; ++k) {
+    _mm256_storeu_pd(g.pa[k],
+                     _mm256_add_pd(g.xa[k], _mm256_mul_pd(_mm256_set1_pd(g.sa[k]), g.d[k])));
+    _mm256_storeu_pd(g.pb[k],
+                     _mm256_sub_pd(g.xb[k], _mm256_mul_pd(_mm256_set1_pd(g.sb[k]), g.d[k])));
+  }
+}
+
+__attribute__((target("avx2"))) long long projectPaddedAvx2(Real* x4, const DistanceBatch& batch,
+                                                            size_t begin, size_t end) {
+  long long degenerate = 0;
+  size_t i = begin;
+  Group4 g0, g1;
+  for (; i + 8 <= end; i += 8) {
+    computeGroup4(x4, batch, i, g0);
+    computeGroup4(x4, batch, i + 4, g1);
+    commitGroup4(g0);
+    commitGroup4(g1);
+    degenerate += 8 - g0.ok - g1.ok;
+  }
+  for (; i + 4 <= end; i += 4) {
+    computeGroup4(x4, batch, i, g0);
+    commitGroup4(g0);
+    degenerate += 4 - g0.ok;
+  }
+  for (; i < end; ++i) degenerate += projectPaddedOne(x4, batch, i);
+  return degenerate;
+}
+#endif
+
+}  // namespace
+
+bool distanceSimdAvailable() {
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+  return __builtin_cpu_supports("avx2");
+#else
+  return false;
+#endif
+}
+
+long long projectDistanceColourPadded(Real* x4, const DistanceBatch& batch, size_t begin,
+                                      size_t end, bool simd) {
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+  static const bool kAvx2 = distanceSimdAvailable();
+  if (simd && kAvx2) return projectPaddedAvx2(x4, batch, begin, end);
+#endif
+  long long degenerate = 0;
+  for (size_t i = begin; i < end; ++i) degenerate += projectPaddedOne(x4, batch, i);
+  return degenerate;
+}
+
+bool projectSurfaceVolume(const MatX3& x, const VecX& w, const MatX3i& F, Real restVolume,
+                          Real alphaTilde, Real k, Real& lambda, MatX3& grad, MatX3& dx) {
+  Real dl = 0;
+  if (!volumeMultiplier(x, w, F, restVolume, alphaTilde, k, lambda, grad, dl)) return false;
+  dx.resize(x.rows(), 3);
+  for (Eigen::Index i = 0; i < x.rows(); ++i) dx.row(i) = (w[i] * dl) * grad.row(i);
+  return true;
+}
+
+bool projectSurfaceVolumeInPlace(MatX3& x, const VecX& w, const MatX3i& F, Real restVolume,
+                                 Real alphaTilde, Real k, Real& lambda, MatX3& grad) {
+  Real dl = 0;
+  if (!volumeMultiplier(x, w, F, restVolume, alphaTilde, k, lambda, grad, dl)) return false;
+  for (Eigen::Index i = 0; i < x.rows(); ++i) x.row(i) += (w[i] * dl) * grad.row(i);
+  return true;
+}
+
+}  // namespace deform::pbd

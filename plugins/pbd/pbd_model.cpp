@@ -1,0 +1,588 @@
+#include "pbd_model.h"
+
+#include <deform/mesh.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <numeric>
+
+namespace deform::pbd {
+
+std::vector<ParamSpec> paramSpecs() {
+  return {
+      ParamSpec::integer("iterations", 10, 1, 10000, "Gauss-Seidel sweeps over all constraints"),
+      ParamSpec::choice("stiffness_mode", "xpbd", {"classic", "xpbd"},
+                        "classic: [0,1] stiffness with k' = 1-(1-k)^(1/n); xpbd: compliances "
+                        "from E, nu, thickness"),
+      ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
+                      "classic mode: distance constraint stiffness"),
+      ParamSpec::real("bending_stiffness", "1", 0.1, 0.0, 1.0,
+                      "classic mode: dihedral bending constraint stiffness"),
+      ParamSpec::real("volume_stiffness", "1", 1.0, 0.0, 1.0,
+                      "classic mode: volume constraint stiffness (global or per tet)"),
+      ParamSpec::flag("bending", false, "dihedral bending constraints on interior surface edges"),
+      ParamSpec::flag("volume", true, "global volume constraint on a closed surface"),
+      ParamSpec::flag("volume_every_sweep", false,
+                      "project the global volume constraint in every sweep (default: last sweep "
+                      "only; it costs a pass over all triangles)"),
+      ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
+                      "xpbd mode, surface input: shell thickness for stretch/bending compliance"),
+      ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
+                      "velocity damping rate: v <- v exp(-damping dt) each step"),
+  };
+}
+
+PbdConfig configFromParams(const ParamValues& p) {
+  PbdConfig c;
+  c.iterations = static_cast<int>(p.integer("iterations"));
+  c.mode = p.choiceAs<StiffnessMode>(
+      "stiffness_mode", {{"classic", StiffnessMode::Classic}, {"xpbd", StiffnessMode::Xpbd}});
+  c.stretchStiffness = p.real("stretch_stiffness");
+  c.bendingStiffness = p.real("bending_stiffness");
+  c.volumeStiffness = p.real("volume_stiffness");
+  c.bending = p.flag("bending");
+  c.volume = p.flag("volume");
+  c.volumeEverySweep = p.flag("volume_every_sweep");
+  c.thickness = p.real("thickness");
+  c.damping = p.real("damping");
+  return c;
+}
+
+Real surfaceEdgeCompliance(Real young, Real thickness, Real restLength, Real adjacentArea) {
+  return restLength * restLength / (young * thickness * adjacentArea);
+}
+
+Real hingeCompliance(const Material& m, Real thickness, Real edgeLength, Real adjacentArea) {
+  const Real D =
+      m.young * thickness * thickness * thickness / (12.0 * (1.0 - m.poisson * m.poisson));
+  return adjacentArea / (3.0 * D * edgeLength * edgeLength);
+}
+
+Real bulkModulus(const Material& m) {
+  const Real d = 3.0 * (1.0 - 2.0 * m.poisson);
+  return d > 0 ? m.young / d : std::numeric_limits<Real>::infinity();
+}
+
+namespace {
+
+void checkMaterial(const Organ& organ) {
+  const Material& m = organ.material;
+  if (!(m.young > 0) || !(m.density > 0) || !(m.poisson > -1.0 && m.poisson <= 0.5))
+    throw InputError(organ.source, "organ.material",
+                     "pbd needs young > 0, density > 0 and poisson in (-1, 0.5]");
+}
+
+// Greedy colouring of constraints (each a set of node indices) so that consecutive constraints
+// rarely share a node: the Gauss-Seidel order stays fixed and deterministic, but the CPU can
+// overlap independent projections instead of waiting on a chain through one vertex.
+template <class C, class NodesOf>
+std::vector<size_t> orderByColour(std::vector<C>& cs, int numNodes, NodesOf nodesOf) {
+  std::vector<std::uint64_t> used(numNodes, 0);
+  std::vector<std::pair<int, int>> key(cs.size());
+  for (size_t i = 0; i < cs.size(); ++i) {
+    std::uint64_t mask = 0;
+    for (int n : nodesOf(cs[i])) mask |= used[n];
+    const int colour = (~mask == 0) ? 63 : std::countr_zero(~mask);
+    for (int n : nodesOf(cs[i])) used[n] |= std::uint64_t(1) << colour;
+    key[i] = {colour, static_cast<int>(i)};
+  }
+  std::sort(key.begin(), key.end());
+  std::vector<C> out;
+  std::vector<size_t> starts;
+  out.reserve(cs.size());
+  for (size_t i = 0; i < key.size(); ++i) {
+    if (i == 0 || key[i].first != key[i - 1].first) starts.push_back(i);
+    out.push_back(cs[key[i].second]);
+  }
+  starts.push_back(cs.size());
+  cs.swap(out);
+  return starts;
+}
+
+Real triangleArea(const MatX3& V, const MatX3i& F, Eigen::Index f) {
+  const Vec3 a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
+  return 0.5 * (b - a).cross(c - a).norm();
+}
+
+}  // namespace
+
+void PbdModel::init(const ModelSetup& setup) {
+  init(setup.organ, configFromParams(setup.params));
+}
+
+void PbdModel::init(const Organ& organ, const PbdConfig& config) {
+  checkMaterial(organ);
+  m_config = config;
+  const int n = m_config.iterations;
+  const bool classic = m_config.mode == StiffnessMode::Classic;
+  m_kStretch = classic ? classicStiffness(m_config.stretchStiffness, n) : 1.0;
+  m_kBend = classic ? classicStiffness(m_config.bendingStiffness, n) : 1.0;
+  m_kVolume = classic ? classicStiffness(m_config.volumeStiffness, n) : 1.0;
+  m_distance.clear();
+  m_degenerateAtInit = 0;
+  m_dihedral.clear();
+  m_tet.clear();
+  m_hasVolume = false;
+
+  if (organ.volume) {
+    buildTets(organ);
+  } else {
+    buildSurface(organ);
+  }
+  const int N = static_cast<int>(m_rest.rows());
+
+  // Colour 63 collects every constraint once 63 colours are used: it is not independent, so it
+  // is projected one by one (see projectAll()).
+  m_distColours = orderByColour(m_distance, N, [](const DistanceConstraint& c) {
+    return std::array{c.a, c.b};
+  });
+  orderByColour(m_dihedral, N, [](const DihedralConstraint& c) {
+    return std::array{c.p[0], c.p[1], c.p[2], c.p[3]};
+  });
+  orderByColour(m_tet, N, [](const TetVolumeConstraint& c) {
+    return std::array{c.p[0], c.p[1], c.p[2], c.p[3]};
+  });
+
+  // Immovable nodes: the fixed region, and nodes without mass (unreferenced tet nodes).
+  m_fixed.clear();
+  if (!organ.fixed.empty()) m_fixed = fixedNodeIndices(m_rest, organ.fixed, organ.surface);
+  m_w0.resize(N);
+  for (int i = 0; i < N; ++i) m_w0[i] = m_mass[i] > 0 ? 1.0 / m_mass[i] : 0.0;
+  for (int i : m_fixed) m_w0[i] = 0.0;
+
+  const Box box = boundingBox(m_rest);
+  m_boxCenter = box.center();
+  m_boxHalf = 0.5 * tol::kDivergenceBoxFactor * std::max(box.size().maxCoeff(), Real(1e-9));
+
+  m_lambdaDist.assign(m_distance.size(), 0.0);
+  m_lambdaBend.assign(m_dihedral.size(), 0.0);
+  m_lambdaTet.assign(m_tet.size(), 0.0);
+  m_distA.resize(m_distance.size());
+  m_distB.resize(m_distance.size());
+  m_distRest.resize(m_distance.size());
+  for (size_t i = 0; i < m_distance.size(); ++i) {
+    m_distA[i] = m_distance[i].a;
+    m_distB[i] = m_distance[i].b;
+    m_distRest[i] = m_distance[i].rest;
+  }
+  m_distAlphaTilde.resize(m_distance.size());
+  m_distScale.resize(m_distance.size());
+  m_distWa.resize(m_distance.size());
+  m_distWb.resize(m_distance.size());
+  m_p4Storage.assign(4 * static_cast<size_t>(N) + 4, 0.0);
+  const auto base = reinterpret_cast<std::uintptr_t>(m_p4Storage.data());
+  m_p4Offset = ((32 - base % 32) % 32) / sizeof(Real);
+  m_graspMask.assign(N, 0);
+  reset();
+}
+
+void PbdModel::buildSurface(const Organ& organ) {
+  const SurfaceMesh& S = organ.surface;
+  const int N = S.numVertices();
+  if (N == 0 || S.numFaces() == 0)
+    throw InputError(organ.source, "organ.surface", "pbd needs a non-empty triangle surface");
+  m_rest = S.V;
+  m_surfaceIdentity = true;
+  m_surfaceF = S.F;
+  m_elements = S.numFaces();
+  const Material& mat = organ.material;
+  const bool xpbd = m_config.mode == StiffnessMode::Xpbd;
+
+  // Mass: the enclosed volume's mass, distributed by vertex area (a third of each triangle).
+  VecX area = VecX::Zero(N);
+  VecX faceArea(S.numFaces());
+  for (int f = 0; f < S.numFaces(); ++f) {
+    faceArea[f] = triangleArea(S.V, S.F, f);
+    for (int k = 0; k < 3; ++k) area[S.F(f, k)] += faceArea[f] / 3.0;
+  }
+  const Real totalArea = faceArea.sum();
+  const MatX2i E = uniqueEdges(S.F);
+  const MatX2i EF = edgeFaces(S.F, E);
+  const bool closed = (EF.array() >= 0).all();
+  const Real enclosed = std::abs(signedVolume(S.V, S.F));
+  // An open surface has no enclosed volume: give it the shell's mass instead.
+  const Real totalMass =
+      mat.density * (closed && enclosed > 0 ? enclosed : totalArea * m_config.thickness);
+  m_mass = area * (totalMass / totalArea);
+
+  for (Eigen::Index e = 0; e < E.rows(); ++e) {
+    DistanceConstraint c;
+    c.a = E(e, 0);
+    c.b = E(e, 1);
+    c.rest = (S.V.row(c.a) - S.V.row(c.b)).norm();
+    Real adj = 0;
+    for (int s = 0; s < 2; ++s)
+      if (EF(e, s) >= 0) adj += faceArea[EF(e, s)];
+    c.compliance = xpbd ? surfaceEdgeCompliance(mat.young, m_config.thickness, c.rest, adj) : 0.0;
+    m_distance.push_back(c);
+  }
+
+  if (m_config.bending) {
+    for (Eigen::Index e = 0; e < E.rows(); ++e) {
+      const int f0 = EF(e, 0), f1 = EF(e, 1);
+      if (f0 < 0 || f1 < 0) continue;
+      // Orient the hinge so that x2 -> x3 runs along triangle f0: f0 = (x0, x2, x3) in cyclic
+      // order, and f1 = (x1, x3, x2).
+      int k = 0;
+      while (!(S.F(f0, k) != E(e, 0) && S.F(f0, k) != E(e, 1))) ++k;
+      DihedralConstraint c;
+      c.p[0] = S.F(f0, k);
+      c.p[2] = S.F(f0, (k + 1) % 3);
+      c.p[3] = S.F(f0, (k + 2) % 3);
+      int j = 0;
+      while (!(S.F(f1, j) != E(e, 0) && S.F(f1, j) != E(e, 1))) ++j;
+      c.p[1] = S.F(f1, j);
+      Vec3 x[4], g[4];
+      for (int i = 0; i < 4; ++i) x[i] = S.V.row(c.p[i]);
+      Real theta = 0;
+      if (!dihedralAngle(x[0], x[1], x[2], x[3], theta, g)) {
+        ++m_degenerateAtInit;
+        continue;
+      }
+      c.restAngle = theta;
+      const Real elen = (x[3] - x[2]).norm();
+      c.compliance =
+          xpbd ? hingeCompliance(mat, m_config.thickness, elen, faceArea[f0] + faceArea[f1]) : 0.0;
+      m_dihedral.push_back(c);
+    }
+  }
+
+  if (m_config.volume && closed) {
+    m_hasVolume = true;
+    m_restVolume = signedVolume(S.V, S.F);
+    const Real K = bulkModulus(mat);
+    // C = V - V0 with energy (K / 2) (dV / V0)^2 V0, so alpha = V0 / K.
+    m_volumeCompliance = xpbd ? std::abs(m_restVolume) / K : 0.0;
+  }
+}
+
+void PbdModel::buildTets(const Organ& organ) {
+  const TetMesh& T = *organ.volume;
+  const int N = T.numVertices();
+  if (N == 0 || T.numTets() == 0)
+    throw InputError(organ.source, "organ.volume", "pbd needs a non-empty tetrahedral mesh");
+  m_rest = T.V;
+  m_elements = T.numTets();
+  m_surfaceF.resize(0, 3);
+  const Material& mat = organ.material;
+  const bool xpbd = m_config.mode == StiffnessMode::Xpbd;
+
+  // Surface vertices -> nodes: the identity when the surface shares the volume's node list,
+  // otherwise the node at the same position.
+  const SurfaceMesh& S = organ.surface;
+  m_surfaceIdentity = S.numVertices() == N && S.V == T.V;
+  m_surfaceRows.clear();
+  if (!m_surfaceIdentity) {
+    const Real weld = tol::kRelativeWeld * std::max(boundingBox(T.V).diagonal(), Real(1e-9));
+    for (int i = 0; i < S.numVertices(); ++i) {
+      const int nd = nearestVertex(T.V, S.V.row(i).transpose());
+      if (nd < 0 || (T.V.row(nd) - S.V.row(i)).norm() > weld)
+        throw InputError(organ.source, "organ.surface vertex " + std::to_string(i),
+                         "surface vertex is not a node of the tetrahedral mesh");
+      m_surfaceRows.push_back(nd);
+    }
+  }
+
+  m_mass = VecX::Zero(N);
+  // Per-edge share: sum of the volumes of the tets containing it.
+  std::map<std::pair<int, int>, Real> edgeVolume;
+  const Real K = bulkModulus(mat);
+  const Real G = mat.young / (2.0 * (1.0 + mat.poisson));
+  // Edge springs k = gamma sum V_T / L^2 with gamma = 5G/2 give an isotropic network with shear
+  // modulus G and bulk modulus 5G/3; the tet volume constraints add the missing K - 5G/3 (Golec
+  // et al. 2019). Below nu = 1/4 that would be negative: clamp to zero (nu_eff = 1/4).
+  const Real gamma = 2.5 * G;
+  const Real extraK = std::max<Real>(K - 5.0 * G / 3.0, 0.0);
+  for (int t = 0; t < T.numTets(); ++t) {
+    TetVolumeConstraint c;
+    Vec3 x[4];
+    for (int i = 0; i < 4; ++i) {
+      c.p[i] = T.T(t, i);
+      if (c.p[i] < 0 || c.p[i] >= N)
+        throw InputError(organ.source, "organ.volume tet " + std::to_string(t),
+                         "node index out of range");
+      x[i] = T.V.row(c.p[i]);
+    }
+    c.restVolume = tetVolume(x[0], x[1], x[2], x[3]);
+    if (!(c.restVolume > 0))
+      throw InputError(organ.source, "organ.volume tet " + std::to_string(t),
+                       "tetrahedron is degenerate or inverted at rest");
+    for (int i = 0; i < 4; ++i) m_mass[c.p[i]] += mat.density * c.restVolume / 4.0;
+    for (int i = 0; i < 4; ++i)
+      for (int j = i + 1; j < 4; ++j)
+        edgeVolume[{std::min(c.p[i], c.p[j]), std::max(c.p[i], c.p[j])}] += c.restVolume;
+    if (extraK > 0 || !xpbd) {
+      c.compliance = xpbd ? (std::isinf(extraK) ? 0.0 : c.restVolume / extraK) : 0.0;
+      m_tet.push_back(c);
+    }
+  }
+  for (const auto& [e, vol] : edgeVolume) {
+    DistanceConstraint c;
+    c.a = e.first;
+    c.b = e.second;
+    c.rest = (T.V.row(c.a) - T.V.row(c.b)).norm();
+    c.compliance = xpbd ? c.rest * c.rest / (gamma * vol) : 0.0;
+    m_distance.push_back(c);
+  }
+}
+
+void PbdModel::reset() {
+  m_x = m_rest;
+  m_v.setZero(m_rest.rows(), 3);
+  m_p = m_rest;
+  m_w = m_w0;
+  m_hotDt = -1;
+  m_hotGrasped.clear();
+  std::fill(m_graspMask.begin(), m_graspMask.end(), 0);
+  m_lambdaVolume = 0;
+  m_volumeGrad.setZero(m_rest.rows(), 3);
+  m_degenerate = 0;
+  m_graspForces.clear();
+  m_phase.clear();
+  if (!m_surfaceIdentity) {
+    m_surface.resize(static_cast<Eigen::Index>(m_surfaceRows.size()), 3);
+    for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);
+  }
+}
+
+void PbdModel::refreshHotData(Real dt) {
+  const Real invDt2 = 1.0 / (dt * dt);
+  for (size_t i = 0; i < m_distance.size(); ++i) {
+    const DistanceConstraint& c = m_distance[i];
+    m_distAlphaTilde[i] = c.compliance * invDt2;
+    const Real denom = m_w[c.a] + m_w[c.b] + m_distAlphaTilde[i];
+    m_distScale[i] = denom > 0 ? m_kStretch / denom : 0.0;
+    m_distWa[i] = m_w[c.a];
+    m_distWb[i] = m_w[c.b];
+  }
+  m_hotDt = dt;
+}
+
+void PbdModel::packPositions() {
+  const Real* P = m_p.data();
+  Real* m_p4 = p4();
+  for (Eigen::Index i = 0; i < m_p.rows(); ++i) {
+    m_p4[4 * i] = P[3 * i];
+    m_p4[4 * i + 1] = P[3 * i + 1];
+    m_p4[4 * i + 2] = P[3 * i + 2];
+  }
+}
+
+void PbdModel::unpackPositions() {
+  Real* P = m_p.data();
+  const Real* m_p4 = p4();
+  for (Eigen::Index i = 0; i < m_p.rows(); ++i) {
+    P[3 * i] = m_p4[4 * i];
+    P[3 * i + 1] = m_p4[4 * i + 1];
+    P[3 * i + 2] = m_p4[4 * i + 2];
+  }
+}
+
+void PbdModel::projectAll(Real dt) {
+  const Real invDt2 = 1.0 / (dt * dt);
+  const Real* W = m_w.data();
+  const DistanceBatch batch{m_distA.data(),          m_distB.data(),     m_distRest.data(),
+                            m_distAlphaTilde.data(), m_distScale.data(), m_lambdaDist.data(),
+                            m_distWa.data(),         m_distWb.data()};
+  const size_t nColours = m_distColours.empty() ? 0 : m_distColours.size() - 1;
+  Real* x4 = p4();
+  bool packed = false;
+  for (int it = 0; it < m_config.iterations; ++it) {
+    if (!packed) packPositions();
+    packed = true;
+    for (size_t c = 0; c < nColours; ++c) {
+      const size_t b = m_distColours[c], e = m_distColours[c + 1];
+      if (c == 63) {  // overflow colour: not independent, go one at a time
+        for (size_t i = b; i < e; ++i)
+          m_degenerate += projectDistanceColourPadded(x4, batch, i, i + 1);
+      } else {
+        m_degenerate += projectDistanceColourPadded(x4, batch, b, e);
+      }
+    }
+    const bool volumeNow =
+        m_hasVolume && (m_config.volumeEverySweep || it + 1 == m_config.iterations);
+    if (m_dihedral.empty() && m_tet.empty() && !volumeNow) continue;
+    unpackPositions();
+    packed = false;
+    for (size_t i = 0; i < m_dihedral.size(); ++i) {
+      const DihedralConstraint& c = m_dihedral[i];
+      Vec3 x[4], dx[4];
+      Real w[4];
+      for (int k = 0; k < 4; ++k) {
+        x[k] = m_p.row(c.p[k]);
+        w[k] = W[c.p[k]];
+      }
+      if (!projectDihedral(x, w, c.restAngle, c.compliance * invDt2, m_kBend, m_lambdaBend[i],
+                           dx)) {
+        ++m_degenerate;
+        continue;
+      }
+      for (int k = 0; k < 4; ++k) m_p.row(c.p[k]) += dx[k];
+    }
+    for (size_t i = 0; i < m_tet.size(); ++i) {
+      const TetVolumeConstraint& c = m_tet[i];
+      Vec3 x[4], dx[4];
+      Real w[4];
+      for (int k = 0; k < 4; ++k) {
+        x[k] = m_p.row(c.p[k]);
+        w[k] = W[c.p[k]];
+      }
+      if (!projectTetVolume(x, w, c.restVolume, c.compliance * invDt2, m_kVolume, m_lambdaTet[i],
+                            dx)) {
+        ++m_degenerate;
+        continue;
+      }
+      for (int k = 0; k < 4; ++k) m_p.row(c.p[k]) += dx[k];
+    }
+    if (volumeNow) {
+      if (!projectSurfaceVolumeInPlace(m_p, m_w, m_surfaceF, m_restVolume,
+                                       m_volumeCompliance * invDt2, m_kVolume, m_lambdaVolume,
+                                       m_volumeGrad))
+        ++m_degenerate;
+    }
+  }
+  if (packed) unpackPositions();
+}
+
+StepStatus PbdModel::step(const StepInput& in) {
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
+  const Real dt = in.dt;
+  const int N = static_cast<int>(m_x.rows());
+
+  // Grasped nodes are kinematic this step: inverse mass 0, position = target.
+  std::vector<int>& grasped = m_graspedScratch;
+  grasped.clear();
+  for (const GraspInput& g : in.grasps)
+    grasped.insert(grasped.end(), g.nodes.begin(), g.nodes.end());
+  std::sort(grasped.begin(), grasped.end());
+  grasped.erase(std::unique(grasped.begin(), grasped.end()), grasped.end());
+  if (grasped != m_hotGrasped || dt != m_hotDt) {
+    for (int i : m_hotGrasped) m_graspMask[i] = 0;
+    m_w = m_w0;
+    for (int i : grasped) {
+      m_w[i] = 0.0;
+      m_graspMask[i] = 1;
+    }
+    m_hotGrasped = grasped;
+    refreshHotData(dt);
+  }
+
+  // Prediction with gravity and point loads (explicit in the external forces only).
+  m_v.rowwise() += dt * in.gravity.transpose();
+  for (const PointLoad& l : in.loads) {
+    const int node = m_surfaceIdentity ? l.surfaceVertex : m_surfaceRows.at(l.surfaceVertex);
+    m_v.row(node) += (dt * m_w[node]) * l.force.transpose();
+  }
+  for (int i = 0; i < N; ++i) {
+    if (m_w[i] == 0.0) m_v.row(i).setZero();
+  }
+  m_p = m_x + dt * m_v;
+  for (const GraspInput& g : in.grasps)
+    for (size_t k = 0; k < g.nodes.size(); ++k) m_p.row(g.nodes[k]) = g.targets.row(k);
+  const auto t1 = Clock::now();
+
+  std::fill(m_lambdaDist.begin(), m_lambdaDist.end(), 0.0);
+  std::fill(m_lambdaBend.begin(), m_lambdaBend.end(), 0.0);
+  std::fill(m_lambdaTet.begin(), m_lambdaTet.end(), 0.0);
+  m_lambdaVolume = 0;
+  projectAll(dt);
+  const auto t2 = Clock::now();
+
+  // Velocity update with damping, and the divergence check (NaN/Inf or leaving the box).
+  const Real invDt = 1.0 / dt;
+  const Real decay = std::exp(-m_config.damping * dt);
+  Real sum = 0, far = 0;
+  for (int i = 0; i < N; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const Real p = m_p(i, k);
+      m_v(i, k) = (p - m_x(i, k)) * invDt * decay;
+      m_x(i, k) = p;
+      sum += p;
+      far = std::max(far, std::abs(p - m_boxCenter[k]));
+    }
+  }
+  if (!m_surfaceIdentity)
+    for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);
+  computeGraspForces(in, dt);
+  const auto t3 = Clock::now();
+  auto ms = [](auto a, auto b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
+  m_phase["predict"] = ms(t0, t1);
+  m_phase["solve"] = ms(t1, t2);
+  m_phase["update"] = ms(t2, t3);
+  if (!std::isfinite(sum) || !(far <= m_boxHalf)) return StepStatus::Diverged;
+  return StepStatus::Ok;
+}
+
+// Force the tissue exerts on each grasp: sum over constraints touching grasped nodes of
+// g_j lambda / dt^2 (the constraint force of XPBD, Macklin et al. 2016, Eq. (9); in classic mode
+// lambda is the same accumulated multiplier, so this is the impulse the free particles received
+// divided by dt, with the sign of Newton's third law).
+void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
+  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
+  if (in.grasps.empty()) return;
+  MatX3& nodeForce = m_nodeForce;
+  nodeForce.setZero(m_x.rows(), 3);
+  const Real invDt2 = 1.0 / (dt * dt);
+  for (size_t i = 0; i < m_distance.size(); ++i) {
+    const int a = m_distA[i], b = m_distB[i];
+    if (!(m_graspMask[a] | m_graspMask[b])) continue;
+    const Vec3 d = m_x.row(a) - m_x.row(b);
+    const Real len = d.norm();
+    if (len <= tol::kDegenerateLength) continue;
+    const Vec3 f = (m_lambdaDist[i] * invDt2 / len) * d;
+    nodeForce.row(a) += f;
+    nodeForce.row(b) -= f;
+  }
+  for (size_t i = 0; i < m_dihedral.size(); ++i) {
+    const DihedralConstraint& c = m_dihedral[i];
+    if (!(m_graspMask[c.p[0]] | m_graspMask[c.p[1]] | m_graspMask[c.p[2]] | m_graspMask[c.p[3]]))
+      continue;
+    Vec3 x[4], g[4];
+    for (int k = 0; k < 4; ++k) x[k] = m_x.row(c.p[k]);
+    Real theta;
+    if (!dihedralAngle(x[0], x[1], x[2], x[3], theta, g)) continue;
+    for (int k = 0; k < 4; ++k) nodeForce.row(c.p[k]) += (m_lambdaBend[i] * invDt2) * g[k];
+  }
+  for (size_t i = 0; i < m_tet.size(); ++i) {
+    const TetVolumeConstraint& c = m_tet[i];
+    if (!(m_graspMask[c.p[0]] | m_graspMask[c.p[1]] | m_graspMask[c.p[2]] | m_graspMask[c.p[3]]))
+      continue;
+    const Vec3 x0 = m_x.row(c.p[0]);
+    const Vec3 e1 = Vec3(m_x.row(c.p[1])) - x0, e2 = Vec3(m_x.row(c.p[2])) - x0,
+               e3 = Vec3(m_x.row(c.p[3])) - x0;
+    Vec3 g[4];
+    g[1] = e2.cross(e3) / 6.0;
+    g[2] = e3.cross(e1) / 6.0;
+    g[3] = e1.cross(e2) / 6.0;
+    g[0] = -(g[1] + g[2] + g[3]);
+    for (int k = 0; k < 4; ++k) nodeForce.row(c.p[k]) += (m_lambdaTet[i] * invDt2) * g[k];
+  }
+  if (m_hasVolume) nodeForce += (m_lambdaVolume * invDt2) * m_volumeGrad;
+  for (size_t g = 0; g < in.grasps.size(); ++g)
+    for (int node : in.grasps[g].nodes) m_graspForces[g] += nodeForce.row(node).transpose();
+}
+
+Counts PbdModel::counts() const {
+  const long long nVol = m_hasVolume ? 1 : 0;
+  return {{"nodes", m_x.rows()},
+          {"elements", m_elements},
+          {"constraints",
+           static_cast<long long>(m_distance.size() + m_dihedral.size() + m_tet.size()) + nVol},
+          {"distance_constraints", static_cast<long long>(m_distance.size())},
+          {"bending_constraints", static_cast<long long>(m_dihedral.size())},
+          {"volume_constraints", static_cast<long long>(m_tet.size()) + nVol}};
+}
+
+NumericCounters PbdModel::numericCounters() const {
+  return {{"degenerate_constraints", m_degenerate},
+          {"degenerate_hinges_at_init", m_degenerateAtInit}};
+}
+
+}  // namespace deform::pbd

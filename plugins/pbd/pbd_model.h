@@ -1,0 +1,132 @@
+// Position based dynamics model of an organ: the thin stateful layer over the kernels in
+// pbd_constraints.h. Simulation nodes are the organ's surface vertices (distance constraints on
+// edges, dihedral bending constraints on interior edges, one global volume constraint), or, when
+// the organ comes with a tetrahedral mesh, the tet nodes (distance constraints on tet edges and
+// one volume constraint per tet). One step follows Mueller et al. 2007, Algorithm 1 (XPBD:
+// Macklin et al. 2016, Algorithm 1): predict with external forces, Gauss-Seidel projection of all
+// constraints in a fixed order for `iterations` sweeps, velocity from the position change, then
+// velocity damping. See README.md for every modelling choice.
+#pragma once
+
+#include "pbd_constraints.h"
+
+#include <deform/model.h>
+#include <deform/params.h>
+
+#include <vector>
+
+namespace deform::pbd {
+
+enum class StiffnessMode { Classic, Xpbd };
+
+/// Resolved parameters (see paramSpecs() for units, ranges and meaning).
+struct PbdConfig {
+  int iterations = 10;
+  StiffnessMode mode = StiffnessMode::Xpbd;
+  Real stretchStiffness = 1.0;    ///< classic, [0, 1]
+  Real bendingStiffness = 0.1;    ///< classic, [0, 1]
+  Real volumeStiffness = 1.0;     ///< classic, [0, 1]
+  bool bending = false;           ///< dihedral bending constraints (surface input)
+  bool volume = true;             ///< global volume constraint (closed surface input)
+  bool volumeEverySweep = false;  ///< project the global volume in every sweep, not only the last
+  Real thickness = 0.01;          ///< m, shell thickness for XPBD compliances (surface input)
+  Real damping = 1.0;             ///< 1/s, velocity damping rate
+};
+
+/// The parameter declarations of the "pbd" plugin.
+std::vector<ParamSpec> paramSpecs();
+/// Reads validated parameters; throws InputError on an unknown stiffness_mode.
+PbdConfig configFromParams(const ParamValues& params);
+
+/// XPBD compliances derived from the material (see README.md, "Stiffness").
+/// Edge of a triangle surface: alpha = L^2 / (E t sum_{T ni e} A_T)  (m/N).
+Real surfaceEdgeCompliance(Real young, Real thickness, Real restLength, Real adjacentArea);
+/// Dihedral hinge: alpha = (A1 + A2) / (3 D |e|^2), D = E t^3 / (12 (1 - nu^2))  (1/(N m)).
+Real hingeCompliance(const Material& m, Real thickness, Real edgeLength, Real adjacentArea);
+/// Bulk modulus K = E / (3 (1 - 2 nu)), Pa (infinite for nu = 0.5).
+Real bulkModulus(const Material& m);
+
+class PbdModel final : public Model {
+ public:
+  void init(const ModelSetup& setup) override;
+  /// init() without the parameter layer (tests and benchmarks).
+  void init(const Organ& organ, const PbdConfig& config);
+
+  StepStatus step(const StepInput& in) override;
+  const MatX3& nodes() const override { return m_x; }
+  const MatX3& surface() const override { return m_surfaceIdentity ? m_x : m_surface; }
+  void reset() override;
+  Counts counts() const override;
+  PhaseTimes phaseTimes() const override { return m_phase; }
+  NumericCounters numericCounters() const override;
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
+
+  const PbdConfig& config() const { return m_config; }
+  const VecX& masses() const { return m_mass; }
+  const std::vector<DistanceConstraint>& distanceConstraints() const { return m_distance; }
+  const std::vector<DihedralConstraint>& dihedralConstraints() const { return m_dihedral; }
+  const std::vector<TetVolumeConstraint>& tetConstraints() const { return m_tet; }
+  bool hasVolumeConstraint() const { return m_hasVolume; }
+
+ private:
+  void buildSurface(const Organ& organ);
+  void buildTets(const Organ& organ);
+  void refreshHotData(Real dt);
+  void projectAll(Real dt);
+  void packPositions();
+  void unpackPositions();
+  void computeGraspForces(const StepInput& in, Real dt);
+
+  PbdConfig m_config;
+  Real m_kStretch = 1, m_kBend = 1, m_kVolume = 1;  // per-iteration stiffness (classic) or 1
+
+  MatX3 m_rest;  // #N by 3 rest positions
+  MatX3 m_x;     // #N by 3 positions
+  MatX3 m_v;     // #N by 3 velocities
+  MatX3 m_p;     // #N by 3 predicted / projected positions
+  VecX m_mass;   // #N masses, kg
+  VecX m_w0;     // #N inverse masses with fixed nodes 0
+  VecX m_w;      // #N inverse masses of this step (grasped nodes 0)
+  std::vector<int> m_fixed;
+
+  bool m_surfaceIdentity = true;
+  std::vector<int> m_surfaceRows;  // surface vertex -> node when not the identity
+  MatX3 m_surface;
+  MatX3i m_surfaceF;  // triangles (node indices) for the global volume constraint
+
+  std::vector<DistanceConstraint> m_distance;
+  std::vector<DihedralConstraint> m_dihedral;
+  std::vector<TetVolumeConstraint> m_tet;
+  bool m_hasVolume = false;
+  Real m_restVolume = 0, m_volumeCompliance = 0;
+  long long m_elements = 0;
+
+  // Distance constraints in colour order as structure of arrays; per-step alphaTilde = alpha/dt^2
+  // and multiplier scale k / (w_a + w_b + alphaTilde), refreshed only when dt or the immovable
+  // set changes. m_distColours: start of each colour, plus the end.
+  std::vector<int> m_distA, m_distB;
+  std::vector<Real> m_distRest, m_distAlphaTilde, m_distScale, m_distWa, m_distWb;
+  // Positions padded to (x, y, z, 0) for the distance kernel, starting m_p4Offset entries into
+  // m_p4Storage (32-byte aligned).
+  std::vector<Real> m_p4Storage;
+  size_t m_p4Offset = 0;
+  Real* p4() { return m_p4Storage.data() + m_p4Offset; }
+  std::vector<size_t> m_distColours;
+  std::vector<Real> m_lambdaDist, m_lambdaBend, m_lambdaTet;
+  Real m_lambdaVolume = 0;
+  MatX3 m_volumeGrad;
+  Real m_hotDt = -1;
+  std::vector<int> m_hotGrasped;  // grasped nodes the hot data was built for
+  std::vector<unsigned char> m_graspMask;
+  Vec3 m_boxCenter = Vec3::Zero();
+  Real m_boxHalf = 0;
+
+  long long m_degenerate = 0;        // skipped projections since init/reset
+  long long m_degenerateAtInit = 0;  // hinges dropped at init (degenerate rest triangles)
+  std::vector<int> m_graspedScratch;
+  MatX3 m_nodeForce;
+  std::vector<Vec3> m_graspForces;
+  PhaseTimes m_phase;
+};
+
+}  // namespace deform::pbd

@@ -1,0 +1,97 @@
+// Reference FEM benchmark: Gmsh meshing of the liver phantom at ~50k tets and one quasi-static
+// Newton solve (grasp and lift under gravity) per material; peak memory (ru_maxrss).
+// Run: build/plugins/reference_fem/bench_reference_fem --benchmark_repetitions=3
+#include "fem_solver.h"
+#include "test_shapes.h"
+
+#include <deform/phantom.h>
+#include <deform/tet_mesher.h>
+
+#include <benchmark/benchmark.h>
+#include <sys/resource.h>
+
+#include <cmath>
+
+using namespace deform;
+using namespace deform::reffem;
+
+namespace {
+
+const SurfaceMesh& organ() {
+  static const SurfaceMesh s = makePhantom("liver");
+  return s;
+}
+
+const TetMeshResult& mesh50k() {
+  static const TetMeshResult r = [] {
+    TetMeshOptions o;
+    o.targetElements = 50000;
+    o.refineSurface = true;
+    return tetrahedralize(organ(), o);
+  }();
+  return r;
+}
+
+double peakRssMb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / 1024.0;
+}
+
+void BM_MeshLiver50k(benchmark::State& state) {
+  TetMeshOptions o;
+  o.targetElements = 50000;
+  o.refineSurface = true;
+  TetMeshResult r;
+  for (auto _ : state) r = tetrahedralize(organ(), o);
+  state.counters["tets"] = double(r.quality.elements);
+  state.counters["nodes"] = double(r.quality.nodes);
+  state.counters["min_dihedral_deg"] = r.quality.minDihedralDeg;
+  state.counters["min_mean_ratio"] = r.quality.minMeanRatio;
+  state.counters["peak_rss_MB"] = peakRssMb();
+}
+BENCHMARK(BM_MeshLiver50k)->Unit(benchmark::kMillisecond)->Iterations(1);
+
+/// Grasp the nodes within 1 cm of the top point, lift them 2 cm, under gravity, with the
+/// bottom 15% of the organ fixed. One full solve from rest (pattern analysis included).
+void BM_QuasiStaticGraspLift(benchmark::State& state) {
+  const TetMeshResult& m = mesh50k();
+  const MaterialModel model = MaterialModel(state.range(0));
+  Material mat;  // 5500 Pa, 0.3, 1000 kg/m^3 (DESIGN.md default)
+  mat.poisson = 0.45;
+  FemSystem sys(m.mesh, mat, model);
+  const Box box = boundingBox(m.mesh.V);
+  LoadCase lc;
+  lc.gravity = Vec3(0, 0, -9.81);
+  const Real zFix = box.lo.z() + 0.15 * box.size().z();
+  const int top = nearestVertex(m.mesh.V, Vec3(box.center().x(), box.center().y(), box.hi.z()));
+  for (int i = 0; i < sys.numNodes(); ++i) {
+    if (m.mesh.V(i, 2) < zFix) {
+      lc.fixedNodes.push_back(i);
+    } else if ((m.mesh.V.row(i) - m.mesh.V.row(top)).norm() < 0.01) {
+      lc.prescribedNodes.push_back(i);
+    }
+  }
+  lc.targets.resize(lc.prescribedNodes.size(), 3);
+  for (size_t k = 0; k < lc.prescribedNodes.size(); ++k)
+    lc.targets.row(k) = m.mesh.V.row(lc.prescribedNodes[k]) + Vec3(0, 0, 0.02).transpose();
+  SolveReport rep;
+  for (auto _ : state) benchmark::DoNotOptimize(solveEquilibrium(sys, lc, {}, &rep));
+  state.SetLabel(materialModelName(model));
+  state.counters["tets"] = double(m.mesh.numTets());
+  state.counters["dofs"] = double(3 * sys.numNodes());
+  state.counters["newton_iterations"] = rep.newtonIterations;
+  state.counters["load_steps"] = rep.loadSteps;
+  state.counters["converged"] = rep.converged;
+  state.counters["peak_rss_MB"] = peakRssMb();
+}
+BENCHMARK(BM_QuasiStaticGraspLift)
+    ->Arg(int(MaterialModel::Linear))
+    ->Arg(int(MaterialModel::Corotational))
+    ->Arg(int(MaterialModel::NeoHookean))
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(1);
+
+}  // namespace
+
+BENCHMARK_MAIN();

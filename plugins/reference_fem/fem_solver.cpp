@@ -1,0 +1,503 @@
+#include "fem_solver.h"
+
+#include <deform/error.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+
+namespace deform::reffem {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::array<Vec3, 4> gather(const VecX& x, const Vec4i& t) {
+  std::array<Vec3, 4> p;
+  for (int k = 0; k < 4; ++k) p[k] = x.segment<3>(3 * t(k));
+  return p;
+}
+
+Eigen::Map<const SparseMatrix> withValues(const SparseMatrix& pattern, const VecX& values) {
+  return Eigen::Map<const SparseMatrix>(pattern.rows(), pattern.cols(), pattern.nonZeros(),
+                                        pattern.outerIndexPtr(), pattern.innerIndexPtr(),
+                                        values.data());
+}
+
+}  // namespace
+
+MaterialModel parseMaterialModel(const std::string& name) {
+  if (name == "linear") return MaterialModel::Linear;
+  if (name == "corotational") return MaterialModel::Corotational;
+  if (name == "neo_hookean") return MaterialModel::NeoHookean;
+  throw InputError("", "params.material",
+                   "unknown material '" + name + "' (linear | corotational | neo_hookean)");
+}
+
+const char* materialModelName(MaterialModel m) {
+  switch (m) {
+    case MaterialModel::Linear:
+      return "linear";
+    case MaterialModel::Corotational:
+      return "corotational";
+    case MaterialModel::NeoHookean:
+      return "neo_hookean";
+  }
+  return "?";
+}
+
+// ---- FemSystem ------------------------------------------------------------------------------
+
+FemSystem::FemSystem(TetMesh rest, const Material& material, MaterialModel model,
+                     CorotationalTangent corotationalTangent)
+    : m_rest(std::move(rest)),
+      m_material(material),
+      m_model(model),
+      m_lame(LameParameters::fromYoungPoisson(material.young, material.poisson)),
+      m_corotationalTangent(corotationalTangent) {
+  const int n = m_rest.numVertices();
+  m_elements.resize(size_t(m_rest.numTets()));
+  m_mass = VecX::Zero(n);
+  std::vector<std::vector<int>> nbrs(static_cast<size_t>(n));
+  for (int t = 0; t < m_rest.numTets(); ++t) {
+    const Vec4i tet = m_rest.T.row(t).transpose();
+    TetRest& r = m_elements[size_t(t)];
+    if (!makeTetRest(m_rest.V.row(tet(0)), m_rest.V.row(tet(1)), m_rest.V.row(tet(2)),
+                     m_rest.V.row(tet(3)), r)) {
+      ++m_degenerate;
+      continue;
+    }
+    for (int a = 0; a < 4; ++a) {
+      m_mass(tet(a)) += material.density * r.volume / 4.0;
+      for (int b = 0; b < 4; ++b) nbrs[size_t(tet(a))].push_back(tet(b));
+    }
+  }
+  for (int i = 0; i < n; ++i) {  // every node couples to itself (isolated nodes too)
+    auto& v = nbrs[size_t(i)];
+    v.push_back(i);
+    std::sort(v.begin(), v.end());
+    v.erase(std::unique(v.begin(), v.end()), v.end());
+  }
+  // Full symmetric 3N x 3N pattern: column (3 b + kb) holds rows 3 a + ka for a in nbrs[b].
+  m_pattern.resize(3 * n, 3 * n);
+  long long nnz = 0;
+  for (int i = 0; i < n; ++i) nnz += 9LL * nbrs[size_t(i)].size();
+  m_pattern.resizeNonZeros(Eigen::Index(nnz));
+  int* outer = m_pattern.outerIndexPtr();
+  int* inner = m_pattern.innerIndexPtr();
+  int pos = 0;
+  for (int b = 0; b < n; ++b)
+    for (int kb = 0; kb < 3; ++kb) {
+      outer[3 * b + kb] = pos;
+      for (int a : nbrs[size_t(b)])
+        for (int ka = 0; ka < 3; ++ka) inner[pos++] = 3 * a + ka;
+    }
+  outer[3 * n] = pos;
+  std::fill(m_pattern.valuePtr(), m_pattern.valuePtr() + nnz, 0.0);
+  m_slots.resize(size_t(m_rest.numTets()));
+  for (int t = 0; t < m_rest.numTets(); ++t) {
+    if (!(m_elements[size_t(t)].volume > 0)) continue;
+    const Vec4i tet = m_rest.T.row(t).transpose();
+    for (int bj = 0; bj < 4; ++bj)
+      for (int ai = 0; ai < 4; ++ai) {
+        const auto& col = nbrs[size_t(tet(bj))];
+        const int off = int(std::lower_bound(col.begin(), col.end(), tet(ai)) - col.begin());
+        for (int kb = 0; kb < 3; ++kb)
+          for (int ka = 0; ka < 3; ++ka)
+            m_slots[size_t(t)][size_t((3 * bj + kb) * 12 + 3 * ai + ka)] =
+                outer[3 * tet(bj) + kb] + 3 * off + ka;
+      }
+  }
+}
+
+template <class Fn>
+void FemSystem::forEachMaterial(Fn&& fn) const {
+  switch (m_model) {
+    case MaterialModel::Linear:
+      fn(LinearMaterial{m_lame});
+      break;
+    case MaterialModel::Corotational:
+      fn(CorotationalMaterial{m_lame, m_corotationalTangent});
+      break;
+    case MaterialModel::NeoHookean:
+      fn(NeoHookeanMaterial{m_lame});
+      break;
+  }
+}
+
+VecX FemSystem::restPositions() const {
+  return Eigen::Map<const VecX>(MatX3(m_rest.V).data(), 3 * numNodes());
+}
+
+Real FemSystem::elasticEnergy(const VecX& x) const {
+  Real W = 0;
+  forEachMaterial([&](const auto& mat) {
+    TetEvaluation e;
+    for (int t = 0; t < m_rest.numTets(); ++t) {
+      const TetRest& r = m_elements[size_t(t)];
+      if (!(r.volume > 0)) continue;
+      evaluateTet(mat, r, gather(x, m_rest.T.row(t).transpose()), TetEvalMode::Energy, e);
+      W += e.energy;
+    }
+  });
+  return W;
+}
+
+void FemSystem::elasticGradient(const VecX& x, VecX& g) const {
+  g = VecX::Zero(3 * numNodes());
+  forEachMaterial([&](const auto& mat) {
+    TetEvaluation e;
+    for (int t = 0; t < m_rest.numTets(); ++t) {
+      const TetRest& r = m_elements[size_t(t)];
+      if (!(r.volume > 0)) continue;
+      const Vec4i tet = m_rest.T.row(t).transpose();
+      evaluateTet(mat, r, gather(x, tet), TetEvalMode::Gradient, e);
+      for (int a = 0; a < 4; ++a) g.segment<3>(3 * tet(a)) += e.gradient.segment<3>(3 * a);
+    }
+  });
+}
+
+void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const {
+  values = VecX::Zero(m_pattern.nonZeros());
+  forEachMaterial([&](const auto& mat) {
+    TetEvaluation e;
+    for (int t = 0; t < m_rest.numTets(); ++t) {
+      const TetRest& r = m_elements[size_t(t)];
+      if (!(r.volume > 0)) continue;
+      evaluateTet(mat, r, gather(x, m_rest.T.row(t).transpose()), TetEvalMode::Stiffness, e,
+                  projectSpd);
+      const auto& slot = m_slots[size_t(t)];
+      const Real* k = e.stiffness.data();  // column-major, matches the slot order
+      for (int i = 0; i < 144; ++i) values(slot[size_t(i)]) += k[i];
+    }
+  });
+}
+
+VecX FemSystem::externalForce(const LoadCase& loads) const {
+  VecX f(3 * numNodes());
+  for (int i = 0; i < numNodes(); ++i) f.segment<3>(3 * i) = m_mass(i) * loads.gravity;
+  for (const auto& [node, force] : loads.nodeForces) f.segment<3>(3 * node) += force;
+  return f;
+}
+
+// ---- EquilibriumSolver ----------------------------------------------------------------------
+
+void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
+  if (m_prepared && dofs == m_constrainedDofs) return;
+  m_constrainedDofs = dofs;
+  const int ndof = 3 * m_sys.numNodes();
+  m_freeIndex.assign(size_t(ndof), 0);
+  for (int d : dofs) m_freeIndex[size_t(d)] = -1;
+  int nf = 0;
+  for (int d = 0; d < ndof; ++d)
+    if (m_freeIndex[size_t(d)] >= 0) m_freeIndex[size_t(d)] = nf++;
+  const SparseMatrix& P = m_sys.stiffnessPattern();
+  m_fullToFree.assign(size_t(P.nonZeros()), -1);
+  std::vector<Triplet> trip;
+  for (int c = 0; c < ndof; ++c) {
+    if (m_freeIndex[size_t(c)] < 0) continue;
+    for (int p = P.outerIndexPtr()[c]; p < P.outerIndexPtr()[c + 1]; ++p) {
+      const int r = P.innerIndexPtr()[p];
+      if (m_freeIndex[size_t(r)] >= 0)
+        trip.emplace_back(m_freeIndex[size_t(r)], m_freeIndex[size_t(c)], 0.0);
+    }
+  }
+  m_Kff.resize(nf, nf);
+  m_Kff.setFromTriplets(trip.begin(), trip.end());
+  m_Kff.makeCompressed();
+  // Map full-pattern entries to the free block (both are sorted by column, then row).
+  for (int c = 0; c < ndof; ++c) {
+    const int fc = m_freeIndex[size_t(c)];
+    if (fc < 0) continue;
+    int q = m_Kff.outerIndexPtr()[fc];
+    for (int p = P.outerIndexPtr()[c]; p < P.outerIndexPtr()[c + 1]; ++p) {
+      const int r = P.innerIndexPtr()[p];
+      if (m_freeIndex[size_t(r)] >= 0) m_fullToFree[size_t(p)] = q++;
+    }
+  }
+  m_chol = std::make_unique<SparseCholesky>();
+  m_chol->cholmod().print = 0;  // a non-PD matrix is handled here, not printed
+  if (nf > 0) m_chol->analyzePattern(m_Kff);
+  m_prepared = true;
+}
+
+Real EquilibriumSolver::objective(const VecX& x, const VecX& f, const InertiaTerms* in) const {
+  Real phi = m_sys.elasticEnergy(x);
+  if (!std::isfinite(phi)) return std::numeric_limits<Real>::infinity();
+  phi -= f.dot(x);
+  if (in) {
+    phi += 0.5 * (in->weight.array() * (x - in->center).array().square()).sum();
+    if (in->dampingValues.size()) {
+      const VecX d = x - in->dampingCenter;
+      phi += 0.5 * d.dot(withValues(m_sys.stiffnessPattern(), in->dampingValues) * d);
+    }
+  }
+  return phi;
+}
+
+void EquilibriumSolver::objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in,
+                                          VecX& g) const {
+  m_sys.elasticGradient(x, g);
+  g -= f;
+  if (in) {
+    g.array() += in->weight.array() * (x - in->center).array();
+    if (in->dampingValues.size())
+      g += withValues(m_sys.stiffnessPattern(), in->dampingValues) * (x - in->dampingCenter);
+  }
+}
+
+bool EquilibriumSolver::factorize(const VecX& x, const InertiaTerms* in, int& fallbacks) {
+  const int ndof = 3 * m_sys.numNodes();
+  for (int attempt = 0; attempt < 8; ++attempt) {
+    if (attempt <= 1) {
+      m_sys.stiffnessValues(x, m_fullValues, attempt == 1);
+      if (in && in->dampingValues.size()) m_fullValues += in->dampingValues;
+    }
+    Real* kv = m_Kff.valuePtr();
+    std::fill(kv, kv + m_Kff.nonZeros(), 0.0);
+    for (size_t p = 0; p < m_fullToFree.size(); ++p)
+      if (m_fullToFree[p] >= 0) kv[m_fullToFree[p]] += m_fullValues(Eigen::Index(p));
+    Real shift = 0;
+    if (attempt >= 2) shift = 1e-8 * std::pow(10.0, attempt - 2) * m_Kff.diagonal().mean();
+    for (int d = 0; d < ndof; ++d) {
+      const int fd = m_freeIndex[size_t(d)];
+      if (fd < 0) continue;
+      Real add = shift + (in ? in->weight(d) : 0.0);
+      if (add != 0) m_Kff.coeffRef(fd, fd) += add;
+    }
+    m_chol->factorize(m_Kff);
+    if (m_chol->info() == Eigen::Success) {
+      if (attempt > 0) ++fallbacks;
+      return true;
+    }
+  }
+  return false;
+}
+
+SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX& fStartIn,
+                                     const InertiaTerms* in, const SolveOptions& opt) {
+  const auto start = Clock::now();
+  SolveReport rep;
+  const int n = m_sys.numNodes(), ndof = 3 * n;
+  // Constrained nodes and their final targets; fixed wins over prescribed.
+  VecX target = x;
+  std::vector<char> isFixed(size_t(n), 0);
+  std::vector<int> cdofs;
+  const MatX3& restV = m_sys.rest().V;
+  for (int node : loads.fixedNodes) {
+    isFixed[size_t(node)] = 1;
+    for (int k = 0; k < 3; ++k) cdofs.push_back(3 * node + k);
+    target.segment<3>(3 * node) = restV.row(node).transpose();
+  }
+  for (size_t i = 0; i < loads.prescribedNodes.size(); ++i) {
+    const int node = loads.prescribedNodes[i];
+    if (isFixed[size_t(node)]) continue;
+    for (int k = 0; k < 3; ++k) cdofs.push_back(3 * node + k);
+    target.segment<3>(3 * node) = loads.targets.row(Eigen::Index(i)).transpose();
+  }
+  for (int d : loads.fixedDofs) {
+    cdofs.push_back(d);
+    target(d) = restV(d / 3, d % 3);
+  }
+  std::sort(cdofs.begin(), cdofs.end());
+  cdofs.erase(std::unique(cdofs.begin(), cdofs.end()), cdofs.end());
+  prepareConstraints(cdofs);
+
+  const VecX fEnd = m_sys.externalForce(loads);
+  const VecX fStart = fStartIn.size() == ndof ? fStartIn : VecX::Zero(ndof);
+  const VecX xStart = x;
+  const Box box = boundingBox(restV);
+  // Force floor for unloaded problems: 1e-6 of the force that strains the organ's bounding
+  // cross-section by 100%, far above the round-off of internal forces at rest.
+  const Real floorForce =
+      1e-6 * m_sys.material().young * std::max<Real>(box.diagonal() * box.diagonal(), 1e-300);
+  const int nf = m_Kff.rows();
+  VecX g, gTrial, rhs(nf), dxFree(nf), step(ndof);
+
+  auto residual = [&](const VecX& grad, const VecX& f) {
+    Real rf = 0, rc = 0;
+    for (int d = 0; d < ndof; ++d) {
+      const Real v = grad(d) * grad(d);
+      (m_freeIndex[size_t(d)] >= 0 ? rf : rc) += v;
+    }
+    rep.forceScale = std::max({f.norm(), std::sqrt(rc), floorForce});
+    return std::sqrt(rf);
+  };
+
+  // One load step: from x (converged at the previous level) to forces f and targets tgt.
+  auto loadStep = [&](VecX& xs, const VecX& f, const VecX& tgt) -> bool {
+    VecX dc = VecX::Zero(ndof);
+    bool lift = false;
+    for (int d : cdofs) {
+      dc(d) = tgt(d) - xs(d);
+      lift |= dc(d) != 0;
+    }
+    for (int it = 0; it <= opt.maxIterations; ++it) {
+      objectiveGradient(xs, f, in, g);
+      rep.residual = residual(g, f);
+      if (!lift && rep.residual <= opt.tolerance * rep.forceScale) return true;
+      if (it == opt.maxIterations || nf == 0) {
+        if (nf == 0) {
+          xs += dc;
+          objectiveGradient(xs, f, in, g);
+          rep.residual = residual(g, f);
+          return std::isfinite(rep.residual);
+        }
+        return false;
+      }
+      if (!factorize(xs, in, rep.spdFallbacks)) return false;
+      ++rep.newtonIterations;
+      for (int d = 0; d < ndof; ++d)
+        if (m_freeIndex[size_t(d)] >= 0) rhs(m_freeIndex[size_t(d)]) = -g(d);
+      if (lift) {  // rhs_f -= K_fc dc
+        const SparseMatrix& P = m_sys.stiffnessPattern();
+        for (int c : cdofs) {
+          if (dc(c) == 0) continue;
+          for (int p = P.outerIndexPtr()[c]; p < P.outerIndexPtr()[c + 1]; ++p) {
+            const int fr = m_freeIndex[size_t(P.innerIndexPtr()[p])];
+            if (fr >= 0) rhs(fr) -= m_fullValues(p) * dc(c);
+          }
+        }
+      }
+      dxFree = m_chol->solve(rhs);
+      if (!dxFree.allFinite()) return false;
+      step.setZero();
+      for (int d = 0; d < ndof; ++d)
+        if (m_freeIndex[size_t(d)] >= 0) step(d) = dxFree(m_freeIndex[size_t(d)]);
+      if (lift) {
+        // Constrained nodes jump to their targets; free nodes back off only if the predicted
+        // state is inadmissible (inverted elements).
+        xs += dc;
+        lift = false;
+        Real alpha = 1;
+        for (int ls = 0; ls < 30; ++ls, alpha *= 0.5)
+          if (std::isfinite(objective(xs + alpha * step, f, in))) break;
+        if (!std::isfinite(objective(xs + alpha * step, f, in))) return false;
+        xs += alpha * step;
+        continue;
+      }
+      const Real phi0 = objective(xs, f, in);
+      const Real slope = g.dot(step);
+      if (!(slope < 0)) return false;
+      if (-slope <= 1e-13 * std::abs(phi0)) {
+        // The predicted decrease of Pi is below its round-off: Armijo cannot judge the step.
+        // Take the full Newton step; if it no longer halves the residual, the residual has
+        // reached its round-off floor and the state is accepted as converged.
+        const VecX xt = xs + step;
+        if (!std::isfinite(objective(xt, f, in))) return false;
+        objectiveGradient(xt, f, in, gTrial);
+        const Real before = rep.residual, after = residual(gTrial, f);
+        xs = xt;
+        if (!(after < 0.5 * before)) {
+          rep.residual = after;
+          return after <= 1e3 * opt.tolerance * rep.forceScale;
+        }
+        continue;
+      }
+      Real alpha = 1;
+      bool accepted = false;
+      for (int ls = 0; ls < 30; ++ls, alpha *= 0.5) {
+        const Real phi = objective(xs + alpha * step, f, in);
+        if (phi <= phi0 + 1e-4 * alpha * slope) {
+          accepted = true;
+          break;
+        }
+      }
+      if (!accepted) {
+        // Near the solution Pi changes below round-off: accept a full step that lowers the
+        // residual.
+        const VecX xt = xs + step;
+        const Real phi1 = objective(xt, f, in);
+        if (!std::isfinite(phi1)) return false;
+        // Only a round-off-level rise of Pi qualifies; otherwise the direction is poor.
+        if (phi1 - phi0 > 1e-10 * std::max(std::abs(phi0), rep.forceScale * 1e-3)) return false;
+        objectiveGradient(xt, f, in, gTrial);
+        if (!(residual(gTrial, f) < rep.residual)) return false;
+        alpha = 1;
+      }
+      xs += alpha * step;
+    }
+    return false;
+  };
+
+  Real s = 0, ds = 1;
+  const Real minStep = std::ldexp(1.0, -opt.maxHalvings);
+  while (s < 1) {
+    const Real sn = std::min<Real>(1, s + ds);
+    const VecX f = fStart + sn * (fEnd - fStart);
+    VecX tgt = x;
+    for (int d : cdofs) tgt(d) = xStart(d) + sn * (target(d) - xStart(d));
+    VecX xs = x;
+    if (loadStep(xs, f, tgt)) {
+      x = xs;
+      s = sn;
+      ++rep.loadSteps;
+      ds = std::min<Real>(2 * ds, 1);
+    } else {
+      ds *= 0.5;
+      if (ds < minStep) break;
+    }
+  }
+  rep.converged = s >= 1;
+  objectiveGradient(x, fStart + s * (fEnd - fStart), in, m_gradient);
+  rep.residual = residual(m_gradient, fEnd);
+  rep.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return rep;
+}
+
+SolveReport EquilibriumSolver::solveStatic(const LoadCase& loads, VecX& x, const VecX& fStart,
+                                           const SolveOptions& options) {
+  return solve(loads, x, fStart, nullptr, options);
+}
+
+SolveReport EquilibriumSolver::stepDynamic(const LoadCase& loads, Real h, Real alpha, Real beta,
+                                           VecX& x, VecX& v, const SolveOptions& options) {
+  const int ndof = 3 * m_sys.numNodes();
+  InertiaTerms in;
+  in.weight.resize(ndof);
+  for (int i = 0; i < m_sys.numNodes(); ++i)
+    in.weight.segment<3>(3 * i).setConstant(m_sys.nodeMass()(i) * (1.0 / (h * h) + alpha / h));
+  // Minimiser of 1/(2h^2)|x - x_pred|^2_M + alpha/(2h)|x - x_n|^2_M in one quadratic.
+  const Real a = 1.0 / (h * h), b = alpha / h;
+  in.center = (a * (x + h * v) + b * x) / (a + b);
+  if (beta > 0) {
+    m_sys.stiffnessValues(x, in.dampingValues, true);
+    in.dampingValues *= beta / h;
+    in.dampingCenter = x;
+  }
+  const VecX xn = x;
+  // Forces are applied fully (no ramp from zero): inertia keeps the step well posed.
+  const VecX f = m_sys.externalForce(loads);
+  SolveReport rep = solve(loads, x, f, &in, options);
+  v = (x - xn) / h;
+  return rep;
+}
+
+VecX solveEquilibrium(const FemSystem& system, const LoadCase& loads, const SolveOptions& options,
+                      SolveReport* report) {
+  EquilibriumSolver solver(system);
+  VecX x = system.restPositions();
+  const SolveReport r = solver.solveStatic(loads, x, VecX(), options);
+  if (report) *report = r;
+  return x;
+}
+
+std::vector<std::pair<int, Vec3>> tractionForces(const TetMesh& mesh, const Vec3& traction,
+                                                 const std::function<bool(const Vec3&)>& select) {
+  const SurfaceMesh b = tetBoundary(mesh);
+  std::map<int, Vec3> acc;
+  for (int f = 0; f < b.numFaces(); ++f) {
+    const Vec3 p0 = mesh.V.row(b.F(f, 0)), p1 = mesh.V.row(b.F(f, 1)), p2 = mesh.V.row(b.F(f, 2));
+    if (!select(p0) || !select(p1) || !select(p2)) continue;
+    const Real area = 0.5 * (p1 - p0).cross(p2 - p0).norm();
+    for (int k = 0; k < 3; ++k) {
+      auto [it, fresh] = acc.try_emplace(b.F(f, k), Vec3::Zero());
+      it->second += area / 3.0 * traction;
+    }
+  }
+  return {acc.begin(), acc.end()};
+}
+
+}  // namespace deform::reffem

@@ -1,0 +1,171 @@
+// Reference FEM kernels: assembly of linear-tet hyperelasticity (deform/fem_tet.h) and its
+// quasi-static and implicit-Euler solves by Newton's method.
+//
+// Quasi-static: x minimises the total potential
+//     Pi(x) = sum_e V_e psi(F_e(x)) - f_ext . x,   f_ext = lumped gravity m_i g + point forces,
+// subject to Dirichlet conditions x_c = target_c (fixed nodes at rest, grasped nodes at their
+// tool targets), eliminated from the system. Newton: K_ff dx_f = -(g_f + K_fc dx_c), where the
+// Dirichlet increment dx_c is applied in the first iteration of each load step (linearised lift)
+// and later iterations only move free nodes, with Armijo backtracking on Pi. K is factorised with
+// CHOLMOD's supernodal LL^T (pattern analysed once per set of constrained nodes). When K_ff is not
+// positive definite (Neo-Hookean far from rest), the element stress derivatives dP/dF are
+// projected onto the PSD cone (eigenvalues clamped at 0), then, if needed, a growing diagonal
+// shift is added. When a load step fails (no convergence, inverted elements that the line search
+// cannot leave), it is halved (load stepping on both Dirichlet targets and forces), down to
+// 1/1024 of the whole increment.
+//
+// Dynamic (implicit Euler with step h, lumped mass M, Rayleigh damping C = alpha M + beta K):
+// x_{n+1} minimises the incremental potential
+//     E(x) = 1/(2 h^2) |x - x_n - h v_n|_M^2 + alpha/(2h) |x - x_n|_M^2
+//            + beta/(2h) (x - x_n)^T K(x_n) (x - x_n) + Pi(x),
+// whose stationarity is M (v_{n+1} - v_n)/h = f(x_{n+1}) - (alpha M + beta K(x_n)) v_{n+1}; the
+// stiffness-proportional damping uses K at the start of the step (Kharevych et al., "Geometric,
+// variational integrators for computer animation", SCA 2006, treat the same incremental
+// potential). v_{n+1} = (x_{n+1} - x_n)/h.
+//
+// Positions are 3N vectors, node-major (x of node i at 3 i + k), metres.
+#pragma once
+
+#include <deform/fem_tet.h>
+#include <deform/mesh.h>
+#include <deform/model.h>
+#include <deform/sparse.h>
+
+#include <array>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace deform::reffem {
+
+enum class MaterialModel { Linear, Corotational, NeoHookean };
+
+/// "linear" | "corotational" | "neo_hookean"; throws InputError on anything else.
+MaterialModel parseMaterialModel(const std::string& name);
+const char* materialModelName(MaterialModel m);
+
+/// Boundary conditions and loads of one solve.
+struct LoadCase {
+  std::vector<int> fixedNodes;       ///< held at their rest positions
+  std::vector<int> fixedDofs;        ///< single dofs (3 node + axis) held at rest (rollers)
+  std::vector<int> prescribedNodes;  ///< held at `targets` (grasped nodes); fixed wins on overlap
+  MatX3 targets;                     ///< #prescribedNodes by 3, m
+  Vec3 gravity = Vec3::Zero();       ///< m/s^2
+  std::vector<std::pair<int, Vec3>> nodeForces;  ///< (node, force in N)
+};
+
+struct SolveOptions {
+  Real tolerance = 1e-8;    ///< |residual_free| <= tolerance * force scale (see SolveReport)
+  int maxIterations = 100;  ///< Newton iterations per load step
+  int maxHalvings = 10;     ///< load step may shrink to 2^-maxHalvings of the increment
+};
+
+struct SolveReport {
+  bool converged = false;
+  int newtonIterations = 0;  ///< total over load steps
+  int loadSteps = 0;         ///< accepted load steps
+  int spdFallbacks = 0;      ///< factorisations that needed projection or a shift
+  Real residual = 0;         ///< final |g_free|_2, N
+  Real forceScale = 0;       ///< max(|f_ext|, |reaction|, 1e-6 E diag^2), N
+  double seconds = 0;
+};
+
+/// Mesh, material, element rest data, lumped masses and the stiffness sparsity pattern.
+class FemSystem {
+ public:
+  FemSystem(TetMesh rest, const Material& material, MaterialModel model,
+            CorotationalTangent corotationalTangent = CorotationalTangent::Exact);
+
+  const TetMesh& rest() const { return m_rest; }
+  int numNodes() const { return m_rest.numVertices(); }
+  MaterialModel model() const { return m_model; }
+  const Material& material() const { return m_material; }
+  VecX restPositions() const;                      ///< 3N
+  const VecX& nodeMass() const { return m_mass; }  ///< #N, kg (lumped: rho V / 4 per tet)
+  long long degenerateElements() const { return m_degenerate; }  ///< skipped at rest
+
+  /// Elastic energy sum_e V_e psi(F_e) (J); +inf when an element is inverted (Neo-Hookean).
+  Real elasticEnergy(const VecX& x) const;
+  /// dW/dx (3N), N.
+  void elasticGradient(const VecX& x, VecX& g) const;
+  /// Tangent stiffness values on the full 3N x 3N pattern (stiffnessPattern()).
+  void stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const;
+  const SparseMatrix& stiffnessPattern() const { return m_pattern; }
+
+  /// External force vector (3N) of a load case: m_i g + point forces.
+  VecX externalForce(const LoadCase& loads) const;
+
+ private:
+  template <class Fn>
+  void forEachMaterial(Fn&& fn) const;
+  TetMesh m_rest;
+  Material m_material;
+  MaterialModel m_model;
+  LameParameters m_lame;
+  CorotationalTangent m_corotationalTangent;
+  std::vector<TetRest> m_elements;  ///< one per tet (volume <= 0: degenerate, skipped)
+  VecX m_mass;
+  long long m_degenerate = 0;
+  SparseMatrix m_pattern;                     ///< full symmetric pattern, values unused
+  std::vector<std::array<int, 144>> m_slots;  ///< element (12x12, col-major) -> value index
+};
+
+/// Extra terms of the dynamic incremental potential (see the file comment).
+struct InertiaTerms {
+  VecX weight;         ///< 3N: M (1/h^2 + alpha/h)
+  VecX center;         ///< 3N
+  VecX dampingValues;  ///< beta/h K(x_n) on the full pattern (empty: no stiffness damping)
+  VecX dampingCenter;  ///< x_n
+};
+
+/// Newton solver owning the factorisation (reused while the constrained set is unchanged).
+class EquilibriumSolver {
+ public:
+  explicit EquilibriumSolver(const FemSystem& system) : m_sys(system) {}
+
+  /// Static equilibrium under `loads`, starting from x (3N, in equilibrium with external force
+  /// fStart and with its constrained nodes where they are) and ending at the solution (or at the
+  /// last converged load step). fStart empty: zero.
+  SolveReport solveStatic(const LoadCase& loads, VecX& x, const VecX& fStart = VecX(),
+                          const SolveOptions& options = {});
+
+  /// One implicit Euler step of size h: x, v (3N) in and out.
+  SolveReport stepDynamic(const LoadCase& loads, Real h, Real alpha, Real beta, VecX& x, VecX& v,
+                          const SolveOptions& options = {});
+
+  /// Gradient of the last solved objective at the solution (3N): on constrained dofs it is the
+  /// force the constraints exert on the nodes; minus it is what the tissue exerts on the tool.
+  const VecX& lastGradient() const { return m_gradient; }
+
+ private:
+  SolveReport solve(const LoadCase& loads, VecX& x, const VecX& fStart, const InertiaTerms* inertia,
+                    const SolveOptions& options);
+  void prepareConstraints(const std::vector<int>& constrainedDofs);
+  Real objective(const VecX& x, const VecX& f, const InertiaTerms* in) const;
+  void objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in, VecX& g) const;
+  bool factorize(const VecX& x, const InertiaTerms* in, int& fallbacks);
+
+  const FemSystem& m_sys;
+  std::vector<int> m_constrainedDofs;  ///< sorted; the set the pattern below was built for
+  bool m_prepared = false;
+  std::vector<int> m_freeIndex;   ///< dof -> free index or -1
+  std::vector<int> m_fullToFree;  ///< full-pattern value index -> free value index or -1
+  SparseMatrix m_Kff;
+  VecX m_fullValues;
+  std::unique_ptr<SparseCholesky> m_chol;
+  VecX m_gradient;
+};
+
+/// Convenience: static equilibrium of `system` under `loads` from the rest state. Returns the 3N
+/// solution; report filled when given.
+VecX solveEquilibrium(const FemSystem& system, const LoadCase& loads,
+                      const SolveOptions& options = {}, SolveReport* report = nullptr);
+
+/// Nodal forces equivalent to a uniform traction t (N/m^2) on the boundary triangles selected by
+/// `select` (a face is used when all three of its vertices pass): each triangle gives area/3 t
+/// to each corner. Returned as (node, force) pairs, one per node touched.
+std::vector<std::pair<int, Vec3>> tractionForces(const TetMesh& mesh, const Vec3& traction,
+                                                 const std::function<bool(const Vec3&)>& select);
+
+}  // namespace deform::reffem

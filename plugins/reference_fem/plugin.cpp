@@ -1,0 +1,246 @@
+// The reference_fem plugin: the thin model class around the kernels in fem_solver.h. See
+// README.md for the method, the parameters and the reasons behind each choice.
+#include "fem_solver.h"
+
+#include <deform/registry.h>
+#include <deform/tet_mesher.h>
+
+#include <chrono>
+
+namespace deform::reffem {
+
+namespace {
+
+constexpr const char* kMeshCacheVersion = "reference_fem.tets/1";
+
+enum class SolveKind { QuasiStatic, Dynamic };
+
+std::vector<ParamSpec> referenceFemParams() {
+  return {
+      ParamSpec::choice("solve", "quasi_static", {"quasi_static", "dynamic"},
+                        "quasi_static: each step is an equilibrium solve; dynamic: implicit Euler "
+                        "with the scene's dt"),
+      ParamSpec::choice("material", "neo_hookean", {"linear", "corotational", "neo_hookean"},
+                        "constitutive model of the linear tets"),
+      ParamSpec::integer("elements", 20000, 100, 5000000,
+                         "target number of tets (used when edge_length is 0)"),
+      ParamSpec::real("edge_length", "m", 0.0, 0.0, 1.0,
+                      "target interior tet edge length; 0: from elements"),
+      ParamSpec::flag("refine_surface", true,
+                      "split surface edges longer than the edge length before meshing (the "
+                      "input vertices stay nodes with their indices)"),
+      ParamSpec::real("newton_tolerance", "1", 1e-8, 1e-14, 1e-2,
+                      "converged when |free residual| <= this * max(|external force|, |reaction|)"),
+      ParamSpec::integer("max_newton_iterations", 100, 1, 10000, "Newton iterations per load step"),
+      ParamSpec::integer("max_load_halvings", 10, 0, 30,
+                         "a failed load step is halved at most this many times"),
+      ParamSpec::real("rayleigh_alpha", "1/s", 0.0, 0.0, 1e6,
+                      "mass-proportional damping (dynamic only)"),
+      ParamSpec::real("rayleigh_beta", "s", 0.0, 0.0, 10.0,
+                      "stiffness-proportional damping (dynamic only; K at the step start)"),
+      ParamSpec::real("mesh_timeout", "s", 600.0, 1.0, 86400.0,
+                      "wall-clock limit of the Gmsh child process"),
+  };
+}
+
+class ReferenceFemModel final : public Model {
+ public:
+  void init(const ModelSetup& setup) override {
+    const ParamValues& p = setup.params;
+    m_solveKind = p.choiceAs<SolveKind>(
+        "solve", {{"quasi_static", SolveKind::QuasiStatic}, {"dynamic", SolveKind::Dynamic}});
+    const MaterialModel model = parseMaterialModel(p.choice("material"));
+    m_options.tolerance = p.real("newton_tolerance");
+    m_options.maxIterations = int(p.integer("max_newton_iterations"));
+    m_options.maxHalvings = int(p.integer("max_load_halvings"));
+    m_alpha = p.real("rayleigh_alpha");
+    m_beta = p.real("rayleigh_beta");
+    m_dt = setup.dt;
+    const Organ& organ = setup.organ;
+
+    TetMesh mesh;
+    if (organ.volume) {
+      mesh = *organ.volume;
+      for (int t = 0; t < mesh.numTets(); ++t) {
+        const auto r = mesh.T.row(t);
+        if (tetVolume(mesh.V.row(r(0)), mesh.V.row(r(1)), mesh.V.row(r(2)), mesh.V.row(r(3))) < 0)
+          std::swap(mesh.T(t, 2), mesh.T(t, 3));
+      }
+      m_surfaceNode = mapSurfaceToNodes(organ, mesh);
+    } else {
+      mesh = meshSurface(organ, p, setup.cache);
+      m_surfaceNode.resize(size_t(organ.surface.numVertices()));
+      for (int i = 0; i < organ.surface.numVertices(); ++i) m_surfaceNode[size_t(i)] = i;
+    }
+    m_system = std::make_unique<FemSystem>(std::move(mesh), organ.material, model);
+    m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
+    reset();
+  }
+
+  StepStatus step(const StepInput& in) override {
+    const auto start = std::chrono::steady_clock::now();
+    LoadCase lc;
+    lc.fixedNodes = m_fixed;
+    lc.gravity = in.gravity;
+    std::vector<char> fixed(size_t(m_system->numNodes()), 0);
+    for (int n : m_fixed) fixed[size_t(n)] = 1;
+    for (const GraspInput& g : in.grasps) {
+      for (size_t k = 0; k < g.nodes.size(); ++k) {
+        lc.prescribedNodes.push_back(g.nodes[k]);
+        lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
+        lc.targets.bottomRows(1) = g.targets.row(Eigen::Index(k));
+      }
+    }
+    for (const PointLoad& l : in.loads)
+      if (l.surfaceVertex >= 0 && l.surfaceVertex < int(m_surfaceNode.size()))
+        lc.nodeForces.emplace_back(m_surfaceNode[size_t(l.surfaceVertex)], l.force);
+
+    SolveReport rep;
+    if (m_solveKind == SolveKind::QuasiStatic) {
+      rep = m_solver->solveStatic(lc, m_x, m_fPrev, m_options);
+      // The next step starts from this state: in equilibrium with the forces it reached.
+      m_fPrev = m_system->externalForce(lc);
+    } else {
+      rep =
+          m_solver->stepDynamic(lc, in.dt > 0 ? in.dt : m_dt, m_alpha, m_beta, m_x, m_v, m_options);
+    }
+    m_lastIterations = rep.newtonIterations;
+    m_lastLoadSteps = rep.loadSteps;
+    m_spdFallbacks += rep.spdFallbacks;
+    if (!rep.converged) ++m_unconverged;
+
+    m_graspForces.clear();
+    for (const GraspInput& g : in.grasps) {
+      Vec3 f = Vec3::Zero();
+      for (int n : g.nodes)
+        if (!fixed[size_t(n)]) f -= m_solver->lastGradient().segment<3>(3 * n);
+      m_graspForces.push_back(f);
+    }
+    updatePositions();
+    m_phase["solve"] =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return m_x.allFinite() ? StepStatus::Ok : StepStatus::Diverged;
+  }
+
+  const MatX3& nodes() const override { return m_nodes; }
+  const MatX3& surface() const override { return m_surface; }
+
+  void reset() override {
+    m_x = m_system->restPositions();
+    m_v = VecX::Zero(m_x.size());
+    m_fPrev = VecX::Zero(m_x.size());
+    m_solver = std::make_unique<EquilibriumSolver>(*m_system);
+    m_graspForces.clear();
+    m_unconverged = m_spdFallbacks = 0;
+    m_lastIterations = m_lastLoadSteps = 0;
+    m_phase.clear();
+    updatePositions();
+  }
+
+  Counts counts() const override {
+    return {{"nodes", m_system->numNodes()},
+            {"elements", m_system->rest().numTets()},
+            {"fixed_nodes", (long long)m_fixed.size()}};
+  }
+  PhaseTimes phaseTimes() const override { return m_phase; }
+  NumericCounters numericCounters() const override {
+    return {{"degenerate_elements", m_system->degenerateElements()},
+            {"unconverged_steps", m_unconverged},
+            {"spd_fallbacks", m_spdFallbacks},
+            {"newton_iterations_last_step", m_lastIterations},
+            {"load_steps_last_step", m_lastLoadSteps}};
+  }
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
+
+ private:
+  static TetMesh meshSurface(const Organ& organ, const ParamValues& p, Cache& cache) {
+    TetMeshOptions o;
+    o.edgeLength = p.real("edge_length");
+    o.targetElements = p.integer("elements");
+    o.refineSurface = p.flag("refine_surface");
+    o.timeoutSeconds = p.real("mesh_timeout");
+    o.source = organ.source;
+    CacheKey key;
+    key.add(kMeshCacheVersion).add(organ.surface.V).add(organ.surface.F);
+    key.add(o.edgeLength).add(o.targetElements).add((long long)o.refineSurface);
+    if (auto hit = cache.get("reference_fem.tets", key)) {
+      try {
+        ByteReader r(*hit);
+        TetMesh m;
+        r.matrix(m.V);
+        r.matrix(m.T);
+        if (m.numVertices() >= organ.surface.numVertices() && m.numTets() > 0) return m;
+      } catch (const std::exception&) {
+        // fall through: remesh
+      }
+    }
+    const TetMeshResult r = tetrahedralize(organ.surface, o);
+    ByteWriter w;
+    w.matrix(r.mesh.V);
+    w.matrix(r.mesh.T);
+    cache.put("reference_fem.tets", key, w.bytes());
+    return r.mesh;
+  }
+
+  /// Surface vertex -> node of a given tet mesh, by position (the loader's surface of a tet
+  /// file is the volume's boundary over the same nodes).
+  static std::vector<int> mapSurfaceToNodes(const Organ& organ, const TetMesh& mesh) {
+    const SurfaceMesh& s = organ.surface;
+    std::vector<int> map(size_t(s.numVertices()));
+    const Real tol = 1e-9 * std::max<Real>(boundingBox(mesh.V).diagonal(), 1e-300);
+    const bool prefix = s.numVertices() <= mesh.numVertices() &&
+                        (s.V - mesh.V.topRows(s.numVertices())).cwiseAbs().maxCoeff() <= tol;
+    for (int i = 0; i < s.numVertices(); ++i) {
+      const int n = prefix ? i : nearestVertex(mesh.V, s.V.row(i).transpose());
+      if (n < 0 || (mesh.V.row(n) - s.V.row(i)).norm() > tol)
+        throw InputError(organ.source, "vertex " + std::to_string(i),
+                         "surface vertex is not a node of the tetrahedral volume");
+      map[size_t(i)] = n;
+    }
+    return map;
+  }
+
+  void updatePositions() {
+    const int n = m_system->numNodes();
+    m_nodes = Eigen::Map<const MatX3>(m_x.data(), n, 3);
+    m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
+    for (size_t i = 0; i < m_surfaceNode.size(); ++i)
+      m_surface.row(Eigen::Index(i)) = m_x.segment<3>(3 * m_surfaceNode[i]).transpose();
+  }
+
+  SolveKind m_solveKind = SolveKind::QuasiStatic;
+  SolveOptions m_options;
+  Real m_alpha = 0, m_beta = 0, m_dt = 1e-3;
+  std::unique_ptr<FemSystem> m_system;
+  std::unique_ptr<EquilibriumSolver> m_solver;
+  std::vector<int> m_fixed;
+  std::vector<int> m_surfaceNode;
+  VecX m_x, m_v, m_fPrev;
+  MatX3 m_nodes, m_surface;
+  std::vector<Vec3> m_graspForces;
+  long long m_unconverged = 0, m_spdFallbacks = 0, m_lastIterations = 0, m_lastLoadSteps = 0;
+  PhaseTimes m_phase;
+};
+
+}  // namespace
+
+}  // namespace deform::reffem
+
+DEFORM_PLUGIN(registry) {
+  using namespace deform;
+  ModelInfo info;
+  info.name = "reference_fem";
+  info.description =
+      "Converged reference: linear tets (Gmsh), linear/corotational/Neo-Hookean, Newton solves";
+  info.citation =
+      "Gmsh: Geuzaine & Remacle, IJNME 79(11) 2009, doi:10.1002/nme.2579; corotational: Mueller & "
+      "Gross, Graphics Interface 2004; Neo-Hookean (isochoric/volumetric split): Bonet & Wood, "
+      "Nonlinear Continuum Mechanics for FEA, 2nd ed. 2008, doi:10.1017/CBO9780511755446";
+  info.version = "1.0";
+  info.capabilities = {Capability::Grasp,         Capability::PointForce,      Capability::Gravity,
+                       Capability::ReactionForce, Capability::NeedsPrecompute, Capability::TetInput,
+                       Capability::QuasiStatic};
+  info.params = reffem::referenceFemParams();
+  info.create = [] { return std::make_unique<reffem::ReferenceFemModel>(); };
+  registry.add(std::move(info));
+}

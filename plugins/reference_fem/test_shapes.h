@@ -1,0 +1,116 @@
+// Simple closed shapes for tests and benchmarks of the reference FEM (no phantom needed):
+// structured Kuhn tet meshes of boxes, their boundary surfaces, and icospheres.
+#pragma once
+
+#include <deform/mesh.h>
+
+#include <array>
+#include <map>
+
+namespace deform::reffem {
+
+/// Structured tet mesh of the box [lo, hi] with n = (nx, ny, nz) cells, each cell split into six
+/// tets around its main diagonal (Kuhn), conforming across cells. Nodes in lexicographic order
+/// (x fastest). All tets positively oriented.
+inline TetMesh structuredBoxTets(const Vec3& lo, const Vec3& hi, const Vec3i& n) {
+  TetMesh m;
+  const int nx = n(0) + 1, ny = n(1) + 1, nz = n(2) + 1;
+  m.V.resize(nx * ny * nz, 3);
+  auto id = [&](int i, int j, int k) { return i + nx * (j + ny * k); };
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i)
+        m.V.row(id(i, j, k)) << lo(0) + (hi(0) - lo(0)) * i / n(0),
+            lo(1) + (hi(1) - lo(1)) * j / n(1), lo(2) + (hi(2) - lo(2)) * k / n(2);
+  static const int perms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  m.T.resize(6 * n(0) * n(1) * n(2), 4);
+  int t = 0;
+  for (int k = 0; k < n(2); ++k)
+    for (int j = 0; j < n(1); ++j)
+      for (int i = 0; i < n(0); ++i)
+        for (const auto& p : perms) {
+          Vec3i c(0, 0, 0);
+          std::array<int, 4> v;
+          v[0] = id(i, j, k);
+          for (int s = 0; s < 3; ++s) {
+            c(p[s]) = 1;
+            v[s + 1] = id(i + c(0), j + c(1), k + c(2));
+          }
+          if (tetVolume(m.V.row(v[0]), m.V.row(v[1]), m.V.row(v[2]), m.V.row(v[3])) < 0)
+            std::swap(v[2], v[3]);
+          m.T.row(t++) << v[0], v[1], v[2], v[3];
+        }
+  return m;
+}
+
+/// Renumbers a tet mesh so that its boundary nodes come first (in their old relative order);
+/// returns the boundary surface over those first nodes (as a closed SurfaceMesh).
+inline SurfaceMesh boundaryFirst(TetMesh& m) {
+  const SurfaceMesh b = tetBoundary(m);
+  std::vector<char> onBoundary(m.numVertices(), 0);
+  for (int f = 0; f < b.numFaces(); ++f)
+    for (int k = 0; k < 3; ++k) onBoundary[b.F(f, k)] = 1;
+  std::vector<int> newIndex(m.numVertices());
+  int next = 0;
+  for (int i = 0; i < m.numVertices(); ++i)
+    if (onBoundary[i]) newIndex[i] = next++;
+  const int nb = next;
+  for (int i = 0; i < m.numVertices(); ++i)
+    if (!onBoundary[i]) newIndex[i] = next++;
+  MatX3 V(m.numVertices(), 3);
+  for (int i = 0; i < m.numVertices(); ++i) V.row(newIndex[i]) = m.V.row(i);
+  for (int t = 0; t < m.numTets(); ++t)
+    for (int k = 0; k < 4; ++k) m.T(t, k) = newIndex[m.T(t, k)];
+  m.V = V;
+  SurfaceMesh s;
+  s.V = V.topRows(nb);
+  s.F.resize(b.numFaces(), 3);
+  for (int f = 0; f < b.numFaces(); ++f)
+    for (int k = 0; k < 3; ++k) s.F(f, k) = newIndex[b.F(f, k)];
+  return s;
+}
+
+/// Closed surface of a box with n cells per axis (the boundary of structuredBoxTets).
+inline SurfaceMesh boxSurface(const Vec3& lo, const Vec3& hi, const Vec3i& n) {
+  TetMesh m = structuredBoxTets(lo, hi, n);
+  return boundaryFirst(m);
+}
+
+/// Icosphere of the given radius: an icosahedron subdivided `levels` times, projected.
+inline SurfaceMesh icosphere(Real radius, int levels, const Vec3& center = Vec3::Zero()) {
+  const Real t = (1.0 + std::sqrt(5.0)) / 2.0;
+  std::vector<Vec3> V = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<std::array<int, 3>> F = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
+                                       {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
+                                       {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
+                                       {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
+  for (auto& v : V) v.normalize();
+  for (int l = 0; l < levels; ++l) {
+    std::map<std::pair<int, int>, int> mid;
+    auto midpoint = [&](int a, int b) {
+      auto key = std::minmax(a, b);
+      auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      V.push_back((V[a] + V[b]).normalized());
+      return mid[key] = int(V.size()) - 1;
+    };
+    std::vector<std::array<int, 3>> G;
+    for (const auto& f : F) {
+      const int a = midpoint(f[0], f[1]), b = midpoint(f[1], f[2]), c = midpoint(f[2], f[0]);
+      G.push_back({f[0], a, c});
+      G.push_back({f[1], b, a});
+      G.push_back({f[2], c, b});
+      G.push_back({a, b, c});
+    }
+    F = G;
+  }
+  SurfaceMesh s;
+  s.V.resize(V.size(), 3);
+  for (size_t i = 0; i < V.size(); ++i) s.V.row(i) = (center + radius * V[i]).transpose();
+  s.F.resize(F.size(), 3);
+  for (size_t f = 0; f < F.size(); ++f) s.F.row(f) << F[f][0], F[f][1], F[f][2];
+  return s;
+}
+
+}  // namespace deform::reffem

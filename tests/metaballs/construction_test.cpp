@@ -1,0 +1,172 @@
+// Properties of each construction stage (paper Sect. 4, 5.1) on closed test surfaces.
+#include "construction.h"
+#include "electrostatic_optimisation.h"
+#include "radius_adjustment.h"
+#include "sphere_merging.h"
+#include "sphere_packing.h"
+#include "test_meshes.h"
+#include "vacant_space_filling.h"
+#include "voxel_grid.h"
+
+#include <gtest/gtest.h>
+
+namespace deform::metaballs {
+namespace {
+
+const SurfaceMesh& testOrgan() {
+  static const SurfaceMesh m = test::banana(0.16, 0.035, 0.08, 4);
+  return m;
+}
+
+ConstructionParams smallParams() {
+  ConstructionParams p;
+  p.targetSpheres = 120;
+  p.voxelResolution = 40;
+  return p;
+}
+
+const Metaballs& built() {
+  static const Metaballs mb = constructMetaballs(testOrgan(), smallParams());
+  return mb;
+}
+
+TEST(MetaballsConstruction, GapMidpointIsEquation2) {
+  const Vec3 c1(0, 0, 0), c2(1, 0, 0);
+  const Real r1 = 0.2, r2 = 0.4;
+  const Vec3 c = gapMidpoint(c1, r1, c2, r2);
+  // Midway between the two sphere surfaces on the centre line: x = (0.2 + 0.6) / 2.
+  EXPECT_NEAR(c.x(), 0.4, 1e-15);
+  EXPECT_NEAR((c - c1).norm() - r1, (c2 - c).norm() - r2, 1e-15);
+  EXPECT_EQ(gapMidpoint(c1, r1, c1, r2), c1);
+}
+
+TEST(MetaballsConstruction, VoxelGridMatchesInsideTest) {
+  const MeshDistance dist(testOrgan());
+  const VoxelGrid g = voxelizeInside(dist, 24);
+  long long mismatches = 0;
+  for (size_t v = 0; v < g.inside.size(); ++v)
+    mismatches += (g.inside[v] != 0) != dist.inside(g.centerOf(int(v))) ? 1 : 0;
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_GT(g.numInside(), 100);
+}
+
+TEST(MetaballsConstruction, RadiusAdjustmentLeavesNoSphereOutside) {
+  const MeshDistance dist(testOrgan());
+  const VoxelGrid g = voxelizeInside(dist, 40);
+  PackingResult pack = packSpheres(testOrgan(), dist, g, 120);
+  ASSERT_GT(pack.spheres.size(), 10);
+  EXPECT_LE(pack.spheres.size(), 120);
+  SphereSet s = pack.spheres;
+  const RadiusAdjustmentResult r = adjustRadii(s, dist, 0.5 * g.h, 0);
+  EXPECT_EQ(countSpheresOutside(s, dist, 1e-12), 0);
+  for (int i = 0; i < s.size(); ++i) {
+    EXPECT_LT(dist.signedDistance(s.center(i)), 0);
+    EXPECT_NEAR(s.radii(i), dist.distance(s.center(i)), 1e-15);  // eq. (1)
+  }
+  EXPECT_EQ(r.outsideBefore, countSpheresOutside(pack.spheres, dist, 0));
+}
+
+TEST(MetaballsConstruction, FillingAddsInsideSpheresInVacantSpace) {
+  const MeshDistance dist(testOrgan());
+  // Two small spheres far apart on the axis leave a gap that Algorithm 1 must fill.
+  SphereSet s;
+  s.append(Vec3(-0.04, 0, 0.01), 0.01);
+  s.append(Vec3(0.04, 0, 0.01), 0.01);
+  const int before = s.size();
+  FillParams p;
+  p.neighbours = 1;
+  p.minRadius = 0.001;
+  const FillResult r = fillVacantSpace(s, dist, p);
+  EXPECT_GT(r.added, 0);
+  EXPECT_EQ(s.size(), before + r.added);
+  for (int i = before; i < s.size(); ++i) {
+    EXPECT_TRUE(dist.inside(s.center(i)));
+    EXPECT_NEAR(s.radii(i), dist.distance(s.center(i)), 1e-15);
+  }
+  // The first new sphere sits on the gap midpoint of the first pair (eq. 2).
+  EXPECT_NEAR((s.center(before) - Vec3(0, 0, 0.01)).norm(), 0, 1e-12);
+}
+
+TEST(MetaballsConstruction, MergingRemovesExtremeOverlap) {
+  const MeshDistance dist(testOrgan());
+  SphereSet s;
+  s.append(Vec3(0, 0, 0), 0.02);
+  s.append(Vec3(0.005, 0, 0), 0.015);  // d = 0.005 < 0.015: extreme overlap
+  s.append(Vec3(0.05, 0, 0.01), 0.01);
+  const MergeResult r = mergeOverlappingSpheres(s, dist);
+  EXPECT_EQ(r.merged, 1);
+  ASSERT_EQ(s.size(), 2);
+  const Vec3 c(0.0025, 0, 0);
+  EXPECT_NEAR((s.center(1) - c).norm(), 0, 1e-15);
+  EXPECT_NEAR(s.radii(1), std::min(0.02, dist.distance(c)), 1e-15);  // eq. (3)
+  // The full construction leaves no extremely overlapping pair right after merging.
+  const Metaballs& mb = built();
+  EXPECT_GE(mb.report.mergedPairs, 0);
+}
+
+TEST(MetaballsConstruction, ElectrostaticOptimisationReducesHollowVoxels) {
+  const ConstructionReport& r = built().report;
+  EXPECT_GT(r.insideVoxels, 0);
+  EXPECT_LT(r.hollowAfter, r.hollowBefore);
+  EXPECT_LT(r.hollowFractionAfter(), r.hollowFractionBefore());
+  EXPECT_EQ(r.outsideAfterAdjustment, 0);
+  EXPECT_EQ(r.outsideAfterOptimisation, 0);
+  // Incremental bookkeeping agrees with a recount from scratch.
+  const MeshDistance dist(testOrgan());
+  const VoxelGrid g = voxelizeInside(dist, smallParams().voxelResolution);
+  EXPECT_EQ(g.numInside(), r.insideVoxels);
+  EXPECT_EQ(countHollowVoxels(built().spheres, g), r.hollowAfter);
+  EXPECT_EQ(countSpheresOutside(built().spheres, dist, 1e-9 * 0.2), 0);
+}
+
+TEST(MetaballsConstruction, TopologyFollowsEquation5AndIsConnected) {
+  const Metaballs& mb = built();
+  const SphereSet& s = mb.spheres;
+  const int N = smallParams().topologyNeighbours;
+  ASSERT_EQ(int(mb.topology.selected.size()), s.size());
+  for (int i = 0; i < s.size(); ++i) {
+    const auto& sel = mb.topology.selected[size_t(i)];
+    EXPECT_LE(int(sel.size()), N);
+    int overlapping = 0;
+    Real farthestSelected = 0;
+    for (int j : sel) {
+      const Real d = (s.center(i) - s.center(j)).norm();
+      EXPECT_LT(d, s.radii(i) + s.radii(j));
+      farthestSelected = std::max(farthestSelected, d);
+    }
+    Real nearestUnselected = 1e30;
+    for (int j = 0; j < s.size(); ++j) {
+      if (j == i) continue;
+      const Real d = (s.center(i) - s.center(j)).norm();
+      if (d >= s.radii(i) + s.radii(j)) continue;
+      ++overlapping;
+      if (std::find(sel.begin(), sel.end(), j) == sel.end())
+        nearestUnselected = std::min(nearestUnselected, d);
+    }
+    EXPECT_EQ(int(sel.size()), std::min(overlapping, N));  // L or L' of eq. (5)
+    EXPECT_LE(farthestSelected, nearestUnselected);        // L' takes the nearest
+  }
+  EXPECT_EQ(countComponents(s.size(), mb.topology.links), 1);
+  EXPECT_EQ(mb.report.links, mb.topology.links.rows());
+}
+
+TEST(MetaballsConstruction, DeterministicAndSerialisable) {
+  const Metaballs again = constructMetaballs(testOrgan(), smallParams());
+  const Metaballs& mb = built();
+  ASSERT_EQ(again.spheres.size(), mb.spheres.size());
+  EXPECT_TRUE(again.spheres.centers == mb.spheres.centers);
+  EXPECT_TRUE(again.spheres.radii == mb.spheres.radii);
+  EXPECT_TRUE(again.topology.links == mb.topology.links);
+  const Metaballs back = deserialiseMetaballs(serialiseMetaballs(mb));
+  EXPECT_TRUE(back.spheres.centers == mb.spheres.centers);
+  EXPECT_TRUE(back.spheres.radii == mb.spheres.radii);
+  EXPECT_TRUE(back.topology.links == mb.topology.links);
+  EXPECT_EQ(back.topology.selected, mb.topology.selected);
+  EXPECT_EQ(back.report.hollowAfter, mb.report.hollowAfter);
+  std::vector<char> bytes = serialiseMetaballs(mb);
+  bytes.resize(bytes.size() / 2);
+  EXPECT_THROW(deserialiseMetaballs(bytes), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace deform::metaballs

@@ -1,0 +1,164 @@
+// Run-time kernels: PBD constraints (eqs. 6-12), rotation extraction and skinning (eqs. 13-16).
+#include "construction.h"
+#include "pbd_constraints.h"
+#include "skinning.h"
+#include "test_meshes.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace deform::metaballs {
+namespace {
+
+TEST(MetaballsKernels, StretchRestoresLengthAndConservesMomentum) {
+  const Vec3 a(0, 0, 0), b(0.3, 0.4, 0);  // length 0.5
+  const Real w1 = 2.0, w2 = 0.5, rest = 0.3;
+  Vec3 da, db;
+  ASSERT_TRUE(projectStretch(a, b, w1, w2, rest, 1.0, da, db));
+  EXPECT_NEAR(((a + da) - (b + db)).norm(), rest, 1e-15);
+  EXPECT_NEAR((da / w1 + db / w2).norm(), 0, 1e-15);  // m1 dc1 + m2 dc2 = 0
+  Real lambda = 0;
+  Vec3 xa, xb;
+  ASSERT_TRUE(projectStretchXpbd(a, b, w1, w2, rest, 0.0, lambda, xa, xb));
+  EXPECT_NEAR((xa - da).norm(), 0, 1e-15);  // zero compliance = rigid classic
+  EXPECT_NEAR((xb - db).norm(), 0, 1e-15);
+  // Compliance softens the correction.
+  lambda = 0;
+  ASSERT_TRUE(projectStretchXpbd(a, b, w1, w2, rest, 1.0, lambda, xa, xb));
+  EXPECT_LT(xa.norm(), da.norm());
+  EXPECT_FALSE(projectStretch(a, a, w1, w2, rest, 1.0, da, db));
+}
+
+TEST(MetaballsKernels, LaplacianReducesToEquation11WithFixedNeighbours) {
+  // With immovable neighbours the projection is c'_m = L_m + c'_center.
+  const Vec3 c1(0, 0, 0), c2(1, 0, 0), c3(0, 1, 0);
+  const Vec3 centre = (c1 + c2 + c3) / 3.0;
+  const Vec3 L(0.1, 0.2, 0.3);
+  const Vec3 cm(5, 5, 5);
+  const Vec3 C = cm - centre - L;
+  const Real s = laplacianScale(1.0, 0.0, 3, 1.0);
+  const Vec3 projected = cm - 1.0 * s * C;
+  EXPECT_NEAR((projected - (L + centre)).norm(), 0, 1e-14);
+  // With movable neighbours the constraint is satisfied too (it is linear) and momentum kept.
+  const Real wm = 1, wi = 2;
+  Vec3 lambda = Vec3::Zero();
+  const Vec3 dl = laplacianXpbd(C, wm, 3 * wi, 3, 0.0, lambda);
+  const Vec3 pm = cm + wm * dl;
+  const Vec3 q1 = c1 - (wi / 3) * dl, q2 = c2 - (wi / 3) * dl, q3 = c3 - (wi / 3) * dl;
+  EXPECT_NEAR((pm - (q1 + q2 + q3) / 3.0 - L).norm(), 0, 1e-13);
+  EXPECT_NEAR((wm * dl / wm - 3 * (wi / 3) * dl / wi).norm(), 0, 1e-14);
+}
+
+TEST(MetaballsKernels, VolumeScaleKeepsLengthTimesRadiusSquared) {
+  for (Real stretch : {0.5, 0.8, 1.0, 1.3, 2.0}) {
+    const Real restSum = 0.07, cur = stretch * restSum;
+    const Real s = volumeRadiusScale(restSum, cur);
+    EXPECT_NEAR(cur * s * s, restSum, 1e-15);
+  }
+  EXPECT_EQ(volumeRadiusScale(0.0, 1.0), 1.0);
+}
+
+TEST(MetaballsKernels, RotationExtractionRecoversRotation) {
+  const Mat3 R0 = Eigen::AngleAxis<Real>(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  Mat3 S;
+  S << 2, 0.1, 0, 0.1, 1, 0.2, 0, 0.2, 1.5;  // symmetric positive definite stretch
+  Eigen::Quaternion<Real> q = Eigen::Quaternion<Real>::Identity();
+  extractRotation(R0 * S, q, 50);
+  EXPECT_NEAR((q.toRotationMatrix() - R0).norm(), 0, 1e-7);
+  q = Eigen::Quaternion<Real>::Identity();
+  extractRotation(S, q, 50);
+  EXPECT_EQ(q.toRotationMatrix(), Mat3::Identity());
+}
+
+class SkinningTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    surface = new SurfaceMesh(test::banana(0.16, 0.035, 0.08, 4));
+    ConstructionParams p;
+    p.targetSpheres = 100;
+    p.voxelResolution = 32;
+    mb = new Metaballs(constructMetaballs(*surface, p));
+  }
+  static void TearDownTestSuite() {
+    delete surface;
+    delete mb;
+  }
+  static SurfaceMesh* surface;
+  static Metaballs* mb;
+};
+SurfaceMesh* SkinningTest::surface = nullptr;
+Metaballs* SkinningTest::mb = nullptr;
+
+TEST_F(SkinningTest, WeightsFollowEquations13And14) {
+  const Real T = 0.2;
+  const Skinning sk = buildSkinning(surface->V, mb->spheres, T, 6);
+  for (int v = 0; v < sk.numVertices; ++v) {
+    Real sum = 0;
+    int attached = 0;
+    for (int s = 0; s < sk.slots; ++s) {
+      const Real w = sk.weight[size_t(v * sk.slots + s)];
+      sum += w;
+      if (w <= 0) continue;
+      ++attached;
+      const int i = sk.sphere[size_t(v * sk.slots + s)];
+      const Real f = fieldStrength((surface->V.row(v) - mb->spheres.centers.row(i)).norm(),
+                                   mb->spheres.radii(i));
+      if (sk.fallbacks == 0) {
+        EXPECT_GE(f, T);
+      }
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-12);
+    EXPECT_GE(attached, 1);
+  }
+  EXPECT_NEAR(fieldStrength(0.3, 0.3), 1.0, 1e-15);  // strongest on the sphere's surface
+  EXPECT_LT(fieldStrength(0.6, 0.3), fieldStrength(0.4, 0.3));
+}
+
+TEST_F(SkinningTest, RestReproducesSurfaceAndRigidTranslationTranslates) {
+  const Skinning sk = buildSkinning(surface->V, mb->spheres, 0.2, 6);
+  MatX3 out(surface->V.rows(), 3);
+  std::vector<Real> identity(size_t(mb->spheres.size()) * 9, 0.0);
+  for (int i = 0; i < mb->spheres.size(); ++i)
+    for (int q = 0; q < 3; ++q) identity[size_t(9 * i + 4 * q)] = 1.0;
+  const std::vector<const Real*> frames = {nullptr, identity.data()};
+  for (const Real* rot : frames) {
+    applySkinning(sk, mb->spheres.centers, mb->spheres.radii, rot, out);
+    EXPECT_LE((out - surface->V).cwiseAbs().maxCoeff(), 1e-15);
+    const Vec3 t(0.01, -0.02, 0.03);
+    MatX3 moved = mb->spheres.centers;
+    moved.rowwise() += t.transpose();
+    applySkinning(sk, moved, mb->spheres.radii, rot, out);
+    MatX3 expect = surface->V;
+    expect.rowwise() += t.transpose();
+    EXPECT_LE((out - expect).cwiseAbs().maxCoeff(), 1e-15);
+  }
+}
+
+TEST_F(SkinningTest, RadiusScaleScalesDisplacementAndRotationRotates) {
+  const Skinning sk = buildSkinning(surface->V, mb->spheres, 0.2, 6);
+  MatX3 out(surface->V.rows(), 3), rest(surface->V.rows(), 3);
+  const VecX bigger = 1.5 * mb->spheres.radii;
+  applySkinning(sk, mb->spheres.centers, bigger, nullptr, out);
+  // Eq. (16): v' - c_center = 1.5 disp.
+  for (int v = 0; v < sk.numVertices; ++v) {
+    Vec3 cc = Vec3::Zero();
+    for (int s = 0; s < sk.slots; ++s)
+      cc += sk.weight[size_t(v * sk.slots + s)] *
+            mb->spheres.centers.row(sk.sphere[size_t(v * sk.slots + s)]).transpose();
+    const Vec3 disp(sk.dispX[size_t(v)], sk.dispY[size_t(v)], sk.dispZ[size_t(v)]);
+    EXPECT_NEAR((out.row(v).transpose() - cc - 1.5 * disp).norm(), 0, 1e-14);
+  }
+  // A rigid rotation of the spheres with matching frames rotates the whole surface.
+  const Mat3 R = Eigen::AngleAxis<Real>(0.5, Vec3(0, 0, 1)).toRotationMatrix();
+  const MatX3 rotated = (mb->spheres.centers * R.transpose()).eval();
+  std::vector<Real> rots(size_t(mb->spheres.size()) * 9);
+  for (int i = 0; i < mb->spheres.size(); ++i)
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) rots[size_t(9 * i + 3 * r + c)] = R(r, c);
+  applySkinning(sk, rotated, mb->spheres.radii, rots.data(), out);
+  EXPECT_LE((out - surface->V * R.transpose()).cwiseAbs().maxCoeff(), 1e-14);
+}
+
+}  // namespace
+}  // namespace deform::metaballs

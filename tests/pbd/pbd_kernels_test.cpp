@@ -1,0 +1,321 @@
+// Property tests of the PBD constraint kernels: each constraint is satisfied after projection,
+// mass-weighted corrections sum to zero, nothing moves at rest, degenerate input is refused,
+// XPBD tends to the hard constraint as compliance -> 0, and the classic stiffness correction
+// makes the effective stiffness independent of the iteration count.
+#include "pbd_constraints.h"
+#include "test_meshes.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace deform::pbd {
+namespace {
+
+Vec3 randomVec(std::mt19937& rng, Real s = 1.0) {
+  std::uniform_real_distribution<Real> u(-s, s);
+  return Vec3(u(rng), u(rng), u(rng));
+}
+
+Vec3 momentum(const Vec3 dx[], const Real w[], int n) {
+  Vec3 p = Vec3::Zero();
+  for (int i = 0; i < n; ++i)
+    if (w[i] > 0) p += dx[i] / w[i];
+  return p;
+}
+
+// ---- distance ----
+
+TEST(PbdDistance, SatisfiedAfterOneProjection) {
+  std::mt19937 rng(1);
+  for (int trial = 0; trial < 20; ++trial) {
+    const Vec3 xa = randomVec(rng), xb = randomVec(rng);
+    const Real wa = 0.5 + trial % 3, wb = 1.0 + trial % 2, rest = 0.3 + 0.05 * trial;
+    Real lambda = 0;
+    Vec3 dxa, dxb;
+    ASSERT_TRUE(projectDistance(xa, xb, wa, wb, rest, 0.0, 1.0, lambda, dxa, dxb));
+    EXPECT_NEAR(((xa + dxa) - (xb + dxb)).norm(), rest, 1e-12);
+    // Mass-weighted corrections sum to zero, with equal and unequal masses.
+    EXPECT_LT((dxa / wa + dxb / wb).norm(), 1e-12);
+  }
+}
+
+TEST(PbdDistance, NothingMovesAtRest) {
+  const Vec3 xa(0.1, 0.2, 0.3), xb(-0.2, 0.4, 0.0);
+  Real lambda = 0;
+  Vec3 dxa, dxb;
+  ASSERT_TRUE(projectDistance(xa, xb, 1.0, 1.0, (xa - xb).norm(), 0.0, 1.0, lambda, dxa, dxb));
+  EXPECT_EQ(dxa.norm(), 0.0);
+  EXPECT_EQ(dxb.norm(), 0.0);
+}
+
+TEST(PbdDistance, DegenerateInputIsRefused) {
+  const Vec3 x(0.1, 0.2, 0.3);
+  Real lambda = 0;
+  Vec3 dxa, dxb;
+  EXPECT_FALSE(projectDistance(x, x, 1.0, 1.0, 0.5, 0.0, 1.0, lambda, dxa, dxb));
+  EXPECT_FALSE(projectDistance(x, Vec3(1, 2, 3), 0.0, 0.0, 0.5, 0.0, 1.0, lambda, dxa, dxb));
+  EXPECT_EQ(lambda, 0.0);
+}
+
+// XPBD on one distance constraint has the closed form C* = C0 at / (wa + wb + at) (the
+// constraint is linear along its own direction): iterating must reach it, and C* -> 0 as
+// alpha -> 0.
+TEST(PbdDistance, XpbdConvergesToTheConstraintAsComplianceVanishes) {
+  const Real rest = 1.0, stretch = 0.2;
+  Real previous = 1e300;
+  for (Real at : {1.0, 1e-2, 1e-4, 1e-8, 1e-14}) {
+    Vec3 xa(0, 0, 0), xb(rest + stretch, 0, 0);
+    Real lambda = 0;
+    for (int it = 0; it < 50; ++it) {
+      Vec3 dxa, dxb;
+      ASSERT_TRUE(projectDistance(xa, xb, 1.0, 1.0, rest, at, 1.0, lambda, dxa, dxb));
+      xa += dxa;
+      xb += dxb;
+    }
+    const Real C = (xa - xb).norm() - rest;
+    EXPECT_NEAR(C, stretch * at / (2.0 + at), 1e-12);
+    EXPECT_LT(std::abs(C), previous);
+    previous = std::abs(C);
+  }
+  EXPECT_LT(previous, 1e-14);
+}
+
+// k' = 1 - (1 - k)^(1/n) applied n times leaves (1 - k) of the error for every n.
+TEST(PbdDistance, ClassicStiffnessCorrectionIsIndependentOfIterationCount) {
+  const Real k = 0.3, rest = 1.0, stretch = 0.1;
+  for (int n : {1, 2, 5, 10, 40}) {
+    const Real kp = classicStiffness(k, n);
+    EXPECT_GT(kp, 0.0);
+    EXPECT_LE(kp, k + 1e-15);
+    Vec3 xa(0, 0, 0), xb(0, rest + stretch, 0);
+    for (int it = 0; it < n; ++it) {
+      Real lambda = 0;
+      Vec3 dxa, dxb;
+      ASSERT_TRUE(projectDistance(xa, xb, 1.0, 2.0, rest, 0.0, kp, lambda, dxa, dxb));
+      xa += dxa;
+      xb += dxb;
+    }
+    EXPECT_NEAR((xa - xb).norm() - rest, (1.0 - k) * stretch, 1e-12) << "n = " << n;
+  }
+  EXPECT_EQ(classicStiffness(1.0, 7), 1.0);
+  EXPECT_EQ(classicStiffness(0.0, 7), 0.0);
+}
+
+// The colour kernel (padded positions, SIMD when available) equals projecting the constraints of
+// one colour one by one with projectDistance(), and its SIMD and scalar paths agree exactly.
+TEST(PbdDistance, ColourKernelMatchesSequentialProjection) {
+  std::mt19937 rng(7);
+  const int n = 23;  // not a multiple of the vector width: exercises the tail
+  std::vector<Vec3> x(2 * n);
+  for (auto& p : x) p = randomVec(rng);
+  x[2 * 5 + 1] = x[2 * 5];  // one degenerate constraint
+  std::vector<int> a(n), b(n);
+  std::vector<Real> rest(n), at(n), scale(n), wa(n), wb(n), lam1(n, 0.01), lam2(n, 0.01),
+      lam3(n, 0.01);
+  for (int i = 0; i < n; ++i) {
+    a[i] = 2 * i;
+    b[i] = 2 * i + 1;
+    rest[i] = 0.5 + 0.01 * i;
+    at[i] = (i % 3) * 0.1;
+    wa[i] = 1.0 + 0.1 * (i % 4);
+    wb[i] = (i % 5 == 0) ? 0.0 : 0.7;
+    scale[i] = 1.0 / (wa[i] + wb[i] + at[i]);
+  }
+  auto pad = [&] {
+    std::vector<Real> x4(8 * n, 0.0);
+    for (int i = 0; i < 2 * n; ++i)
+      for (int k = 0; k < 3; ++k) x4[4 * i + k] = x[i][k];
+    return x4;
+  };
+  std::vector<Real> simd = pad(), scalar = pad();
+  const DistanceBatch b1{a.data(),     b.data(),    rest.data(), at.data(),
+                         scale.data(), lam1.data(), wa.data(),   wb.data()};
+  const DistanceBatch b2{a.data(),     b.data(),    rest.data(), at.data(),
+                         scale.data(), lam2.data(), wa.data(),   wb.data()};
+  EXPECT_EQ(projectDistanceColourPadded(simd.data(), b1, 0, n, true), 1);
+  EXPECT_EQ(projectDistanceColourPadded(scalar.data(), b2, 0, n, false), 1);
+  EXPECT_TRUE(simd == scalar);
+  EXPECT_TRUE(lam1 == lam2);
+  for (int i = 0; i < n; ++i) {
+    Vec3 dxa, dxb;
+    if (!projectDistance(x[a[i]], x[b[i]], wa[i], wb[i], rest[i], at[i], 1.0, lam3[i], dxa, dxb))
+      continue;
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(simd[4 * a[i] + k], x[a[i]][k] + dxa[k], 1e-14);
+      EXPECT_NEAR(simd[4 * b[i] + k], x[b[i]][k] + dxb[k], 1e-14);
+    }
+    EXPECT_NEAR(lam1[i], lam3[i], 1e-14);
+    EXPECT_EQ(simd[4 * a[i] + 3], 0.0);
+  }
+}
+
+// ---- dihedral ----
+
+struct Hinge {
+  Vec3 x[4];
+};
+
+Hinge randomHinge(std::mt19937& rng) {
+  Hinge h;
+  h.x[2] = Vec3(0, 0, 0) + randomVec(rng, 0.1);
+  h.x[3] = Vec3(1, 0, 0) + randomVec(rng, 0.1);
+  h.x[0] = Vec3(0.5, -0.8, 0) + randomVec(rng, 0.3);
+  h.x[1] = Vec3(0.5, 0.8, 0) + randomVec(rng, 0.3);
+  return h;
+}
+
+TEST(PbdDihedral, GradientMatchesFiniteDifferences) {
+  std::mt19937 rng(2);
+  for (int trial = 0; trial < 20; ++trial) {
+    Hinge h = randomHinge(rng);
+    Real theta;
+    Vec3 g[4];
+    ASSERT_TRUE(dihedralAngle(h.x[0], h.x[1], h.x[2], h.x[3], theta, g));
+    const Real eps = 1e-6;
+    for (int i = 0; i < 4; ++i) {
+      for (int k = 0; k < 3; ++k) {
+        Hinge hp = h, hm = h;
+        hp.x[i][k] += eps;
+        hm.x[i][k] -= eps;
+        Real tp, tm;
+        Vec3 gg[4];
+        ASSERT_TRUE(dihedralAngle(hp.x[0], hp.x[1], hp.x[2], hp.x[3], tp, gg));
+        ASSERT_TRUE(dihedralAngle(hm.x[0], hm.x[1], hm.x[2], hm.x[3], tm, gg));
+        EXPECT_NEAR((tp - tm) / (2 * eps), g[i][k], 1e-6) << "vertex " << i << " axis " << k;
+      }
+    }
+    EXPECT_LT((g[0] + g[1] + g[2] + g[3]).norm(), 1e-12);
+  }
+}
+
+TEST(PbdDihedral, FlatHingeHasZeroAngle) {
+  Real theta;
+  Vec3 g[4];
+  ASSERT_TRUE(
+      dihedralAngle(Vec3(0.5, -1, 0), Vec3(0.5, 1, 0), Vec3(0, 0, 0), Vec3(1, 0, 0), theta, g));
+  EXPECT_NEAR(theta, 0.0, 1e-15);
+  EXPECT_TRUE(g[0].allFinite() && g[1].allFinite());
+}
+
+TEST(PbdDihedral, ProjectionSatisfiesConstraintAndConservesMomentum) {
+  std::mt19937 rng(3);
+  for (int trial = 0; trial < 10; ++trial) {
+    Hinge h = randomHinge(rng);
+    const Real w[4] = {1.0, 2.0, 0.5, 1.5};
+    const Real target = 0.4 * (trial % 2 ? 1 : -1);
+    Real lambda = 0;
+    for (int it = 0; it < 30; ++it) {
+      Vec3 dx[4];
+      ASSERT_TRUE(projectDihedral(h.x, w, target, 0.0, 1.0, lambda, dx));
+      EXPECT_LT(momentum(dx, w, 4).norm(), 1e-12);
+      for (int i = 0; i < 4; ++i) h.x[i] += dx[i];
+    }
+    Real theta;
+    Vec3 g[4];
+    ASSERT_TRUE(dihedralAngle(h.x[0], h.x[1], h.x[2], h.x[3], theta, g));
+    EXPECT_NEAR(theta, target, 1e-9);
+  }
+}
+
+TEST(PbdDihedral, NothingMovesAtRest) {
+  std::mt19937 rng(4);
+  Hinge h = randomHinge(rng);
+  Real theta;
+  Vec3 g[4], dx[4];
+  ASSERT_TRUE(dihedralAngle(h.x[0], h.x[1], h.x[2], h.x[3], theta, g));
+  const Real w[4] = {1, 1, 1, 1};
+  Real lambda = 0;
+  ASSERT_TRUE(projectDihedral(h.x, w, theta, 0.0, 1.0, lambda, dx));
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(dx[i].norm(), 0.0);
+}
+
+TEST(PbdDihedral, DegenerateInputIsRefused) {
+  const Real w[4] = {1, 1, 1, 1};
+  Real lambda = 0;
+  Vec3 dx[4];
+  // Wing vertex on the hinge line: zero-area triangle.
+  const Vec3 collapsed[4] = {Vec3(0.5, 0, 0), Vec3(0.5, 1, 0), Vec3(0, 0, 0), Vec3(1, 0, 0)};
+  EXPECT_FALSE(projectDihedral(collapsed, w, 0.0, 0.0, 1.0, lambda, dx));
+  // Zero-length hinge edge.
+  const Vec3 shortEdge[4] = {Vec3(0.5, -1, 0), Vec3(0.5, 1, 0), Vec3(0, 0, 0), Vec3(0, 0, 0)};
+  EXPECT_FALSE(projectDihedral(shortEdge, w, 0.0, 0.0, 1.0, lambda, dx));
+  // All immovable.
+  const Real w0[4] = {0, 0, 0, 0};
+  const Vec3 ok[4] = {Vec3(0.5, -1, 0.2), Vec3(0.5, 1, 0), Vec3(0, 0, 0), Vec3(1, 0, 0)};
+  EXPECT_FALSE(projectDihedral(ok, w0, 0.0, 0.0, 1.0, lambda, dx));
+}
+
+// ---- tet volume ----
+
+TEST(PbdTetVolume, ProjectionSatisfiesConstraintAndConservesMomentum) {
+  std::mt19937 rng(5);
+  for (int trial = 0; trial < 10; ++trial) {
+    Vec3 x[4] = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
+    for (auto& p : x) p += randomVec(rng, 0.1);
+    const Real v0 = tetVolume(x[0], x[1], x[2], x[3]);
+    for (auto& p : x) p *= 1.2;  // 73% too large
+    const Real w[4] = {1.0, 0.5, 2.0, 1.0};
+    Real lambda = 0;
+    for (int it = 0; it < 20; ++it) {
+      Vec3 dx[4];
+      ASSERT_TRUE(projectTetVolume(x, w, v0, 0.0, 1.0, lambda, dx));
+      EXPECT_LT(momentum(dx, w, 4).norm(), 1e-12);
+      for (int i = 0; i < 4; ++i) x[i] += dx[i];
+    }
+    EXPECT_NEAR(tetVolume(x[0], x[1], x[2], x[3]), v0, 1e-12);
+  }
+}
+
+TEST(PbdTetVolume, NothingMovesAtRestAndDegenerateIsRefused) {
+  const Vec3 x[4] = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
+  const Real w[4] = {1, 1, 1, 1};
+  Real lambda = 0;
+  Vec3 dx[4];
+  ASSERT_TRUE(projectTetVolume(x, w, 1.0 / 6.0, 0.0, 1.0, lambda, dx));
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(dx[i].norm(), 0.0);
+  // All four nodes at one point (zero gradients) and collinear nodes.
+  const Vec3 point[4] = {Vec3(1, 1, 1), Vec3(1, 1, 1), Vec3(1, 1, 1), Vec3(1, 1, 1)};
+  EXPECT_FALSE(projectTetVolume(point, w, 1.0 / 6.0, 0.0, 1.0, lambda, dx));
+  const Vec3 line[4] = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(2, 0, 0), Vec3(3, 0, 0)};
+  EXPECT_FALSE(projectTetVolume(line, w, 1.0 / 6.0, 0.0, 1.0, lambda, dx));
+  EXPECT_EQ(lambda, 0.0);
+}
+
+// ---- global surface volume ----
+
+TEST(PbdSurfaceVolume, RestoresVolumeConservesMomentumAndRestsAtRest) {
+  const SurfaceMesh m = testing::uvEllipsoid(8, 12, 0.05, 0.04, 0.03);
+  const Real v0 = signedVolume(m.V, m.F);
+  ASSERT_GT(v0, 0.0);
+  VecX w(m.numVertices());
+  for (int i = 0; i < m.numVertices(); ++i) w[i] = 1.0 + 0.1 * (i % 5);
+  MatX3 grad, dx;
+  Real lambda = 0;
+  // At rest: corrections vanish (up to round-off of the volume sum).
+  ASSERT_TRUE(projectSurfaceVolume(m.V, w, m.F, v0, 0.0, 1.0, lambda, grad, dx));
+  EXPECT_LT(dx.cwiseAbs().maxCoeff(), 1e-14);
+  // Inflated by 10% in each direction: projections bring the volume back.
+  MatX3 x = 1.1 * m.V;
+  lambda = 0;
+  for (int it = 0; it < 10; ++it) {
+    ASSERT_TRUE(projectSurfaceVolume(x, w, m.F, v0, 0.0, 1.0, lambda, grad, dx));
+    Vec3 p = Vec3::Zero();
+    for (int i = 0; i < x.rows(); ++i) p += dx.row(i).transpose() / w[i];
+    EXPECT_LT(p.norm(), 1e-15);
+    x += dx;
+  }
+  EXPECT_NEAR(signedVolume(x, m.F), v0, 1e-12 * v0);
+}
+
+TEST(PbdSurfaceVolume, AllImmovableIsRefused) {
+  const SurfaceMesh m = testing::uvEllipsoid(4, 6, 0.05, 0.04, 0.03);
+  const VecX w = VecX::Zero(m.numVertices());
+  MatX3 grad, dx;
+  Real lambda = 0;
+  EXPECT_FALSE(
+      projectSurfaceVolume(1.1 * m.V, w, m.F, signedVolume(m.V, m.F), 0.0, 1.0, lambda, grad, dx));
+}
+
+}  // namespace
+}  // namespace deform::pbd

@@ -1,0 +1,243 @@
+// Model-level tests of PbdModel: rest stays rest, reset() reproduces a run bit for bit, grasped
+// nodes follow their targets exactly, gravity sags a pinned organ (less when stiffer), the grasp
+// reaction balances the weight of a hanging organ, tet input, and the parameter layer.
+#include "pbd_model.h"
+#include "test_meshes.h"
+
+#include <gtest/gtest.h>
+
+namespace deform::pbd {
+namespace {
+
+Organ surfaceOrgan(const SurfaceMesh& s, Real young = 5500.0) {
+  Organ o;
+  o.source = "test:ellipsoid";
+  o.surface = s;
+  o.material.young = young;
+  o.material.poisson = 0.3;
+  o.material.density = 1000.0;
+  return o;
+}
+
+Organ smallOrgan(Real young = 5500.0) {
+  return surfaceOrgan(testing::uvEllipsoid(10, 16, 0.05, 0.04, 0.03), young);
+}
+
+Organ tetOrgan() {
+  Organ o;
+  o.source = "test:tetbox";
+  o.volume = testing::tetBox(4, 3, 2, 0.04, 0.03, 0.02);
+  o.surface = tetBoundary(*o.volume);
+  o.material.young = 5500.0;
+  o.material.poisson = 0.3;
+  return o;
+}
+
+StepInput input(Real dt, Vec3 gravity = Vec3::Zero()) {
+  StepInput in;
+  in.dt = dt;
+  in.gravity = gravity;
+  return in;
+}
+
+Real maxDistance(const MatX3& a, const MatX3& b) {
+  return (a - b).rowwise().norm().maxCoeff();
+}
+
+TEST(PbdModel, CountsOfAClosedSurface) {
+  const Organ o = smallOrgan();
+  PbdModel m;
+  PbdConfig cfg;
+  cfg.bending = true;
+  m.init(o, cfg);
+  const Counts c = m.counts();
+  const long long E = uniqueEdges(o.surface.F).rows();
+  EXPECT_EQ(c.at("nodes"), o.surface.numVertices());
+  EXPECT_EQ(c.at("elements"), o.surface.numFaces());
+  EXPECT_EQ(c.at("distance_constraints"), E);
+  EXPECT_EQ(c.at("bending_constraints"), E);  // closed: every edge is interior
+  EXPECT_EQ(c.at("volume_constraints"), 1);
+  EXPECT_EQ(c.at("constraints"), 2 * E + 1);
+  // Mass = density * enclosed volume.
+  EXPECT_NEAR(m.masses().sum(), 1000.0 * signedVolume(o.surface.V, o.surface.F), 1e-12);
+}
+
+TEST(PbdModel, RestWithoutGravityStaysAtRest) {
+  for (StiffnessMode mode : {StiffnessMode::Xpbd, StiffnessMode::Classic}) {
+    PbdModel m;
+    PbdConfig cfg;
+    cfg.mode = mode;
+    const Organ o = smallOrgan();
+    m.init(o, cfg);
+    for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(input(1e-3)), StepStatus::Ok);
+    EXPECT_LT(maxDistance(m.surface(), o.surface.V), 1e-12);
+  }
+  PbdModel t;
+  const Organ o = tetOrgan();
+  t.init(o, PbdConfig{});
+  for (int s = 0; s < 100; ++s) ASSERT_EQ(t.step(input(1e-3)), StepStatus::Ok);
+  EXPECT_LT(maxDistance(t.nodes(), o.volume->V), 1e-12);
+}
+
+// A scripted run with gravity, a pinned box, a moving grasp and a point load.
+std::vector<MatX3> scriptedRun(PbdModel& m, const Organ& o, int steps) {
+  std::vector<MatX3> out;
+  const int top = nearestVertex(o.surface.V, Vec3(0, 0, 0.03));
+  const int side = nearestVertex(o.surface.V, Vec3(0.05, 0, 0));
+  for (int s = 0; s < steps; ++s) {
+    StepInput in = input(1e-3, Vec3(0, 0, -9.81));
+    GraspInput g;
+    g.nodes = {top};
+    g.targets = o.surface.V.row(top) + Eigen::RowVector3d(0, 0, 1e-4 * (s + 1));
+    in.grasps.push_back(g);
+    in.loads.push_back({side, Vec3(0.5, 0, 0)});
+    EXPECT_EQ(m.step(in), StepStatus::Ok);
+    out.push_back(m.surface());
+  }
+  return out;
+}
+
+TEST(PbdModel, ResetReproducesARunBitForBit) {
+  Organ o = smallOrgan();
+  o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.025)});
+  PbdModel m;
+  m.init(o, PbdConfig{});
+  const std::vector<MatX3> a = scriptedRun(m, o, 60);
+  m.reset();
+  EXPECT_TRUE(m.surface() == o.surface.V);
+  const std::vector<MatX3> b = scriptedRun(m, o, 60);
+  for (size_t s = 0; s < a.size(); ++s) ASSERT_TRUE(a[s] == b[s]) << "step " << s;
+  EXPECT_GT(maxDistance(a.back(), o.surface.V), 1e-4);  // the run did move the organ
+}
+
+TEST(PbdModel, GraspedNodeFollowsItsTargetExactly) {
+  for (StiffnessMode mode : {StiffnessMode::Xpbd, StiffnessMode::Classic}) {
+    const Organ o = smallOrgan();
+    PbdModel m;
+    PbdConfig cfg;
+    cfg.mode = mode;
+    m.init(o, cfg);
+    const std::vector<int> nodes = {nearestVertex(o.surface.V, Vec3(0, 0, 0.03)),
+                                    nearestVertex(o.surface.V, Vec3(0.01, 0, 0.03))};
+    for (int s = 0; s < 40; ++s) {
+      StepInput in = input(1e-3, Vec3(0, 0, -9.81));
+      GraspInput g;
+      g.nodes = nodes;
+      g.targets.resize(2, 3);
+      for (int k = 0; k < 2; ++k)
+        g.targets.row(k) = o.surface.V.row(nodes[k]) + Eigen::RowVector3d(2e-4 * s, 0, 5e-4 * s);
+      in.grasps.push_back(g);
+      ASSERT_EQ(m.step(in), StepStatus::Ok);
+      for (int k = 0; k < 2; ++k) EXPECT_TRUE(m.nodes().row(nodes[k]) == g.targets.row(k));
+    }
+  }
+}
+
+// Mean z displacement of the free nodes after settling under gravity with the bottom pinned.
+Real sagUnderGravity(Real young) {
+  Organ o = smallOrgan(young);
+  o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.025)});
+  PbdModel m;
+  PbdConfig cfg;
+  cfg.damping = 20.0;
+  m.init(o, cfg);
+  for (int s = 0; s < 400; ++s) EXPECT_EQ(m.step(input(1e-3, Vec3(0, 0, -9.81))), StepStatus::Ok);
+  return (m.surface().col(2) - o.surface.V.col(2)).mean();
+}
+
+TEST(PbdModel, GravitySagsAPinnedOrganLessWhenStiffer) {
+  const Real soft = sagUnderGravity(2e3), stiff = sagUnderGravity(2e4);
+  EXPECT_LT(soft, 0.0);
+  EXPECT_LT(stiff, 0.0);
+  EXPECT_LT(std::abs(stiff), 0.5 * std::abs(soft));
+}
+
+// An organ hanging from a grasp: once still, the tissue pulls the grasp down with the weight of
+// every node the grasp does not hold (momentum balance of the free nodes).
+TEST(PbdModel, GraspReactionBalancesTheHangingWeight) {
+  const Organ o = smallOrgan(2e4);
+  PbdModel m;
+  PbdConfig cfg;
+  cfg.damping = 30.0;
+  m.init(o, cfg);
+  const std::vector<int> held = nearestVertices(o.surface.V, Vec3(0, 0, 0.03), 7);
+  Real heldMass = 0;
+  for (int i : held) heldMass += m.masses()[i];
+  const Vec3 g(0, 0, -9.81);
+  for (int s = 0; s < 3000; ++s) {
+    StepInput in = input(1e-3, g);
+    GraspInput gi;
+    gi.nodes = held;
+    gi.targets.resize(static_cast<Eigen::Index>(held.size()), 3);
+    for (size_t k = 0; k < held.size(); ++k) gi.targets.row(k) = o.surface.V.row(held[k]);
+    in.grasps.push_back(gi);
+    ASSERT_EQ(m.step(in), StepStatus::Ok);
+  }
+  const std::vector<Vec3> f = m.graspForces();
+  ASSERT_EQ(f.size(), 1u);
+  const Vec3 weight = (m.masses().sum() - heldMass) * g;
+  EXPECT_LT((f[0] - weight).norm(), 0.05 * weight.norm()) << f[0].transpose();
+}
+
+TEST(PbdModel, TetInputSagsAndKeepsVolume) {
+  Organ o = tetOrgan();
+  o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(0.001, 1, 1)});  // the x = 0 face
+  PbdModel m;
+  PbdConfig cfg;
+  cfg.damping = 20.0;
+  m.init(o, cfg);
+  const Counts c = m.counts();
+  EXPECT_EQ(c.at("nodes"), o.volume->numVertices());
+  EXPECT_EQ(c.at("elements"), o.volume->numTets());
+  EXPECT_EQ(c.at("volume_constraints"), o.volume->numTets());
+  for (int s = 0; s < 300; ++s) ASSERT_EQ(m.step(input(1e-3, Vec3(0, 0, -9.81))), StepStatus::Ok);
+  // The free end of the cantilever drops; the pinned face stays.
+  const int tip = nearestVertex(o.volume->V, Vec3(0.04, 0.015, 0.02));
+  EXPECT_LT(m.nodes()(tip, 2) - o.volume->V(tip, 2), -1e-4);
+  EXPECT_EQ(m.nodes().row(0), o.volume->V.row(0));
+  const SurfaceMesh b = tetBoundary(*o.volume);
+  EXPECT_NEAR(signedVolume(m.nodes(), b.F), signedVolume(o.volume->V, b.F),
+              0.02 * signedVolume(o.volume->V, b.F));
+  EXPECT_EQ(m.surface().rows(), o.surface.numVertices());
+}
+
+TEST(PbdModel, DivergenceIsReportedNotThrown) {
+  const Organ o = smallOrgan();
+  PbdModel m;
+  m.init(o, PbdConfig{});
+  StepInput in = input(1e-3);
+  in.loads.push_back({0, Vec3(std::numeric_limits<Real>::quiet_NaN(), 0, 0)});
+  EXPECT_EQ(m.step(in), StepStatus::Diverged);
+}
+
+TEST(PbdModel, ParametersAreReadAndBadChoicesRejected) {
+  std::vector<ParamSpec> specs = paramSpecs();
+  ParamValues p = ParamValues::defaults(specs);
+  for (const ParamSpec& s : specs) EXPECT_TRUE(p.has(s.key)) << s.key;
+  p.set("iterations", 7LL);
+  p.set("stiffness_mode", std::string("classic"));
+  p.set("bending", false);
+  const PbdConfig c = configFromParams(p);
+  EXPECT_EQ(c.iterations, 7);
+  EXPECT_EQ(c.mode, StiffnessMode::Classic);
+  EXPECT_FALSE(c.bending);
+
+  const Organ o = smallOrgan();
+  Cache cache{std::filesystem::path()};
+  PbdModel m;
+  m.init(ModelSetup{o, p, cache, 1e-3, Vec3::Zero()});
+  EXPECT_EQ(m.counts().at("bending_constraints"), 0);
+
+  p.set("stiffness_mode", std::string("stiff"));
+  EXPECT_THROW(configFromParams(p), InputError);
+}
+
+TEST(PbdModel, BadMaterialIsAnInputError) {
+  Organ o = smallOrgan();
+  o.material.young = -1;
+  PbdModel m;
+  EXPECT_THROW(m.init(o, PbdConfig{}), InputError);
+}
+
+}  // namespace
+}  // namespace deform::pbd
