@@ -83,8 +83,8 @@ ModelInfo ParticleBemModel::info() {
       "guidance=false)";
   i.citation =
       "Zhu B., Gu L., Zhou Z.: Particle-Based Deformable Modeling with Pre-computed Surface Data "
-      "in Real-Time Surgical Simulation. MIAR 2010, LNCS 6326, pp. 507-514, "
-      "doi:10.1007/978-3-642-15699-1_53";
+      "in Real-Time Surgical Simulation (Image Guided Surgery and Therapy Lab, Shanghai Jiao Tong "
+      "University; no DOI given in the paper)";
   i.version = "1.0";
   i.capabilities = {Capability::Grasp, Capability::PointForce, Capability::Gravity,
                     Capability::NeedsPrecompute};

@@ -1,5 +1,5 @@
 // particle_bem: the model class. Zhu, Gu & Zhou 2010, "Particle-Based Deformable Modeling with
-// Pre-computed Surface Data in Real-Time Surgical Simulation" (MIAR 2010, LNCS 6326).
+// Pre-computed Surface Data in Real-Time Surgical Simulation".
 //
 // guidance = true (the paper's surface-guided organ, §5): nodes() are the particles: first the
 // surface particles (the vertices of the coarse BEM surface), then the interior physics points.
