@@ -1,0 +1,257 @@
+#include "bem_assembly.h"
+
+#include "sph_elasticity.h"
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+
+namespace deform::particle_bem {
+
+namespace {
+
+struct Element {
+  Vec3 p[3];
+  Vec3 n;
+  Vec3 centroid;
+  Real area, size;
+  int v[3];
+};
+
+// Accumulates int_T K(x, y) N_k(y) dGamma over the sub-triangle with parent barycentric corners
+// B (columns), into rowH/rowG (3 x 3N, columns of the element's nodes).
+void integrateRegular(const KelvinKernel& K, const Vec3& x, const Element& e, const Mat3& B,
+                      Real areaFactor, int level, const BemQuadrature& q, Eigen::Ref<MatX> rowH,
+                      Eigen::Ref<MatX> rowG, long long& subdivided) {
+  const Vec3 c = (e.p[0] * B.row(0).sum() + e.p[1] * B.row(1).sum() + e.p[2] * B.row(2).sum()) / 3;
+  const Real size = e.size * std::pow(0.5, level);
+  if (level < q.maxLevel && (x - c).norm() < q.nearFactor * size) {
+    if (level == 0) ++subdivided;
+    const Vec3 b0 = B.col(0), b1 = B.col(1), b2 = B.col(2);
+    const Vec3 m01 = 0.5 * (b0 + b1), m12 = 0.5 * (b1 + b2), m20 = 0.5 * (b2 + b0);
+    Mat3 S;
+    S << b0, m01, m20;
+    integrateRegular(K, x, e, S, areaFactor / 4, level + 1, q, rowH, rowG, subdivided);
+    S << m01, b1, m12;
+    integrateRegular(K, x, e, S, areaFactor / 4, level + 1, q, rowH, rowG, subdivided);
+    S << m20, m12, b2;
+    integrateRegular(K, x, e, S, areaFactor / 4, level + 1, q, rowH, rowG, subdivided);
+    S << m12, m20, m01;
+    integrateRegular(K, x, e, S, areaFactor / 4, level + 1, q, rowH, rowG, subdivided);
+    return;
+  }
+  Mat3 U, T;
+  for (const TrianglePoint& g : gaussTriangle7()) {
+    const Vec3 N = B * Vec3(g.l0, g.l1, g.l2);  // parent barycentrics = shape functions
+    const Vec3 y = N[0] * e.p[0] + N[1] * e.p[1] + N[2] * e.p[2];
+    K.both(y - x, e.n, U, T);
+    const Real w = g.w * e.area * areaFactor;
+    for (int k = 0; k < 3; ++k) {
+      rowH.middleCols<3>(3 * e.v[k]) += (w * N[k]) * T;
+      rowG.middleCols<3>(3 * e.v[k]) += (w * N[k]) * U;
+    }
+  }
+}
+
+MatX rigidModes(const MatX3& V) {
+  const int n = int(V.rows());
+  const Vec3 c = V.colwise().mean().transpose();
+  const Real L = std::max((V.rowwise() - c.transpose()).rowwise().norm().maxCoeff(), Real(1e-30));
+  MatX R = MatX::Zero(3 * n, 6);
+  for (int j = 0; j < n; ++j) {
+    const Vec3 d = (V.row(j).transpose() - c) / L;
+    for (int k = 0; k < 3; ++k) {
+      R(3 * j + k, k) = 1;
+      const Vec3 e = Vec3::Unit(k).cross(d);
+      R.block<3, 1>(3 * j, 3 + k) = e;
+    }
+  }
+  return R;
+}
+
+// A of the mixed system (see header); bordered when `fixed` is empty.
+MatX mixedMatrix(const BemMatrices& bem, const MatX3& V, const std::vector<char>& isFixed,
+                 bool bordered) {
+  const Eigen::Index n3 = bem.H.rows(), m = n3 + (bordered ? 6 : 0);
+  MatX A = MatX::Zero(m, m);
+  for (Eigen::Index j = 0; j < n3 / 3; ++j) {
+    if (isFixed[j])
+      A.block(0, 3 * j, n3, 3) = -bem.G.middleCols(3 * j, 3);
+    else
+      A.block(0, 3 * j, n3, 3) = bem.H.middleCols(3 * j, 3);
+  }
+  if (bordered) {
+    const MatX R = rigidModes(V);
+    A.block(0, n3, n3, 6) = R;
+    A.block(n3, 0, 6, n3) = R.transpose();
+  }
+  return A;
+}
+
+// In place: X <- A^-1 X, with A's LU stored in A.
+void luSolveInPlace(const Eigen::PartialPivLU<Eigen::Ref<MatX>>& lu, MatX& X) {
+  X = lu.permutationP() * X;
+  lu.matrixLU().triangularView<Eigen::UnitLower>().solveInPlace(X);
+  lu.matrixLU().triangularView<Eigen::Upper>().solveInPlace(X);
+}
+
+}  // namespace
+
+BemMatrices assembleBem(const SurfaceMesh& s, Real young, Real poisson, const BemQuadrature& q) {
+  const KelvinKernel K(young, poisson);
+  const int n = s.numVertices(), nf = s.numFaces();
+  BemMatrices out;
+  std::vector<Element> elems;
+  elems.reserve(nf);
+  for (int f = 0; f < nf; ++f) {
+    Element e;
+    for (int k = 0; k < 3; ++k) {
+      e.v[k] = s.F(f, k);
+      e.p[k] = s.V.row(e.v[k]).transpose();
+    }
+    const Vec3 cr = (e.p[1] - e.p[0]).cross(e.p[2] - e.p[0]);
+    e.area = 0.5 * cr.norm();
+    if (!(e.area > 0)) {
+      ++out.degenerateTriangles;
+      continue;
+    }
+    e.n = cr.normalized();
+    e.centroid = (e.p[0] + e.p[1] + e.p[2]) / 3;
+    e.size =
+        std::max({(e.p[1] - e.p[0]).norm(), (e.p[2] - e.p[1]).norm(), (e.p[0] - e.p[2]).norm()});
+    elems.push_back(e);
+  }
+  const std::vector<TrianglePoint> duffy = duffyTriangle(q.duffyOrder);
+  out.H = MatX::Zero(3 * n, 3 * n);
+  out.G = MatX::Zero(3 * n, 3 * n);
+  MatX rowH(3, 3 * n), rowG(3, 3 * n);
+  Mat3 U, T;
+  for (int i = 0; i < n; ++i) {
+    rowH.setZero();
+    rowG.setZero();
+    const Vec3 x = s.V.row(i).transpose();
+    for (const Element& e : elems) {
+      int local = -1;
+      for (int k = 0; k < 3; ++k)
+        if (e.v[k] == i) local = k;
+      if (local < 0) {
+        integrateRegular(K, x, e, Mat3::Identity(), 1.0, 0, q, rowH, rowG, out.subdividedPairs);
+        continue;
+      }
+      ++out.singularPairs;
+      // Rotate so the source is the Duffy rule's first vertex.
+      const int a = local, b = (local + 1) % 3, c = (local + 2) % 3;
+      for (const TrianglePoint& g : duffy) {
+        const Vec3 y = g.l0 * e.p[a] + g.l1 * e.p[b] + g.l2 * e.p[c];
+        K.both(y - x, e.n, U, T);
+        const Real w = g.w * e.area;
+        rowG.middleCols<3>(3 * e.v[a]) += (w * g.l0) * U;
+        rowG.middleCols<3>(3 * e.v[b]) += (w * g.l1) * U;
+        rowG.middleCols<3>(3 * e.v[c]) += (w * g.l2) * U;
+        // T* N_i is strongly singular: its share goes into H_ii by the rigid-body trick.
+        rowH.middleCols<3>(3 * e.v[b]) += (w * g.l1) * T;
+        rowH.middleCols<3>(3 * e.v[c]) += (w * g.l2) * T;
+      }
+    }
+    if (q.rigidBodyDiagonal) {
+      Mat3 sum = Mat3::Zero();
+      for (int j = 0; j < n; ++j)
+        if (j != i) sum += rowH.middleCols<3>(3 * j);
+      rowH.middleCols<3>(3 * i) = -sum;
+    }
+    out.H.middleRows(3 * i, 3) = rowH;
+    out.G.middleRows(3 * i, 3) = rowG;
+  }
+  return out;
+}
+
+VecX nodalAreas(const SurfaceMesh& s) {
+  VecX A = VecX::Zero(s.numVertices());
+  for (int f = 0; f < s.numFaces(); ++f) {
+    const Vec3 x0 = s.V.row(s.F(f, 0)), x1 = s.V.row(s.F(f, 1)), x2 = s.V.row(s.F(f, 2));
+    const Real a = 0.5 * (x1 - x0).cross(x2 - x0).norm();
+    for (int k = 0; k < 3; ++k) A[s.F(f, k)] += a / 3;
+  }
+  return A;
+}
+
+DeformationMatrix computeDeformationMatrix(BemMatrices&& bem, const SurfaceMesh& s,
+                                           const MatX3& normals, const std::vector<int>& fixed,
+                                           Real young, Real poisson, Real density) {
+  const int n = s.numVertices();
+  const Eigen::Index n3 = 3 * n;
+  DeformationMatrix out;
+  out.fixed = fixed;
+  out.bordered = fixed.empty();
+  std::vector<char> isFixed(n, 0);
+  for (int j : fixed) isFixed[j] = 1;
+
+  // Gravity right-hand sides (before H and G are released).
+  Real lambda, mu;
+  lame(young, poisson, lambda, mu);
+  const Real alpha = -1 / (2 * lambda + 8 * mu);
+  const Vec3 c = s.V.colwise().mean().transpose();
+  MatX up = MatX::Zero(n3, 3), gravRhs = MatX::Zero(n3 + (out.bordered ? 6 : 0), 3);
+  if (!out.bordered) {
+    MatX pp = MatX::Zero(n3, 3);
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 b = density * Vec3::Unit(k);
+      for (int j = 0; j < n; ++j) {
+        const Vec3 d = s.V.row(j).transpose() - c;
+        up.block<3, 1>(3 * j, k) = alpha * b * d.squaredNorm();
+        const Mat3 sigma = 2 * lambda * alpha * b.dot(d) * Mat3::Identity() +
+                           2 * mu * alpha * (b * d.transpose() + d * b.transpose());
+        pp.block<3, 1>(3 * j, k) = sigma * normals.row(j).transpose();
+      }
+    }
+    for (int j = 0; j < n; ++j) {
+      if (isFixed[j])
+        gravRhs.topRows(n3) += bem.H.middleCols(3 * j, 3) * up.middleRows(3 * j, 3);
+      else
+        gravRhs.topRows(n3) -= bem.G.middleCols(3 * j, 3) * pp.middleRows(3 * j, 3);
+    }
+  }
+
+  MatX A = mixedMatrix(bem, s.V, isFixed, out.bordered);
+  bem.H.resize(0, 0);
+  MatX B = std::move(bem.G);
+  for (int j : fixed) B.middleCols(3 * j, 3).setZero();
+  if (out.bordered) B.conservativeResize(n3 + 6, Eigen::NoChange);
+  if (out.bordered) B.bottomRows(6).setZero();
+  Eigen::PartialPivLU<Eigen::Ref<MatX>> lu(A);
+  luSolveInPlace(lu, B);
+  luSolveInPlace(lu, gravRhs);
+  B.conservativeResize(n3, Eigen::NoChange);
+  for (int j : fixed) {
+    B.middleRows(3 * j, 3).setZero();  // these rows held the reaction tractions
+  }
+  out.M = std::move(B);
+  out.gravity = MatX::Zero(n3, 3);
+  if (!out.bordered) {
+    for (int j = 0; j < n; ++j)
+      if (!isFixed[j])
+        out.gravity.middleRows(3 * j, 3) = gravRhs.middleRows(3 * j, 3) + up.middleRows(3 * j, 3);
+  }
+  return out;
+}
+
+VecX solveBem(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
+              const VecX& traction) {
+  const int n = s.numVertices();
+  const Eigen::Index n3 = 3 * n;
+  std::vector<char> isFixed(n, 0);
+  for (int j : fixed) isFixed[j] = 1;
+  const bool bordered = fixed.empty();
+  MatX A = mixedMatrix(bem, s.V, isFixed, bordered);
+  VecX p = traction;
+  for (int j : fixed) p.segment<3>(3 * j).setZero();
+  MatX rhs = MatX::Zero(A.rows(), 1);
+  rhs.topRows(n3) = bem.G * p;
+  Eigen::PartialPivLU<Eigen::Ref<MatX>> lu(A);
+  luSolveInPlace(lu, rhs);
+  VecX u = rhs.col(0).head(n3);
+  for (int j : fixed) u.segment<3>(3 * j).setZero();
+  return u;
+}
+
+}  // namespace deform::particle_bem

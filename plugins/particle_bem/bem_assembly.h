@@ -1,0 +1,78 @@
+// particle_bem: the BEM precomputation of the paper's §5.1 (eqs. 2-6).
+//
+// Discretisation: linear triangles with collocation at the vertices (N nodes, nodal u and p, so
+// the coarse vertices carry the surface particles and interpolation to the fine surface is
+// barycentric). Eq. 2 becomes, per source node i,
+//   sum_j H_ij u_j = sum_j G_ij p_j,   H_ij = c_i delta_ij + sum_e int_e T*(x_i, y) N_j(y) dGamma
+//                                      G_ij = sum_e int_e U*(x_i, y) N_j(y) dGamma      (eq. 5)
+// (H, G: 3N x 3N, blocks 3x3). The paper writes eqs. 3-4 for constant elements with the
+// seven-point rule; we use the same rule with the linear shape functions, plus:
+//  - near-singular triangles (source closer than nearFactor x element size): the seven-point
+//    rule on a recursive 4-way subdivision (maxLevel levels);
+//  - singular triangles (source at one of their vertices): a Duffy transform from that vertex
+//    (Gauss-Legendre order x order), which removes the 1/r singularity of U* (weakly singular
+//    G) and of T* N_j for j != i;
+//  - the strongly singular diagonal blocks H_ii (c_i and the Cauchy principal value) by the
+//    rigid-body trick: a rigid translation gives no traction, so H_ii = -sum_{j != i} H_ij.
+//
+// Mixed boundary conditions (eq. 6 with a fixed region): at fixed nodes u = 0 is known and p
+// is unknown, so their columns swap sides: A x = B p_free with A = [H_free | -G_fixed],
+// x = (u_free, p_fixed), B = G with fixed columns zeroed. M = (rows u_free of) A^-1 B: the global
+// deformation matrix, U = M P. With no fixed node the traction problem leaves rigid motions
+// free; the six rigid modes R are then removed by a bordered system [H R; R^T 0] (u orthogonal
+// to rigid motions), which needs a self-equilibrated load.
+#pragma once
+
+#include "bem_kelvin.h"
+
+#include <deform/mesh.h>
+
+#include <vector>
+
+namespace deform::particle_bem {
+
+struct BemQuadrature {
+  int duffyOrder = 6;             ///< Gauss-Legendre points per direction on singular triangles
+  Real nearFactor = 1.5;          ///< subdivide when |x - centroid| < nearFactor * longest edge
+  int maxLevel = 3;               ///< subdivision depth for near-singular triangles
+  bool rigidBodyDiagonal = true;  ///< false: leave H_ii = 0 (tests sum the off-diagonal blocks)
+};
+
+struct BemMatrices {
+  MatX H, G;                      ///< 3N x 3N (H dimensionless, G in m/Pa)
+  long long subdividedPairs = 0;  ///< near-singular (node, triangle) pairs
+  long long singularPairs = 0;
+  long long degenerateTriangles = 0;  ///< zero area, skipped
+};
+
+/// H and G of a closed, outward-oriented surface.
+BemMatrices assembleBem(const SurfaceMesh& s, Real young, Real poisson,
+                        const BemQuadrature& q = {});
+
+/// Lumped nodal areas A_k = sum over adjacent triangles of area / 3 (m^2): a nodal traction p_k
+/// with linear interpolation carries the force int N_k p dGamma = A_k p_k.
+VecX nodalAreas(const SurfaceMesh& s);
+
+struct DeformationMatrix {
+  MatX M;        ///< 3N x 3N, m/Pa: nodal displacements per nodal traction; fixed rows/cols 0
+  MatX gravity;  ///< 3N x 3, m per (m/s^2): displacement under unit gravity along x, y, z
+  std::vector<int> fixed;
+  bool bordered = false;  ///< no fixed node: rigid modes constrained, gravity left at zero
+  size_t bytes() const { return size_t(M.size() + gravity.size()) * sizeof(Real); }
+};
+
+/// M = H^-1 G with mixed boundary conditions (partial-pivot LU of the mixed system, eq. 6).
+/// normals: #N by 3 unit vertex normals (for the gravity particular solution's traction).
+/// Gravity response: the particular solution u_p = alpha b |x - c|^2, alpha = -1 / (2 lambda +
+/// 8 mu), b = rho g, of Navier's equation with a uniform body force, plus a homogeneous BEM
+/// solution correcting its boundary values (u = 0 on fixed nodes, p = 0 elsewhere).
+DeformationMatrix computeDeformationMatrix(BemMatrices&& bem, const SurfaceMesh& s,
+                                           const MatX3& normals, const std::vector<int>& fixed,
+                                           Real young, Real poisson, Real density);
+
+/// One BEM solve (the "standard BEM" of Table 2): nodal displacements (3N, m) for nodal
+/// tractions (3N, Pa; values at fixed nodes ignored), u = 0 at fixed nodes.
+VecX solveBem(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
+              const VecX& traction);
+
+}  // namespace deform::particle_bem

@@ -1,0 +1,158 @@
+#include "paper_tables.h"
+
+#include "bem_accuracy.h"
+#include "particle_bem_model.h"
+#include "surface_decimation.h"
+
+#include <deform/phantom.h>
+
+#include <algorithm>
+#include <chrono>
+
+namespace deform::particle_bem {
+
+namespace {
+
+Real median(std::vector<Real> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+Box bottomBox(const MatX3& V, Real fraction) {
+  const Box b = boundingBox(V);
+  Box f;
+  f.lo = b.lo - Vec3::Constant(1);
+  f.hi = b.hi + Vec3::Constant(1);
+  f.hi[2] = b.lo[2] + fraction * b.size()[2];
+  return f;
+}
+
+int topVertex(const MatX3& V) {
+  int t = 0;
+  for (int i = 0; i < V.rows(); ++i)
+    if (V(i, 2) > V(t, 2)) t = i;
+  return t;
+}
+
+}  // namespace
+
+nlohmann::json bemTimingTable(const TableOptions& o) {
+  const std::vector<int> points =
+      o.quick ? std::vector<int>{150, 284} : std::vector<int>{284, 508, 784, 876, 1144};
+  const std::vector<std::vector<double>> paper = {{0.63, 0.228, 0.137, 1.00},
+                                                  {1.13, 0.309, 0.266, 1.67},
+                                                  {1.75, 0.653, 0.422, 2.83},
+                                                  {1.94, 0.725, 0.497, 3.162},
+                                                  {2.53, 1.012, 0.634, 4.176}};
+  Organ organ;
+  organ.source = "phantom:liver";
+  organ.surface = makePhantom("liver");
+  organ.material = Material{5500, 0.45, 1000};
+  organ.fixed.boxes.push_back(bottomBox(organ.surface.V, 0.15));
+  nlohmann::json rows = nlohmann::json::array();
+  for (size_t r = 0; r < points.size(); ++r) {
+    ParamValues params = ParamValues::defaults(ParticleBemModel::paramSpecs());
+    params.set("coarse_vertices", (long long)points[r]);
+    params.set("points", (long long)o.interiorPoints);
+    Cache cache("");
+    ParticleBemModel m;
+    const auto t0 = std::chrono::steady_clock::now();
+    m.init(ModelSetup{organ, params, cache, 1e-3, Vec3(0, 0, -9.81)});
+    const double precompute =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const int nc = m.surfaceParticles();
+    const int top = topVertex(m.nodes().topRows(nc));
+    GraspInput g;
+    for (int i = 0; i < nc; ++i)
+      if ((m.nodes().row(i) - m.nodes().row(top)).norm() < 0.01) g.nodes.push_back(i);
+    MatX3 start(g.nodes.size(), 3);
+    for (size_t a = 0; a < g.nodes.size(); ++a) start.row(a) = m.nodes().row(g.nodes[a]);
+    const int loadVertex =
+        nearestVertex(organ.surface.V, m.nodes().row(top).transpose() + Vec3(0.03, 0.0, 0.0));
+    std::vector<Real> surf, corr, interp, total;
+    for (int s = 0; s < o.steps; ++s) {
+      StepInput in;
+      in.time = s * 1e-3;
+      in.dt = 1e-3;
+      in.gravity = Vec3(0, 0, -9.81);
+      g.targets = start.rowwise() + Vec3(0, 0, 0.01 * (s + 1) / o.steps).transpose();
+      in.grasps.push_back(g);
+      in.loads.push_back({loadVertex, Vec3(0, 0, -0.5)});
+      const auto a = std::chrono::steady_clock::now();
+      m.step(in);
+      const auto b = std::chrono::steady_clock::now();
+      const PhaseTimes t = m.phaseTimes();
+      surf.push_back(t.at("surface"));
+      corr.push_back(t.at("correction"));
+      interp.push_back(t.at("interpolation"));
+      total.push_back(std::chrono::duration<double, std::milli>(b - a).count());
+    }
+    nlohmann::json row = {{"model", r + 1},
+                          {"point_number", nc},
+                          {"interior_points", m.counts().at("points")},
+                          {"grasped_nodes", g.nodes.size()},
+                          {"surface_ms", median(surf)},
+                          {"correction_ms", median(corr)},
+                          {"interpolation_ms", median(interp)},
+                          {"overall_ms", median(total)},
+                          {"precompute_s", precompute},
+                          {"matrix_MB", m.deformationMatrix().bytes() / 1e6}};
+    if (!o.quick && r < paper.size())
+      row["paper"] = {{"point_number", points[r]},
+                      {"surface_ms", paper[r][0]},
+                      {"correction_ms", paper[r][1]},
+                      {"interpolation_ms", paper[r][2]},
+                      {"overall_ms", paper[r][3]}};
+    rows.push_back(row);
+  }
+  return {{"name", "bem-timing"},
+          {"source", "Zhu, Gu & Zhou 2010, Table 1"},
+          {"organ", "phantom:liver (8122 vertices), E = 5500 Pa, nu = 0.45"},
+          {"note", "medians over the timed steps; single thread; paper: 2.26 GHz Pentium M"},
+          {"rows", rows}};
+}
+
+nlohmann::json bemAccuracyTable(const TableOptions& o) {
+  struct Row {
+    int coarse, fine;
+    double paperRatio, paperLoss;
+  };
+  const std::vector<Row> rows =
+      o.quick ? std::vector<Row>{{150, 300, 2.0, 0}}
+              : std::vector<Row>{{284, 256, 0.90, 0.021},  {284, 394, 1.39, 0.037},
+                                 {284, 574, 2.02, 0.051},  {608, 506, 0.83, 0.014},
+                                 {608, 1000, 1.64, 0.033}, {608, 1586, 2.61, 0.062}};
+  const SurfaceMesh liver = makePhantom("liver");
+  const Box box = boundingBox(liver.V);
+  LossRatioCase c;
+  c.center = liver.V.row(topVertex(liver.V)).transpose();
+  c.radius = 0.15 * box.size().maxCoeff();
+  c.traction = Vec3(0, 0, -500);
+  c.fixedBox = bottomBox(liver.V, 0.15);
+  const Material material{5500, 0.45, 1000};
+  nlohmann::json out = nlohmann::json::array();
+  for (const Row& r : rows) {
+    const SurfaceMesh coarse = decimateQuadric(liver, r.coarse);
+    const SurfaceMesh fine = decimateQuadric(liver, r.fine);
+    const LossRatioResult res = bemLossRatio(coarse, fine, material, c);
+    nlohmann::json row = {{"coarse_vertices", coarse.numVertices()},
+                          {"fine_vertices", fine.numVertices()},
+                          {"fine_polygons", fine.numFaces()},
+                          {"vertex_ratio", double(fine.numVertices()) / coarse.numVertices()},
+                          {"loss_ratio", res.ratio},
+                          {"mean_fine_displacement_m", res.meanFineDisplacement},
+                          {"max_fine_displacement_m", res.maxFineDisplacement}};
+    if (!o.quick) row["paper"] = {{"vertex_ratio", r.paperRatio}, {"loss_ratio", r.paperLoss}};
+    out.push_back(row);
+  }
+  return {{"name", "bem-accuracy"},
+          {"source", "Zhu, Gu & Zhou 2010, Table 2"},
+          {"organ", "phantom:liver decimated (quadric edge collapse), E = 5500 Pa, nu = 0.45"},
+          {"load",
+           "Gaussian traction patch, peak 500 Pa down, radius 0.15 x largest extent, "
+           "centred on the top vertex; bottom 15% fixed"},
+          {"rows", out}};
+}
+
+}  // namespace deform::particle_bem

@@ -1,0 +1,427 @@
+#include "particle_bem_model.h"
+
+#include "distance_field.h"
+#include "physics_points.h"
+#include "surface_decimation.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+
+namespace deform::particle_bem {
+
+namespace {
+
+constexpr const char* kMatrixVersion = "particle_bem.M/1";
+
+using Clock = std::chrono::steady_clock;
+double ms(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+// The k (<= 8) rows of P nearest to p, nearest first; unused slots get index -1.
+void nearest8(const MatX3& P, const Vec3& p, std::array<int, 8>& idx, std::array<Real, 8>& dist) {
+  std::vector<std::pair<Real, int>> d(P.rows());
+  for (Eigen::Index j = 0; j < P.rows(); ++j) d[j] = {(P.row(j).transpose() - p).norm(), int(j)};
+  const size_t k = std::min<size_t>(8, d.size());
+  std::partial_sort(d.begin(), d.begin() + k, d.end());
+  for (size_t a = 0; a < 8; ++a) {
+    idx[a] = a < k ? d[a].second : -1;
+    dist[a] = a < k ? d[a].first : 0;
+  }
+}
+
+// Inverse-distance weights, normalised; a coincident point takes all the weight.
+std::array<Real, 8> shepard(const std::array<int, 8>& idx, const std::array<Real, 8>& dist,
+                            Real eps) {
+  std::array<Real, 8> w{};
+  Real sum = 0;
+  for (int a = 0; a < 8; ++a) {
+    if (idx[a] < 0) continue;
+    w[a] = 1 / (dist[a] * dist[a] + eps * eps);
+    sum += w[a];
+  }
+  for (Real& x : w) x /= sum;
+  return w;
+}
+
+}  // namespace
+
+std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
+  return {
+      ParamSpec::flag("guidance", true,
+                      "true: BEM surface-guided particles (organs); false: pure MLS particle "
+                      "elasticity (small tissues)"),
+      ParamSpec::integer("points", 400, 8, 200000,
+                         "interior physics points (lattice inside the organ)"),
+      ParamSpec::integer("coarse_vertices", 600, 12, 20000,
+                         "vertices of the coarse BEM surface = surface particles"),
+      ParamSpec::real("spring_stiffness", "1/s^2", 2500.0, 1e-3, 1e9,
+                      "virtual spring stiffness per unit mass pulling particles to BEM targets"),
+      ParamSpec::real("spring_damping", "1/s", 100.0, 0.0, 1e7,
+                      "virtual spring damping per unit mass (viscosity / creep)"),
+      ParamSpec::real("particle_damping", "1/s", 2.0, 0.0, 1e6,
+                      "mass-proportional damping of the pure particle model"),
+      ParamSpec::real("kernel_radius", "1", 2.0, 1.2, 4.0,
+                      "MLS kernel support h in lattice spacings (pure particle model)"),
+      ParamSpec::flag("repulsion", true,
+                      "surface-particle repulsion forces enter the traction vector"),
+      ParamSpec::flag("bem_gravity", true,
+                      "gravity in the guided model through a precomputed particular solution "
+                      "(the paper ignores gravity)"),
+      ParamSpec::integer("duffy_order", 6, 2, 16,
+                         "Gauss-Legendre order of the Duffy rule on singular triangles"),
+  };
+}
+
+ModelInfo ParticleBemModel::info() {
+  ModelInfo i;
+  i.name = "particle_bem";
+  i.description =
+      "particles guided by a precomputed BEM deformation matrix (pure MLS particles when "
+      "guidance=false)";
+  i.citation =
+      "Zhu B., Gu L., Zhou Z.: Particle-Based Deformable Modeling with Pre-computed Surface Data "
+      "in Real-Time Surgical Simulation (Image Guided Surgery and Therapy Lab, Shanghai Jiao Tong "
+      "University; no DOI given in the paper)";
+  i.version = "1.0";
+  i.capabilities = {Capability::Grasp, Capability::PointForce, Capability::Gravity,
+                    Capability::NeedsPrecompute};
+  i.params = paramSpecs();
+  i.create = [] { return std::make_unique<ParticleBemModel>(); };
+  return i;
+}
+
+void ParticleBemModel::init(const ModelSetup& setup) {
+  const SurfaceMesh& S = setup.organ.surface;
+  m_source = setup.organ.source;
+  if (S.numVertices() < 4 || S.numFaces() < 4)
+    throw InputError(m_source, "organ.mesh", "particle_bem needs a closed surface");
+  const Real volume = signedVolume(S.V, S.F);
+  if (!(volume > 0))
+    throw InputError(m_source, "organ.mesh",
+                     "particle_bem needs a closed, outward-oriented surface (volume <= 0)");
+  m_guided = setup.params.flag("guidance");
+  m_dt = setup.dt;
+  m_material = setup.organ.material;
+  m_fineRest = S.V;
+  m_numeric.clear();
+  const TriangleGrid fineGrid(S.V, S.F);
+  const SignedDistanceField sdf(fineGrid, 40, 0.05 * boundingBox(S.V).diagonal());
+  m_numeric["distance_field_nodes"] = sdf.nodeCount();
+  if (m_guided)
+    initGuided(setup, sdf, volume);
+  else
+    initParticles(setup, sdf, volume);
+  m_fixedMask.assign(m_rest.rows(), 0);
+  for (int i : m_fixed) m_fixedMask[i] = 1;
+  reset();
+}
+
+void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceField& sdf,
+                                  Real volume) {
+  const SurfaceMesh& S = setup.organ.surface;
+  const ParamValues& p = setup.params;
+  DecimationStats st;
+  m_coarse = decimateQuadric(S, int(p.integer("coarse_vertices")), &st);
+  m_numeric["decimation_refused_collapses"] = st.refusedTopology + st.refusedGeometry;
+  const int nc = m_coarse.numVertices();
+  const PhysicsPoints interior =
+      sampleLatticeInside(sdf, S.V, volume, int(p.integer("points")), 0.5);
+  m_spacing = interior.spacing;
+  m_rest.resize(nc + interior.points.rows(), 3);
+  m_rest.topRows(nc) = m_coarse.V;
+  m_rest.bottomRows(interior.points.rows()) = interior.points;
+  m_restCoarse = m_coarse.V;
+  m_fixed = fixedNodeIndices(m_rest, setup.organ.fixed, S);
+  std::vector<int> coarseFixed;
+  for (int i : m_fixed)
+    if (i < nc) coarseFixed.push_back(i);
+
+  m_springK = p.real("spring_stiffness");
+  m_springC = p.real("spring_damping");
+  m_repulsion = p.flag("repulsion");
+  m_bemGravity = p.flag("bem_gravity");
+  BemQuadrature quad;
+  quad.duffyOrder = int(p.integer("duffy_order"));
+
+  // The cache key names every input of M: the coarse surface, the material, the fixed set and
+  // the quadrature.
+  CacheKey key;
+  key.add(kMatrixVersion).add(m_coarse.V).add(m_coarse.F).add(m_material.young);
+  key.add(m_material.poisson).add(m_material.density).add(int(coarseFixed.size()));
+  for (int i : coarseFixed) key.add(i);
+  key.add(quad.duffyOrder).add(quad.nearFactor).add(quad.maxLevel);
+  bool loaded = false;
+  if (auto bytes = setup.cache.get("particle_bem.M", key)) {
+    try {
+      ByteReader r(*bytes);
+      if (r.string() != kMatrixVersion) throw std::runtime_error("version");
+      r.matrix(m_bem.M);
+      r.matrix(m_bem.gravity);
+      m_bem.bordered = r.pod<char>() != 0;
+      m_bem.fixed = coarseFixed;
+      loaded = r.atEnd() && m_bem.M.rows() == 3 * nc && m_bem.M.cols() == 3 * nc &&
+               m_bem.gravity.rows() == 3 * nc;
+    } catch (const std::exception&) {
+      loaded = false;
+    }
+  }
+  if (!loaded) {
+    BemMatrices bem = assembleBem(m_coarse, m_material.young, m_material.poisson, quad);
+    m_numeric["bem_degenerate_triangles"] = bem.degenerateTriangles;
+    m_bem = computeDeformationMatrix(std::move(bem), m_coarse,
+                                     vertexNormals(m_coarse.V, m_coarse.F), coarseFixed,
+                                     m_material.young, m_material.poisson, m_material.density);
+    if (!m_bem.M.allFinite())
+      throw InputError(m_source, "organ.mesh",
+                       "the BEM system of the coarse surface is singular (degenerate surface?)");
+    ByteWriter w;
+    w.string(kMatrixVersion);
+    w.matrix(m_bem.M);
+    w.matrix(m_bem.gravity);
+    w.pod<char>(m_bem.bordered ? 1 : 0);
+    setup.cache.put("particle_bem.M", key, w.bytes());
+  }
+  m_nodalArea = nodalAreas(m_coarse);
+
+  const TriangleGrid coarseGrid(m_coarse.V, m_coarse.F);
+  m_map = mapToSurface(coarseGrid, S.V);
+
+  const Real meanEdge = [&] {
+    Real sum = 0;
+    for (int f = 0; f < m_coarse.numFaces(); ++f)
+      for (int k = 0; k < 3; ++k)
+        sum +=
+            (m_coarse.V.row(m_coarse.F(f, k)) - m_coarse.V.row(m_coarse.F(f, (k + 1) % 3))).norm();
+    return sum / (3.0 * m_coarse.numFaces());
+  }();
+  m_repulsionDistance = 0.5 * meanEdge;
+  m_repulsionStiffness = m_material.young * m_repulsionDistance;
+
+  m_interiorNodes.resize(interior.points.rows());
+  m_interiorWeights.resize(interior.points.rows());
+  for (Eigen::Index q = 0; q < interior.points.rows(); ++q) {
+    std::array<Real, 8> dist;
+    nearest8(m_coarse.V, interior.points.row(q).transpose(), m_interiorNodes[q], dist);
+    m_interiorWeights[q] = shepard(m_interiorNodes[q], dist, 1e-6 * meanEdge);
+  }
+  m_U.resize(3 * nc);
+}
+
+void ParticleBemModel::initParticles(const ModelSetup& setup, const SignedDistanceField& sdf,
+                                     Real volume) {
+  const SurfaceMesh& S = setup.organ.surface;
+  const ParamValues& p = setup.params;
+  const PhysicsPoints pts = sampleLatticeInside(sdf, S.V, volume, int(p.integer("points")), 0.0);
+  if (pts.points.rows() < 4)
+    throw InputError(m_source, "params.points", "fewer than 4 lattice points fit in the organ");
+  m_spacing = pts.spacing;
+  m_rest = pts.points;
+  const int n = int(m_rest.rows());
+  const VecX vol = VecX::Constant(n, volume / n);
+  m_mass = m_material.density * vol;
+  long long degenerate = 0;
+  m_mls = initMlsElasticity(m_rest, p.real("kernel_radius") * m_spacing, vol, m_material.young,
+                            m_material.poisson, &degenerate);
+  m_numeric["degenerate_particles"] = degenerate;
+  m_particleDamping = p.real("particle_damping");
+  m_fixed = fixedNodeIndices(m_rest, setup.organ.fixed, S);
+  m_skinNodes.resize(S.numVertices());
+  m_skinWeights.resize(S.numVertices());
+  for (int v = 0; v < S.numVertices(); ++v) {
+    std::array<Real, 8> dist;
+    nearest8(m_rest, S.V.row(v).transpose(), m_skinNodes[v], dist);
+    m_skinWeights[v] = shepard(m_skinNodes[v], dist, 1e-6 * m_spacing);
+  }
+}
+
+void ParticleBemModel::reset() {
+  m_x = m_rest;
+  m_v = MatX3::Zero(m_rest.rows(), 3);
+  m_target = m_rest;
+  m_surface = m_fineRest;
+  m_kinematic = m_fixedMask;
+  m_times.clear();
+  m_graspSolver = GraspSolver();
+  m_F.assign(m_rest.rows(), Mat3::Identity());
+  m_verletValid = false;
+  m_verlet.clear();
+}
+
+Counts ParticleBemModel::counts() const {
+  Counts c;
+  c["particles"] = m_x.rows();
+  if (m_guided) {
+    c["points"] = m_x.rows() - m_coarse.numVertices();
+    c["coarse_vertices"] = m_coarse.numVertices();
+    c["elements"] = m_coarse.numFaces();
+    c["deformation_matrix_bytes"] = (long long)m_bem.bytes();
+  } else {
+    c["points"] = m_x.rows();
+    c["neighbours"] = (long long)m_mls.nbr.size();
+  }
+  c["fixed"] = (long long)m_fixed.size();
+  return c;
+}
+
+StepStatus ParticleBemModel::step(const StepInput& in) {
+  const StepStatus s = m_guided ? stepGuided(in) : stepParticles(in);
+  if (s != StepStatus::Ok) return s;
+  return (m_x.allFinite() && m_surface.allFinite()) ? StepStatus::Ok : StepStatus::Diverged;
+}
+
+void ParticleBemModel::applyGrasps(const StepInput& in) {
+  for (const GraspInput& g : in.grasps)
+    for (size_t a = 0; a < g.nodes.size(); ++a) {
+      const int i = g.nodes[a];
+      if (i < 0 || i >= m_x.rows() || m_fixedMask[i]) continue;
+      m_v.row(i) = (g.targets.row(Eigen::Index(a)) - m_x.row(i)) / in.dt;
+      m_x.row(i) = g.targets.row(Eigen::Index(a));
+    }
+}
+
+StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
+  const auto t0 = Clock::now();
+  const int nc = m_coarse.numVertices();
+  m_P.clear();
+  for (const PointLoad& l : in.loads) {
+    if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_map.triangle.size())) continue;
+    const int t = m_map.triangle[l.surfaceVertex];
+    for (int k = 0; k < 3; ++k) {
+      const int node = m_coarse.F(t, k);
+      const Real b = m_map.bary(l.surfaceVertex, k);
+      if (b != 0 && !m_fixedMask[node]) m_P.add(node, b * l.force / m_nodalArea[node]);
+    }
+  }
+  if (m_repulsion) {
+    // Surface particles closer than the repulsion distance d that were at least 2d apart at
+    // rest (mesh neighbours excluded) push each other apart. Candidate pairs come from a Verlet
+    // list: pairs within d + skin (skin = d) found with the spatial hash, rebuilt only when a
+    // particle has moved more than skin / 2 since the last build, so no pair closer than d is
+    // ever missed.
+    const Real skin = m_repulsionDistance;
+    Real maxMove2 = 0;
+    for (int i = 0; m_verletValid && i < nc && maxMove2 <= 0.25 * skin * skin; ++i)
+      maxMove2 = std::max(maxMove2, (m_x.row(i) - m_verletRef.row(i)).squaredNorm());
+    if (!m_verletValid || maxMove2 > 0.25 * skin * skin) {
+      m_verletRef = m_x.topRows(nc);
+      m_hash.setCellSize(m_repulsionDistance + skin);
+      m_hash.build(m_verletRef);
+      m_pairs.clear();
+      m_hash.pairsWithin(m_repulsionDistance + skin, m_pairs);
+      m_verlet.clear();
+      for (const auto& [i, j] : m_pairs)
+        if ((m_restCoarse.row(i) - m_restCoarse.row(j)).norm() >= 2 * m_repulsionDistance)
+          m_verlet.emplace_back(i, j);
+      m_verletValid = true;
+      ++m_numeric["repulsion_list_builds"];
+    }
+    for (const auto& [i, j] : m_verlet) {
+      const Vec3 d = (m_x.row(i) - m_x.row(j)).transpose();
+      const Real len = d.norm();
+      if (!(len > 0) || len >= m_repulsionDistance) continue;
+      const Vec3 f = m_repulsionStiffness * (m_repulsionDistance - len) * d / len;
+      if (!m_fixedMask[i]) m_P.add(i, f / m_nodalArea[i]);
+      if (!m_fixedMask[j]) m_P.add(j, -f / m_nodalArea[j]);
+      ++m_numeric["repulsion_pairs"];
+    }
+  }
+  m_U.setZero();
+  accumulateDisplacement(m_bem.M, m_P, m_U);
+  if (m_bemGravity) m_U.noalias() += m_bem.gravity * in.gravity;
+
+  // Grasped coarse nodes: tractions so that their displacement is the prescribed one.
+  std::vector<int> graspNodes;
+  std::vector<Vec3> graspTargets;
+  for (const GraspInput& g : in.grasps)
+    for (size_t a = 0; a < g.nodes.size(); ++a) {
+      const int i = g.nodes[a];
+      if (i < 0 || i >= nc || m_fixedMask[i]) continue;
+      if (std::find(graspNodes.begin(), graspNodes.end(), i) != graspNodes.end()) continue;
+      graspNodes.push_back(i);
+      graspTargets.push_back(g.targets.row(Eigen::Index(a)).transpose());
+    }
+  if (!graspNodes.empty()) {
+    m_graspRhs.resize(3 * graspNodes.size());
+    for (size_t a = 0; a < graspNodes.size(); ++a)
+      m_graspRhs.segment<3>(3 * a) = graspTargets[a] - m_restCoarse.row(graspNodes[a]).transpose() -
+                                     m_U.segment<3>(3 * graspNodes[a]);
+    if (m_graspSolver.solve(m_bem.M, graspNodes, m_graspRhs, m_graspP)) {
+      SparseTraction Pg;
+      for (size_t a = 0; a < graspNodes.size(); ++a)
+        Pg.add(graspNodes[a], m_graspP.segment<3>(3 * a));
+      accumulateDisplacement(m_bem.M, Pg, m_U);
+    } else {
+      ++m_numeric["singular_grasp_systems"];
+    }
+  }
+  const auto t1 = Clock::now();
+
+  for (int i = 0; i < nc; ++i)
+    m_target.row(i) = m_restCoarse.row(i) + m_U.segment<3>(3 * i).transpose();
+  for (size_t q = 0; q < m_interiorNodes.size(); ++q) {
+    Vec3 u = Vec3::Zero();
+    for (int a = 0; a < 8; ++a)
+      if (m_interiorNodes[q][a] >= 0)
+        u += m_interiorWeights[q][a] * m_U.segment<3>(3 * m_interiorNodes[q][a]);
+    m_target.row(nc + Eigen::Index(q)) = m_rest.row(nc + Eigen::Index(q)) + u.transpose();
+  }
+  m_kinematic = m_fixedMask;
+  for (const GraspInput& g : in.grasps)
+    for (int i : g.nodes)
+      if (i >= 0 && i < m_x.rows()) m_kinematic[i] = 1;
+  springCorrection(m_x, m_v, m_target, m_springK, m_springC, in.dt, m_kinematic);
+  applyGrasps(in);
+  const auto t2 = Clock::now();
+
+  m_coarseDisp = m_x.topRows(nc) - m_restCoarse;
+  interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_surface);
+  const auto t3 = Clock::now();
+  m_times["surface"] = ms(t0, t1);
+  m_times["correction"] = ms(t1, t2);
+  m_times["interpolation"] = ms(t2, t3);
+  return StepStatus::Ok;
+}
+
+StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
+  const auto t0 = Clock::now();
+  mlsDeformationGradients(m_mls, m_rest, m_x, m_F);
+  mlsForces(m_mls, m_F, m_forces);
+  for (const PointLoad& l : in.loads) {
+    if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_skinNodes.size())) continue;
+    for (int a = 0; a < 8; ++a) {
+      const int j = m_skinNodes[l.surfaceVertex][a];
+      if (j >= 0) m_forces.row(j) += m_skinWeights[l.surfaceVertex][a] * l.force.transpose();
+    }
+  }
+  const auto t1 = Clock::now();
+  const Real damp = 1 / (1 + in.dt * m_particleDamping);
+  for (Eigen::Index i = 0; i < m_x.rows(); ++i) {
+    if (m_fixedMask[i]) continue;
+    m_v.row(i) =
+        (m_v.row(i) + in.dt * (m_forces.row(i) / m_mass[i] + in.gravity.transpose())) * damp;
+    m_x.row(i) += in.dt * m_v.row(i);
+  }
+  applyGrasps(in);
+  const auto t2 = Clock::now();
+  mlsDeformationGradients(m_mls, m_rest, m_x, m_F);
+  for (Eigen::Index v = 0; v < m_fineRest.rows(); ++v) {
+    Vec3 x = Vec3::Zero();
+    for (int a = 0; a < 8; ++a) {
+      const int j = m_skinNodes[v][a];
+      if (j < 0) continue;
+      x += m_skinWeights[v][a] *
+           (m_x.row(j).transpose() + m_F[j] * (m_fineRest.row(v) - m_rest.row(j)).transpose());
+    }
+    m_surface.row(v) = x.transpose();
+  }
+  const auto t3 = Clock::now();
+  m_times["forces"] = ms(t0, t1);
+  m_times["integration"] = ms(t1, t2);
+  m_times["skinning"] = ms(t2, t3);
+  return StepStatus::Ok;
+}
+
+}  // namespace deform::particle_bem

@@ -1,0 +1,102 @@
+// particle_bem: the model class. Zhu, Gu & Zhou 2010, "Particle-Based Deformable Modeling with
+// Pre-computed Surface Data in Real-Time Surgical Simulation".
+//
+// guidance = true (the paper's surface-guided organ, §5): nodes() are the particles: first the
+// surface particles (the vertices of the coarse BEM surface), then the interior physics points.
+// Each step: sparse traction vector -> U = M P (eq. 6) -> damped virtual springs pull every
+// particle to its target (surface particles: X + U; interior particles: X + inverse-distance
+// weighted U of their 8 nearest coarse nodes) -> the fine organ surface follows the coarse
+// surface particles by barycentric interpolation. See guided_particles.h, bem_assembly.h.
+//
+// guidance = false (the paper's pure particle model for small tissues, §4): nodes() are the
+// interior physics points, moved by MLS point-based elasticity (sph_elasticity.h) with gravity,
+// symplectic Euler; the fine surface is skinned to the particles to first order,
+// x_v = sum_j w_vj (x_j + F_j (X_v - X_j)) / sum_j w_vj over the 8 nearest particles.
+#pragma once
+
+#include "bem_assembly.h"
+#include "distance_field.h"
+#include "guided_particles.h"
+#include "spatial_hash.h"
+#include "sph_elasticity.h"
+
+#include <deform/model.h>
+#include <deform/registry.h>
+
+#include <memory>
+
+namespace deform::particle_bem {
+
+class ParticleBemModel final : public Model {
+ public:
+  static std::vector<ParamSpec> paramSpecs();
+  static ModelInfo info();
+
+  void init(const ModelSetup& setup) override;
+  StepStatus step(const StepInput& in) override;
+  const MatX3& nodes() const override { return m_x; }
+  const MatX3& surface() const override { return m_surface; }
+  void reset() override;
+  Counts counts() const override;
+  PhaseTimes phaseTimes() const override { return m_times; }
+  NumericCounters numericCounters() const override { return m_numeric; }
+
+  // For tests, benchmarks and tables.
+  bool guided() const { return m_guided; }
+  const SurfaceMesh& coarseSurface() const { return m_coarse; }
+  const DeformationMatrix& deformationMatrix() const { return m_bem; }
+  int surfaceParticles() const { return m_guided ? m_coarse.numVertices() : 0; }
+  const std::vector<int>& fixedNodes() const { return m_fixed; }
+  Real particleSpacing() const { return m_spacing; }
+
+ private:
+  void initGuided(const ModelSetup& setup, const SignedDistanceField& sdf, Real volume);
+  void initParticles(const ModelSetup& setup, const SignedDistanceField& sdf, Real volume);
+  StepStatus stepGuided(const StepInput& in);
+  StepStatus stepParticles(const StepInput& in);
+  void applyGrasps(const StepInput& in);
+
+  bool m_guided = true;
+  std::string m_source;
+  MatX3 m_fineRest;
+  Real m_dt = 1e-3;
+  Material m_material;
+  MatX3 m_rest, m_x, m_v, m_target, m_surface;
+  std::vector<int> m_fixed;
+  std::vector<char> m_fixedMask, m_kinematic;
+  Real m_spacing = 0;
+  PhaseTimes m_times;
+  NumericCounters m_numeric;
+
+  // guided
+  SurfaceMesh m_coarse;
+  DeformationMatrix m_bem;
+  VecX m_nodalArea;
+  SurfaceMap m_map;
+  std::vector<std::array<int, 8>> m_interiorNodes;
+  std::vector<std::array<Real, 8>> m_interiorWeights;
+  Real m_springK = 0, m_springC = 0;
+  bool m_repulsion = true, m_bemGravity = true;
+  Real m_repulsionDistance = 0, m_repulsionStiffness = 0;
+  MatX3 m_restCoarse;
+  SpatialHash m_hash;
+  std::vector<std::pair<int, int>> m_pairs;
+  std::vector<std::pair<int, int>> m_verlet;
+  MatX3 m_verletRef;
+  bool m_verletValid = false;
+  SparseTraction m_P;
+  VecX m_U, m_graspRhs, m_graspP;
+  GraspSolver m_graspSolver;
+  MatX3 m_coarseDisp;
+
+  // pure particles
+  MlsElasticity m_mls;
+  VecX m_mass;
+  Real m_particleDamping = 0;
+  std::vector<Mat3> m_F;
+  MatX3 m_forces;
+  std::vector<std::array<int, 8>> m_skinNodes;
+  std::vector<std::array<Real, 8>> m_skinWeights;
+};
+
+}  // namespace deform::particle_bem

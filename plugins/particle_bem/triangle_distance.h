@@ -1,0 +1,52 @@
+// particle_bem: exact point-to-triangle-mesh distance with a uniform bucket grid, and the sign
+// of the distance from angle-weighted pseudo-normals (Baerentzen & Aanaes 2005). Written inside
+// the plugin because core has no distance query yet (see README).
+#pragma once
+
+#include <deform/mesh.h>
+
+#include <vector>
+
+namespace deform::particle_bem {
+
+/// Closest point to p on the triangle (a, b, c) (Voronoi-region walk, Ericson 2005 §5.1.5).
+/// bary: weights of a, b, c (exactly 0 on the excluded vertices of an edge or vertex region).
+Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, Vec3& bary);
+
+struct ClosestPoint {
+  Vec3 point = Vec3::Zero();
+  Vec3 bary = Vec3::Zero();  ///< weights of the triangle's three vertices
+  Real distance = 0;         ///< unsigned, m
+  int triangle = -1;
+};
+
+/// Closed triangle surface with its triangles bucketed into a uniform grid (each triangle in
+/// every cell its bounding box overlaps). Queries search cells in growing shells, so a query
+/// costs O(triangles near p). Not thread-safe (queries reuse a visit stamp).
+class TriangleGrid {
+ public:
+  /// V: #V by 3, F: #F by 3 (outward). cellSize <= 0: twice the mean edge length.
+  TriangleGrid(const MatX3& V, const MatX3i& F, Real cellSize = 0);
+
+  ClosestPoint closest(const Vec3& p) const;
+  /// Negative inside the closed surface. Sign from the pseudo-normal of the closest feature
+  /// (face normal, edge: sum of the two face normals, vertex: angle-weighted normal).
+  Real signedDistance(const Vec3& p, ClosestPoint* cp = nullptr) const;
+
+  const MatX3& vertices() const { return m_V; }
+  const MatX3i& faces() const { return m_F; }
+
+ private:
+  MatX3 m_V;
+  MatX3i m_F;
+  Vec3 m_lo;
+  Real m_cell = 1;
+  Eigen::Vector3i m_dims;
+  std::vector<int> m_cellStart, m_cellTris;
+  MatX3 m_faceNormal, m_vertexNormal;
+  std::vector<Vec3> m_edgeNormal;    ///< per (face, local edge k = opposite vertex k)
+  mutable std::vector<int> m_stamp;  ///< per triangle: last query that tested it
+  mutable int m_query = 0;
+};
+
+}  // namespace deform::particle_bem

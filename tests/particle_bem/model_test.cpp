@@ -1,0 +1,159 @@
+// Tests of the particle_bem model class (guided and pure particle modes).
+#include "particle_bem_model.h"
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+namespace deform::particle_bem {
+namespace {
+
+struct Fixture {
+  Organ organ;
+  ParamValues params;
+  Cache cache{""};
+  explicit Fixture(bool guided, int coarse = 250, int points = 150) {
+    organ.source = "test:ellipsoid";
+    organ.surface = testing::ellipsoid(4, Vec3(0.06, 0.04, 0.03));
+    organ.material = Material{5000, 0.3, 1000};
+    Box b;
+    b.lo = Vec3(-1, -1, -1);
+    b.hi = Vec3(1, 1, -0.015);
+    organ.fixed.boxes.push_back(b);
+    params = ParamValues::defaults(ParticleBemModel::paramSpecs());
+    params.set("guidance", guided);
+    params.set("coarse_vertices", (long long)coarse);
+    params.set("points", (long long)points);
+  }
+  std::unique_ptr<ParticleBemModel> make(Cache* c = nullptr) {
+    auto m = std::make_unique<ParticleBemModel>();
+    m->init(ModelSetup{organ, params, c ? *c : cache, 1e-3, Vec3(0, 0, -9.81)});
+    return m;
+  }
+};
+
+int topVertex(const MatX3& V) {
+  int t = 0;
+  for (int i = 0; i < V.rows(); ++i)
+    if (V(i, 2) > V(t, 2)) t = i;
+  return t;
+}
+
+StepInput input(int step) {
+  StepInput in;
+  in.time = step * 1e-3;
+  in.dt = 1e-3;
+  return in;
+}
+
+TEST(GuidedModel, RestStaysAtRestAndInterpolationIsExact) {
+  Fixture fx(true);
+  auto m = fx.make();
+  EXPECT_EQ(m->surface(), fx.organ.surface.V);
+  EXPECT_EQ(m->counts().at("coarse_vertices"), 250);
+  EXPECT_GT(m->counts().at("points"), 100);
+  EXPECT_GT(m->counts().at("deformation_matrix_bytes"), 0);
+  EXPECT_FALSE(m->fixedNodes().empty());
+  for (int s = 0; s < 20; ++s) ASSERT_EQ(m->step(input(s)), StepStatus::Ok);
+  EXPECT_LT((m->surface() - fx.organ.surface.V).cwiseAbs().maxCoeff(), 1e-15);
+  const PhaseTimes t = m->phaseTimes();
+  EXPECT_TRUE(t.count("surface") && t.count("correction") && t.count("interpolation"));
+}
+
+TEST(GuidedModel, PointLoadDisplacesAlongTheLoad) {
+  Fixture fx(true);
+  auto m = fx.make();
+  const int v = topVertex(fx.organ.surface.V);
+  const Vec3 f(0.2, 0, -1.0);
+  for (int s = 0; s < 400; ++s) {
+    StepInput in = input(s);
+    in.loads.push_back({v, f});
+    ASSERT_EQ(m->step(in), StepStatus::Ok);
+  }
+  const Vec3 u = (m->surface().row(v) - fx.organ.surface.V.row(v)).transpose();
+  EXPECT_GT(u.norm(), 1e-4);
+  EXPECT_GT(u.dot(f.normalized()), 0.8 * u.norm());
+  // Far from the load (and at the fixed bottom) the surface moves much less.
+  int bottom = 0;
+  for (int i = 0; i < fx.organ.surface.V.rows(); ++i)
+    if (fx.organ.surface.V(i, 2) < fx.organ.surface.V(bottom, 2)) bottom = i;
+  EXPECT_LT((m->surface().row(bottom) - fx.organ.surface.V.row(bottom)).norm(), 0.2 * u.norm());
+}
+
+TEST(GuidedModel, GraspReachesTargetAndResetReproduces) {
+  Fixture fx(true);
+  auto m = fx.make();
+  const int top = topVertex(m->nodes().topRows(m->surfaceParticles()));
+  GraspInput g;
+  g.nodes = {top};
+  g.targets = m->nodes().row(top) + Vec3(0, 0, 0.004).transpose();
+  std::vector<MatX3> first;
+  for (int run = 0; run < 2; ++run) {
+    m->reset();
+    for (int s = 0; s < 300; ++s) {
+      StepInput in = input(s);
+      in.grasps.push_back(g);
+      in.gravity = Vec3(0, 0, -9.81);
+      ASSERT_EQ(m->step(in), StepStatus::Ok);
+    }
+    first.push_back(m->surface());
+  }
+  EXPECT_EQ(first[0], first[1]);  // bit for bit
+  EXPECT_LT((m->nodes().row(top) - g.targets.row(0)).norm(), 1e-12);
+  const int vtop = topVertex(fx.organ.surface.V);
+  EXPECT_GT(m->surface()(vtop, 2) - fx.organ.surface.V(vtop, 2), 0.001);
+}
+
+TEST(GuidedModel, GravitySagsAndCacheHits) {
+  const auto dir = std::filesystem::temp_directory_path() / "particle_bem_model_test_cache";
+  std::filesystem::remove_all(dir);
+  Cache cache(dir);
+  Fixture fx(true, 150, 60);
+  auto a = fx.make(&cache);
+  auto b = fx.make(&cache);
+  ASSERT_GE(cache.events().size(), 2u);
+  EXPECT_EQ(cache.events().back().what, Cache::EventKind::Hit);
+  EXPECT_EQ(a->deformationMatrix().M, b->deformationMatrix().M);
+  for (int s = 0; s < 300; ++s) {
+    StepInput in = input(s);
+    in.gravity = Vec3(0, 0, -9.81);
+    ASSERT_EQ(b->step(in), StepStatus::Ok);
+  }
+  const int v = topVertex(fx.organ.surface.V);
+  EXPECT_LT(b->surface()(v, 2), fx.organ.surface.V(v, 2) - 1e-5);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(ParticleModel, RestStaysAtRestAndGravitySagsStably) {
+  Fixture fx(false, 250, 300);
+  auto m = fx.make();
+  EXPECT_FALSE(m->guided());
+  for (int s = 0; s < 10; ++s) ASSERT_EQ(m->step(input(s)), StepStatus::Ok);
+  EXPECT_LT((m->surface() - fx.organ.surface.V).cwiseAbs().maxCoeff(), 1e-12);
+  m->reset();
+  for (int s = 0; s < 1000; ++s) {
+    StepInput in = input(s);
+    in.gravity = Vec3(0, 0, -9.81);
+    ASSERT_EQ(m->step(in), StepStatus::Ok) << s;
+  }
+  const int v = topVertex(fx.organ.surface.V);
+  const Real dz = m->surface()(v, 2) - fx.organ.surface.V(v, 2);
+  EXPECT_LT(dz, -1e-5);
+  EXPECT_GT(dz, -0.03);  // bounded: no blow-up at dt = 1e-3, E = 5 kPa
+}
+
+TEST(ParticleModel, PointLoadPushesAlongTheLoad) {
+  Fixture fx(false, 250, 300);
+  auto m = fx.make();
+  const int v = topVertex(fx.organ.surface.V);
+  for (int s = 0; s < 500; ++s) {
+    StepInput in = input(s);
+    in.loads.push_back({v, Vec3(0, 0, -0.5)});
+    ASSERT_EQ(m->step(in), StepStatus::Ok);
+  }
+  EXPECT_LT(m->surface()(v, 2) - fx.organ.surface.V(v, 2), -1e-4);
+}
+
+}  // namespace
+}  // namespace deform::particle_bem
