@@ -40,8 +40,12 @@ std::vector<ParamSpec> paramSpecs() {
                          "Newton iterations of Bullet's implicit solver per step (Bullet's "
                          "default 1: linearly implicit)"),
       ParamSpec::integer("krylov_iterations", 300, 1, 100000,
-                         "iteration cap of Bullet's Krylov (conjugate residual) solver per "
-                         "Newton iteration (Bullet's default 300)"),
+                         "iteration cap of Bullet's conjugate gradient solver per Newton "
+                         "iteration (Bullet's default 300)"),
+      ParamSpec::real("krylov_tolerance", "1", 1.1920928955078125e-07, 1e-30, 1.0,
+                      "CG stops when r^T M^-1 r < tol min(1, b^T M^-1 b); default FLT_EPSILON, "
+                      "the value of Bullet's single-precision build (its double build uses "
+                      "DBL_EPSILON and then always runs to the cap)"),
   };
 }
 
@@ -55,6 +59,7 @@ DeformableConfig configFromParams(const ParamValues& p) {
   c.dampingBeta = p.real("damping_beta");
   c.newtonIterations = static_cast<int>(p.integer("newton_iterations"));
   c.krylovIterations = static_cast<int>(p.integer("krylov_iterations"));
+  c.krylovTolerance = p.real("krylov_tolerance");
   return c;
 }
 
@@ -80,10 +85,11 @@ namespace {
 // btDeformableBodySolver keeps its Newton and Krylov iteration caps protected.
 class ConfigurableDeformableSolver : public btDeformableBodySolver {
  public:
-  void setIterationLimits(int newton, int krylov) {
+  void setLimits(int newton, int krylov, Real krylovTolerance) {
     m_maxNewtonIterations = newton;
     m_cg.m_maxIterations = krylov;
     m_cr.m_maxIterations = krylov;
+    m_cg.m_tolerance = krylovTolerance;
   }
 };
 
@@ -235,8 +241,14 @@ void BulletDeformableModel::build() {
   for (Eigen::Index f = 0; f < m_boundary.rows(); ++f)
     b.appendFace(m_boundary(f, 0), m_boundary(f, 1), m_boundary(f, 2));
   b.initializeDmInverse();
-  b.m_tetraScratches.resize(b.m_tetras.size());
-  b.m_tetraScratchesTn.resize(b.m_tetras.size());
+  btSoftBody::TetraScratch scratch;
+  scratch.m_F.setIdentity();
+  scratch.m_cofF.setIdentity();
+  scratch.m_corotation.setIdentity();
+  scratch.m_trace = 3;
+  scratch.m_J = 1;
+  b.m_tetraScratches.resize(b.m_tetras.size(), scratch);
+  b.m_tetraScratchesTn.resize(b.m_tetras.size(), scratch);
   b.m_cfg.collisions = 0;  // nothing to collide with; no self collision
   b.m_cfg.drag = 0;
   b.m_sleepingThreshold = 0;
@@ -258,7 +270,11 @@ void BulletDeformableModel::build() {
   world.addForce(&b, w.gravity.get());
   world.setImplicit(true);
   world.setLineSearch(false);
-  w.deformableSolver.setIterationLimits(m_config.newtonIterations, m_config.krylovIterations);
+  // Bullet 3.24's implicit branch only solves correctly with the projection formulation (the
+  // Lagrange-multiplier default leaves dv = 0: nothing moves); measured, see README.
+  world.setUseProjection(true);
+  w.deformableSolver.setLimits(m_config.newtonIterations, m_config.krylovIterations,
+                               m_config.krylovTolerance);
 
   m_grasped.clear();
   pullPositions();

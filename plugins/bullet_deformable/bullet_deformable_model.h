@@ -6,7 +6,8 @@
 //   (M - dt D - dt^2 K) dv = dt (f(x_n + dt v_n) + D v_n + f_ext),  v+ = v_n + dv,  x+ = x_n + dt
 //   v+
 //
-// solved by Bullet's Krylov solver (conjugate residual, up to `krylov_iterations`), repeated for
+// solved by Bullet's conjugate gradient in its projection form (fixed and kinematic nodes' dv
+// projected to 0; up to `krylov_iterations`, relative tolerance `krylov_tolerance`), repeated for
 // `newton_iterations` Newton steps (Bullet's default 1). Elasticity per tetrahedron with constant
 // deformation gradient F = Ds Dm^-1, either
 //   linear_elasticity (btDeformableLinearElasticityForce): P = 2 mu eps + lambda tr(eps) I,
@@ -41,6 +42,7 @@ struct DeformableConfig {
   Real dampingBeta = 0.01;      ///< s, stiffness-proportional
   int newtonIterations = 1;
   int krylovIterations = 300;
+  Real krylovTolerance = 1.1920928955078125e-07;  ///< FLT_EPSILON, see paramSpecs()
 };
 
 std::vector<ParamSpec> paramSpecs();
