@@ -1,0 +1,89 @@
+// Hybrid FEM+PBD, the coarse volume mesh MV by linear finite elements (paper Sec. 3, Eqs. (1)-(5),
+// Sec. 6.2): 4-node tetrahedra with linear shape functions, element stiffness
+// K_e = V_e B^T D B (Eq. (4), evaluated by the shared kernel deform/fem_tet.h's LinearMaterial),
+// assembled into K once, the fixed nodes eliminated, and K factorised once (CHOLMOD supernodal
+// LL^T). Each step solves the quasi-static equilibrium K u = f (Eq. (5)).
+//
+// Because K never changes, each step uses superposition instead of a full solve: the columns of
+// K^-1 for the three dofs of every loaded node are solved once and cached, and the response to a
+// constant body force (gravity, f_i = sum over tets of rho V_e / 4 g) is solved once per gravity
+// vector; u = u_g + sum_loads K^-1[:, node] f. This is exactly K^-1 f, at O(#dofs) per load.
+//
+// Prescribed displacements (grasps) keep the factorisation too: rows C u = d (each row a node's
+// displacement, or a shape-function combination of up to three nodes) are imposed with Lagrange
+// multipliers r solved on the Schur complement (capacitance matrix) S = C K^-1 C^T:
+//   u = K^-1 (f + C^T r),  S r = d - C K^-1 f,
+// with Z = K^-1 C^T built from the cached node columns and S factorised (complete orthogonal
+// decomposition, so dependent rows are harmless) only when the set of rows changes.
+//
+// Paper: "A Hybrid Model Method for Accurate Surface Deformation and Incision Based on FEM and
+// PBD", Scientific Programming 2021, article 8343312
+// (/work/shared/papers/hybrid-fem-pbd-incision.md).
+#pragma once
+
+#include <deform/mesh.h>
+#include <deform/model.h>
+#include <deform/sparse.h>
+
+#include <Eigen/Dense>
+#include <array>
+#include <map>
+#include <memory>
+#include <vector>
+
+#include "load_processing.h"
+
+namespace deform::hybrid {
+
+class CoarseLinearFem {
+ public:
+  struct NodalForce {
+    int node = 0;
+    Vec3 force = Vec3::Zero();  ///< N
+  };
+  /// sum_k N_k u(node_k) = displacement (m).
+  struct Prescribed {
+    CoarseAttachment at;
+    Vec3 displacement = Vec3::Zero();
+  };
+
+  /// Assembles and factorises K. mesh: positively oriented tets (m); fixed: pinned node indices.
+  /// When nothing is pinned, K is singular; a tiny multiple (1e-8) of its mean diagonal is added
+  /// so that it factorises (reported by regularised()). Throws InputError(source, ...) when the
+  /// factorisation fails or a tet is degenerate.
+  void init(const TetMesh& mesh, const Material& material, const std::vector<int>& fixed,
+            const std::string& source);
+
+  /// Displacements u (#nodes by 3, m) under the given nodal forces, a body acceleration
+  /// (m/s^2, times density), and prescribed displacements.
+  void solve(const std::vector<NodalForce>& forces, const Vec3& gravity,
+             const std::vector<Prescribed>& prescribed, MatX3& u);
+
+  int numNodes() const { return m_numNodes; }
+  int numFreeDofs() const { return m_numFree; }
+  bool regularised() const { return m_regularised; }
+  long long degenerateTets() const { return m_degenerate; }
+  const SparseMatrix& stiffness() const { return m_K; }  ///< reduced to free dofs
+
+ private:
+  const MatX& nodeColumns(int node);  ///< K^-1 restricted to node's free dofs (#free by 3)
+  int m_numNodes = 0, m_numFree = 0;
+  std::vector<int> m_dof;  ///< node * 3 + axis -> free dof or -1
+  SparseMatrix m_K;
+  std::unique_ptr<SparseCholesky> m_chol;
+  VecX m_nodeMass;  ///< lumped, kg
+  std::map<int, MatX> m_columns;
+  Vec3 m_gravity = Vec3::Zero();
+  VecX m_gravityU;
+  bool m_regularised = false;
+  long long m_degenerate = 0;
+  // Capacitance data for the current prescribed rows.
+  std::vector<std::array<Real, 7>> m_rowKey;
+  MatX m_Z;  ///< #free by #rows
+  Eigen::CompleteOrthogonalDecomposition<MatX> m_S;
+  std::vector<int> m_rowAxis;
+  std::vector<CoarseAttachment> m_rowAt;
+  VecX m_scratch;
+};
+
+}  // namespace deform::hybrid

@@ -1,0 +1,348 @@
+#include "hybrid_model.h"
+
+#include <deform/cache.h>
+#include <deform/error.h>
+#include <deform/tet_mesher.h>
+
+#include <chrono>
+#include <cmath>
+
+namespace deform::hybrid {
+
+std::vector<ParamSpec> paramSpecs() {
+  return {
+      ParamSpec::integer("iterations", 10, 1, 10000,
+                         "Gauss-Seidel sweeps over the surface constraints"),
+      ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
+                      "stretch constraint stiffness (classic PBD)"),
+      ParamSpec::real("bending_stiffness", "1", 0.5, 0.0, 1.0,
+                      "dihedral bending constraint stiffness (classic PBD)"),
+      ParamSpec::real("damping", "1/s", 20.0, 0.0, 1e4,
+                      "surface velocity damping rate: v <- v exp(-damping dt) each step"),
+      ParamSpec::flag("surface_load", true,
+                      "the point force also moves its own fine node in the PBD prediction "
+                      "(paper Sec. 6.3) besides loading the coarse FEM"),
+      ParamSpec::integer(
+          "simplification_levels", 1, 1, 4,
+          "vertex-cover simplification passes building the coarse surface (paper: 1)"),
+      ParamSpec::real("min_collapse_quality", "1", 0.1, 0.0, 0.9,
+                      "reject vertex merges leaving a triangle of lower quality "
+                      "4 sqrt(3) A / sum l^2"),
+      ParamSpec::real("tet_edge_factor", "1", 1.0, 0.25, 8.0,
+                      "interior tet edge length of the coarse volume mesh, relative to the coarse "
+                      "surface's mean edge length"),
+      ParamSpec::real("cut_snap", "1", 0.1, 0.0, 0.3,
+                      "incision: intersection points within this barycentric distance of a "
+                      "vertex or edge snap to it"),
+  };
+}
+
+HybridConfig configFromParams(const ParamValues& p) {
+  HybridConfig c;
+  c.iterations = static_cast<int>(p.integer("iterations"));
+  c.stretchStiffness = p.real("stretch_stiffness");
+  c.bendingStiffness = p.real("bending_stiffness");
+  c.damping = p.real("damping");
+  c.surfaceLoad = p.flag("surface_load");
+  c.simplificationLevels = static_cast<int>(p.integer("simplification_levels"));
+  c.minCollapseQuality = p.real("min_collapse_quality");
+  c.tetEdgeFactor = p.real("tet_edge_factor");
+  c.cutSnap = p.real("cut_snap");
+  return c;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+Real meanEdgeLength(const SurfaceMesh& s) {
+  const MatX2i E = uniqueEdges(s.F);
+  Real sum = 0;
+  for (Eigen::Index e = 0; e < E.rows(); ++e) sum += (s.V.row(E(e, 0)) - s.V.row(E(e, 1))).norm();
+  return E.rows() > 0 ? sum / E.rows() : 0;
+}
+
+}  // namespace
+
+HybridMesh buildHybridMesh(const SurfaceMesh& fine, const HybridConfig& cfg,
+                           const std::string& source, Cache* cache) {
+  const auto t0 = Clock::now();
+  CacheKey key;
+  key.add("hybrid_fem_pbd.mesh/1").add(fine.V).add(fine.F).add(cfg.simplificationLevels);
+  key.add(cfg.minCollapseQuality).add(cfg.tetEdgeFactor);
+  HybridMesh m;
+  if (cache) {
+    if (auto bytes = cache->get("hybrid_fem_pbd.mesh", key)) {
+      try {
+        ByteReader r(*bytes);
+        Eigen::Matrix<int, Eigen::Dynamic, 1> c2f;
+        r.matrix(m.coarseSurface.V);
+        r.matrix(m.coarseSurface.F);
+        r.matrix(c2f);
+        r.matrix(m.volume.V);
+        r.matrix(m.volume.T);
+        m.collapsed = r.pod<long long>();
+        m.rejected = r.pod<long long>();
+        m.coarseToFine.assign(c2f.data(), c2f.data() + c2f.size());
+        m.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+        return m;
+      } catch (const std::exception&) {
+        m = HybridMesh();  // unreadable entry: rebuild
+      }
+    }
+  }
+  SimplificationOptions so;
+  so.levels = cfg.simplificationLevels;
+  so.minQuality = cfg.minCollapseQuality;
+  SimplificationResult sr = simplifyByVertexCover(fine, so);
+  m.coarseSurface = std::move(sr.coarse);
+  m.coarseToFine = std::move(sr.coarseToFine);
+  m.collapsed = sr.collapsed;
+  m.rejected = sr.rejected;
+  TetMeshOptions to;
+  to.edgeLength = cfg.tetEdgeFactor * meanEdgeLength(m.coarseSurface);
+  to.refineSurface = false;  // the coarse surface vertices must stay exactly the control nodes
+  to.source = source;
+  TetMeshResult tr = tetrahedralize(m.coarseSurface, to);
+  m.volume = std::move(tr.mesh);
+  if (tr.inputVertices != m.coarseSurface.numVertices() ||
+      m.volume.numVertices() < m.coarseSurface.numVertices())
+    throw InputError(source, "hybrid coarse volume mesh", "the tet mesher changed the surface");
+  m.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  if (cache) {
+    ByteWriter w;
+    Eigen::Matrix<int, Eigen::Dynamic, 1> c2f =
+        Eigen::Map<const Eigen::Matrix<int, Eigen::Dynamic, 1>>(
+            m.coarseToFine.data(), static_cast<Eigen::Index>(m.coarseToFine.size()));
+    w.matrix(m.coarseSurface.V);
+    w.matrix(m.coarseSurface.F);
+    w.matrix(c2f);
+    w.matrix(m.volume.V);
+    w.matrix(m.volume.T);
+    w.pod<long long>(m.collapsed);
+    w.pod<long long>(m.rejected);
+    cache->put("hybrid_fem_pbd.mesh", key, w.bytes());
+  }
+  return m;
+}
+
+void HybridModel::init(const ModelSetup& setup) {
+  init(setup.organ, configFromParams(setup.params), &setup.cache);
+}
+
+void HybridModel::init(const Organ& organ, const HybridConfig& config, Cache* cache) {
+  m_cfg = config;
+  m_source = organ.source;
+  m_density = organ.material.density;
+  const Material& mat = organ.material;
+  if (!(mat.young > 0) || !(mat.density > 0) || !(mat.poisson > -1.0 && mat.poisson < 0.5))
+    throw InputError(organ.source, "organ.material",
+                     "hybrid_fem_pbd needs young > 0, density > 0 and poisson in (-1, 0.5)");
+  const SurfaceMesh& fine = organ.surface;
+  m_mesh = buildHybridMesh(fine, m_cfg, organ.source, cache);
+
+  const std::vector<int> fixedVolume = fixedNodeIndices(m_mesh.volume.V, organ.fixed, fine);
+  m_fem.init(m_mesh.volume, mat, fixedVolume, organ.source);
+  m_fixedFine = fixedNodeIndices(fine.V, organ.fixed, fine);
+
+  m_surf0 = CuttableSurface::fromMesh(fine.V, fine.V, fine.F);
+  m_numeric.clear();
+  long long skipped = 0;
+  m_constraints0 = buildSurfaceConstraints(fine.V, fine.F, &skipped);
+  m_numeric["degenerate_hinges"] = skipped;
+  m_numeric["rejected_merges"] = m_mesh.rejected;
+  if (m_fem.regularised()) m_numeric["unpinned_volume"] = 1;
+  m_controlOf0.assign(fine.numVertices(), -1);
+  for (size_t c = 0; c < m_mesh.coarseToFine.size(); ++c)
+    m_controlOf0[m_mesh.coarseToFine[c]] = static_cast<int>(c);
+  reset();
+}
+
+void HybridModel::rebuildMasses() {
+  // Organ mass (density x enclosed rest volume) lumped to the vertices by a third of the rest
+  // area of each incident triangle.
+  const MatX3i F = m_surf.faces();
+  const int n = m_surf.numVertices();
+  const Real total =
+      m_surf0.x.rows() > 0 ? std::abs(signedVolume(m_surf0.rest, m_surf0.originalF)) : 0;
+  VecX area = VecX::Zero(n);
+  Real areaSum = 0;
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    const Vec3 a = m_surf.rest.row(F(f, 0)), b = m_surf.rest.row(F(f, 1)),
+               c = m_surf.rest.row(F(f, 2));
+    const Real A = 0.5 * (b - a).cross(c - a).norm();
+    for (int k = 0; k < 3; ++k) area[F(f, k)] += A / 3;
+    areaSum += A;
+  }
+  const Real density = m_density;
+  m_mass = VecX::Zero(n);
+  for (int i = 0; i < n; ++i) m_mass[i] = areaSum > 0 ? density * total * area[i] / areaSum : 0;
+}
+
+void HybridModel::reset() {
+  m_surf = m_surf0;
+  m_constraints = m_constraints0;
+  m_controlOf = m_controlOf0;
+  const int n = m_surf.numVertices();
+  m_v = MatX3::Zero(n, 3);
+  m_p = m_surf.x;
+  m_volumeX = m_mesh.volume.V;
+  m_volumeU = MatX3::Zero(m_volumeX.rows(), 3);
+  m_isFixedFine.assign(n, 0);
+  for (int i : m_fixedFine) m_isFixedFine[i] = 1;
+  m_attach.clear();
+  m_immovable.clear();
+  m_activeValid = false;
+  m_lastCut = CutReport();
+  m_cut = false;
+  m_phase.clear();
+  rebuildMasses();
+}
+
+const CoarseAttachment& HybridModel::attachment(int i) {
+  auto it = m_attach.find(i);
+  if (it != m_attach.end()) return it->second;
+  const CoarseAttachment a =
+      attachToCoarseSurface(m_surf.rest.row(i).transpose(), m_mesh.coarseSurface.V,
+                            m_mesh.coarseSurface.F, m_controlOf[i]);
+  return m_attach.emplace(i, a).first->second;
+}
+
+StepStatus HybridModel::step(const StepInput& in) {
+  const int n = m_surf.numVertices();
+  const Real dt = in.dt;
+  auto t = Clock::now();
+
+  // 1. Load processing.
+  std::vector<CoarseLinearFem::NodalForce> nodal;
+  std::vector<std::pair<int, Vec3>> surfaceForces;
+  for (const PointLoad& l : in.loads) {
+    if (l.surfaceVertex < 0 || l.surfaceVertex >= n || l.force.isZero()) continue;
+    const CoarseAttachment& a = attachment(l.surfaceVertex);
+    const std::array<Vec3, 3> f = equivalentNodalForces(a, l.force);
+    for (int k = 0; k < a.count; ++k) nodal.push_back({a.nodes[k], f[k]});
+    if (m_cfg.surfaceLoad && m_controlOf[l.surfaceVertex] < 0)
+      surfaceForces.emplace_back(l.surfaceVertex, l.force);
+  }
+  std::vector<CoarseLinearFem::Prescribed> prescribed;
+  std::vector<char> immovable(n, 0);
+  std::vector<std::pair<int, Vec3>> graspTargets;
+  for (const GraspInput& g : in.grasps) {
+    bool anyControl = false;
+    for (int i : g.nodes)
+      if (i >= 0 && i < n && m_controlOf[i] >= 0) anyControl = true;
+    for (size_t k = 0; k < g.nodes.size(); ++k) {
+      const int i = g.nodes[k];
+      if (i < 0 || i >= n || static_cast<Eigen::Index>(k) >= g.targets.rows()) continue;
+      const Vec3 target = g.targets.row(k).transpose();
+      graspTargets.emplace_back(i, target);
+      immovable[i] = 1;
+      if (m_controlOf[i] >= 0 || !anyControl) {
+        CoarseLinearFem::Prescribed p;
+        p.at = attachment(i);
+        p.displacement = target - m_surf.rest.row(i).transpose();
+        prescribed.push_back(p);
+      }
+    }
+  }
+  m_phase["load"] = msSince(t);
+
+  // 2. Coarse FEM.
+  t = Clock::now();
+  m_fem.solve(nodal, in.gravity, prescribed, m_volumeU);
+  m_volumeX = m_mesh.volume.V + m_volumeU;
+  m_phase["fem"] = msSince(t);
+
+  // 3.-5. Fine surface PBD.
+  t = Clock::now();
+  for (int i = 0; i < n; ++i)
+    if (m_controlOf[i] >= 0 || m_isFixedFine[i]) immovable[i] = 1;
+  if (!m_activeValid || immovable != m_immovable) {
+    m_immovable = immovable;
+    m_w.resize(n);
+    for (int i = 0; i < n; ++i) m_w[i] = immovable[i] || !(m_mass[i] > 0) ? 0 : 1 / m_mass[i];
+    m_active = activeConstraints(m_constraints, m_w);
+    m_activeValid = true;
+  }
+  const Real damp = std::exp(-m_cfg.damping * dt);
+  const Vec3 g = in.gravity;
+  for (const auto& [i, f] : surfaceForces) m_v.row(i) += (dt * m_w[i] * f).transpose();
+  m_p.resize(n, 3);
+  for (int i = 0; i < n; ++i) {
+    if (m_controlOf[i] >= 0 && !m_isFixedFine[i]) {
+      m_p.row(i) = m_volumeX.row(m_controlOf[i]);
+    } else if (m_isFixedFine[i]) {
+      m_p.row(i) = m_surf.rest.row(i);
+    } else if (m_w[i] > 0) {
+      m_v.row(i) += dt * g.transpose();
+      m_p.row(i) = m_surf.x.row(i) + dt * m_v.row(i);
+    } else {
+      m_p.row(i) = m_surf.x.row(i);
+    }
+  }
+  for (const auto& [i, target] : graspTargets)
+    if (!m_isFixedFine[i]) m_p.row(i) = target.transpose();
+  m_numeric["degenerate_constraints"] +=
+      projectSurfaceConstraints(m_p, m_w, m_constraints, m_active, m_cfg.stretchStiffness,
+                                m_cfg.bendingStiffness, m_cfg.iterations);
+  const Real invDt = dt > 0 ? 1 / dt : 0;
+  m_v = (m_p - m_surf.x) * (invDt * damp);
+  m_surf.x.swap(m_p);
+  m_phase["pbd"] = msSince(t);
+  if (!m_surf.x.allFinite() || !m_volumeX.allFinite()) return StepStatus::Diverged;
+  return StepStatus::Ok;
+}
+
+void HybridModel::cut(const CutPath& path) {
+  CutReport r = cutSurface(m_surf, path, CutOptions{m_cfg.cutSnap});
+  m_lastCut = r;
+  if (!r.applied) {
+    ++m_numeric["rejected_cuts"];
+    return;
+  }
+  ++m_numeric["cuts"];
+  m_cut = true;
+  const int n = m_surf.numVertices();
+  const int old = static_cast<int>(m_controlOf.size());
+  m_controlOf.resize(n, -1);
+  m_isFixedFine.resize(n, 0);
+  m_v.conservativeResize(n, 3);
+  for (int i = old; i < n; ++i) m_v.row(i).setZero();
+  // A control point on the cut is duplicated; both copies become ordinary points (paper Sec. 7).
+  for (const auto& [v, copy] : r.duplicates) {
+    m_controlOf[v] = -1;
+    m_controlOf[copy] = -1;
+    m_isFixedFine[copy] = m_isFixedFine[v];
+    m_v.row(copy) = m_v.row(v);
+  }
+  m_constraints = constraintsAfterCut(m_surf, m_constraints0);
+  m_attach.clear();
+  m_activeValid = false;
+  rebuildMasses();
+}
+
+MatX3i HybridModel::surfaceFaces() const {
+  return m_cut ? m_surf.faces() : MatX3i();
+}
+
+Counts HybridModel::counts() const {
+  Counts c;
+  c["nodes"] = m_surf.numVertices();
+  c["coarse_vertices"] = m_mesh.coarseSurface.numVertices();
+  c["coarse_faces"] = m_mesh.coarseSurface.numFaces();
+  c["volume_nodes"] = m_mesh.volume.numVertices();
+  c["tets"] = m_mesh.volume.numTets();
+  c["stretch_constraints"] = static_cast<long long>(m_constraints.stretch.size());
+  c["bending_constraints"] = static_cast<long long>(m_constraints.bending.size());
+  c["constraints"] = c["stretch_constraints"] + c["bending_constraints"];
+  long long control = 0;
+  for (int v : m_controlOf) control += v >= 0;
+  c["control_nodes"] = control;
+  c["faces"] = static_cast<long long>(m_surf.F.size());
+  return c;
+}
+
+}  // namespace deform::hybrid

@@ -1,0 +1,119 @@
+// Hybrid FEM+PBD model: the thin stateful layer over the kernels. The hybrid mesh is a fine
+// triangle surface MS (the organ's own surface, simulated by PBD) and a coarse tetrahedral
+// volume MV (linear FEM) whose boundary vertices are a subset of MS's vertices, the control
+// nodes (paper Secs. 2, 5, 6). One step (paper Sec. 6.5):
+//   1. load processing: each point load's fine node is attached to the coarse surface; its
+//      force goes to MV as equivalent nodal forces (load_processing.h);
+//   2. MV: quasi-static linear FEM, K u = f with K factorised once (coarse_fem.h); grasped
+//      control nodes are prescribed displacements (Schur complement, factorisation kept);
+//   3. MS prediction: v += dt (g + w f_ext), p = x + dt v for ordinary nodes;
+//   4. MS projection: control nodes take MV's positions (w = 0), grasped and fixed nodes their
+//      targets; stretch and bending constraints are projected Gauss-Seidel (surface_pbd.h);
+//   5. v = (p - x) / dt (then damped), x = p.
+// cut() implements the small incision of paper Sec. 7 (incision.h).
+//
+// Paper: "A Hybrid Model Method for Accurate Surface Deformation and Incision Based on FEM and
+// PBD", Scientific Programming 2021, article 8343312
+// (/work/shared/papers/hybrid-fem-pbd-incision.md). See README.md.
+#pragma once
+
+#include <deform/model.h>
+#include <deform/params.h>
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "coarse_fem.h"
+#include "incision.h"
+#include "surface_pbd.h"
+#include "vertex_cover_simplification.h"
+
+namespace deform::hybrid {
+
+/// Resolved parameters (see paramSpecs()).
+struct HybridConfig {
+  int iterations = 10;            ///< Gauss-Seidel sweeps on MS
+  Real stretchStiffness = 1.0;    ///< classic PBD, [0, 1]
+  Real bendingStiffness = 0.5;    ///< classic PBD, [0, 1]
+  Real damping = 20.0;            ///< 1/s: v <- v exp(-damping dt)
+  bool surfaceLoad = true;        ///< the force also acts on its fine node in the prediction
+  int simplificationLevels = 1;   ///< vertex-cover passes (the paper: 1)
+  Real minCollapseQuality = 0.1;  ///< see SimplificationOptions
+  Real tetEdgeFactor = 1.0;       ///< interior tet edge length / mean coarse surface edge
+  Real cutSnap = 0.1;             ///< CutOptions::snapFraction
+};
+
+std::vector<ParamSpec> paramSpecs();
+HybridConfig configFromParams(const ParamValues& params);
+
+/// The hybrid mesh: coarse surface, MV, and the map between them and MS.
+struct HybridMesh {
+  SurfaceMesh coarseSurface;      ///< vertices = MV nodes 0..#Vc-1
+  std::vector<int> coarseToFine;  ///< #Vc
+  TetMesh volume;                 ///< MV
+  long long collapsed = 0, rejected = 0;
+  double seconds = 0;  ///< construction wall time (simplification + meshing), s
+};
+
+/// Builds the hybrid mesh from a fine surface (cached when a cache is given).
+HybridMesh buildHybridMesh(const SurfaceMesh& fine, const HybridConfig& config,
+                           const std::string& source, Cache* cache);
+
+class HybridModel final : public Model {
+ public:
+  void init(const ModelSetup& setup) override;
+  /// init() without the parameter layer (tests and benchmarks); cache may be null.
+  void init(const Organ& organ, const HybridConfig& config, Cache* cache = nullptr);
+
+  StepStatus step(const StepInput& in) override;
+  const MatX3& nodes() const override { return m_surf.x; }
+  const MatX3& surface() const override { return m_surf.x; }
+  void reset() override;
+  Counts counts() const override;
+  PhaseTimes phaseTimes() const override { return m_phase; }
+  NumericCounters numericCounters() const override { return m_numeric; }
+  void cut(const CutPath& path) override;
+  MatX3i surfaceFaces() const override;
+
+  // Introspection for tests and benchmarks.
+  const HybridMesh& hybridMesh() const { return m_mesh; }
+  /// Current MV node positions (#nodes by 3).
+  const MatX3& volumePositions() const { return m_volumeX; }
+  /// Coarse vertex of each fine vertex that is (still) a control node, else -1.
+  const std::vector<int>& controlOf() const { return m_controlOf; }
+  const SurfaceConstraints& constraints() const { return m_constraints; }
+  const CutReport& lastCut() const { return m_lastCut; }
+  const MatX3& restSurface() const { return m_surf.rest; }
+
+ private:
+  void rebuildMasses();
+  const CoarseAttachment& attachment(int fineVertex);
+
+  HybridConfig m_cfg;
+  std::string m_source;
+  Real m_density = 1000;  ///< kg/m^3
+  HybridMesh m_mesh;
+  CoarseLinearFem m_fem;
+  std::vector<int> m_fixedFine;
+  std::vector<char> m_isFixedFine;
+
+  // State (restored by reset()).
+  CuttableSurface m_surf, m_surf0;
+  SurfaceConstraints m_constraints, m_constraints0;
+  std::vector<int> m_controlOf, m_controlOf0;
+  MatX3 m_v;
+  VecX m_mass, m_w;
+  MatX3 m_p, m_volumeU, m_volumeX;
+  std::map<int, CoarseAttachment> m_attach;
+  std::vector<char> m_immovable;
+  ActiveConstraints m_active;
+  bool m_activeValid = false;
+  CutReport m_lastCut;
+  bool m_cut = false;
+
+  PhaseTimes m_phase;
+  NumericCounters m_numeric;
+};
+
+}  // namespace deform::hybrid

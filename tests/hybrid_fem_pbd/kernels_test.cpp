@@ -1,0 +1,347 @@
+// Hybrid FEM+PBD kernels: vertex-cover simplification, load processing, incision, rest data.
+#include <deform/mesh_check.h>
+#include <deform/phantom.h>
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <map>
+#include <random>
+#include <set>
+
+#include "incision.h"
+#include "load_processing.h"
+#include "surface_pbd.h"
+#include "vertex_cover_simplification.h"
+
+namespace deform::hybrid {
+namespace {
+
+// ---------------------------------------------------------------- vertex cover simplification
+
+class Simplification : public ::testing::TestWithParam<std::pair<const char*, double>> {};
+
+TEST_P(Simplification, CoverPropertyAndValidClosedCoarseSurface) {
+  const auto [name, res] = GetParam();
+  const SurfaceMesh fine = makePhantom(name, res);
+  const MatX2i E = uniqueEdges(fine.F);
+  const SimplificationResult r = simplifyByVertexCover(fine);
+
+  // Cover before merging: every edge has an endpoint in the cover, and the cover is minimal
+  // (each cover vertex has a non-cover neighbour, i.e. the complement is a maximal independent
+  // set).
+  ASSERT_EQ(static_cast<int>(r.firstCover.size()), fine.numVertices());
+  EXPECT_TRUE(isVertexCover(E, r.firstCover));
+  std::vector<char> hasFreeNeighbour(fine.numVertices(), 0);
+  for (Eigen::Index e = 0; e < E.rows(); ++e) {
+    if (!r.firstCover[E(e, 1)]) hasFreeNeighbour[E(e, 0)] = 1;
+    if (!r.firstCover[E(e, 0)]) hasFreeNeighbour[E(e, 1)] = 1;
+  }
+  for (int v = 0; v < fine.numVertices(); ++v) {
+    if (r.firstCover[v]) {
+      EXPECT_TRUE(hasFreeNeighbour[v]) << "cover vertex " << v << " redundant";
+    }
+  }
+  std::printf("%s: fine %d, coarse %d vertices, %lld merged, %lld rejected\n", name,
+              fine.numVertices(), r.coarse.numVertices(), r.collapsed, r.rejected);
+
+  // Coarse surface: valid closed manifold, outward, built from fine vertices, fewer of them.
+  const MeshReport report = validateSurface(r.coarse);
+  EXPECT_TRUE(report.ok()) << (report.ok() ? "" : report.issues.front().message);
+  EXPECT_GT(signedVolume(r.coarse.V, r.coarse.F), 0);
+  EXPECT_LT(r.coarse.numVertices(), fine.numVertices());
+  EXPECT_GT(r.collapsed, fine.numVertices() / 5);
+  ASSERT_EQ(static_cast<int>(r.coarseToFine.size()), r.coarse.numVertices());
+  for (int c = 0; c < r.coarse.numVertices(); ++c) {
+    const int f = r.coarseToFine[c];
+    EXPECT_TRUE(r.firstCover[f] || r.rejected > 0);
+    EXPECT_EQ((r.coarse.V.row(c) - fine.V.row(f)).norm(), 0.0);
+  }
+  // Every merge kept the triangle quality above the bound.
+  for (int f = 0; f < r.coarse.numFaces(); ++f) {
+    const Vec3 a = r.coarse.V.row(r.coarse.F(f, 0)), b = r.coarse.V.row(r.coarse.F(f, 1)),
+               c = r.coarse.V.row(r.coarse.F(f, 2));
+    EXPECT_GE(triangleQuality(a, b, c), 0.1 - 1e-12);
+  }
+  // The enclosed volume changes little (merges move no vertex, they only drop some).
+  const Real v0 = signedVolume(fine.V, fine.F), v1 = signedVolume(r.coarse.V, r.coarse.F);
+  EXPECT_NEAR(v1 / v0, 1.0, 0.1);
+}
+
+INSTANTIATE_TEST_SUITE_P(Phantoms, Simplification,
+                         ::testing::Values(std::make_pair("cube", 0.5),
+                                           std::make_pair("sphere", 0.5),
+                                           std::make_pair("liver", 0.25),
+                                           std::make_pair("steak", 1.0)));
+
+TEST(Simplification, TwoLevelsAreCoarserAndStillValid) {
+  const SurfaceMesh fine = makePhantom("sphere", 0.5);
+  SimplificationOptions o1, o2;
+  o2.levels = 2;
+  const auto r1 = simplifyByVertexCover(fine, o1);
+  const auto r2 = simplifyByVertexCover(fine, o2);
+  EXPECT_LT(r2.coarse.numVertices(), r1.coarse.numVertices());
+  EXPECT_TRUE(validateSurface(r2.coarse).ok());
+}
+
+TEST(VertexCover, DetectsAnUncoveredEdge) {
+  MatX2i E(3, 2);
+  E << 0, 1, 1, 2, 2, 3;
+  EXPECT_TRUE(isVertexCover(E, {0, 1, 1, 0}));
+  EXPECT_FALSE(isVertexCover(E, {0, 1, 0, 0}));
+  // Path 0-1-2-3: the min-degree greedy takes 0 (degree 1), then 2 or 3; cover size 2.
+  const std::vector<char> c = vertexCoverFromIndependentSet(E, 4);
+  EXPECT_TRUE(isVertexCover(E, c));
+  EXPECT_EQ(c[0] + c[1] + c[2] + c[3], 2);
+}
+
+// ---------------------------------------------------------------- load processing
+
+TEST(LoadProcessing, ConservesForceAndMoment) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<Real> u(-1, 1);
+  for (int trial = 0; trial < 200; ++trial) {
+    MatX3 V(3, 3);
+    for (int i = 0; i < 9; ++i) V(i / 3, i % 3) = u(rng);
+    MatX3i F(1, 3);
+    F << 0, 1, 2;
+    const Vec3 p(u(rng), u(rng), u(rng)), f(u(rng), u(rng), u(rng));
+    const CoarseAttachment a = attachToCoarseSurface(p, V, F);
+    const auto nf = equivalentNodalForces(a, f);
+    Vec3 sum = Vec3::Zero(), moment = Vec3::Zero();
+    for (int k = 0; k < a.count; ++k) {
+      sum += nf[k];
+      moment += (V.row(a.nodes[k]).transpose() - a.projection).cross(nf[k]);
+      EXPECT_GE(a.weights[k], -1e-12);
+    }
+    EXPECT_LT((sum - f).norm(), 1e-12);
+    EXPECT_LT(moment.norm(), 1e-10);
+    // The projection is the closest point of the triangle (no sampled point is closer).
+    for (int s = 0; s < 50; ++s) {
+      Real b1 = (u(rng) + 1) / 2, b2 = (u(rng) + 1) / 2;
+      if (b1 + b2 > 1) {
+        b1 = 1 - b1;
+        b2 = 1 - b2;
+      }
+      const Vec3 q = V.row(0).transpose() + b1 * (V.row(1) - V.row(0)).transpose() +
+                     b2 * (V.row(2) - V.row(0)).transpose();
+      EXPECT_GE((q - p).norm(), (a.projection - p).norm() - 1e-12);
+    }
+  }
+}
+
+TEST(LoadProcessing, PointOnTheCoarseTriangleKeepsTheMomentAboutItself) {
+  MatX3 V(3, 3);
+  V << 0, 0, 0, 2, 0, 0, 0, 1, 0;
+  MatX3i F(1, 3);
+  F << 0, 1, 2;
+  const Vec3 p(0.5, 0.25, 0), f(0.3, -1.0, 2.0);
+  const CoarseAttachment a = attachToCoarseSurface(p, V, F);
+  ASSERT_EQ(a.count, 3);
+  const auto nf = equivalentNodalForces(a, f);
+  Vec3 moment = Vec3::Zero();
+  for (int k = 0; k < 3; ++k) moment += (V.row(a.nodes[k]).transpose() - p).cross(nf[k]);
+  EXPECT_LT(moment.norm(), 1e-14);
+  EXPECT_NEAR(a.weights[0], 0.5, 1e-14);   // 1 - 0.25 - 0.25
+  EXPECT_NEAR(a.weights[1], 0.25, 1e-14);  // x / 2
+  EXPECT_NEAR(a.weights[2], 0.25, 1e-14);  // y / 1
+  // A control node takes the whole force.
+  const CoarseAttachment c = attachToCoarseSurface(p, V, F, 1);
+  EXPECT_EQ(c.count, 1);
+  EXPECT_EQ(c.nodes[0], 1);
+  EXPECT_EQ(c.weights[0], 1.0);
+}
+
+// ---------------------------------------------------------------- incision rest data
+
+TEST(Incision, LawOfCosinesRestLengthsMatchTheTriangle) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<Real> u(0, 1);
+  for (int trial = 0; trial < 100; ++trial) {
+    const Vec3 A(u(rng), u(rng), u(rng)), B(u(rng), u(rng), u(rng)), C(u(rng), u(rng), u(rng));
+    const Real lAB = (B - A).norm(), lBC = (C - B).norm(), lCA = (A - C).norm();
+    auto bary = [&] {
+      Vec3 b(u(rng), u(rng), u(rng));
+      return Vec3(b / b.sum());
+    };
+    const Vec3 bp = bary(), bq = bary();
+    const Vec3 P = bp[0] * A + bp[1] * B + bp[2] * C, Q = bq[0] * A + bq[1] * B + bq[2] * C;
+    EXPECT_NEAR(restDistanceInTriangle(lAB, lBC, lCA, bp, bq), (P - Q).norm(), 1e-12);
+    // Edge point on AB (paper Fig. 8(a)): l_AP = lambda_B l_AB.
+    const Real t = u(rng);
+    EXPECT_NEAR(restDistanceInTriangle(lAB, lBC, lCA, Vec3(1, 0, 0), Vec3(1 - t, t, 0)), t * lAB,
+                1e-12);
+  }
+}
+
+// A flat patch of n unit squares along x, each split by its diagonal (x,0)-(x+1,1):
+// bottom row vertices 0..n, top row n+1..2n+1.
+SurfaceMesh patch(int n) {
+  SurfaceMesh m;
+  m.V.resize(2 * (n + 1), 3);
+  for (int x = 0; x <= n; ++x) {
+    m.V.row(x) = Vec3(x, 0, 0).transpose();
+    m.V.row(n + 1 + x) = Vec3(x, 1, 0).transpose();
+  }
+  m.F.resize(2 * n, 3);
+  for (int x = 0; x < n; ++x) {
+    m.F.row(2 * x) = Vec3i(x, x + 1, n + 2 + x).transpose();
+    m.F.row(2 * x + 1) = Vec3i(x, n + 2 + x, n + 1 + x).transpose();
+  }
+  return m;
+}
+
+struct EdgeUse {
+  int boundary = 0, interior = 0, overused = 0, directedTwice = 0;
+};
+EdgeUse edgeUse(const MatX3i& F) {
+  std::map<std::pair<int, int>, int> und;
+  std::set<std::pair<int, int>> dir;
+  EdgeUse r;
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = F(f, k), b = F(f, (k + 1) % 3);
+      ++und[{std::min(a, b), std::max(a, b)}];
+      if (!dir.insert({a, b}).second) ++r.directedTwice;
+    }
+  for (const auto& [e, n] : und) {
+    if (n == 1) ++r.boundary;
+    if (n == 2) ++r.interior;
+    if (n > 2) ++r.overused;
+  }
+  return r;
+}
+
+Real minArea(const MatX3& V, const MatX3i& F) {
+  Real m = 1e300;
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    const Vec3 a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
+    m = std::min(m, 0.5 * (b - a).cross(c - a).norm());
+  }
+  return m;
+}
+
+TEST(Incision, EndToEdgeToEndOnTwoSquares) {
+  // Path (0.6,0.3) -> (1.4,0.8): facet point in triangle (0,1,4), edge point on edge (1,4) at
+  // y = 0.3 + 0.625 * 0.4 = 0.55, facet point in triangle (1,5,4). Insertions: face split +2
+  // triangles, edge split +2, face split +2; the edge point is the only interior path vertex,
+  // duplicated once. New vertices 2 + 1 + 1 = 4, triangles 4 -> 10.
+  const SurfaceMesh m = patch(2);
+  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
+  CutPath path;
+  path.points = {Vec3(0.6, 0.3, 0), Vec3(1.4, 0.8, 0)};
+  const CutReport r = cutSurface(s, path);
+  ASSERT_TRUE(r.applied) << r.reason;
+  EXPECT_EQ(r.facetPoints, 2);
+  EXPECT_EQ(r.edgePoints, 1);
+  EXPECT_EQ(r.vertexPoints, 0);
+  EXPECT_EQ(r.newVertices, 4);
+  EXPECT_EQ(r.newFaces, 6);
+  ASSERT_EQ(r.path.size(), 3u);
+  ASSERT_EQ(r.duplicates.size(), 1u);
+  const int e = r.path[1], copy = r.duplicates[0].second;
+  EXPECT_EQ(r.duplicates[0].first, e);
+  EXPECT_LT((s.x.row(e) - Vec3(1, 0.55, 0).transpose()).norm(), 1e-12);
+  EXPECT_EQ((s.x.row(copy) - s.x.row(e)).norm(), 0.0);
+  // Original indices unchanged, new vertices appended.
+  EXPECT_EQ((s.x.topRows(6) - m.V).norm(), 0.0);
+  const MatX3i F = s.faces();
+  const EdgeUse use = edgeUse(F);
+  EXPECT_EQ(use.overused, 0);
+  EXPECT_EQ(use.directedTwice, 0);  // consistently oriented
+  EXPECT_EQ(use.boundary, 6 + 4);   // the patch's own 6 boundary edges + the cut's 4 lips
+  EXPECT_GT(minArea(s.x, F), 0.01);
+  // Area is conserved by the subdivision.
+  EXPECT_NEAR(surfaceArea(s.x, F), 2.0, 1e-12);
+}
+
+TEST(Incision, ThroughTriangleOnThreeSquares) {
+  // Path (0.6,0.3) -> (2.4,0.7), y = 0.3 + (2/9)(x - 0.6): facet point in (0,1,5); edge points
+  // on (1,5) at y = 7/18, on diagonal (1,6) at (1.5,0.5), on (2,6) at y = 11/18; facet point in
+  // (2,7,6). Triangle (1,6,5) is crossed edge to edge (3 pieces). New vertices: 5 points + 3
+  // duplicates = 8; triangles 6 + 2 + 2 + 2 + 2 + 2 = 16.
+  const SurfaceMesh m = patch(3);
+  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
+  CutPath path;
+  path.points = {Vec3(0.6, 0.3, 0), Vec3(2.4, 0.7, 0)};
+  const CutReport r = cutSurface(s, path);
+  ASSERT_TRUE(r.applied) << r.reason;
+  EXPECT_EQ(r.facetPoints, 2);
+  EXPECT_EQ(r.edgePoints, 3);
+  EXPECT_EQ(r.newVertices, 8);
+  EXPECT_EQ(r.newFaces, 10);
+  ASSERT_EQ(r.path.size(), 5u);
+  EXPECT_LT((s.x.row(r.path[1]) - Vec3(1, 7.0 / 18, 0).transpose()).norm(), 1e-12);
+  EXPECT_LT((s.x.row(r.path[2]) - Vec3(1.5, 0.5, 0).transpose()).norm(), 1e-12);
+  EXPECT_LT((s.x.row(r.path[3]) - Vec3(2, 11.0 / 18, 0).transpose()).norm(), 1e-12);
+  const MatX3i F = s.faces();
+  const EdgeUse use = edgeUse(F);
+  EXPECT_EQ(use.overused, 0);
+  EXPECT_EQ(use.directedTwice, 0);
+  EXPECT_EQ(use.boundary, 8 + 8);  // patch boundary 8, cut lips 2 x 4
+  EXPECT_NEAR(surfaceArea(s.x, F), 3.0, 1e-12);
+  EXPECT_GT(minArea(s.x, F), 1e-3);
+}
+
+TEST(Incision, CutInsideOneTriangleGetsAMidpoint) {
+  // Both ends in triangle (0,1,4) of one square: face split (+2), face split of a piece (+2),
+  // midpoint of the cut edge (+2), duplicated midpoint: +4 vertices, +6 triangles.
+  const SurfaceMesh m = patch(1);
+  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
+  CutPath path;
+  path.points = {Vec3(0.45, 0.15, 0), Vec3(0.8, 0.35, 0)};
+  const CutReport r = cutSurface(s, path);
+  ASSERT_TRUE(r.applied) << r.reason;
+  EXPECT_EQ(r.facetPoints, 2);
+  EXPECT_EQ(r.newVertices, 4);
+  EXPECT_EQ(r.newFaces, 6);
+  const EdgeUse use = edgeUse(s.faces());
+  EXPECT_EQ(use.overused, 0);
+  EXPECT_EQ(use.boundary, 4 + 4);
+}
+
+TEST(Incision, RejectsAPathThatIsTooShort) {
+  const SurfaceMesh m = patch(1);
+  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
+  CutPath path;
+  path.points = {Vec3(0.5, 0.25, 0), Vec3(0.5, 0.25, 0)};
+  const CutReport r = cutSurface(s, path);
+  EXPECT_FALSE(r.applied);
+  EXPECT_EQ(s.numVertices(), 4);  // unchanged
+}
+
+TEST(Incision, ConstraintsAfterCutAreAtRestOnACurvedSurface) {
+  const SurfaceMesh m = makePhantom("sphere", 0.3);
+  const SurfaceConstraints c0 = buildSurfaceConstraints(m.V, m.F);
+  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
+  CutPath path;
+  path.points = {Vec3(-0.02, -0.01, 0.05), Vec3(0.0, 0.0, 0.05), Vec3(0.02, 0.012, 0.05)};
+  const CutReport r = cutSurface(s, path);
+  ASSERT_TRUE(r.applied) << r.reason;
+  EXPECT_GT(r.edgePoints, 0);
+  const MatX3i F = s.faces();
+  const EdgeUse use = edgeUse(F);
+  EXPECT_EQ(use.overused, 0);
+  EXPECT_EQ(use.directedTwice, 0);
+  EXPECT_EQ(use.boundary, 2 * (static_cast<int>(r.path.size()) - 1));
+  EXPECT_GT(minArea(s.x, F), 0);
+  const SurfaceConstraints c = constraintsAfterCut(s, c0);
+  // Rest lengths from the law of cosines equal the rest distances (the pieces are flat).
+  for (const auto& d : c.stretch)
+    EXPECT_NEAR(d.rest, (s.rest.row(d.a) - s.rest.row(d.b)).norm(), 1e-12);
+  // Bending rest angles are the rest configuration's angles (kept across original edges, 0
+  // inside original triangles).
+  for (const auto& h : c.bending) {
+    Real theta;
+    Vec3 g[4];
+    ASSERT_TRUE(pbd::dihedralAngle(s.rest.row(h.p[0]).transpose(), s.rest.row(h.p[1]).transpose(),
+                                   s.rest.row(h.p[2]).transpose(), s.rest.row(h.p[3]).transpose(),
+                                   theta, g));
+    EXPECT_NEAR(theta, h.restAngle, 1e-9);
+  }
+  // One stretch per edge, one bending per interior edge.
+  EXPECT_EQ(static_cast<int>(c.stretch.size()), use.boundary + use.interior);
+  EXPECT_EQ(static_cast<int>(c.bending.size()), use.interior);
+}
+
+}  // namespace
+}  // namespace deform::hybrid
