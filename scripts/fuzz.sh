@@ -74,7 +74,7 @@ for t in "${targets[@]}"; do
     grep -E '^stat::number_of_executed_units|^stat::new_units_added' "$log" | tr '\n' ' '
     echo
   else
-    tail -n 60 "$log"
+    grep -m1 -A25 -E "^==[0-9]+==|^SUMMARY|ERROR:" "$log" || tail -n 40 "$log"
     found=$(ls -t "$artifacts" | head -n 1)
     failed+=("$t: reproducer $artifacts/$found (log $log)")
   fi

@@ -10,13 +10,14 @@
 #include <deform/error.h>
 #include <deform/mesh_check.h>
 #include <deform/mesh_io.h>
+#include <deform/scene.h>
+#include <unistd.h>
 
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <string>
 #include <string_view>
-
-#if __has_include(<deform/scene.h>)
-#include <deform/scene.h>
-#endif
 
 namespace deform::fuzz {
 
@@ -45,21 +46,35 @@ inline Outcome feedMesh(std::string_view data, const std::string& name) {
   return Outcome::Accepted;
 }
 
-/// Parses `text` as JSON and then as a scene file ("fuzz/scene.json"; mesh paths resolve
-/// relative to it but no mesh is loaded).
+/// Feeds `text` to the scene parser both ways a scene arrives: as a JSON value
+/// (json::parse, then parseScene(j, "fuzz/scene.json")) and as a file (parseSceneFile, which also
+/// refuses duplicate keys and turns JSON syntax errors into InputError with line and column).
+/// Mesh paths resolve relative to the file but no mesh is loaded. Refused if either refuses.
 inline Outcome feedScene(std::string_view text) {
-  nlohmann::json j;
+  Outcome outcome = Outcome::Accepted;
   try {
-    j = nlohmann::json::parse(text.begin(), text.end());
-  } catch (const nlohmann::json::parse_error&) {
-    return Outcome::Refused;
-  }
-  try {
+    const nlohmann::json j = nlohmann::json::parse(text.begin(), text.end());
     (void)parseScene(j, "fuzz/scene.json");
+  } catch (const nlohmann::json::parse_error&) {
+    outcome = Outcome::Refused;
   } catch (const InputError&) {
-    return Outcome::Refused;
+    outcome = Outcome::Refused;
   }
-  return Outcome::Accepted;
+  // One scratch file per process, rewritten for every input.
+  static const std::string path = (std::filesystem::temp_directory_path() /
+                                   ("deform_fuzz_scene_" + std::to_string(getpid()) + ".json"))
+                                      .string();
+  {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+  }
+  try {
+    (void)parseSceneFile(path);
+  } catch (const InputError&) {
+    outcome = Outcome::Refused;
+  }
+  std::remove(path.c_str());
+  return outcome;
 }
 
 }  // namespace deform::fuzz
