@@ -10,13 +10,7 @@
 #include <algorithm>
 #include <filesystem>
 
-namespace deform {
-// TEMPORARY stand-in for fixedNodeIndices (declared in model.h, implemented on another branch);
-// the benchmark pins nothing. Remove when it lands in core.
-std::vector<int> fixedNodeIndices(const MatX3&, const FixedRegion&, const SurfaceMesh&) {
-  return {};
-}
-}  // namespace deform
+namespace deform {}  // namespace deform
 
 namespace {
 using namespace deform;

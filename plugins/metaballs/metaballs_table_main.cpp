@@ -8,13 +8,7 @@
 #include <exception>
 #include <iostream>
 
-namespace deform {
-// TEMPORARY stand-in for fixedNodeIndices (declared in model.h, implemented on another branch);
-// the table's runs pin nothing. Remove when it lands in core.
-std::vector<int> fixedNodeIndices(const MatX3&, const FixedRegion&, const SurfaceMesh&) {
-  return {};
-}
-}  // namespace deform
+namespace deform {}  // namespace deform
 
 int main(int argc, char** argv) {
   try {

@@ -13,20 +13,6 @@
 
 namespace deform {
 
-// TEMPORARY local copy of fixedNodeIndices (declared in model.h, implemented on another branch);
-// remove when it lands in core. Nodes inside any box, plus the node nearest each listed vertex.
-std::vector<int> fixedNodeIndices(const MatX3& nodes, const FixedRegion& region,
-                                  const SurfaceMesh& restSurface) {
-  std::vector<int> out;
-  for (Eigen::Index i = 0; i < nodes.rows(); ++i)
-    for (const Box& b : region.boxes)
-      if (b.contains(nodes.row(i).transpose())) out.push_back(int(i));
-  for (int v : region.surfaceVertices) out.push_back(nearestVertex(nodes, restSurface.V.row(v)));
-  std::sort(out.begin(), out.end());
-  out.erase(std::unique(out.begin(), out.end()), out.end());
-  return out;
-}
-
 namespace metaballs {
 namespace {
 

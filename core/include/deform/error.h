@@ -6,10 +6,14 @@
 #include <stdexcept>
 #include <string>
 
+/// Types thrown or caught across the plugin boundary keep default visibility (their typeinfo must
+/// be one object process-wide) even when a plugin is compiled with -fvisibility=hidden.
+#define DEFORM_VISIBLE __attribute__((visibility("default")))
+
 namespace deform {
 
 /// Bad input from a user-provided file or value: "FILE: PLACE: PROBLEM" (PLACE may be empty).
-class InputError : public std::runtime_error {
+class DEFORM_VISIBLE InputError : public std::runtime_error {
  public:
   InputError(std::string file, std::string place, std::string problem)
       : std::runtime_error(format(file, place, problem)),
@@ -32,7 +36,7 @@ class InputError : public std::runtime_error {
 };
 
 /// A plugin could not be loaded or initialised. kind says which of the distinct failures it is.
-class PluginError : public std::runtime_error {
+class DEFORM_VISIBLE PluginError : public std::runtime_error {
  public:
   enum class Kind { FileNotFound, NotSharedObject, MissingSymbol, AbiMismatch, InitFailure };
   PluginError(Kind kind, std::string file, const std::string& problem)
@@ -46,7 +50,7 @@ class PluginError : public std::runtime_error {
 };
 
 /// A model was asked for something its capabilities do not include (e.g. cut()).
-class UnsupportedError : public std::runtime_error {
+class DEFORM_VISIBLE UnsupportedError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };

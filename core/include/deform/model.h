@@ -20,9 +20,9 @@ namespace deform {
 
 /// Isotropic material, SI.
 struct Material {
-  Real young = 5500.0;   ///< Young's modulus E, Pa
-  Real poisson = 0.3;    ///< Poisson ratio nu, dimensionless, in (-1, 0.5)
-  Real density = 1000.0; ///< kg/m^3
+  Real young = 5500.0;    ///< Young's modulus E, Pa
+  Real poisson = 0.3;     ///< Poisson ratio nu, dimensionless, in (-1, 0.5)
+  Real density = 1000.0;  ///< kg/m^3
 };
 
 /// Region whose model nodes are pinned: nodes inside any box, and the model node nearest to each
@@ -60,9 +60,9 @@ struct ModelSetup {
 /// positions (#nodes by 3, m) they must reach at the end of the step (they follow the tool
 /// rigidly). Nodes stay attached until the jaws open.
 struct GraspInput {
-  int tool = 0;             ///< index of the tool in the scene
-  std::vector<int> nodes;   ///< model node indices
-  MatX3 targets;            ///< #nodes by 3
+  int tool = 0;            ///< index of the tool in the scene
+  std::vector<int> nodes;  ///< model node indices
+  MatX3 targets;           ///< #nodes by 3
 };
 
 /// A force on the organ surface: applied at one input-surface vertex, distributed by the model
@@ -97,7 +97,7 @@ struct CutPath {
   Real depth = 0.0;          ///< m
 };
 
-class Model {
+class DEFORM_VISIBLE Model {
  public:
   virtual ~Model() = default;
 

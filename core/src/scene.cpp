@@ -1,0 +1,738 @@
+// Scene files: strict parsing and validation (DESIGN.md "Scene file"), parameter resolution
+// against a model's declarations, and loading the organ the scene describes.
+#include <deform/cache.h>
+#include <deform/mesh_check.h>
+#include <deform/mesh_io.h>
+#include <deform/phantom.h>
+#include <deform/scene.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <set>
+#include <sstream>
+
+namespace deform {
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+/// Shortest decimal that reads back as the same double.
+std::string num(double v) {
+  if (std::isnan(v)) return "nan";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof(buf), v);
+  return std::string(buf, r.ptr);
+}
+
+/// "number", "string", ... with integers called numbers too (JSON has one number type).
+std::string typeName(const json& j) {
+  if (j.is_number()) return "number";
+  if (j.is_boolean()) return "boolean";
+  return j.type_name();
+}
+
+/// Reads one JSON object, refusing keys that are not in the allowed list, and remembers the path
+/// of every value it hands out so that errors name it.
+class ObjectReader {
+ public:
+  ObjectReader(const json& j, std::string path, const std::string& file,
+               std::vector<std::string> allowed)
+      : m_j(j), m_path(std::move(path)), m_file(file), m_allowed(std::move(allowed)) {
+    if (!j.is_object())
+      throw InputError(m_file, placeOf(m_path), "expected an object, got " + typeName(j));
+    for (const auto& [key, value] : j.items()) {
+      if (std::find(m_allowed.begin(), m_allowed.end(), key) == m_allowed.end()) {
+        std::string known;
+        for (const auto& a : m_allowed) known += (known.empty() ? "" : ", ") + a;
+        throw InputError(m_file, child(key),
+                         "unknown key '" + key + "' (allowed here: " + known + ")");
+      }
+    }
+  }
+
+  static std::string placeOf(const std::string& path) { return path.empty() ? "/" : path; }
+  std::string child(const std::string& key) const { return m_path + "/" + key; }
+  const std::string& path() const { return m_path; }
+  bool has(const std::string& key) const { return m_j.contains(key); }
+
+  const json& required(const std::string& key) const {
+    if (!m_j.contains(key)) throw InputError(m_file, child(key), "required key is missing");
+    return m_j.at(key);
+  }
+  const json* optional(const std::string& key) const {
+    return m_j.contains(key) ? &m_j.at(key) : nullptr;
+  }
+
+ private:
+  const json& m_j;
+  std::string m_path;
+  const std::string& m_file;
+  std::vector<std::string> m_allowed;
+};
+
+struct Ctx {
+  const std::string& file;
+
+  [[noreturn]] void fail(const std::string& path, const std::string& problem) const {
+    throw InputError(file, ObjectReader::placeOf(path), problem);
+  }
+
+  double number(const json& j, const std::string& path) const {
+    if (!j.is_number()) fail(path, "expected a number, got " + typeName(j));
+    const double v = j.get<double>();
+    if (!std::isfinite(v)) fail(path, "expected a finite number, got " + num(v));
+    return v;
+  }
+  double positive(const json& j, const std::string& path) const {
+    const double v = number(j, path);
+    if (!(v > 0)) fail(path, "must be > 0, got " + num(v));
+    return v;
+  }
+  long long integer(const json& j, const std::string& path) const {
+    if (!j.is_number()) fail(path, "expected an integer, got " + typeName(j));
+    if (j.is_number_integer()) return j.get<long long>();
+    const double v = j.get<double>();
+    if (!std::isfinite(v) || std::floor(v) != v || std::fabs(v) > 9.0e15)
+      fail(path, "expected an integer, got " + num(v));
+    return static_cast<long long>(v);
+  }
+  bool boolean(const json& j, const std::string& path) const {
+    if (!j.is_boolean()) fail(path, "expected true or false, got " + typeName(j));
+    return j.get<bool>();
+  }
+  std::string string(const json& j, const std::string& path) const {
+    if (!j.is_string()) fail(path, "expected a string, got " + typeName(j));
+    return j.get<std::string>();
+  }
+  const json& array(const json& j, const std::string& path) const {
+    if (!j.is_array()) fail(path, "expected an array, got " + typeName(j));
+    return j;
+  }
+  Vec3 vec3(const json& j, const std::string& path) const {
+    if (!j.is_array() || j.size() != 3) {
+      fail(path, "expected an array of 3 numbers, got " +
+                     (j.is_array() ? "an array of " + std::to_string(j.size()) : typeName(j)));
+    }
+    Vec3 v;
+    for (int i = 0; i < 3; ++i) v[i] = number(j[i], path + "/" + std::to_string(i));
+    return v;
+  }
+  Box box(const json& j, const std::string& path) const {
+    if (!j.is_array() || j.size() != 2) {
+      fail(path, "expected a box [[xlo, ylo, zlo], [xhi, yhi, zhi]], got " +
+                     (j.is_array() ? "an array of " + std::to_string(j.size()) : typeName(j)));
+    }
+    Box b;
+    b.lo = vec3(j[0], path + "/0");
+    b.hi = vec3(j[1], path + "/1");
+    for (int i = 0; i < 3; ++i) {
+      if (!(b.lo[i] <= b.hi[i]))
+        fail(path, "box corner " + std::string(1, char('x' + i)) + " low " + num(b.lo[i]) +
+                       " > high " + num(b.hi[i]));
+    }
+    return b;
+  }
+};
+
+/// Keyframes; jaws allowed only for graspers. Missing "jaw" keeps the previous frame's state.
+std::vector<KeyFrame> parseKeyFrames(const Ctx& c, const json& j, const std::string& path,
+                                     bool allowJaw) {
+  c.array(j, path);
+  if (j.empty()) c.fail(path, "needs at least one keyframe");
+  std::vector<KeyFrame> frames;
+  bool closed = false;
+  for (size_t i = 0; i < j.size(); ++i) {
+    const std::string p = path + "/" + std::to_string(i);
+    std::vector<std::string> keys = {"t", "pos"};
+    if (allowJaw) keys.push_back("jaw");
+    ObjectReader r(j[i], p, c.file, keys);
+    KeyFrame k;
+    k.t = c.number(r.required("t"), r.child("t"));
+    if (k.t < 0) c.fail(r.child("t"), "must be >= 0, got " + num(k.t));
+    if (!frames.empty() && !(k.t > frames.back().t)) {
+      c.fail(r.child("t"), "keyframe times must be strictly increasing, got " + num(k.t) +
+                               " after " + num(frames.back().t));
+    }
+    k.pos = c.vec3(r.required("pos"), r.child("pos"));
+    if (const json* jaw = r.optional("jaw")) {
+      const std::string s = c.string(*jaw, r.child("jaw"));
+      if (s == "open") {
+        closed = false;
+      } else if (s == "closed") {
+        closed = true;
+      } else {
+        c.fail(r.child("jaw"), "expected \"open\" or \"closed\", got \"" + s + "\"");
+      }
+    }
+    k.jawClosed = closed;
+    frames.push_back(k);
+  }
+  return frames;
+}
+
+ModelSpec parseModelSpec(const Ctx& c, const json& j, const std::string& path) {
+  ObjectReader r(j, path, c.file, {"plugin", "model", "label", "params"});
+  ModelSpec m;
+  m.jsonPath = path;
+  m.plugin = c.string(r.required("plugin"), r.child("plugin"));
+  const auto nameOk = [](const std::string& s) {
+    return !s.empty() && std::all_of(s.begin(), s.end(), [](char ch) {
+      return std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '-';
+    });
+  };
+  if (!nameOk(m.plugin))
+    c.fail(r.child("plugin"),
+           "plugin names are letters, digits, '_' and '-', got \"" + m.plugin + "\"");
+  m.model = m.plugin;
+  if (const json* v = r.optional("model")) {
+    m.model = c.string(*v, r.child("model"));
+    if (m.model.empty()) c.fail(r.child("model"), "must not be empty");
+  }
+  if (const json* v = r.optional("label")) {
+    m.label = c.string(*v, r.child("label"));
+    if (m.label.empty()) c.fail(r.child("label"), "must not be empty");
+  }
+  if (const json* v = r.optional("params")) {
+    if (!v->is_object()) c.fail(r.child("params"), "expected an object, got " + typeName(*v));
+    m.params = *v;
+  }
+  return m;
+}
+
+FixedRegion parseFixed(const Ctx& c, const json& j, const std::string& path) {
+  ObjectReader r(j, path, c.file, {"box", "boxes", "vertices"});
+  FixedRegion f;
+  if (const json* v = r.optional("box")) f.boxes.push_back(c.box(*v, r.child("box")));
+  if (const json* v = r.optional("boxes")) {
+    c.array(*v, r.child("boxes"));
+    for (size_t i = 0; i < v->size(); ++i)
+      f.boxes.push_back(c.box((*v)[i], r.child("boxes") + "/" + std::to_string(i)));
+  }
+  if (const json* v = r.optional("vertices")) {
+    c.array(*v, r.child("vertices"));
+    for (size_t i = 0; i < v->size(); ++i) {
+      const std::string p = r.child("vertices") + "/" + std::to_string(i);
+      const long long idx = c.integer((*v)[i], p);
+      if (idx < 0 || idx > 2147483647LL) c.fail(p, "vertex index must be >= 0, got " + num(idx));
+      f.surfaceVertices.push_back(static_cast<int>(idx));
+    }
+  }
+  return f;
+}
+
+OrganSpec parseOrgan(const Ctx& c, const json& j, const std::string& path) {
+  ObjectReader r(j, path, c.file, {"mesh", "scale", "resolution", "repair", "material", "fixed"});
+  OrganSpec o;
+  o.mesh = c.string(r.required("mesh"), r.child("mesh"));
+  if (o.mesh.empty()) c.fail(r.child("mesh"), "must not be empty");
+  const bool phantom = o.mesh.rfind("phantom:", 0) == 0;
+  if (phantom) {
+    const std::string name = o.mesh.substr(8);
+    const auto names = phantomNames();
+    if (std::find(names.begin(), names.end(), name) == names.end()) {
+      std::string known;
+      for (const auto& n : names) known += (known.empty() ? "" : ", ") + n;
+      c.fail(r.child("mesh"), "unknown phantom '" + name + "' (known: " + known + ")");
+    }
+  } else if (!c.file.empty() && fs::path(o.mesh).is_relative()) {
+    o.mesh = (fs::path(c.file).parent_path() / o.mesh).lexically_normal().string();
+  }
+  if (const json* v = r.optional("scale")) o.scale = c.positive(*v, r.child("scale"));
+  if (const json* v = r.optional("resolution")) {
+    if (!phantom) c.fail(r.child("resolution"), "applies only to phantom meshes (phantom:NAME)");
+    o.resolution = c.positive(*v, r.child("resolution"));
+  }
+  if (const json* v = r.optional("repair")) o.repair = c.boolean(*v, r.child("repair"));
+  if (const json* v = r.optional("material")) {
+    const std::string mp = r.child("material");
+    ObjectReader m(*v, mp, c.file, {"young", "poisson", "density"});
+    if (const json* x = m.optional("young")) o.material.young = c.positive(*x, m.child("young"));
+    if (const json* x = m.optional("poisson")) {
+      const double nu = c.number(*x, m.child("poisson"));
+      if (!(nu > -1.0 && nu < 0.5))
+        c.fail(m.child("poisson"), "must be in (-1, 0.5), got " + num(nu));
+      o.material.poisson = nu;
+    }
+    if (const json* x = m.optional("density"))
+      o.material.density = c.positive(*x, m.child("density"));
+  }
+  if (const json* v = r.optional("fixed")) o.fixed = parseFixed(c, *v, r.child("fixed"));
+  return o;
+}
+
+ToolSpec parseTool(const Ctx& c, const json& j, const std::string& path) {
+  ObjectReader r(j, path, c.file, {"type", "radius", "trajectory"});
+  ToolSpec t;
+  const std::string type = c.string(r.required("type"), r.child("type"));
+  if (type == "grasper") {
+    t.type = ToolType::Grasper;
+  } else if (type == "probe") {
+    t.type = ToolType::Probe;
+  } else {
+    c.fail(r.child("type"), "expected \"grasper\" or \"probe\", got \"" + type + "\"");
+  }
+  if (const json* v = r.optional("radius")) t.radius = c.positive(*v, r.child("radius"));
+  t.trajectory = parseKeyFrames(c, r.required("trajectory"), r.child("trajectory"),
+                                t.type == ToolType::Grasper);
+  return t;
+}
+
+LoadSpec parseLoad(const Ctx& c, const json& j, const std::string& path) {
+  if (!j.is_object()) c.fail(path, "expected an object, got " + typeName(j));
+  if (!j.contains("type")) c.fail(path + "/type", "required key is missing");
+  const std::string type = c.string(j.at("type"), path + "/type");
+  LoadSpec l;
+  std::vector<std::string> keys;
+  if (type == "point_force") {
+    l.type = LoadType::PointForce;
+    keys = {"type", "at", "force", "start", "end"};
+  } else if (type == "pin_head") {
+    l.type = LoadType::PinHead;
+    keys = {"type", "at", "stiffness", "path", "start", "end"};
+  } else {
+    c.fail(path + "/type", "expected \"point_force\" or \"pin_head\", got \"" + type + "\"");
+  }
+  ObjectReader r(j, path, c.file, keys);
+  l.at = c.vec3(r.required("at"), r.child("at"));
+  if (l.type == LoadType::PointForce) {
+    l.force = c.vec3(r.required("force"), r.child("force"));
+  } else {
+    l.stiffness = c.positive(r.required("stiffness"), r.child("stiffness"));
+    l.path = parseKeyFrames(c, r.required("path"), r.child("path"), false);
+  }
+  if (const json* v = r.optional("start")) {
+    l.start = c.number(*v, r.child("start"));
+    if (l.start < 0) c.fail(r.child("start"), "must be >= 0, got " + num(l.start));
+  }
+  if (const json* v = r.optional("end")) {
+    l.end = c.number(*v, r.child("end"));
+    if (!(l.end > l.start))
+      c.fail(r.child("end"), "must be > start (" + num(l.start) + "), got " + num(l.end));
+  }
+  return l;
+}
+
+}  // namespace
+
+int Scene::numSteps() const {
+  return static_cast<int>(std::llround(duration / dt));
+}
+
+Scene parseScene(const nlohmann::json& j, const std::string& file) {
+  const Ctx c{file};
+  ObjectReader r(j, "", file,
+                 {"name", "description", "organ", "gravity", "dt", "duration", "tools", "loads",
+                  "models", "reference", "samples", "compare_at", "output"});
+  Scene s;
+  s.file = file;
+  if (const json* v = r.optional("name")) {
+    s.name = c.string(*v, "/name");
+    if (s.name.empty()) c.fail("/name", "must not be empty");
+  } else {
+    s.name = file.empty() ? "scene" : fs::path(file).stem().string();
+  }
+  if (const json* v = r.optional("description")) c.string(*v, "/description");
+  s.organ = parseOrgan(c, r.required("organ"), "/organ");
+  if (const json* v = r.optional("gravity")) s.gravity = c.vec3(*v, "/gravity");
+  if (const json* v = r.optional("dt")) s.dt = c.positive(*v, "/dt");
+  if (const json* v = r.optional("duration")) s.duration = c.positive(*v, "/duration");
+  const double steps = std::round(s.duration / s.dt);
+  if (steps < 1) {
+    c.fail("/duration", "shorter than one time step (duration " + num(s.duration) + " s, dt " +
+                            num(s.dt) + " s)");
+  }
+  if (steps > 1e9) c.fail("/duration", "more than 1e9 steps (" + num(steps) + ")");
+
+  if (const json* v = r.optional("tools")) {
+    c.array(*v, "/tools");
+    for (size_t i = 0; i < v->size(); ++i)
+      s.tools.push_back(parseTool(c, (*v)[i], "/tools/" + std::to_string(i)));
+  }
+  if (const json* v = r.optional("loads")) {
+    c.array(*v, "/loads");
+    for (size_t i = 0; i < v->size(); ++i)
+      s.loads.push_back(parseLoad(c, (*v)[i], "/loads/" + std::to_string(i)));
+  }
+  const json& models = c.array(r.required("models"), "/models");
+  if (models.empty()) c.fail("/models", "needs at least one model");
+  std::set<std::string> labels;
+  const auto checkLabel = [&](const ModelSpec& m) {
+    if (!m.label.empty() && !labels.insert(m.label).second)
+      c.fail(m.jsonPath + "/label", "duplicate label \"" + m.label + "\"");
+  };
+  for (size_t i = 0; i < models.size(); ++i) {
+    s.models.push_back(parseModelSpec(c, models[i], "/models/" + std::to_string(i)));
+    checkLabel(s.models.back());
+  }
+  if (const json* v = r.optional("reference")) {
+    s.reference = parseModelSpec(c, *v, "/reference");
+    checkLabel(*s.reference);
+  }
+  if (const json* v = r.optional("samples")) {
+    ObjectReader sr(*v, "/samples", file, {"nearest"});
+    if (const json* n = sr.optional("nearest")) {
+      c.array(*n, "/samples/nearest");
+      s.nearest.clear();
+      for (size_t i = 0; i < n->size(); ++i) {
+        const std::string p = "/samples/nearest/" + std::to_string(i);
+        const long long k = c.integer((*n)[i], p);
+        if (k < 1 || k > 100000000) c.fail(p, "must be >= 1, got " + num(double(k)));
+        s.nearest.push_back(static_cast<int>(k));
+      }
+    }
+  }
+  if (const json* v = r.optional("compare_at")) {
+    c.array(*v, "/compare_at");
+    for (size_t i = 0; i < v->size(); ++i) {
+      const std::string p = "/compare_at/" + std::to_string(i);
+      const double t = c.number((*v)[i], p);
+      if (!(t > 0) || t > s.duration + 0.5 * s.dt)
+        c.fail(p, "must be in (0, duration = " + num(s.duration) + "], got " + num(t));
+      if (!s.compareAt.empty() && !(t > s.compareAt.back()))
+        c.fail(p, "instants must be strictly increasing, got " + num(t) + " after " +
+                      num(s.compareAt.back()));
+      s.compareAt.push_back(t);
+    }
+  }
+  if (const json* v = r.optional("output")) {
+    ObjectReader o(*v, "/output", file, {"surfaces"});
+    if (const json* sv = o.optional("surfaces")) {
+      const std::string str = c.string(*sv, "/output/surfaces");
+      if (str == "final") {
+        s.surfaces = SurfaceOutput::Final;
+      } else if (str == "none") {
+        s.surfaces = SurfaceOutput::None;
+      } else if (str.rfind("every:", 0) == 0) {
+        const std::string n = str.substr(6);
+        int every = 0;
+        const auto res = std::from_chars(n.data(), n.data() + n.size(), every);
+        if (n.empty() || res.ec != std::errc() || res.ptr != n.data() + n.size() || every < 1)
+          c.fail("/output/surfaces", "\"every:N\" needs an integer N >= 1, got \"" + str + "\"");
+        s.surfaces = SurfaceOutput::Every;
+        s.surfaceEvery = every;
+      } else {
+        c.fail("/output/surfaces",
+               "expected \"final\", \"every:N\" or \"none\", got \"" + str + "\"");
+      }
+    }
+  }
+  return s;
+}
+
+Scene parseSceneFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, "", "cannot open the scene file");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw InputError(path, "", "cannot read the scene file");
+  // JSON itself lets a key repeat (the last one wins); a scene must not, so a typo'd copy of
+  // "dt" cannot silently override the first. Track the path while parsing to name the place.
+  struct Frame {
+    bool array = false;
+    long index = -1;
+    std::string key;
+    std::set<std::string> keys;
+  };
+  std::vector<Frame> stack;
+  const auto pathOf = [&stack]() {
+    std::string p;
+    for (const Frame& f : stack) p += "/" + (f.array ? std::to_string(f.index) : f.key);
+    return p;
+  };
+  const json::parser_callback_t noDuplicates = [&](int, json::parse_event_t event, json& parsed) {
+    switch (event) {
+      case json::parse_event_t::object_start:
+      case json::parse_event_t::array_start:
+        if (!stack.empty() && stack.back().array) ++stack.back().index;
+        stack.push_back(Frame{event == json::parse_event_t::array_start, -1, {}, {}});
+        break;
+      case json::parse_event_t::object_end:
+      case json::parse_event_t::array_end:
+        if (!stack.empty()) stack.pop_back();
+        break;
+      case json::parse_event_t::key: {
+        Frame& f = stack.back();
+        f.key = parsed.get<std::string>();
+        if (!f.keys.insert(f.key).second)
+          throw InputError(path, pathOf(), "duplicate key '" + f.key + "'");
+        break;
+      }
+      case json::parse_event_t::value:
+        if (!stack.empty() && stack.back().array) ++stack.back().index;
+        break;
+    }
+    return true;
+  };
+  json j;
+  try {
+    j = json::parse(text, noDuplicates);
+  } catch (const json::parse_error& e) {
+    // nlohmann reports a byte offset (1-based, one past the offending character); turn it into
+    // line and column, and keep only the explanation from its message.
+    const size_t byte = std::min<size_t>(e.byte > 0 ? e.byte - 1 : 0, text.size());
+    size_t line = 1, col = 1;
+    for (size_t i = 0; i < byte; ++i) {
+      if (text[i] == '\n') {
+        ++line;
+        col = 1;
+      } else {
+        ++col;
+      }
+    }
+    std::string what = e.what();
+    const size_t colon = what.find(": ", what.find("parse error"));
+    if (colon != std::string::npos) what = what.substr(colon + 2);
+    throw InputError(path, "line " + std::to_string(line) + ", column " + std::to_string(col),
+                     "malformed JSON: " + what);
+  }
+  Scene s = parseScene(j, path);
+  s.sha256 = sha256Hex(text.data(), text.size());
+  return s;
+}
+
+ParamValues resolveParams(const std::vector<ParamSpec>& specs, const nlohmann::json& given,
+                          const std::string& file, const std::string& jsonPath) {
+  const Ctx c{file};
+  if (!given.is_null() && !given.is_object())
+    c.fail(jsonPath, "expected an object, got " + typeName(given));
+  ParamValues values = ParamValues::defaults(specs);
+  if (given.is_null()) return values;
+  for (const auto& [key, v] : given.items()) {
+    const std::string p = jsonPath + "/" + key;
+    const auto it =
+        std::find_if(specs.begin(), specs.end(), [&](const ParamSpec& s) { return s.key == key; });
+    if (it == specs.end()) {
+      std::string known;
+      for (const auto& s : specs) known += (known.empty() ? "" : ", ") + s.key;
+      c.fail(p, "unknown parameter '" + key + "' (declared: " + (known.empty() ? "none" : known) +
+                    ")");
+    }
+    const ParamSpec& spec = *it;
+    const auto checkRange = [&](double x) {
+      if (x < spec.min) c.fail(p, "must be >= " + num(spec.min) + ", got " + num(x));
+      if (x > spec.max) c.fail(p, "must be <= " + num(spec.max) + ", got " + num(x));
+    };
+    switch (spec.type) {
+      case ParamType::Real: {
+        const double x = c.number(v, p);
+        checkRange(x);
+        values.set(key, x);
+        break;
+      }
+      case ParamType::Int: {
+        const long long x = c.integer(v, p);
+        checkRange(double(x));
+        values.set(key, x);
+        break;
+      }
+      case ParamType::Bool:
+        values.set(key, c.boolean(v, p));
+        break;
+      case ParamType::Choice: {
+        const std::string x = c.string(v, p);
+        if (std::find(spec.choices.begin(), spec.choices.end(), x) == spec.choices.end()) {
+          std::string known;
+          for (const auto& ch : spec.choices) known += (known.empty() ? "\"" : ", \"") + ch + "\"";
+          c.fail(p, "expected one of " + known + ", got \"" + x + "\"");
+        }
+        values.set(key, x);
+        break;
+      }
+    }
+  }
+  return values;
+}
+
+namespace {
+
+/// Drops vertices no triangle uses; returns old -> new index (-1 for dropped).
+std::vector<int> compactSurface(SurfaceMesh& mesh) {
+  std::vector<int> map(mesh.V.rows(), -1);
+  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int v = mesh.F(f, k);
+      if (v >= 0 && v < int(map.size())) map[v] = 0;
+    }
+  int next = 0;
+  for (int& m : map)
+    if (m == 0) m = next++;
+  if (next == mesh.V.rows()) return map;
+  MatX3 V(next, 3);
+  for (size_t i = 0; i < map.size(); ++i)
+    if (map[i] >= 0) V.row(map[i]) = mesh.V.row(i);
+  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) mesh.F(f, k) = map[mesh.F(f, k)];
+  mesh.V = std::move(V);
+  return map;
+}
+
+bool repairable(const MeshReport& report) {
+  for (const auto& issue : report.issues) {
+    switch (issue.defect) {
+      case MeshDefect::DuplicateVertices:
+      case MeshDefect::DegenerateTriangles:
+      case MeshDefect::InconsistentOrientation:
+      case MeshDefect::InwardOrientation:
+      case MeshDefect::MultipleComponents:
+      case MeshDefect::UnreferencedVertices:
+        break;
+      default:
+        return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog) {
+  const OrganSpec& spec = scene.organ;
+  const auto log = [&](const std::string& line) {
+    if (repairLog) repairLog->push_back(line);
+  };
+  Organ organ;
+  organ.source = spec.mesh;
+  organ.material = spec.material;
+  organ.fixed = spec.fixed;
+  std::string meshName = spec.mesh;
+  const bool phantom = spec.mesh.rfind("phantom:", 0) == 0;
+  if (phantom) {
+    organ.surface = makePhantom(spec.mesh.substr(8), spec.resolution);
+  } else {
+    if (!fs::exists(spec.mesh))
+      throw InputError(scene.file, "/organ/mesh", "mesh file not found: " + spec.mesh);
+    LoadedMesh loaded = readMesh(spec.mesh);
+    organ.surface = std::move(loaded.surface);
+    organ.volume = std::move(loaded.volume);
+  }
+  if (spec.scale != 1.0) {
+    organ.surface.V *= spec.scale;
+    if (organ.volume) organ.volume->V *= spec.scale;
+  }
+  const int inputVertices = organ.surface.numVertices();
+
+  // Listed fixed vertices index the file's vertices; remember where they are so they can be
+  // found again after unreferenced vertices are dropped or the mesh is repaired.
+  std::vector<Vec3> fixedAt;
+  for (size_t i = 0; i < spec.fixed.surfaceVertices.size(); ++i) {
+    const int v = spec.fixed.surfaceVertices[i];
+    if (v >= inputVertices) {
+      throw InputError(scene.file, "/organ/fixed/vertices/" + std::to_string(i),
+                       "vertex " + std::to_string(v) + " does not exist (the mesh has " +
+                           std::to_string(inputVertices) + " vertices)");
+    }
+    fixedAt.push_back(organ.surface.V.row(v).transpose());
+  }
+
+  const bool facesInRange =
+      organ.surface.F.size() == 0 ||
+      (organ.surface.F.minCoeff() >= 0 && organ.surface.F.maxCoeff() < organ.surface.V.rows());
+  if (facesInRange) {
+    const std::vector<int> map = compactSurface(organ.surface);
+    const int dropped = inputVertices - organ.surface.numVertices();
+    if (dropped > 0) {
+      log("dropped " + std::to_string(dropped) +
+          " vertices used by no triangle (they would be pinned by no model)");
+      for (size_t i = 0; i < spec.fixed.surfaceVertices.size(); ++i) {
+        if (map[spec.fixed.surfaceVertices[i]] < 0)
+          throw InputError(scene.file, "/organ/fixed/vertices/" + std::to_string(i),
+                           "vertex " + std::to_string(spec.fixed.surfaceVertices[i]) +
+                               " is used by no triangle");
+      }
+      if (organ.volume) {
+        // Keep "surface vertex i is volume node i": surface nodes first, interior nodes after.
+        TetMesh& vol = *organ.volume;
+        std::vector<int> volMap(vol.V.rows(), -1);
+        for (size_t i = 0; i < map.size(); ++i)
+          if (map[i] >= 0 && i < size_t(vol.V.rows())) volMap[i] = map[i];
+        int next = organ.surface.numVertices();
+        for (int& m : volMap)
+          if (m < 0) m = next++;
+        MatX3 V(vol.V.rows(), 3);
+        for (Eigen::Index i = 0; i < vol.V.rows(); ++i) V.row(volMap[i]) = vol.V.row(i);
+        for (Eigen::Index t = 0; t < vol.T.rows(); ++t)
+          for (int k = 0; k < 4; ++k) vol.T(t, k) = volMap[vol.T(t, k)];
+        vol.V = std::move(V);
+      }
+    }
+  }
+
+  if (spec.repair) {
+    const int before = organ.surface.numVertices();
+    const MatX3i facesBefore = organ.surface.F;
+    const RepairReport rep = repairSurface(organ.surface);
+    for (const auto& line : rep.lines()) log(line);
+    const bool changed = organ.surface.numVertices() != before ||
+                         organ.surface.F.rows() != facesBefore.rows() ||
+                         organ.surface.F != facesBefore;
+    if (changed && organ.volume) {
+      organ.volume.reset();
+      log("dropped the tetrahedral volume: the repaired surface no longer matches it");
+    }
+  }
+  const MeshReport report = validateSurface(organ.surface);
+  if (!report.ok()) {
+    std::string problem = report.issues.front().message;
+    if (!spec.repair && repairable(report))
+      problem += " (\"repair\": true in the scene's organ would fix this)";
+    throw InputError(spec.mesh, "", problem);
+  }
+
+  organ.fixed.surfaceVertices.clear();
+  for (const Vec3& p : fixedAt)
+    organ.fixed.surfaceVertices.push_back(nearestVertex(organ.surface.V, p));
+  std::sort(organ.fixed.surfaceVertices.begin(), organ.fixed.surfaceVertices.end());
+  organ.fixed.surfaceVertices.erase(
+      std::unique(organ.fixed.surfaceVertices.begin(), organ.fixed.surfaceVertices.end()),
+      organ.fixed.surfaceVertices.end());
+  return organ;
+}
+
+nlohmann::json paramsToJson(const ParamValues& values) {
+  json j = json::object();
+  for (const auto& [key, v] : values.all()) {
+    std::visit([&](const auto& x) { j[key] = x; }, v);
+  }
+  return j;
+}
+
+nlohmann::json paramSpecToJson(const ParamSpec& spec) {
+  json j;
+  j["key"] = spec.key;
+  switch (spec.type) {
+    case ParamType::Real:
+      j["type"] = "real";
+      break;
+    case ParamType::Int:
+      j["type"] = "int";
+      break;
+    case ParamType::Bool:
+      j["type"] = "bool";
+      break;
+    case ParamType::Choice:
+      j["type"] = "choice";
+      break;
+  }
+  j["unit"] = spec.unit;
+  std::visit([&](const auto& x) { j["default"] = x; }, spec.defaultValue);
+  if (spec.type == ParamType::Real || spec.type == ParamType::Int) {
+    // JSON has no infinity: an open end of the range is null.
+    j["min"] = std::isfinite(spec.min) ? json(spec.min) : json(nullptr);
+    j["max"] = std::isfinite(spec.max) ? json(spec.max) : json(nullptr);
+    if (spec.type == ParamType::Int) {
+      if (std::fabs(spec.min) < 9e18) j["min"] = static_cast<long long>(spec.min);
+      if (std::fabs(spec.max) < 9e18) j["max"] = static_cast<long long>(spec.max);
+    }
+  }
+  if (spec.type == ParamType::Choice) j["choices"] = spec.choices;
+  j["description"] = spec.description;
+  return j;
+}
+
+}  // namespace deform

@@ -1,0 +1,43 @@
+// deformbench harness: results.json (DESIGN.md "Results") and the surfaces written beside it.
+#pragma once
+
+#include <deform_harness/runner.h>
+
+#include <filesystem>
+#include <string>
+
+namespace deform::harness {
+
+/// Where and with what the results were produced.
+struct MachineInfo {
+  std::string cpu;        ///< /proc/cpuinfo model name
+  std::string compiler;   ///< e.g. "GCC 12.2.0"
+  std::string buildType;  ///< CMAKE_BUILD_TYPE of the harness
+  std::string git;        ///< git describe of the source tree, "" when unavailable
+  std::string timestamp;  ///< UTC, ISO 8601
+  std::string version;    ///< deformbench version
+};
+MachineInfo machineInfo();
+
+/// Folder name for a run label: letters, digits, '.', '-' and '_' kept, everything else '_'.
+std::string sanitizeLabel(const std::string& label);
+
+/// Writes each run's surfaces under outDir/<sanitised label>/ (final.obj; a .vtp series with a
+/// .pvd for "every:N"; grasp_forces.csv when the model reports forces) and sets the records'
+/// file fields. Labels that sanitise to the same folder get a numeric suffix.
+void writeRunSurfaces(const std::filesystem::path& outDir, const Scene& scene, const Organ& organ,
+                      std::vector<RunRecord>& runs);
+
+/// The results document (keys in the order DESIGN.md shows them).
+nlohmann::ordered_json resultsJson(const Scene& scene, const Organ& organ,
+                                   const std::vector<std::string>& organLog,
+                                   const std::vector<RunRecord>& runs, const MachineInfo& machine);
+
+/// JSON of one run (an element of "runs").
+nlohmann::ordered_json runJson(const RunRecord& run);
+
+/// Writes outDir/results.json atomically; returns its path.
+std::filesystem::path writeResults(const std::filesystem::path& outDir,
+                                   const nlohmann::ordered_json& doc);
+
+}  // namespace deform::harness

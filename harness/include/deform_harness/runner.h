@@ -1,0 +1,150 @@
+// deformbench harness: running models on a scene. runModel() runs one model (resolve, create,
+// init, step with timing and divergence checks) and never throws for the model's own trouble:
+// the record's status says what happened. planRuns() / runBenchmark() drive a whole scene: every
+// plugin is loaded and every parameter validated BEFORE anything runs, so bad input ends the
+// program before any output exists.
+#pragma once
+
+#include <deform/cache.h>
+#include <deform/plugin_loader.h>
+#include <deform/scene.h>
+#include <deform_harness/metrics.h>
+
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace deform::harness {
+
+enum class RunStatus { Ok, Diverged, Unsupported, Failed };
+/// "ok" | "diverged" | "unsupported" | "failed" (as in results.json).
+const char* statusName(RunStatus s);
+
+/// A surface kept at some instant of a run.
+struct SurfaceSnapshot {
+  int step = 0;   ///< steps completed
+  Real time = 0;  ///< s
+  MatX3 positions;
+};
+
+/// One grasp reaction force reported by a model.
+struct GraspForceSample {
+  int step = 0;  ///< steps completed
+  int tool = 0;
+  Vec3 force = Vec3::Zero();  ///< N
+};
+
+struct RunRecord {
+  std::string plugin;  ///< plugin file name
+  std::string model;   ///< model name within the plugin
+  std::string label;   ///< unique within a scene run
+  std::string jsonPath;
+  bool isReference = false;
+  nlohmann::json params = nlohmann::json::object();  ///< resolved
+
+  RunStatus status = RunStatus::Ok;
+  std::string message;
+  std::vector<std::string> notes;  ///< warnings that do not change the status
+
+  Counts counts;
+  double precomputeS = 0;  ///< wall time of init(), s
+  int steps = 0;           ///< steps completed (the step that diverged included)
+  int plannedSteps = 0;
+  std::vector<double> stepMs;  ///< wall time of every step() call, ms
+  StepStats stepStats;
+  std::map<std::string, double> phaseMs;  ///< median per phase over the steps after warm-up
+  NumericCounters numeric;
+  int fixedNodes = 0;  ///< model nodes pinned by the fixed region
+  std::vector<int> emptyGrasps;
+  std::vector<Cache::Event> cacheEvents;
+
+  MatX3 finalSurface;                     ///< after the last completed step
+  MatX3i finalFaces;                      ///< the organ's faces unless the model cut them
+  std::vector<SurfaceSnapshot> compared;  ///< at the scene's compared instants, in order
+  std::vector<SurfaceSnapshot> series;    ///< every N steps ("output": "every:N")
+  std::vector<GraspForceSample> graspForces;
+
+  std::optional<ErrorMetrics> error;
+  std::string referenceModel;  ///< model name of the reference the error is against
+
+  std::string finalSurfaceFile;  ///< relative to the output folder; empty if not written
+  std::string seriesFile;        ///< .pvd relative to the output folder
+  std::string graspForceFile;    ///< .csv relative to the output folder
+};
+
+struct RunOptions {
+  int maxSteps = -1;             ///< < 0: scene.numSteps()
+  double warmupFraction = 0.05;  ///< steps excluded from the statistics (still simulated)
+  bool keepSeries = true;        ///< honour "every:N"
+  bool recordGraspForces = true;
+};
+
+/// Steps (counts of completed steps) at which the scene compares surfaces: round(t / dt) for
+/// each compare_at instant up to lastStep, else lastStep itself. lastStep < 0: the scene's last.
+std::vector<int> comparedSteps(const Scene& scene, int lastStep = -1);
+
+/// Why a model cannot run this scene ("" when it can): a grasp or probe tool without the grasp
+/// capability, a load without point_force.
+std::string unsupportedReason(const ModelInfo& info, const Scene& scene);
+
+/// Runs one model from creation to the end of the scene. Fills every field but the output files
+/// and the error. Model exceptions become status Failed; NaN/Inf or a surface leaving the
+/// divergence box becomes Diverged (the run stops at that step).
+RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene& scene,
+                   const Organ& organ, Cache& cache, const RunOptions& options = {});
+
+/// The stepping part alone, on a model already initialised (or reset): from t = 0 for
+/// options.maxSteps steps (or the scene's). Fills steps, timings, surfaces, status.
+void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOptions& options,
+              RunRecord& record);
+
+/// A run the scene asks for, resolved against its plugin.
+struct PlannedRun {
+  ModelSpec spec;
+  const ModelInfo* info = nullptr;
+  ParamValues params;
+  std::string label;
+  bool isReference = false;
+};
+
+struct BenchmarkOptions {
+  std::vector<std::string> only;  ///< run only models whose label, model or plugin matches
+  bool noReference = false;
+  /// Cache folder: nullopt = Cache::defaultDir(); an empty path disables caching.
+  std::optional<std::filesystem::path> cacheDir;
+  std::filesystem::path outDir;  ///< where results.json and surfaces go
+  RunOptions run;
+  std::function<void(const std::string&)> explain;   ///< --explain lines (may be empty)
+  std::function<void(const std::string&)> progress;  ///< one line per run started/finished
+};
+
+/// Loads the plugins the scene names and resolves every run's parameters. Throws InputError or
+/// PluginError; runs nothing.
+std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
+                                 const BenchmarkOptions& options);
+
+/// Errors of every ok model run against the reference run (if there is one and it is ok).
+void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs);
+
+struct BenchmarkResult {
+  Scene scene;
+  Organ organ;
+  std::vector<std::string> organLog;  ///< what loadOrgan dropped or repaired
+  std::vector<RunRecord> runs;
+  std::filesystem::path resultsPath;
+};
+
+/// The `deformbench run` pipeline: parse, load the organ, plan, run, compare, write surfaces and
+/// then results.json (atomically, last). Throws InputError / PluginError for bad input before
+/// anything is written.
+BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
+                             const BenchmarkOptions& options);
+
+/// Limits BLAS/OpenMP to one thread (environment for libraries loaded later, and the runtime
+/// calls of those already loaded). Call first thing in main() and again after loading plugins.
+void forceSingleThreadedNumerics();
+
+}  // namespace deform::harness

@@ -1,0 +1,277 @@
+// results.json, the surfaces written beside it, and where they were produced.
+#include <deform/cache.h>
+#include <deform/mesh_io.h>
+#include <deform_harness/results.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#ifndef DEFORM_SOURCE_DIR
+#define DEFORM_SOURCE_DIR ""
+#endif
+#ifndef DEFORM_BUILD_TYPE
+#define DEFORM_BUILD_TYPE ""
+#endif
+#ifndef DEFORM_VERSION
+#define DEFORM_VERSION "0.1.0"
+#endif
+
+namespace deform::harness {
+
+namespace fs = std::filesystem;
+using json = nlohmann::ordered_json;
+
+namespace {
+
+std::string trim(std::string s) {
+  const auto b = s.find_first_not_of(" \t\r\n");
+  const auto e = s.find_last_not_of(" \t\r\n");
+  return b == std::string::npos ? std::string() : s.substr(b, e - b + 1);
+}
+
+std::string cpuModel() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("model name", 0) == 0) {
+      const auto colon = line.find(':');
+      if (colon != std::string::npos) return trim(line.substr(colon + 1));
+    }
+  }
+  return "";
+}
+
+std::string gitDescribe() {
+  const std::string src = DEFORM_SOURCE_DIR;
+  if (src.empty() || !fs::exists(fs::path(src) / ".git")) return "";
+  const std::string cmd = "git -C '" + src + "' describe --always --dirty --tags 2>/dev/null";
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return "";
+  std::array<char, 256> buf{};
+  std::string out;
+  while (fgets(buf.data(), int(buf.size()), p)) out += buf.data();
+  pclose(p);
+  return trim(out);
+}
+
+/// JSON number, or null for NaN/Inf (JSON has neither).
+json finite(double v) {
+  return std::isfinite(v) ? json(v) : json(nullptr);
+}
+
+}  // namespace
+
+MachineInfo machineInfo() {
+  MachineInfo m;
+  m.cpu = cpuModel();
+#if defined(__clang__)
+  m.compiler = std::string("Clang ") + __clang_version__;
+#elif defined(__GNUC__)
+  m.compiler = std::string("GCC ") + __VERSION__;
+#else
+  m.compiler = "unknown";
+#endif
+  m.buildType = DEFORM_BUILD_TYPE;
+  if (m.buildType.empty()) {
+#ifdef NDEBUG
+    m.buildType = "Release";
+#else
+    m.buildType = "Debug";
+#endif
+  }
+  m.git = gitDescribe();
+  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof(buf), "%Y-%m-%dT%H:%M:%SZ", &tm);
+  m.timestamp = buf;
+  m.version = DEFORM_VERSION;
+  return m;
+}
+
+std::string sanitizeLabel(const std::string& label) {
+  std::string s;
+  for (char c : label) {
+    const bool ok = std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-' || c == '_';
+    if (ok) {
+      s += c;
+    } else if (s.empty() || s.back() != '_') {
+      s += '_';
+    }
+  }
+  while (!s.empty() && (s.back() == '_' || s.back() == '.')) s.pop_back();
+  while (!s.empty() && s.front() == '.') s.erase(s.begin());
+  return s.empty() ? "run" : s;
+}
+
+void writeRunSurfaces(const fs::path& outDir, const Scene& scene, const Organ& organ,
+                      std::vector<RunRecord>& runs) {
+  std::set<std::string> used;
+  for (RunRecord& run : runs) {
+    run.finalSurfaceFile.clear();
+    run.seriesFile.clear();
+    run.graspForceFile.clear();
+    if (run.status == RunStatus::Unsupported) continue;
+    std::string folder = sanitizeLabel(run.label);
+    if (used.count(folder)) {
+      int i = 2;
+      while (used.count(folder + "_" + std::to_string(i))) ++i;
+      folder += "_" + std::to_string(i);
+    }
+    used.insert(folder);
+    const fs::path dir = outDir / folder;
+    const bool ok = run.status == RunStatus::Ok;
+    const bool wantFinal = ok && scene.surfaces != SurfaceOutput::None;
+    const bool wantSeries = !run.series.empty();
+    const bool wantForces = !run.graspForces.empty();
+    if (!wantFinal && !wantSeries && !wantForces) continue;
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec) throw InputError(dir.string(), "", "cannot create the folder: " + ec.message());
+
+    if (wantFinal && run.finalSurface.rows() > 0) {
+      SurfaceMesh mesh{run.finalSurface, run.finalFaces};
+      writeObj((dir / "final.obj").string(), mesh);
+      run.finalSurfaceFile = folder + "/final.obj";
+    }
+    if (wantSeries) {
+      std::vector<std::pair<Real, std::string>> series;
+      for (const SurfaceSnapshot& s : run.series) {
+        if (!s.positions.allFinite()) break;
+        char name[64];
+        std::snprintf(name, sizeof(name), "surface_%06d.vtp", s.step);
+        SurfaceMesh mesh{s.positions, organ.surface.F};
+        if (s.positions.rows() != organ.surface.V.rows()) mesh.F = run.finalFaces;
+        VecX disp(s.positions.rows());
+        for (Eigen::Index i = 0; i < s.positions.rows(); ++i) {
+          disp[i] = i < organ.surface.V.rows()
+                        ? (s.positions.row(i) - organ.surface.V.row(i)).norm()
+                        : 0.0;
+        }
+        writeVtp((dir / name).string(), mesh, {{"displacement", disp}});
+        series.emplace_back(s.time, name);
+      }
+      writePvd((dir / "surfaces.pvd").string(), series);
+      run.seriesFile = folder + "/surfaces.pvd";
+    }
+    if (wantForces) {
+      std::ostringstream csv;
+      csv.precision(17);
+      csv << "step,time_s,tool,fx_N,fy_N,fz_N\n";
+      for (const GraspForceSample& g : run.graspForces) {
+        csv << g.step << ',' << g.step * scene.dt << ',' << g.tool << ',' << g.force.x() << ','
+            << g.force.y() << ',' << g.force.z() << '\n';
+      }
+      writeFileAtomic(dir / "grasp_forces.csv", csv.str());
+      run.graspForceFile = folder + "/grasp_forces.csv";
+    }
+  }
+}
+
+json runJson(const RunRecord& run) {
+  json j;
+  j["model"] = run.model;
+  j["plugin"] = run.plugin;
+  j["label"] = run.label;
+  j["role"] = run.isReference ? "reference" : "model";
+  j["params"] = json::parse(run.params.dump());
+  j["status"] = statusName(run.status);
+  j["message"] = run.message;
+  if (!run.notes.empty()) j["notes"] = run.notes;
+  j["counts"] = json::object();
+  for (const auto& [k, v] : run.counts) j["counts"][k] = v;
+  j["precompute_s"] = run.precomputeS;
+  j["steps"] = run.steps;
+  j["planned_steps"] = run.plannedSteps;
+  if (run.stepStats.samples > 0) {
+    j["step_ms"] = {{"median", run.stepStats.median},
+                    {"p95", run.stepStats.p95},
+                    {"max", run.stepStats.max},
+                    {"mean", run.stepStats.mean},
+                    {"samples", run.stepStats.samples}};
+  } else {
+    j["step_ms"] = nullptr;
+  }
+  if (!run.phaseMs.empty()) {
+    j["phase_ms"] = json::object();
+    for (const auto& [k, v] : run.phaseMs) j["phase_ms"][k] = v;
+  }
+  j["numeric"] = json::object();
+  for (const auto& [k, v] : run.numeric) j["numeric"][k] = v;
+  j["fixed_nodes"] = run.fixedNodes;
+  if (!run.cacheEvents.empty()) {
+    json c = {{"hits", 0}, {"misses", 0}, {"stored", 0}, {"corrupt", 0}};
+    for (const auto& e : run.cacheEvents) {
+      switch (e.what) {
+        case Cache::EventKind::Hit:
+          c["hits"] = c["hits"].get<int>() + 1;
+          break;
+        case Cache::EventKind::Miss:
+        case Cache::EventKind::Disabled:
+          c["misses"] = c["misses"].get<int>() + 1;
+          break;
+        case Cache::EventKind::Stored:
+          c["stored"] = c["stored"].get<int>() + 1;
+          break;
+        case Cache::EventKind::Corrupt:
+          c["corrupt"] = c["corrupt"].get<int>() + 1;
+          break;
+      }
+    }
+    j["cache"] = c;
+  }
+  if (run.error) {
+    const ErrorMetrics& e = *run.error;
+    json err;
+    err["reference"] = run.referenceModel;
+    for (const auto& [k, v] : e.rmseNearest) err["rmse_" + std::to_string(k)] = finite(v);
+    err["rmse_all"] = finite(e.rmseAll);
+    err["max"] = finite(e.max);
+    err["loss_ratio"] = finite(e.lossRatio);
+    err["instants"] = e.instants;
+    j["error"] = err;
+  }
+  if (!run.compared.empty()) {
+    json at = json::array();
+    for (const auto& s : run.compared) at.push_back(s.time);
+    j["compared_at"] = at;
+  }
+  if (!run.emptyGrasps.empty()) j["empty_grasps"] = run.emptyGrasps;
+  if (!run.finalSurfaceFile.empty()) j["final_surface"] = run.finalSurfaceFile;
+  if (!run.seriesFile.empty()) j["surface_series"] = run.seriesFile;
+  if (!run.graspForceFile.empty()) j["grasp_forces"] = run.graspForceFile;
+  return j;
+}
+
+json resultsJson(const Scene& scene, const Organ& organ, const std::vector<std::string>& organLog,
+                 const std::vector<RunRecord>& runs, const MachineInfo& machine) {
+  json doc;
+  doc["format"] = "deformbench-results/1";
+  doc["scene"] = {{"name", scene.name}, {"file", scene.file},         {"sha256", scene.sha256},
+                  {"dt", scene.dt},     {"duration", scene.duration}, {"steps", scene.numSteps()}};
+  doc["organ"] = {{"source", organ.source},
+                  {"vertices", organ.surface.numVertices()},
+                  {"triangles", organ.surface.numFaces()},
+                  {"log", organLog}};
+  doc["machine"] = {
+      {"cpu", machine.cpu}, {"compiler", machine.compiler},   {"build_type", machine.buildType},
+      {"git", machine.git}, {"timestamp", machine.timestamp}, {"deformbench", machine.version}};
+  doc["runs"] = json::array();
+  for (const RunRecord& r : runs) doc["runs"].push_back(runJson(r));
+  return doc;
+}
+
+fs::path writeResults(const fs::path& outDir, const json& doc) {
+  const fs::path path = outDir / "results.json";
+  writeFileAtomic(path, doc.dump(2) + "\n");
+  return path;
+}
+
+}  // namespace deform::harness

@@ -1,0 +1,436 @@
+// The runner: one model through one scene with timing and divergence checks, and the whole
+// `deformbench run` pipeline around it.
+#include <deform/interaction.h>
+#include <deform_harness/results.h>
+#include <deform_harness/runner.h>
+
+#include <dlfcn.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <set>
+#include <sstream>
+
+namespace deform::harness {
+
+namespace fs = std::filesystem;
+
+const char* statusName(RunStatus s) {
+  switch (s) {
+    case RunStatus::Ok:
+      return "ok";
+    case RunStatus::Diverged:
+      return "diverged";
+    case RunStatus::Unsupported:
+      return "unsupported";
+    case RunStatus::Failed:
+      return "failed";
+  }
+  return "failed";
+}
+
+void forceSingleThreadedNumerics() {
+  for (const char* var : {"OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                          "GOTO_NUM_THREADS", "BLIS_NUM_THREADS"})
+    setenv(var, "1", 1);
+  // Libraries already loaded read their environment at load time; tell them directly. Looked up
+  // at run time so the harness does not depend on which BLAS is installed.
+  using SetThreads = void (*)(int);
+  for (const char* fn : {"openblas_set_num_threads", "goto_set_num_threads", "omp_set_num_threads",
+                         "bli_thread_set_num_threads"}) {
+    if (void* sym = dlsym(RTLD_DEFAULT, fn)) reinterpret_cast<SetThreads>(sym)(1);
+  }
+}
+
+std::vector<int> comparedSteps(const Scene& scene, int lastStep) {
+  const int n = lastStep >= 0 ? std::min(lastStep, scene.numSteps()) : scene.numSteps();
+  std::vector<int> steps;
+  for (Real t : scene.compareAt) {
+    const int k = std::max(static_cast<int>(std::llround(t / scene.dt)), 1);
+    if (k > n) break;  // the run stops before this instant (--steps)
+    if (steps.empty() || k > steps.back()) steps.push_back(k);
+  }
+  if (scene.compareAt.empty() && n >= 1) steps.push_back(n);
+  return steps;
+}
+
+std::string unsupportedReason(const ModelInfo& info, const Scene& scene) {
+  for (size_t i = 0; i < scene.tools.size(); ++i) {
+    if (!info.has(Capability::Grasp)) {
+      return std::string("the scene's tool ") + std::to_string(i) + " (" +
+             (scene.tools[i].type == ToolType::Grasper ? "grasper" : "probe") +
+             ") needs the grasp capability, which " + info.name + " does not have";
+    }
+  }
+  if (!scene.loads.empty() && !info.has(Capability::PointForce)) {
+    return "the scene's loads need the point_force capability, which " + info.name +
+           " does not have";
+  }
+  return "";
+}
+
+namespace {
+
+/// Divergence test after a step: NaN/Inf, or a vertex outside the box kDivergenceBoxFactor times
+/// the organ's size around its centre (a cube, so that flat organs get room too).
+std::string divergenceProblem(const MatX3& surface, const Vec3& centre, Real halfSide) {
+  for (Eigen::Index i = 0; i < surface.rows(); ++i) {
+    const Vec3 p = surface.row(i).transpose();
+    if (!p.allFinite()) return "vertex " + std::to_string(i) + " is NaN or Inf";
+    if (((p - centre).cwiseAbs().array() > halfSide).any()) {
+      std::ostringstream s;
+      s << "vertex " << i << " left the divergence box (" << tol::kDivergenceBoxFactor
+        << " x the organ's size)";
+      return s.str();
+    }
+  }
+  return "";
+}
+
+double secondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+}  // namespace
+
+void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOptions& options,
+              RunRecord& rec) {
+  const int n =
+      options.maxSteps >= 0 ? std::min(options.maxSteps, scene.numSteps()) : scene.numSteps();
+  rec.plannedSteps = n;
+  rec.steps = 0;
+  rec.stepMs.clear();
+  rec.stepMs.reserve(static_cast<size_t>(n));
+  rec.compared.clear();
+  rec.series.clear();
+  rec.graspForces.clear();
+  rec.status = RunStatus::Ok;
+
+  const Box box = boundingBox(organ.surface.V);
+  const Real halfSide = 0.5 * tol::kDivergenceBoxFactor * std::max(box.size().maxCoeff(), 1e-9);
+  const std::vector<int> compareSteps = comparedSteps(scene, n);
+  const int every =
+      options.keepSeries && scene.surfaces == SurfaceOutput::Every ? scene.surfaceEvery : 0;
+  const int nv = organ.surface.numVertices();
+
+  Interaction interaction(scene, organ.surface);
+  std::map<std::string, std::vector<double>> phases;
+  const int warmup = static_cast<int>(std::floor(options.warmupFraction * n));
+  if (every > 0) rec.series.push_back({0, 0.0, model.surface()});
+
+  for (int k = 0; k < n; ++k) {
+    const Real t = k * scene.dt;
+    const StepInput in = interaction.prepare(t, scene.dt, model);
+    StepStatus status;
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      status = model.step(in);
+    } catch (const std::exception& e) {
+      rec.status = RunStatus::Failed;
+      rec.message = "step " + std::to_string(k + 1) + ": " + e.what();
+      break;
+    } catch (...) {
+      rec.status = RunStatus::Failed;
+      rec.message = "step " + std::to_string(k + 1) + ": unknown exception";
+      break;
+    }
+    rec.stepMs.push_back(1e3 * secondsSince(t0));
+    rec.steps = k + 1;
+    const Real tEnd = (k + 1) * scene.dt;
+
+    const MatX3& surface = model.surface();
+    std::string problem;
+    if (status == StepStatus::Diverged) {
+      problem = "the model reported divergence";
+    } else if (surface.rows() < nv) {
+      rec.status = RunStatus::Failed;
+      rec.message = "step " + std::to_string(k + 1) + ": surface() has " +
+                    std::to_string(surface.rows()) + " rows, the organ has " + std::to_string(nv) +
+                    " vertices";
+      break;
+    } else {
+      problem = divergenceProblem(surface, box.center(), halfSide);
+    }
+    if (!problem.empty()) {
+      rec.status = RunStatus::Diverged;
+      std::ostringstream s;
+      s << "diverged at step " << k + 1 << " (t = " << tEnd << " s): " << problem;
+      rec.message = s.str();
+      break;
+    }
+
+    if (k >= warmup) {
+      for (const auto& [phase, ms] : model.phaseTimes()) phases[phase].push_back(ms);
+    }
+    if (options.recordGraspForces && !in.grasps.empty()) {
+      const std::vector<Vec3> forces = model.graspForces();
+      for (size_t g = 0; g < forces.size() && g < in.grasps.size(); ++g)
+        rec.graspForces.push_back({k + 1, in.grasps[g].tool, forces[g]});
+    }
+    if (std::binary_search(compareSteps.begin(), compareSteps.end(), k + 1))
+      rec.compared.push_back({k + 1, tEnd, surface});
+    if (every > 0 && (k + 1) % every == 0) rec.series.push_back({k + 1, tEnd, surface});
+  }
+
+  rec.stepStats = stepStatistics(rec.stepMs, options.warmupFraction);
+  rec.phaseMs.clear();
+  for (auto& [phase, v] : phases) rec.phaseMs[phase] = median(v);
+  rec.numeric = model.numericCounters();
+  rec.finalSurface = model.surface();
+  const MatX3i faces = model.surfaceFaces();
+  rec.finalFaces = faces.rows() > 0 ? faces : organ.surface.F;
+  rec.emptyGrasps = interaction.emptyGrasps();
+  for (int tool : rec.emptyGrasps) {
+    rec.notes.push_back("the grasp of tool " + std::to_string(tool) +
+                        " closed on no model node (nothing within its radius)");
+  }
+}
+
+RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene& scene,
+                   const Organ& organ, Cache& cache, const RunOptions& options) {
+  RunRecord rec;
+  rec.model = info.name;
+  rec.plugin = info.name;
+  rec.label = info.name;
+  rec.params = paramsToJson(params);
+  rec.plannedSteps =
+      options.maxSteps >= 0 ? std::min(options.maxSteps, scene.numSteps()) : scene.numSteps();
+
+  const std::string why = unsupportedReason(info, scene);
+  if (!why.empty()) {
+    rec.status = RunStatus::Unsupported;
+    rec.message = why;
+    return rec;
+  }
+  if (scene.gravity.squaredNorm() > 0 && !info.has(Capability::Gravity))
+    rec.notes.push_back("gravity ignored: the model has no gravity capability");
+
+  std::unique_ptr<Model> model;
+  cache.clearEvents();
+  try {
+    model = info.create();
+    if (!model) throw std::runtime_error("the plugin's factory returned no model");
+    const ModelSetup setup{organ, params, cache, scene.dt, scene.gravity};
+    const auto t0 = std::chrono::steady_clock::now();
+    model->init(setup);
+    rec.precomputeS = secondsSince(t0);
+  } catch (const std::exception& e) {
+    rec.status = RunStatus::Failed;
+    rec.message = std::string("init: ") + e.what();
+    rec.cacheEvents = cache.events();
+    return rec;
+  } catch (...) {
+    rec.status = RunStatus::Failed;
+    rec.message = "init: unknown exception";
+    rec.cacheEvents = cache.events();
+    return rec;
+  }
+  rec.cacheEvents = cache.events();
+
+  try {
+    rec.counts = model->counts();
+    rec.fixedNodes =
+        static_cast<int>(fixedNodeIndices(model->nodes(), organ.fixed, organ.surface).size());
+    if (model->surface().rows() != organ.surface.numVertices()) {
+      rec.status = RunStatus::Failed;
+      rec.message = "after init, surface() has " + std::to_string(model->surface().rows()) +
+                    " rows, the organ has " + std::to_string(organ.surface.numVertices()) +
+                    " vertices";
+      return rec;
+    }
+    simulate(*model, scene, organ, options, rec);
+  } catch (const std::exception& e) {
+    rec.status = RunStatus::Failed;
+    rec.message = e.what();
+  } catch (...) {
+    rec.status = RunStatus::Failed;
+    rec.message = "unknown exception";
+  }
+  return rec;
+}
+
+namespace {
+
+bool matchesOnly(const BenchmarkOptions& options, const PlannedRun& run) {
+  if (options.only.empty()) return true;
+  for (const std::string& o : options.only) {
+    if (o == run.label || o == run.spec.model || o == run.spec.plugin) return true;
+  }
+  return false;
+}
+
+std::string eventName(Cache::EventKind k) {
+  switch (k) {
+    case Cache::EventKind::Hit:
+      return "hit";
+    case Cache::EventKind::Miss:
+      return "miss";
+    case Cache::EventKind::Corrupt:
+      return "corrupt (deleted)";
+    case Cache::EventKind::Stored:
+      return "stored";
+    case Cache::EventKind::Disabled:
+      return "disabled";
+  }
+  return "?";
+}
+
+}  // namespace
+
+std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
+                                 const BenchmarkOptions& options) {
+  const auto explain = [&](const std::string& s) {
+    if (options.explain) options.explain(s);
+  };
+  std::vector<const ModelSpec*> specs;
+  for (const ModelSpec& m : scene.models) specs.push_back(&m);
+  if (scene.reference) {
+    if (options.noReference) {
+      explain("skipped the reference " + scene.reference->model + ": --no-reference");
+    } else {
+      specs.push_back(&*scene.reference);
+    }
+  }
+  std::vector<PlannedRun> planned;
+  std::set<std::string> labels;
+  for (const ModelSpec* spec : specs) {
+    PlannedRun run;
+    run.spec = *spec;
+    run.isReference = scene.reference && spec == &*scene.reference;
+    run.info = &loader.load(spec->plugin, spec->model);
+    run.params =
+        resolveParams(run.info->params, spec->params, scene.file, spec->jsonPath + "/params");
+    if (!spec->label.empty()) {
+      run.label = spec->label;
+    } else {
+      const std::string nd = formatNonDefault(run.params, run.info->params);
+      run.label = nd.empty() ? spec->model : spec->model + "(" + nd + ")";
+      if (labels.count(run.label)) {
+        int i = 2;
+        while (labels.count(run.label + " #" + std::to_string(i))) ++i;
+        run.label += " #" + std::to_string(i);
+      }
+    }
+    labels.insert(run.label);
+    planned.push_back(std::move(run));
+  }
+  std::vector<PlannedRun> kept;
+  for (PlannedRun& run : planned) {
+    if (!matchesOnly(options, run) && !run.isReference) {
+      explain("skipped " + run.label + ": not selected by --only");
+      continue;
+    }
+    kept.push_back(std::move(run));
+  }
+  if (!options.only.empty()) {
+    const bool any =
+        std::any_of(kept.begin(), kept.end(), [](const PlannedRun& r) { return !r.isReference; });
+    if (!any) {
+      std::string names;
+      for (const PlannedRun& r : planned) names += (names.empty() ? "" : ", ") + r.label;
+      std::string given;
+      for (const auto& o : options.only) given += (given.empty() ? "" : ", ") + o;
+      throw InputError(
+          "--only", "",
+          "no model of the scene matches '" + given + "' (the scene has: " + names + ")");
+    }
+  }
+  for (const std::string& f : loader.loadedFiles()) explain("loaded plugin " + f);
+  for (const PlannedRun& r : kept) {
+    explain(std::string("built ") + (r.isReference ? "reference " : "model ") + r.label + " = " +
+            r.spec.plugin + "/" + r.info->name + " " + paramsToJson(r.params).dump());
+  }
+  return kept;
+}
+
+void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs) {
+  const auto ref =
+      std::find_if(runs.begin(), runs.end(), [](const RunRecord& r) { return r.isReference; });
+  if (ref == runs.end()) return;
+  if (ref->status != RunStatus::Ok) {
+    for (RunRecord& r : runs) {
+      if (!r.isReference)
+        r.notes.push_back("no error: the reference run is " + std::string(statusName(ref->status)));
+    }
+    return;
+  }
+  const Interaction interaction(scene, organ.surface);
+  const Vec3 focus = interaction.focusPoint();
+  if (ref->compared.empty()) {
+    for (RunRecord& r : runs) {
+      if (!r.isReference)
+        r.notes.push_back("no error: the run ended before every compared instant");
+    }
+    return;
+  }
+  std::vector<MatX3> refSurfaces;
+  for (const auto& s : ref->compared) refSurfaces.push_back(s.positions);
+  for (RunRecord& r : runs) {
+    if (r.isReference || r.status != RunStatus::Ok) continue;
+    if (r.compared.size() != refSurfaces.size()) {
+      r.notes.push_back("no error: the run has surfaces at different instants than the reference");
+      continue;
+    }
+    std::vector<MatX3> mine;
+    for (const auto& s : r.compared) mine.push_back(s.positions);
+    r.error = computeErrors(mine, refSurfaces, organ.surface.V, focus, scene.nearest);
+    r.referenceModel = ref->model;
+  }
+}
+
+BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
+                             const BenchmarkOptions& options) {
+  const auto explain = [&](const std::string& s) {
+    if (options.explain) options.explain(s);
+  };
+  const auto progress = [&](const std::string& s) {
+    if (options.progress) options.progress(s);
+  };
+  BenchmarkResult result;
+  result.scene = parseSceneFile(sceneFile);
+  const Scene& scene = result.scene;
+  result.organ = loadOrgan(scene, &result.organLog);
+  for (const auto& line : result.organLog) explain("organ: " + line);
+  explain("organ " + result.organ.source + ": " +
+          std::to_string(result.organ.surface.numVertices()) + " vertices, " +
+          std::to_string(result.organ.surface.numFaces()) + " triangles");
+
+  const std::vector<PlannedRun> planned = planRuns(scene, loader, options);
+  forceSingleThreadedNumerics();
+
+  const fs::path cacheDir = options.cacheDir ? *options.cacheDir : Cache::defaultDir();
+  Cache cache(cacheDir);
+  explain(cacheDir.empty() ? std::string("cache disabled") : "cache folder " + cacheDir.string());
+
+  // Output folder must be writable before hours of runs, not after.
+  std::error_code ec;
+  fs::create_directories(options.outDir, ec);
+  if (ec || !fs::is_directory(options.outDir))
+    throw InputError(options.outDir.string(), "", "cannot create the output folder");
+
+  for (const PlannedRun& p : planned) {
+    progress("running " + p.label + " ...");
+    RunRecord rec = runModel(*p.info, p.params, scene, result.organ, cache, options.run);
+    rec.plugin = p.spec.plugin;
+    rec.label = p.label;
+    rec.jsonPath = p.spec.jsonPath;
+    rec.isReference = p.isReference;
+    for (const auto& e : rec.cacheEvents)
+      explain("cache " + eventName(e.what) + ": " + p.label + " " + e.kind + " " + e.key);
+    if (rec.status == RunStatus::Unsupported) explain("skipped " + p.label + ": " + rec.message);
+    for (const auto& note : rec.notes) explain(p.label + ": " + note);
+    progress(p.label + ": " + statusName(rec.status) +
+             (rec.message.empty() ? "" : " (" + rec.message + ")"));
+    result.runs.push_back(std::move(rec));
+  }
+  computeRunErrors(scene, result.organ, result.runs);
+
+  writeRunSurfaces(options.outDir, scene, result.organ, result.runs);
+  const auto doc = resultsJson(scene, result.organ, result.organLog, result.runs, machineInfo());
+  result.resultsPath = writeResults(options.outDir, doc);
+  return result;
+}
+
+}  // namespace deform::harness

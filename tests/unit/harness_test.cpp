@@ -1,0 +1,448 @@
+// The harness: error metrics on hand-made arrays, step statistics, the runner (status, timing
+// records, divergence, failures, unsupported scenes, reset reproducibility) and results.json.
+#include <deform/interaction.h>
+#include <deform_harness/metrics.h>
+#include <deform_harness/results.h>
+#include <deform_harness/runner.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "harness_test_models.h"
+
+namespace deform::harness {
+namespace {
+
+namespace fs = std::filesystem;
+using deform::testing::RigidTestModel;
+using nlohmann::json;
+
+// ---------------------------------------------------------------------------------- metrics
+
+MatX3 rows(std::initializer_list<Vec3> pts) {
+  MatX3 m(static_cast<Eigen::Index>(pts.size()), 3);
+  Eigen::Index i = 0;
+  for (const Vec3& p : pts) m.row(i++) = p.transpose();
+  return m;
+}
+
+TEST(Metrics, HandComputedSingleInstant) {
+  const MatX3 rest = rows({Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(2, 0, 0), Vec3(10, 0, 0)});
+  const MatX3 ref = rest.rowwise() + Vec3(0, 0, 1).transpose();  // |u_ref| = 1 everywhere
+  MatX3 model = ref;
+  model.row(1) += Vec3(0, 3, 0).transpose();   // d = 3
+  model.row(2) += Vec3(0, 0, -4).transpose();  // d = 4
+  const ErrorMetrics e = computeErrors(model, ref, rest, Vec3(0, 0, 0), {2, 3, 10});
+  EXPECT_DOUBLE_EQ(e.rmseAll, 2.5);  // sqrt((0 + 9 + 16 + 0) / 4)
+  EXPECT_DOUBLE_EQ(e.max, 4.0);
+  EXPECT_DOUBLE_EQ(e.lossRatio, 7.0 / 4.0);
+  ASSERT_EQ(e.rmseNearest.size(), 3u);
+  EXPECT_EQ(e.rmseNearest[0].first, 2);
+  EXPECT_DOUBLE_EQ(e.rmseNearest[0].second, std::sqrt(9.0 / 2.0));
+  EXPECT_DOUBLE_EQ(e.rmseNearest[1].second, std::sqrt(25.0 / 3.0));
+  EXPECT_DOUBLE_EQ(e.rmseNearest[2].second, 2.5) << "k larger than #V covers every vertex";
+  // The k nearest are taken on the REST surface around the focus: focus at the far vertex.
+  const ErrorMetrics far = computeErrors(model, ref, rest, Vec3(10, 0, 0), {1});
+  EXPECT_DOUBLE_EQ(far.rmseNearest[0].second, 0.0);
+}
+
+TEST(Metrics, PooledOverInstants) {
+  const MatX3 rest = rows({Vec3(0, 0, 0), Vec3(1, 0, 0)});
+  const MatX3 ref = rest.rowwise() + Vec3(0, 0, 2).transpose();
+  MatX3 off = ref;
+  off.row(0) += Vec3(1, 0, 0).transpose();
+  const ErrorMetrics e = computeErrors(std::vector<MatX3>{off, ref}, std::vector<MatX3>{ref, ref},
+                                       rest, Vec3(0, 0, 0), {1});
+  EXPECT_EQ(e.instants, 2);
+  EXPECT_DOUBLE_EQ(e.rmseAll, std::sqrt(1.0 / 4.0));
+  EXPECT_DOUBLE_EQ(e.lossRatio, 1.0 / 8.0);
+  EXPECT_DOUBLE_EQ(e.rmseNearest[0].second, std::sqrt(1.0 / 2.0));
+}
+
+TEST(Metrics, LossRatioWhenTheReferenceDoesNotMove) {
+  const MatX3 rest = rows({Vec3(0, 0, 0), Vec3(1, 0, 0)});
+  EXPECT_EQ(computeErrors(rest, rest, rest, Vec3::Zero(), {}).lossRatio, 0.0);
+  const MatX3 moved = rest.rowwise() + Vec3(0, 0, 1).transpose();
+  EXPECT_TRUE(std::isinf(computeErrors(moved, rest, rest, Vec3::Zero(), {}).lossRatio));
+}
+
+TEST(StepStats, WarmUpExcludedMedianP95) {
+  std::vector<double> ms;
+  for (int i = 1; i <= 100; ++i) ms.push_back(i);
+  const StepStats s = stepStatistics(ms, 0.05);
+  EXPECT_EQ(s.samples, 95);  // steps 1..5 are warm-up
+  EXPECT_DOUBLE_EQ(s.median, 53);
+  EXPECT_DOUBLE_EQ(s.mean, 53);
+  EXPECT_DOUBLE_EQ(s.max, 100);
+  EXPECT_DOUBLE_EQ(s.p95, 96);  // nearest rank ceil(0.95 * 95) = 91 -> 6 + 90
+  const StepStats few = stepStatistics({3, 1, 2}, 0.05);
+  EXPECT_EQ(few.samples, 3);
+  EXPECT_DOUBLE_EQ(few.median, 2);
+  EXPECT_DOUBLE_EQ(few.p95, 3);
+  EXPECT_EQ(stepStatistics({}, 0.05).samples, 0);
+  EXPECT_DOUBLE_EQ(median({4, 1, 3, 2}), 2.5);
+}
+
+// ----------------------------------------------------------------------------------- runner
+
+struct Fixture {
+  Scene scene;
+  Organ organ;
+  Fixture() {
+    scene.name = "tet-lift";
+    scene.dt = 0.01;
+    scene.duration = 1.0;
+    scene.gravity = Vec3::Zero();
+    ToolSpec t;
+    t.radius = 0.005;
+    t.trajectory = {KeyFrame{0.0, Vec3(0, 0, 0.1), false}, KeyFrame{0.1, Vec3(0, 0, 0.1), true},
+                    KeyFrame{0.6, Vec3(0, 0, 0.12), true}};
+    scene.tools.push_back(t);
+    scene.compareAt = {0.5, 1.0};
+    scene.nearest = {1, 2};
+    organ.source = "test:tet";
+    organ.surface = deform::testing::tetSurface();
+    organ.fixed.boxes.push_back(Box{Vec3(-1, -1, -1), Vec3(0.01, 0.01, 0.01)});
+  }
+};
+
+ModelInfo infoFor(std::function<void(RigidTestModel&)> configure, bool grasp = true,
+                  int* created = nullptr) {
+  ModelInfo info;
+  info.name = "rigid";
+  info.version = "1";
+  info.capabilities = {Capability::PointForce};
+  if (grasp) info.capabilities.push_back(Capability::Grasp);
+  info.params = {ParamSpec::integer("iterations", 1, 1, 10, "unused")};
+  info.create = [configure, created]() -> std::unique_ptr<Model> {
+    if (created) ++*created;
+    auto m = std::make_unique<RigidTestModel>();
+    configure(*m);
+    return m;
+  };
+  return info;
+}
+
+RunRecord runWith(const Fixture& f, std::function<void(RigidTestModel&)> configure,
+                  bool grasp = true, int* created = nullptr) {
+  Cache cache{fs::path()};
+  const ModelInfo info = infoFor(std::move(configure), grasp, created);
+  return runModel(info, ParamValues::defaults(info.params), f.scene, f.organ, cache);
+}
+
+TEST(Runner, OkRunRecordsEveryStepAndFollowsTheGrasp) {
+  const Fixture f;
+  const RunRecord r = runWith(f, [](RigidTestModel&) {});
+  ASSERT_EQ(r.status, RunStatus::Ok) << r.message;
+  EXPECT_EQ(r.steps, 100);
+  EXPECT_EQ(r.plannedSteps, 100);
+  EXPECT_EQ(r.stepMs.size(), 100u);
+  EXPECT_EQ(r.stepStats.samples, 95);
+  EXPECT_LE(r.stepStats.median, r.stepStats.max);
+  EXPECT_LE(r.stepStats.p95, r.stepStats.max);
+  for (double ms : r.stepMs) EXPECT_GE(ms, 0.0);
+  EXPECT_GE(r.precomputeS, 0.0);
+  EXPECT_EQ(r.counts.at("nodes"), 4);
+  EXPECT_EQ(r.fixedNodes, 1);
+  EXPECT_DOUBLE_EQ(r.phaseMs.at("solve"), 0.5);
+  EXPECT_EQ(r.params["iterations"], 1);
+  ASSERT_EQ(r.compared.size(), 2u);
+  EXPECT_EQ(r.compared[0].step, 50);
+  EXPECT_NEAR(r.compared[0].positions(3, 2) - 0.1, 0.016, 1e-12);
+  EXPECT_NEAR(r.finalSurface(0, 2), 0.02, 1e-12) << "rigid body lifted by 2 cm";
+  EXPECT_EQ(r.finalFaces, f.organ.surface.F);
+}
+
+TEST(Runner, NanIsDivergenceAtThatStep) {
+  const Fixture f;
+  const RunRecord r = runWith(f, [](RigidTestModel& m) { m.nanAtStep = 7; });
+  EXPECT_EQ(r.status, RunStatus::Diverged);
+  EXPECT_EQ(r.steps, 7);
+  EXPECT_NE(r.message.find("step 7"), std::string::npos) << r.message;
+  EXPECT_NE(r.message.find("NaN"), std::string::npos) << r.message;
+}
+
+TEST(Runner, LeavingTheBoxIsDivergence) {
+  const Fixture f;
+  const RunRecord r = runWith(f, [](RigidTestModel& m) { m.runawayAtStep = 3; });
+  EXPECT_EQ(r.status, RunStatus::Diverged);
+  EXPECT_EQ(r.steps, 3);
+  EXPECT_NE(r.message.find("divergence box"), std::string::npos) << r.message;
+  const RunRecord own = runWith(f, [](RigidTestModel& m) { m.reportDivergedAtStep = 4; });
+  EXPECT_EQ(own.status, RunStatus::Diverged);
+  EXPECT_EQ(own.steps, 4);
+}
+
+TEST(Runner, ExceptionsAreFailures) {
+  const Fixture f;
+  const RunRecord r = runWith(f, [](RigidTestModel& m) { m.throwAtStep = 3; });
+  EXPECT_EQ(r.status, RunStatus::Failed);
+  EXPECT_NE(r.message.find("step 3"), std::string::npos) << r.message;
+  EXPECT_NE(r.message.find("injected failure"), std::string::npos) << r.message;
+  const RunRecord i = runWith(f, [](RigidTestModel& m) { m.throwInInit = true; });
+  EXPECT_EQ(i.status, RunStatus::Failed);
+  EXPECT_NE(i.message.find("init: "), std::string::npos) << i.message;
+  EXPECT_NE(i.message.find("cannot handle"), std::string::npos) << i.message;
+}
+
+TEST(Runner, MissingCapabilityIsUnsupportedWithoutRunning) {
+  const Fixture f;
+  int created = 0;
+  const RunRecord r = runWith(
+      f, [](RigidTestModel&) {}, /*grasp=*/false, &created);
+  EXPECT_EQ(r.status, RunStatus::Unsupported);
+  EXPECT_NE(r.message.find("grasp"), std::string::npos) << r.message;
+  EXPECT_EQ(created, 0);
+  EXPECT_TRUE(r.stepMs.empty());
+}
+
+TEST(Runner, ResetThenRerunReproducesBitForBit) {
+  const Fixture f;
+  RigidTestModel model;
+  Cache cache{fs::path()};
+  const ParamValues params;
+  model.init(ModelSetup{f.organ, params, cache, f.scene.dt, f.scene.gravity});
+  RunRecord a, b;
+  simulate(model, f.scene, f.organ, RunOptions{}, a);
+  model.reset();
+  simulate(model, f.scene, f.organ, RunOptions{}, b);
+  ASSERT_EQ(a.status, RunStatus::Ok);
+  EXPECT_TRUE(a.finalSurface == b.finalSurface);
+  EXPECT_FALSE(a.finalSurface == f.organ.surface.V);
+}
+
+TEST(Runner, MaxStepsAndComparedSteps) {
+  Fixture f;
+  RunOptions o;
+  o.maxSteps = 10;
+  Cache cache{fs::path()};
+  const ModelInfo info = infoFor([](RigidTestModel&) {});
+  const RunRecord r =
+      runModel(info, ParamValues::defaults(info.params), f.scene, f.organ, cache, o);
+  EXPECT_EQ(r.steps, 10);
+  EXPECT_EQ(comparedSteps(f.scene), (std::vector<int>{50, 100}));
+  EXPECT_EQ(comparedSteps(f.scene, 60), (std::vector<int>{50})) << "a run cut short at step 60";
+  EXPECT_EQ(r.compared.size(), 0u) << "10 steps reach no compared instant";
+  f.scene.compareAt.clear();
+  EXPECT_EQ(comparedSteps(f.scene), (std::vector<int>{100}));
+  EXPECT_EQ(comparedSteps(f.scene, 10), (std::vector<int>{10})) << "the end of a shortened run";
+  const RunRecord shortRun =
+      runModel(info, ParamValues::defaults(info.params), f.scene, f.organ, cache, o);
+  ASSERT_EQ(shortRun.compared.size(), 1u);
+  EXPECT_EQ(shortRun.compared[0].step, 10);
+}
+
+TEST(Runner, ErrorsAgainstTheReferenceRun) {
+  const Fixture f;
+  std::vector<RunRecord> runs;
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.back().isReference = true;
+  runs.back().model = "exact";
+  // Move the reference's last compared surface: the model is then off by 1 mm there.
+  runs.back().compared[1].positions.rowwise() += Vec3(0.001, 0, 0).transpose();
+  computeRunErrors(f.scene, f.organ, runs);
+  ASSERT_TRUE(runs[0].error.has_value());
+  EXPECT_FALSE(runs[1].error.has_value());
+  EXPECT_EQ(runs[0].referenceModel, "exact");
+  EXPECT_NEAR(runs[0].error->max, 0.001, 1e-12);
+  EXPECT_NEAR(runs[0].error->rmseAll, std::sqrt(0.5) * 0.001, 1e-12);  // half the instants off
+}
+
+// ---------------------------------------------------------------------------------- results
+
+TEST(Results, SanitizedLabels) {
+  EXPECT_EQ(sanitizeLabel("pbd(iterations=10)"), "pbd_iterations_10");
+  EXPECT_EQ(sanitizeLabel("../../etc"), "_.._etc");
+  EXPECT_EQ(sanitizeLabel("///"), "run");
+  EXPECT_EQ(sanitizeLabel("fem-hex_2.0"), "fem-hex_2.0");
+}
+
+TEST(Results, WrittenAtomicallyAndParseable) {
+  Fixture f;
+  f.scene.surfaces = SurfaceOutput::Every;
+  f.scene.surfaceEvery = 25;
+  std::vector<RunRecord> runs;
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.back().label = "rigid(a=1)";
+  runs.push_back(runWith(f, [](RigidTestModel& m) { m.nanAtStep = 2; }));
+  runs.back().label = "rigid nan";
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.back().label = "ref";
+  runs.back().isReference = true;
+  computeRunErrors(f.scene, f.organ, runs);
+  ASSERT_EQ(runs[0].series.size(), 5u);  // rest + every 25 steps of 100
+
+  const fs::path out = fs::temp_directory_path() / "deform_results_test";
+  fs::remove_all(out);
+  fs::create_directories(out);
+  writeRunSurfaces(out, f.scene, f.organ, runs);
+  const auto doc = resultsJson(f.scene, f.organ, {"a log line"}, runs, machineInfo());
+  const fs::path path = writeResults(out, doc);
+  EXPECT_EQ(path, out / "results.json");
+
+  std::ifstream in(path);
+  const json back = json::parse(in);
+  EXPECT_EQ(back["format"], "deformbench-results/1");
+  EXPECT_EQ(back["scene"]["name"], "tet-lift");
+  ASSERT_EQ(back["runs"].size(), 3u);
+  const json& r0 = back["runs"][0];
+  EXPECT_EQ(r0["status"], "ok");
+  EXPECT_EQ(r0["label"], "rigid(a=1)");
+  EXPECT_EQ(r0["steps"], 100);
+  for (const char* k : {"median", "p95", "max", "mean"}) EXPECT_TRUE(r0["step_ms"][k].is_number());
+  EXPECT_EQ(r0["counts"]["nodes"], 4);
+  EXPECT_EQ(r0["error"]["reference"], "rigid");
+  EXPECT_DOUBLE_EQ(r0["error"]["rmse_all"].get<double>(), 0.0);
+  EXPECT_TRUE(r0["error"].contains("rmse_1"));
+  EXPECT_TRUE(r0["error"].contains("rmse_2"));
+  EXPECT_EQ(r0["final_surface"], "rigid_a_1/final.obj");
+  EXPECT_TRUE(fs::exists(out / "rigid_a_1/final.obj"));
+  EXPECT_TRUE(fs::exists(out / "rigid_a_1/surfaces.pvd"));
+  EXPECT_TRUE(fs::exists(out / "rigid_a_1/surface_000050.vtp"));
+  const json& r1 = back["runs"][1];
+  EXPECT_EQ(r1["status"], "diverged");
+  EXPECT_FALSE(r1.contains("error"));
+  EXPECT_FALSE(r1.contains("final_surface"));
+  EXPECT_EQ(back["runs"][2]["role"], "reference");
+  EXPECT_FALSE(back["machine"]["timestamp"].get<std::string>().empty());
+  // Nothing but results.json and the run folders: no temporary files left behind.
+  for (const auto& entry : fs::directory_iterator(out)) {
+    if (entry.is_regular_file()) {
+      EXPECT_EQ(entry.path().filename(), "results.json");
+    }
+  }
+  fs::remove_all(out);
+}
+
+TEST(Results, NoReferenceMeansNoErrorKey) {
+  const Fixture f;
+  std::vector<RunRecord> runs;
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  computeRunErrors(f.scene, f.organ, runs);
+  EXPECT_FALSE(runJson(runs[0]).contains("error"));
+}
+
+}  // namespace
+}  // namespace deform::harness
+
+// ------------------------------------------------------------- the whole pipeline, via a plugin
+#ifdef DEFORM_FIXTURE_PLUGIN_DIR
+namespace deform::harness {
+namespace {
+
+class Pipeline : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    m_dir = fs::temp_directory_path() /
+            ("deform_pipeline_" +
+             std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(m_dir);
+    fs::create_directories(m_dir);
+  }
+  void TearDown() override { fs::remove_all(m_dir); }
+
+  /// Toy scene on the cube phantom: a grasp on the top face lifting 1 cm.
+  json scene() const {
+    return json::parse(R"({
+      "name": "toy-lift",
+      "organ": {"mesh": "phantom:cube", "resolution": 0.3,
+                "fixed": {"box": [[-1, -1, -1], [1, 1, -0.04]]}},
+      "gravity": [0, 0, 0], "dt": 0.01, "duration": 0.5,
+      "tools": [{"type": "grasper", "radius": 0.02,
+                 "trajectory": [{"t": 0, "pos": [0, 0, 0.05], "jaw": "closed"},
+                                {"t": 0.4, "pos": [0, 0, 0.06]}]}],
+      "models": [{"plugin": "toy", "params": {"gain": 0.5}}],
+      "reference": {"plugin": "toy", "label": "exact", "params": {}},
+      "compare_at": [0.2, 0.5]
+    })");
+  }
+  std::string write(const json& j) const {
+    const fs::path p = m_dir / "scene.json";
+    std::ofstream(p) << j.dump(2);
+    return p.string();
+  }
+  BenchmarkOptions options() const {
+    BenchmarkOptions o;
+    o.outDir = m_dir / "out";
+    o.cacheDir = fs::path();
+    return o;
+  }
+  fs::path m_dir;
+};
+
+TEST_F(Pipeline, RunsModelsAndReferenceAndWritesResults) {
+  PluginLoader loader({DEFORM_FIXTURE_PLUGIN_DIR});
+  std::vector<std::string> explained;
+  BenchmarkOptions o = options();
+  o.explain = [&](const std::string& s) { explained.push_back(s); };
+  const BenchmarkResult r = runBenchmark(write(scene()), loader, o);
+  ASSERT_EQ(r.runs.size(), 2u);
+  EXPECT_EQ(r.runs[0].label, "toy(gain=0.5)");
+  EXPECT_EQ(r.runs[1].label, "exact");
+  EXPECT_TRUE(r.runs[1].isReference);
+  ASSERT_TRUE(r.runs[0].error.has_value());
+  // gain 0.5 lags the tool: e <- (1 - g)(e + v) settles at e = v = 0.25 mm per step while the
+  // tool moves (t = 0.2) and decays to ~0 after it stops (t = 0.5).
+  EXPECT_GT(r.runs[0].error->max, 1e-4);
+  EXPECT_LT(r.runs[0].error->max, 5e-4);
+  EXPECT_GT(r.runs[0].error->lossRatio, 0.0);
+  std::ifstream in(r.resultsPath);
+  const json doc = json::parse(in);
+  EXPECT_EQ(doc["scene"]["name"], "toy-lift");
+  EXPECT_EQ(doc["scene"]["sha256"].get<std::string>().size(), 64u);
+  EXPECT_EQ(doc["runs"][0]["params"]["gain"], 0.5);
+  EXPECT_EQ(doc["runs"][0]["params"]["iterations"], 20) << "defaults are written too";
+  EXPECT_EQ(doc["runs"][0]["error"]["reference"], "toy");
+  EXPECT_TRUE(fs::exists(m_dir / "out" / doc["runs"][0]["final_surface"].get<std::string>()));
+  const auto has = [&](const std::string& prefix) {
+    return std::any_of(explained.begin(), explained.end(),
+                       [&](const std::string& s) { return s.rfind(prefix, 0) == 0; });
+  };
+  EXPECT_TRUE(has("loaded plugin "));
+  EXPECT_TRUE(has("built model toy(gain=0.5)"));
+  EXPECT_TRUE(has("built reference exact"));
+}
+
+TEST_F(Pipeline, NoReferenceMeansNoError) {
+  PluginLoader loader({DEFORM_FIXTURE_PLUGIN_DIR});
+  BenchmarkOptions o = options();
+  o.noReference = true;
+  const BenchmarkResult r = runBenchmark(write(scene()), loader, o);
+  ASSERT_EQ(r.runs.size(), 1u);
+  EXPECT_FALSE(r.runs[0].error.has_value());
+}
+
+TEST_F(Pipeline, BadParameterStopsBeforeAnyOutput) {
+  PluginLoader loader({DEFORM_FIXTURE_PLUGIN_DIR});
+  json j = scene();
+  j["models"][0]["params"]["gain"] = 2;
+  try {
+    runBenchmark(write(j), loader, options());
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.place(), "/models/0/params/gain");
+    EXPECT_NE(std::string(e.what()).find("must be <= 1, got 2"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(m_dir / "out"));
+}
+
+TEST_F(Pipeline, MissingPluginAndOnlyFilter) {
+  PluginLoader loader({DEFORM_FIXTURE_PLUGIN_DIR});
+  json j = scene();
+  j["models"][0]["plugin"] = "absent";
+  EXPECT_THROW(runBenchmark(write(j), loader, options()), PluginError);
+  EXPECT_FALSE(fs::exists(m_dir / "out"));
+
+  BenchmarkOptions o = options();
+  o.only = {"nothing"};
+  EXPECT_THROW(runBenchmark(write(scene()), loader, o), InputError);
+  o.only = {"toy(gain=0.5)"};
+  EXPECT_EQ(runBenchmark(write(scene()), loader, o).runs.size(), 2u) << "the reference stays";
+}
+
+}  // namespace
+}  // namespace deform::harness
+#endif

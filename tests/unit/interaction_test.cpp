@@ -1,0 +1,209 @@
+// Interaction: keyframe interpolation, jaw state, grasp attach/follow/release, point forces and
+// pin heads, probes, the focus point and the fixed region.
+#include <deform/interaction.h>
+#include <gtest/gtest.h>
+
+#include "harness_test_models.h"
+
+namespace deform {
+namespace {
+
+using testing::FixedNodesModel;
+
+KeyFrame kf(Real t, Vec3 p, bool closed) {
+  return KeyFrame{t, p, closed};
+}
+
+std::vector<KeyFrame> liftTrajectory() {
+  return {kf(0.0, Vec3(0, 0, 0), false), kf(0.1, Vec3(0, 0, 0), true),
+          kf(0.6, Vec3(0, 0, 0.02), true), kf(0.8, Vec3(0, 0, 0.02), false)};
+}
+
+TEST(ToolPosition, PiecewiseLinearAndHeldAtTheEnds) {
+  const std::vector<KeyFrame> k = {kf(0.2, Vec3(1, 0, 0), false), kf(0.4, Vec3(3, 2, 0), false),
+                                   kf(1.0, Vec3(3, 2, 6), false)};
+  EXPECT_EQ(toolPosition(k, 0.0), Vec3(1, 0, 0));
+  EXPECT_EQ(toolPosition(k, 0.2), Vec3(1, 0, 0));
+  EXPECT_TRUE(toolPosition(k, 0.3).isApprox(Vec3(2, 1, 0)));
+  EXPECT_TRUE(toolPosition(k, 0.4).isApprox(Vec3(3, 2, 0)));
+  EXPECT_TRUE(toolPosition(k, 0.5).isApprox(Vec3(3, 2, 1)));
+  EXPECT_EQ(toolPosition(k, 5.0), Vec3(3, 2, 6));
+}
+
+TEST(JawClosed, StateOfTheLastKeyframeReached) {
+  const auto k = liftTrajectory();
+  EXPECT_FALSE(jawClosed(k, -1.0));
+  EXPECT_FALSE(jawClosed(k, 0.05));
+  EXPECT_TRUE(jawClosed(k, 0.1));
+  EXPECT_TRUE(jawClosed(k, 0.7));
+  EXPECT_FALSE(jawClosed(k, 0.8));
+  EXPECT_FALSE(jawClosed({kf(0.5, Vec3::Zero(), true)}, 0.2)) << "open before the first frame";
+}
+
+Scene graspScene(Real radius) {
+  Scene s;
+  s.dt = 0.01;
+  s.duration = 1.0;
+  ToolSpec t;
+  t.type = ToolType::Grasper;
+  t.radius = radius;
+  t.trajectory = liftTrajectory();
+  s.tools.push_back(t);
+  return s;
+}
+
+MatX3 lineOfNodes() {
+  MatX3 n(4, 3);
+  n << 0, 0, 0,     //
+      0.004, 0, 0,  //
+      0.006, 0, 0,  //
+      0, 0.001, 0;
+  return n;
+}
+
+TEST(Interaction, GraspAttachesWithinRadiusFollowsAndReleases) {
+  const Scene scene = graspScene(0.005);
+  const SurfaceMesh rest = testing::tetSurface();
+  Interaction inter(scene, rest);
+  FixedNodesModel model(lineOfNodes());
+
+  EXPECT_TRUE(inter.prepare(0.05, 0.01, model).grasps.empty()) << "jaws still open";
+
+  // Step count 10 at dt 0.01 lands on the closing keyframe, possibly a rounding error below it.
+  StepInput in = inter.prepare(10 * 0.01, 0.01, model);
+  ASSERT_EQ(in.grasps.size(), 1u);
+  EXPECT_EQ(in.grasps[0].tool, 0);
+  EXPECT_EQ(in.grasps[0].nodes, (std::vector<int>{0, 1, 3}));
+  ASSERT_EQ(in.grasps[0].targets.rows(), 3);
+  // The tool moves 0.02 m up between t = 0.1 and 0.6: 0.0004 m during the first step.
+  EXPECT_NEAR(in.grasps[0].targets(0, 2), 0.0004, 1e-12);
+  EXPECT_NEAR(in.grasps[0].targets(1, 0), 0.004, 1e-15);
+
+  // Attached nodes are kept even when the model's nodes move out of the radius later.
+  model.m_x.row(1) = Vec3(1, 1, 1).transpose();
+  in = inter.prepare(0.35, 0.01, model);
+  ASSERT_EQ(in.grasps.size(), 1u);
+  EXPECT_EQ(in.grasps[0].nodes, (std::vector<int>{0, 1, 3}));
+  EXPECT_NEAR(in.grasps[0].targets(1, 2), 0.02 * (0.36 - 0.1) / 0.5, 1e-12)
+      << "targets are the positions at closing, translated by the tool";
+  EXPECT_NEAR(in.grasps[0].targets(1, 0), 0.004, 1e-15);
+
+  EXPECT_TRUE(inter.prepare(0.85, 0.01, model).grasps.empty()) << "released when the jaws open";
+  EXPECT_TRUE(inter.emptyGrasps().empty());
+}
+
+TEST(Interaction, GraspOnNothingIsReportedAndResetForgets) {
+  const Scene scene = graspScene(0.0001);
+  const SurfaceMesh rest = testing::tetSurface();
+  Interaction inter(scene, rest);
+  MatX3 far(1, 3);
+  far << 1, 1, 1;
+  FixedNodesModel model(far);
+  EXPECT_TRUE(inter.prepare(0.2, 0.01, model).grasps.empty());
+  EXPECT_EQ(inter.emptyGrasps(), (std::vector<int>{0}));
+  inter.reset();
+  EXPECT_TRUE(inter.emptyGrasps().empty());
+
+  // After reset a grasp re-attaches at the next prepare with the model's nodes then.
+  Scene big = graspScene(0.01);
+  Interaction inter2(big, rest);
+  FixedNodesModel m2(lineOfNodes());
+  ASSERT_EQ(inter2.prepare(0.2, 0.01, m2).grasps.size(), 1u);
+  inter2.reset();
+  m2.m_x.row(2) = Vec3(0.001, 0, 0).transpose();
+  m2.m_x.row(0) = Vec3(0.5, 0, 0).transpose();
+  const StepInput in = inter2.prepare(0.3, 0.01, m2);
+  ASSERT_EQ(in.grasps.size(), 1u);
+  EXPECT_EQ(in.grasps[0].nodes, (std::vector<int>{1, 2, 3}));
+}
+
+TEST(Interaction, PointForceOnNearestRestVertexWithinItsWindow) {
+  Scene scene;
+  LoadSpec l;
+  l.type = LoadType::PointForce;
+  l.at = Vec3(0.09, 0.001, 0);  // nearest to vertex 1 of the tet
+  l.force = Vec3(0, 0, 2);
+  l.start = 0.2;
+  l.end = 0.5;
+  scene.loads.push_back(l);
+  const SurfaceMesh rest = testing::tetSurface();
+  Interaction inter(scene, rest);
+  FixedNodesModel model(rest.V);
+  EXPECT_EQ(inter.loadVertices(), (std::vector<int>{1}));
+  EXPECT_TRUE(inter.prepare(0.1, 0.01, model).loads.empty());
+  const StepInput in = inter.prepare(0.2, 0.01, model);
+  ASSERT_EQ(in.loads.size(), 1u);
+  EXPECT_EQ(in.loads[0].surfaceVertex, 1);
+  EXPECT_EQ(in.loads[0].force, Vec3(0, 0, 2));
+  EXPECT_EQ(inter.prepare(0.49, 0.01, model).loads.size(), 1u);
+  EXPECT_TRUE(inter.prepare(0.5, 0.01, model).loads.empty()) << "end is exclusive";
+  EXPECT_EQ(inter.focusPoint(), rest.V.row(1).transpose());
+}
+
+TEST(Interaction, PinHeadIsASpringToTheKeyframedPin) {
+  Scene scene;
+  scene.gravity = Vec3(0, 0, -1);
+  LoadSpec l;
+  l.type = LoadType::PinHead;
+  l.at = Vec3(0, 0, 0.1);
+  l.stiffness = 100;
+  l.path = {kf(0, Vec3(0, 0, 0.1), false), kf(1, Vec3(0, 0.02, 0.1), false)};
+  scene.loads.push_back(l);
+  const SurfaceMesh rest = testing::tetSurface();
+  Interaction inter(scene, rest);
+  FixedNodesModel model(rest.V);
+  const StepInput in = inter.prepare(0.49, 0.01, model);
+  EXPECT_EQ(in.gravity, Vec3(0, 0, -1));
+  ASSERT_EQ(in.loads.size(), 1u);
+  EXPECT_EQ(in.loads[0].surfaceVertex, 3);
+  // pin at the end of the step (t = 0.5) is 0.01 m along y: f = 100 N/m * 0.01 m.
+  EXPECT_TRUE(in.loads[0].force.isApprox(Vec3(0, 1.0, 0), 1e-12)) << in.loads[0].force.transpose();
+}
+
+TEST(Interaction, ProbePushesNodesOntoItsSphere) {
+  Scene scene;
+  ToolSpec probe;
+  probe.type = ToolType::Probe;
+  probe.radius = 0.01;
+  probe.trajectory = {kf(0, Vec3(0, 0, 0.005), false)};
+  scene.tools.push_back(probe);
+  const SurfaceMesh rest = testing::tetSurface();
+  Interaction inter(scene, rest);
+  FixedNodesModel model(lineOfNodes());
+  const StepInput in = inter.prepare(0.0, 0.01, model);
+  ASSERT_EQ(in.grasps.size(), 1u);
+  EXPECT_EQ(in.grasps[0].nodes.size(), 4u);
+  for (Eigen::Index k = 0; k < in.grasps[0].targets.rows(); ++k) {
+    EXPECT_NEAR((in.grasps[0].targets.row(k).transpose() - Vec3(0, 0, 0.005)).norm(), 0.01, 1e-12);
+  }
+  EXPECT_LT(in.grasps[0].targets(0, 2), 0) << "the node under the centre goes down";
+}
+
+TEST(Interaction, FocusPointFallsBackToGraspThenCentre) {
+  const SurfaceMesh rest = testing::tetSurface();
+  const Scene grasp = graspScene(0.01);
+  EXPECT_EQ(Interaction(grasp, rest).focusPoint(), Vec3(0, 0, 0));
+  Scene shifted = grasp;
+  for (auto& k : shifted.tools[0].trajectory) k.pos += Vec3(0.3, 0, 0);
+  EXPECT_EQ(Interaction(shifted, rest).focusPoint(), Vec3(0.3, 0, 0));
+  const Scene none;
+  EXPECT_TRUE(Interaction(none, rest).focusPoint().isApprox(Vec3(0.05, 0.05, 0.05)));
+}
+
+TEST(FixedNodes, BoxesAndNearestNodesToListedVertices) {
+  const SurfaceMesh rest = testing::tetSurface();
+  MatX3 nodes(5, 3);
+  nodes << 0, 0, 0,      //
+      0.1, 0, 0,         //
+      0.01, 0.0, 0.095,  //
+      0.0, 0.09, 0.0,    //
+      -0.01, -0.01, -0.01;
+  FixedRegion region;
+  region.boxes.push_back(Box{Vec3(-0.02, -0.02, -0.02), Vec3(0.001, 0.001, 0.001)});
+  region.surfaceVertices = {3, 2};  // rest (0,0,0.1) -> node 2; rest (0,0.1,0) -> node 3
+  EXPECT_EQ(fixedNodeIndices(nodes, region, rest), (std::vector<int>{0, 2, 3, 4}));
+  EXPECT_TRUE(fixedNodeIndices(nodes, FixedRegion{}, rest).empty());
+}
+
+}  // namespace
+}  // namespace deform
