@@ -3,8 +3,10 @@
 # suite with AddressSanitizer + UndefinedBehaviorSanitizer in build-asan/ and runs them; any
 # sanitizer report (memory error, leak, undefined behaviour) aborts the test binary and fails
 # the script. Usage:
-#   scripts/sanitize.sh            build + run
-#   scripts/sanitize.sh --no-run   build only
+#   scripts/sanitize.sh            build + run everything
+#   scripts/sanitize.sh --quick    only the core, deformbench and the unit tests (no plugins, no
+#                                  conformance suite): the part that fits a CI budget
+#   scripts/sanitize.sh --no-run   build only (combine with --quick as the second argument)
 # Tests too slow under the sanitizers (ASan + UBSan at -O1 runs the numerics 3-10x slower) are
 # excluded by name with SANITIZE_EXCLUDE, a ':'-separated list of gtest patterns (wildcards * ?)
 # applied to both test programs; the default is below, override it with
@@ -16,7 +18,17 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 run=1
-[[ ${1:-} == --no-run ]] && run=0
+quick=0
+for a in "$@"; do
+  case $a in
+    --no-run) run=0 ;;
+    --quick) quick=1 ;;
+    *)
+      echo "usage: $0 [--quick] [--no-run]" >&2
+      exit 2
+      ;;
+  esac
+done
 build=${SANITIZE_BUILD_DIR:-build-asan}
 jobs=${SANITIZE_JOBS:-$(nproc)}
 # Default exclusions: see the README in tests/fuzz ("Sanitizer build") for why each is here.
@@ -35,11 +47,14 @@ cmake -S . -B "$build" "${generator[@]}" "${compilers[@]}" -DCMAKE_BUILD_TYPE=De
 
 # The plugins are MODULE libraries named deform_<plugin>; the test programs load them.
 targets=(deform_core deformbench)
+tests=(deform_unit_tests deform_conformance_tests)
+[[ $quick -eq 1 ]] && tests=(deform_unit_tests)
 for d in plugins/*/; do
+  [[ $quick -eq 1 ]] && break
   p=$(basename "$d")
   grep -q "deform_add_plugin(${p}\b" "$d/CMakeLists.txt" 2>/dev/null && targets+=("deform_$p")
 done
-for t in deform_unit_tests deform_conformance_tests; do
+for t in "${tests[@]}"; do
   if cmake --build "$build" --target help 2>/dev/null | grep -q "\b$t\b"; then targets+=("$t"); fi
 done
 echo "sanitize.sh: building ${targets[*]}"
@@ -51,7 +66,7 @@ export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 export DEFORM_CACHE_DIR=$PWD/$build/test-cache
 
 status=0
-for t in deform_unit_tests deform_conformance_tests; do
+for t in "${tests[@]}"; do
   bin=$build/tests/$t
   [[ -x $bin ]] || continue
   filter=()

@@ -503,7 +503,10 @@ ParamValues resolveParams(const std::vector<ParamSpec>& specs, const nlohmann::j
     c.fail(jsonPath, "expected an object, got " + typeName(given));
   ParamValues values = ParamValues::defaults(specs);
   if (given.is_null()) return values;
-  for (const auto& [key, v] : given.items()) {
+  // Named copies, not structured bindings: clang before 16 cannot capture those in a lambda.
+  for (const auto& item : given.items()) {
+    const std::string key = item.key();
+    const json& v = item.value();
     const std::string p = jsonPath + "/" + key;
     const auto it =
         std::find_if(specs.begin(), specs.end(), [&](const ParamSpec& s) { return s.key == key; });
@@ -696,8 +699,9 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog) {
 
 nlohmann::json paramsToJson(const ParamValues& values) {
   json j = json::object();
-  for (const auto& [key, v] : values.all()) {
-    std::visit([&](const auto& x) { j[key] = x; }, v);
+  for (const auto& kv : values.all()) {
+    const std::string& key = kv.first;
+    std::visit([&](const auto& x) { j[key] = x; }, kv.second);
   }
   return j;
 }
