@@ -81,6 +81,8 @@ for t in "${tests[@]}"; do
 done
 if ctest --test-dir "$build" -N -R '^cli_' 2>/dev/null | grep -q 'Total Tests: [1-9]'; then
   echo "== deformbench CLI tests (ctest -R '^cli_' -E '$cli_exclude')"
+  # cli_phantom_write writes into the out/ folder that the (excluded) cli_run_* tests create.
+  mkdir -p "$build/tests/cli/out"
   start=$SECONDS
   ctest --test-dir "$build" -R '^cli_' ${cli_exclude:+-E "$cli_exclude"} --output-on-failure \
     -j "$jobs" --timeout 600 || status=1
