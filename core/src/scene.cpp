@@ -490,6 +490,12 @@ Scene parseSceneFile(const std::string& path) {
     if (colon != std::string::npos) what = what.substr(colon + 2);
     throw InputError(path, "line " + std::to_string(line) + ", column " + std::to_string(col),
                      "malformed JSON: " + what);
+  } catch (const json::out_of_range& e) {
+    // A number too large for a double (e.g. 1e999) is out_of_range.406, not a parse_error.
+    std::string what = e.what();
+    const size_t bracket = what.find("] ");
+    if (bracket != std::string::npos) what = what.substr(bracket + 2);
+    throw InputError(path, "", "malformed JSON: " + what);
   }
   Scene s = parseScene(j, path);
   s.sha256 = sha256Hex(text.data(), text.size());

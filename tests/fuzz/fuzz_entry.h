@@ -1,8 +1,9 @@
 // The entry points shared by the libFuzzer targets (tests/fuzz/*_fuzzer.cpp) and the regression
 // test that replays every saved crash (tests/unit/fuzz_regressions_test.cpp). They feed bytes
 // through the same code a user's file goes through and swallow only the exceptions that are the
-// documented answer to bad input: deform::InputError (and, for scenes, the JSON library's own
-// syntax errors for text that is not JSON). Anything else escaping (std::bad_alloc,
+// documented answer to bad input: deform::InputError (and, for scenes parsed from a JSON value,
+// the JSON library's own exceptions from json::parse; parseSceneFile must turn those into
+// InputError itself). Anything else escaping (std::bad_alloc,
 // std::out_of_range, a nlohmann type_error from inside the parser) ends the process and counts
 // as a bug, as do crashes, sanitizer reports, hangs and leaks.
 #pragma once
@@ -47,18 +48,26 @@ inline Outcome feedMesh(std::string_view data, const std::string& name) {
 }
 
 /// Feeds `text` to the scene parser both ways a scene arrives: as a JSON value
-/// (json::parse, then parseScene(j, "fuzz/scene.json")) and as a file (parseSceneFile, which also
-/// refuses duplicate keys and turns JSON syntax errors into InputError with line and column).
+/// (json::parse, whose own exceptions are accepted, then parseScene(j, "fuzz/scene.json")) and
+/// as a file (parseSceneFile, which also refuses duplicate keys and must turn every JSON error
+/// into InputError with the place).
 /// Mesh paths resolve relative to the file but no mesh is loaded. Refused if either refuses.
 inline Outcome feedScene(std::string_view text) {
   Outcome outcome = Outcome::Accepted;
+  nlohmann::json j;
+  bool parsed = false;
   try {
-    const nlohmann::json j = nlohmann::json::parse(text.begin(), text.end());
-    (void)parseScene(j, "fuzz/scene.json");
-  } catch (const nlohmann::json::parse_error&) {
+    j = nlohmann::json::parse(text.begin(), text.end());
+    parsed = true;
+  } catch (const nlohmann::json::exception&) {  // syntax error, or a number overflowing a double
     outcome = Outcome::Refused;
-  } catch (const InputError&) {
-    outcome = Outcome::Refused;
+  }
+  if (parsed) {
+    try {
+      (void)parseScene(j, "fuzz/scene.json");
+    } catch (const InputError&) {
+      outcome = Outcome::Refused;
+    }
   }
   // One scratch file per process, rewritten for every input.
   static const std::string path = (std::filesystem::temp_directory_path() /
