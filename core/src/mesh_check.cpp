@@ -79,7 +79,12 @@ std::vector<int> weldMap(const MatX3& V, const Box& box, Real eps) {
     if (!finiteRow(V, i)) continue;
     const Vec3 p = V.row(i).transpose();
     std::array<long long, 3> c;
-    for (int k = 0; k < 3; ++k) c[size_t(k)] = static_cast<long long>((p[k] - box.lo[k]) / h);
+    for (int k = 0; k < 3; ++k) {
+      // Coordinates near DBL_MAX overflow the box to inf, so eps = h = inf and q = inf / inf is
+      // NaN: such points all go to cell 0 (every point is within an infinite eps anyway).
+      const Real q = (p[k] - box.lo[k]) / h;
+      c[size_t(k)] = q >= 0 && q < 4e18 ? static_cast<long long>(q) : 0;
+    }
     int best = -1;
     for (long long dx = -1; dx <= 1; ++dx) {
       for (long long dy = -1; dy <= 1; ++dy) {

@@ -74,6 +74,12 @@ SurfaceMesh io::readPlyData(std::string_view data, const std::string& path) {
       if (tok.size() < 3 || !io::parseInteger(tok[2], n) || n < 0 || n > io::kMaxCount) {
         cur.fail("bad element line");
       }
+      // The reader looks up x, y, z and the index list by element name, so these must be unique.
+      if (tok[1] == "vertex" || tok[1] == "face") {
+        for (const PlyElement& e : elements) {
+          if (e.name == tok[1]) cur.fail("second '" + e.name + "' element");
+        }
+      }
       elements.push_back({std::string(tok[1]), n, {}});
     } else if (tok[0] == "property") {
       if (elements.empty()) cur.fail("property before any element");
@@ -178,6 +184,8 @@ SurfaceMesh io::readPlyData(std::string_view data, const std::string& path) {
         const size_t countAt = cur.pos();
         const double n = value(prop.countType, "a list length");
         if (n < 0) cur.fail("negative list length");
+        // ASCII accepts "inf" or 1e30 as an integer; only a count in range may be cast.
+        if (!(n <= double(io::kMaxCount))) cur.fail("invalid list length");
         const auto count = static_cast<long long>(n);
         cur.requireFits(count, binary ? io::scalarSize(prop.type) : 2, "list entries");
         const bool indices = isFace && int(k) == iface;
@@ -195,8 +203,9 @@ SurfaceMesh io::readPlyData(std::string_view data, const std::string& path) {
           const double v = value(prop.type, "a list entry");
           if (!indices) continue;
           if (v < 0 || v >= double(nv)) {
-            cur.fail("face index " + std::to_string(static_cast<long long>(v)) + " out of range (" +
-                     std::to_string(nv) + " vertices)");
+            const std::string shown =
+                std::fabs(v) < 1e18 ? std::to_string(static_cast<long long>(v)) : std::to_string(v);
+            cur.fail("face index " + shown + " out of range (" + std::to_string(nv) + " vertices)");
           }
           poly.push_back(static_cast<int>(v));
         }

@@ -177,7 +177,8 @@ class VtkReader {
     const long long n = count("point count");
     const io::ScalarType t = typeToken();
     restOfLine();
-    m_xyz.reserve(3 * size_t(n));
+    // Reserve no more than the rest of the file can hold (values() checks the count itself).
+    m_xyz.reserve(std::min(3 * size_t(n), m_cur.remaining()));
     values(3 * n, t, "point coordinates", [&](double v) {
       if (!std::isfinite(v)) m_cur.fail("non-finite coordinate (NaN or Inf)");
       m_xyz.push_back(v);
@@ -221,7 +222,7 @@ class VtkReader {
     values(size, io::ScalarType::Int32, "cell list",
            [&](double v) { flat.push_back(asIndex(v, "cell list entry")); });
     size_t pos = 0;
-    cells.offsets.reserve(size_t(n) + 1);
+    cells.offsets.reserve(std::min(size_t(n), flat.size()) + 1);
     cells.ids.reserve(flat.size());
     for (long long c = 0; c < n; ++c) {
       if (pos >= flat.size() || flat[pos] > static_cast<long long>(flat.size() - pos - 1)) {
@@ -242,7 +243,7 @@ class VtkReader {
     const long long n = count("cell type count");
     restOfLine();
     m_types.clear();
-    m_types.reserve(size_t(n));
+    m_types.reserve(std::min(size_t(n), m_cur.remaining()));
     values(n, io::ScalarType::Int32, "cell types",
            [&](double v) { m_types.push_back(static_cast<int>(asIndex(v, "cell type"))); });
   }

@@ -490,6 +490,12 @@ Scene parseSceneFile(const std::string& path) {
     if (colon != std::string::npos) what = what.substr(colon + 2);
     throw InputError(path, "line " + std::to_string(line) + ", column " + std::to_string(col),
                      "malformed JSON: " + what);
+  } catch (const json::out_of_range& e) {
+    // A number too large for a double (e.g. 1e999) is out_of_range.406, not a parse_error.
+    std::string what = e.what();
+    const size_t bracket = what.find("] ");
+    if (bracket != std::string::npos) what = what.substr(bracket + 2);
+    throw InputError(path, "", "malformed JSON: " + what);
   }
   Scene s = parseScene(j, path);
   s.sha256 = sha256Hex(text.data(), text.size());
@@ -503,7 +509,10 @@ ParamValues resolveParams(const std::vector<ParamSpec>& specs, const nlohmann::j
     c.fail(jsonPath, "expected an object, got " + typeName(given));
   ParamValues values = ParamValues::defaults(specs);
   if (given.is_null()) return values;
-  for (const auto& [key, v] : given.items()) {
+  // Named copies, not structured bindings: clang before 16 cannot capture those in a lambda.
+  for (const auto& item : given.items()) {
+    const std::string key = item.key();
+    const json& v = item.value();
     const std::string p = jsonPath + "/" + key;
     const auto it =
         std::find_if(specs.begin(), specs.end(), [&](const ParamSpec& s) { return s.key == key; });
@@ -696,8 +705,9 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog) {
 
 nlohmann::json paramsToJson(const ParamValues& values) {
   json j = json::object();
-  for (const auto& [key, v] : values.all()) {
-    std::visit([&](const auto& x) { j[key] = x; }, v);
+  for (const auto& kv : values.all()) {
+    const std::string& key = kv.first;
+    std::visit([&](const auto& x) { j[key] = x; }, kv.second);
   }
   return j;
 }

@@ -1,0 +1,92 @@
+#!/usr/bin/env bash
+# Builds the core, the harness (deformbench), every plugin, the unit tests and the conformance
+# suite with AddressSanitizer + UndefinedBehaviorSanitizer in build-asan/ and runs them; any
+# sanitizer report (memory error, leak, undefined behaviour) aborts the test binary and fails
+# the script. Usage:
+#   scripts/sanitize.sh            build + run everything
+#   scripts/sanitize.sh --quick    only the core, deformbench and the unit tests (no plugins, no
+#                                  conformance suite): the part that fits a CI budget
+#   scripts/sanitize.sh --no-run   build only (combine with --quick as the second argument)
+# Tests too slow under the sanitizers (ASan + UBSan at -O1 runs the numerics 3-10x slower) are
+# excluded by name with SANITIZE_EXCLUDE, a ':'-separated list of gtest patterns (wildcards * ?)
+# applied to both test programs; the default is below, override it with
+# SANITIZE_EXCLUDE='' to run everything. The deformbench CLI tests (ctest -R '^cli_') run too,
+# except those matching SANITIZE_CLI_EXCLUDE (a ctest -E regex; default: the full scene runs).
+# Environment: SANITIZE_JOBS (build parallelism, default nproc), SANITIZE_BUILD_DIR (build-asan),
+# SANITIZE_CC / SANITIZE_CXX (compiler, default the system's cc / c++).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+run=1
+quick=0
+for a in "$@"; do
+  case $a in
+    --no-run) run=0 ;;
+    --quick) quick=1 ;;
+    *)
+      echo "usage: $0 [--quick] [--no-run]" >&2
+      exit 2
+      ;;
+  esac
+done
+build=${SANITIZE_BUILD_DIR:-build-asan}
+jobs=${SANITIZE_JOBS:-$(nproc)}
+# Default exclusions: see the README in tests/fuzz ("Sanitizer build") for why each is here.
+exclude=${SANITIZE_EXCLUDE-}
+cli_exclude=${SANITIZE_CLI_EXCLUDE-'^cli_run_'}
+
+compilers=()
+[[ -n ${SANITIZE_CC:-} ]] && compilers+=(-DCMAKE_C_COMPILER="$SANITIZE_CC")
+[[ -n ${SANITIZE_CXX:-} ]] && compilers+=(-DCMAKE_CXX_COMPILER="$SANITIZE_CXX")
+generator=()
+command -v ninja >/dev/null && [[ ! -f $build/CMakeCache.txt ]] && generator=(-G Ninja)
+# Debug at -O1: assertions stay on (Eigen's index checks too), and it runs far faster than -O0.
+cmake -S . -B "$build" "${generator[@]}" "${compilers[@]}" -DCMAKE_BUILD_TYPE=Debug \
+  -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g" -DCMAKE_C_FLAGS_DEBUG="-O1 -g" -DDEFORM_SANITIZE=ON \
+  -DDEFORM_BUILD_TESTS=ON -DDEFORM_BUILD_BENCHMARKS=OFF >/dev/null
+
+# The plugins are MODULE libraries named deform_<plugin>; the test programs load them.
+targets=(deform_core deformbench)
+tests=(deform_unit_tests deform_conformance_tests)
+[[ $quick -eq 1 ]] && tests=(deform_unit_tests)
+for d in plugins/*/; do
+  [[ $quick -eq 1 ]] && break
+  p=$(basename "$d")
+  grep -q "deform_add_plugin(${p}\b" "$d/CMakeLists.txt" 2>/dev/null && targets+=("deform_$p")
+done
+for t in "${tests[@]}"; do
+  if cmake --build "$build" --target help 2>/dev/null | grep -q "\b$t\b"; then targets+=("$t"); fi
+done
+echo "sanitize.sh: building ${targets[*]}"
+cmake --build "$build" -j "$jobs" --target "${targets[@]}"
+[[ $run -eq 1 ]] || exit 0
+
+export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1}
+export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+export DEFORM_CACHE_DIR=$PWD/$build/test-cache
+
+status=0
+for t in "${tests[@]}"; do
+  bin=$build/tests/$t
+  [[ -x $bin ]] || continue
+  filter=()
+  [[ -n $exclude ]] && filter=(--gtest_filter="-$exclude")
+  echo "== $t ${filter[*]}"
+  start=$SECONDS
+  if ! "$bin" "${filter[@]}" --gtest_brief=1; then
+    echo "sanitize.sh: $t FAILED (sanitizer report or failing test above)"
+    status=1
+  fi
+  echo "== $t took $((SECONDS - start))s"
+done
+if ctest --test-dir "$build" -N -R '^cli_' 2>/dev/null | grep -q 'Total Tests: [1-9]'; then
+  echo "== deformbench CLI tests (ctest -R '^cli_' -E '$cli_exclude')"
+  # cli_phantom_write writes into the out/ folder that the (excluded) cli_run_* tests create.
+  mkdir -p "$build/tests/cli/out"
+  start=$SECONDS
+  ctest --test-dir "$build" -R '^cli_' ${cli_exclude:+-E "$cli_exclude"} --output-on-failure \
+    -j "$jobs" --timeout 600 || status=1
+  echo "== CLI tests took $((SECONDS - start))s"
+fi
+[[ $status -eq 0 ]] && echo "sanitize.sh: no sanitizer report, all tests passed"
+exit $status
