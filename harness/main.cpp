@@ -350,12 +350,15 @@ int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot) {
     Progress progress(0, "sweep");
     points = runSweep(scene, loader, o, &progress);
   }
+  size_t w = 6;
+  for (const SweepPoint& p : points) w = std::max(w, p.label.size() + 2);
   std::cout << "\n";
-  std::cout << std::left << std::setw(36) << "point" << std::setw(12) << "status" << std::setw(10)
-            << "ms/step" << std::setw(14) << "rmse_50 mm" << std::setw(14) << "rmse_all mm"
+  std::cout << std::left << std::setw(int(w)) << "point" << std::setw(12) << "status"
+            << std::setw(10) << "ms/step" << std::setw(14) << "rmse_50 mm" << std::setw(14)
+            << "rmse_all mm"
             << "pareto\n";
   for (const SweepPoint& p : points) {
-    std::cout << std::left << std::setw(36) << p.label << std::setw(12)
+    std::cout << std::left << std::setw(int(w)) << p.label << std::setw(12)
               << (p.status.size() > 11 ? p.status.substr(0, 11) : p.status) << std::setw(10)
               << fmt(p.msMedian) << std::setw(14) << fmt(1e3 * p.rmseNearest) << std::setw(14)
               << fmt(1e3 * p.rmseAll) << (p.pareto ? "*" : "") << "\n";

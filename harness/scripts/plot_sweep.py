@@ -57,8 +57,13 @@ def main():
                            zorder=5)
         ax.axvline(budget, color="red", linestyle=":", linewidth=1.5,
                    label="%g ms haptic budget" % budget)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        # Log axes only where the data span a decade; otherwise the ticks are unreadable.
+        xs_all = [p["ms_median"] for p in points] + [budget]
+        ys_all = [1e3 * p[key] for p in points if p[key] is not None and p[key] > 0]
+        if xs_all and min(xs_all) > 0 and max(xs_all) / min(xs_all) > 10:
+            ax.set_xscale("log")
+        if ys_all and max(ys_all) / min(ys_all) > 10:
+            ax.set_yscale("log")
         ax.set_xlabel("median ms per step")
         ax.set_ylabel("error (mm)")
         ax.set_title(title)

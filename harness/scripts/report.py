@@ -30,7 +30,7 @@ try:
 except ImportError:
     HAVE_MPL = False
 
-MAX_ORGAN_FIGURES = 8
+MAX_ORGAN_FIGURES = 12
 
 
 def esc(x):
@@ -204,7 +204,14 @@ def main():
 
     # Tables (deformbench-table/1) at the top level.
     table_html = []
-    for path in sorted(glob.glob(os.path.join(root, "*.json"))):
+    order = ["metaballs-construction", "method-comparison", "bem-timing", "bem-accuracy",
+             "hybrid-accuracy", "hybrid-timing"]
+
+    def table_rank(path):
+        name = os.path.splitext(os.path.basename(path))[0]
+        return (order.index(name) if name in order else len(order), name)
+
+    for path in sorted(glob.glob(os.path.join(root, "*.json")), key=table_rank):
         try:
             with open(path) as f:
                 doc = json.load(f)
@@ -291,7 +298,17 @@ def main():
 
     # Deformed organs: every results.json below the folder that has final surfaces.
     if HAVE_MPL:
-        found = sorted(glob.glob(os.path.join(root, "**", "results.json"), recursive=True))
+        found = glob.glob(os.path.join(root, "**", "results.json"), recursive=True)
+
+        def organ_rank(path):
+            # The folder's own results first, then the runs compared with a FEM reference
+            # (method comparison, hybrid), then the rest, each alphabetically.
+            rel = os.path.relpath(path, root)
+            group = 0 if rel == "results.json" else 1 if "/method/" in "/" + rel else \
+                2 if "/hybrid/" in "/" + rel else 3
+            return (group, rel)
+
+        found.sort(key=organ_rank)
         figs = []
         for path in found:
             if len(figs) >= MAX_ORGAN_FIGURES:
@@ -305,9 +322,9 @@ def main():
                 continue
             if fig is None:
                 continue
-            figs.append("<figure>%s<figcaption>%s (%s)</figcaption></figure>"
-                        % (png_tag(fig, caption), esc(caption),
-                           esc(os.path.relpath(path, root))))
+            figs.append("<figure><figcaption>%s (%s)</figcaption>%s</figure>"
+                        % (esc(caption), esc(os.path.relpath(path, root)),
+                           png_tag(fig, caption)))
         if figs:
             sections.append(("organs", "Deformed organs", "".join(figs)))
 
@@ -336,7 +353,8 @@ img { max-width: 100%; }
 .map { display: inline-block; margin: 4px; }
 .map img { width: 560px; }
 .note { color: #a33; }
-figure { margin: 1em 0; }
+figure { margin: 1.5em 0; border-top: 1px solid #ddd; }
+figcaption { font-weight: bold; margin: 0.4em 0; }
 """
     doc = ("<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>%s</title><style>%s</style>"
            "</head><body>%s</body></html>" % (esc(title), style, "\n".join(body)))

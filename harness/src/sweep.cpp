@@ -122,7 +122,10 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     if (!progress) return;
     const std::string prefix = "running ";
     if (line.rfind(prefix, 0) == 0) {
-      progress->start(line.substr(prefix.size()));
+      std::string label = line.substr(prefix.size());
+      if (label.size() > 4 && label.compare(label.size() - 4, 4, " ...") == 0)
+        label.resize(label.size() - 4);
+      progress->start(label);
     } else {
       const auto colon = line.find(": ");
       progress->finish(line.substr(0, colon),
