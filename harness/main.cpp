@@ -483,6 +483,8 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
     std::cout << "warning: " << r.message << "\n";
     return 0;
   }
+  std::cout << "max surface difference between levels: " << fmt(1e3 * r.d01) << " mm, then "
+            << fmt(1e3 * r.d12) << " mm (vertices near loads and grasps left out)\n";
   std::cout << "observed order p = " << fmt(r.order) << ", estimated error of the finest level "
             << fmt(1e3 * r.errorEstimate) << " mm = " << fmt(100 * r.relativeError)
             << "% of the peak displacement\n";

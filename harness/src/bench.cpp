@@ -5,6 +5,8 @@
 #include <deform_harness/bench.h>
 #include <deform_harness/results.h>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -106,7 +108,9 @@ ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* prog
     cases.push_back(c);
   }
   if (progress) progress->addTotal(int(cases.size()));
-  const fs::path work = fs::path(options.out.string() + ".runs");
+  // The generated scenes and their results are scratch: only the timings are kept.
+  const fs::path work =
+      fs::temp_directory_path() / ("deformbench_bench_" + std::to_string(::getpid()));
   const MachineInfo machine = machineInfo();
   ojson doc;
   doc["format"] = "deformbench-bench/1";
@@ -158,6 +162,8 @@ ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* prog
     }
     doc["cases"].push_back(entry);
   }
+  std::error_code ec;
+  fs::remove_all(work, ec);
   writeFileAtomic(options.out, doc.dump(2) + "\n");
   return doc;
 }

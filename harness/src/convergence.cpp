@@ -65,17 +65,23 @@ ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loa
   const Organ organ = loadOrgan(scene);
   const double volume = std::fabs(signedVolume(organ.surface.V, organ.surface.F));
   const Interaction interaction(scene, organ.surface);
-  const Vec3 focus = interaction.focusPoint();
   const double exclude = options.excludeRadius >= 0 ? options.excludeRadius
                                                     : 0.1 * boundingBox(organ.surface.V).diagonal();
+  // Left out: vertices near a point load (singular) and near where a grasp closes (the nodes
+  // a grasp attaches are those of each mesh within its radius, so the boundary condition
+  // itself changes with the mesh there).
+  std::vector<Vec3> centres;
+  for (int v : interaction.loadVertices()) centres.push_back(organ.surface.V.row(v).transpose());
+  for (const ToolSpec& tool : scene.tools)
+    for (const KeyFrame& k : tool.trajectory)
+      if (k.jawClosed) {
+        centres.push_back(k.pos);
+        break;
+      }
   std::vector<char> include(size_t(organ.surface.numVertices()), 1);
-  if (!scene.loads.empty()) {
-    for (int v : interaction.loadVertices())
-      for (int i = 0; i < organ.surface.numVertices(); ++i)
-        if ((organ.surface.V.row(i) - organ.surface.V.row(v)).norm() < exclude)
-          include[size_t(i)] = 0;
-  }
-  (void)focus;
+  for (const Vec3& c : centres)
+    for (int i = 0; i < organ.surface.numVertices(); ++i)
+      if ((organ.surface.V.row(i).transpose() - c).norm() < exclude) include[size_t(i)] = 0;
 
   ConvergenceResult out;
   std::vector<MatX3> displacement;

@@ -7,7 +7,8 @@
 // and the finest level's error is e_2 = d_12 h_2^p / (h_1^p - h_2^p) (Roache 1997,
 // doi:10.1146/annurev.fluid.29.1.123; the same analysis as plugins/reference_fem/convergence.h,
 // here on runs of the plugin rather than on its kernels). Vertices within `excludeRadius` of a
-// point load are left out (a point load is singular in 3D elasticity).
+// point load (singular in 3D elasticity) or of where a grasp closes (the attached node set
+// depends on the mesh) are left out.
 #pragma once
 
 #include <deform/plugin_loader.h>
