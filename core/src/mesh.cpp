@@ -44,8 +44,8 @@ MatX2i edgeFaces(const MatX3i& F, const MatX2i& E) {
   std::sort(keyed.begin(), keyed.end());
   size_t j = 0;
   for (Eigen::Index e = 0; e < E.rows(); ++e) {
-    while (j < keyed.size() && (keyed[j][0] < E(e, 0) ||
-                                (keyed[j][0] == E(e, 0) && keyed[j][1] < E(e, 1)))) {
+    while (j < keyed.size() &&
+           (keyed[j][0] < E(e, 0) || (keyed[j][0] == E(e, 0) && keyed[j][1] < E(e, 1)))) {
       ++j;
     }
     int slot = 0;

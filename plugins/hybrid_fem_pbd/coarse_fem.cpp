@@ -139,7 +139,8 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
         }
         S(r, c) = v;
       }
-    m_S.compute(S);
+    // Eigen's pivoting QR must not be run on a 0x0 matrix (it reads past the empty storage).
+    if (m > 0) m_S.compute(S);
   }
   if (!m_rowAt.empty()) {
     // Rows in the same order as built: one per prescribed entry and free axis.

@@ -31,20 +31,20 @@ struct ParamSpec {
 
   static ParamSpec real(std::string key, std::string unit, double def, double lo, double hi,
                         std::string description) {
-    return {std::move(key), std::move(unit), ParamType::Real, def, lo, hi, {},
+    return {std::move(key),        std::move(unit), ParamType::Real, def, lo, hi, {},
             std::move(description)};
   }
   static ParamSpec integer(std::string key, long long def, long long lo, long long hi,
                            std::string description) {
-    return {std::move(key), "", ParamType::Int, def, double(lo), double(hi), {},
-            std::move(description)};
+    return {std::move(key), "", ParamType::Int,        def, double(lo),
+            double(hi),     {}, std::move(description)};
   }
   static ParamSpec flag(std::string key, bool def, std::string description) {
     return {std::move(key), "", ParamType::Bool, def, 0, 1, {}, std::move(description)};
   }
   static ParamSpec choice(std::string key, std::string def, std::vector<std::string> choices,
                           std::string description) {
-    return {std::move(key), "", ParamType::Choice, std::move(def), 0, 0, std::move(choices),
+    return {std::move(key),        "", ParamType::Choice, std::move(def), 0, 0, std::move(choices),
             std::move(description)};
   }
 };

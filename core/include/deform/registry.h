@@ -63,6 +63,8 @@ class Registry {
 #define DEFORM_PLUGIN_EXPORT extern "C" __attribute__((visibility("default")))
 
 /// Defines the two exported symbols. Usage: DEFORM_PLUGIN(registry) { registry.add({...}); }
-#define DEFORM_PLUGIN(registryName)                                       \
-  DEFORM_PLUGIN_EXPORT int deform_abi_version() { return DEFORM_ABI_VERSION; } \
+#define DEFORM_PLUGIN(registryName)               \
+  DEFORM_PLUGIN_EXPORT int deform_abi_version() { \
+    return DEFORM_ABI_VERSION;                    \
+  }                                               \
   DEFORM_PLUGIN_EXPORT void deform_register(deform::Registry& registryName)

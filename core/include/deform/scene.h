@@ -14,16 +14,16 @@
 namespace deform {
 
 struct KeyFrame {
-  Real t = 0;                  ///< s
-  Vec3 pos = Vec3::Zero();     ///< m
-  bool jawClosed = false;      ///< grasper jaws ("open" | "closed"); held until the next frame
+  Real t = 0;               ///< s
+  Vec3 pos = Vec3::Zero();  ///< m
+  bool jawClosed = false;   ///< grasper jaws ("open" | "closed"); held until the next frame
 };
 
 enum class ToolType { Grasper, Probe };
 
 struct ToolSpec {
   ToolType type = ToolType::Grasper;
-  Real radius = 0.005;  ///< m: grasp radius (grasper) or tip radius (probe)
+  Real radius = 0.005;               ///< m: grasp radius (grasper) or tip radius (probe)
   std::vector<KeyFrame> trajectory;  ///< times strictly increasing
 };
 
@@ -42,17 +42,17 @@ struct LoadSpec {
 };
 
 struct ModelSpec {
-  std::string plugin;       ///< plugin file name (deform_<plugin>.so)
-  std::string model;        ///< model within the plugin (default: plugin)
-  std::string label;        ///< optional; default "model(nondefault params)"
+  std::string plugin;  ///< plugin file name (deform_<plugin>.so)
+  std::string model;   ///< model within the plugin (default: plugin)
+  std::string label;   ///< optional; default "model(nondefault params)"
   nlohmann::json params = nlohmann::json::object();
-  std::string jsonPath;     ///< where this spec sits in the scene, for error messages
+  std::string jsonPath;  ///< where this spec sits in the scene, for error messages
 };
 
 struct OrganSpec {
-  std::string mesh;          ///< "phantom:NAME" or a path (resolved relative to the scene file)
-  Real scale = 1.0;          ///< mesh units -> metres
-  Real resolution = 1.0;     ///< phantoms only
+  std::string mesh;       ///< "phantom:NAME" or a path (resolved relative to the scene file)
+  Real scale = 1.0;       ///< mesh units -> metres
+  Real resolution = 1.0;  ///< phantoms only
   bool repair = false;
   Material material;
   FixedRegion fixed;
@@ -75,7 +75,7 @@ struct Scene {
   std::vector<int> nearest = {10, 50};
   std::vector<Real> compareAt;  ///< empty: the end of the run
   SurfaceOutput surfaces = SurfaceOutput::Final;
-  int surfaceEvery = 0;         ///< for SurfaceOutput::Every
+  int surfaceEvery = 0;  ///< for SurfaceOutput::Every
 
   int numSteps() const;  ///< round(duration / dt)
 };

@@ -1,0 +1,351 @@
+#include "bullet_deformable_model.h"
+
+#include <BulletSoftBody/btDeformableBodySolver.h>
+#include <BulletSoftBody/btDeformableGravityForce.h>
+#include <BulletSoftBody/btDeformableLinearElasticityForce.h>
+#include <BulletSoftBody/btDeformableMultiBodyConstraintSolver.h>
+#include <BulletSoftBody/btDeformableMultiBodyDynamicsWorld.h>
+#include <BulletSoftBody/btDeformableNeoHookeanForce.h>
+#include <BulletSoftBody/btSoftBody.h>
+#include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
+#include <btBulletDynamicsCommon.h>
+#include <deform/cache.h>
+#include <deform/kdtree.h>
+#include <deform/tet_mesher.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+
+namespace deform::bullet_deformable {
+
+static_assert(sizeof(btScalar) == sizeof(double), "the Bullet peers use double-precision Bullet");
+
+std::vector<ParamSpec> paramSpecs() {
+  return {
+      ParamSpec::choice("force", "neo_hookean", {"neo_hookean", "linear_elasticity"},
+                        "Bullet's elastic force: btDeformableNeoHookeanForce (stable Neo-Hookean) "
+                        "or btDeformableLinearElasticityForce (small strain)"),
+      ParamSpec::integer("tets", 6000, 10, 5000000,
+                         "target tetrahedron count of the shared Gmsh mesher (organs without a "
+                         "volume mesh)"),
+      ParamSpec::real("damping_alpha", "1/s", 0.01, 0.0, 1e4,
+                      "mass-proportional damping alpha M (linear_elasticity only; Bullet's "
+                      "default)"),
+      ParamSpec::real("damping_beta", "s", 0.01, 0.0, 10.0,
+                      "stiffness-proportional damping beta K (Bullet's default for "
+                      "linear_elasticity)"),
+      ParamSpec::integer("newton_iterations", 1, 1, 1000,
+                         "Newton iterations of Bullet's implicit solver per step (Bullet's "
+                         "default 1: linearly implicit)"),
+      ParamSpec::integer("krylov_iterations", 300, 1, 100000,
+                         "iteration cap of Bullet's conjugate gradient solver per Newton "
+                         "iteration (Bullet's default 300)"),
+      ParamSpec::real("krylov_tolerance", "1", 1.1920928955078125e-07, 1e-30, 1.0,
+                      "CG stops when r^T M^-1 r < tol min(1, b^T M^-1 b); default FLT_EPSILON, "
+                      "the value of Bullet's single-precision build (its double build uses "
+                      "DBL_EPSILON and then always runs to the cap)"),
+  };
+}
+
+DeformableConfig configFromParams(const ParamValues& p) {
+  DeformableConfig c;
+  c.force =
+      p.choiceAs<ElasticForce>("force", {{"neo_hookean", ElasticForce::NeoHookean},
+                                         {"linear_elasticity", ElasticForce::LinearElasticity}});
+  c.targetTets = p.integer("tets");
+  c.dampingAlpha = p.real("damping_alpha");
+  c.dampingBeta = p.real("damping_beta");
+  c.newtonIterations = static_cast<int>(p.integer("newton_iterations"));
+  c.krylovIterations = static_cast<int>(p.integer("krylov_iterations"));
+  c.krylovTolerance = p.real("krylov_tolerance");
+  return c;
+}
+
+std::pair<Real, Real> lameParameters(const Material& m) {
+  const Real mu = m.young / (2.0 * (1.0 + m.poisson));
+  const Real lambda = m.young * m.poisson / ((1.0 + m.poisson) * (1.0 - 2.0 * m.poisson));
+  return {mu, lambda};
+}
+
+VecX lumpedMasses(const TetMesh& mesh, Real density) {
+  VecX m = VecX::Zero(mesh.numVertices());
+  for (int t = 0; t < mesh.numTets(); ++t) {
+    const auto r = mesh.T.row(t);
+    const Real v =
+        std::abs(tetVolume(mesh.V.row(r(0)), mesh.V.row(r(1)), mesh.V.row(r(2)), mesh.V.row(r(3))));
+    for (int k = 0; k < 4; ++k) m(r(k)) += density * v / 4.0;
+  }
+  return m;
+}
+
+namespace {
+
+// btDeformableBodySolver keeps its Newton and Krylov iteration caps protected.
+class ConfigurableDeformableSolver : public btDeformableBodySolver {
+ public:
+  void setLimits(int newton, int krylov, Real krylovTolerance) {
+    m_maxNewtonIterations = newton;
+    m_cg.m_maxIterations = krylov;
+    m_cr.m_maxIterations = krylov;
+    m_cg.m_tolerance = krylovTolerance;
+  }
+};
+
+constexpr long long kMeshCacheVersion = 1;
+
+TetMesh meshSurface(const Organ& organ, long long targetTets, Cache& cache) {
+  TetMeshOptions o;
+  o.targetElements = targetTets;
+  o.source = organ.source;
+  CacheKey key;
+  key.add(kMeshCacheVersion).add(organ.surface.V).add(organ.surface.F).add(targetTets);
+  if (auto hit = cache.get("bullet_deformable.tets", key)) {
+    try {
+      ByteReader r(*hit);
+      TetMesh m;
+      r.matrix(m.V);
+      r.matrix(m.T);
+      if (m.numVertices() >= organ.surface.numVertices() && m.numTets() > 0) return m;
+    } catch (const std::exception&) {
+      // corrupt payload: remesh
+    }
+  }
+  const TetMeshResult r = tetrahedralize(organ.surface, o);
+  ByteWriter w;
+  w.matrix(r.mesh.V);
+  w.matrix(r.mesh.T);
+  cache.put("bullet_deformable.tets", key, w.bytes());
+  return r.mesh;
+}
+
+}  // namespace
+
+// The Bullet objects of one run, in construction order. The soft body and the forces are not
+// owned by the world: the world goes first (it only refers to them), then they are deleted.
+struct BulletDeformableModel::World {
+  btSoftBodyRigidBodyCollisionConfiguration collision;
+  btCollisionDispatcher dispatcher{&collision};
+  btDbvtBroadphase broadphase;
+  ConfigurableDeformableSolver deformableSolver;
+  btDeformableMultiBodyConstraintSolver constraintSolver;
+  std::unique_ptr<btDeformableMultiBodyDynamicsWorld> world;
+  std::unique_ptr<btSoftBody> body;
+  std::unique_ptr<btDeformableLagrangianForce> elastic;
+  std::unique_ptr<btDeformableGravityForce> gravity;
+  std::vector<btScalar> inverseMass;
+
+  ~World() {
+    if (world && body) world->removeSoftBody(body.get());
+    world.reset();
+  }
+};
+
+BulletDeformableModel::BulletDeformableModel() = default;
+BulletDeformableModel::~BulletDeformableModel() = default;
+
+void BulletDeformableModel::init(const ModelSetup& setup) {
+  const DeformableConfig config = configFromParams(setup.params);
+  const Organ& organ = setup.organ;
+  TetMesh mesh;
+  std::vector<int> surfaceNode(size_t(organ.surface.numVertices()));
+  if (organ.volume) {
+    mesh = *organ.volume;
+    for (int t = 0; t < mesh.numTets(); ++t) {
+      const auto r = mesh.T.row(t);
+      if (tetVolume(mesh.V.row(r(0)), mesh.V.row(r(1)), mesh.V.row(r(2)), mesh.V.row(r(3))) < 0)
+        std::swap(mesh.T(t, 2), mesh.T(t, 3));
+    }
+    // The loader's surface of a tet file is the boundary over the same nodes: match by position.
+    const KdTree3 tree(mesh.V);
+    const Real tolerance = 1e-9 * std::max<Real>(boundingBox(mesh.V).diagonal(), 1e-300);
+    for (int i = 0; i < organ.surface.numVertices(); ++i) {
+      const Vec3 p = organ.surface.V.row(i);
+      const int n = tree.nearest(p);
+      if (n < 0 || (mesh.V.row(n).transpose() - p).norm() > tolerance)
+        throw InputError(organ.source, "vertex " + std::to_string(i),
+                         "surface vertex is not a node of the volume mesh");
+      surfaceNode[size_t(i)] = n;
+    }
+  } else {
+    mesh = meshSurface(organ, config.targetTets, setup.cache);
+    for (int i = 0; i < organ.surface.numVertices(); ++i) surfaceNode[size_t(i)] = i;
+  }
+  const std::vector<int> fixed = fixedNodeIndices(mesh.V, organ.fixed, organ.surface);
+  init(mesh, std::move(surfaceNode), organ.material, config, setup.dt, fixed);
+}
+
+void BulletDeformableModel::init(const TetMesh& mesh, std::vector<int> surfaceNode,
+                                 const Material& material, const DeformableConfig& config, Real dt,
+                                 const std::vector<int>& fixedNodes) {
+  if (mesh.numTets() < 1) throw InputError("", "", "bullet_deformable needs tetrahedra");
+  if (!(dt > 0)) throw InputError("", "dt", "bullet_deformable needs a positive time step");
+  m_config = config;
+  m_dt = dt;
+  m_material = material;
+  m_mesh = mesh;
+  m_surfaceNode = std::move(surfaceNode);
+  m_fixed = fixedNodes;
+  m_mass = lumpedMasses(mesh, material.density);
+  m_boundary = tetBoundary(mesh).F;
+
+  std::vector<std::array<int, 2>> edges;
+  edges.reserve(size_t(mesh.numTets()) * 6);
+  for (int t = 0; t < mesh.numTets(); ++t)
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b) {
+        const int i = mesh.T(t, a), j = mesh.T(t, b);
+        edges.push_back({std::min(i, j), std::max(i, j)});
+      }
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  m_edges.resize(Eigen::Index(edges.size()), 2);
+  for (size_t e = 0; e < edges.size(); ++e)
+    m_edges.row(Eigen::Index(e)) << edges[e][0], edges[e][1];
+
+  const Box box = boundingBox(mesh.V);
+  m_boxCenter = box.center();
+  m_boxHalf = 0.5 * tol::kDivergenceBoxFactor * box.size().maxCoeff();
+  build();
+}
+
+void BulletDeformableModel::build() {
+  m_world.reset();
+  m_world = std::make_unique<World>();
+  World& w = *m_world;
+  w.constraintSolver.setDeformableSolver(&w.deformableSolver);
+  w.world = std::make_unique<btDeformableMultiBodyDynamicsWorld>(
+      &w.dispatcher, &w.broadphase, &w.constraintSolver, &w.collision, &w.deformableSolver);
+  btDeformableMultiBodyDynamicsWorld& world = *w.world;
+  world.setGravity(btVector3(0, 0, 0));
+  world.getWorldInfo().m_gravity.setZero();
+
+  const int n = m_mesh.numVertices();
+  std::vector<btVector3> x(n);
+  std::vector<btScalar> mass(n);
+  for (int i = 0; i < n; ++i) {
+    x[i] = btVector3(m_mesh.V(i, 0), m_mesh.V(i, 1), m_mesh.V(i, 2));
+    mass[i] = m_mass(i);
+  }
+  for (int i : m_fixed) mass[i] = 0;  // Bullet: mass 0 = immovable
+  w.inverseMass.resize(n);
+  for (int i = 0; i < n; ++i) w.inverseMass[i] = mass[i] > 0 ? 1.0 / mass[i] : 0.0;
+
+  w.body = std::make_unique<btSoftBody>(&world.getWorldInfo(), n, x.data(), mass.data());
+  btSoftBody& b = *w.body;
+  for (int t = 0; t < m_mesh.numTets(); ++t)
+    b.appendTetra(m_mesh.T(t, 0), m_mesh.T(t, 1), m_mesh.T(t, 2), m_mesh.T(t, 3));
+  for (Eigen::Index e = 0; e < m_edges.rows(); ++e)
+    b.appendLink(m_edges(e, 0), m_edges(e, 1), nullptr, false);
+  for (Eigen::Index f = 0; f < m_boundary.rows(); ++f)
+    b.appendFace(m_boundary(f, 0), m_boundary(f, 1), m_boundary(f, 2));
+  b.initializeDmInverse();
+  btSoftBody::TetraScratch scratch;
+  scratch.m_F.setIdentity();
+  scratch.m_cofF.setIdentity();
+  scratch.m_corotation.setIdentity();
+  scratch.m_trace = 3;
+  scratch.m_J = 1;
+  b.m_tetraScratches.resize(b.m_tetras.size(), scratch);
+  b.m_tetraScratchesTn.resize(b.m_tetras.size(), scratch);
+  b.m_cfg.collisions = 0;  // nothing to collide with; no self collision
+  b.m_cfg.drag = 0;
+  b.m_sleepingThreshold = 0;
+  b.setActivationState(DISABLE_DEACTIVATION);
+  world.addSoftBody(&b);
+
+  const auto [mu, lambda] = lameParameters(m_material);
+  if (m_config.force == ElasticForce::LinearElasticity) {
+    w.elastic = std::make_unique<btDeformableLinearElasticityForce>(
+        mu, lambda, m_config.dampingAlpha, m_config.dampingBeta);
+  } else {
+    // Smith, de Goes, Kim 2018, Sec. 3.4: mu' = 4/3 mu, lambda' = lambda + 5/6 mu make the stable
+    // Neo-Hookean energy agree with linear elasticity (E, nu) at small strain.
+    w.elastic = std::make_unique<btDeformableNeoHookeanForce>(
+        4.0 / 3.0 * mu, lambda + 5.0 / 6.0 * mu, m_config.dampingBeta);
+  }
+  w.gravity = std::make_unique<btDeformableGravityForce>(btVector3(0, 0, 0));
+  world.addForce(&b, w.elastic.get());
+  world.addForce(&b, w.gravity.get());
+  world.setImplicit(true);
+  world.setLineSearch(false);
+  // Bullet 3.24's implicit branch only solves correctly with the projection formulation (the
+  // Lagrange-multiplier default leaves dv = 0: nothing moves); measured, see README.
+  world.setUseProjection(true);
+  w.deformableSolver.setLimits(m_config.newtonIterations, m_config.krylovIterations,
+                               m_config.krylovTolerance);
+
+  m_grasped.clear();
+  pullPositions();
+}
+
+void BulletDeformableModel::pullPositions() {
+  const btSoftBody& b = *m_world->body;
+  m_x.resize(b.m_nodes.size(), 3);
+  for (int i = 0; i < b.m_nodes.size(); ++i)
+    for (int k = 0; k < 3; ++k) m_x(i, k) = b.m_nodes[i].m_x[k];
+  m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
+  for (size_t i = 0; i < m_surfaceNode.size(); ++i)
+    m_surface.row(Eigen::Index(i)) = m_x.row(m_surfaceNode[i]);
+}
+
+StepStatus BulletDeformableModel::step(const StepInput& in) {
+  const auto t0 = std::chrono::steady_clock::now();
+  World& w = *m_world;
+  btSoftBody& b = *w.body;
+  const Real dt = in.dt > 0 ? in.dt : m_dt;
+  const btVector3 g(in.gravity.x(), in.gravity.y(), in.gravity.z());
+  w.gravity->m_gravity = g;
+  w.world->getWorldInfo().m_gravity = g;
+
+  std::vector<int> grasped;
+  for (const GraspInput& gr : in.grasps)
+    grasped.insert(grasped.end(), gr.nodes.begin(), gr.nodes.end());
+  std::sort(grasped.begin(), grasped.end());
+  grasped.erase(std::unique(grasped.begin(), grasped.end()), grasped.end());
+  if (grasped != m_grasped) {
+    for (int i : m_grasped) b.m_nodes[i].m_im = w.inverseMass[i];
+    for (int i : grasped) b.m_nodes[i].m_im = 0;
+    m_grasped = grasped;
+  }
+  for (const PointLoad& l : in.loads) {
+    btSoftBody::Node& node = b.m_nodes[m_surfaceNode[size_t(l.surfaceVertex)]];
+    node.m_v += btVector3(l.force.x(), l.force.y(), l.force.z()) * (node.m_im * dt);
+    node.m_vn = node.m_v;
+  }
+  for (const GraspInput& gr : in.grasps)
+    for (size_t k = 0; k < gr.nodes.size(); ++k) {
+      btSoftBody::Node& node = b.m_nodes[gr.nodes[k]];
+      node.m_v = (btVector3(gr.targets(k, 0), gr.targets(k, 1), gr.targets(k, 2)) - node.m_x) / dt;
+      node.m_vn = node.m_v;
+    }
+
+  w.world->stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
+
+  for (const GraspInput& gr : in.grasps)
+    for (size_t k = 0; k < gr.nodes.size(); ++k)
+      b.m_nodes[gr.nodes[k]].m_x = btVector3(gr.targets(k, 0), gr.targets(k, 1), gr.targets(k, 2));
+  pullPositions();
+  m_phase["step"] =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+
+  if (!m_x.allFinite()) return StepStatus::Diverged;
+  if (((m_x.rowwise() - m_boxCenter.transpose()).cwiseAbs().maxCoeff()) > m_boxHalf)
+    return StepStatus::Diverged;
+  return StepStatus::Ok;
+}
+
+void BulletDeformableModel::reset() {
+  build();
+}
+
+Counts BulletDeformableModel::counts() const {
+  const btSoftBody& b = *m_world->body;
+  return {{"nodes", b.m_nodes.size()},
+          {"tets", b.m_tetras.size()},
+          {"links", b.m_links.size()},
+          {"faces", b.m_faces.size()}};
+}
+
+}  // namespace deform::bullet_deformable

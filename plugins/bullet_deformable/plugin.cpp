@@ -1,0 +1,22 @@
+// The "bullet_deformable" plugin: registers BulletDeformableModel (bullet_deformable_model.h).
+#include "bullet_deformable_model.h"
+
+#include <deform/registry.h>
+
+DEFORM_PLUGIN(registry) {
+  deform::ModelInfo info;
+  info.name = "bullet_deformable";
+  info.description =
+      "Peer baseline: Bullet 3.24's implicit FEM deformable body (btDeformableMultiBodyDynamics"
+      "World, Neo-Hookean or linear elasticity on a tet mesh, kinematic grasps)";
+  info.citation =
+      "Bullet Physics SDK 3.24, E. Coumans et al., https://github.com/bulletphysics/bullet3 "
+      "(deformable solver by Xuchen Han, 2019); stable Neo-Hookean: Smith, de Goes, Kim 2018, "
+      "ACM TOG 37(2), doi:10.1145/3180491";
+  info.version = "1.0";
+  using C = deform::Capability;
+  info.capabilities = {C::Grasp, C::PointForce, C::Gravity, C::TetInput, C::NeedsPrecompute};
+  info.params = deform::bullet_deformable::paramSpecs();
+  info.create = [] { return std::make_unique<deform::bullet_deformable::BulletDeformableModel>(); };
+  registry.add(std::move(info));
+}

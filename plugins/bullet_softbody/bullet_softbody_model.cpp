@@ -1,0 +1,287 @@
+#include "bullet_softbody_model.h"
+
+#include <BulletSoftBody/btSoftBody.h>
+#include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
+#include <BulletSoftBody/btSoftRigidDynamicsWorld.h>
+#include <btBulletDynamicsCommon.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace deform::bullet_softbody {
+
+static_assert(sizeof(btScalar) == sizeof(double), "the Bullet peers use double-precision Bullet");
+
+std::vector<ParamSpec> paramSpecs() {
+  return {
+      ParamSpec::integer("iterations", 10, 1, 100000,
+                         "position solver sweeps per step (btSoftBody m_cfg.piterations)"),
+      ParamSpec::choice("stiffness_mapping", "xpbd", {"xpbd", "fixed"},
+                        "link stiffness kLST: xpbd = per link from E (one XPBD projection's "
+                        "fraction, see README); fixed = link_stiffness for every link"),
+      ParamSpec::real("link_stiffness", "1", 0.5, 1e-6, 1.0,
+                      "kLST of every structural link when stiffness_mapping is fixed"),
+      ParamSpec::real("thickness", "m", 0.01, 1e-6, 1.0,
+                      "shell thickness t of the xpbd mapping (alpha = L^2 / (E t A_e))"),
+      ParamSpec::flag("bending", false,
+                      "add Bullet's bending links between nodes two edges apart "
+                      "(generateBendingConstraints(2))"),
+      ParamSpec::real("bending_stiffness", "1", 0.1, 1e-6, 1.0, "kLST of the bending links"),
+      ParamSpec::flag("volume", true,
+                      "Bullet's volume conservation force with kVC = volume_scale K / V0"),
+      ParamSpec::real("volume_scale", "1", 1.0, 0.0, 1e6,
+                      "multiplier on the physical volume coefficient K / V0"),
+      ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
+                      "velocity damping rate c: Bullet kDP = 1 - exp(-c dt)"),
+  };
+}
+
+SoftBodyConfig configFromParams(const ParamValues& p) {
+  SoftBodyConfig c;
+  c.iterations = static_cast<int>(p.integer("iterations"));
+  c.mapping = p.choiceAs<StiffnessMapping>(
+      "stiffness_mapping", {{"xpbd", StiffnessMapping::Xpbd}, {"fixed", StiffnessMapping::Fixed}});
+  c.linkStiffness = p.real("link_stiffness");
+  c.thickness = p.real("thickness");
+  c.bending = p.flag("bending");
+  c.bendingStiffness = p.real("bending_stiffness");
+  c.volume = p.flag("volume");
+  c.volumeScale = p.real("volume_scale");
+  c.damping = p.real("damping");
+  return c;
+}
+
+Real xpbdLinkStiffness(Real young, Real thickness, Real restLength, Real adjacentArea, Real wa,
+                       Real wb, Real dt) {
+  const Real w = wa + wb;
+  const Real stiffness = young * thickness * adjacentArea;  // alpha = L0^2 / stiffness
+  if (w <= 0 || !(stiffness > 0)) return 1.0;
+  const Real alphaTilde = restLength * restLength / stiffness / (dt * dt);
+  // Bullet divides by kLST: keep it away from 0 for absurdly soft links.
+  return std::clamp(w / (w + alphaTilde), 1e-12, 1.0);
+}
+
+Real volumeCoefficient(const Material& m, Real restVolume) {
+  const Real bulk = m.young / (3.0 * (1.0 - 2.0 * m.poisson));
+  return restVolume > 0 ? bulk / restVolume : 0.0;
+}
+
+Real dampingCoefficient(Real rate, Real dt) {
+  return 1.0 - std::exp(-rate * dt);
+}
+
+// The Bullet objects of one run. Members are declared in construction order; the soft body is
+// not owned by the world, so it is removed and deleted first.
+struct BulletSoftBodyModel::World {
+  btSoftBodyRigidBodyCollisionConfiguration collision;
+  btCollisionDispatcher dispatcher{&collision};
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  btSoftRigidDynamicsWorld world{&dispatcher, &broadphase, &solver, &collision};
+  btSoftBody* body = nullptr;
+  std::vector<btScalar> inverseMass;  // per node, 0 for fixed nodes
+
+  ~World() {
+    if (body) {
+      world.removeSoftBody(body);
+      delete body;
+    }
+  }
+};
+
+BulletSoftBodyModel::BulletSoftBodyModel() = default;
+BulletSoftBodyModel::~BulletSoftBodyModel() = default;
+
+void BulletSoftBodyModel::init(const ModelSetup& setup) {
+  const SoftBodyConfig config = configFromParams(setup.params);
+  const std::vector<int> fixed =
+      fixedNodeIndices(setup.organ.surface.V, setup.organ.fixed, setup.organ.surface);
+  init(setup.organ, config, setup.dt, fixed);
+}
+
+void BulletSoftBodyModel::init(const Organ& organ, const SoftBodyConfig& config, Real dt,
+                               const std::vector<int>& fixedNodes) {
+  const SurfaceMesh& s = organ.surface;
+  if (s.numVertices() < 4 || s.numFaces() < 4)
+    throw InputError(organ.source, "", "bullet_softbody needs a closed surface mesh");
+  if (!(dt > 0)) throw InputError(organ.source, "dt", "bullet_softbody needs a positive time step");
+  // generateBendingConstraints(2) allocates a dense #V x #V distance table.
+  if (config.bending && s.numVertices() > 12000)
+    throw InputError(organ.source, "params.bending",
+                     "Bullet's bending links need a dense #V^2 table; at most 12000 vertices");
+  m_config = config;
+  m_dt = dt;
+  m_material = organ.material;
+  m_rest = s.V;
+  m_faces = s.F;
+  m_edges = uniqueEdges(s.F);
+  m_fixed = fixedNodes;
+  m_restVolume = signedVolume(s.V, s.F);
+  if (!(m_restVolume > 0))
+    throw InputError(organ.source, "", "bullet_softbody needs an outward-oriented closed surface");
+
+  // Area of the faces adjacent to each edge, and node masses by adjacent area.
+  const MatX2i ef = edgeFaces(s.F, m_edges);
+  VecX faceArea(s.numFaces());
+  VecX nodeArea = VecX::Zero(s.numVertices());
+  for (int f = 0; f < s.numFaces(); ++f) {
+    const Vec3 a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+    faceArea(f) = 0.5 * (b - a).cross(c - a).norm();
+    for (int k = 0; k < 3; ++k) nodeArea(s.F(f, k)) += faceArea(f) / 3.0;
+  }
+  m_edgeArea.resize(m_edges.rows());
+  for (Eigen::Index e = 0; e < m_edges.rows(); ++e) {
+    m_edgeArea(e) = 0;
+    for (int k = 0; k < 2; ++k)
+      if (ef(e, k) >= 0) m_edgeArea(e) += faceArea(ef(e, k));
+  }
+  const Real totalMass = organ.material.density * m_restVolume;
+  m_mass = nodeArea * (totalMass / nodeArea.sum());
+
+  const Box box = boundingBox(s.V);
+  m_boxCenter = box.center();
+  m_boxHalf = 0.5 * tol::kDivergenceBoxFactor * box.size().maxCoeff();
+
+  build();
+}
+
+void BulletSoftBodyModel::build() {
+  m_world = std::make_unique<World>();
+  World& w = *m_world;
+  const int n = static_cast<int>(m_rest.rows());
+
+  std::vector<btVector3> x(n);
+  std::vector<btScalar> mass(n);
+  for (int i = 0; i < n; ++i) {
+    x[i] = btVector3(m_rest(i, 0), m_rest(i, 1), m_rest(i, 2));
+    mass[i] = m_mass(i);
+  }
+  for (int i : m_fixed) mass[i] = 0;  // Bullet: mass 0 = immovable
+  w.inverseMass.resize(n);
+  for (int i = 0; i < n; ++i) w.inverseMass[i] = mass[i] > 0 ? 1.0 / mass[i] : 0.0;
+
+  btSoftBodyWorldInfo& info = w.world.getWorldInfo();
+  info.m_gravity.setZero();
+  w.body = new btSoftBody(&info, n, x.data(), mass.data());
+  btSoftBody& b = *w.body;
+
+  btSoftBody::Material* base = b.m_materials[0];
+  base->m_kLST = m_config.mapping == StiffnessMapping::Fixed ? m_config.linkStiffness : 1.0;
+  for (Eigen::Index e = 0; e < m_edges.rows(); ++e) {
+    const int a = m_edges(e, 0), c = m_edges(e, 1);
+    btSoftBody::Material* mat = base;
+    if (m_config.mapping == StiffnessMapping::Xpbd) {
+      mat = b.appendMaterial();
+      const Real rest = (m_rest.row(a) - m_rest.row(c)).norm();
+      mat->m_kLST = xpbdLinkStiffness(m_material.young, m_config.thickness, rest, m_edgeArea(e),
+                                      w.inverseMass[a], w.inverseMass[c], m_dt);
+    }
+    b.appendLink(a, c, mat, false);
+  }
+  for (Eigen::Index f = 0; f < m_faces.rows(); ++f)
+    b.appendFace(m_faces(f, 0), m_faces(f, 1), m_faces(f, 2), base);
+  if (m_config.bending) {
+    btSoftBody::Material* bend = b.appendMaterial();
+    bend->m_kLST = m_config.bendingStiffness;
+    b.generateBendingConstraints(2, bend);
+  }
+
+  b.m_cfg.piterations = m_config.iterations;
+  b.m_cfg.kDP = dampingCoefficient(m_config.damping, m_dt);
+  b.m_cfg.kVC =
+      m_config.volume ? m_config.volumeScale * volumeCoefficient(m_material, m_restVolume) : 0.0;
+  b.m_cfg.collisions = 0;  // nothing to collide with; no self collision
+  // setPose records the rest volume V0 for kVC and calls updateConstants (rest lengths, areas)
+  // while the body is at rest. Afterwards m_bUpdateRtCst must stay false: Bullet's
+  // updateConstants() would reset every rest length to the current (deformed) length, which is
+  // why grasps write the inverse masses directly instead of calling setMass().
+  b.setPose(m_config.volume, false);
+  b.updateNormals();
+  b.m_bUpdateRtCst = false;
+  b.setActivationState(DISABLE_DEACTIVATION);
+  w.world.addSoftBody(&b);
+
+  m_grasped.clear();
+  pullPositions();
+}
+
+void BulletSoftBodyModel::pullPositions() {
+  const btSoftBody& b = *m_world->body;
+  m_x.resize(b.m_nodes.size(), 3);
+  for (int i = 0; i < b.m_nodes.size(); ++i)
+    for (int k = 0; k < 3; ++k) m_x(i, k) = b.m_nodes[i].m_x[k];
+}
+
+StepStatus BulletSoftBodyModel::step(const StepInput& in) {
+  const auto t0 = std::chrono::steady_clock::now();
+  World& w = *m_world;
+  btSoftBody& b = *w.body;
+  const Real dt = in.dt > 0 ? in.dt : m_dt;
+  w.world.getWorldInfo().m_gravity = btVector3(in.gravity.x(), in.gravity.y(), in.gravity.z());
+
+  // Kinematic grasped nodes: inverse mass 0 and the velocity that lands them on the target.
+  std::vector<int> grasped;
+  for (const GraspInput& g : in.grasps)
+    grasped.insert(grasped.end(), g.nodes.begin(), g.nodes.end());
+  std::sort(grasped.begin(), grasped.end());
+  grasped.erase(std::unique(grasped.begin(), grasped.end()), grasped.end());
+  if (grasped != m_grasped) {
+    for (int i : m_grasped) b.m_nodes[i].m_im = w.inverseMass[i];
+    for (int i : grasped) b.m_nodes[i].m_im = 0;
+    b.updateLinkConstants();  // link c0 = (w_a + w_b) / kLST
+    m_grasped = grasped;
+  }
+  for (const GraspInput& g : in.grasps)
+    for (size_t k = 0; k < g.nodes.size(); ++k) {
+      btSoftBody::Node& node = b.m_nodes[g.nodes[k]];
+      const btVector3 target(g.targets(k, 0), g.targets(k, 1), g.targets(k, 2));
+      node.m_v = (target - node.m_x) / dt;
+    }
+  for (const PointLoad& l : in.loads)
+    b.addForce(btVector3(l.force.x(), l.force.y(), l.force.z()), l.surfaceVertex);
+
+  w.world.stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
+
+  for (const GraspInput& g : in.grasps)
+    for (size_t k = 0; k < g.nodes.size(); ++k)
+      b.m_nodes[g.nodes[k]].m_x = btVector3(g.targets(k, 0), g.targets(k, 1), g.targets(k, 2));
+  pullPositions();
+  m_phase["step"] =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+
+  if (!m_x.allFinite()) return StepStatus::Diverged;
+  if (((m_x.rowwise() - m_boxCenter.transpose()).cwiseAbs().maxCoeff()) > m_boxHalf)
+    return StepStatus::Diverged;
+  return StepStatus::Ok;
+}
+
+void BulletSoftBodyModel::reset() {
+  build();
+}
+
+Counts BulletSoftBodyModel::counts() const {
+  const btSoftBody& b = *m_world->body;
+  long long bending = 0;
+  for (int i = 0; i < b.m_links.size(); ++i) bending += b.m_links[i].m_bbending ? 1 : 0;
+  return {{"nodes", b.m_nodes.size()},
+          {"links", b.m_links.size()},
+          {"bending_links", bending},
+          {"faces", b.m_faces.size()}};
+}
+
+std::vector<Real> BulletSoftBodyModel::linkStiffnesses() const {
+  const btSoftBody& b = *m_world->body;
+  std::vector<Real> k(b.m_links.size());
+  for (int i = 0; i < b.m_links.size(); ++i) k[i] = b.m_links[i].m_material->m_kLST;
+  return k;
+}
+
+Real BulletSoftBodyModel::volumeCoefficientUsed() const {
+  return m_world->body->m_cfg.kVC;
+}
+Real BulletSoftBodyModel::dampingCoefficientUsed() const {
+  return m_world->body->m_cfg.kDP;
+}
+
+}  // namespace deform::bullet_softbody

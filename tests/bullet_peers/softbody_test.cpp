@@ -1,0 +1,210 @@
+// bullet_softbody: parameter mapping kernels and model properties (rest, sag, grasp, reset, no
+// NaN, stiffness).
+#include "bullet_softbody_model.h"
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+namespace deform::bullet_softbody {
+namespace {
+
+using deform::testing::bottomSlab;
+using deform::testing::maxDisplacement;
+using deform::testing::topGrasp;
+
+constexpr Real kDt = 1e-3;
+
+Organ organOf(const std::string& phantom, Real resolution, Real young = 5500) {
+  Organ o;
+  o.source = "phantom:" + phantom;
+  o.surface = makePhantom(phantom, resolution);
+  o.material.young = young;
+  return o;
+}
+
+StepInput gravityInput() {
+  StepInput in;
+  in.dt = kDt;
+  in.gravity = Vec3(0, 0, -9.81);
+  return in;
+}
+
+TEST(BulletSoftBodyKernels, XpbdLinkStiffnessIsAFractionGrowingWithE) {
+  const Real soft = xpbdLinkStiffness(1e3, 0.01, 0.005, 2e-5, 2000, 2000, kDt);
+  const Real stiff = xpbdLinkStiffness(1e5, 0.01, 0.005, 2e-5, 2000, 2000, kDt);
+  EXPECT_GT(soft, 0.0);
+  EXPECT_LT(soft, stiff);
+  EXPECT_LE(stiff, 1.0);
+  // One XPBD projection with lambda = 0: w / (w + alpha / dt^2), alpha = L^2 / (E t A).
+  const Real alpha = 0.005 * 0.005 / (1e3 * 0.01 * 2e-5);
+  EXPECT_NEAR(soft, 4000 / (4000 + alpha / (kDt * kDt)), 1e-14);
+  // Immovable ends: the link is inactive in Bullet; any kLST in (0, 1] will do.
+  EXPECT_EQ(xpbdLinkStiffness(1e3, 0.01, 0.005, 2e-5, 0, 0, kDt), 1.0);
+}
+
+TEST(BulletSoftBodyKernels, VolumeAndDampingCoefficients) {
+  Material m;
+  m.young = 6000;
+  m.poisson = 0.4;
+  EXPECT_NEAR(volumeCoefficient(m, 2e-3), 6000 / (3 * 0.2) / 2e-3, 1e-6);
+  EXPECT_EQ(dampingCoefficient(0, kDt), 0.0);
+  EXPECT_NEAR(dampingCoefficient(2.0, kDt), 1 - std::exp(-2e-3), 1e-15);
+}
+
+TEST(BulletSoftBodyModel, MassIsDensityTimesEnclosedVolume) {
+  const Organ o = organOf("liver", 0.2);
+  BulletSoftBodyModel m;
+  m.init(o, SoftBodyConfig{}, kDt, {});
+  EXPECT_NEAR(m.masses().sum(), 1000 * signedVolume(o.surface.V, o.surface.F), 1e-9);
+  EXPECT_EQ(m.counts().at("nodes"), o.surface.numVertices());
+  EXPECT_EQ(m.counts().at("faces"), o.surface.numFaces());
+  EXPECT_EQ(m.counts().at("links"), uniqueEdges(o.surface.F).rows());
+  for (Real k : m.linkStiffnesses()) {
+    EXPECT_GT(k, 0.0);
+    EXPECT_LE(k, 1.0);
+  }
+}
+
+TEST(BulletSoftBodyModel, RestStaysAtRestWithoutGravity) {
+  // At rest every link has |d|^2 = L0^2 up to the rounding of L0 = sqrt(|d|^2), and the volume
+  // equals V0 exactly (same formula, same positions): the only motion is that rounding. 500
+  // steps must stay below 1e-12 m (measured: printed below); a wrong rest length, volume sign or
+  // V0 moves the surface by millimetres within a few steps.
+  const Organ o = organOf("liver", 0.27);
+  BulletSoftBodyModel m;
+  m.init(o, SoftBodyConfig{}, kDt, bottomSlab(o.surface.V, 0.1));
+  StepInput in;
+  in.dt = kDt;
+  for (int s = 0; s < 500; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
+  const Real drift = maxDisplacement(m.surface(), o.surface.V);
+  std::printf("bullet_softbody rest drift after 500 steps: %.3g m\n", drift);
+  EXPECT_LT(drift, 1e-12);
+}
+
+TEST(BulletSoftBodyModel, GravitySagsAFixedOrganAndFixedNodesStay) {
+  const Organ o = organOf("liver", 0.27);
+  const std::vector<int> fixed = bottomSlab(o.surface.V, 0.15);
+  ASSERT_FALSE(fixed.empty());
+  BulletSoftBodyModel m;
+  m.init(o, SoftBodyConfig{}, kDt, fixed);
+  const StepInput in = gravityInput();
+  for (int s = 0; s < 200; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
+  const VecX dz = m.surface().col(2) - o.surface.V.col(2);
+  std::printf("bullet_softbody mean sag after 0.2 s: %.3g m\n", dz.mean());
+  EXPECT_LT(dz.mean(), -1e-4);
+  for (int i : fixed) EXPECT_EQ(m.surface().row(i), o.surface.V.row(i)) << i;
+}
+
+TEST(BulletSoftBodyModel, StifferMaterialSagsLess) {
+  Real sag[2];
+  for (int k = 0; k < 2; ++k) {
+    const Organ o = organOf("liver", 0.27, k == 0 ? 2000 : 20000);
+    BulletSoftBodyModel m;
+    m.init(o, SoftBodyConfig{}, kDt, bottomSlab(o.surface.V, 0.15));
+    const StepInput in = gravityInput();
+    for (int s = 0; s < 200; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
+    sag[k] = -(m.surface().col(2) - o.surface.V.col(2)).mean();
+  }
+  std::printf("bullet_softbody mean sag E=2 kPa: %.3g m, E=20 kPa: %.3g m\n", sag[0], sag[1]);
+  EXPECT_GT(sag[1], 0.0);
+  EXPECT_LT(sag[1], 0.8 * sag[0]);
+}
+
+TEST(BulletSoftBodyModel, GraspedNodesFollowTheirTargetsAndReleaseRestoresMass) {
+  const Organ o = organOf("liver", 0.27);
+  BulletSoftBodyModel m;
+  m.init(o, SoftBodyConfig{}, kDt, bottomSlab(o.surface.V, 0.15));
+  StepInput in = gravityInput();
+  in.grasps.push_back(topGrasp(o.surface.V, 6, 0.0));
+  const MatX3 start = in.grasps[0].targets;
+  for (int s = 1; s <= 100; ++s) {
+    in.grasps[0].targets = start;
+    in.grasps[0].targets.col(2).array() += 2e-4 * s;  // 0.2 m/s up
+    ASSERT_EQ(m.step(in), StepStatus::Ok);
+    for (size_t k = 0; k < in.grasps[0].nodes.size(); ++k)
+      ASSERT_EQ(m.nodes().row(in.grasps[0].nodes[k]), in.grasps[0].targets.row(Eigen::Index(k)));
+  }
+  // Neighbours were dragged up with the grasp.
+  const std::vector<int> near =
+      nearestVertices(o.surface.V, o.surface.V.row(in.grasps[0].nodes[0]), 20);
+  Real rise = 0;
+  for (int v : near) rise += m.surface()(v, 2) - o.surface.V(v, 2);
+  EXPECT_GT(rise / near.size(), 0.005);
+  // Released: the node falls under gravity again (its mass is back).
+  const int held = in.grasps[0].nodes[0];
+  const Real zHeld = m.nodes()(held, 2);
+  in.grasps.clear();
+  for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
+  EXPECT_LT(m.nodes()(held, 2), zHeld - 1e-4);
+}
+
+TEST(BulletSoftBodyModel, PointForceMovesTheLoadedVertexAlongTheForce) {
+  const Organ o = organOf("liver", 0.27);
+  BulletSoftBodyModel m;
+  m.init(o, SoftBodyConfig{}, kDt, bottomSlab(o.surface.V, 0.15));
+  const Box b = boundingBox(o.surface.V);
+  StepInput in;
+  in.dt = kDt;
+  PointLoad l;
+  l.surfaceVertex = nearestVertex(o.surface.V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
+  l.force = Vec3(0, 0, 0.5);
+  in.loads.push_back(l);
+  for (int s = 0; s < 50; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
+  EXPECT_GT(m.surface()(l.surfaceVertex, 2) - o.surface.V(l.surfaceVertex, 2), 1e-4);
+}
+
+TEST(BulletSoftBodyModel, ResetReproducesARunBitForBit) {
+  const Organ o = organOf("liver", 0.27);
+  SoftBodyConfig c;
+  c.bending = true;
+  BulletSoftBodyModel m;
+  m.init(o, c, kDt, bottomSlab(o.surface.V, 0.15));
+  auto run = [&] {
+    StepInput in = gravityInput();
+    in.grasps.push_back(topGrasp(o.surface.V, 5, 0.0));
+    for (int s = 0; s < 60; ++s) {
+      if (s == 40) in.grasps.clear();
+      if (!in.grasps.empty()) in.grasps[0].targets.col(1).array() += 1e-4;
+      EXPECT_EQ(m.step(in), StepStatus::Ok);
+    }
+    return MatX3(m.surface());
+  };
+  const MatX3 a = run();
+  m.reset();
+  EXPECT_TRUE(m.surface() == o.surface.V);
+  const MatX3 b = run();
+  EXPECT_TRUE(a == b);
+  EXPECT_GT(maxDisplacement(a, o.surface.V), 1e-4);
+}
+
+TEST(BulletSoftBodyModel, NoNanOverAGraspLift) {
+  const Organ o = organOf("liver", 0.27);
+  BulletSoftBodyModel m;
+  m.init(o, SoftBodyConfig{}, kDt, bottomSlab(o.surface.V, 0.15));
+  StepInput in = gravityInput();
+  in.grasps.push_back(topGrasp(o.surface.V, 8, 0.0));
+  for (int s = 0; s < 200; ++s) {
+    in.grasps[0].targets.col(2).array() += 1e-4;  // 2 cm lift over 0.2 s
+    ASSERT_EQ(m.step(in), StepStatus::Ok) << "step " << s;
+    ASSERT_TRUE(m.surface().allFinite());
+  }
+}
+
+TEST(BulletSoftBodyModel, NanIsReportedAsDivergence) {
+  const Organ o = organOf("cube", 0.5);
+  BulletSoftBodyModel m;
+  m.init(o, SoftBodyConfig{}, kDt, {});
+  StepInput in;
+  in.dt = kDt;
+  PointLoad l;
+  l.surfaceVertex = 0;
+  l.force = Vec3(std::nan(""), 0, 0);
+  in.loads.push_back(l);
+  EXPECT_EQ(m.step(in), StepStatus::Diverged);
+}
+
+}  // namespace
+}  // namespace deform::bullet_softbody
