@@ -1,19 +1,29 @@
-// deformbench: the command-line program. Verbs: plugins, run, phantom (DESIGN.md "Command
-// line"). Bad input ends with one line "deformbench: FILE: PLACE: PROBLEM" on stderr and exit
-// code 2; an unexpected internal error exits 3.
+// deformbench: the command-line program. Verbs (DESIGN.md "Command line"): plugins, run, phantom,
+// tables, sweep, stability, report, bench, converge. Bad input ends with one line "deformbench:
+// FILE: PLACE: PROBLEM" on stderr and exit code 2; an unexpected internal error exits 3.
 #include <deform/mesh_io.h>
 #include <deform/phantom.h>
 #include <deform/plugin_loader.h>
 #include <deform/scene.h>
+#include <deform_harness/bench.h>
+#include <deform_harness/convergence.h>
+#include <deform_harness/progress.h>
 #include <deform_harness/results.h>
 #include <deform_harness/runner.h>
+#include <deform_harness/scripts.h>
+#include <deform_harness/stability.h>
+#include <deform_harness/sweep.h>
+#include <deform_harness/tables.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <map>
+#include <optional>
 #include <sstream>
 
 namespace {
@@ -255,6 +265,240 @@ int cmdPhantom(const std::string& name, const std::string& out, double resolutio
   return 0;
 }
 
+// ------------------------------------------------------------------- tables, sweep, stability
+
+struct CommonArgs {
+  std::string out;
+  bool quick = false;
+  bool explain = false;
+  std::string cacheDir;
+  bool noCache = false;
+  std::vector<std::string> pluginDirs;
+};
+
+std::optional<fs::path> cacheChoice(const CommonArgs& a) {
+  if (a.noCache) return fs::path();
+  if (!a.cacheDir.empty()) return fs::path(a.cacheDir);
+  return std::nullopt;
+}
+
+CaseOptions caseOptions(const CommonArgs& a) {
+  CaseOptions o;
+  o.cacheDir = cacheChoice(a);
+  if (a.explain)
+    o.explain = [](const std::string& s) { std::cout << "explain: " << s << "\n" << std::flush; };
+  return o;
+}
+
+fs::path makeOutDir(const std::string& out) {
+  if (out.empty()) throw InputError("--out", "", "an output folder is required");
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec || !fs::is_directory(out)) throw InputError(out, "", "cannot create the output folder");
+  return fs::path(out);
+}
+
+/// Runs a plotting script; one line when matplotlib (or Python) is missing. Returns true on
+/// success.
+bool plot(const std::string& script, const std::vector<std::string>& args) {
+  const ScriptResult r = runScript(script, args);
+  if (r.exitCode == 0) {
+    if (!r.output.empty()) std::cout << r.output;
+    return true;
+  }
+  if (r.exitCode == kScriptNoMatplotlib) {
+    std::cout << "matplotlib is not installed for " << pythonInterpreter()
+              << ": wrote the data, no picture (apt-get install python3-matplotlib)\n";
+  } else {
+    std::cout << "plot " << script << " failed (" << oneLine(r.output) << "): wrote the data\n";
+  }
+  return false;
+}
+
+int cmdTables(const std::vector<std::string>& names, const CommonArgs& a, long long refElements) {
+  PluginLoader loader(searchPath(a.pluginDirs));
+  TablesOptions o;
+  o.quick = a.quick;
+  o.outDir = makeOutDir(a.out);
+  o.cases = caseOptions(a);
+  o.referenceElements = refElements;
+  std::vector<Table> tables;
+  {
+    Progress progress(0, "tables");
+    tables = buildTables(names, loader, o, &progress);
+  }
+  if (a.explain) {
+    for (const auto& f : loader.loadedFiles()) std::cout << "explain: loaded plugin " << f << "\n";
+  }
+  for (const Table& t : tables) {
+    std::ifstream md(o.outDir / (t.name + ".md"));
+    std::cout << "\n" << md.rdbuf();
+  }
+  std::cout << "\ntables: " << o.outDir.string() << " (<table>.md/.csv/.json; scenes/ to rerun "
+            << "any row with deformbench run)\n";
+  return 0;
+}
+
+int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot) {
+  PluginLoader loader(searchPath(a.pluginDirs));
+  SweepOptions o;
+  o.quick = a.quick;
+  o.outDir = makeOutDir(a.out);
+  o.cases = caseOptions(a);
+  std::vector<SweepPoint> points;
+  {
+    Progress progress(0, "sweep");
+    points = runSweep(scene, loader, o, &progress);
+  }
+  size_t w = 6;
+  for (const SweepPoint& p : points) w = std::max(w, p.label.size() + 2);
+  std::cout << "\n";
+  std::cout << std::left << std::setw(int(w)) << "point" << std::setw(12) << "status"
+            << std::setw(10) << "ms/step" << std::setw(14) << "rmse_50 mm" << std::setw(14)
+            << "rmse_all mm"
+            << "pareto\n";
+  for (const SweepPoint& p : points) {
+    std::cout << std::left << std::setw(int(w)) << p.label << std::setw(12)
+              << (p.status.size() > 11 ? p.status.substr(0, 11) : p.status) << std::setw(10)
+              << fmt(p.msMedian) << std::setw(14) << fmt(1e3 * p.rmseNearest) << std::setw(14)
+              << fmt(1e3 * p.rmseAll) << (p.pareto ? "*" : "") << "\n";
+  }
+  if (!noPlot)
+    plot("plot_sweep.py", {(o.outDir / "sweep.json").string(), (o.outDir / "sweep.png").string()});
+  std::cout << "sweep: " << (o.outDir / "sweep.json").string() << "\n";
+  return 0;
+}
+
+struct StabilityArgs {
+  CommonArgs common;
+  bool resume = false;
+  std::vector<std::string> models, cases;
+  double timeout = 0;
+  int jobs = 1;
+  bool noPlot = false;
+};
+
+int cmdStability(const StabilityArgs& a) {
+  PluginLoader loader(searchPath(a.common.pluginDirs));
+  StabilityOptions o;
+  o.quick = a.common.quick;
+  o.resume = a.resume;
+  o.outDir = makeOutDir(a.common.out);
+  o.models = a.models;
+  o.cases = a.cases;
+  o.timeoutS = a.timeout;
+  o.jobs = a.jobs;
+  o.pluginDirs = a.common.pluginDirs;
+  if (a.common.noCache) {
+    // The child runs use their own cache; --no-cache keeps them out of the user's.
+    o.cacheDir = (o.outDir / "cache").string();
+  } else {
+    o.cacheDir = a.common.cacheDir;
+  }
+  std::vector<StabilityRecord> records;
+  {
+    Progress progress(0, "stability");
+    records = runStability(loader, o, &progress);
+  }
+  std::map<std::string, std::map<std::string, int>> summary;
+  for (const auto& r : records) ++summary[r.model][r.status];
+  std::cout << "\n";
+  for (const auto& [model, counts] : summary) {
+    std::cout << std::left << std::setw(18) << model;
+    for (const char* s : {"stable", "diverged", "failed", "unsupported"})
+      std::cout << " " << s << "=" << (counts.count(s) ? counts.at(s) : 0);
+    std::cout << "\n";
+  }
+  if (!a.noPlot)
+    plot("plot_stability.py", {(o.outDir / "stability.json").string(), o.outDir.string()});
+  std::cout << "stability: " << (o.outDir / "stability.md").string() << "\n";
+  return 0;
+}
+
+int cmdReport(const std::string& dir, const std::string& out) {
+  if (!fs::is_directory(dir)) throw InputError(dir, "", "not a folder");
+  const std::string html = out.empty() ? (fs::path(dir) / "report.html").string() : out;
+  const ScriptResult r = runScript("report.py", {dir, html});
+  std::cout << r.output;
+  if (r.exitCode != 0) {
+    std::cerr << "deformbench: report: " << oneLine(r.output) << "\n";
+    return kExitBadInput;
+  }
+  return 0;
+}
+
+struct BenchArgs {
+  CommonArgs common;
+  std::vector<std::string> compare;
+  double threshold = 0.25;
+  int repeat = 3;
+  int steps = 100;
+  std::vector<std::string> only;
+};
+
+int cmdBench(const BenchArgs& a) {
+  if (!a.compare.empty()) {
+    if (a.compare.size() != 2) throw InputError("--compare", "", "give OLD.json NEW.json");
+    const auto oldDoc = readBenchFile(a.compare[0]);
+    const auto newDoc = readBenchFile(a.compare[1]);
+    const BenchComparison c = compareBench(oldDoc, newDoc, a.threshold);
+    printBenchComparison(c, a.threshold, std::cout);
+    return c.regressions > 0 ? 1 : 0;
+  }
+  if (a.common.out.empty()) throw InputError("bench", "", "--out FILE.json or --compare OLD NEW");
+  PluginLoader loader(searchPath(a.common.pluginDirs));
+  BenchOptions o;
+  o.out = a.common.out;
+  if (o.out.has_parent_path()) fs::create_directories(o.out.parent_path());
+  o.repeat = a.repeat;
+  o.steps = a.steps;
+  o.only = a.only;
+  o.cases = caseOptions(a.common);
+  {
+    Progress progress(0, "bench");
+    runBench(loader, o, &progress);
+  }
+  std::cout << "bench: " << o.out.string() << "\n";
+  return 0;
+}
+
+int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements) {
+  PluginLoader loader(searchPath(a.pluginDirs));
+  ConvergeOptions o;
+  o.outDir = makeOutDir(a.out);
+  o.cacheDir = cacheChoice(a);
+  o.baseElements = elements;
+  ConvergenceResult r;
+  {
+    Progress progress(0, "converge");
+    r = runConvergence(scene, loader, o, &progress);
+  }
+  for (const auto& l : r.levels) {
+    std::cout << "level " << std::setw(9) << l.targetElements << " target: " << l.elements
+              << " elements, h = " << fmt(1e3 * l.h)
+              << " mm, peak |u| = " << fmt(1e3 * l.peakDisplacement) << " mm, " << l.status << ", "
+              << fmt(l.solveS) << " s\n";
+  }
+  if (!r.message.empty()) {
+    std::cout << "warning: " << r.message << "\n";
+    return 0;
+  }
+  std::cout << "max surface difference between levels: " << fmt(1e3 * r.d01) << " mm, then "
+            << fmt(1e3 * r.d12) << " mm (vertices near loads and grasps left out)\n";
+  std::cout << "observed order p = " << fmt(r.order) << ", estimated error of the finest level "
+            << fmt(1e3 * r.errorEstimate) << " mm = " << fmt(100 * r.relativeError)
+            << "% of the peak displacement\n";
+  if (!r.converged) {
+    std::cout << "warning: the reference is not converged to 1%"
+              << (r.asymptotic ? "" : " (the levels are not in the asymptotic range)")
+              << ": raise its \"elements\" or read its errors as bounds of that size\n";
+  } else {
+    std::cout << "the reference is converged to within 1% at " << r.levels[2].elements
+              << " elements\n";
+  }
+  return 0;
+}
+
 int realMain(int argc, char** argv) {
   CLI::App app{"deformbench: compares soft-tissue deformation models on equal terms"};
   app.require_subcommand(1);
@@ -294,6 +538,87 @@ int realMain(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   phantom->add_flag("--list", phList, "list the phantoms");
 
+  const auto addCommon = [](CLI::App* cmd, CommonArgs& c, bool quick) {
+    if (quick) cmd->add_flag("--quick", c.quick, "fewer cases, shorter runs (CI)");
+    auto* cd = cmd->add_option("--cache-dir", c.cacheDir, "precomputation cache folder");
+    auto* nc = cmd->add_flag("--no-cache", c.noCache, "do not read or write the cache");
+    cd->excludes(nc);
+  };
+
+  std::vector<std::string> tableNamesArg;
+  CommonArgs ta;
+  long long tableRefElements = 0;
+  CLI::App* tables = app.add_subcommand(
+      "tables",
+      "regenerate the papers' tables (metaballs-construction, method-comparison, "
+      "bem-timing, bem-accuracy, hybrid-accuracy, hybrid-timing, or all)");
+  tables->add_option("name", tableNamesArg, "table name(s) or all")->required();
+  tables->add_option("--out", ta.out, "output folder")->required();
+  tables
+      ->add_option("--reference-elements", tableRefElements,
+                   "tets of the reference FEM (default 20000; 4000 with --quick)")
+      ->check(CLI::PositiveNumber);
+  tables->add_flag("--explain", ta.explain, "say what each case loaded, built, cached, skipped");
+  addCommon(tables, ta, true);
+
+  std::string sweepScene;
+  CommonArgs sa;
+  bool sweepNoPlot = false;
+  CLI::App* sweep = app.add_subcommand(
+      "sweep", "error against run time: each model over its accuracy knob, with a plot");
+  sweep->add_option("scene", sweepScene, "scene file with a reference")->required();
+  sweep->add_option("--out", sa.out, "output folder")->required();
+  sweep->add_flag("--no-plot", sweepNoPlot, "write the data only");
+  sweep->add_flag("--explain", sa.explain, "say what was loaded, built, cached, skipped");
+  addCommon(sweep, sa, true);
+
+  StabilityArgs st;
+  CLI::App* stability = app.add_subcommand(
+      "stability", "every model over stiff and extreme cases, each in its own process");
+  stability->add_option("--out", st.common.out, "output folder")->required();
+  stability->add_flag("--resume", st.resume, "skip the cases already finished in --out");
+  stability->add_option("--model", st.models, "plugin to test (repeatable; default: all found)");
+  stability->add_option("--case", st.cases, "case id to run (repeatable; default: the set)");
+  stability->add_option("--timeout", st.timeout, "seconds per case (default 120, 60 with --quick)")
+      ->check(CLI::PositiveNumber);
+  stability->add_option("--jobs", st.jobs, "cases at once (default 1: timings stay clean)")
+      ->check(CLI::PositiveNumber);
+  stability->add_flag("--no-plot", st.noPlot, "write the data only");
+  addCommon(stability, st.common, true);
+
+  std::string reportDir, reportOut;
+  CLI::App* report = app.add_subcommand(
+      "report", "a self-contained HTML report of a results, tables, sweep or stability folder");
+  report->add_option("dir", reportDir, "folder")->required();
+  report->add_option("--out", reportOut, "HTML file (default DIR/report.html)");
+
+  BenchArgs ba;
+  CLI::App* bench = app.add_subcommand(
+      "bench", "time a fixed set of model x scene cases, or compare two such files");
+  bench->add_option("--out", ba.common.out, "bench file to write (JSON)");
+  bench->add_option("--compare", ba.compare, "OLD.json NEW.json: print ratios, exit 1 on slowdown")
+      ->expected(2);
+  bench->add_option("--threshold", ba.threshold, "slowdown flagged above this fraction (0.25)")
+      ->check(CLI::NonNegativeNumber);
+  bench->add_option("--repeat", ba.repeat, "runs per case (median taken)")
+      ->check(CLI::PositiveNumber);
+  bench->add_option("--steps", ba.steps, "steps per run")->check(CLI::PositiveNumber);
+  bench->add_option("--only", ba.only, "case id or plugin (repeatable)");
+  addCommon(bench, ba.common, false);
+
+  std::string convScene;
+  CommonArgs ca;
+  long long convElements = 0;
+  CLI::App* converge = app.add_subcommand(
+      "converge", "is the scene's reference converged? three refinements + Richardson");
+  converge->add_option("scene", convScene, "scene file with a reference")->required();
+  converge->add_option("--out", ca.out, "output folder")->required();
+  converge
+      ->add_option("--elements", convElements,
+                   "coarsest level's elements (default: the reference's own)")
+      ->check(CLI::PositiveNumber);
+  addCommon(converge, ca, false);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -307,6 +632,27 @@ int realMain(int argc, char** argv) {
     return cmdRun(ra);
   }
   if (*phantom) return cmdPhantom(phName, phOut, phRes, phList);
+  if (*tables) {
+    ta.pluginDirs = pluginDirs;
+    return cmdTables(tableNamesArg, ta, tableRefElements);
+  }
+  if (*sweep) {
+    sa.pluginDirs = pluginDirs;
+    return cmdSweep(sweepScene, sa, sweepNoPlot);
+  }
+  if (*stability) {
+    st.common.pluginDirs = pluginDirs;
+    return cmdStability(st);
+  }
+  if (*report) return cmdReport(reportDir, reportOut);
+  if (*bench) {
+    ba.common.pluginDirs = pluginDirs;
+    return cmdBench(ba);
+  }
+  if (*converge) {
+    ca.pluginDirs = pluginDirs;
+    return cmdConverge(convScene, ca, convElements);
+  }
   return kExitBadInput;
 }
 

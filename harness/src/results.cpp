@@ -190,6 +190,7 @@ json runJson(const RunRecord& run) {
   j["precompute_s"] = run.precomputeS;
   j["steps"] = run.steps;
   j["planned_steps"] = run.plannedSteps;
+  if (run.solvedSteps >= 0) j["solved_steps"] = run.solvedSteps;
   if (run.stepStats.samples > 0) {
     j["step_ms"] = {{"median", run.stepStats.median},
                     {"p95", run.stepStats.p95},

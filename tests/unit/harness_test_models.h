@@ -20,7 +20,8 @@ class RigidTestModel : public Model {
   int runawayAtStep = -1;  ///< moves 1000 m at this step
   int reportDivergedAtStep = -1;
   bool throwInInit = false;
-  std::vector<StepInput> inputs;  ///< every input received
+  std::vector<StepInput> inputs;                 ///< every input received
+  std::vector<StepInput>* recordInto = nullptr;  ///< also appended here when set (outlives runs)
 
   void init(const ModelSetup& setup) override {
     if (throwInInit) throw InputError("test", "", "cannot handle this organ");
@@ -29,6 +30,7 @@ class RigidTestModel : public Model {
   }
   StepStatus step(const StepInput& in) override {
     inputs.push_back(in);
+    if (recordInto) recordInto->push_back(in);
     ++m_steps;
     if (m_steps == throwAtStep) throw std::runtime_error("injected failure");
     Vec3 shift = Vec3::Zero();

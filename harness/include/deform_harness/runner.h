@@ -53,6 +53,7 @@ struct RunRecord {
   double precomputeS = 0;  ///< wall time of init(), s
   int steps = 0;           ///< steps completed (the step that diverged included)
   int plannedSteps = 0;
+  int solvedSteps = -1;  ///< quasi-static at compared instants: step() calls made; -1 otherwise
   std::vector<double> stepMs;  ///< wall time of every step() call, ms
   StepStats stepStats;
   std::map<std::string, double> phaseMs;  ///< median per phase over the steps after warm-up
@@ -80,7 +81,24 @@ struct RunOptions {
   double warmupFraction = 0.05;  ///< steps excluded from the statistics (still simulated)
   bool keepSeries = true;        ///< honour "every:N"
   bool recordGraspForces = true;
+  /// Quasi-static stepping (DESIGN.md "Metrics": a quasi-static reference is solved only at the
+  /// compared instants). true: the interaction is prepared every step (so grasps attach when the
+  /// jaws close) but model.step() is called only at the steps that end at a compared instant and
+  /// at the steps that end just before a grasper's jaws close (so the attachment sees the solved
+  /// state at that moment). false: step() every step. nullopt: runModel() decides with
+  /// solveOnlyAtComparedInstants(); simulate() alone treats nullopt as false.
+  std::optional<bool> quasiStaticAtComparedInstants;
 };
+
+/// Whether runModel() solves a model only at the compared instants: it has the quasi_static
+/// capability, and (a convention for plugins that offer both) its resolved parameters do not
+/// include a choice "solve" set to anything other than "quasi_static".
+bool solveOnlyAtComparedInstants(const ModelInfo& info, const ParamValues& params);
+
+/// Steps (counts of completed steps, ascending) after which a quasi-static model is solved:
+/// the compared steps, and for each grasper whose jaws close at the start of step k > 0 the
+/// step k (the state the attachment is taken from). lastStep as in comparedSteps().
+std::vector<int> quasiStaticSolveSteps(const Scene& scene, int lastStep = -1);
 
 /// Steps (counts of completed steps) at which the scene compares surfaces: round(t / dt) for
 /// each compare_at instant up to lastStep, else lastStep itself. lastStep < 0: the scene's last.

@@ -1,0 +1,57 @@
+// deformbench harness: is the scene's reference converged? The reference plugin is run (through
+// the loader and the runner, like any model) at three element counts N, 2.8 N, 8 N (interior
+// edge-length ratio ~1.41), and the surface displacement at the last compared instant is
+// extrapolated (Richardson). With h_k = (organ volume / #elements_k)^(1/3), d_01 = max_i
+// |u_0,i - u_1,i| and d_12 likewise, and the ansatz u_k = u + C h_k^p, the observed order p solves
+//   (h_0^p - h_1^p) / (h_1^p - h_2^p) = d_01 / d_12
+// and the finest level's error is e_2 = d_12 h_2^p / (h_1^p - h_2^p) (Roache 1997,
+// doi:10.1146/annurev.fluid.29.1.123; the same analysis as plugins/reference_fem/convergence.h,
+// here on runs of the plugin rather than on its kernels). Vertices within `excludeRadius` of a
+// point load (singular in 3D elasticity) or of where a grasp closes (the attached node set
+// depends on the mesh) are left out.
+#pragma once
+
+#include <deform/plugin_loader.h>
+#include <deform_harness/progress.h>
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace deform::harness {
+
+struct ConvergenceLevelResult {
+  long long targetElements = 0, elements = 0;
+  double h = 0;                 ///< m
+  double peakDisplacement = 0;  ///< m
+  std::string status;
+  double solveS = 0;  ///< precompute + steps, s
+};
+
+struct ConvergenceResult {
+  std::vector<ConvergenceLevelResult> levels;
+  double d01 = 0, d12 = 0;  ///< m
+  double order = NAN;       ///< observed p
+  double errorEstimate = NAN, relativeError = NAN;
+  bool asymptotic = false;  ///< 0.5 <= p <= 4
+  bool converged = false;   ///< asymptotic && relativeError <= 1%
+  std::string message;      ///< why there is no estimate, if there is none
+};
+
+/// Richardson analysis of three levels (h0 > h1 > h2, differences d01, d12): fills order,
+/// errorEstimate, asymptotic. relativeError needs the peak displacement: errorEstimate / peak.
+void richardsonEstimate(double h0, double h1, double h2, double d01, double d12, double peak,
+                        ConvergenceResult& out);
+
+struct ConvergeOptions {
+  long long baseElements = 0;  ///< N; 0: the scene reference's own "elements" (else 5000)
+  std::filesystem::path outDir;
+  std::optional<std::filesystem::path> cacheDir;
+  double excludeRadius = -1;  ///< m; < 0: 10% of the organ's bounding-box diagonal
+};
+
+ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loader,
+                                 const ConvergeOptions& options, Progress* progress);
+
+}  // namespace deform::harness

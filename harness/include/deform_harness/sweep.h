@@ -1,0 +1,52 @@
+// deformbench harness: error against run time. Each model of a scene is swept over its accuracy
+// knob (a table of plugin name -> parameter and values, as data; a plugin without an entry gives
+// the one point of its scene parameters), every point runs through the loader and the runner
+// against the scene's reference, and the points with their Pareto front (no other point is both
+// faster and more accurate in rmse_50) are written as DIR/sweep.json and DIR/sweep.csv; the plot
+// (harness/scripts/plot_sweep.py) is DIR/sweep.png.
+#pragma once
+
+#include <deform_harness/cases.h>
+#include <deform_harness/progress.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace deform::harness {
+
+/// An accuracy knob: the parameter and the values swept.
+struct SweepKnob {
+  std::string param;
+  std::vector<nlohmann::json> values;
+};
+
+/// The knob of a plugin ("" param when it has none). quick: two or three values.
+SweepKnob sweepKnob(const std::string& plugin, bool quick);
+
+struct SweepPoint {
+  std::string model, plugin, label, param;
+  nlohmann::json value;
+  std::string status;
+  double msMedian = NAN, msP95 = NAN;
+  double rmseNearest = NAN;  ///< rmse_50 (or the scene's last nearest k), m
+  double rmseAll = NAN, max = NAN, lossRatio = NAN;
+  bool pareto = false;
+};
+
+/// Marks the points on the Pareto front of (msMedian, rmseNearest), ok points with an error.
+void markPareto(std::vector<SweepPoint>& points);
+
+struct SweepOptions {
+  bool quick = false;
+  std::filesystem::path outDir;
+  CaseOptions cases;
+};
+
+/// Runs the sweep of a scene; writes sweep.json and sweep.csv (and the scene it ran into
+/// DIR/sweep_scene.json). Throws InputError for a bad scene.
+std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loader,
+                                 const SweepOptions& options, Progress* progress);
+
+}  // namespace deform::harness

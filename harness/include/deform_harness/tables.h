@@ -1,0 +1,43 @@
+// deformbench harness: the six tables the project regenerates (DESIGN.md "Tables the project
+// must regenerate"), each from generated scenes run through the plugin loader and the runner.
+// A table names its plugins and their parameters as data; the harness never links a plugin's
+// code. The paper's own figures are printed beside ours where the paper gives them.
+//
+//   metaballs-construction  Pan et al. 2015 (metaballs), Table 1
+//   method-comparison       Pan et al. 2015, Table 2 (+ our error against the reference FEM)
+//   bem-timing              Zhu, Gu & Zhou 2010 (particles + BEM), Table 1
+//   bem-accuracy            Zhu, Gu & Zhou 2010, Table 2
+//   hybrid-accuracy         hybrid FEM+PBD paper (Scientific Programming 2021), Tables 2-3
+//   hybrid-timing           the same paper, Tables 4-5
+//
+// Output in DIR: <table>.md, <table>.csv, <table>.json; scenes/<group>/<case>.json (rerun any
+// row with `deformbench run`); runs/<group>/<case>/ (results.json and surfaces of that case).
+#pragma once
+
+#include <deform_harness/cases.h>
+#include <deform_harness/progress.h>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace deform::harness {
+
+struct TablesOptions {
+  bool quick = false;  ///< fewer cases, shorter runs and a coarser reference (for CI)
+  std::filesystem::path outDir;
+  CaseOptions cases;
+  /// Tets of the reference FEM; 0: 4000 with --quick, else 20000.
+  long long referenceElements = 0;
+};
+
+/// Names of the six tables, in DESIGN.md's order.
+std::vector<std::string> tableNames();
+
+/// Builds the named tables ("all" expands to every one; an unknown name is an InputError),
+/// runs their cases (each case once even when two tables share it), writes every file into
+/// options.outDir and returns the tables. progress may be null.
+std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
+                               const TablesOptions& options, Progress* progress);
+
+}  // namespace deform::harness

@@ -1,0 +1,84 @@
+#!/usr/bin/env python3
+"""Stability maps from a deformbench stability.json.
+
+usage: plot_stability.py STABILITY.json OUTDIR
+
+One picture per model, OUTDIR/stability_<model>.png: the map of Young's modulus against the time
+step (cells coloured stable / diverged / failed / unsupported, with the divergence step), and a
+strip of the other cases (Poisson ratio, large forces, pull, invert, flatten).
+"""
+import json
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from deform_plot_common import STATUS_COLOURS, pyplot_or_exit  # noqa: E402
+
+
+def main():
+    if len(sys.argv) != 3:
+        print(__doc__)
+        return 2
+    with open(sys.argv[1]) as f:
+        doc = json.load(f)
+    plt = pyplot_or_exit()
+    from matplotlib.patches import Patch, Rectangle
+
+    rows = doc["rows"]
+    models = []
+    for r in rows:
+        if r["model"] not in models:
+            models.append(r["model"])
+    written = []
+    for model in models:
+        mine = [r for r in rows if r["model"] == model]
+        grid = [r for r in mine if r["group"] == "stiffness_dt"]
+        others = [r for r in mine if r["group"] != "stiffness_dt"]
+        youngs = sorted({r["young"] for r in grid})
+        dts = sorted({r["dt"] for r in grid})
+        fig, (ax, ax2) = plt.subplots(
+            2, 1, figsize=(8, 6.5), gridspec_kw={"height_ratios": [max(len(dts), 1), 1.2]})
+        for r in grid:
+            x, y = youngs.index(r["young"]), dts.index(r["dt"])
+            ax.add_patch(Rectangle((x, y), 1, 1, facecolor=STATUS_COLOURS.get(r["status"], "white"),
+                                   edgecolor="white", linewidth=2))
+            label = r["status"]
+            if r["status"] == "diverged" and r.get("step") is not None:
+                label += "\nstep %d" % r["step"]
+            ax.text(x + 0.5, y + 0.5, label, ha="center", va="center", fontsize=8)
+        ax.set_xlim(0, max(len(youngs), 1))
+        ax.set_ylim(0, max(len(dts), 1))
+        ax.set_xticks([i + 0.5 for i in range(len(youngs))])
+        ax.set_xticklabels(["%g" % e for e in youngs])
+        ax.set_yticks([i + 0.5 for i in range(len(dts))])
+        ax.set_yticklabels(["1/%d" % round(1 / d) if d > 0 else "%g" % d for d in dts])
+        ax.set_xlabel("Young's modulus E (Pa)")
+        ax.set_ylabel("time step dt (s)")
+        ax.set_title("%s: stability map (1 N load, gravity)" % model)
+        for i, r in enumerate(others):
+            ax2.add_patch(Rectangle((i, 0), 1, 1,
+                                    facecolor=STATUS_COLOURS.get(r["status"], "white"),
+                                    edgecolor="white", linewidth=2))
+            label = r["status"]
+            if r["status"] == "diverged" and r.get("step") is not None:
+                label += "\nstep %d" % r["step"]
+            ax2.text(i + 0.5, 0.5, label, ha="center", va="center", fontsize=8)
+        ax2.set_xlim(0, max(len(others), 1))
+        ax2.set_ylim(0, 1)
+        ax2.set_xticks([i + 0.5 for i in range(len(others))])
+        ax2.set_xticklabels([r["case"] for r in others], fontsize=8)
+        ax2.set_yticks([])
+        ax2.set_title("extreme cases", fontsize=10)
+        handles = [Patch(facecolor=c, label=s) for s, c in STATUS_COLOURS.items()]
+        fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=8)
+        fig.tight_layout(rect=(0, 0.05, 1, 1))
+        path = os.path.join(sys.argv[2], "stability_%s.png" % model)
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        written.append(path)
+    print("stability maps: " + ", ".join(os.path.basename(p) for p in written))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

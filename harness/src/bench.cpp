@@ -1,0 +1,269 @@
+// CI timing tables (see bench.h).
+#include <deform/cache.h>
+#include <deform/mesh.h>
+#include <deform/phantom.h>
+#include <deform_harness/bench.h>
+#include <deform_harness/results.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <map>
+#include <ostream>
+#include <set>
+#include <sstream>
+
+namespace deform::harness {
+
+namespace fs = std::filesystem;
+using ojson = nlohmann::ordered_json;
+using json = nlohmann::json;
+
+namespace {
+
+ojson vec(const Vec3& v) {
+  return ojson::array({v.x(), v.y(), v.z()});
+}
+
+struct BenchCase {
+  std::string id, plugin;
+  ojson params;
+  std::string scene;  ///< "liver_grasp" | "cube_poke"
+};
+
+/// The fixed case set: each model on a grasp-and-lift of the ~2.2k-vertex liver and a poke of
+/// the cube, at the parameters the shipped scenes use.
+std::vector<BenchCase> benchCases() {
+  std::vector<BenchCase> out;
+  const std::vector<std::pair<std::string, ojson>> models = {
+      {"pbd", ojson::object()},
+      {"massspring", {{"integrator", "implicit_euler"}}},
+      {"fem_hex", ojson::object()},
+      {"metaballs", {{"spheres", 300}}},
+      {"particle_bem", {{"coarse_vertices", 300}}},
+      {"hybrid_fem_pbd", ojson::object()}};
+  for (const char* scene : {"liver_grasp", "cube_poke"})
+    for (const auto& [plugin, params] : models)
+      out.push_back({plugin + "/" + scene, plugin, params, scene});
+  return out;
+}
+
+ojson benchScene(const BenchCase& c, int steps) {
+  ojson j;
+  j["name"] = "bench-" + c.id;
+  const bool liver = c.scene == "liver_grasp";
+  const std::string phantom = liver ? "liver" : "cube";
+  const double resolution = liver ? 0.27 : 0.6;
+  const SurfaceMesh s = makePhantom(phantom, resolution);
+  const Box b = boundingBox(s.V);
+  const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
+  const Vec3 top =
+      s.V.row(nearestVertex(s.V, Vec3(b.center().x(), b.center().y(), b.hi.z()))).transpose();
+  j["description"] = "Timing case " + c.id + " (deformbench bench).";
+  j["organ"] = {{"mesh", "phantom:" + phantom},
+                {"resolution", resolution},
+                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
+                {"fixed",
+                 {{"box",
+                   {vec(b.lo - m), vec(Vec3(b.hi.x() + m.x(), b.hi.y() + m.y(),
+                                            b.lo.z() + 0.15 * b.size().z()))}}}}};
+  j["gravity"] = {0, 0, -9.81};
+  j["dt"] = 0.001;
+  j["duration"] = steps * 0.001;
+  if (liver) {
+    const Vec3 p = top - Vec3(0, 0, 0.2 * b.size().z());
+    j["tools"] = ojson::array({{{"type", "grasper"},
+                                {"radius", 0.25 * b.size().z()},
+                                {"trajectory",
+                                 {{{"t", 0.0}, {"pos", vec(p)}, {"jaw", "closed"}},
+                                  {{"t", steps * 0.001}, {"pos", vec(p + Vec3(0, 0, 0.01))}}}}}});
+  } else {
+    j["loads"] = ojson::array(
+        {{{"type", "point_force"}, {"at", vec(top)}, {"force", {0, 0, -1.0}}, {"start", 0.0}}});
+  }
+  j["models"] = ojson::array({{{"plugin", c.plugin}, {"label", c.plugin}, {"params", c.params}}});
+  j["output"] = {{"surfaces", "none"}};
+  return j;
+}
+
+double medianOf(std::vector<double> v) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+}  // namespace
+
+ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* progress) {
+  std::vector<BenchCase> cases;
+  for (const BenchCase& c : benchCases()) {
+    if (!options.only.empty() &&
+        std::find(options.only.begin(), options.only.end(), c.id) == options.only.end() &&
+        std::find(options.only.begin(), options.only.end(), c.plugin) == options.only.end())
+      continue;
+    cases.push_back(c);
+  }
+  if (progress) progress->addTotal(int(cases.size()));
+  // The generated scenes and their results are scratch: only the timings are kept.
+  const fs::path work =
+      fs::temp_directory_path() / ("deformbench_bench_" + std::to_string(::getpid()));
+  const MachineInfo machine = machineInfo();
+  ojson doc;
+  doc["format"] = "deformbench-bench/1";
+  doc["machine"] = {{"cpu", machine.cpu},
+                    {"compiler", machine.compiler},
+                    {"build_type", machine.buildType},
+                    {"git", machine.git},
+                    {"timestamp", machine.timestamp}};
+  doc["repeat"] = options.repeat;
+  doc["steps"] = options.steps;
+  doc["cases"] = ojson::array();
+  for (const BenchCase& c : cases) {
+    if (progress) progress->start(c.id);
+    ojson entry = {{"id", c.id}, {"plugin", c.plugin}, {"params", c.params}};
+    std::vector<double> reps;
+    std::string status = "ok", message;
+    for (int r = 0; r < std::max(1, options.repeat); ++r) {
+      const CaseResult res =
+          runSceneCase(benchScene(c, options.steps), work / "scenes" / (c.id + ".json"),
+                       work / "runs" / c.id, loader, options.cases);
+      if (res.missing.count(c.plugin)) {
+        status = "missing";
+        message = res.missing.at(c.plugin);
+        break;
+      }
+      const RunRecord* run = res.run(c.plugin);
+      if (!run || run->status != RunStatus::Ok || run->stepStats.samples == 0) {
+        status = run ? statusName(run->status) : "not run";
+        message = run ? run->message : res.error;
+        break;
+      }
+      reps.push_back(run->stepStats.median);
+    }
+    entry["status"] = status;
+    if (!message.empty()) entry["message"] = message;
+    if (!reps.empty()) {
+      entry["ms_median"] = medianOf(reps);
+      entry["ms_min"] = *std::min_element(reps.begin(), reps.end());
+      entry["ms_max"] = *std::max_element(reps.begin(), reps.end());
+      entry["ms_repeats"] = reps;
+    } else {
+      entry["ms_median"] = nullptr;
+    }
+    if (progress) {
+      std::ostringstream s;
+      s << status;
+      if (!reps.empty()) s << " " << std::setprecision(3) << medianOf(reps) << " ms";
+      progress->finish(c.id, s.str());
+    }
+    doc["cases"].push_back(entry);
+  }
+  std::error_code ec;
+  fs::remove_all(work, ec);
+  writeFileAtomic(options.out, doc.dump(2) + "\n");
+  return doc;
+}
+
+json readBenchFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path, "", "cannot read the bench file");
+  json j;
+  try {
+    j = json::parse(in);
+  } catch (const std::exception& e) {
+    throw InputError(path, "", std::string("not JSON: ") + e.what());
+  }
+  if (!j.is_object() || j.value("format", "") != "deformbench-bench/1" || !j.contains("cases") ||
+      !j["cases"].is_array())
+    throw InputError(path, "/format", "not a deformbench-bench/1 file");
+  for (size_t i = 0; i < j["cases"].size(); ++i) {
+    const json& c = j["cases"][i];
+    if (!c.is_object() || !c.contains("id") || !c["id"].is_string())
+      throw InputError(path, "/cases/" + std::to_string(i), "a case needs a string \"id\"");
+    for (const char* k : {"ms_median", "ms_min", "ms_max"})
+      if (c.contains(k) && !c[k].is_null() && !c[k].is_number())
+        throw InputError(path, "/cases/" + std::to_string(i) + "/" + k, "must be a number");
+  }
+  return j;
+}
+
+BenchComparison compareBench(const json& oldDoc, const json& newDoc, double threshold) {
+  BenchComparison out;
+  const auto num = [](const json& c, const char* k) {
+    return c.contains(k) && c[k].is_number() ? c[k].get<double>() : NAN;
+  };
+  std::map<std::string, json> olds;
+  for (const json& c : oldDoc["cases"]) olds[c["id"].get<std::string>()] = c;
+  std::set<std::string> seen;
+  for (const json& c : newDoc["cases"]) {
+    BenchComparison::Row row;
+    row.id = c["id"];
+    seen.insert(row.id);
+    row.newMs = num(c, "ms_median");
+    if (!olds.count(row.id)) {
+      row.verdict = "new";
+      out.rows.push_back(row);
+      continue;
+    }
+    const json& o = olds.at(row.id);
+    row.oldMs = num(o, "ms_median");
+    if (!std::isfinite(row.oldMs) || !std::isfinite(row.newMs) || row.oldMs <= 0) {
+      row.verdict = "not timed";
+      out.rows.push_back(row);
+      continue;
+    }
+    row.ratio = row.newMs / row.oldMs;
+    const auto spread = [&](const json& d, double med) {
+      const double lo = num(d, "ms_min"), hi = num(d, "ms_max");
+      return std::isfinite(lo) && std::isfinite(hi) ? hi - lo : 0.0 * med;
+    };
+    row.noiseMs = std::max(spread(o, row.oldMs), spread(c, row.newMs));
+    const double slower = row.newMs - row.oldMs;
+    if (row.ratio > 1 + threshold && slower > row.noiseMs) {
+      row.verdict = "SLOWER";
+      ++out.regressions;
+    } else if (row.ratio < 1 / (1 + threshold) && -slower > row.noiseMs) {
+      row.verdict = "faster";
+    } else {
+      row.verdict = "ok";
+    }
+    out.rows.push_back(row);
+  }
+  for (const auto& [id, o] : olds) {
+    if (seen.count(id)) continue;
+    BenchComparison::Row row;
+    row.id = id;
+    row.oldMs = num(o, "ms_median");
+    row.verdict = "missing";
+    out.rows.push_back(row);
+  }
+  return out;
+}
+
+void printBenchComparison(const BenchComparison& c, double threshold, std::ostream& out) {
+  const auto f = [](double v, int p = 4) {
+    if (!std::isfinite(v)) return std::string("-");
+    std::ostringstream s;
+    s << std::setprecision(p) << v;
+    return s.str();
+  };
+  size_t w = 4;
+  for (const auto& r : c.rows) w = std::max(w, r.id.size());
+  out << std::left << std::setw(int(w)) << "case"
+      << "  " << std::setw(10) << "old ms" << std::setw(10) << "new ms" << std::setw(8) << "ratio"
+      << std::setw(10) << "noise ms"
+      << "verdict\n";
+  for (const auto& r : c.rows) {
+    out << std::left << std::setw(int(w)) << r.id << "  " << std::setw(10) << f(r.oldMs)
+        << std::setw(10) << f(r.newMs) << std::setw(8) << f(r.ratio, 3) << std::setw(10)
+        << f(r.noiseMs, 3) << r.verdict << "\n";
+  }
+  out << c.regressions << " case(s) slower by more than " << f(100 * threshold, 3)
+      << "% and the noise\n";
+}
+
+}  // namespace deform::harness

@@ -1,0 +1,164 @@
+// The reference's mesh convergence from three runs of the reference plugin (see convergence.h).
+#include <deform/interaction.h>
+#include <deform_harness/cases.h>
+#include <deform_harness/convergence.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+
+namespace deform::harness {
+
+namespace fs = std::filesystem;
+using ojson = nlohmann::ordered_json;
+
+void richardsonEstimate(double h0, double h1, double h2, double d01, double d12, double peak,
+                        ConvergenceResult& out) {
+  out.d01 = d01;
+  out.d12 = d12;
+  if (!(d12 > 0) || !(d01 > 0) || !(h0 > h1 && h1 > h2 && h2 > 0)) {
+    out.message = "no Richardson estimate: the levels do not refine or their answers coincide";
+    return;
+  }
+  // f(p) = (h0^p - h1^p) / (h1^p - h2^p) grows monotonically in p; bisection on [1e-3, 20].
+  const auto f = [&](double p) {
+    return (std::pow(h0, p) - std::pow(h1, p)) / (std::pow(h1, p) - std::pow(h2, p));
+  };
+  const double target = d01 / d12;
+  double lo = 1e-3, hi = 20;
+  if (target <= f(lo) || target >= f(hi)) {
+    out.message =
+        "no Richardson estimate: the differences do not shrink monotonically (d01/d12 = " +
+        std::to_string(target) + ")";
+    return;
+  }
+  for (int i = 0; i < 200; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (f(mid) < target ? lo : hi) = mid;
+  }
+  const double p = 0.5 * (lo + hi);
+  out.order = p;
+  out.errorEstimate = d12 * std::pow(h2, p) / (std::pow(h1, p) - std::pow(h2, p));
+  out.relativeError = peak > 0 ? out.errorEstimate / peak : NAN;
+  out.asymptotic = p >= 0.5 && p <= 4;
+  out.converged = out.asymptotic && out.relativeError <= 0.01;
+}
+
+ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loader,
+                                 const ConvergeOptions& options, Progress* progress) {
+  const Scene scene = parseSceneFile(sceneFile);
+  if (!scene.reference)
+    throw InputError(sceneFile, "/reference", "the scene has no reference to check");
+  std::ifstream in(sceneFile);
+  ojson base = ojson::parse(in);
+  if (base.contains("organ") && base["organ"].contains("mesh")) {
+    const std::string mesh = base["organ"]["mesh"];
+    if (mesh.rfind("phantom:", 0) != 0 && !fs::path(mesh).is_absolute())
+      base["organ"]["mesh"] =
+          fs::absolute(fs::path(sceneFile).parent_path() / mesh).lexically_normal().string();
+  }
+  ojson ref = base["reference"];
+  long long n = options.baseElements;
+  if (n <= 0 && ref.contains("params") && ref["params"].contains("elements"))
+    n = ref["params"]["elements"].get<long long>();
+  if (n <= 0) n = 5000;
+  const Organ organ = loadOrgan(scene);
+  const double volume = std::fabs(signedVolume(organ.surface.V, organ.surface.F));
+  const Interaction interaction(scene, organ.surface);
+  const double exclude = options.excludeRadius >= 0 ? options.excludeRadius
+                                                    : 0.1 * boundingBox(organ.surface.V).diagonal();
+  // Left out: vertices near a point load (singular) and near where a grasp closes (the nodes
+  // a grasp attaches are those of each mesh within its radius, so the boundary condition
+  // itself changes with the mesh there).
+  std::vector<Vec3> centres;
+  for (int v : interaction.loadVertices()) centres.push_back(organ.surface.V.row(v).transpose());
+  for (const ToolSpec& tool : scene.tools)
+    for (const KeyFrame& k : tool.trajectory)
+      if (k.jawClosed) {
+        centres.push_back(k.pos);
+        break;
+      }
+  std::vector<char> include(size_t(organ.surface.numVertices()), 1);
+  for (const Vec3& c : centres)
+    for (int i = 0; i < organ.surface.numVertices(); ++i)
+      if ((organ.surface.V.row(i).transpose() - c).norm() < exclude) include[size_t(i)] = 0;
+
+  ConvergenceResult out;
+  std::vector<MatX3> displacement;
+  const std::vector<double> factors = {1.0, 2.8, 8.0};
+  if (progress) progress->addTotal(int(factors.size()));
+  for (size_t k = 0; k < factors.size(); ++k) {
+    ConvergenceLevelResult level;
+    level.targetElements = static_cast<long long>(std::llround(factors[k] * double(n)));
+    ojson j = base;
+    j["models"] = ojson::array();
+    ojson r = ref;
+    if (!r.contains("params")) r["params"] = ojson::object();
+    r["params"]["elements"] = level.targetElements;
+    r["label"] = "level_" + std::to_string(k);
+    j["models"].push_back(r);
+    j.erase("reference");
+    const std::string id = "level_" + std::to_string(k);
+    if (progress) progress->start(id + " (" + std::to_string(level.targetElements) + " elements)");
+    CaseOptions co;
+    co.cacheDir = options.cacheDir;
+    const auto t0 = std::chrono::steady_clock::now();
+    const CaseResult c =
+        runSceneCase(j, options.outDir / (id + ".json"), options.outDir / id, loader, co);
+    level.solveS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const RunRecord* run = c.run(r["label"]);
+    if (!c.missing.empty()) {
+      level.status = "missing plugin: " + c.missing.begin()->second;
+    } else if (!run) {
+      level.status = "not run: " + c.error;
+    } else {
+      level.status = statusName(run->status);
+      if (run->counts.count("elements")) level.elements = run->counts.at("elements");
+    }
+    if (run && run->status == RunStatus::Ok && !run->compared.empty() && level.elements > 0) {
+      const MatX3 u =
+          run->compared.back().positions.topRows(organ.surface.numVertices()) - organ.surface.V;
+      displacement.push_back(u);
+      level.h = std::cbrt(volume / double(level.elements));
+      level.peakDisplacement = u.rowwise().norm().maxCoeff();
+    }
+    if (progress) progress->finish(id, level.status);
+    out.levels.push_back(level);
+  }
+  if (displacement.size() != 3) {
+    out.message = "no estimate: not every level ran to its compared instant";
+    return out;
+  }
+  const auto maxDiff = [&](const MatX3& a, const MatX3& b) {
+    double m = 0;
+    for (Eigen::Index i = 0; i < a.rows(); ++i)
+      if (include[size_t(i)]) m = std::max(m, (a.row(i) - b.row(i)).norm());
+    return m;
+  };
+  richardsonEstimate(
+      out.levels[0].h, out.levels[1].h, out.levels[2].h, maxDiff(displacement[0], displacement[1]),
+      maxDiff(displacement[1], displacement[2]), out.levels[2].peakDisplacement, out);
+  ojson doc;
+  doc["format"] = "deformbench-convergence/1";
+  doc["scene"] = sceneFile;
+  doc["levels"] = ojson::array();
+  for (const auto& l : out.levels)
+    doc["levels"].push_back({{"target_elements", l.targetElements},
+                             {"elements", l.elements},
+                             {"h_m", l.h},
+                             {"peak_displacement_m", l.peakDisplacement},
+                             {"status", l.status},
+                             {"wall_s", l.solveS}});
+  doc["d01_m"] = out.d01;
+  doc["d12_m"] = out.d12;
+  doc["order"] = numberOrNull(out.order);
+  doc["error_estimate_m"] = numberOrNull(out.errorEstimate);
+  doc["relative_error"] = numberOrNull(out.relativeError);
+  doc["asymptotic"] = out.asymptotic;
+  doc["converged"] = out.converged;
+  doc["message"] = out.message;
+  writeFileAtomic(options.outDir / "convergence.json", doc.dump(2) + "\n");
+  return out;
+}
+
+}  // namespace deform::harness

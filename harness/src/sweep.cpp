@@ -1,0 +1,220 @@
+// Error against run time: sweeping each model over its accuracy knob (see sweep.h).
+#include <deform/cache.h>
+#include <deform_harness/sweep.h>
+
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+namespace deform::harness {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using ojson = nlohmann::ordered_json;
+
+SweepKnob sweepKnob(const std::string& plugin, bool quick) {
+  // The knob that trades accuracy for time in each method, with values spanning the useful
+  // range (data: the harness does not know the plugins beyond their parameter names).
+  static const std::map<std::string, std::pair<SweepKnob, SweepKnob>> knobs = {
+      {"pbd", {{"iterations", {1, 2, 5, 10, 20, 50}}, {"iterations", {2, 10, 40}}}},
+      {"hybrid_fem_pbd", {{"iterations", {2, 5, 10, 20, 40}}, {"iterations", {2, 10, 40}}}},
+      {"massspring",
+       {{"integrator", {"explicit_euler", "symplectic_euler", "implicit_euler"}},
+        {"integrator", {"symplectic_euler", "implicit_euler"}}}},
+      {"fem_hex", {{"elements", {100, 300, 967, 2500}}, {"elements", {100, 500}}}},
+      {"metaballs", {{"spheres", {100, 250, 500, 900}}, {"spheres", {100, 300}}}},
+      {"particle_bem",
+       {{"coarse_vertices", {150, 300, 600, 1200}}, {"coarse_vertices", {150, 400}}}},
+  };
+  const auto it = knobs.find(plugin);
+  if (it == knobs.end()) return {};
+  return quick ? it->second.second : it->second.first;
+}
+
+void markPareto(std::vector<SweepPoint>& points) {
+  const auto usable = [](const SweepPoint& p) {
+    return p.status == "ok" && std::isfinite(p.msMedian) && std::isfinite(p.rmseNearest);
+  };
+  for (SweepPoint& p : points) {
+    p.pareto = false;
+    if (!usable(p)) continue;
+    bool dominated = false;
+    for (const SweepPoint& q : points) {
+      if (&q == &p || !usable(q)) continue;
+      if (q.msMedian <= p.msMedian && q.rmseNearest <= p.rmseNearest &&
+          (q.msMedian < p.msMedian || q.rmseNearest < p.rmseNearest)) {
+        dominated = true;
+        break;
+      }
+    }
+    p.pareto = !dominated;
+  }
+}
+
+namespace {
+
+std::string valueText(const json& v) {
+  return v.is_string() ? v.get<std::string>() : v.dump();
+}
+
+ojson num(double v) {
+  return std::isfinite(v) ? ojson(v) : ojson(nullptr);
+}
+
+}  // namespace
+
+std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loader,
+                                 const SweepOptions& options, Progress* progress) {
+  std::ifstream in(sceneFile);
+  if (!in) throw InputError(sceneFile, "", "cannot read the scene file");
+  ojson scene;
+  try {
+    scene = ojson::parse(in);
+  } catch (const std::exception& e) {
+    throw InputError(sceneFile, "", std::string("not JSON: ") + e.what());
+  }
+  // Validate the scene as given (unknown keys, ranges) before anything runs.
+  const Scene parsed = parseSceneFile(sceneFile);
+  if (!parsed.reference)
+    throw InputError(sceneFile, "/reference",
+                     "a sweep needs a reference (error against run time); add \"reference\": "
+                     "{\"plugin\": \"reference_fem\", \"params\": {}}");
+  // Mesh paths are relative to the scene file; the generated scene lives in DIR.
+  if (scene.contains("organ") && scene["organ"].contains("mesh")) {
+    const std::string mesh = scene["organ"]["mesh"];
+    if (mesh.rfind("phantom:", 0) != 0 && !fs::path(mesh).is_absolute())
+      scene["organ"]["mesh"] =
+          fs::absolute(fs::path(sceneFile).parent_path() / mesh).lexically_normal().string();
+  }
+
+  struct Planned {
+    std::string model, plugin, label, param;
+    json value;
+  };
+  std::vector<Planned> planned;
+  ojson models = ojson::array();
+  for (const auto& m : scene["models"]) {
+    const std::string plugin = m.value("plugin", "");
+    const std::string modelName = m.value("model", plugin);
+    const SweepKnob knob = sweepKnob(plugin, options.quick);
+    std::vector<json> values = knob.values;
+    if (values.empty()) values.push_back(nullptr);
+    for (const json& v : values) {
+      ojson copy = m;
+      if (!copy.contains("params")) copy["params"] = ojson::object();
+      std::string label = modelName;
+      if (!knob.param.empty()) {
+        copy["params"][knob.param] = ojson::parse(v.dump());
+        label += "[" + knob.param + "=" + valueText(v) + "]";
+      }
+      copy["label"] = label;
+      models.push_back(copy);
+      planned.push_back({modelName, plugin, label, knob.param, v});
+    }
+  }
+  scene["models"] = models;
+  // One scene with every point; the reference is solved once, only at the compared instants.
+  // The runner reports each run started and finished: that is the progress.
+  if (progress) progress->addTotal(int(planned.size()) + 1);
+  CaseOptions co = options.cases;
+  co.progress = [progress](const std::string& line) {
+    if (!progress) return;
+    const std::string prefix = "running ";
+    if (line.rfind(prefix, 0) == 0) {
+      std::string label = line.substr(prefix.size());
+      if (label.size() > 4 && label.compare(label.size() - 4, 4, " ...") == 0)
+        label.resize(label.size() - 4);
+      progress->start(label);
+    } else {
+      const auto colon = line.find(": ");
+      progress->finish(line.substr(0, colon),
+                       colon == std::string::npos ? line : line.substr(colon + 2));
+    }
+  };
+  const CaseResult c =
+      runSceneCase(scene, options.outDir / "sweep_scene.json", options.outDir / "runs", loader, co);
+
+  std::vector<SweepPoint> points;
+  for (const Planned& p : planned) {
+    SweepPoint s;
+    s.model = p.model;
+    s.plugin = p.plugin;
+    s.label = p.label;
+    s.param = p.param;
+    s.value = p.value;
+    const RunRecord* r = c.run(p.label);
+    if (c.missing.count(p.plugin)) {
+      s.status = "missing plugin: " + c.missing.at(p.plugin);
+    } else if (!r) {
+      s.status = c.error.empty() ? "not run" : "not run: " + c.error;
+    } else {
+      s.status = statusName(r->status);
+      if (r->stepStats.samples > 0) {
+        s.msMedian = r->stepStats.median;
+        s.msP95 = r->stepStats.p95;
+      }
+      if (r->error) {
+        s.rmseNearest = r->error->rmseNearest.empty() ? NAN : r->error->rmseNearest.back().second;
+        for (const auto& [k, v] : r->error->rmseNearest)
+          if (k == 50) s.rmseNearest = v;
+        s.rmseAll = r->error->rmseAll;
+        s.max = r->error->max;
+        s.lossRatio = r->error->lossRatio;
+      }
+    }
+    points.push_back(s);
+  }
+  markPareto(points);
+
+  ojson doc;
+  doc["format"] = "deformbench-sweep/1";
+  doc["scene"] = {{"name", parsed.name}, {"file", sceneFile}, {"sha256", parsed.sha256}};
+  doc["reference"] = parsed.reference->model;
+  const RunRecord* ref = nullptr;
+  if (c.result)
+    for (const RunRecord& r : c.result->runs)
+      if (r.isReference) ref = &r;
+  doc["reference_status"] =
+      ref ? statusName(ref->status)
+          : (c.missing.count(parsed.reference->plugin) ? "missing" : "not run");
+  doc["quick"] = options.quick;
+  doc["haptic_budget_ms"] = 1.0;
+  doc["results"] = "runs/results.json";
+  doc["points"] = ojson::array();
+  std::ostringstream csv;
+  csv << "model,plugin,label,param,value,status,ms_median,ms_p95,rmse_50_m,rmse_all_m,max_m,"
+         "loss_ratio,pareto\n";
+  for (const SweepPoint& p : points) {
+    doc["points"].push_back({{"model", p.model},
+                             {"plugin", p.plugin},
+                             {"label", p.label},
+                             {"param", p.param},
+                             {"value", ojson::parse(p.value.dump())},
+                             {"status", p.status},
+                             {"ms_median", num(p.msMedian)},
+                             {"ms_p95", num(p.msP95)},
+                             {"rmse_50", num(p.rmseNearest)},
+                             {"rmse_all", num(p.rmseAll)},
+                             {"max", num(p.max)},
+                             {"loss_ratio", num(p.lossRatio)},
+                             {"pareto", p.pareto}});
+    const auto f = [](double v) {
+      if (!std::isfinite(v)) return std::string();
+      std::ostringstream s;
+      s.precision(10);
+      s << v;
+      return s.str();
+    };
+    std::string value = p.value.is_null() ? "" : valueText(p.value);
+    csv << p.model << ',' << p.plugin << ",\"" << p.label << "\"," << p.param << ',' << value
+        << ",\"" << p.status << "\"," << f(p.msMedian) << ',' << f(p.msP95) << ','
+        << f(p.rmseNearest) << ',' << f(p.rmseAll) << ',' << f(p.max) << ',' << f(p.lossRatio)
+        << ',' << (p.pareto ? "yes" : "no") << '\n';
+  }
+  writeFileAtomic(options.outDir / "sweep.json", doc.dump(2) + "\n");
+  writeFileAtomic(options.outDir / "sweep.csv", csv.str());
+  return points;
+}
+
+}  // namespace deform::harness

@@ -1,0 +1,374 @@
+// The long harness verbs end to end: a quick table with a missing plugin, the stability sweep with
+// a crashing model and --resume, bench --compare verdicts and exit codes, the HTML report, and
+// progress lines.
+#include <deform/cache.h>
+#include <deform/plugin_loader.h>
+#include <deform/scene.h>
+#include <deform_harness/bench.h>
+#include <deform_harness/progress.h>
+#include <deform_harness/scripts.h>
+#include <deform_harness/stability.h>
+#include <deform_harness/sweep.h>
+#include <deform_harness/tables.h>
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+namespace deform::harness {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+class TempDir : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    m_dir = fs::temp_directory_path() /
+            ("deform_tables_" +
+             std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(m_dir);
+    fs::create_directories(m_dir);
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(m_dir);
+  }
+  fs::path m_dir;
+};
+
+json readJson(const fs::path& p) {
+  std::ifstream in(p);
+  return json::parse(in);
+}
+
+std::string readText(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+/// A plugin folder holding only the named plugins of the build tree (symlinks).
+fs::path pluginSubset(const fs::path& dir, const std::vector<std::string>& names) {
+  fs::create_directories(dir);
+  PluginLoader all({DEFORM_BUILD_PLUGIN_DIR});
+  for (const auto& n : names) {
+    const fs::path so = all.locate(n);
+    fs::create_symlink(so, dir / so.filename());
+  }
+  return dir;
+}
+
+int exitCodeOf(const std::string& cmd) {
+  const int status = std::system(cmd.c_str());
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// ------------------------------------------------------------------------------------- tables
+
+TEST_F(TempDir, QuickHybridTimingRunsWhatLoadsAndSaysWhatIsMissing) {
+  PluginLoader probe({DEFORM_BUILD_PLUGIN_DIR});
+  for (const char* p : {"pbd", "massspring"})
+    if (probe.discover().end() ==
+        std::find(probe.discover().begin(), probe.discover().end(), std::string(p)))
+      GTEST_SKIP() << p << " is not built";
+  // Only pbd and mass-spring: hybrid_fem_pbd and reference_fem are missing on purpose.
+  PluginLoader loader({pluginSubset(m_dir / "plugins", {"pbd", "massspring"}).string()});
+  TablesOptions o;
+  o.quick = true;
+  o.outDir = m_dir / "out";
+  o.cases.cacheDir = fs::path();
+  const auto tables = buildTables({"hybrid-timing"}, loader, o, nullptr);
+  ASSERT_EQ(tables.size(), 1u);
+  for (const char* ext : {".md", ".csv", ".json"})
+    EXPECT_TRUE(fs::exists(o.outDir / (std::string("hybrid-timing") + ext))) << ext;
+
+  const json doc = readJson(o.outDir / "hybrid-timing.json");
+  EXPECT_EQ(doc["format"], "deformbench-table/1");
+  ASSERT_EQ(doc["rows"].size(), 4u) << "--quick: the cube at 2 and 20 N, up and down";
+  std::vector<std::string> keys;
+  for (const auto& c : doc["columns"]) keys.push_back(c["key"]);
+  for (const char* k : {"paper_hybrid_ms", "paper_pbd_ms", "paper_massspring_ms", "paper_fem_ms"})
+    EXPECT_NE(std::find(keys.begin(), keys.end(), k), keys.end()) << k;
+  for (const auto& row : doc["rows"]) {
+    ASSERT_TRUE(row["pbd_ms"].is_number()) << row.dump();
+    EXPECT_GT(row["pbd_ms"].get<double>(), 0.0);
+    EXPECT_GT(row["massspring_ms"].get<double>(), 0.0);
+    EXPECT_TRUE(row["hybrid_ms"].is_null());
+    const std::string status = row["status"];
+    EXPECT_NE(status.find("missing plugin hybrid_fem_pbd"), std::string::npos) << status;
+    EXPECT_NE(status.find("reference"), std::string::npos) << status;
+    // The scene of the row reruns with `deformbench run`: it parses and names every model.
+    const fs::path scene = o.outDir / row["scene"].get<std::string>();
+    ASSERT_TRUE(fs::exists(scene)) << scene;
+    const Scene s = parseSceneFile(scene.string());
+    EXPECT_EQ(s.models.size(), 3u);
+    EXPECT_TRUE(s.reference.has_value());
+  }
+  const std::string csv = readText(o.outDir / "hybrid-timing.csv");
+  EXPECT_EQ(csv.substr(0, csv.find('\n')).rfind("phantom,force_N,direction,hybrid_ms", 0), 0u)
+      << csv.substr(0, 80);
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 5);
+  const std::string md = readText(o.outDir / "hybrid-timing.md");
+  EXPECT_NE(md.find("| phantom | force N |"), std::string::npos);
+}
+
+TEST(Tables, UnknownTableIsAnInputError) {
+  PluginLoader loader({DEFORM_TEST_FIXTURE_PLUGIN_DIR});
+  TablesOptions o;
+  o.outDir = fs::temp_directory_path() / "deform_tables_unknown";
+  EXPECT_THROW(buildTables({"nonsense"}, loader, o, nullptr), InputError);
+  EXPECT_EQ(tableNames().size(), 6u);
+}
+
+// ---------------------------------------------------------------------------------- stability
+
+TEST_F(TempDir, StabilityRecordsACrashAndGoesOnAndResumeSkipsFinishedCases) {
+  PluginLoader loader({DEFORM_TEST_FIXTURE_PLUGIN_DIR, DEFORM_TABLES_TEST_PLUGIN_DIR});
+  StabilityOptions o;
+  o.quick = true;
+  o.outDir = m_dir / "stab";
+  o.models = {"crashy", "toy"};
+  o.cases = {"E1000_dt0.001", "pull"};
+  o.executable = DEFORMBENCH_EXE;
+  o.pluginDirs = {DEFORM_TEST_FIXTURE_PLUGIN_DIR, DEFORM_TABLES_TEST_PLUGIN_DIR};
+  o.cacheDir = (m_dir / "cache").string();
+  o.timeoutS = 30;
+  const auto records = runStability(loader, o, nullptr);
+  ASSERT_EQ(records.size(), 4u);
+  std::map<std::pair<std::string, std::string>, StabilityRecord> by;
+  for (const auto& r : records) by[{r.model, r.caseId}] = r;
+  for (const char* c : {"E1000_dt0.001", "pull"}) {
+    const StabilityRecord& r = by.at({"crashy", c});
+    EXPECT_EQ(r.status, "failed") << c;
+    EXPECT_NE(r.message.find("SIGSEGV"), std::string::npos) << r.message;
+  }
+  EXPECT_EQ(by.at({"toy", "pull"}).status, "stable") << by.at({"toy", "pull"}).message;
+  EXPECT_EQ(by.at({"toy", "E1000_dt0.001"}).status, "unsupported")
+      << "the toy has no point_force capability";
+  for (const char* ext : {".md", ".csv", ".json"})
+    EXPECT_TRUE(fs::exists(o.outDir / (std::string("stability") + ext)));
+  const json table = readJson(o.outDir / "stability.json");
+  EXPECT_EQ(table["rows"].size(), 4u);
+
+  // --resume: nothing finished is run again; a removed case is.
+  const fs::path kept = o.outDir / "cases" / "toy" / "pull.json";
+  const fs::path removed = o.outDir / "cases" / "crashy" / "pull.json";
+  const auto keptTime = fs::last_write_time(kept);
+  fs::remove(removed);
+  fs::remove_all(o.outDir / "runs" / "toy");
+  o.resume = true;
+  const auto again = runStability(loader, o, nullptr);
+  ASSERT_EQ(again.size(), 4u);
+  int resumed = 0;
+  for (const auto& r : again) {
+    resumed += r.resumed;
+    if (r.model == "crashy" && r.caseId == "pull") {
+      EXPECT_FALSE(r.resumed);
+      EXPECT_EQ(r.status, "failed");
+    }
+  }
+  EXPECT_EQ(resumed, 3);
+  EXPECT_EQ(fs::last_write_time(kept), keptTime);
+  EXPECT_FALSE(fs::exists(o.outDir / "runs" / "toy")) << "toy cases were not rerun";
+  EXPECT_TRUE(fs::exists(removed));
+}
+
+TEST(Stability, ClassifiesTimeoutsSignalsAndExitCodes) {
+  const fs::path none = "/nonexistent/results.json";
+  const StabilityRecord t = classifyStabilityRun(0, true, 5, none, "");
+  EXPECT_EQ(t.status, "failed");
+  EXPECT_NE(t.message.find("timeout"), std::string::npos);
+  const StabilityRecord bad = classifyStabilityRun(2 << 8, false, 5, none, "bad scene");
+  EXPECT_EQ(bad.status, "failed");
+  EXPECT_NE(bad.message.find("exit code 2: bad scene"), std::string::npos) << bad.message;
+  EXPECT_FALSE(stabilityCases(true).empty());
+  EXPECT_GT(stabilityCases(false).size(), stabilityCases(true).size());
+}
+
+// -------------------------------------------------------------------------------------- bench
+
+json benchDoc(std::vector<std::tuple<std::string, double, double, double>> cases) {
+  json j = {{"format", "deformbench-bench/1"}, {"cases", json::array()}};
+  for (const auto& [id, med, lo, hi] : cases)
+    j["cases"].push_back({{"id", id}, {"ms_median", med}, {"ms_min", lo}, {"ms_max", hi}});
+  return j;
+}
+
+TEST(Bench, CompareFlagsOnlySlowdownsBeyondThresholdAndNoise) {
+  const json oldDoc = benchDoc({{"a", 10, 9.9, 10.1},
+                                {"b", 10, 9.9, 10.1},
+                                {"c", 10, 9.9, 10.1},
+                                {"d", 10, 7, 13},
+                                {"gone", 1, 1, 1}});
+  const json newDoc = benchDoc({{"a", 14, 13.9, 14.1},  // 40% slower, tight: flagged
+                                {"b", 11, 10.9, 11.1},  // 10%: under the threshold
+                                {"c", 6, 5.9, 6.1},     // faster
+                                {"d", 14, 11, 17},      // 40% but within the noise (6 ms)
+                                {"new", 2, 2, 2}});
+  const BenchComparison c = compareBench(oldDoc, newDoc, 0.25);
+  EXPECT_EQ(c.regressions, 1);
+  std::map<std::string, std::string> verdict;
+  for (const auto& r : c.rows) verdict[r.id] = r.verdict;
+  EXPECT_EQ(verdict["a"], "SLOWER");
+  EXPECT_EQ(verdict["b"], "ok");
+  EXPECT_EQ(verdict["c"], "faster");
+  EXPECT_EQ(verdict["d"], "ok");
+  EXPECT_EQ(verdict["new"], "new");
+  EXPECT_EQ(verdict["gone"], "missing");
+  EXPECT_EQ(compareBench(oldDoc, newDoc, 0.5).regressions, 0) << "40% is under a 50% threshold";
+}
+
+TEST_F(TempDir, BenchCompareExitCodes) {
+  const auto write = [&](const std::string& name, const json& j) {
+    std::ofstream(m_dir / name) << j.dump();
+    return (m_dir / name).string();
+  };
+  const std::string a = write("old.json", benchDoc({{"x", 10, 9.9, 10.1}}));
+  const std::string slow = write("slow.json", benchDoc({{"x", 20, 19.9, 20.1}}));
+  const std::string same = write("same.json", benchDoc({{"x", 10.5, 10.4, 10.6}}));
+  const std::string bad = write("bad.json", json{{"format", "other"}});
+  const std::string exe = std::string(DEFORMBENCH_EXE) + " bench --compare ";
+  const std::string quiet = " > /dev/null 2>&1";
+  EXPECT_EQ(exitCodeOf(exe + a + " " + slow + quiet), 1);
+  EXPECT_EQ(exitCodeOf(exe + a + " " + same + quiet), 0);
+  EXPECT_EQ(exitCodeOf(exe + a + " " + slow + " --threshold 1.5" + quiet), 0);
+  EXPECT_EQ(exitCodeOf(exe + a + " " + bad + quiet), 2);
+  EXPECT_THROW(readBenchFile(bad), InputError);
+}
+
+// ------------------------------------------------------------------------------------- report
+
+bool matplotlibAvailable() {
+  return exitCodeOf(pythonInterpreter() + " -c 'import matplotlib' > /dev/null 2>&1") == 0;
+}
+
+TEST_F(TempDir, ReportHasTheSectionsAndPictures) {
+  if (scriptsDir().empty()) GTEST_SKIP() << "scripts folder not found";
+  // A results folder with a model and a reference (the toy fixture plugin), plus a table and a
+  // sweep file beside it.
+  const fs::path scene = m_dir / "scene.json";
+  std::ofstream(scene) << R"({
+    "name": "toy-lift",
+    "organ": {"mesh": "phantom:cube", "resolution": 0.3,
+              "fixed": {"box": [[-1, -1, -1], [1, 1, -0.04]]}},
+    "gravity": [0, 0, 0], "dt": 0.01, "duration": 0.3,
+    "tools": [{"type": "grasper", "radius": 0.02,
+               "trajectory": [{"t": 0, "pos": [0, 0, 0.05], "jaw": "closed"},
+                              {"t": 0.2, "pos": [0, 0, 0.06]}]}],
+    "models": [{"plugin": "toy", "params": {"gain": 0.5}}],
+    "reference": {"plugin": "toy", "label": "exact", "params": {}}
+  })";
+  const std::string exe = DEFORMBENCH_EXE;
+  const std::string pluginDir = std::string(" --plugin-dir ") + DEFORM_TEST_FIXTURE_PLUGIN_DIR;
+  const fs::path out = m_dir / "results";
+  ASSERT_EQ(exitCodeOf(exe + pluginDir + " run " + scene.string() + " --no-cache --out " +
+                       out.string() + " > /dev/null 2>&1"),
+            0);
+  Table t;
+  t.name = "demo-table";
+  t.title = "a demo";
+  t.columns = {{"name", "name"}, {"status", "status"}, {"paper_ms", "paper ms"}};
+  t.rows = {{{"name", "x"}, {"status", "ok"}, {"paper_ms", 1.5}}};
+  writeTable(t, out);
+  json sweep = {{"format", "deformbench-sweep/1"},
+                {"scene", {{"name", "toy-lift"}}},
+                {"reference", "toy"},
+                {"haptic_budget_ms", 1.0},
+                {"points", json::array()}};
+  for (int i = 0; i < 3; ++i)
+    sweep["points"].push_back({{"model", "toy"},
+                               {"plugin", "toy"},
+                               {"label", "toy[" + std::to_string(i) + "]"},
+                               {"param", "gain"},
+                               {"value", 0.3 * (i + 1)},
+                               {"status", "ok"},
+                               {"ms_median", 0.1 * (i + 1)},
+                               {"ms_p95", 0.2},
+                               {"rmse_50", 1e-3 / (i + 1)},
+                               {"rmse_all", 5e-4},
+                               {"max", 2e-3},
+                               {"loss_ratio", 0.1},
+                               {"pareto", true}});
+  std::ofstream(out / "sweep.json") << sweep.dump();
+
+  ASSERT_EQ(exitCodeOf(exe + " report " + out.string() + " > /dev/null 2>&1"), 0);
+  const std::string html = readText(out / "report.html");
+  EXPECT_NE(html.find("<section id=\"tables\">"), std::string::npos);
+  EXPECT_NE(html.find("id=\"table-demo-table\""), std::string::npos);
+  EXPECT_NE(html.find("id=\"table-results\""), std::string::npos);
+  EXPECT_NE(html.find("<section id=\"sweep\">"), std::string::npos);
+  EXPECT_NE(html.find("toy(gain=0.5)"), std::string::npos);
+  if (!matplotlibAvailable()) GTEST_SKIP() << "matplotlib missing: pictures not checked";
+  EXPECT_NE(html.find("<section id=\"organs\">"), std::string::npos);
+  size_t images = 0;
+  for (size_t at = html.find("data:image/png;base64,"); at != std::string::npos;
+       at = html.find("data:image/png;base64,", at + 1))
+    ++images;
+  EXPECT_GE(images, 2u) << "the sweep plot and the organ picture";
+  EXPECT_TRUE(fs::exists(out / "sweep.png"));
+}
+
+TEST(Report, NotAFolderIsBadInput) {
+  EXPECT_EQ(exitCodeOf(std::string(DEFORMBENCH_EXE) + " report /nonexistent/dir > /dev/null 2>&1"),
+            2);
+}
+
+// ----------------------------------------------------------------------------------- progress
+
+TEST(Progress, PlainLinesWhenNotATerminal) {
+  std::FILE* f = std::tmpfile();
+  ASSERT_NE(f, nullptr);
+  {
+    Progress p(3, "test", f);
+    EXPECT_FALSE(p.live());
+    p.start("a");
+    p.finish("a", "ok");
+    p.start("b");
+    p.finish("b", "failed");
+    EXPECT_EQ(p.done(), 2);
+    EXPECT_NE(p.status().find("2/3"), std::string::npos);
+    EXPECT_NE(p.status().find("left"), std::string::npos);
+  }
+  std::rewind(f);
+  std::string text;
+  char buf[256];
+  while (std::fgets(buf, sizeof buf, f)) text += buf;
+  std::fclose(f);
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 4) << text;
+  EXPECT_EQ(text.find('\r'), std::string::npos);
+  EXPECT_NE(text.find("[test 1/3"), std::string::npos) << text;
+  EXPECT_NE(text.find("a: ok"), std::string::npos);
+  EXPECT_EQ(Progress::formatSeconds(65), "1m05s");
+  EXPECT_EQ(Progress::formatSeconds(3.25), "3.2s");
+}
+
+// ---------------------------------------------------------------------------------- sweep
+
+TEST(Sweep, ParetoFrontAndKnobs) {
+  std::vector<SweepPoint> pts(4);
+  pts[0].status = pts[1].status = pts[2].status = "ok";
+  pts[3].status = "diverged";
+  pts[0].msMedian = 1;
+  pts[0].rmseNearest = 3;
+  pts[1].msMedian = 2;
+  pts[1].rmseNearest = 1;
+  pts[2].msMedian = 3;
+  pts[2].rmseNearest = 2;  // slower and worse than pts[1]
+  pts[3].msMedian = 0.1;
+  pts[3].rmseNearest = 0.1;  // diverged: not a candidate
+  markPareto(pts);
+  EXPECT_TRUE(pts[0].pareto);
+  EXPECT_TRUE(pts[1].pareto);
+  EXPECT_FALSE(pts[2].pareto);
+  EXPECT_FALSE(pts[3].pareto);
+  EXPECT_EQ(sweepKnob("pbd", false).param, "iterations");
+  EXPECT_EQ(sweepKnob("massspring", false).param, "integrator");
+  EXPECT_TRUE(sweepKnob("unknown_plugin", false).param.empty());
+}
+
+}  // namespace
+}  // namespace deform::harness
