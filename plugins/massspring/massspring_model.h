@@ -88,6 +88,7 @@ class MassSpringModel final : public Model {
   std::vector<unsigned char> m_constrainedDof;
 
   std::vector<unsigned char> m_graspMask;
+  std::vector<int> m_graspedScratch, m_graspSpringsFor, m_graspSprings;
   Vec3 m_boxCenter = Vec3::Zero();
   Real m_boxHalf = 0;
   long long m_degenerate = 0, m_cgNotConverged = 0, m_cgIterations = 0;

@@ -6,6 +6,9 @@
 
 #include <benchmark/benchmark.h>
 
+#include <map>
+#include <string>
+
 namespace {
 
 using namespace deform;
@@ -26,10 +29,15 @@ void runPbd(benchmark::State& state, pbd::PbdConfig cfg) {
   for (size_t k = 0; k < g.nodes.size(); ++k) g.targets.row(k) = o.surface.V.row(g.nodes[k]);
   in.grasps.push_back(g);
   for (int s = 0; s < 20; ++s) m.step(in);  // warm-up
+  std::map<std::string, double> phaseSum;
   for (auto _ : state) {
     in.grasps[0].targets.col(2).array() += 1e-6;
     benchmark::DoNotOptimize(m.step(in));
+    for (const auto& [name, ms] : m.phaseTimes()) phaseSum[name] += ms;
   }
+  // Mean wall time per phase (ms), to see where a step goes.
+  for (const auto& [name, ms] : phaseSum)
+    state.counters[name + "_ms"] = ms / static_cast<double>(state.iterations());
   const Counts c = m.counts();
   state.counters["nodes"] = static_cast<double>(c.at("nodes"));
   state.counters["constraints"] = static_cast<double>(c.at("constraints"));

@@ -30,10 +30,11 @@ struct DistanceBatch {
 /// Projects constraints [begin, end) of a batch whose constraints share no particle (one colour of
 /// a greedy colouring), so that projecting them together equals projecting them one after the
 /// other with projectDistance(). Positions x4 are padded to four doubles per particle
-/// (x, y, z, 0) and the inverse masses come from batch.wa / batch.wb. With simd (and a CPU with
-/// AVX2) four constraints are projected per vector step: one vector load and store per particle
-/// instead of three scalar ones. Arithmetic is the same operation for operation (no FMA
-/// contraction), so the SIMD and scalar paths give identical results. Returns the number of
+/// (x, y, z, 0) and the inverse masses come from batch.wa / batch.wb. With simd, on a CPU with
+/// AVX-512 (F, VL, DQ) eight constraints are projected per vector step, with 1/|d| from a refined
+/// reciprocal square root (equal to the scalar path to rounding); on a CPU with AVX2 only, four,
+/// with the scalar path's arithmetic operation for operation (identical results). Either way a
+/// particle costs one vector load and store instead of three scalar ones. Returns the number of
 /// degenerate (skipped) constraints.
 long long projectDistanceColourPadded(Real* x4, const DistanceBatch& batch, size_t begin,
                                       size_t end, bool simd = true);

@@ -472,6 +472,7 @@ StepStatus PbdModel::step(const StepInput& in) {
     }
     m_hotGrasped = grasped;
     refreshHotData(dt);
+    listGraspConstraints();
   }
 
   // Prediction with gravity and point loads (explicit in the external forces only).
@@ -520,6 +521,24 @@ StepStatus PbdModel::step(const StepInput& in) {
   return StepStatus::Ok;
 }
 
+void PbdModel::listGraspConstraints() {
+  const auto touches = [&](const int* p, int n) {
+    for (int k = 0; k < n; ++k)
+      if (m_graspMask[p[k]]) return true;
+    return false;
+  };
+  m_graspDist.clear();
+  m_graspBend.clear();
+  m_graspTet.clear();
+  for (size_t i = 0; i < m_distance.size(); ++i)
+    if (m_graspMask[m_distA[i]] | m_graspMask[m_distB[i]])
+      m_graspDist.push_back(static_cast<int>(i));
+  for (size_t i = 0; i < m_dihedral.size(); ++i)
+    if (touches(m_dihedral[i].p, 4)) m_graspBend.push_back(static_cast<int>(i));
+  for (size_t i = 0; i < m_tet.size(); ++i)
+    if (touches(m_tet[i].p, 4)) m_graspTet.push_back(static_cast<int>(i));
+}
+
 // Force the tissue exerts on each grasp: sum over constraints touching grasped nodes of
 // g_j lambda / dt^2 (the constraint force of XPBD, Macklin et al. 2016, Eq. (9); in classic mode
 // lambda is the same accumulated multiplier, so this is the impulse the free particles received
@@ -527,33 +546,33 @@ StepStatus PbdModel::step(const StepInput& in) {
 void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
   m_graspForces.assign(in.grasps.size(), Vec3::Zero());
   if (in.grasps.empty()) return;
+  // Only the rows of grasped nodes are zeroed, accumulated and read.
   MatX3& nodeForce = m_nodeForce;
-  nodeForce.setZero(m_x.rows(), 3);
+  if (nodeForce.rows() != m_x.rows()) nodeForce.setZero(m_x.rows(), 3);
+  for (int i : m_hotGrasped) nodeForce.row(i).setZero();
+  const auto add = [&](int node, const Vec3& f) {
+    if (m_graspMask[node]) nodeForce.row(node) += f.transpose();
+  };
   const Real invDt2 = 1.0 / (dt * dt);
-  for (size_t i = 0; i < m_distance.size(); ++i) {
+  for (int i : m_graspDist) {
     const int a = m_distA[i], b = m_distB[i];
-    if (!(m_graspMask[a] | m_graspMask[b])) continue;
     const Vec3 d = m_x.row(a) - m_x.row(b);
     const Real len = d.norm();
     if (len <= tol::kDegenerateLength) continue;
     const Vec3 f = (m_lambdaDist[i] * invDt2 / len) * d;
-    nodeForce.row(a) += f;
-    nodeForce.row(b) -= f;
+    add(a, f);
+    add(b, -f);
   }
-  for (size_t i = 0; i < m_dihedral.size(); ++i) {
+  for (int i : m_graspBend) {
     const DihedralConstraint& c = m_dihedral[i];
-    if (!(m_graspMask[c.p[0]] | m_graspMask[c.p[1]] | m_graspMask[c.p[2]] | m_graspMask[c.p[3]]))
-      continue;
     Vec3 x[4], g[4];
     for (int k = 0; k < 4; ++k) x[k] = m_x.row(c.p[k]);
     Real theta;
     if (!dihedralAngle(x[0], x[1], x[2], x[3], theta, g)) continue;
-    for (int k = 0; k < 4; ++k) nodeForce.row(c.p[k]) += (m_lambdaBend[i] * invDt2) * g[k];
+    for (int k = 0; k < 4; ++k) add(c.p[k], (m_lambdaBend[i] * invDt2) * g[k]);
   }
-  for (size_t i = 0; i < m_tet.size(); ++i) {
+  for (int i : m_graspTet) {
     const TetVolumeConstraint& c = m_tet[i];
-    if (!(m_graspMask[c.p[0]] | m_graspMask[c.p[1]] | m_graspMask[c.p[2]] | m_graspMask[c.p[3]]))
-      continue;
     const Vec3 x0 = m_x.row(c.p[0]);
     const Vec3 e1 = Vec3(m_x.row(c.p[1])) - x0, e2 = Vec3(m_x.row(c.p[2])) - x0,
                e3 = Vec3(m_x.row(c.p[3])) - x0;
@@ -562,9 +581,10 @@ void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
     g[2] = e3.cross(e1) / 6.0;
     g[3] = e1.cross(e2) / 6.0;
     g[0] = -(g[1] + g[2] + g[3]);
-    for (int k = 0; k < 4; ++k) nodeForce.row(c.p[k]) += (m_lambdaTet[i] * invDt2) * g[k];
+    for (int k = 0; k < 4; ++k) add(c.p[k], (m_lambdaTet[i] * invDt2) * g[k]);
   }
-  if (m_hasVolume) nodeForce += (m_lambdaVolume * invDt2) * m_volumeGrad;
+  if (m_hasVolume)
+    for (int i : m_hotGrasped) nodeForce.row(i) += (m_lambdaVolume * invDt2) * m_volumeGrad.row(i);
   for (size_t g = 0; g < in.grasps.size(); ++g)
     for (int node : in.grasps[g].nodes) m_graspForces[g] += nodeForce.row(node).transpose();
 }

@@ -73,6 +73,7 @@ class PbdModel final : public Model {
   void buildTets(const Organ& organ);
   void refreshHotData(Real dt);
   void projectAll(Real dt);
+  void listGraspConstraints();
   void packPositions();
   void unpackPositions();
   void computeGraspForces(const StepInput& in, Real dt);
@@ -125,6 +126,8 @@ class PbdModel final : public Model {
   long long m_degenerateAtInit = 0;  // hinges dropped at init (degenerate rest triangles)
   std::vector<int> m_graspedScratch;
   MatX3 m_nodeForce;
+  // Constraints touching a grasped node (rebuilt with the hot data when the grasped set changes).
+  std::vector<int> m_graspDist, m_graspBend, m_graspTet;
   std::vector<Vec3> m_graspForces;
   PhaseTimes m_phase;
 };

@@ -103,7 +103,7 @@ TEST(PbdDistance, ClassicStiffnessCorrectionIsIndependentOfIterationCount) {
 }
 
 // The colour kernel (padded positions, SIMD when available) equals projecting the constraints of
-// one colour one by one with projectDistance(), and its SIMD and scalar paths agree exactly.
+// one colour one by one with projectDistance(), and its SIMD and scalar paths agree to rounding.
 TEST(PbdDistance, ColourKernelMatchesSequentialProjection) {
   std::mt19937 rng(7);
   const int n = 23;  // not a multiple of the vector width: exercises the tail
@@ -135,8 +135,10 @@ TEST(PbdDistance, ColourKernelMatchesSequentialProjection) {
                          scale.data(), lam2.data(), wa.data(),   wb.data()};
   EXPECT_EQ(projectDistanceColourPadded(simd.data(), b1, 0, n, true), 1);
   EXPECT_EQ(projectDistanceColourPadded(scalar.data(), b2, 0, n, false), 1);
-  EXPECT_TRUE(simd == scalar);
-  EXPECT_TRUE(lam1 == lam2);
+  // AVX2 repeats the scalar arithmetic exactly; AVX-512 replaces sqrt and division by a refined
+  // reciprocal square root, equal to rounding.
+  for (size_t i = 0; i < simd.size(); ++i) EXPECT_NEAR(simd[i], scalar[i], 1e-14) << i;
+  for (int i = 0; i < n; ++i) EXPECT_NEAR(lam1[i], lam2[i], 1e-14) << i;
   for (int i = 0; i < n; ++i) {
     Vec3 dxa, dxb;
     if (!projectDistance(x[a[i]], x[b[i]], wa[i], wb[i], rest[i], at[i], 1.0, lam3[i], dxa, dxb))
