@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <map>
 
 namespace deform::massspring {
@@ -350,7 +351,11 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     const Real* Fp = m_f.data();
     // The divergence check (as checkDivergence()) rides along: grasped nodes end on their
     // targets, which are finite and inside the box by construction.
-    Real sum = 0, far = 0;
+    // |x - c| <= half and |v| <= max are false for NaN and Inf too: one integer flag, no
+    // floating-point reduction.
+    const Real c[3] = {m_boxCenter[0], m_boxCenter[1], m_boxCenter[2]};
+    const Real half = m_boxHalf, vmax = std::numeric_limits<Real>::max();
+    int ok = 1;
     for (int i = 0; i < N; ++i) {
       const Real w = m_invMass[i];
       for (int k = 0; k < 3; ++k) {
@@ -365,15 +370,15 @@ StepStatus MassSpringModel::step(const StepInput& in) {
             V[3 * i + k] += h * a;
           }
         }
-        sum += X[3 * i + k] + V[3 * i + k];
-        far = std::max(far, std::abs(X[3 * i + k] - m_boxCenter[k]));
+        ok &= static_cast<int>(std::abs(X[3 * i + k] - c[k]) <= half) &
+              static_cast<int>(std::abs(V[3 * i + k]) <= vmax);
       }
     }
     applyConstraints(in, h, m_xOld);
     const auto t2 = Clock::now();
     m_phase["forces"] = std::chrono::duration<double, std::milli>(t1 - t0).count();
     m_phase["integrate"] = std::chrono::duration<double, std::milli>(t2 - t1).count();
-    status = (std::isfinite(sum) && far <= m_boxHalf) ? StepStatus::Ok : StepStatus::Diverged;
+    status = ok ? StepStatus::Ok : StepStatus::Diverged;
   }
   if (!m_surfaceIdentity)
     for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);

@@ -11,34 +11,57 @@ namespace deform::pbd {
 
 namespace {
 
-// Volume and gradient of a closed surface in one pass over the triangles.
-Real volumeAndGradient(const MatX3& x, const MatX3i& F, MatX3& grad) {
-  grad.setZero(x.rows(), 3);
+// Volume and gradient of a closed surface in one pass over the triangles. The gradient uses
+// one cross product per triangle: around a vertex a of a closed surface the terms x_a x x_b of
+// the fan telescope away, so dV/dx_a = (1/6) sum_T (x_b x x_c) = (1/6) sum_T N_T with
+// N_T = (x_b - x_a) x (x_c - x_a) (a third of the area-weighted normals), and
+// V = (1/6) sum_T x_a . N_T. stride: doubles per particle in x and grad (3 or 4).
+Real volumeAndGradient(const Real* x, Eigen::Index n, int stride, const MatX3i& F, Real* grad) {
+  std::fill(grad, grad + n * stride, 0.0);
   Real six = 0;
   for (Eigen::Index f = 0; f < F.rows(); ++f) {
-    const int a = F(f, 0), b = F(f, 1), c = F(f, 2);
-    const Vec3 xa = x.row(a), xb = x.row(b), xc = x.row(c);
-    const Vec3 bc = xb.cross(xc);
-    six += xa.dot(bc);
-    grad.row(a) += bc;
-    grad.row(b) += xc.cross(xa);
-    grad.row(c) += xa.cross(xb);
+    const Real* xa = x + stride * F(f, 0);
+    const Real* xb = x + stride * F(f, 1);
+    const Real* xc = x + stride * F(f, 2);
+    const Real u0 = xb[0] - xa[0], u1 = xb[1] - xa[1], u2 = xb[2] - xa[2];
+    const Real v0 = xc[0] - xa[0], v1 = xc[1] - xa[1], v2 = xc[2] - xa[2];
+    const Real N0 = u1 * v2 - u2 * v1, N1 = u2 * v0 - u0 * v2, N2 = u0 * v1 - u1 * v0;
+    six += xa[0] * N0 + xa[1] * N1 + xa[2] * N2;
+    for (int k = 0; k < 3; ++k) {
+      Real* g = grad + stride * F(f, k);
+      g[0] += N0;
+      g[1] += N1;
+      g[2] += N2;
+    }
   }
-  grad /= 6.0;
+  for (Eigen::Index i = 0; i < n * stride; ++i) grad[i] /= 6.0;
   return six / 6.0;
 }
 
-bool volumeMultiplier(const MatX3& x, const VecX& w, const MatX3i& F, Real restVolume,
-                      Real alphaTilde, Real k, Real& lambda, MatX3& grad, Real& dl) {
-  const Real vol = volumeAndGradient(x, F, grad);
+bool volumeMultiplier(const Real* x, Eigen::Index n, int stride, const Real* w, const MatX3i& F,
+                      Real restVolume, Real alphaTilde, Real k, Real& lambda, Real* grad,
+                      Real& dl) {
+  const Real vol = volumeAndGradient(x, n, stride, F, grad);
   Real denom = 0;
-  for (Eigen::Index i = 0; i < x.rows(); ++i) denom += w[i] * grad.row(i).squaredNorm();
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Real* g = grad + stride * i;
+    denom += w[i] * (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+  }
   // Gradients are ~ area; a vanishing denominator means every particle is immovable or the
   // surface collapsed.
   if (!(denom > 0) || !std::isfinite(denom)) return false;
   dl = multiplierUpdate(vol - restVolume, denom, alphaTilde, k, lambda);
   lambda += dl;
   return true;
+}
+
+// x += dl * w * grad, row by row.
+void applyVolumeCorrection(Real* x, Eigen::Index n, int stride, const Real* w, const Real* grad,
+                           Real dl) {
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Real s = w[i] * dl;
+    for (int k = 0; k < 3; ++k) x[stride * i + k] += s * grad[stride * i + k];
+  }
 }
 
 }  // namespace
@@ -263,17 +286,32 @@ long long projectDistanceColourPadded(Real* x4, const DistanceBatch& batch, size
 bool projectSurfaceVolume(const MatX3& x, const VecX& w, const MatX3i& F, Real restVolume,
                           Real alphaTilde, Real k, Real& lambda, MatX3& grad, MatX3& dx) {
   Real dl = 0;
-  if (!volumeMultiplier(x, w, F, restVolume, alphaTilde, k, lambda, grad, dl)) return false;
-  dx.resize(x.rows(), 3);
-  for (Eigen::Index i = 0; i < x.rows(); ++i) dx.row(i) = (w[i] * dl) * grad.row(i);
+  grad.resize(x.rows(), 3);
+  if (!volumeMultiplier(x.data(), x.rows(), 3, w.data(), F, restVolume, alphaTilde, k, lambda,
+                        grad.data(), dl))
+    return false;
+  dx.setZero(x.rows(), 3);
+  applyVolumeCorrection(dx.data(), x.rows(), 3, w.data(), grad.data(), dl);
   return true;
 }
 
 bool projectSurfaceVolumeInPlace(MatX3& x, const VecX& w, const MatX3i& F, Real restVolume,
                                  Real alphaTilde, Real k, Real& lambda, MatX3& grad) {
   Real dl = 0;
-  if (!volumeMultiplier(x, w, F, restVolume, alphaTilde, k, lambda, grad, dl)) return false;
-  for (Eigen::Index i = 0; i < x.rows(); ++i) x.row(i) += (w[i] * dl) * grad.row(i);
+  grad.resize(x.rows(), 3);
+  if (!volumeMultiplier(x.data(), x.rows(), 3, w.data(), F, restVolume, alphaTilde, k, lambda,
+                        grad.data(), dl))
+    return false;
+  applyVolumeCorrection(x.data(), x.rows(), 3, w.data(), grad.data(), dl);
+  return true;
+}
+
+bool projectSurfaceVolumePadded(Real* x4, Eigen::Index n, const Real* w, const MatX3i& F,
+                                Real restVolume, Real alphaTilde, Real k, Real& lambda,
+                                Real* grad4) {
+  Real dl = 0;
+  if (!volumeMultiplier(x4, n, 4, w, F, restVolume, alphaTilde, k, lambda, grad4, dl)) return false;
+  applyVolumeCorrection(x4, n, 4, w, grad4, dl);
   return true;
 }
 

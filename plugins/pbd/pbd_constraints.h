@@ -78,7 +78,8 @@ inline bool projectTetVolume(const Vec3 x[4], const Real w[4], Real restVolume, 
 /// Global volume constraint of a closed, outward-oriented triangle surface, C = V(x) - V0 with
 /// V = (1/6) sum_T x_a.(x_b x x_c) (Mueller et al. 2007, Sec. 4.4, Eq. for closed meshes), so
 /// g_i = (1/6) sum over triangles T containing i of (x_b x x_c) with (i, b, c) T's vertices in
-/// cyclic order.
+/// cyclic order; on a closed surface that equals (1/6) sum_T (x_b - x_a) x (x_c - x_a), one cross
+/// product per triangle shared by its three vertices (the fan's other terms cancel).
 ///
 /// x: #N by 3 positions, w: #N inverse masses, F: #F by 3 triangles, grad: #N by 3 scratch
 /// (overwritten with the gradient), dx: #N by 3 output corrections. Returns false when no
@@ -89,5 +90,11 @@ bool projectSurfaceVolume(const MatX3& x, const VecX& w, const MatX3i& F, Real r
 /// The same projection applied in place to x (the solver's form: no dx array).
 bool projectSurfaceVolumeInPlace(MatX3& x, const VecX& w, const MatX3i& F, Real restVolume,
                                  Real alphaTilde, Real k, Real& lambda, MatX3& grad);
+
+/// The same projection in place on n padded particles x4 (x, y, z, 0 each: the solver's packed
+/// form), w: n inverse masses, grad4: 4 n doubles of scratch, left holding the gradient.
+bool projectSurfaceVolumePadded(Real* x4, Eigen::Index n, const Real* w, const MatX3i& F,
+                                Real restVolume, Real alphaTilde, Real k, Real& lambda,
+                                Real* grad4);
 
 }  // namespace deform::pbd

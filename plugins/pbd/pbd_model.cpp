@@ -341,7 +341,7 @@ void PbdModel::reset() {
   m_hotGrasped.clear();
   std::fill(m_graspMask.begin(), m_graspMask.end(), 0);
   m_lambdaVolume = 0;
-  m_volumeGrad.setZero(m_rest.rows(), 3);
+  m_volumeGrad4.assign(4 * static_cast<size_t>(m_rest.rows()), 0.0);
   m_degenerate = 0;
   m_graspForces.clear();
   m_phase.clear();
@@ -407,43 +407,46 @@ void PbdModel::projectAll(Real dt) {
     }
     const bool volumeNow =
         m_hasVolume && (m_config.volumeEverySweep || it + 1 == m_config.iterations);
-    if (m_dihedral.empty() && m_tet.empty() && !volumeNow) continue;
-    unpackPositions();
-    packed = false;
-    for (size_t i = 0; i < m_dihedral.size(); ++i) {
-      const DihedralConstraint& c = m_dihedral[i];
-      Vec3 x[4], dx[4];
-      Real w[4];
-      for (int k = 0; k < 4; ++k) {
-        x[k] = m_p.row(c.p[k]);
-        w[k] = W[c.p[k]];
+    if (!m_dihedral.empty() || !m_tet.empty()) {
+      unpackPositions();
+      for (size_t i = 0; i < m_dihedral.size(); ++i) {
+        const DihedralConstraint& c = m_dihedral[i];
+        Vec3 x[4], dx[4];
+        Real w[4];
+        for (int k = 0; k < 4; ++k) {
+          x[k] = m_p.row(c.p[k]);
+          w[k] = W[c.p[k]];
+        }
+        if (!projectDihedral(x, w, c.restAngle, c.compliance * invDt2, m_kBend, m_lambdaBend[i],
+                             dx)) {
+          ++m_degenerate;
+          continue;
+        }
+        for (int k = 0; k < 4; ++k) m_p.row(c.p[k]) += dx[k];
       }
-      if (!projectDihedral(x, w, c.restAngle, c.compliance * invDt2, m_kBend, m_lambdaBend[i],
-                           dx)) {
-        ++m_degenerate;
-        continue;
+      for (size_t i = 0; i < m_tet.size(); ++i) {
+        const TetVolumeConstraint& c = m_tet[i];
+        Vec3 x[4], dx[4];
+        Real w[4];
+        for (int k = 0; k < 4; ++k) {
+          x[k] = m_p.row(c.p[k]);
+          w[k] = W[c.p[k]];
+        }
+        if (!projectTetVolume(x, w, c.restVolume, c.compliance * invDt2, m_kVolume, m_lambdaTet[i],
+                              dx)) {
+          ++m_degenerate;
+          continue;
+        }
+        for (int k = 0; k < 4; ++k) m_p.row(c.p[k]) += dx[k];
       }
-      for (int k = 0; k < 4; ++k) m_p.row(c.p[k]) += dx[k];
-    }
-    for (size_t i = 0; i < m_tet.size(); ++i) {
-      const TetVolumeConstraint& c = m_tet[i];
-      Vec3 x[4], dx[4];
-      Real w[4];
-      for (int k = 0; k < 4; ++k) {
-        x[k] = m_p.row(c.p[k]);
-        w[k] = W[c.p[k]];
-      }
-      if (!projectTetVolume(x, w, c.restVolume, c.compliance * invDt2, m_kVolume, m_lambdaTet[i],
-                            dx)) {
-        ++m_degenerate;
-        continue;
-      }
-      for (int k = 0; k < 4; ++k) m_p.row(c.p[k]) += dx[k];
+      packed = false;
     }
     if (volumeNow) {
-      if (!projectSurfaceVolumeInPlace(m_p, m_w, m_surfaceF, m_restVolume,
-                                       m_volumeCompliance * invDt2, m_kVolume, m_lambdaVolume,
-                                       m_volumeGrad))
+      if (!packed) packPositions();
+      packed = true;
+      if (!projectSurfaceVolumePadded(x4, m_p.rows(), W, m_surfaceF, m_restVolume,
+                                      m_volumeCompliance * invDt2, m_kVolume, m_lambdaVolume,
+                                      m_volumeGrad4.data()))
         ++m_degenerate;
     }
   }
@@ -499,14 +502,20 @@ StepStatus PbdModel::step(const StepInput& in) {
   // Velocity update with damping, and the divergence check (NaN/Inf or leaving the box).
   const Real invDt = 1.0 / dt;
   const Real decay = std::exp(-m_config.damping * dt);
-  Real sum = 0, far = 0;
+  // |p - c| <= half is false for NaN and Inf too, so one flag covers both checks; it is an
+  // integer AND, not a floating-point reduction, so the loop vectorises.
+  const Real* P = m_p.data();
+  Real* X = m_x.data();
+  Real* V = m_v.data();
+  const Real scale = invDt * decay, half = m_boxHalf;
+  const Real c[3] = {m_boxCenter[0], m_boxCenter[1], m_boxCenter[2]};
+  int inside = 1;
   for (int i = 0; i < N; ++i) {
     for (int k = 0; k < 3; ++k) {
-      const Real p = m_p(i, k);
-      m_v(i, k) = (p - m_x(i, k)) * invDt * decay;
-      m_x(i, k) = p;
-      sum += p;
-      far = std::max(far, std::abs(p - m_boxCenter[k]));
+      const Real p = P[3 * i + k];
+      V[3 * i + k] = (p - X[3 * i + k]) * scale;
+      X[3 * i + k] = p;
+      inside &= static_cast<int>(std::abs(p - c[k]) <= half);
     }
   }
   if (!m_surfaceIdentity)
@@ -517,7 +526,7 @@ StepStatus PbdModel::step(const StepInput& in) {
   m_phase["predict"] = ms(t0, t1);
   m_phase["solve"] = ms(t1, t2);
   m_phase["update"] = ms(t2, t3);
-  if (!std::isfinite(sum) || !(far <= m_boxHalf)) return StepStatus::Diverged;
+  if (!inside) return StepStatus::Diverged;
   return StepStatus::Ok;
 }
 
@@ -584,7 +593,11 @@ void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
     for (int k = 0; k < 4; ++k) add(c.p[k], (m_lambdaTet[i] * invDt2) * g[k]);
   }
   if (m_hasVolume)
-    for (int i : m_hotGrasped) nodeForce.row(i) += (m_lambdaVolume * invDt2) * m_volumeGrad.row(i);
+    for (int i : m_hotGrasped)
+      nodeForce.row(i) +=
+          (m_lambdaVolume * invDt2) *
+          Vec3(m_volumeGrad4[4 * i], m_volumeGrad4[4 * i + 1], m_volumeGrad4[4 * i + 2])
+              .transpose();
   for (size_t g = 0; g < in.grasps.size(); ++g)
     for (int node : in.grasps[g].nodes) m_graspForces[g] += nodeForce.row(node).transpose();
 }

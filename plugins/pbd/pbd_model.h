@@ -115,7 +115,7 @@ class PbdModel final : public Model {
   std::vector<size_t> m_distColours;
   std::vector<Real> m_lambdaDist, m_lambdaBend, m_lambdaTet;
   Real m_lambdaVolume = 0;
-  MatX3 m_volumeGrad;
+  std::vector<Real> m_volumeGrad4;  // padded like the positions
   Real m_hotDt = -1;
   std::vector<int> m_hotGrasped;  // grasped nodes the hot data was built for
   std::vector<unsigned char> m_graspMask;
