@@ -222,10 +222,7 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
 
   // Kinematic grasped nodes: inverse mass 0 and the velocity that lands them on the target.
   std::vector<int> grasped;
-  for (const GraspInput& g : in.grasps)
-    grasped.insert(grasped.end(), g.nodes.begin(), g.nodes.end());
-  std::sort(grasped.begin(), grasped.end());
-  grasped.erase(std::unique(grasped.begin(), grasped.end()), grasped.end());
+  graspedNodeSet(in.grasps, grasped);
   if (grasped != m_grasped) {
     for (int i : m_grasped) b.m_nodes[i].m_im = w.inverseMass[i];
     for (int i : grasped) b.m_nodes[i].m_im = 0;

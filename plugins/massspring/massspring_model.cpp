@@ -495,11 +495,7 @@ void MassSpringModel::computeGraspForces(const StepInput& in) {
   // The springs touching a grasped node, listed again only when the grasped set changes (a grasp
   // holds the same nodes for many steps): the per-step cost is then that of the few springs.
   std::vector<int>& grasped = m_graspedScratch;
-  grasped.clear();
-  for (const GraspInput& g : in.grasps)
-    grasped.insert(grasped.end(), g.nodes.begin(), g.nodes.end());
-  std::sort(grasped.begin(), grasped.end());
-  grasped.erase(std::unique(grasped.begin(), grasped.end()), grasped.end());
+  graspedNodeSet(in.grasps, grasped);
   if (grasped != m_graspSpringsFor) {
     m_graspSprings.clear();
     for (size_t k = 0; k < m_springs.size(); ++k)

@@ -461,11 +461,7 @@ StepStatus PbdModel::step(const StepInput& in) {
 
   // Grasped nodes are kinematic this step: inverse mass 0, position = target.
   std::vector<int>& grasped = m_graspedScratch;
-  grasped.clear();
-  for (const GraspInput& g : in.grasps)
-    grasped.insert(grasped.end(), g.nodes.begin(), g.nodes.end());
-  std::sort(grasped.begin(), grasped.end());
-  grasped.erase(std::unique(grasped.begin(), grasped.end()), grasped.end());
+  graspedNodeSet(in.grasps, grasped);
   if (grasped != m_hotGrasped || dt != m_hotDt) {
     for (int i : m_hotGrasped) m_graspMask[i] = 0;
     m_w = m_w0;

@@ -10,6 +10,7 @@
 #include <deform/mesh.h>
 #include <deform/params.h>
 
+#include <algorithm>
 #include <map>
 #include <memory>
 #include <optional>
@@ -64,6 +65,15 @@ struct GraspInput {
   std::vector<int> nodes;  ///< model node indices
   MatX3 targets;           ///< #nodes by 3
 };
+
+/// The nodes held by any of the grasps, sorted and without repeats, written to out (its capacity
+/// is kept, so a model can call this every step without allocating).
+inline void graspedNodeSet(const std::vector<GraspInput>& grasps, std::vector<int>& out) {
+  out.clear();
+  for (const GraspInput& g : grasps) out.insert(out.end(), g.nodes.begin(), g.nodes.end());
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+}
 
 /// A force on the organ surface: applied at one input-surface vertex, distributed by the model
 /// over its own representation.
