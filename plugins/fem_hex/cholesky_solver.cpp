@@ -15,11 +15,12 @@ void CholeskySolver::setKind(Kind kind) {
   cholmod().supernodal = kind == Kind::Simplicial   ? CHOLMOD_SIMPLICIAL
                          : kind == Kind::Supernodal ? CHOLMOD_SUPERNODAL
                                                     : CHOLMOD_AUTO;
-  // With Debian's reference BLAS the supernodal solve only pays off for much denser factors than
-  // CHOLMOD's default switch (flops / nnz(L) >= 40) assumes: measured on the liver phantom,
-  // simplicial wins at 967 hexahedra (ratio ~320), they tie at 3000 (~600), and supernodal's
-  // factorisation is ~20x faster at 10000 (~1200).
-  cholmod().supernodal_switch = 500;
+  // Retuned for OpenBLAS (libopenblas0-serial, Debian's BLAS here; the earlier 500 was for the
+  // reference BLAS). bench_fem_hex on the liver phantom, median CPU per step, simplicial vs
+  // supernodal: ties at 104 and 300 hexahedra (flops / nnz(L) = 69, 136), supernodal 10-18% faster
+  // at 967-1000 (~250), 35% at 3000 (~490), and its refactorisation 4x faster at 967. So
+  // supernodal wherever CHOLMOD's own default switch (40) puts it.
+  cholmod().supernodal_switch = 40;
 }
 
 bool CholeskySolver::isSupernodal() const {

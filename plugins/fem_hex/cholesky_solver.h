@@ -14,8 +14,8 @@ class CholeskySolver : public SparseCholesky {
   ~CholeskySolver();
 
   enum class Kind { Simplicial, Supernodal, Auto };
-  /// CHOLMOD's factorisation kind; Auto lets CHOLMOD pick supernodal when flops / nnz(L) >= 500
-  /// (tuned for the reference BLAS; CHOLMOD's own default is 40).
+  /// CHOLMOD's factorisation kind; Auto lets CHOLMOD pick supernodal when flops / nnz(L) >= 40
+  /// (CHOLMOD's default; measured right for OpenBLAS, see cholesky_solver.cpp).
   /// Call before analyzePattern().
   void setKind(Kind kind);
   bool isSupernodal() const;

@@ -104,6 +104,9 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
     if (m_chol.info() != Eigen::Success) {
       throw InputError(where, "fem_hex", "CHOLMOD could not analyse the system matrix");
     }
+    // CHOLMOD's auto switch compares this ratio with supernodal_switch (README, "CHOLMOD kind").
+    const cholmod_common& cc = m_chol.cholmod();
+    m_flopsPerFactorNonZero = cc.lnz > 0 ? cc.fl / cc.lnz : 0.0;
   }
 
   m_isGrasped.assign(N, 0);
@@ -132,6 +135,7 @@ Counts HexFemModel::counts() const {
           {"fixed_nodes", static_cast<long long>(m_fixedList.size())},
           {"dofs", m_numDofs},
           {"cholesky_factor_nonzeros", m_factorNonZeros},
+          {"cholesky_flops_per_factor_nonzero", std::llround(m_flopsPerFactorNonZero)},
           {"cholesky_supernodal", m_chol.isSupernodal() ? 1 : 0}};
 }
 

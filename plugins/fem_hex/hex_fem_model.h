@@ -114,6 +114,7 @@ class HexFemModel : public Model {
   std::vector<int> m_nodeElemStart, m_nodeElems;  // node -> elements (CSR)
   bool m_factorOk = false;
   long long m_factorNonZeros = 0;
+  double m_flopsPerFactorNonZero = 0;  // factorisation flops / nnz(L) of the analysed ordering
   Real m_totalMass = 0;
   Vec3 m_restCenter = Vec3::Zero();
   Real m_divergenceRadius = 0;
