@@ -1,0 +1,77 @@
+// Metaballs plugin: the run-time solver kernels of Algorithm 3 (paper Sect. 5.3) in the layout the
+// model steps with. Pan, Zhao, Zhao, Hao, Qin 2015, "Metaballs-based physical modeling and
+// deformation of organs for virtual surgery", The Visual Computer 31,
+// doi:10.1007/s00371-015-1092-2.
+//
+// Positions P4: (#S + 1) rows of 4 doubles (x, y, z, 0), row #S a dummy sphere with inverse mass 0
+// that pads the constraint batches. The maths is that of pbd_constraints.h; these kernels only
+// order and batch it:
+//
+// - Stretching, eqs. (6)-(8), in XPBD form with a stiffness factor k (classic PBD: alpha = 0):
+//     dlambda = (k (d - |c_a - c_b|) - alpha~ lambda) / (w_a + w_b + alpha~),   lambda += dlambda,
+//     c_a += w_a (dlambda / |c_a - c_b|) (c_a - c_b),   c_b -= w_b (dlambda / |c_a - c_b|) (c_a -
+//     c_b)
+//   (xpbd: k = 1; classic: alpha~ = 0 gives dc_a = -k w_a C n / (w_a + w_b), eq. 8). The links are
+//   coloured so that no two links of one colour share a sphere; a colour is projected in groups of
+//   eight (Gauss-Seidel across colours, independent inside). The AVX-512 path and the scalar path
+//   evaluate the same operations in the same order per link (no fused multiply-add), so results
+//   are bit-identical on every CPU.
+// - Laplacian coordinates, eqs. (9)-(11), as the vector constraint of pbd_constraints.h with the
+//   per-step constants (generalised inverse mass W, rotated R L_m) hoisted out of the iterations.
+#pragma once
+
+#include <deform/types.h>
+
+#include <vector>
+
+namespace deform::metaballs {
+
+/// Links grouped by colour, each colour padded to a multiple of 8 with dummy links (a = b = the
+/// dummy row). Arrays are in batch order (#B = padded link count).
+struct StretchBatches {
+  std::vector<int> a, b;         ///< #B sphere indices (dummy row for padding)
+  std::vector<int> link;         ///< #B original link index, -1 for padding
+  std::vector<Real> rest;        ///< #B rest length d (m)
+  std::vector<Real> compliance;  ///< #B XPBD compliance alpha (m/N), 0 for padding
+  std::vector<int> colourStart;  ///< #colours + 1 offsets into the arrays
+  int numColours() const { return int(colourStart.size()) - 1; }
+  int size() const { return int(a.size()); }
+};
+
+/// Greedy colouring in link order (deterministic). links: #L by 2; rest, compliance: #L;
+/// dummy: the padding row index (= #S).
+StretchBatches buildStretchBatches(const MatX2i& links, const std::vector<Real>& rest,
+                                   const std::vector<Real>& compliance, int dummy);
+
+/// Per-step data of the stretching kernel, #B each: inverse masses of both ends, alpha~ =
+/// alpha/dt^2 (0 in classic mode) and the multipliers (zeroed at the start of every step).
+struct StretchStepData {
+  std::vector<Real> wa, wb, alphaTilde, lambda;
+};
+
+/// One Gauss-Seidel sweep over all colours. k: stiffness factor (1 for XPBD). simd: use AVX-512
+/// when the CPU has it (same results either way). Returns the number of degenerate links
+/// (|c_a - c_b| <= 1e-12 m with a movable end), which are skipped.
+long long projectStretchSweep(const StretchBatches& batches, StretchStepData& data, Real* p4,
+                              Real k, bool simd = true);
+
+/// True when projectStretchSweep and skinning use the AVX-512 path on this CPU.
+bool simdAvailable();
+
+/// Laplacian constraint data hoisted per step. CSR adjacency (adjStart #S+1, adj) of the links.
+struct LaplacianStepData {
+  std::vector<Real> W;           ///< #S: w_m + sum_i w_i / n^2 (0: skip)
+  std::vector<Real> coef;        ///< #adj: w_i / n for neighbour i of m
+  std::vector<Real> target;      ///< #S*4: R L_m (row of 4, last 0)
+  std::vector<Real> alphaTilde;  ///< #S: compliance / dt^2 (0 in classic mode)
+  std::vector<Real> lambda;      ///< #S*4: XPBD multipliers (zeroed every step)
+};
+
+/// One Gauss-Seidel sweep of the Laplacian constraints in sphere order:
+///   C = c_m - mean(c_i) - R L_m,  dl = (-k C - alpha~ lambda) / (W + alpha~),  lambda += dl,
+///   c_m += w_m dl,  c_i -= (w_i / n) dl.
+/// w: (#S + 1) inverse masses. k: stiffness factor (1 for XPBD).
+void projectLaplacianSweep(const std::vector<int>& adjStart, const std::vector<int>& adj,
+                           const Real* w, LaplacianStepData& data, Real* p4, Real k);
+
+}  // namespace deform::metaballs
