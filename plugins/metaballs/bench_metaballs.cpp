@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <vector>
 
 namespace deform {}  // namespace deform
 
@@ -42,28 +43,30 @@ void BM_MetaballsStep(benchmark::State& state) {
   in.grasps = {g};
   model.setSimd(state.range(0) != 0);
   long long i = 0;
-  MetaballsModel::Phases sum;
+  std::vector<MetaballsModel::Phases> phases;
+  phases.reserve(1 << 16);
   for (auto _ : state) {
     in.grasps[0].targets(0, 2) = x0(top, 2) + 0.02 * std::min(1.0, double(i++) / 1000.0);
     benchmark::DoNotOptimize(model.step(in));
-    const MetaballsModel::Phases& p = model.lastPhases();
-    sum.pbd += p.pbd;
-    sum.laplacian += p.laplacian;
-    sum.volume += p.volume;
-    sum.rotations += p.rotations;
-    sum.skinning += p.skinning;
+    if (phases.size() < phases.capacity()) phases.push_back(model.lastPhases());
   }
   const Counts c = model.counts();
   state.counters["spheres"] = double(c.at("spheres"));
   state.counters["links"] = double(c.at("links"));
   state.counters["vertices"] = double(organ.surface.numVertices());
-  // Mean phase times (wall) over the iterations.
-  const double n = double(std::max<long long>(i, 1));
-  state.counters["pbd_ms"] = sum.pbd / n;
-  state.counters["laplacian_ms"] = sum.laplacian / n;
-  state.counters["volume_ms"] = sum.volume / n;
-  state.counters["rotations_ms"] = sum.rotations / n;
-  state.counters["skinning_ms"] = sum.skinning / n;
+  // Median phase times (wall) over the steps: robust to the preemptions of a loaded machine.
+  auto median = [&](double MetaballsModel::Phases::*f) {
+    std::vector<double> v;
+    for (const auto& p : phases) v.push_back(p.*f);
+    if (v.empty()) return 0.0;
+    std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  state.counters["pbd_ms"] = median(&MetaballsModel::Phases::pbd);
+  state.counters["laplacian_ms"] = median(&MetaballsModel::Phases::laplacian);
+  state.counters["volume_ms"] = median(&MetaballsModel::Phases::volume);
+  state.counters["rotations_ms"] = median(&MetaballsModel::Phases::rotations);
+  state.counters["skinning_ms"] = median(&MetaballsModel::Phases::skinning);
 }
 // Argument: 1 = AVX-512 kernels where the CPU has them, 0 = scalar path (same results).
 BENCHMARK(BM_MetaballsStep)

@@ -190,6 +190,7 @@ void MetaballsModel::init(const ModelSetup& setup) {
   m_volFactorSum.assign(size_t(n), 0);
   m_volCount.assign(size_t(n), 0);
   m_rot.assign(size_t(n) * 9, 0);
+  m_rotBatch.resize(n);
   m_frames.assign(size_t(n) * kFrameStride, 0);
   m_contacted.reserve(size_t(n));
   reset();
@@ -200,7 +201,7 @@ void MetaballsModel::reset() {
   m_x = m_x0;
   m_v.setZero(n, 3);
   m_r = m_mb.spheres.radii;
-  m_q.assign(size_t(n), Eigen::Quaternion<Real>::Identity());
+  m_rotBatch.setIdentity();
   for (int i = 0; i < n; ++i)
     for (int q = 0; q < 9; ++q) m_rot[size_t(9 * i + q)] = (q % 4 == 0) ? 1.0 : 0.0;
   m_surface = m_restSurface;
@@ -211,27 +212,23 @@ void MetaballsModel::reset() {
 void MetaballsModel::computeRotations() {
   const int n = m_mb.spheres.size();
   const Real* X = m_x.data();
+  const size_t P = size_t(m_rotBatch.padded);
+  Real* A = m_rotBatch.A.data();
   for (int m = 0; m < n; ++m) {
-    const int b = m_adjStart[size_t(m)], e = m_adjStart[size_t(m) + 1];
-    if (e == b) continue;
-    // A = sum_i (x_i - x_m)(x0_i - x0_m)^T
+    // A = sum_i (x_i - x_m)(x0_i - x0_m)^T over the linked spheres (0 without links: identity).
     Real a[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
     const Real* xm = X + 3 * m;
-    for (int k = b; k < e; ++k) {
+    for (int k = m_adjStart[size_t(m)]; k < m_adjStart[size_t(m) + 1]; ++k) {
       const Real* xi = X + 3 * m_adj[size_t(k)];
       const Real* r0 = m_restOff.data() + 3 * size_t(k);
       const Real d[3] = {xi[0] - xm[0], xi[1] - xm[1], xi[2] - xm[2]};
       for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c) a[3 * r + c] += d[r] * r0[c];
     }
-    Mat3 A;
-    A << a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8];
-    // Warm-started from the previous step: a few iterations track the rotation.
-    extractRotation(A, m_q[size_t(m)], 3);
-    const Mat3 R = m_q[size_t(m)].toRotationMatrix();
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) m_rot[size_t(9 * m + 3 * r + c)] = R(r, c);
+    for (int q = 0; q < 9; ++q) A[size_t(q) * P + size_t(m)] = a[q];
   }
+  // Warm-started from the previous step: a few iterations track the rotation.
+  extractRotations(m_rotBatch, 3, m_rot.data(), m_simd);
 }
 
 PhaseTimes MetaballsModel::phaseTimes() const {
@@ -246,8 +243,6 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   const int n = m_mb.spheres.size();
   const Real dt = in.dt;
   if (!(dt > 0)) return StepStatus::Ok;
-  const MatX2i& L = m_mb.topology.links;
-  const int nl = int(L.rows());
   auto t0 = Clock::now();
 
   // External forces: point loads spread over the loaded vertex's spheres by skinning weight.

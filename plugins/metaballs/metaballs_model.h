@@ -92,8 +92,8 @@ class MetaballsModel final : public Model {
   MatX3 m_x, m_v, m_f;
   std::vector<Real> m_p4;  // (#S+1)*4 predicted positions, row #S the padding dummy
   VecX m_r;
-  std::vector<Eigen::Quaternion<Real>> m_q;
-  std::vector<Real> m_rot;  // #S*9 row-major rotations
+  RotationBatch m_rotBatch;  // per-sphere A and warm-started quaternions
+  std::vector<Real> m_rot;   // #S*9 row-major rotations
   std::vector<uint8_t> m_kin;
   std::vector<Real> m_wEff;  // #S+1 inverse masses this step (0: kinematic, dummy)
   StretchStepData m_sdata;

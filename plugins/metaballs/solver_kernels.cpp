@@ -166,6 +166,238 @@ bool cpuHasAvx512() {
 
 }  // namespace
 
+void RotationBatch::resize(int count) {
+  n = count;
+  padded = (count + 7) / 8 * 8;
+  A.assign(size_t(9) * size_t(padded), 0);
+  q.assign(size_t(4) * size_t(padded), 0);
+  setIdentity();
+}
+
+void RotationBatch::setIdentity() {
+  std::fill(q.begin(), q.end(), 0.0);
+  std::fill(q.begin(), q.begin() + padded, 1.0);
+}
+
+namespace {
+
+constexpr Real kQuarterPi = 0.78539816339744830962;
+// Taylor coefficients of sin and cos up to h^15 / h^16: below 1e-16 relative on |h| <= pi/4.
+constexpr Real kSin[8] = {1.0,          -1.0 / 6,        1.0 / 120,        -1.0 / 5040,
+                          1.0 / 362880, -1.0 / 39916800, 1.0 / 6227020800, -1.0 / 1307674368000};
+constexpr Real kCos[9] = {1.0,
+                          -1.0 / 2,
+                          1.0 / 24,
+                          -1.0 / 720,
+                          1.0 / 40320,
+                          -1.0 / 3628800,
+                          1.0 / 479001600,
+                          -1.0 / 87178291200,
+                          1.0 / 20922789888000};
+
+inline void sinCosHalf(Real h, Real& s, Real& c) {
+  if (!(std::abs(h) <= kQuarterPi)) {
+    s = std::sin(h);
+    c = std::cos(h);
+    return;
+  }
+  const Real h2 = h * h;
+  Real ps = kSin[7], pc = kCos[8];
+  for (int k = 6; k >= 0; --k) ps = ps * h2 + kSin[k];
+  for (int k = 7; k >= 0; --k) pc = pc * h2 + kCos[k];
+  s = h * ps;
+  c = pc;
+}
+
+// R(q) row-major, Eigen's toRotationMatrix() formula.
+inline void rotationOf(Real w, Real x, Real y, Real z, Real* R) {
+  const Real tx = 2 * x, ty = 2 * y, tz = 2 * z;
+  const Real twx = tx * w, twy = ty * w, twz = tz * w;
+  const Real txx = tx * x, txy = ty * x, txz = tz * x;
+  const Real tyy = ty * y, tyz = tz * y, tzz = tz * z;
+  R[0] = 1 - (tyy + tzz);
+  R[1] = txy - twz;
+  R[2] = txz + twy;
+  R[3] = txy + twz;
+  R[4] = 1 - (txx + tzz);
+  R[5] = tyz - twx;
+  R[6] = txz - twy;
+  R[7] = tyz + twx;
+  R[8] = 1 - (txx + tyy);
+}
+
+void extractOne(RotationBatch& b, int i, int maxIter, Real* out) {
+  const size_t P = size_t(b.padded);
+  Real a[9];
+  for (int k = 0; k < 9; ++k) a[k] = b.A[size_t(k) * P + size_t(i)];
+  Real w = b.q[size_t(i)], x = b.q[P + size_t(i)], y = b.q[2 * P + size_t(i)],
+       z = b.q[3 * P + size_t(i)];
+  Real R[9];
+  for (int it = 0; it < maxIter; ++it) {
+    rotationOf(w, x, y, z, R);
+    // sum over columns c of R_c x A_c and R_c . A_c (column c of a 3x3 row-major M: M[c], M[3+c],
+    // M[6+c]).
+    Real ox = 0, oy = 0, oz = 0, dot = 0;
+    for (int c = 0; c < 3; ++c) {
+      const Real r0 = R[c], r1 = R[3 + c], r2 = R[6 + c];
+      const Real a0 = a[c], a1 = a[3 + c], a2 = a[6 + c];
+      ox = ox + (r1 * a2 - r2 * a1);
+      oy = oy + (r2 * a0 - r0 * a2);
+      oz = oz + (r0 * a1 - r1 * a0);
+      dot = dot + ((r0 * a0 + r1 * a1) + r2 * a2);
+    }
+    const Real inv = 1 / (std::abs(dot) + 1e-30);
+    ox = ox * inv;
+    oy = oy * inv;
+    oz = oz * inv;
+    const Real ang = std::sqrt((ox * ox + oy * oy) + oz * oz);
+    if (!(ang >= 1e-9)) break;
+    Real sh, ch;
+    sinCosHalf(0.5 * ang, sh, ch);
+    const Real f = sh / ang;
+    const Real dw = ch, dx = f * ox, dy = f * oy, dz = f * oz;
+    // q <- dq q (Hamilton product), then normalise.
+    const Real nw = ((dw * w - dx * x) - dy * y) - dz * z;
+    const Real nx = ((dw * x + dx * w) + dy * z) - dz * y;
+    const Real ny = ((dw * y - dx * z) + dy * w) + dz * x;
+    const Real nz = ((dw * z + dx * y) - dy * x) + dz * w;
+    const Real rn = 1 / std::sqrt(((nw * nw + nx * nx) + ny * ny) + nz * nz);
+    w = nw * rn;
+    x = nx * rn;
+    y = ny * rn;
+    z = nz * rn;
+  }
+  b.q[size_t(i)] = w;
+  b.q[P + size_t(i)] = x;
+  b.q[2 * P + size_t(i)] = y;
+  b.q[3 * P + size_t(i)] = z;
+  rotationOf(w, x, y, z, out + 9 * size_t(i));
+}
+
+#ifdef DEFORM_METABALLS_HAVE_AVX512
+DEFORM_AVX512 inline void rotationOf8(__m512d w, __m512d x, __m512d y, __m512d z, __m512d* R) {
+  const __m512d two = _mm512_set1_pd(2), one = _mm512_set1_pd(1);
+  const __m512d tx = _mm512_mul_pd(two, x), ty = _mm512_mul_pd(two, y), tz = _mm512_mul_pd(two, z);
+  const __m512d twx = _mm512_mul_pd(tx, w), twy = _mm512_mul_pd(ty, w), twz = _mm512_mul_pd(tz, w);
+  const __m512d txx = _mm512_mul_pd(tx, x), txy = _mm512_mul_pd(ty, x), txz = _mm512_mul_pd(tz, x);
+  const __m512d tyy = _mm512_mul_pd(ty, y), tyz = _mm512_mul_pd(tz, y), tzz = _mm512_mul_pd(tz, z);
+  R[0] = _mm512_sub_pd(one, _mm512_add_pd(tyy, tzz));
+  R[1] = _mm512_sub_pd(txy, twz);
+  R[2] = _mm512_add_pd(txz, twy);
+  R[3] = _mm512_add_pd(txy, twz);
+  R[4] = _mm512_sub_pd(one, _mm512_add_pd(txx, tzz));
+  R[5] = _mm512_sub_pd(tyz, twx);
+  R[6] = _mm512_sub_pd(txz, twy);
+  R[7] = _mm512_add_pd(tyz, twx);
+  R[8] = _mm512_sub_pd(one, _mm512_add_pd(txx, tyy));
+}
+
+DEFORM_AVX512 void extract8(RotationBatch& b, int i0, int maxIter, Real* out) {
+  const size_t P = size_t(b.padded), i = size_t(i0);
+  __m512d a[9];
+  for (int k = 0; k < 9; ++k) a[k] = _mm512_loadu_pd(b.A.data() + size_t(k) * P + i);
+  __m512d w = _mm512_loadu_pd(b.q.data() + i), x = _mm512_loadu_pd(b.q.data() + P + i),
+          y = _mm512_loadu_pd(b.q.data() + 2 * P + i), z = _mm512_loadu_pd(b.q.data() + 3 * P + i);
+  const __m512d zero = _mm512_setzero_pd(), one = _mm512_set1_pd(1), half = _mm512_set1_pd(0.5),
+                eps = _mm512_set1_pd(1e-30), stop = _mm512_set1_pd(1e-9),
+                quarterPi = _mm512_set1_pd(kQuarterPi);
+  __mmask8 active = 0xff;
+  __m512d R[9];
+  for (int it = 0; it < maxIter && active; ++it) {
+    rotationOf8(w, x, y, z, R);
+    __m512d ox = zero, oy = zero, oz = zero, dot = zero;
+    for (int c = 0; c < 3; ++c) {
+      const __m512d r0 = R[c], r1 = R[3 + c], r2 = R[6 + c];
+      const __m512d a0 = a[c], a1 = a[3 + c], a2 = a[6 + c];
+      ox = _mm512_add_pd(ox, _mm512_sub_pd(_mm512_mul_pd(r1, a2), _mm512_mul_pd(r2, a1)));
+      oy = _mm512_add_pd(oy, _mm512_sub_pd(_mm512_mul_pd(r2, a0), _mm512_mul_pd(r0, a2)));
+      oz = _mm512_add_pd(oz, _mm512_sub_pd(_mm512_mul_pd(r0, a1), _mm512_mul_pd(r1, a0)));
+      dot = _mm512_add_pd(dot,
+                          _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(r0, a0), _mm512_mul_pd(r1, a1)),
+                                        _mm512_mul_pd(r2, a2)));
+    }
+    const __m512d inv = _mm512_div_pd(one, _mm512_add_pd(_mm512_abs_pd(dot), eps));
+    ox = _mm512_mul_pd(ox, inv);
+    oy = _mm512_mul_pd(oy, inv);
+    oz = _mm512_mul_pd(oz, inv);
+    const __m512d ang = _mm512_sqrt_pd(_mm512_add_pd(
+        _mm512_add_pd(_mm512_mul_pd(ox, ox), _mm512_mul_pd(oy, oy)), _mm512_mul_pd(oz, oz)));
+    active &= _mm512_cmp_pd_mask(ang, stop, _CMP_GE_OQ);
+    if (!active) break;
+    const __m512d h = _mm512_mul_pd(half, ang);
+    const __m512d h2 = _mm512_mul_pd(h, h);
+    __m512d ps = _mm512_set1_pd(kSin[7]), pc = _mm512_set1_pd(kCos[8]);
+    for (int k = 6; k >= 0; --k) ps = _mm512_add_pd(_mm512_mul_pd(ps, h2), _mm512_set1_pd(kSin[k]));
+    for (int k = 7; k >= 0; --k) pc = _mm512_add_pd(_mm512_mul_pd(pc, h2), _mm512_set1_pd(kCos[k]));
+    __m512d sh = _mm512_mul_pd(h, ps), ch = pc;
+    const __mmask8 far = active & ~_mm512_cmp_pd_mask(_mm512_abs_pd(h), quarterPi, _CMP_LE_OQ);
+    if (far) {  // rare: large correction angles take the library sin/cos, as the scalar path
+      alignas(64) Real hs[8], ss[8], cs[8];
+      _mm512_store_pd(hs, h);
+      _mm512_store_pd(ss, sh);
+      _mm512_store_pd(cs, ch);
+      for (int k = 0; k < 8; ++k)
+        if (far & (1u << k)) {
+          ss[k] = std::sin(hs[k]);
+          cs[k] = std::cos(hs[k]);
+        }
+      sh = _mm512_load_pd(ss);
+      ch = _mm512_load_pd(cs);
+    }
+    const __m512d f = _mm512_maskz_div_pd(active, sh, ang);
+    const __m512d dw = ch, dx = _mm512_mul_pd(f, ox), dy = _mm512_mul_pd(f, oy),
+                  dz = _mm512_mul_pd(f, oz);
+    const __m512d nw =
+        _mm512_sub_pd(_mm512_sub_pd(_mm512_sub_pd(_mm512_mul_pd(dw, w), _mm512_mul_pd(dx, x)),
+                                    _mm512_mul_pd(dy, y)),
+                      _mm512_mul_pd(dz, z));
+    const __m512d nx =
+        _mm512_sub_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(dw, x), _mm512_mul_pd(dx, w)),
+                                    _mm512_mul_pd(dy, z)),
+                      _mm512_mul_pd(dz, y));
+    const __m512d ny =
+        _mm512_add_pd(_mm512_add_pd(_mm512_sub_pd(_mm512_mul_pd(dw, y), _mm512_mul_pd(dx, z)),
+                                    _mm512_mul_pd(dy, w)),
+                      _mm512_mul_pd(dz, x));
+    const __m512d nz =
+        _mm512_add_pd(_mm512_sub_pd(_mm512_add_pd(_mm512_mul_pd(dw, z), _mm512_mul_pd(dx, y)),
+                                    _mm512_mul_pd(dy, x)),
+                      _mm512_mul_pd(dz, w));
+    const __m512d rn = _mm512_div_pd(
+        one, _mm512_sqrt_pd(_mm512_add_pd(
+                 _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nw, nw), _mm512_mul_pd(nx, nx)),
+                               _mm512_mul_pd(ny, ny)),
+                 _mm512_mul_pd(nz, nz))));
+    w = _mm512_mask_mul_pd(w, active, nw, rn);
+    x = _mm512_mask_mul_pd(x, active, nx, rn);
+    y = _mm512_mask_mul_pd(y, active, ny, rn);
+    z = _mm512_mask_mul_pd(z, active, nz, rn);
+  }
+  _mm512_storeu_pd(b.q.data() + i, w);
+  _mm512_storeu_pd(b.q.data() + P + i, x);
+  _mm512_storeu_pd(b.q.data() + 2 * P + i, y);
+  _mm512_storeu_pd(b.q.data() + 3 * P + i, z);
+  rotationOf8(w, x, y, z, R);
+  alignas(64) Real rr[9][8];
+  for (int k = 0; k < 9; ++k) _mm512_store_pd(rr[k], R[k]);
+  const int lanes = std::min(8, b.n - i0);
+  for (int l = 0; l < lanes; ++l)
+    for (int k = 0; k < 9; ++k) out[9 * (i + size_t(l)) + size_t(k)] = rr[k][l];
+}
+#endif
+
+}  // namespace
+
+void extractRotations(RotationBatch& batch, int maxIter, Real* rotations, bool simd) {
+#ifdef DEFORM_METABALLS_HAVE_AVX512
+  if (simd && cpuHasAvx512()) {
+    for (int i = 0; i < batch.n; i += 8) extract8(batch, i, maxIter, rotations);
+    return;
+  }
+#endif
+  for (int i = 0; i < batch.n; ++i) extractOne(batch, i, maxIter, rotations);
+}
+
 bool simdAvailable() {
 #ifdef DEFORM_METABALLS_HAVE_AVX512
   return cpuHasAvx512();
