@@ -176,7 +176,9 @@ void MetaballsModel::init(const ModelSetup& setup) {
     for (int k = m_adjStart[size_t(m)]; k < m_adjStart[size_t(m) + 1]; ++k)
       for (int c = 0; c < 3; ++c)
         m_restOff[3 * size_t(k) + size_t(c)] = m_x0(m_adj[size_t(k)], c) - m_x0(m, c);
+  m_ldata.order = laplacianOrder(m_adjStart, m_adj);
   m_ldata.W.assign(size_t(n), 0);
+  m_ldata.invDenom.assign(size_t(n), 0);
   m_ldata.coef.assign(m_adj.size(), 0);
   m_ldata.target.assign(size_t(n) * 4, 0);
   m_ldata.alphaTilde.assign(size_t(n), 0);
@@ -316,6 +318,8 @@ StepStatus MetaballsModel::step(const StepInput& in) {
                                    Lm)
                             : Lm;
       for (int c = 0; c < 3; ++c) m_ldata.target[4 * size_t(m) + size_t(c)] = t(c);
+      const Real W = m_ldata.W[size_t(m)];
+      m_ldata.invDenom[size_t(m)] = W > 0 ? 1 / (W + m_ldata.alphaTilde[size_t(m)]) : 0;
     }
     std::fill(m_ldata.lambda.begin(), m_ldata.lambda.end(), 0.0);
   }
@@ -328,7 +332,7 @@ StepStatus MetaballsModel::step(const StepInput& in) {
     auto tl = Clock::now();
     tStretch += std::chrono::duration<double, std::milli>(tl - ts).count();
     if (!m_laplacian) continue;
-    projectLaplacianSweep(m_adjStart, m_adj, m_wEff.data(), m_ldata, P, kLap);
+    projectLaplacianSweep(m_adjStart, m_adj, m_wEff.data(), m_ldata, P, kLap, m_simd);
     tLap += msSince(tl);
   }
   // Algorithm 3, lines 18-21.

@@ -417,44 +417,138 @@ long long projectStretchSweep(const StretchBatches& batches, StretchStepData& da
   return degenerate;
 }
 
-void projectLaplacianSweep(const std::vector<int>& adjStart, const std::vector<int>& adj,
-                           const Real* w, LaplacianStepData& d, Real* p4, Real k) {
+std::vector<int> laplacianOrder(const std::vector<int>& adjStart, const std::vector<int>& adj) {
   const int n = int(adjStart.size()) - 1;
+  // A colour is taken by sphere m when some constraint of that colour touches m (as centre or
+  // neighbour); constraint m needs a colour free on m and on all its neighbours.
+  std::vector<std::vector<uint8_t>> taken{size_t(n)};
+  std::vector<int> colour(size_t(n), 0);
+  int numColours = 0;
+  auto isTaken = [&](int s, int c) {
+    return c < int(taken[size_t(s)].size()) && taken[size_t(s)][size_t(c)];
+  };
+  auto take = [&](int s, int c) {
+    if (int(taken[size_t(s)].size()) <= c) taken[size_t(s)].resize(size_t(c) + 1, 0);
+    taken[size_t(s)][size_t(c)] = 1;
+  };
   for (int m = 0; m < n; ++m) {
+    int c = 0;
+    for (;; ++c) {
+      bool free = !isTaken(m, c);
+      for (int k = adjStart[size_t(m)]; free && k < adjStart[size_t(m) + 1]; ++k)
+        free = !isTaken(adj[size_t(k)], c);
+      if (free) break;
+    }
+    take(m, c);
+    for (int k = adjStart[size_t(m)]; k < adjStart[size_t(m) + 1]; ++k) take(adj[size_t(k)], c);
+    colour[size_t(m)] = c;
+    numColours = std::max(numColours, c + 1);
+  }
+  std::vector<int> order;
+  order.reserve(size_t(n));
+  for (int c = 0; c < numColours; ++c)
+    for (int m = 0; m < n; ++m)
+      if (colour[size_t(m)] == c) order.push_back(m);
+  return order;
+}
+
+namespace {
+
+// The neighbour sum uses two accumulators (even and odd neighbours), added at the end.
+void laplacianScalar(const std::vector<int>& adjStart, const std::vector<int>& adj, const Real* w,
+                     LaplacianStepData& d, Real* p4, Real k) {
+  for (int m : d.order) {
     const Real W = d.W[size_t(m)];
     if (!(W > 0)) continue;
     const int b = adjStart[size_t(m)], e = adjStart[size_t(m) + 1];
-    Real cx = 0, cy = 0, cz = 0;
-    for (int q = b; q < e; ++q) {
-      const Real* pi = p4 + 4 * size_t(adj[size_t(q)]);
-      cx += pi[0];
-      cy += pi[1];
-      cz += pi[2];
+    Real s0[3] = {0, 0, 0}, s1[3] = {0, 0, 0};
+    int q = b;
+    for (; q + 1 < e; q += 2) {
+      const Real* p0 = p4 + 4 * size_t(adj[size_t(q)]);
+      const Real* p1 = p4 + 4 * size_t(adj[size_t(q) + 1]);
+      for (int c = 0; c < 3; ++c) {
+        s0[c] = s0[c] + p0[c];
+        s1[c] = s1[c] + p1[c];
+      }
+    }
+    if (q < e) {
+      const Real* p0 = p4 + 4 * size_t(adj[size_t(q)]);
+      for (int c = 0; c < 3; ++c) s0[c] = s0[c] + p0[c];
     }
     const Real cnt = Real(e - b);
     Real* pm = p4 + 4 * size_t(m);
     const Real* t = d.target.data() + 4 * size_t(m);
     Real* lam = d.lambda.data() + 4 * size_t(m);
-    const Real at = d.alphaTilde[size_t(m)];
-    const Real denom = W + at;
-    const Real dlx = (-k * (pm[0] - cx / cnt - t[0]) - at * lam[0]) / denom;
-    const Real dly = (-k * (pm[1] - cy / cnt - t[1]) - at * lam[1]) / denom;
-    const Real dlz = (-k * (pm[2] - cz / cnt - t[2]) - at * lam[2]) / denom;
-    lam[0] += dlx;
-    lam[1] += dly;
-    lam[2] += dlz;
-    const Real wm = w[m];
-    pm[0] += wm * dlx;
-    pm[1] += wm * dly;
-    pm[2] += wm * dlz;
-    for (int q = b; q < e; ++q) {
+    const Real at = d.alphaTilde[size_t(m)], inv = d.invDenom[size_t(m)], wm = w[m];
+    Real dl[3];
+    for (int c = 0; c < 3; ++c) {
+      const Real C = (pm[c] - (s0[c] + s1[c]) / cnt) - t[c];
+      dl[c] = (-k * C - at * lam[c]) * inv;
+      lam[c] = lam[c] + dl[c];
+      pm[c] = pm[c] + wm * dl[c];
+    }
+    for (q = b; q < e; ++q) {
       Real* pi = p4 + 4 * size_t(adj[size_t(q)]);
-      const Real c = d.coef[size_t(q)];
-      pi[0] -= c * dlx;
-      pi[1] -= c * dly;
-      pi[2] -= c * dlz;
+      const Real cf = d.coef[size_t(q)];
+      for (int c = 0; c < 3; ++c) pi[c] = pi[c] - cf * dl[c];
     }
   }
+}
+
+#ifdef DEFORM_METABALLS_HAVE_AVX512
+// The same operations on rows (x, y, z, 0) with AVX2; lane 3 stays 0.
+__attribute__((target("avx2"))) void laplacianAvx2(const std::vector<int>& adjStart,
+                                                   const std::vector<int>& adj, const Real* w,
+                                                   LaplacianStepData& d, Real* p4, Real k) {
+  const __m256d mk = _mm256_set1_pd(-k);
+  for (int m : d.order) {
+    const Real W = d.W[size_t(m)];
+    if (!(W > 0)) continue;
+    const int b = adjStart[size_t(m)], e = adjStart[size_t(m) + 1];
+    __m256d s0 = _mm256_setzero_pd(), s1 = _mm256_setzero_pd();
+    int q = b;
+    for (; q + 1 < e; q += 2) {
+      s0 = _mm256_add_pd(s0, _mm256_loadu_pd(p4 + 4 * size_t(adj[size_t(q)])));
+      s1 = _mm256_add_pd(s1, _mm256_loadu_pd(p4 + 4 * size_t(adj[size_t(q) + 1])));
+    }
+    if (q < e) s0 = _mm256_add_pd(s0, _mm256_loadu_pd(p4 + 4 * size_t(adj[size_t(q)])));
+    const __m256d cnt = _mm256_set1_pd(Real(e - b));
+    Real* pm = p4 + 4 * size_t(m);
+    Real* lam = d.lambda.data() + 4 * size_t(m);
+    const __m256d xm = _mm256_loadu_pd(pm), l = _mm256_loadu_pd(lam);
+    const __m256d C = _mm256_sub_pd(_mm256_sub_pd(xm, _mm256_div_pd(_mm256_add_pd(s0, s1), cnt)),
+                                    _mm256_loadu_pd(d.target.data() + 4 * size_t(m)));
+    const __m256d dl =
+        _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(mk, C),
+                                    _mm256_mul_pd(_mm256_set1_pd(d.alphaTilde[size_t(m)]), l)),
+                      _mm256_set1_pd(d.invDenom[size_t(m)]));
+    // Lane 3 of dl: (-k * 0 - at * 0) * inv = 0 (keeps the padding lane at 0).
+    _mm256_storeu_pd(lam, _mm256_add_pd(l, dl));
+    _mm256_storeu_pd(pm, _mm256_add_pd(xm, _mm256_mul_pd(_mm256_set1_pd(w[m]), dl)));
+    for (q = b; q < e; ++q) {
+      Real* pi = p4 + 4 * size_t(adj[size_t(q)]);
+      _mm256_storeu_pd(pi, _mm256_sub_pd(_mm256_loadu_pd(pi),
+                                         _mm256_mul_pd(_mm256_set1_pd(d.coef[size_t(q)]), dl)));
+    }
+  }
+}
+bool cpuHasAvx2() {
+  static const bool ok = __builtin_cpu_supports("avx2");
+  return ok;
+}
+#endif
+
+}  // namespace
+
+void projectLaplacianSweep(const std::vector<int>& adjStart, const std::vector<int>& adj,
+                           const Real* w, LaplacianStepData& d, Real* p4, Real k, bool simd) {
+#ifdef DEFORM_METABALLS_HAVE_AVX512
+  if (simd && cpuHasAvx2()) {
+    laplacianAvx2(adjStart, adj, w, d, p4, k);
+    return;
+  }
+#endif
+  laplacianScalar(adjStart, adj, w, d, p4, k);
 }
 
 }  // namespace deform::metaballs

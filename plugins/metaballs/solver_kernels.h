@@ -58,21 +58,30 @@ long long projectStretchSweep(const StretchBatches& batches, StretchStepData& da
 /// True when projectStretchSweep and skinning use the AVX-512 path on this CPU.
 bool simdAvailable();
 
-/// Laplacian constraint data hoisted per step. CSR adjacency (adjStart #S+1, adj) of the links.
+/// Sphere order for the Laplacian sweep: greedy distance-2 colouring (two constraints of one colour
+/// share no sphere), colours one after the other, so that consecutive projections are independent
+/// and overlap in the CPU. Deterministic. CSR adjacency (adjStart #S+1, adj) of the links.
+std::vector<int> laplacianOrder(const std::vector<int>& adjStart, const std::vector<int>& adj);
+
+/// Laplacian constraint data hoisted per step.
 struct LaplacianStepData {
+  std::vector<int> order;        ///< #S sweep order (laplacianOrder)
   std::vector<Real> W;           ///< #S: w_m + sum_i w_i / n^2 (0: skip)
+  std::vector<Real> invDenom;    ///< #S: 1 / (W + alpha~)
   std::vector<Real> coef;        ///< #adj: w_i / n for neighbour i of m
   std::vector<Real> target;      ///< #S*4: R L_m (row of 4, last 0)
   std::vector<Real> alphaTilde;  ///< #S: compliance / dt^2 (0 in classic mode)
   std::vector<Real> lambda;      ///< #S*4: XPBD multipliers (zeroed every step)
 };
 
-/// One Gauss-Seidel sweep of the Laplacian constraints in sphere order:
+/// One Gauss-Seidel sweep of the Laplacian constraints in data.order:
 ///   C = c_m - mean(c_i) - R L_m,  dl = (-k C - alpha~ lambda) / (W + alpha~),  lambda += dl,
 ///   c_m += w_m dl,  c_i -= (w_i / n) dl.
-/// w: (#S + 1) inverse masses. k: stiffness factor (1 for XPBD).
+/// w: (#S + 1) inverse masses. k: stiffness factor (1 for XPBD). simd: AVX2 rows (x, y, z, 0) when
+/// the CPU has them (same results).
 void projectLaplacianSweep(const std::vector<int>& adjStart, const std::vector<int>& adj,
-                           const Real* w, LaplacianStepData& data, Real* p4, Real k);
+                           const Real* w, LaplacianStepData& data, Real* p4, Real k,
+                           bool simd = true);
 
 /// Rotation extraction for many spheres at once: the iteration of extractRotation()
 /// (pbd_constraints.h; Mueller, Bender, Chentanez, Macklin 2016), warm-started from q:
