@@ -20,6 +20,22 @@ Box VoxelGrid::cellBox(const Vec3i& c) const {
   return b;
 }
 
+Vec3 VoxelGrid::cellCenter(const Vec3i& c) const {
+  return origin + cellSize * (c.cast<Real>() + Vec3::Constant(0.5));
+}
+
+Vec3i VoxelGrid::cellAt(long long index) const {
+  const long long nxy = static_cast<long long>(dims.x()) * dims.y();
+  return Vec3i(static_cast<int>(index % dims.x()), static_cast<int>((index / dims.x()) % dims.y()),
+               static_cast<int>(index / nxy));
+}
+
+long long VoxelGrid::numCentresInside() const {
+  long long n = 0;
+  for (std::uint8_t f : centreInside) n += f;
+  return n;
+}
+
 int VoxelGrid::numInside() const {
   int n = 0;
   for (const Vec3i& c : cells) n += at(c) == CellState::Inside;
@@ -115,10 +131,48 @@ VoxelGrid buildGrid(const SurfaceMesh& s, Real h, long long maxGridCells) {
   return g;
 }
 
+// Classifies the cells of g (state Outside, centreInside empty on entry). clampVertices: mark the
+// clamped cell of every vertex Crossing (the default grid contains every vertex); otherwise only
+// the vertices inside the grid.
+void classify(const SurfaceMesh& s, VoxelGrid& g, bool clampVertices);
+
 }  // namespace
 
 VoxelGrid voxelize(const SurfaceMesh& s, Real h, long long maxGridCells) {
   VoxelGrid g = buildGrid(s, h, maxGridCells);
+  classify(s, g, true);
+  return g;
+}
+
+VoxelGrid voxelizeGrid(const SurfaceMesh& s, const Vec3& origin, Real h, const Vec3i& dims,
+                       long long maxGridCells) {
+  if (s.numVertices() == 0 || s.numFaces() == 0) {
+    throw InputError("", "voxelize", "empty surface mesh");
+  }
+  if (!(h > 0) || !std::isfinite(h)) {
+    throw InputError("", "voxelize", "cell size must be positive and finite");
+  }
+  if ((dims.array() < 1).any()) throw InputError("", "voxelize", "grid dimensions must be >= 1");
+  const long long total = static_cast<long long>(dims.x()) * dims.y() * dims.z();
+  if (total > maxGridCells) {
+    throw InputError("", "voxelize",
+                     "grid of " + std::to_string(total) + " cells exceeds the limit of " +
+                         std::to_string(maxGridCells) + " (cell size too small)");
+  }
+  VoxelGrid g;
+  g.origin = origin;
+  g.cellSize = h;
+  g.dims = dims;
+  g.state.assign(total, CellState::Outside);
+  classify(s, g, false);
+  return g;
+}
+
+namespace {
+
+void classify(const SurfaceMesh& s, VoxelGrid& g, bool clampVertices) {
+  const Real h = g.cellSize;
+  g.centreInside.assign(g.state.size(), 0);
   const Vec3 half = Vec3::Constant(0.5 * h);
   auto clampCell = [&](Vec3i c) {
     for (int d = 0; d < 3; ++d) c[d] = std::clamp(c[d], 0, g.dims[d] - 1);
@@ -145,7 +199,12 @@ VoxelGrid voxelize(const SurfaceMesh& s, Real h, long long maxGridCells) {
   }
   // Every vertex's own cell is crossing, even where rounding made the overlap test miss it.
   for (int v = 0; v < s.numVertices(); ++v) {
-    g.state[g.linearIndex(clampCell(g.cellOf(s.V.row(v))))] = CellState::Crossing;
+    const Vec3i c = g.cellOf(s.V.row(v));
+    if (clampVertices) {
+      g.state[g.linearIndex(clampCell(c))] = CellState::Crossing;
+    } else if (g.contains(c)) {
+      g.state[g.linearIndex(c)] = CellState::Crossing;
+    }
   }
 
   // 2. Winding number along +x through the centres of each (j, k) row.
@@ -191,7 +250,9 @@ VoxelGrid voxelize(const SurfaceMesh& s, Real h, long long maxGridCells) {
       for (int i = 0; i < g.dims.x(); ++i) {
         const Real xc = g.origin.x() + (i + 0.5) * h;
         while (next < row.size() && row[next].x < xc) winding += row[next++].sign;
-        CellState& st = g.state[g.linearIndex(Vec3i(i, j, k))];
+        const long long idx = g.linearIndex(Vec3i(i, j, k));
+        g.centreInside[idx] = winding != 0 ? 1 : 0;
+        CellState& st = g.state[idx];
         if (st == CellState::Outside && winding != 0) st = CellState::Inside;
       }
     }
@@ -206,8 +267,9 @@ VoxelGrid voxelize(const SurfaceMesh& s, Real h, long long maxGridCells) {
       }
     }
   }
-  return g;
 }
+
+}  // namespace
 
 long long voxelCount(const SurfaceMesh& surface, Real cellSize) {
   return voxelize(surface, cellSize).numCells();

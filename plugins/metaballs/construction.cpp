@@ -32,7 +32,7 @@ Metaballs constructMetaballs(const SurfaceMesh& surface, const ConstructionParam
     t0 = t;
   };
   const MeshDistance dist(surface);
-  const VoxelGrid grid = voxelizeInside(dist, p.voxelResolution);
+  const VoxelGrid grid = voxelizeInside(surface, p.voxelResolution);
   // Absolute tolerance for "outside": round-off of the distance queries.
   const Real tol = 1e-9 * boundingBox(surface.V).diagonal();
 
@@ -43,7 +43,7 @@ Metaballs constructMetaballs(const SurfaceMesh& surface, const ConstructionParam
   SphereSet s = std::move(pack.spheres);
   lap(0);
 
-  const RadiusAdjustmentResult adj = adjustRadii(s, dist, 0.5 * grid.h, tol);
+  const RadiusAdjustmentResult adj = adjustRadii(s, dist, 0.5 * grid.cellSize, tol);
   rep.outsideBeforeAdjustment = adj.outsideBefore;
   rep.removedByAdjustment = adj.removedOutsideCentre + adj.removedTooSmall;
   rep.outsideAfterAdjustment = countSpheresOutside(s, dist, tol);
@@ -54,7 +54,7 @@ Metaballs constructMetaballs(const SurfaceMesh& surface, const ConstructionParam
   std::nth_element(r.begin(), r.begin() + long(r.size() / 2), r.end());
   FillParams fp;
   fp.neighbours = p.fillNeighbours;
-  fp.minRadius = std::max(0.5 * grid.h, p.fillMinRadiusRatio * r[r.size() / 2]);
+  fp.minRadius = std::max(0.5 * grid.cellSize, p.fillMinRadiusRatio * r[r.size() / 2]);
   fp.maxGenerations = p.fillMaxGenerations;
   rep.filledSpheres = fillVacantSpace(s, dist, fp).added;
   lap(2);

@@ -20,7 +20,7 @@
 namespace deform::metaballs {
 
 /// Bumped whenever any stage's result can change for the same inputs.
-inline constexpr const char* kConstructionVersion = "metaballs-construction/1";
+inline constexpr const char* kConstructionVersion = "metaballs-construction/2";
 
 struct ConstructionParams {
   int targetSpheres = 900;        ///< stage 1 selection budget (liver: ~580 after merging)

@@ -162,15 +162,39 @@ void MetaballsModel::init(const ModelSetup& setup) {
   m_fixed.assign(size_t(n), 0);
   for (int i : m_fixedList) m_fixed[size_t(i)] = 1;
 
-  m_p.resize(n, 3);
+  // Solver layout: links by colour; rest offsets of every adjacency entry for the rotations.
+  m_batches = buildStretchBatches(
+      L, m_linkRest, m_mode == StiffnessMode::Xpbd ? m_linkAlpha : std::vector<Real>(size_t(nl), 0),
+      n);
+  const size_t nb = size_t(m_batches.size());
+  m_sdata.wa.assign(nb, 0);
+  m_sdata.wb.assign(nb, 0);
+  m_sdata.alphaTilde.assign(nb, 0);
+  m_sdata.lambda.assign(nb, 0);
+  m_restOff.assign(m_adj.size() * 3, 0);
+  for (int m = 0; m < n; ++m)
+    for (int k = m_adjStart[size_t(m)]; k < m_adjStart[size_t(m) + 1]; ++k)
+      for (int c = 0; c < 3; ++c)
+        m_restOff[3 * size_t(k) + size_t(c)] = m_x0(m_adj[size_t(k)], c) - m_x0(m, c);
+  m_ldata.order = laplacianOrder(m_adjStart, m_adj);
+  m_ldata.W.assign(size_t(n), 0);
+  m_ldata.invDenom.assign(size_t(n), 0);
+  m_ldata.coef.assign(m_adj.size(), 0);
+  m_ldata.target.assign(size_t(n) * 4, 0);
+  m_ldata.alphaTilde.assign(size_t(n), 0);
+  m_ldata.lambda.assign(size_t(n) * 4, 0);
+  m_alphaDt = -1;
+
+  m_p4.assign(size_t(n + 1) * 4, 0);
   m_f.resize(n, 3);
   m_kin.assign(size_t(n), 0);
-  m_wEff.assign(size_t(n), 0);
-  m_lambda.assign(size_t(nl), 0);
-  m_lapLambda.assign(size_t(n), Vec3::Zero());
+  m_wEff.assign(size_t(n) + 1, 0);
   m_volFactorSum.assign(size_t(n), 0);
   m_volCount.assign(size_t(n), 0);
   m_rot.assign(size_t(n) * 9, 0);
+  m_rotBatch.resize(n);
+  m_frames.assign(size_t(n) * kFrameStride, 0);
+  m_contacted.reserve(size_t(n));
   reset();
 }
 
@@ -179,39 +203,48 @@ void MetaballsModel::reset() {
   m_x = m_x0;
   m_v.setZero(n, 3);
   m_r = m_mb.spheres.radii;
-  m_q.assign(size_t(n), Eigen::Quaternion<Real>::Identity());
+  m_rotBatch.setIdentity();
   for (int i = 0; i < n; ++i)
     for (int q = 0; q < 9; ++q) m_rot[size_t(9 * i + q)] = (q % 4 == 0) ? 1.0 : 0.0;
   m_surface = m_restSurface;
-  m_phase.clear();
+  m_phases = Phases();
   m_degenerate = 0;
 }
 
 void MetaballsModel::computeRotations() {
   const int n = m_mb.spheres.size();
+  const Real* X = m_x.data();
+  const size_t P = size_t(m_rotBatch.padded);
+  Real* A = m_rotBatch.A.data();
   for (int m = 0; m < n; ++m) {
-    const int b = m_adjStart[size_t(m)], e = m_adjStart[size_t(m) + 1];
-    if (e == b) continue;
-    Mat3 A = Mat3::Zero();
-    const Vec3 xm = m_x.row(m).transpose(), x0m = m_x0.row(m).transpose();
-    for (int k = b; k < e; ++k) {
-      const int i = m_adj[size_t(k)];
-      A += (m_x.row(i).transpose() - xm) * (m_x0.row(i).transpose() - x0m).transpose();
+    // A = sum_i (x_i - x_m)(x0_i - x0_m)^T over the linked spheres (0 without links: identity).
+    Real a[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+    const Real* xm = X + 3 * m;
+    for (int k = m_adjStart[size_t(m)]; k < m_adjStart[size_t(m) + 1]; ++k) {
+      const Real* xi = X + 3 * m_adj[size_t(k)];
+      const Real* r0 = m_restOff.data() + 3 * size_t(k);
+      const Real d[3] = {xi[0] - xm[0], xi[1] - xm[1], xi[2] - xm[2]};
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) a[3 * r + c] += d[r] * r0[c];
     }
-    // Warm-started from the previous step: a few iterations track the rotation.
-    extractRotation(A, m_q[size_t(m)], 3);
-    const Mat3 R = m_q[size_t(m)].toRotationMatrix();
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) m_rot[size_t(9 * m + 3 * r + c)] = R(r, c);
+    for (int q = 0; q < 9; ++q) A[size_t(q) * P + size_t(m)] = a[q];
   }
+  // Warm-started from the previous step: a few iterations track the rotation.
+  extractRotations(m_rotBatch, 3, m_rot.data(), m_simd);
+}
+
+PhaseTimes MetaballsModel::phaseTimes() const {
+  return {{"pbd", m_phases.pbd},
+          {"laplacian", m_phases.laplacian},
+          {"volume", m_phases.volume},
+          {"rotations", m_phases.rotations},
+          {"skinning", m_phases.skinning}};
 }
 
 StepStatus MetaballsModel::step(const StepInput& in) {
   const int n = m_mb.spheres.size();
   const Real dt = in.dt;
   if (!(dt > 0)) return StepStatus::Ok;
-  const MatX2i& L = m_mb.topology.links;
-  const int nl = int(L.rows());
   auto t0 = Clock::now();
 
   // External forces: point loads spread over the loaded vertex's spheres by skinning weight.
@@ -228,14 +261,16 @@ StepStatus MetaballsModel::step(const StepInput& in) {
     }
   }
   // Kinematic spheres: fixed ones stay at rest, grasped ones reach their targets.
+  Real* P = m_p4.data();
   std::copy(m_fixed.begin(), m_fixed.end(), m_kin.begin());
-  for (int i : m_fixedList) m_p.row(i) = m_x0.row(i);
+  for (int i : m_fixedList)
+    for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x0(i, c);
   for (const GraspInput& g : in.grasps) {
     for (size_t k = 0; k < g.nodes.size(); ++k) {
       const int i = g.nodes[k];
       if (i < 0 || i >= n || m_fixed[size_t(i)]) continue;
       m_kin[size_t(i)] = 1;
-      m_p.row(i) = g.targets.row(Eigen::Index(k));
+      for (int c = 0; c < 3; ++c) P[4 * i + c] = g.targets(Eigen::Index(k), c);
       m_contacted.push_back(i);
     }
   }
@@ -248,95 +283,67 @@ StepStatus MetaballsModel::step(const StepInput& in) {
     }
     m_wEff[size_t(i)] = m_invMass(i);
     m_v.row(i) = keep * (m_v.row(i) + dt * (in.gravity.transpose() + m_invMass(i) * m_f.row(i)));
-    m_p.row(i) = m_x.row(i) + dt * m_v.row(i);
+    for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x(i, c) + dt * m_v(i, c);
   }
-  std::fill(m_lambda.begin(), m_lambda.end(), 0.0);
-  std::fill(m_lapLambda.begin(), m_lapLambda.end(), Vec3::Zero());
   const Real dt2 = dt * dt;
-  const bool lapRot = m_lapFrame == Frame::Rotated;
-  double tStretch = msSince(t0), tLap = 0;
-  long long degenerate = 0;
-  for (int it = 0; it < m_iterations; ++it) {
-    auto ts = Clock::now();
-    Real* P = m_p.data();
-    const int* LL = L.data();
-    for (int l = 0; l < nl; ++l) {
-      const int a = LL[2 * l], b = LL[2 * l + 1];
-      const Real wa = m_wEff[size_t(a)], wb = m_wEff[size_t(b)];
-      if (wa + wb == 0) continue;
-      Real* pa = P + 3 * a;
-      Real* pb = P + 3 * b;
-      const Real dx = pa[0] - pb[0], dy = pa[1] - pb[1], dz = pa[2] - pb[2];
-      const Real len = std::sqrt(dx * dx + dy * dy + dz * dz);
-      if (!(len > 1e-12)) {
-        ++degenerate;
-        continue;
-      }
-      // Eqs. (7)-(8) (classic) or their XPBD form; same maths as projectStretch*, inlined on raw
-      // arrays for speed.
-      const Real C = len - m_linkRest[size_t(l)];
-      Real s;
-      if (m_mode == StiffnessMode::Xpbd) {
-        const Real at = m_linkAlpha[size_t(l)] / dt2;
-        const Real dl = (-C - at * m_lambda[size_t(l)]) / (wa + wb + at);
-        m_lambda[size_t(l)] += dl;
-        s = -dl;
-      } else {
-        s = m_stiffness * C / (wa + wb);
-      }
-      const Real f = s / len;
-      pa[0] -= wa * f * dx;
-      pa[1] -= wa * f * dy;
-      pa[2] -= wa * f * dz;
-      pb[0] += wb * f * dx;
-      pb[1] += wb * f * dy;
-      pb[2] += wb * f * dz;
-    }
-    tStretch += msSince(ts);
-    if (!m_laplacian) continue;
-    ts = Clock::now();
+  const bool xpbd = m_mode == StiffnessMode::Xpbd;
+  // Per-step constants of the constraints.
+  if (dt != m_alphaDt) {
+    for (size_t j = 0; j < m_sdata.alphaTilde.size(); ++j)
+      m_sdata.alphaTilde[j] = xpbd ? m_batches.compliance[j] / dt2 : 0;
+    for (int m = 0; m < n; ++m) m_ldata.alphaTilde[size_t(m)] = xpbd ? m_lapAlpha(m) / dt2 : 0;
+    m_alphaDt = dt;
+  }
+  for (size_t j = 0; j < m_sdata.wa.size(); ++j) {
+    m_sdata.wa[j] = m_wEff[size_t(m_batches.a[j])];
+    m_sdata.wb[j] = m_wEff[size_t(m_batches.b[j])];
+  }
+  std::fill(m_sdata.lambda.begin(), m_sdata.lambda.end(), 0.0);
+  if (m_laplacian) {
+    const bool lapRot = m_lapFrame == Frame::Rotated;
     for (int m = 0; m < n; ++m) {
       const int b = m_adjStart[size_t(m)], e = m_adjStart[size_t(m) + 1];
       const int cnt = e - b;
-      if (cnt == 0) continue;
-      Vec3 centre = Vec3::Zero();
       Real wsum = 0;
       for (int k = b; k < e; ++k) {
-        const int i = m_adj[size_t(k)];
-        centre += m_p.row(i).transpose();
-        wsum += m_wEff[size_t(i)];
+        const Real wi = m_wEff[size_t(m_adj[size_t(k)])];
+        wsum += wi;
+        m_ldata.coef[size_t(k)] = cnt > 0 ? wi / Real(cnt) : 0;
       }
       const Real wm = m_wEff[size_t(m)];
-      if (wm + wsum == 0) continue;
-      centre /= Real(cnt);
-      Vec3 Lm = m_lapRest.row(m).transpose();
-      if (lapRot)
-        Lm = Eigen::Map<const Eigen::Matrix<Real, 3, 3, Eigen::RowMajor>>(&m_rot[size_t(9 * m)]) *
-             Lm;
-      const Vec3 C = m_p.row(m).transpose() - centre - Lm;
-      Vec3 dl;
-      if (m_mode == StiffnessMode::Xpbd) {
-        dl = laplacianXpbd(C, wm, wsum, cnt, m_lapAlpha(m) / dt2, m_lapLambda[size_t(m)]);
-      } else {
-        dl = -laplacianScale(wm, wsum, cnt, m_lapStiffness) * C;
-      }
-      // dc_m = w_m dl, dc_i = -(w_i / n) dl
-      m_p.row(m) += wm * dl.transpose();
-      for (int k = b; k < e; ++k) {
-        const int i = m_adj[size_t(k)];
-        m_p.row(i) -= (m_wEff[size_t(i)] / Real(cnt)) * dl.transpose();
-      }
+      m_ldata.W[size_t(m)] = (cnt == 0 || wm + wsum == 0) ? 0 : wm + wsum / Real(cnt * cnt);
+      const Vec3 Lm = m_lapRest.row(m).transpose();
+      const Vec3 t = lapRot ? Vec3(Eigen::Map<const Eigen::Matrix<Real, 3, 3, Eigen::RowMajor>>(
+                                       &m_rot[size_t(9 * m)]) *
+                                   Lm)
+                            : Lm;
+      for (int c = 0; c < 3; ++c) m_ldata.target[4 * size_t(m) + size_t(c)] = t(c);
+      const Real W = m_ldata.W[size_t(m)];
+      m_ldata.invDenom[size_t(m)] = W > 0 ? 1 / (W + m_ldata.alphaTilde[size_t(m)]) : 0;
     }
-    tLap += msSince(ts);
+    std::fill(m_ldata.lambda.begin(), m_ldata.lambda.end(), 0.0);
+  }
+  double tStretch = msSince(t0), tLap = 0;
+  long long degenerate = 0;
+  const Real kStretch = xpbd ? 1.0 : m_stiffness, kLap = xpbd ? 1.0 : m_lapStiffness;
+  for (int it = 0; it < m_iterations; ++it) {
+    auto ts = Clock::now();
+    degenerate += projectStretchSweep(m_batches, m_sdata, P, kStretch, m_simd);
+    auto tl = Clock::now();
+    tStretch += std::chrono::duration<double, std::milli>(tl - ts).count();
+    if (!m_laplacian) continue;
+    projectLaplacianSweep(m_adjStart, m_adj, m_wEff.data(), m_ldata, P, kLap, m_simd);
+    tLap += msSince(tl);
   }
   // Algorithm 3, lines 18-21.
   auto ts = Clock::now();
   const Real invDt = 1.0 / dt;
   for (int i = 0; i < n; ++i) {
-    m_v.row(i) = m_fixed[size_t(i)] ? Eigen::RowVector3d::Zero().eval()
-                                    : ((m_p.row(i) - m_x.row(i)) * invDt).eval();
+    for (int c = 0; c < 3; ++c) {
+      m_v(i, c) = m_fixed[size_t(i)] ? 0.0 : (P[4 * i + c] - m_x(i, c)) * invDt;
+      m_x(i, c) = P[4 * i + c];
+    }
   }
-  m_x = m_p;
   tStretch += msSince(ts);
   m_degenerate += degenerate;
 
@@ -375,15 +382,12 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   if (m_lapFrame == Frame::Rotated || m_skinFrame == Frame::Rotated) computeRotations();
   const double tRot = msSince(ts);
   ts = Clock::now();
-  applySkinning(m_skin, m_x, m_r, m_skinFrame == Frame::Rotated ? m_rot.data() : nullptr,
-                m_surface);
+  const bool skinRot = m_skinFrame == Frame::Rotated;
+  packSphereFrames(m_x, m_r, skinRot ? m_rot.data() : nullptr, m_frames);
+  applySkinningFrames(m_skin, m_frames.data(), skinRot, m_surface, m_simd);
   const double tSkin = msSince(ts);
 
-  m_phase["pbd"] = tStretch;
-  m_phase["laplacian"] = tLap;
-  m_phase["volume"] = tVol;
-  m_phase["rotations"] = tRot;
-  m_phase["skinning"] = tSkin;
+  m_phases = {tStretch, tLap, tVol, tRot, tSkin};
   if (!m_x.allFinite() || !m_surface.allFinite() || !m_r.allFinite()) return StepStatus::Diverged;
   return StepStatus::Ok;
 }

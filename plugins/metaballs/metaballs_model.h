@@ -13,6 +13,7 @@
 
 #include "construction.h"
 #include "skinning.h"
+#include "solver_kernels.h"
 
 #include <deform/model.h>
 #include <deform/registry.h>
@@ -37,7 +38,7 @@ class MetaballsModel final : public Model {
   const MatX3& surface() const override { return m_surface; }
   void reset() override;
   Counts counts() const override;
-  PhaseTimes phaseTimes() const override { return m_phase; }
+  PhaseTimes phaseTimes() const override;
   NumericCounters numericCounters() const override;
 
   const Metaballs& metaballs() const { return m_mb; }
@@ -45,6 +46,14 @@ class MetaballsModel final : public Model {
   const VecX& restRadii() const { return m_mb.spheres.radii; }
   const Skinning& skinning() const { return m_skin; }
   bool constructionCacheHit() const { return m_cacheHit; }
+
+  /// Phase times of the last step (ms), without the map phaseTimes() builds.
+  struct Phases {
+    double pbd = 0, laplacian = 0, volume = 0, rotations = 0, skinning = 0;
+  };
+  const Phases& lastPhases() const { return m_phases; }
+  /// Use the AVX-512 kernels when the CPU has them (default); results are identical either way.
+  void setSimd(bool on) { m_simd = on; }
 
  private:
   void computeRotations();
@@ -76,19 +85,27 @@ class MetaballsModel final : public Model {
   VecX m_lapAlpha;                            // XPBD compliance of each Laplacian constraint
   VecX m_restSumD;                            // sum d(c_m) over linked spheres (eq. 12)
 
+  StretchBatches m_batches;     // links by colour (solver_kernels.h)
+  std::vector<Real> m_restOff;  // #adj*3: x0_i - x0_m for each adjacency entry (rotations)
+
   // state
-  MatX3 m_x, m_v, m_p, m_f;
+  MatX3 m_x, m_v, m_f;
+  std::vector<Real> m_p4;  // (#S+1)*4 predicted positions, row #S the padding dummy
   VecX m_r;
-  std::vector<Eigen::Quaternion<Real>> m_q;
-  std::vector<Real> m_rot;  // #S*9 row-major rotations
+  RotationBatch m_rotBatch;  // per-sphere A and warm-started quaternions
+  std::vector<Real> m_rot;   // #S*9 row-major rotations
   std::vector<uint8_t> m_kin;
-  std::vector<Real> m_wEff, m_lambda;
-  std::vector<Vec3> m_lapLambda;
+  std::vector<Real> m_wEff;  // #S+1 inverse masses this step (0: kinematic, dummy)
+  StretchStepData m_sdata;
+  LaplacianStepData m_ldata;
+  Real m_alphaDt = -1;         // dt the alpha~ arrays were computed for
+  std::vector<Real> m_frames;  // #S*16 sphere records for the skinning
   std::vector<Real> m_volFactorSum;
   std::vector<int> m_volCount, m_contacted;
   MatX3 m_surface;
-  PhaseTimes m_phase;
+  Phases m_phases;
   long long m_degenerate = 0;
+  bool m_simd = true;
 };
 
 }  // namespace deform::metaballs

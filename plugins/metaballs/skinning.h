@@ -31,12 +31,28 @@ struct Skinning {
   std::vector<Real> weight;               ///< #V*K, f_i / sum f (eq. 14), 0 in padding slots
   std::vector<Real> restRadiusSum;        ///< #V: sum_i r_i over the attached spheres at rest
   std::vector<Real> dispX, dispY, dispZ;  ///< #V each: eq. (15)
+  std::vector<int> count;                 ///< #V attached spheres (the first count slots)
   int fallbacks = 0;    ///< vertices with no sphere at f >= T (took the strongest)
   int attachments = 0;  ///< total attached (vertex, sphere) pairs
 };
 
 /// V: #V by 3 rest surface vertices. threshold T in (0, 1].
 Skinning buildSkinning(const MatX3& V, const SphereSet& spheres, Real threshold, int maxSpheres);
+
+/// Doubles per sphere in a frame record: (c_x, c_y, c_z, r, R row-major (9), 0, 0, 0).
+inline constexpr int kFrameStride = 16;
+
+/// Packs the per-sphere data eq. (16) blends into one record per sphere (#S*16, pre-sized):
+/// centers #S by 3, radii #S, rotations #S*9 row-major or nullptr (identity).
+void packSphereFrames(const MatX3& centers, const VecX& radii, const Real* rotations,
+                      std::vector<Real>& frames);
+
+/// Eq. (16) from packed frames: per vertex the weighted sum of its spheres' records (one
+/// 16-double multiply-add per attached sphere; AVX-512 when simd and the CPU has it, identical
+/// results either way), then v' = c'_center + (sum r' / sum r) R_v disp. rotate: false for the
+/// paper's fixed frame (R_v = I). out: #V by 3 (pre-sized).
+void applySkinningFrames(const Skinning& sk, const Real* frames, bool rotate, MatX3& out,
+                         bool simd = true);
 
 /// Eq. (16). centers: #S by 3 current centres; radii: #S current radii; rotations: #S*9 row-major
 /// 3x3 local rotations, or nullptr for the paper's fixed frame. out: #V by 3 (pre-sized).

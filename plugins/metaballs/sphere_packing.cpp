@@ -84,20 +84,20 @@ MedialCandidates medialCandidates(const SurfaceMesh& surface, const MeshDistance
 PackingResult packSpheres(const SurfaceMesh& surface, const MeshDistance& dist,
                           const VoxelGrid& grid, int target) {
   PackingResult res;
-  const MedialCandidates cand = medialCandidates(surface, dist, 0.5 * grid.h);
+  const MedialCandidates cand = medialCandidates(surface, dist, 0.5 * grid.cellSize);
   res.degenerateTets = cand.degenerateTets;
   // Samples: inside voxel centres, then surface vertices.
   std::vector<int> insideIdx;
-  for (size_t i = 0; i < grid.inside.size(); ++i)
-    if (grid.inside[i]) insideIdx.push_back(int(i));
+  for (size_t i = 0; i < grid.centreInside.size(); ++i)
+    if (grid.centreInside[i]) insideIdx.push_back(int(i));
   MatX3 vox(Eigen::Index(insideIdx.size()), 3);
   for (size_t i = 0; i < insideIdx.size(); ++i)
-    vox.row(Eigen::Index(i)) = grid.centerOf(insideIdx[i]);
+    vox.row(Eigen::Index(i)) = voxelCenter(grid, insideIdx[i]);
   const KdTree3 voxTree(vox);
   const KdTree3 surfTree(surface.V);
   const int nVox = int(insideIdx.size());
   res.samples = nVox + surface.numVertices();
-  const Real slack = grid.h;
+  const Real slack = grid.cellSize;
 
   // Candidates: the inner poles, then the inside voxel centres (their ball is the largest empty
   // ball there, radius D(c)), so that spheres can also be placed off the medial axis.
@@ -106,7 +106,7 @@ PackingResult packSpheres(const SurfaceMesh& surface, const MeshDistance& dist,
   for (size_t i = 0; i < insideIdx.size(); ++i) {
     const Vec3 x = vox.row(Eigen::Index(i)).transpose();
     const Real d = dist.distance(x);
-    if (d < 0.5 * grid.h) continue;
+    if (d < 0.5 * grid.cellSize) continue;
     all.append(x, d);
     dall.push_back(d);
   }
@@ -114,7 +114,7 @@ PackingResult packSpheres(const SurfaceMesh& surface, const MeshDistance& dist,
   // A candidate covers samples only up to the radius at which `target` balls of equal size would
   // fill the organ twice over: the budget then spreads over the whole body instead of a few
   // medial balls covering everything.
-  const Real volume = Real(nVox) * grid.h * grid.h * grid.h;
+  const Real volume = Real(nVox) * grid.cellSize * grid.cellSize * grid.cellSize;
   const Real cap = std::cbrt(2.0 * volume * 3.0 / (4.0 * 3.14159265358979 * std::max(target, 1)));
   const int nc = all.size();
   std::vector<std::vector<int>> covers(static_cast<size_t>(nc));

@@ -8,6 +8,7 @@
 #include "vacant_space_filling.h"
 #include "voxel_grid.h"
 
+#include <deform/error.h>
 #include <gtest/gtest.h>
 
 namespace deform::metaballs {
@@ -42,22 +43,49 @@ TEST(MetaballsConstruction, GapMidpointIsEquation2) {
 
 TEST(MetaballsConstruction, VoxelGridMatchesInsideTest) {
   const MeshDistance dist(testOrgan());
-  const VoxelGrid g = voxelizeInside(dist, 24);
+  const VoxelGrid g = voxelizeInside(testOrgan(), 24);
   long long mismatches = 0;
-  for (size_t v = 0; v < g.inside.size(); ++v)
-    mismatches += (g.inside[v] != 0) != dist.inside(g.centerOf(int(v))) ? 1 : 0;
+  for (size_t v = 0; v < g.centreInside.size(); ++v)
+    mismatches += (g.centreInside[v] != 0) != dist.inside(voxelCenter(g, (long long)v)) ? 1 : 0;
   EXPECT_EQ(mismatches, 0);
-  EXPECT_GT(g.numInside(), 100);
+  EXPECT_GT(g.numCentresInside(), 100);
+  // 24 voxels along the longest side plus one of margin each side; the grid covers the organ.
+  EXPECT_EQ(g.dims.maxCoeff(), 26);
+  const Box b = boundingBox(testOrgan().V);
+  EXPECT_TRUE((g.origin.array() < b.lo.array()).all());
+  EXPECT_TRUE(((g.origin + g.cellSize * g.dims.cast<Real>()).array() > b.hi.array()).all());
+}
+
+// Core's voxelizeGrid on voxelize()'s own grid classifies every cell alike; Inside cells have their
+// centre inside, and centreInside agrees with the signed distance on every cell.
+TEST(MetaballsConstruction, CoreVoxelizeGridMatchesVoxelize) {
+  const SurfaceMesh& s = testOrgan();
+  const VoxelGrid a = voxelize(s, 0.01);
+  const VoxelGrid b = voxelizeGrid(s, a.origin, a.cellSize, a.dims);
+  EXPECT_TRUE(a.state == b.state);
+  EXPECT_TRUE(a.cells == b.cells);
+  EXPECT_TRUE(a.centreInside == b.centreInside);
+  const MeshDistance dist(s);
+  long long mismatches = 0;
+  for (long long v = 0; v < (long long)a.state.size(); ++v) {
+    if (a.state[size_t(v)] == CellState::Inside) {
+      EXPECT_EQ(a.centreInside[size_t(v)], 1);
+    }
+    mismatches += (a.centreInside[size_t(v)] != 0) != dist.inside(voxelCenter(a, v)) ? 1 : 0;
+  }
+  EXPECT_EQ(mismatches, 0);
+  EXPECT_GT(a.numCentresInside(), a.numInside());  // some crossing cells have inside centres
+  EXPECT_THROW(voxelizeGrid(s, a.origin, a.cellSize, Vec3i(0, 1, 1)), InputError);
 }
 
 TEST(MetaballsConstruction, RadiusAdjustmentLeavesNoSphereOutside) {
   const MeshDistance dist(testOrgan());
-  const VoxelGrid g = voxelizeInside(dist, 40);
+  const VoxelGrid g = voxelizeInside(testOrgan(), 40);
   PackingResult pack = packSpheres(testOrgan(), dist, g, 120);
   ASSERT_GT(pack.spheres.size(), 10);
   EXPECT_LE(pack.spheres.size(), 120);
   SphereSet s = pack.spheres;
-  const RadiusAdjustmentResult r = adjustRadii(s, dist, 0.5 * g.h, 0);
+  const RadiusAdjustmentResult r = adjustRadii(s, dist, 0.5 * g.cellSize, 0);
   EXPECT_EQ(countSpheresOutside(s, dist, 1e-12), 0);
   for (int i = 0; i < s.size(); ++i) {
     EXPECT_LT(dist.signedDistance(s.center(i)), 0);
@@ -113,8 +141,8 @@ TEST(MetaballsConstruction, ElectrostaticOptimisationReducesHollowVoxels) {
   EXPECT_EQ(r.outsideAfterOptimisation, 0);
   // Incremental bookkeeping agrees with a recount from scratch.
   const MeshDistance dist(testOrgan());
-  const VoxelGrid g = voxelizeInside(dist, smallParams().voxelResolution);
-  EXPECT_EQ(g.numInside(), r.insideVoxels);
+  const VoxelGrid g = voxelizeInside(testOrgan(), smallParams().voxelResolution);
+  EXPECT_EQ(g.numCentresInside(), r.insideVoxels);
   EXPECT_EQ(countHollowVoxels(built().spheres, g), r.hollowAfter);
   EXPECT_EQ(countSpheresOutside(built().spheres, dist, 1e-9 * 0.2), 0);
 }

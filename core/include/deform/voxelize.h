@@ -10,8 +10,9 @@
 // edge or vertex is counted exactly once on a closed mesh (no double or missed crossing).
 // p is inside when w(p) != 0 (so inward- or outward-oriented closed meshes both work).
 //
-// Used by the hexahedral FEM (the grid of hexahedra) and the metaballs construction (the
-// organ's interior for the electrostatic optimisation).
+// Used by the hexahedral FEM (the grid of hexahedra) and the metaballs construction (inside voxel
+// centres as packing samples and for the electrostatic optimisation, on its own grid through
+// voxelizeGrid and centreInside).
 #pragma once
 
 #include <deform/mesh.h>
@@ -31,6 +32,10 @@ struct VoxelGrid {
   std::vector<CellState> state;
   /// #C by 3 cells intersecting the organ (Crossing or Inside), in ascending linear index.
   std::vector<Vec3i> cells;
+  /// dims.prod() flags, same indexing as state: 1 when the cell's centre is inside the surface
+  /// (winding number != 0), for every cell whatever its state (the centre of a Crossing cell may
+  /// lie on either side).
+  std::vector<std::uint8_t> centreInside;
 
   long long linearIndex(const Vec3i& c) const {
     return c.x() +
@@ -43,9 +48,14 @@ struct VoxelGrid {
   /// Cell containing p (floor of (p - origin)/h), not clamped.
   Vec3i cellOf(const Vec3& p) const;
   Box cellBox(const Vec3i& c) const;
+  /// Centre of cell c: origin + h (c + 1/2).
+  Vec3 cellCenter(const Vec3i& c) const;
+  /// Cell of a linear index (inverse of linearIndex).
+  Vec3i cellAt(long long index) const;
   int numCells() const { return static_cast<int>(cells.size()); }
-  int numInside() const;    ///< cells fully inside the surface
-  int numCrossing() const;  ///< cells the surface passes through
+  int numInside() const;               ///< cells fully inside the surface
+  int numCrossing() const;             ///< cells the surface passes through
+  long long numCentresInside() const;  ///< cells whose centre is inside (centreInside)
 };
 
 /// Voxelises a closed surface with cells of edge cellSize (m). The grid is centred on the surface's
@@ -53,6 +63,13 @@ struct VoxelGrid {
 /// vertex lies strictly inside a Crossing cell. Throws InputError for an empty mesh, cellSize <= 0
 /// or a grid of more than maxGridCells cells.
 VoxelGrid voxelize(const SurfaceMesh& surface, Real cellSize, long long maxGridCells = 200000000);
+
+/// Voxelises a closed surface on a grid the caller chooses: lower corner origin (m), cubic cells of
+/// edge cellSize (m), dims cells along x, y, z (the grid need not contain the whole surface; cells
+/// outside it are simply not represented). Same classification as voxelize(). Throws InputError
+/// for an empty mesh, cellSize <= 0, dims < 1 or more than maxGridCells cells.
+VoxelGrid voxelizeGrid(const SurfaceMesh& surface, const Vec3& origin, Real cellSize,
+                       const Vec3i& dims, long long maxGridCells = 200000000);
 
 /// Number of cells voxelize() would mark Crossing or Inside.
 long long voxelCount(const SurfaceMesh& surface, Real cellSize);
