@@ -29,6 +29,8 @@ struct ScalarLanes {
   static M band(M a, M b) { return a && b; }
   static V select(M m, V a, V b) { return m ? a : b; }
   static int count(M m) { return m ? 1 : 0; }
+  static unsigned orBytes(const unsigned char* m) { return *m; }
+  static bool anyByte(const unsigned char* m) { return *m != 0; }
   static void loadPoints(const double* x4, const int* idx, V& x, V& y, V& z) {
     const double* p = x4 + 4 * static_cast<long>(*idx);
     x = p[0];
@@ -54,11 +56,12 @@ bool avx2Supported() {
 }  // namespace
 
 batched::StretchView SurfaceBatches::stretchView() const {
-  return {sa.data(), sb.data(), sRest.data(), sScaleA.data(), sScaleB.data()};
+  return {sbMovable.data(), sa.data(), sb.data(), sRest.data(), sScaleA.data(), sScaleB.data()};
 }
 
 batched::BendView SurfaceBatches::bendView() const {
-  return {{hp[0].data(), hp[1].data(), hp[2].data(), hp[3].data()},
+  return {hMovable.data(),
+          {hp[0].data(), hp[1].data(), hp[2].data(), hp[3].data()},
           {hw[0].data(), hw[1].data(), hw[2].data(), hw[3].data()},
           hCos0.data(),
           hSin0.data(),
@@ -71,32 +74,61 @@ SurfaceBatches buildSurfaceBatches(const SurfaceConstraints& c, const ActiveCons
   b.kStretch = pbd::classicStiffness(std::clamp<Real>(kStretch, 0, 1), iterations);
   b.kBending = pbd::classicStiffness(std::clamp<Real>(kBending, 0, 1), iterations);
   const size_t ns = a.stretch.size(), nb = a.bending.size();
+  // Within a colour the order is free (its constraints share no movable particle), so each colour
+  // is sorted by the pattern of movable slots: groups of four then share it and skip the work of
+  // their immovable slots. A stretch constraint is oriented so that a is movable.
+  // An overflowing last colour is projected in sequence and keeps its order.
+  auto sortColours = [](std::vector<int> ids, const std::vector<int>& start, bool overflow,
+                        auto pattern) {
+    const size_t sorted = start.size() < 2 ? 0 : start.size() - 1 - (overflow ? 1 : 0);
+    for (size_t c = 0; c < sorted; ++c)
+      std::stable_sort(ids.begin() + start[c], ids.begin() + start[c + 1],
+                       [&](int x, int y) { return pattern(x) < pattern(y); });
+    return ids;
+  };
+  const std::vector<int> sOrder = sortColours(
+      a.stretch, a.stretchColourStart, a.stretchColourOverflow,
+      [&](int i) { return (w[c.stretch[i].a] > 0) && (w[c.stretch[i].b] > 0) ? 1 : 0; });
+  auto hPattern = [&](int i) {
+    unsigned m = 0;
+    for (int k = 0; k < 4; ++k)
+      if (w[c.bending[i].p[k]] > 0) m |= 1u << k;
+    return m;
+  };
+  const std::vector<int> hOrder =
+      sortColours(a.bending, a.bendingColourStart, a.bendingColourOverflow, hPattern);
   b.sa.reserve(ns);
   b.sb.reserve(ns);
+  b.sbMovable.reserve(ns);
   b.sRest.reserve(ns);
   b.sScaleA.reserve(ns);
   b.sScaleB.reserve(ns);
-  for (int i : a.stretch) {
+  for (int i : sOrder) {
     const pbd::DistanceConstraint& d = c.stretch[i];
-    const Real wsum = w[d.a] + w[d.b];  // > 0: the constraint is active
-    b.sa.push_back(d.a);
-    b.sb.push_back(d.b);
+    const bool swap = !(w[d.a] > 0);
+    const int ia = swap ? d.b : d.a, ib = swap ? d.a : d.b;
+    const Real wsum = w[ia] + w[ib];  // > 0: the constraint is active
+    b.sa.push_back(ia);
+    b.sb.push_back(ib);
+    b.sbMovable.push_back(w[ib] > 0 ? 1 : 0);
     b.sRest.push_back(d.rest);
-    b.sScaleA.push_back(b.kStretch * w[d.a] / wsum);
-    b.sScaleB.push_back(b.kStretch * w[d.b] / wsum);
+    b.sScaleA.push_back(b.kStretch * w[ia] / wsum);
+    b.sScaleB.push_back(b.kStretch * w[ib] / wsum);
   }
   for (int k = 0; k < 4; ++k) {
     b.hp[k].reserve(nb);
     b.hw[k].reserve(nb);
   }
+  b.hMovable.reserve(nb);
   b.hCos0.reserve(nb);
   b.hSin0.reserve(nb);
-  for (int i : a.bending) {
+  for (int i : hOrder) {
     const pbd::DihedralConstraint& h = c.bending[i];
     for (int k = 0; k < 4; ++k) {
       b.hp[k].push_back(h.p[k]);
       b.hw[k].push_back(w[h.p[k]]);
     }
+    b.hMovable.push_back(static_cast<unsigned char>(hPattern(i)));
     b.hCos0.push_back(std::cos(h.restAngle));
     b.hSin0.push_back(std::sin(h.restAngle));
   }

@@ -21,12 +21,14 @@
 namespace deform::hybrid {
 
 struct SurfaceBatches {
-  // Stretch, in ActiveConstraints order.
+  // Stretch, in ActiveConstraints colour order (sorted by pattern within a colour; a movable).
   std::vector<int> sa, sb;
+  std::vector<unsigned char> sbMovable;
   std::vector<Real> sRest, sScaleA, sScaleB;
   std::vector<int> sColourStart;  ///< #colours + 1 offsets into the stretch arrays
-  // Bending, in ActiveConstraints order.
+  // Bending, in ActiveConstraints colour order (sorted by movable-slot pattern within a colour).
   std::vector<int> hp[4];
+  std::vector<unsigned char> hMovable;  ///< bit k: w[hp[k]] > 0
   std::vector<Real> hw[4], hCos0, hSin0;
   std::vector<int> hColourStart;
   bool sLastColourShared = false, hLastColourShared = false;  ///< colour overflow: sequential

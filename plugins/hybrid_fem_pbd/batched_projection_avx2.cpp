@@ -23,6 +23,8 @@ struct Avx2Lanes {
   static M band(M a, M b) { return _mm256_and_pd(a, b); }
   static V select(M m, V a, V b) { return _mm256_blendv_pd(b, a, m); }
   static int count(M m) { return __builtin_popcount(_mm256_movemask_pd(m)); }
+  static unsigned orBytes(const unsigned char* m) { return m[0] | m[1] | m[2] | m[3]; }
+  static bool anyByte(const unsigned char* m) { return (m[0] | m[1] | m[2] | m[3]) != 0; }
   // Gathers the points idx[0..3] of the padded array into x, y, z lanes.
   static void loadPoints(const double* x4, const int* idx, V& x, V& y, V& z) {
     const V r0 = _mm256_loadu_pd(x4 + 4 * static_cast<long>(idx[0]));

@@ -25,6 +25,7 @@ namespace deform::hybrid::batched {
 /// Structure-of-arrays views of one constraint list (built by SurfaceBatches). Positions are a
 /// padded #V by 4 array (x, y, z, 0) so that a point is one aligned-size load.
 struct StretchView {
+  const unsigned char* bMovable;  ///< 1 when w_b > 0 (a is always movable: SurfaceBatches orients)
   const int* a;
   const int* b;
   const double* rest;  ///< l, m
@@ -32,6 +33,7 @@ struct StretchView {
   const double* sb;    ///< k w_b / (w_a + w_b)
 };
 struct BendView {
+  const unsigned char* movable;  ///< bit k set when w[k] > 0
   const int* p[4];     ///< x0, x1 wings; x2, x3 the shared edge (DihedralConstraint order)
   const double* w[4];  ///< inverse masses, 1/kg
   const double* cos0;  ///< cos theta0
@@ -103,14 +105,18 @@ inline int stretchGroup(double* x4, const StretchView& s, std::size_t i) {
   const V f = L::select(ok, (L::load(s.rest + i) - len) / len, L::set1(0.0));
   const V fa = L::load(s.sa + i) * f, fb = L::load(s.sb + i) * f;
   L::addPoints(x4, s.a + i, fa * dx, fa * dy, fa * dz);
-  L::addPoints(x4, s.b + i, -(fb * dx), -(fb * dy), -(fb * dz));
+  if (L::anyByte(s.bMovable + i)) L::addPoints(x4, s.b + i, -(fb * dx), -(fb * dy), -(fb * dz));
   return L::kWidth - L::count(ok);
 }
 
 /// Projects L::kWidth dihedral constraints starting at i. Returns the number of degenerate ones.
+/// The gradient and the update of a particle slot are skipped when the slot is immovable in every
+/// lane (w = 0 there, so it contributes nothing): SurfaceBatches sorts each colour by its
+/// movable-slot pattern so that the groups of four share it.
 template <class L>
 inline int bendGroup(double* x4, const BendView& h, std::size_t i) {
   using V = typename L::V;
+  const unsigned mask = L::orBytes(h.movable + i);
   V x[4], y[4], z[4], w[4];
   for (int k = 0; k < 4; ++k) {
     L::loadPoints(x4, h.p[k] + i, x[k], y[k], z[k]);
@@ -138,20 +144,29 @@ inline int bendGroup(double* x4, const BendView& h, std::size_t i) {
   const V invA = b2s * elen * r, invB = a2s * elen * r, invE = a2s * b2s * r;
   const V uAx = nAx * invA, uAy = nAy * invA, uAz = nAz * invA;
   const V uBx = nBx * invB, uBy = nBy * invB, uBz = nBz * invB;
-  // Projections of the wings onto the edge, divided by |e|.
-  const V d03 = ((x[0] - x[3]) * ex + (y[0] - y[3]) * ey + (z[0] - z[3]) * ez) * invE;
-  const V d13 = ((x[1] - x[3]) * ex + (y[1] - y[3]) * ey + (z[1] - z[3]) * ez) * invE;
-  const V d02 = -(p20x * ex + p20y * ey + p20z * ez) * invE;  // (x0 - x2).e / |e|
-  const V d12 = -(p21x * ex + p21y * ey + p21z * ez) * invE;  // (x1 - x2).e / |e|
-  V gx[4], gy[4], gz[4];
-  gx[0] = elen * uAx, gy[0] = elen * uAy, gz[0] = elen * uAz;
-  gx[1] = elen * uBx, gy[1] = elen * uBy, gz[1] = elen * uBz;
-  gx[2] = d03 * uAx + d13 * uBx, gy[2] = d03 * uAy + d13 * uBy, gz[2] = d03 * uAz + d13 * uBz;
-  gx[3] = -(d02 * uAx + d12 * uBx), gy[3] = -(d02 * uAy + d12 * uBy),
-  gz[3] = -(d02 * uAz + d12 * uBz);
-  V denom = w[0] * (gx[0] * gx[0] + gy[0] * gy[0] + gz[0] * gz[0]);
-  for (int k = 1; k < 4; ++k)
-    denom = denom + w[k] * (gx[k] * gx[k] + gy[k] * gy[k] + gz[k] * gz[k]);
+  V gx[4] = {}, gy[4] = {}, gz[4] = {};  // only the movable slots are filled and read
+  V denom = L::set1(0.0);
+  if (mask & 1u) {
+    gx[0] = elen * uAx, gy[0] = elen * uAy, gz[0] = elen * uAz;
+    denom = denom + w[0] * (gx[0] * gx[0] + gy[0] * gy[0] + gz[0] * gz[0]);
+  }
+  if (mask & 2u) {
+    gx[1] = elen * uBx, gy[1] = elen * uBy, gz[1] = elen * uBz;
+    denom = denom + w[1] * (gx[1] * gx[1] + gy[1] * gy[1] + gz[1] * gz[1]);
+  }
+  if (mask & 4u) {
+    const V d03 = ((x[0] - x[3]) * ex + (y[0] - y[3]) * ey + (z[0] - z[3]) * ez) * invE;
+    const V d13 = ((x[1] - x[3]) * ex + (y[1] - y[3]) * ey + (z[1] - z[3]) * ez) * invE;
+    gx[2] = d03 * uAx + d13 * uBx, gy[2] = d03 * uAy + d13 * uBy, gz[2] = d03 * uAz + d13 * uBz;
+    denom = denom + w[2] * (gx[2] * gx[2] + gy[2] * gy[2] + gz[2] * gz[2]);
+  }
+  if (mask & 8u) {
+    const V d02 = -(p20x * ex + p20y * ey + p20z * ez) * invE;  // (x0 - x2).e / |e|
+    const V d12 = -(p21x * ex + p21y * ey + p21z * ez) * invE;  // (x1 - x2).e / |e|
+    gx[3] = -(d02 * uAx + d12 * uBx), gy[3] = -(d02 * uAy + d12 * uBy),
+    gz[3] = -(d02 * uAz + d12 * uBz);
+    denom = denom + w[3] * (gx[3] * gx[3] + gy[3] * gy[3] + gz[3] * gz[3]);
+  }
   ok = L::band(ok, L::gt(denom, L::set1(0.0)));
   // s = (nB x nA) . e, c = |e| nA . nB
   const V s =
@@ -161,6 +176,7 @@ inline int bendGroup(double* x4, const BendView& h, std::size_t i) {
   const V C = atan2Poly<L>(s * cos0 - c * sin0, c * cos0 + s * sin0);
   const V dl = L::select(ok, (L::set1(-h.k) * C) / L::max(denom, L::set1(1e-300)), L::set1(0.0));
   for (int k = 0; k < 4; ++k) {
+    if (!(mask & (1u << k))) continue;
     const V f = w[k] * dl;  // exactly 0 for immovable particles: adding it changes nothing
     L::addPoints(x4, h.p[k] + i, f * gx[k], f * gy[k], f * gz[k]);
   }

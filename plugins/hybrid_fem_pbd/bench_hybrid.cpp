@@ -69,6 +69,10 @@ void BM_HybridStep(benchmark::State& state) {
   state.counters["pbd_ms"] = pbd / n;
   state.counters["load_ms"] = load / n;
   state.counters["fine_vertices"] = double(m.counts().at("nodes"));
+  state.counters["active_stretch"] = double(m.batches().sa.size());
+  state.counters["active_bending"] = double(m.batches().hCos0.size());
+  state.counters["colours"] =
+      double(m.batches().sColourStart.size() + m.batches().hColourStart.size() - 2);
 }
 BENCHMARK(BM_HybridStep)
     ->ArgNames({"iterations", "projection"})

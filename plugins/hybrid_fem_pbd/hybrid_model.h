@@ -99,6 +99,8 @@ class HybridModel final : public Model {
   /// Coarse vertex of each fine vertex that is (still) a control node, else -1.
   const std::vector<int>& controlOf() const { return m_controlOf; }
   const SurfaceConstraints& constraints() const { return m_constraints; }
+  /// The batches projected in the last step (the constraints with a movable particle).
+  const SurfaceBatches& batches() const { return m_batches; }
   const CutReport& lastCut() const { return m_lastCut; }
   const MatX3& restSurface() const { return m_surf.rest; }
 
