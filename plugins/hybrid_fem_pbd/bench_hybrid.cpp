@@ -1,6 +1,9 @@
 // Google Benchmark of the hybrid FEM+PBD model on the liver phantom with a ~2k-vertex fine
 // surface (makePhantom("liver", 0.25)): per-step time under a constant 2 N point load, and the
 // hybrid mesh construction (vertex-cover simplification + Gmsh tetrahedralisation) time.
+// BM_HybridStep/<iterations>/<projection>: projection 0 = Reference (the shared scalar kernels
+// one by one, the implementation before batching), 1 = BatchedScalar, 2 = Batched (AVX2), so
+// one run measures before and after side by side.
 #include <benchmark/benchmark.h>
 #include <deform/phantom.h>
 
@@ -44,6 +47,7 @@ void BM_HybridStep(benchmark::State& state) {
   hybrid::HybridModel m;
   hybrid::HybridConfig cfg;
   cfg.iterations = static_cast<int>(state.range(0));
+  cfg.projection = static_cast<hybrid::SurfaceProjection>(state.range(1));
   m.init(organ, cfg, nullptr);
   const Box b = boundingBox(organ.surface.V);
   StepInput in;
@@ -65,12 +69,19 @@ void BM_HybridStep(benchmark::State& state) {
   state.counters["pbd_ms"] = pbd / n;
   state.counters["load_ms"] = load / n;
   state.counters["fine_vertices"] = double(m.counts().at("nodes"));
+  state.counters["active_stretch"] = double(m.batches().sa.size());
+  state.counters["active_bending"] = double(m.batches().hCos0.size());
+  state.counters["colours"] =
+      double(m.batches().sColourStart.size() + m.batches().hColourStart.size() - 2);
 }
 BENCHMARK(BM_HybridStep)
-    ->Arg(10)
-    ->Arg(5)
-    ->Arg(2)
-    ->Arg(1)
+    ->ArgNames({"iterations", "projection"})
+    ->Args({10, 0})
+    ->Args({10, 1})
+    ->Args({10, 2})
+    ->Args({5, 2})
+    ->Args({2, 2})
+    ->Args({1, 2})
     ->Unit(benchmark::kMillisecond)
     ->Repetitions(5)
     ->ReportAggregatesOnly(true);

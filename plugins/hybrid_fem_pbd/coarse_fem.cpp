@@ -83,7 +83,8 @@ const MatX& CoarseLinearFem::nodeColumns(int node) {
 }
 
 void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& gravity,
-                            const std::vector<Prescribed>& prescribed, MatX3& u) {
+                            const std::vector<Prescribed>& prescribed, MatX3& u,
+                            std::vector<Vec3>* reactions) {
   VecX& x = m_scratch;
   x.setZero(m_numFree);
   if (!gravity.isZero()) {
@@ -103,7 +104,8 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
   }
 
   // Prescribed rows: rebuild Z and S only when the rows (nodes, weights, axes) change.
-  std::vector<std::array<Real, 7>> key;
+  std::vector<std::array<Real, 7>>& key = m_keyScratch;
+  key.clear();
   for (const Prescribed& p : prescribed) {
     std::array<Real, 7> k = {Real(p.at.count), -1, -1, -1, 0, 0, 0};
     for (int i = 0; i < p.at.count; ++i) {
@@ -142,9 +144,11 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
     // Eigen's pivoting QR must not be run on a 0x0 matrix (it reads past the empty storage).
     if (m > 0) m_S.compute(S);
   }
+  if (reactions) reactions->assign(prescribed.size(), Vec3::Zero());
   if (!m_rowAt.empty()) {
     // Rows in the same order as built: one per prescribed entry and free axis.
-    VecX rhs(m_rowAt.size());
+    VecX& rhs = m_rhs;
+    rhs.resize(static_cast<Eigen::Index>(m_rowAt.size()));
     size_t r = 0;
     for (const Prescribed& p : prescribed)
       for (int a = 0; a < 3; ++a) {
@@ -159,8 +163,18 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
         }
         rhs[r++] = p.displacement[a] - cu;
       }
-    const VecX lambda = m_S.solve(rhs);
-    x.noalias() += m_Z * lambda;
+    m_lambda = m_S.solve(rhs);
+    x.noalias() += m_Z * m_lambda;
+    if (reactions) {
+      r = 0;
+      for (size_t e = 0; e < prescribed.size() && r < m_rowAt.size(); ++e)
+        for (int a = 0; a < 3 && r < m_rowAt.size(); ++a) {
+          bool anyFree = false;
+          for (int i = 0; i < prescribed[e].at.count; ++i)
+            anyFree |= m_dof[3 * prescribed[e].at.nodes[i] + a] >= 0;
+          if (anyFree) (*reactions)[e][a] = m_lambda[static_cast<Eigen::Index>(r++)];
+        }
+    }
   }
 
   u.setZero(m_numNodes, 3);

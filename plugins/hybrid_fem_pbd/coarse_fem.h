@@ -55,9 +55,15 @@ class CoarseLinearFem {
             const std::string& source);
 
   /// Displacements u (#nodes by 3, m) under the given nodal forces, a body acceleration
-  /// (m/s^2, times density), and prescribed displacements.
+  /// (m/s^2, times density), and prescribed displacements. reactions (optional, resized to
+  /// #prescribed): the force (N) each prescription applies to MV, i.e. its Lagrange multipliers r
+  /// (the entry's nodes receive N_k r, and sum_k N_k = 1), so that K u = f + sum C^T r: the FEM
+  /// reaction K u - f at the prescribed nodes. An axis whose nodes are all pinned has no row and
+  /// reports 0 (its load goes to the fixed support). Dependent rows (two prescriptions on the
+  /// same node) share their reaction by the minimum-norm solution.
   void solve(const std::vector<NodalForce>& forces, const Vec3& gravity,
-             const std::vector<Prescribed>& prescribed, MatX3& u);
+             const std::vector<Prescribed>& prescribed, MatX3& u,
+             std::vector<Vec3>* reactions = nullptr);
 
   int numNodes() const { return m_numNodes; }
   int numFreeDofs() const { return m_numFree; }
@@ -83,7 +89,8 @@ class CoarseLinearFem {
   Eigen::CompleteOrthogonalDecomposition<MatX> m_S;
   std::vector<int> m_rowAxis;
   std::vector<CoarseAttachment> m_rowAt;
-  VecX m_scratch;
+  VecX m_scratch, m_rhs, m_lambda;
+  std::vector<std::array<Real, 7>> m_keyScratch;
 };
 
 }  // namespace deform::hybrid

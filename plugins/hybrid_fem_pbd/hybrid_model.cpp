@@ -196,6 +196,7 @@ void HybridModel::reset() {
   m_attach.clear();
   m_immovable.clear();
   m_activeValid = false;
+  m_graspForces.clear();
   m_lastCut = CutReport();
   m_cut = false;
   m_phase.clear();
@@ -217,20 +218,23 @@ StepStatus HybridModel::step(const StepInput& in) {
   auto t = Clock::now();
 
   // 1. Load processing.
-  std::vector<CoarseLinearFem::NodalForce> nodal;
-  std::vector<std::pair<int, Vec3>> surfaceForces;
+  m_nodal.clear();
+  m_surfaceForces.clear();
   for (const PointLoad& l : in.loads) {
     if (l.surfaceVertex < 0 || l.surfaceVertex >= n || l.force.isZero()) continue;
     const CoarseAttachment& a = attachment(l.surfaceVertex);
     const std::array<Vec3, 3> f = equivalentNodalForces(a, l.force);
-    for (int k = 0; k < a.count; ++k) nodal.push_back({a.nodes[k], f[k]});
+    for (int k = 0; k < a.count; ++k) m_nodal.push_back({a.nodes[k], f[k]});
     if (m_cfg.surfaceLoad && m_controlOf[l.surfaceVertex] < 0)
-      surfaceForces.emplace_back(l.surfaceVertex, l.force);
+      m_surfaceForces.emplace_back(l.surfaceVertex, l.force);
   }
-  std::vector<CoarseLinearFem::Prescribed> prescribed;
-  std::vector<char> immovable(n, 0);
-  std::vector<std::pair<int, Vec3>> graspTargets;
-  for (const GraspInput& g : in.grasps) {
+  m_prescribed.clear();
+  m_prescribedGrasp.clear();
+  std::vector<char>& immovable = m_immovableStep;
+  immovable.assign(n, 0);
+  m_graspTargets.clear();
+  for (size_t gi = 0; gi < in.grasps.size(); ++gi) {
+    const GraspInput& g = in.grasps[gi];
     bool anyControl = false;
     for (int i : g.nodes)
       if (i >= 0 && i < n && m_controlOf[i] >= 0) anyControl = true;
@@ -238,13 +242,14 @@ StepStatus HybridModel::step(const StepInput& in) {
       const int i = g.nodes[k];
       if (i < 0 || i >= n || static_cast<Eigen::Index>(k) >= g.targets.rows()) continue;
       const Vec3 target = g.targets.row(k).transpose();
-      graspTargets.emplace_back(i, target);
+      m_graspTargets.emplace_back(i, target);
       immovable[i] = 1;
       if (m_controlOf[i] >= 0 || !anyControl) {
         CoarseLinearFem::Prescribed p;
         p.at = attachment(i);
         p.displacement = target - m_surf.rest.row(i).transpose();
-        prescribed.push_back(p);
+        m_prescribed.push_back(p);
+        m_prescribedGrasp.push_back(static_cast<int>(gi));
       }
     }
   }
@@ -252,8 +257,12 @@ StepStatus HybridModel::step(const StepInput& in) {
 
   // 2. Coarse FEM.
   t = Clock::now();
-  m_fem.solve(nodal, in.gravity, prescribed, m_volumeU);
+  m_fem.solve(m_nodal, in.gravity, m_prescribed, m_volumeU, &m_reactions);
   m_volumeX = m_mesh.volume.V + m_volumeU;
+  // Newton's third law: the multipliers are the forces the grasps apply to the tissue.
+  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
+  for (size_t e = 0; e < m_prescribed.size(); ++e)
+    m_graspForces[static_cast<size_t>(m_prescribedGrasp[e])] -= m_reactions[e];
   m_phase["fem"] = msSince(t);
 
   // 3.-5. Fine surface PBD.
@@ -265,11 +274,13 @@ StepStatus HybridModel::step(const StepInput& in) {
     m_w.resize(n);
     for (int i = 0; i < n; ++i) m_w[i] = immovable[i] || !(m_mass[i] > 0) ? 0 : 1 / m_mass[i];
     m_active = activeConstraints(m_constraints, m_w);
+    m_batches = buildSurfaceBatches(m_constraints, m_active, m_w, m_cfg.stretchStiffness,
+                                    m_cfg.bendingStiffness, m_cfg.iterations);
     m_activeValid = true;
   }
   const Real damp = std::exp(-m_cfg.damping * dt);
   const Vec3 g = in.gravity;
-  for (const auto& [i, f] : surfaceForces) m_v.row(i) += (dt * m_w[i] * f).transpose();
+  for (const auto& [i, f] : m_surfaceForces) m_v.row(i) += (dt * m_w[i] * f).transpose();
   m_p.resize(n, 3);
   for (int i = 0; i < n; ++i) {
     if (m_controlOf[i] >= 0 && !m_isFixedFine[i]) {
@@ -283,11 +294,23 @@ StepStatus HybridModel::step(const StepInput& in) {
       m_p.row(i) = m_surf.x.row(i);
     }
   }
-  for (const auto& [i, target] : graspTargets)
+  for (const auto& [i, target] : m_graspTargets)
     if (!m_isFixedFine[i]) m_p.row(i) = target.transpose();
-  m_numeric["degenerate_constraints"] +=
-      projectSurfaceConstraints(m_p, m_w, m_constraints, m_active, m_cfg.stretchStiffness,
-                                m_cfg.bendingStiffness, m_cfg.iterations);
+  long long degenerate = 0;
+  if (m_cfg.projection == SurfaceProjection::Reference) {
+    degenerate =
+        projectSurfaceConstraints(m_p, m_w, m_constraints, m_active, m_cfg.stretchStiffness,
+                                  m_cfg.bendingStiffness, m_cfg.iterations);
+  } else {
+    m_x4.resize(4 * static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i)
+      for (int a = 0; a < 4; ++a) m_x4[4 * size_t(i) + a] = a < 3 ? m_p(i, a) : 0.0;
+    degenerate = projectSurfaceBatches(m_x4.data(), m_batches, m_cfg.iterations,
+                                       m_cfg.projection == SurfaceProjection::Batched);
+    for (int i = 0; i < n; ++i)
+      for (int a = 0; a < 3; ++a) m_p(i, a) = m_x4[4 * size_t(i) + a];
+  }
+  m_numeric["degenerate_constraints"] += degenerate;
   const Real invDt = dt > 0 ? 1 / dt : 0;
   m_v = (m_p - m_surf.x) * (invDt * damp);
   m_surf.x.swap(m_p);

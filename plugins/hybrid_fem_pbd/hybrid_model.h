@@ -24,12 +24,22 @@
 #include <string>
 #include <vector>
 
+#include "batched_projection.h"
 #include "coarse_fem.h"
 #include "incision.h"
 #include "surface_pbd.h"
 #include "vertex_cover_simplification.h"
 
 namespace deform::hybrid {
+
+/// How the surface constraints are projected (identical constraints, order and stiffness; see
+/// batched_projection.h). Not a scene parameter: the reference path is kept for tests and the
+/// before/after benchmark.
+enum class SurfaceProjection {
+  Reference,      ///< projectSurfaceConstraints(): the shared pbd_kernels.h kernels, one by one
+  BatchedScalar,  ///< projectSurfaceBatches() without SIMD
+  Batched,        ///< projectSurfaceBatches(), four at a time where the CPU has AVX2
+};
 
 /// Resolved parameters (see paramSpecs()).
 struct HybridConfig {
@@ -42,6 +52,7 @@ struct HybridConfig {
   Real minCollapseQuality = 0.1;  ///< see SimplificationOptions
   Real tetEdgeFactor = 1.0;       ///< interior tet edge length / mean coarse surface edge
   Real cutSnap = 0.1;             ///< CutOptions::snapFraction
+  SurfaceProjection projection = SurfaceProjection::Batched;
 };
 
 std::vector<ParamSpec> paramSpecs();
@@ -73,6 +84,11 @@ class HybridModel final : public Model {
   Counts counts() const override;
   PhaseTimes phaseTimes() const override { return m_phase; }
   NumericCounters numericCounters() const override { return m_numeric; }
+  /// Force (N) the tissue exerts on each grasp: minus the sum of the Lagrange multipliers of the
+  /// grasp's prescribed displacements on MV, i.e. -(K u - f) at the grasped control nodes (see
+  /// CoarseLinearFem::solve). The volume mesh carries the load in this model; the fine surface is
+  /// a classic (unitless) PBD skin driven by MV, so its multipliers are not forces.
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
   void cut(const CutPath& path) override;
   MatX3i surfaceFaces() const override;
 
@@ -83,6 +99,8 @@ class HybridModel final : public Model {
   /// Coarse vertex of each fine vertex that is (still) a control node, else -1.
   const std::vector<int>& controlOf() const { return m_controlOf; }
   const SurfaceConstraints& constraints() const { return m_constraints; }
+  /// The batches projected in the last step (the constraints with a movable particle).
+  const SurfaceBatches& batches() const { return m_batches; }
   const CutReport& lastCut() const { return m_lastCut; }
   const MatX3& restSurface() const { return m_surf.rest; }
 
@@ -108,12 +126,23 @@ class HybridModel final : public Model {
   std::map<int, CoarseAttachment> m_attach;
   std::vector<char> m_immovable;
   ActiveConstraints m_active;
+  SurfaceBatches m_batches;
   bool m_activeValid = false;
+  std::vector<Vec3> m_graspForces;
   CutReport m_lastCut;
   bool m_cut = false;
 
   PhaseTimes m_phase;
   NumericCounters m_numeric;
+
+  // Per-step scratch (kept to avoid allocations in step()).
+  std::vector<CoarseLinearFem::NodalForce> m_nodal;
+  std::vector<std::pair<int, Vec3>> m_surfaceForces, m_graspTargets;
+  std::vector<CoarseLinearFem::Prescribed> m_prescribed;
+  std::vector<int> m_prescribedGrasp;  ///< grasp index of each m_prescribed entry
+  std::vector<Vec3> m_reactions;
+  std::vector<char> m_immovableStep;
+  std::vector<Real> m_x4;  ///< #V by 4 padded positions for projectSurfaceBatches
 };
 
 }  // namespace deform::hybrid

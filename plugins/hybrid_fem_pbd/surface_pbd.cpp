@@ -75,7 +75,8 @@ namespace {
 // particle, and projecting colour by colour (a fixed, deterministic Gauss-Seidel order) lets the
 // CPU overlap independent projections instead of waiting on a chain through one free node.
 template <class NodesOf>
-std::vector<int> orderByColour(const std::vector<int>& ids, const VecX& w, NodesOf nodesOf) {
+std::vector<int> orderByColour(const std::vector<int>& ids, const VecX& w, NodesOf nodesOf,
+                               std::vector<int>& colourStart, bool& overflow) {
   std::vector<std::uint64_t> used(w.size(), 0);
   std::vector<std::pair<int, int>> key(ids.size());
   for (size_t i = 0; i < ids.size(); ++i) {
@@ -83,13 +84,19 @@ std::vector<int> orderByColour(const std::vector<int>& ids, const VecX& w, Nodes
     for (int n : nodesOf(ids[i]))
       if (n >= 0 && w[n] > 0) mask |= used[n];
     const int colour = (~mask == 0) ? 63 : std::countr_zero(~mask);
+    overflow |= ~mask == 0;
     for (int n : nodesOf(ids[i]))
       if (n >= 0 && w[n] > 0) used[n] |= std::uint64_t(1) << colour;
     key[i] = {colour, ids[i]};
   }
   std::sort(key.begin(), key.end());
   std::vector<int> out(ids.size());
-  for (size_t i = 0; i < key.size(); ++i) out[i] = key[i].second;
+  colourStart.clear();
+  for (size_t i = 0; i < key.size(); ++i) {
+    out[i] = key[i].second;
+    if (i == 0 || key[i].first != key[i - 1].first) colourStart.push_back(static_cast<int>(i));
+  }
+  colourStart.push_back(static_cast<int>(key.size()));
   return out;
 }
 
@@ -104,13 +111,19 @@ ActiveConstraints activeConstraints(const SurfaceConstraints& c, const VecX& w) 
     if (w[h.p[0]] > 0 || w[h.p[1]] > 0 || w[h.p[2]] > 0 || w[h.p[3]] > 0)
       a.bending.push_back(static_cast<int>(i));
   }
-  a.stretch = orderByColour(a.stretch, w, [&](int i) {
-    return std::array<int, 4>{c.stretch[i].a, c.stretch[i].b, -1, -1};
-  });
-  a.bending = orderByColour(a.bending, w, [&](int i) {
-    const auto& h = c.bending[i];
-    return std::array<int, 4>{h.p[0], h.p[1], h.p[2], h.p[3]};
-  });
+  a.stretch = orderByColour(
+      a.stretch, w,
+      [&](int i) {
+        return std::array<int, 4>{c.stretch[i].a, c.stretch[i].b, -1, -1};
+      },
+      a.stretchColourStart, a.stretchColourOverflow);
+  a.bending = orderByColour(
+      a.bending, w,
+      [&](int i) {
+        const auto& h = c.bending[i];
+        return std::array<int, 4>{h.p[0], h.p[1], h.p[2], h.p[3]};
+      },
+      a.bendingColourStart, a.bendingColourOverflow);
   return a;
 }
 

@@ -37,6 +37,11 @@ bool orderHinge(const MatX3i& F, int fa, int fb, int a, int b, pbd::DihedralCons
 struct ActiveConstraints {
   std::vector<int> stretch;
   std::vector<int> bending;
+  /// Colour c holds stretch[stretchColourStart[c] .. stretchColourStart[c + 1]) (likewise for
+  /// bending). The last colour may share movable particles when the 63 colours ran out
+  /// (*ColourOverflow): it must then be projected one constraint at a time.
+  std::vector<int> stretchColourStart, bendingColourStart;
+  bool stretchColourOverflow = false, bendingColourOverflow = false;
 };
 ActiveConstraints activeConstraints(const SurfaceConstraints& c, const VecX& w);
 

@@ -1,8 +1,10 @@
 // Hybrid FEM+PBD model: rest state, control nodes, loads, linearity, grasp, cut, reset.
+#include <deform/fem_tet.h>
 #include <deform/mesh_check.h>
 #include <deform/phantom.h>
 #include <gtest/gtest.h>
 
+#include <Eigen/SparseCholesky>
 #include <set>
 
 #include "hybrid_model.h"
@@ -242,6 +244,165 @@ TEST(HybridModelLiver, BuildsAndStaysFiniteUnderLargeLoads) {
   EXPECT_TRUE(model.surface().allFinite());
   const Vec3 d = (model.surface().row(top) - organ.surface.V.row(top)).transpose();
   EXPECT_LT(d.z(), 0);
+}
+
+// The batched (AVX2) projection gives the trajectory of the one-by-one reference projection.
+TEST(HybridModelProjection, BatchedFollowsTheReferenceTrajectory) {
+  const Organ organ = phantomOrgan("liver", 0.25);
+  const int top = topVertex(organ.surface);
+  MatX3 result[3];
+  for (int mode = 0; mode < 3; ++mode) {
+    HybridConfig cfg;
+    cfg.projection = static_cast<SurfaceProjection>(mode);
+    HybridModel m;
+    m.init(organ, cfg, &testCache());
+    for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(input(top, Vec3(0.5, 0, -5.0))), StepStatus::Ok);
+    result[mode] = m.surface();
+  }
+  const Real moved = maxDistance(result[0], organ.surface.V);
+  EXPECT_GT(moved, 1e-3);
+  EXPECT_LT(maxDistance(result[1], result[0]), 1e-9 * moved);
+  EXPECT_LT(maxDistance(result[2], result[0]), 1e-9 * moved);
+}
+
+// Fine vertices on the cube's top face (z = 0.05 m).
+std::vector<int> topFace(const SurfaceMesh& s) {
+  std::vector<int> out;
+  const Real zTop = boundingBox(s.V).hi.z();
+  for (int i = 0; i < s.numVertices(); ++i)
+    if (s.V(i, 2) > zTop - 1e-9) out.push_back(i);
+  return out;
+}
+
+GraspInput graspAt(const SurfaceMesh& s, const std::vector<int>& nodes, const Vec3& shift) {
+  GraspInput g;
+  g.nodes = nodes;
+  g.targets = MatX3(nodes.size(), 3);
+  for (size_t k = 0; k < nodes.size(); ++k)
+    g.targets.row(k) = s.V.row(nodes[k]) + shift.transpose();
+  return g;
+}
+
+// An organ hanging from grasps is in equilibrium: the grasps carry its whole weight, the weight of
+// the volume mesh that carries the load (rho g sum V_tet). The only deviation is the 1e-8
+// regularisation of the unpinned K (its force eps K_ii u is ~1e-8 of the weight here) and
+// rounding through the capacitance matrix, whose rigid-mode part is ~1e8 times its elastic part:
+// 1e-5 relative is far above both and far below any modelling error (a missing node's load is
+// >= 1e-3 of the weight on this mesh).
+TEST(HybridModelReaction, HangingOrganGraspsCarryItsWeight) {
+  Organ organ = phantomOrgan("cube", 0.5);
+  organ.fixed = FixedRegion();  // hangs from the grasps only
+  HybridModel model;
+  model.init(organ, HybridConfig(), &testCache());
+  Real volume = 0;
+  const TetMesh& mv = model.hybridMesh().volume;
+  for (int t = 0; t < mv.numTets(); ++t) {
+    const Vec3 a = mv.V.row(mv.T(t, 0)), b = mv.V.row(mv.T(t, 1)), c = mv.V.row(mv.T(t, 2)),
+               d = mv.V.row(mv.T(t, 3));
+    volume += (b - a).dot((c - a).cross(d - a)) / 6;
+  }
+  const Real weight = organ.material.density * volume * 9.81;
+  // Two grasps: the top face split at x = 0 (both hold control nodes).
+  std::vector<int> left, right;
+  for (int i : topFace(organ.surface)) (organ.surface.V(i, 0) < 0 ? left : right).push_back(i);
+  StepInput in = input();
+  in.gravity = Vec3(0, 0, -9.81);
+  in.grasps = {graspAt(organ.surface, left, Vec3::Zero()),
+               graspAt(organ.surface, right, Vec3(0, 0, 0.002))};
+  for (int s = 0; s < 5; ++s) ASSERT_EQ(model.step(in), StepStatus::Ok);
+  const std::vector<Vec3> f = model.graspForces();
+  ASSERT_EQ(f.size(), 2u);
+  const Vec3 total = f[0] + f[1];
+  std::printf("weight %.6f N, grasp forces (%.4g %.4g %.4g) + (%.4g %.4g %.4g)\n", weight, f[0].x(),
+              f[0].y(), f[0].z(), f[1].x(), f[1].y(), f[1].z());
+  // The tissue pulls the grasps down by its weight, and nothing sideways.
+  EXPECT_NEAR(total.z(), -weight, 1e-5 * weight);
+  EXPECT_NEAR(total.x(), 0.0, 1e-5 * weight);
+  EXPECT_NEAR(total.y(), 0.0, 1e-5 * weight);
+  // Both grasps pull down; lifting one side by 2 mm loads it more.
+  EXPECT_LT(f[0].z(), 0);
+  EXPECT_LT(f[1].z(), f[0].z());
+  // No grasp, no force.
+  in.grasps.clear();
+  model.step(in);
+  EXPECT_TRUE(model.graspForces().empty());
+}
+
+// The grasp force equals the reaction of an independent linear FEM solve on the same volume mesh
+// (prescribed displacements eliminated instead of imposed by multipliers, K assembled here).
+// Lifting the top face of a cube clamped at the bottom: the tissue pulls the grasp down, with a
+// stiffness between the uniaxial E A / L and the constrained-modulus bound.
+TEST(HybridModelReaction, LiftedTopFaceMatchesAnEliminatedLinearFemReaction) {
+  const Organ organ = phantomOrgan("cube", 0.5);
+  HybridModel model;
+  model.init(organ, HybridConfig(), &testCache());
+  const Real lift = 1e-3;
+  const std::vector<int> top = topFace(organ.surface);
+  StepInput in = input();
+  in.grasps = {graspAt(organ.surface, top, Vec3(0, 0, lift))};
+  ASSERT_EQ(model.step(in), StepStatus::Ok);
+  const Vec3 f = model.graspForces().at(0);
+
+  const TetMesh& mv = model.hybridMesh().volume;
+  const int nn = mv.numVertices();
+  std::vector<char> kind(nn, 0);  // 0 free, 1 fixed, 2 prescribed
+  for (int v : fixedNodeIndices(mv.V, organ.fixed, organ.surface)) kind[v] = 1;
+  for (int i : top)
+    if (model.controlOf()[i] >= 0 && kind[model.controlOf()[i]] == 0)
+      kind[model.controlOf()[i]] = 2;
+  std::vector<int> dof(3 * nn, -1);
+  int nf = 0;
+  for (int v = 0; v < nn; ++v)
+    if (kind[v] == 0)
+      for (int a = 0; a < 3; ++a) dof[3 * v + a] = nf++;
+  const LinearMaterial lin{
+      LameParameters::fromYoungPoisson(organ.material.young, organ.material.poisson)};
+  std::vector<Eigen::Triplet<Real>> trip;
+  VecX rhs = VecX::Zero(nf), reaction = VecX::Zero(3);
+  std::vector<Mat12> ke(mv.numTets());
+  for (int t = 0; t < mv.numTets(); ++t) {
+    std::array<Vec3, 4> X;
+    for (int k = 0; k < 4; ++k) X[k] = mv.V.row(mv.T(t, k)).transpose();
+    TetRest rest;
+    ASSERT_TRUE(makeTetRest(X[0], X[1], X[2], X[3], rest));
+    TetEvaluation e;
+    evaluateTet(lin, rest, X, TetEvalMode::Stiffness, e);
+    ke[t] = e.stiffness;
+    for (int i = 0; i < 12; ++i)
+      for (int j = 0; j < 12; ++j) {
+        const int vi = mv.T(t, i / 3), vj = mv.T(t, j / 3);
+        const int di = dof[3 * vi + i % 3], dj = dof[3 * vj + j % 3];
+        const Real uj = (kind[vj] == 2 && j % 3 == 2) ? lift : 0.0;
+        if (di >= 0 && dj >= 0) trip.emplace_back(di, dj, e.stiffness(i, j));
+        if (di >= 0 && dj < 0) rhs[di] -= e.stiffness(i, j) * uj;
+      }
+  }
+  Eigen::SparseMatrix<Real> K(nf, nf);
+  K.setFromTriplets(trip.begin(), trip.end());
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<Real>> ldlt(K);
+  ASSERT_EQ(ldlt.info(), Eigen::Success);
+  const VecX uf = ldlt.solve(rhs);
+  // Reaction at the prescribed nodes: (K u)_P, summed per axis.
+  Vec3 r = Vec3::Zero();
+  for (int t = 0; t < mv.numTets(); ++t)
+    for (int i = 0; i < 12; ++i) {
+      const int vi = mv.T(t, i / 3);
+      if (kind[vi] != 2) continue;
+      for (int j = 0; j < 12; ++j) {
+        const int vj = mv.T(t, j / 3);
+        const int dj = dof[3 * vj + j % 3];
+        const Real uj = dj >= 0 ? uf[dj] : (kind[vj] == 2 && j % 3 == 2 ? lift : 0.0);
+        r[i % 3] += ke[t](i, j) * uj;
+      }
+    }
+  std::printf("grasp force (%.6g %.6g %.6g) N, reference -(K u)_P (%.6g %.6g %.6g) N\n", f.x(),
+              f.y(), f.z(), -r.x(), -r.y(), -r.z());
+  EXPECT_LT((f + r).norm(), 1e-6 * r.norm());
+  const Real E = organ.material.young, A = 0.1 * 0.1, nu = organ.material.poisson;
+  const Real M = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu));
+  // Free length between 0.09 m (fixed box reaches 1 cm up the sides) and 0.1 m.
+  EXPECT_LT(f.z(), -E * A * lift / 0.1);
+  EXPECT_GT(f.z(), -M * A * lift / 0.09 * 1.2);  // + 20 % for the stiffness of coarse linear tets
 }
 
 }  // namespace

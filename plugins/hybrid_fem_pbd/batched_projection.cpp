@@ -1,0 +1,185 @@
+#include "batched_projection.h"
+
+#include <deform/pbd_kernels.h>
+
+#include <algorithm>
+#include <cmath>
+
+#ifdef DEFORM_HYBRID_AVX2
+#include "batched_projection_avx2.h"
+#endif
+
+namespace deform::hybrid {
+
+namespace {
+
+// One constraint at a time: the reference for the AVX2 lanes and the tail of each colour.
+struct ScalarLanes {
+  using V = double;
+  using M = bool;
+  static constexpr int kWidth = 1;
+  static V set1(double v) { return v; }
+  static V load(const double* p) { return *p; }
+  static V sqrt(V a) { return std::sqrt(a); }
+  static V min(V a, V b) { return a < b ? a : b; }
+  static V max(V a, V b) { return a > b ? a : b; }
+  static V abs(V a) { return std::fabs(a); }
+  static M gt(V a, V b) { return a > b; }
+  static M lt(V a, V b) { return a < b; }
+  static M band(M a, M b) { return a && b; }
+  static V select(M m, V a, V b) { return m ? a : b; }
+  static int count(M m) { return m ? 1 : 0; }
+  static unsigned orBytes(const unsigned char* m) { return *m; }
+  static bool anyByte(const unsigned char* m) { return *m != 0; }
+  static void loadPoints(const double* x4, const int* idx, V& x, V& y, V& z) {
+    const double* p = x4 + 4 * static_cast<long>(*idx);
+    x = p[0];
+    y = p[1];
+    z = p[2];
+  }
+  static void addPoints(double* x4, const int* idx, V dx, V dy, V dz) {
+    double* p = x4 + 4 * static_cast<long>(*idx);
+    p[0] += dx;
+    p[1] += dy;
+    p[2] += dz;
+  }
+};
+
+bool avx2Supported() {
+#ifdef DEFORM_HYBRID_AVX2
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+  return false;
+#endif
+}
+
+}  // namespace
+
+batched::StretchView SurfaceBatches::stretchView() const {
+  return {sbMovable.data(), sa.data(), sb.data(), sRest.data(), sScaleA.data(), sScaleB.data()};
+}
+
+batched::BendView SurfaceBatches::bendView() const {
+  return {hMovable.data(),
+          {hp[0].data(), hp[1].data(), hp[2].data(), hp[3].data()},
+          {hw[0].data(), hw[1].data(), hw[2].data(), hw[3].data()},
+          hCos0.data(),
+          hSin0.data(),
+          kBending};
+}
+
+SurfaceBatches buildSurfaceBatches(const SurfaceConstraints& c, const ActiveConstraints& a,
+                                   const VecX& w, Real kStretch, Real kBending, int iterations) {
+  SurfaceBatches b;
+  b.kStretch = pbd::classicStiffness(std::clamp<Real>(kStretch, 0, 1), iterations);
+  b.kBending = pbd::classicStiffness(std::clamp<Real>(kBending, 0, 1), iterations);
+  const size_t ns = a.stretch.size(), nb = a.bending.size();
+  // Within a colour the order is free (its constraints share no movable particle), so each colour
+  // is sorted by the pattern of movable slots: groups of four then share it and skip the work of
+  // their immovable slots. A stretch constraint is oriented so that a is movable.
+  // An overflowing last colour is projected in sequence and keeps its order.
+  auto sortColours = [](std::vector<int> ids, const std::vector<int>& start, bool overflow,
+                        auto pattern) {
+    const size_t sorted = start.size() < 2 ? 0 : start.size() - 1 - (overflow ? 1 : 0);
+    for (size_t c = 0; c < sorted; ++c)
+      std::stable_sort(ids.begin() + start[c], ids.begin() + start[c + 1],
+                       [&](int x, int y) { return pattern(x) < pattern(y); });
+    return ids;
+  };
+  const std::vector<int> sOrder = sortColours(
+      a.stretch, a.stretchColourStart, a.stretchColourOverflow,
+      [&](int i) { return (w[c.stretch[i].a] > 0) && (w[c.stretch[i].b] > 0) ? 1 : 0; });
+  auto hPattern = [&](int i) {
+    unsigned m = 0;
+    for (int k = 0; k < 4; ++k)
+      if (w[c.bending[i].p[k]] > 0) m |= 1u << k;
+    return m;
+  };
+  const std::vector<int> hOrder =
+      sortColours(a.bending, a.bendingColourStart, a.bendingColourOverflow, hPattern);
+  b.sa.reserve(ns);
+  b.sb.reserve(ns);
+  b.sbMovable.reserve(ns);
+  b.sRest.reserve(ns);
+  b.sScaleA.reserve(ns);
+  b.sScaleB.reserve(ns);
+  for (int i : sOrder) {
+    const pbd::DistanceConstraint& d = c.stretch[i];
+    const bool swap = !(w[d.a] > 0);
+    const int ia = swap ? d.b : d.a, ib = swap ? d.a : d.b;
+    const Real wsum = w[ia] + w[ib];  // > 0: the constraint is active
+    b.sa.push_back(ia);
+    b.sb.push_back(ib);
+    b.sbMovable.push_back(w[ib] > 0 ? 1 : 0);
+    b.sRest.push_back(d.rest);
+    b.sScaleA.push_back(b.kStretch * w[ia] / wsum);
+    b.sScaleB.push_back(b.kStretch * w[ib] / wsum);
+  }
+  for (int k = 0; k < 4; ++k) {
+    b.hp[k].reserve(nb);
+    b.hw[k].reserve(nb);
+  }
+  b.hMovable.reserve(nb);
+  b.hCos0.reserve(nb);
+  b.hSin0.reserve(nb);
+  for (int i : hOrder) {
+    const pbd::DihedralConstraint& h = c.bending[i];
+    for (int k = 0; k < 4; ++k) {
+      b.hp[k].push_back(h.p[k]);
+      b.hw[k].push_back(w[h.p[k]]);
+    }
+    b.hMovable.push_back(static_cast<unsigned char>(hPattern(i)));
+    b.hCos0.push_back(std::cos(h.restAngle));
+    b.hSin0.push_back(std::sin(h.restAngle));
+  }
+  b.sColourStart = a.stretchColourStart;
+  b.hColourStart = a.bendingColourStart;
+  if (b.sColourStart.empty()) b.sColourStart = {0, static_cast<int>(ns)};
+  if (b.hColourStart.empty()) b.hColourStart = {0, static_cast<int>(nb)};
+  b.sLastColourShared = a.stretchColourOverflow;
+  b.hLastColourShared = a.bendingColourOverflow;
+  return b;
+}
+
+long long projectSurfaceBatches(Real* x4, const SurfaceBatches& b, int iterations, bool simd) {
+  if (b.sColourStart.empty() || b.hColourStart.empty()) return 0;  // never built: nothing active
+  static const bool kAvx2 = avx2Supported();
+  const bool vec = simd && kAvx2;
+  const batched::StretchView sv = b.stretchView();
+  const batched::BendView hv = b.bendView();
+  const size_t nsc = b.sColourStart.size() - 1, nhc = b.hColourStart.size() - 1;
+  long long degenerate = 0;
+  for (int it = 0; it < iterations; ++it) {
+    for (size_t col = 0; col < nsc; ++col) {
+      size_t i = static_cast<size_t>(b.sColourStart[col]);
+      const size_t end = static_cast<size_t>(b.sColourStart[col + 1]);
+#ifdef DEFORM_HYBRID_AVX2
+      if (vec && !(b.sLastColourShared && col + 1 == nsc))
+        i += batched::stretchRangeAvx2(x4, sv, i, end, &degenerate);
+#endif
+      for (; i < end; ++i) degenerate += batched::stretchGroup<ScalarLanes>(x4, sv, i);
+    }
+    if (b.kBending <= 0) continue;
+    for (size_t col = 0; col < nhc; ++col) {
+      size_t i = static_cast<size_t>(b.hColourStart[col]);
+      const size_t end = static_cast<size_t>(b.hColourStart[col + 1]);
+#ifdef DEFORM_HYBRID_AVX2
+      if (vec && !(b.hLastColourShared && col + 1 == nhc))
+        i += batched::bendRangeAvx2(x4, hv, i, end, &degenerate);
+#endif
+      for (; i < end; ++i) degenerate += batched::bendGroup<ScalarLanes>(x4, hv, i);
+    }
+  }
+  (void)vec;
+  return degenerate;
+}
+
+bool surfaceSimdAvailable() {
+  return avx2Supported();
+}
+
+Real atan2Polynomial(Real y, Real x) {
+  return batched::atan2Poly<ScalarLanes>(y, x);
+}
+
+}  // namespace deform::hybrid

@@ -1,0 +1,56 @@
+// Hybrid FEM+PBD: the surface projection of surface_pbd.h (projectSurfaceConstraints), colour
+// batched and vectorised. Same constraints, same stiffnesses, same Gauss-Seidel order (stretch
+// colours then bending colours in each sweep, each colour in index order): the constraints of one
+// colour share no movable particle, so projecting four of them at once (AVX2) gives what
+// projecting them one after the other gives, up to rounding. The arithmetic is in
+// batched_projection_math.h; see there for the equations (paper Eqs. (8)-(11)).
+//
+// Per-constraint data that do not change while the set of immovable particles stays the same
+// (the inverse masses, the stretch scales k w_a / (w_a + w_b), cos and sin of the rest angle) are
+// precomputed in SurfaceBatches, rebuilt only when that set changes (a grasp starts or ends, a
+// cut). Positions are projected in a padded #V by 4 array.
+#pragma once
+
+#include <deform/types.h>
+
+#include <vector>
+
+#include "batched_projection_math.h"
+#include "surface_pbd.h"
+
+namespace deform::hybrid {
+
+struct SurfaceBatches {
+  // Stretch, in ActiveConstraints colour order (sorted by pattern within a colour; a movable).
+  std::vector<int> sa, sb;
+  std::vector<unsigned char> sbMovable;
+  std::vector<Real> sRest, sScaleA, sScaleB;
+  std::vector<int> sColourStart;  ///< #colours + 1 offsets into the stretch arrays
+  // Bending, in ActiveConstraints colour order (sorted by movable-slot pattern within a colour).
+  std::vector<int> hp[4];
+  std::vector<unsigned char> hMovable;  ///< bit k: w[hp[k]] > 0
+  std::vector<Real> hw[4], hCos0, hSin0;
+  std::vector<int> hColourStart;
+  bool sLastColourShared = false, hLastColourShared = false;  ///< colour overflow: sequential
+  Real kStretch = 0, kBending = 0;                            ///< per-iteration stiffnesses
+
+  batched::StretchView stretchView() const;
+  batched::BendView bendView() const;
+};
+
+/// Builds the batches of the active constraints (a: from activeConstraints(c, w)). kStretch,
+/// kBending: classic PBD stiffnesses in [0, 1] for `iterations` sweeps.
+SurfaceBatches buildSurfaceBatches(const SurfaceConstraints& c, const ActiveConstraints& a,
+                                   const VecX& w, Real kStretch, Real kBending, int iterations);
+
+/// `iterations` sweeps on the padded positions x4 (#V by 4, row-major, 4th column unused).
+/// simd: use the AVX2 path when the CPU has it. Returns the degenerate projections skipped.
+long long projectSurfaceBatches(Real* x4, const SurfaceBatches& b, int iterations, bool simd);
+
+/// Whether projectSurfaceBatches(..., simd = true) runs four constraints at a time here.
+bool surfaceSimdAvailable();
+
+/// Scalar atan2 by the same polynomial as the batched bending kernel (for tests).
+Real atan2Polynomial(Real y, Real x);
+
+}  // namespace deform::hybrid
