@@ -4,8 +4,14 @@
 // (u^imp_i, what the guided model shows). The accuracy loss ratio is
 //   R = sum_i |u^o_i - u^imp_i| / sum_i |u^o_i|
 // over the fine vertices. The load must be the same physical load on both meshes, so it is a
-// smooth traction field t(x) = t0 exp(-|x - c|^2 / r^2) sampled at each mesh's nodes; the
-// fixed region is the nodes inside a box on each mesh.
+// smooth traction field t(x) = t0 exp(-|x - c|^2 / r^2) integrated over each mesh's elements
+// (integrateTractionField: the right-hand side int U* t dGamma with the same quadrature on both
+// meshes, so both carry the same resultant); sampling t at the nodes instead (G p with p the
+// nodal values, the old measure) is kept as a second figure. The fixed region is the nodes
+// inside a box on each mesh (as fixedNodeIndices does for the model). Because R turns out to be
+// dominated by where the box's edge cuts each mesh, the ratio can also be evaluated with the
+// box's top face shifted by a few small offsets (edgeShifts), which flips the few nodes lying
+// next to it.
 #pragma once
 
 #include "bem_assembly.h"
@@ -20,11 +26,16 @@ struct LossRatioCase {
   Real radius = 0.02;            ///< m
   Vec3 traction = Vec3::Zero();  ///< Pa, peak
   Box fixedBox;                  ///< nodes inside are fixed
+  Real fieldResolution = 0;      ///< m; elements subdivided down to this (<= 0: radius / 4)
+  std::vector<Real> edgeShifts;  ///< m; extra ratios with fixedBox.hi.z moved by each shift
 };
 
 struct LossRatioResult {
-  Real ratio = 0;
+  Real ratio = 0;                   ///< traction field integrated over the elements
+  Real ratioNodalLoad = 0;          ///< traction sampled at the nodes (G p)
+  std::vector<Real> shiftedRatios;  ///< per LossRatioCase::edgeShifts (field load)
   int coarseVertices = 0, fineVertices = 0;
+  int coarseFixed = 0, fineFixed = 0;
   Real meanFineDisplacement = 0;  ///< m
   Real maxFineDisplacement = 0;   ///< m
 };

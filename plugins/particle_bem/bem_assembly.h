@@ -27,6 +27,7 @@
 
 #include <deform/mesh.h>
 
+#include <functional>
 #include <vector>
 
 namespace deform::particle_bem {
@@ -74,5 +75,24 @@ DeformationMatrix computeDeformationMatrix(BemMatrices&& bem, const SurfaceMesh&
 /// tractions (3N, Pa; values at fixed nodes ignored), u = 0 at fixed nodes.
 VecX solveBem(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
               const VecX& traction);
+
+/// A traction field t(x) (Pa) prescribed on the surface, as a function of position.
+using TractionField = std::function<Vec3(const Vec3&)>;
+
+/// Right-hand side of eq. 2 for a traction FIELD rather than its nodal interpolant:
+///   b_i = int_Gamma U*(x_i, y) t(y) dGamma(y)       (3N, m)
+/// integrated over every element with the rules of assembleBem (seven-point rule, recursive
+/// subdivision near the source, Duffy from the source vertex), with elements further subdivided
+/// until they are no larger than `resolution` (m) so that the field is resolved; elements where
+/// |t| < 1e-12 max|t| at every quadrature point are skipped. (G p, with p the nodal values of
+/// t, is the same integral with t replaced by its linear interpolant.)
+VecX integrateTractionField(const SurfaceMesh& s, Real young, Real poisson, const TractionField& t,
+                            Real resolution, const BemQuadrature& q = {});
+
+/// One BEM solve with a given right-hand side b (3N; b = G p for nodal tractions p): nodal
+/// displacements (3N, m), u = 0 at fixed nodes. The fixed nodes' reaction tractions are
+/// unknowns on top of whatever b already carries.
+VecX solveBemRhs(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
+                 const VecX& rhs);
 
 }  // namespace deform::particle_bem
