@@ -48,10 +48,13 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
   const SurfaceMap map = mapToSurface(grid, fine.V);
   // R for one fixed box and one load representation; nodal loads at fixed nodes are dropped
   // (their tractions are unknowns), which G p did implicitly by zeroing them.
-  const auto ratio = [&](const Box& box, bool nodal, bool keepStats) {
+  const auto ratio = [&](const Box& box, bool nodal, bool partial, bool keepStats) {
     const auto solve = [&](const Side& side, int& nFixed) {
       const std::vector<int> fixed = nodesInBox(side.s->V, box);
       nFixed = int(fixed.size());
+      if (partial && !nodal)
+        return solveBemPartial(side.bem, *side.s, fixedFractions(*side.s, box), material.young,
+                               side.fieldRhs);
       VecX rhs = side.fieldRhs;
       if (nodal) {
         VecX p = gaussianTraction(side.s->V, c);
@@ -81,12 +84,15 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
     }
     return den > 0 ? num / den : 0;
   };
-  r.ratio = ratio(c.fixedBox, false, true);
-  r.ratioNodalLoad = ratio(c.fixedBox, true, false);
+  r.ratio = ratio(c.fixedBox, false, c.partialConstraints, true);
+  r.ratioNodalClamp = c.partialConstraints ? ratio(c.fixedBox, false, false, false) : r.ratio;
+  r.ratioNodalLoad = ratio(c.fixedBox, true, false, false);
   for (Real shift : c.edgeShifts) {
     Box b = c.fixedBox;
     b.hi[2] += shift;
-    r.shiftedRatios.push_back(ratio(b, false, false));
+    r.shiftedRatios.push_back(ratio(b, false, c.partialConstraints, false));
+    r.shiftedClampRatios.push_back(c.partialConstraints ? ratio(b, false, false, false)
+                                                        : r.shiftedRatios.back());
   }
   return r;
 }

@@ -8,10 +8,11 @@
 // (integrateTractionField: the right-hand side int U* t dGamma with the same quadrature on both
 // meshes, so both carry the same resultant); sampling t at the nodes instead (G p with p the
 // nodal values, the old measure) is kept as a second figure. The fixed region is the nodes
-// inside a box on each mesh (as fixedNodeIndices does for the model). Because R turns out to be
-// dominated by where the box's edge cuts each mesh, the ratio can also be evaluated with the
-// box's top face shifted by a few small offsets (edgeShifts), which flips the few nodes lying
-// next to it.
+// inside a box on each mesh (as fixedNodeIndices does for the model) or, by default, each node
+// constrained in proportion to the fraction of its support inside the box (solveBemPartial):
+// with nodal clamps R is dominated by which nodes happen to lie just inside the box's edge on
+// each mesh. The ratio can also be evaluated with the box's top face shifted by small offsets
+// (edgeShifts) to show that sensitivity.
 #pragma once
 
 #include "bem_assembly.h"
@@ -27,13 +28,18 @@ struct LossRatioCase {
   Vec3 traction = Vec3::Zero();  ///< Pa, peak
   Box fixedBox;                  ///< nodes inside are fixed
   Real fieldResolution = 0;      ///< m; elements subdivided down to this (<= 0: radius / 4)
+  /// true: nodes constrained in proportion to their fixed fraction (solveBemPartial);
+  /// false: nodes inside the box clamped (what fixedNodeIndices gives the model).
+  bool partialConstraints = true;
   std::vector<Real> edgeShifts;  ///< m; extra ratios with fixedBox.hi.z moved by each shift
 };
 
 struct LossRatioResult {
-  Real ratio = 0;                   ///< traction field integrated over the elements
-  Real ratioNodalLoad = 0;          ///< traction sampled at the nodes (G p)
-  std::vector<Real> shiftedRatios;  ///< per LossRatioCase::edgeShifts (field load)
+  Real ratio = 0;            ///< field load, fixed region as LossRatioCase::partialConstraints says
+  Real ratioNodalClamp = 0;  ///< field load, nodes inside the box clamped
+  Real ratioNodalLoad = 0;   ///< traction sampled at the nodes, nodes in the box clamped (old)
+  std::vector<Real> shiftedRatios;       ///< per edgeShifts, as `ratio`
+  std::vector<Real> shiftedClampRatios;  ///< per edgeShifts, as `ratioNodalClamp`
   int coarseVertices = 0, fineVertices = 0;
   int coarseFixed = 0, fineFixed = 0;
   Real meanFineDisplacement = 0;  ///< m

@@ -378,4 +378,57 @@ VecX solveBemRhs(const BemMatrices& bem, const SurfaceMesh& s, const std::vector
   return u;
 }
 
+VecX fixedFractions(const SurfaceMesh& s, const Box& box, int samples) {
+  const int n = s.numVertices(), K = std::max(1, samples);
+  VecX inside = VecX::Zero(n), total = VecX::Zero(n);
+  for (int f = 0; f < s.numFaces(); ++f) {
+    const Vec3 x[3] = {s.V.row(s.F(f, 0)), s.V.row(s.F(f, 1)), s.V.row(s.F(f, 2))};
+    const Real w = 0.5 * (x[1] - x[0]).cross(x[2] - x[0]).norm() / (K * K);
+    // Centroids of the K^2 sub-triangles: upright (i, j) and, where it exists, inverted.
+    const auto add = [&](Real l1, Real l2) {
+      const Vec3 N(1 - l1 - l2, l1, l2);
+      const bool in = box.contains(N[0] * x[0] + N[1] * x[1] + N[2] * x[2]);
+      for (int k = 0; k < 3; ++k) {
+        total[s.F(f, k)] += w * N[k];
+        if (in) inside[s.F(f, k)] += w * N[k];
+      }
+    };
+    for (int i = 0; i < K; ++i)
+      for (int j = 0; i + j < K; ++j) {
+        add((i + 1.0 / 3) / K, (j + 1.0 / 3) / K);
+        if (i + j < K - 1) add((i + 2.0 / 3) / K, (j + 2.0 / 3) / K);
+      }
+  }
+  VecX phi = VecX::Zero(n);
+  for (int j = 0; j < n; ++j)
+    if (total[j] > 0) phi[j] = inside[j] / total[j];
+  return phi;
+}
+
+VecX solveBemPartial(const BemMatrices& bem, const SurfaceMesh& s, const VecX& phi, Real young,
+                     const VecX& rhsIn) {
+  const int n = s.numVertices();
+  const Eigen::Index n3 = 3 * n;
+  const VecX area = nodalAreas(s);
+  const Real clamped = 1 - 1e-9;
+  bool anySupport = false;
+  for (int j = 0; j < n; ++j) anySupport = anySupport || phi[j] > 0;
+  std::vector<char> isFixed(n, 0);
+  for (int j = 0; j < n; ++j) isFixed[j] = phi[j] >= clamped;
+  MatX A = mixedMatrix(bem, s.V, isFixed, !anySupport);
+  for (int j = 0; j < n; ++j)
+    if (phi[j] > 0 && phi[j] < clamped && area[j] > 0) {
+      const Real k = young / std::sqrt(area[j]) * phi[j] / (1 - phi[j]);
+      A.block(0, 3 * j, n3, 3) += k * bem.G.middleCols(3 * j, 3);
+    }
+  MatX rhs = MatX::Zero(A.rows(), 1);
+  rhs.topRows(n3) = rhsIn;
+  Eigen::PartialPivLU<Eigen::Ref<MatX>> lu(A);
+  luSolveInPlace(lu, rhs);
+  VecX u = rhs.col(0).head(n3);
+  for (int j = 0; j < n; ++j)
+    if (isFixed[j]) u.segment<3>(3 * j).setZero();
+  return u;
+}
+
 }  // namespace deform::particle_bem

@@ -95,4 +95,23 @@ VecX integrateTractionField(const SurfaceMesh& s, Real young, Real poisson, cons
 VecX solveBemRhs(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
                  const VecX& rhs);
 
+/// Fraction of each node's traction support inside a box, phi_j = int_box N_j dGamma /
+/// int N_j dGamma (N_j the linear shape function), by the midpoint rule on a samples x samples
+/// subdivision of every triangle. 1 deep inside, 0 outside, in between on the box's edge.
+VecX fixedFractions(const SurfaceMesh& s, const Box& box, int samples = 16);
+
+/// One BEM solve with a fixed region that cuts through elements, each node constrained in
+/// proportion to its fixed fraction phi_j (fixedFractions):
+///  - phi_j = 1 (to 1e-9): u_j = 0, p_j unknown (as solveBemRhs);
+///  - 0 < phi_j < 1: an elastic support p_j = -k_j u_j added to the load, with
+///      k_j = E / sqrt(A_j) * phi_j / (1 - phi_j)     (Pa/m; A_j the lumped nodal area),
+///    i.e. the stiffness of tissue one element long (E / h) times the ratio of clamped to free
+///    support: stiffer the more of the node's support is clamped, a clamp in the limit phi -> 1
+///    and free at phi = 0. So the discrete support moves continuously with the region's edge
+///    instead of jumping when a node crosses it; columns j of A become H_j + k_j G_j;
+///  - phi_j = 0: free.
+/// rhs as for solveBemRhs. Returns nodal displacements (3N, m).
+VecX solveBemPartial(const BemMatrices& bem, const SurfaceMesh& s, const VecX& phi, Real young,
+                     const VecX& rhs);
+
 }  // namespace deform::particle_bem
