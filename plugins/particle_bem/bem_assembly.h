@@ -110,6 +110,8 @@ VecX fixedFractions(const SurfaceMesh& s, const Box& box, int samples = 16);
 ///    and free at phi = 0. So the discrete support moves continuously with the region's edge
 ///    instead of jumping when a node crosses it; columns j of A become H_j + k_j G_j;
 ///  - phi_j = 0: free.
+/// The factor 1 in k_j is a modelling choice: the loss ratio of the liver cases moves by
+/// several percentage points between 0.3 and 3 (README, "Accuracy loss ratio").
 /// rhs as for solveBemRhs. Returns nodal displacements (3N, m).
 VecX solveBemPartial(const BemMatrices& bem, const SurfaceMesh& s, const VecX& phi, Real young,
                      const VecX& rhs);
