@@ -11,54 +11,55 @@ namespace deform {
 TriangleClosestPoint closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b,
                                             const Vec3& c) {
   TriangleClosestPoint r;
-  auto finish = [&](const Vec3& q, TriangleFeature f) {
+  auto finish = [&](const Vec3& q, TriangleFeature f, const Vec3& bary) {
     r.point = q;
     r.dist2 = (p - q).squaredNorm();
     r.feature = f;
+    r.bary = bary;
     return r;
   };
   const Vec3 ab = b - a, ac = c - a, ap = p - a;
   const Real d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return finish(a, TriangleFeature::VertexA);
+  if (d1 <= 0 && d2 <= 0) return finish(a, TriangleFeature::VertexA, Vec3(1, 0, 0));
   const Vec3 bp = p - b;
   const Real d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return finish(b, TriangleFeature::VertexB);
+  if (d3 >= 0 && d4 <= d3) return finish(b, TriangleFeature::VertexB, Vec3(0, 1, 0));
   const Real vc = d1 * d4 - d3 * d2;
   if (vc <= 0 && d1 >= 0 && d3 <= 0) {
     const Real v = d1 / (d1 - d3);
-    return finish(a + v * ab, TriangleFeature::EdgeAB);
+    return finish(a + v * ab, TriangleFeature::EdgeAB, Vec3(1 - v, v, 0));
   }
   const Vec3 cp = p - c;
   const Real d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return finish(c, TriangleFeature::VertexC);
+  if (d6 >= 0 && d5 <= d6) return finish(c, TriangleFeature::VertexC, Vec3(0, 0, 1));
   const Real vb = d5 * d2 - d1 * d6;
   if (vb <= 0 && d2 >= 0 && d6 <= 0) {
     const Real w = d2 / (d2 - d6);
-    return finish(a + w * ac, TriangleFeature::EdgeCA);
+    return finish(a + w * ac, TriangleFeature::EdgeCA, Vec3(1 - w, 0, w));
   }
   const Real va = d3 * d6 - d5 * d4;
   if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
     const Real w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    return finish(b + w * (c - b), TriangleFeature::EdgeBC);
+    return finish(b + w * (c - b), TriangleFeature::EdgeBC, Vec3(0, 1 - w, w));
   }
   const Real denom = va + vb + vc;
   if (!(std::abs(denom) > 0)) {
     // Degenerate (zero-area) triangle: fall back to the nearest of its three edges.
-    auto seg = [&](const Vec3& s0, const Vec3& s1) {
+    auto param = [&](const Vec3& s0, const Vec3& s1) {
       const Vec3 d = s1 - s0;
       const Real l2 = d.squaredNorm();
-      const Real t = l2 > 0 ? std::clamp((p - s0).dot(d) / l2, Real(0), Real(1)) : Real(0);
-      return Vec3(s0 + t * d);
+      return l2 > 0 ? std::clamp((p - s0).dot(d) / l2, Real(0), Real(1)) : Real(0);
     };
-    const Vec3 q0 = seg(a, b), q1 = seg(b, c), q2 = seg(c, a);
+    const Real t0 = param(a, b), t1 = param(b, c), t2 = param(c, a);
+    const Vec3 q0 = a + t0 * (b - a), q1 = b + t1 * (c - b), q2 = c + t2 * (a - c);
     const Real e0 = (p - q0).squaredNorm(), e1 = (p - q1).squaredNorm(),
                e2 = (p - q2).squaredNorm();
-    if (e0 <= e1 && e0 <= e2) return finish(q0, TriangleFeature::EdgeAB);
-    if (e1 <= e2) return finish(q1, TriangleFeature::EdgeBC);
-    return finish(q2, TriangleFeature::EdgeCA);
+    if (e0 <= e1 && e0 <= e2) return finish(q0, TriangleFeature::EdgeAB, Vec3(1 - t0, t0, 0));
+    if (e1 <= e2) return finish(q1, TriangleFeature::EdgeBC, Vec3(0, 1 - t1, t1));
+    return finish(q2, TriangleFeature::EdgeCA, Vec3(t2, 0, 1 - t2));
   }
   const Real v = vb / denom, w = vc / denom;
-  return finish(a + ab * v + ac * w, TriangleFeature::Face);
+  return finish(a + ab * v + ac * w, TriangleFeature::Face, Vec3(1 - v - w, v, w));
 }
 
 MeshDistance::MeshDistance(const SurfaceMesh& mesh) : m_mesh(mesh) {

@@ -28,26 +28,72 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
   LossRatioResult r;
   r.coarseVertices = coarse.numVertices();
   r.fineVertices = fine.numVertices();
-  const auto solve = [&](const SurfaceMesh& s) {
-    const BemMatrices bem = assembleBem(s, material.young, material.poisson, q);
-    return solveBem(bem, s, nodesInBox(s.V, c.fixedBox), gaussianTraction(s.V, c));
+  const TractionField field = [&c](const Vec3& x) -> Vec3 {
+    return c.traction * std::exp(-(x - c.center).squaredNorm() / (c.radius * c.radius));
   };
-  const VecX uf = solve(fine), uc = solve(coarse);
-  MatX3 coarseDisp(coarse.numVertices(), 3);
-  for (int j = 0; j < coarse.numVertices(); ++j) coarseDisp.row(j) = uc.segment<3>(3 * j);
+  const Real resolution = c.fieldResolution > 0 ? c.fieldResolution : c.radius / 4;
+  struct Side {
+    const SurfaceMesh* s;
+    BemMatrices bem;
+    VecX fieldRhs;
+  };
+  const auto prepare = [&](const SurfaceMesh& s) {
+    Side side{&s, assembleBem(s, material.young, material.poisson, q), {}};
+    side.fieldRhs =
+        integrateTractionField(s, material.young, material.poisson, field, resolution, q);
+    return side;
+  };
+  const Side fs = prepare(fine), cs = prepare(coarse);
   const TriangleGrid grid(coarse.V, coarse.F);
   const SurfaceMap map = mapToSurface(grid, fine.V);
-  MatX3 interp;
-  interpolateDisplacement(map, coarse.F, MatX3::Zero(fine.numVertices(), 3), coarseDisp, interp);
-  Real num = 0, den = 0;
-  for (int v = 0; v < fine.numVertices(); ++v) {
-    const Vec3 uo = uf.segment<3>(3 * v);
-    num += (uo - interp.row(v).transpose()).norm();
-    den += uo.norm();
-    r.maxFineDisplacement = std::max(r.maxFineDisplacement, uo.norm());
+  // R for one fixed box and one load representation; nodal loads at fixed nodes are dropped
+  // (their tractions are unknowns), which G p did implicitly by zeroing them.
+  const auto ratio = [&](const Box& box, bool nodal, bool partial, bool keepStats) {
+    const auto solve = [&](const Side& side, int& nFixed) {
+      const std::vector<int> fixed = nodesInBox(side.s->V, box);
+      nFixed = int(fixed.size());
+      if (partial && !nodal)
+        return solveBemPartial(side.bem, *side.s, fixedFractions(*side.s, box), material.young,
+                               side.fieldRhs);
+      VecX rhs = side.fieldRhs;
+      if (nodal) {
+        VecX p = gaussianTraction(side.s->V, c);
+        for (int j : fixed) p.segment<3>(3 * j).setZero();
+        rhs = side.bem.G * p;
+      }
+      return solveBemRhs(side.bem, *side.s, fixed, rhs);
+    };
+    int nf = 0, nc = 0;
+    const VecX uf = solve(fs, nf), uc = solve(cs, nc);
+    MatX3 coarseDisp(coarse.numVertices(), 3);
+    for (int j = 0; j < coarse.numVertices(); ++j) coarseDisp.row(j) = uc.segment<3>(3 * j);
+    MatX3 interp;
+    interpolateDisplacement(map, coarse.F, MatX3::Zero(fine.numVertices(), 3), coarseDisp, interp);
+    Real num = 0, den = 0, maxU = 0;
+    for (int v = 0; v < fine.numVertices(); ++v) {
+      const Vec3 uo = uf.segment<3>(3 * v);
+      num += (uo - interp.row(v).transpose()).norm();
+      den += uo.norm();
+      maxU = std::max(maxU, uo.norm());
+    }
+    if (keepStats) {
+      r.coarseFixed = nc;
+      r.fineFixed = nf;
+      r.maxFineDisplacement = maxU;
+      r.meanFineDisplacement = den / std::max(1, fine.numVertices());
+    }
+    return den > 0 ? num / den : 0;
+  };
+  r.ratio = ratio(c.fixedBox, false, c.partialConstraints, true);
+  r.ratioNodalClamp = c.partialConstraints ? ratio(c.fixedBox, false, false, false) : r.ratio;
+  r.ratioNodalLoad = ratio(c.fixedBox, true, false, false);
+  for (Real shift : c.edgeShifts) {
+    Box b = c.fixedBox;
+    b.hi[2] += shift;
+    r.shiftedRatios.push_back(ratio(b, false, c.partialConstraints, false));
+    r.shiftedClampRatios.push_back(c.partialConstraints ? ratio(b, false, false, false)
+                                                        : r.shiftedRatios.back());
   }
-  r.ratio = den > 0 ? num / den : 0;
-  r.meanFineDisplacement = den / std::max(1, fine.numVertices());
   return r;
 }
 

@@ -4,8 +4,15 @@
 // (u^imp_i, what the guided model shows). The accuracy loss ratio is
 //   R = sum_i |u^o_i - u^imp_i| / sum_i |u^o_i|
 // over the fine vertices. The load must be the same physical load on both meshes, so it is a
-// smooth traction field t(x) = t0 exp(-|x - c|^2 / r^2) sampled at each mesh's nodes; the
-// fixed region is the nodes inside a box on each mesh.
+// smooth traction field t(x) = t0 exp(-|x - c|^2 / r^2) integrated over each mesh's elements
+// (integrateTractionField: the right-hand side int U* t dGamma with the same quadrature on both
+// meshes, so both carry the same resultant); sampling t at the nodes instead (G p with p the
+// nodal values, the old measure) is kept as a second figure. The fixed region is the nodes
+// inside a box on each mesh (as fixedNodeIndices does for the model) or, by default, each node
+// constrained in proportion to the fraction of its support inside the box (solveBemPartial):
+// with nodal clamps R is dominated by which nodes happen to lie just inside the box's edge on
+// each mesh. The ratio can also be evaluated with the box's top face shifted by small offsets
+// (edgeShifts) to show that sensitivity.
 #pragma once
 
 #include "bem_assembly.h"
@@ -20,11 +27,21 @@ struct LossRatioCase {
   Real radius = 0.02;            ///< m
   Vec3 traction = Vec3::Zero();  ///< Pa, peak
   Box fixedBox;                  ///< nodes inside are fixed
+  Real fieldResolution = 0;      ///< m; elements subdivided down to this (<= 0: radius / 4)
+  /// true: nodes constrained in proportion to their fixed fraction (solveBemPartial);
+  /// false: nodes inside the box clamped (what fixedNodeIndices gives the model).
+  bool partialConstraints = true;
+  std::vector<Real> edgeShifts;  ///< m; extra ratios with fixedBox.hi.z moved by each shift
 };
 
 struct LossRatioResult {
-  Real ratio = 0;
+  Real ratio = 0;            ///< field load, fixed region as LossRatioCase::partialConstraints says
+  Real ratioNodalClamp = 0;  ///< field load, nodes inside the box clamped
+  Real ratioNodalLoad = 0;   ///< traction sampled at the nodes, nodes in the box clamped (old)
+  std::vector<Real> shiftedRatios;       ///< per edgeShifts, as `ratio`
+  std::vector<Real> shiftedClampRatios;  ///< per edgeShifts, as `ratioNodalClamp`
   int coarseVertices = 0, fineVertices = 0;
+  int coarseFixed = 0, fineFixed = 0;
   Real meanFineDisplacement = 0;  ///< m
   Real maxFineDisplacement = 0;   ///< m
 };

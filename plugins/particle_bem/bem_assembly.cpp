@@ -4,6 +4,7 @@
 
 #include <Eigen/LU>
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace deform::particle_bem {
@@ -95,7 +96,125 @@ void luSolveInPlace(const Eigen::PartialPivLU<Eigen::Ref<MatX>>& lu, MatX& X) {
   lu.matrixLU().triangularView<Eigen::Upper>().solveInPlace(X);
 }
 
+// A piece of an element for integrating a traction field: corners, the element's normal, and
+// (for a source at one of its corners) the global vertex index at each corner, else -1.
+struct FieldPatch {
+  Vec3 p[3];
+  int vertex[3];
+  Real area, size;
+  Vec3 centroid;
+  std::array<Vec3, 7> y, t;  // seven-point rule: points and field values
+};
+
+Real longestEdge(const Vec3& a, const Vec3& b, const Vec3& c) {
+  return std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+}
+
+// int_T U*(x, y) t(y) dGamma over the triangle (a, b, c), subdivided near x.
+Vec3 integrateFieldNear(const KelvinKernel& K, const TractionField& field, const Vec3& x,
+                        const Vec3& a, const Vec3& b, const Vec3& c, int level,
+                        const BemQuadrature& q) {
+  const Real size = longestEdge(a, b, c);
+  if (level < q.maxLevel && (x - (a + b + c) / 3).norm() < q.nearFactor * size) {
+    const Vec3 ab = 0.5 * (a + b), bc = 0.5 * (b + c), ca = 0.5 * (c + a);
+    return integrateFieldNear(K, field, x, a, ab, ca, level + 1, q) +
+           integrateFieldNear(K, field, x, ab, b, bc, level + 1, q) +
+           integrateFieldNear(K, field, x, ca, bc, c, level + 1, q) +
+           integrateFieldNear(K, field, x, bc, ca, ab, level + 1, q);
+  }
+  const Real area = 0.5 * (b - a).cross(c - a).norm();
+  Vec3 sum = Vec3::Zero();
+  for (const TrianglePoint& g : gaussTriangle7()) {
+    const Vec3 y = g.l0 * a + g.l1 * b + g.l2 * c;
+    sum += g.w * area * (K.displacement(y - x) * field(y));
+  }
+  return sum;
+}
+
+void subdivideUniform(const Vec3& a, const Vec3& b, const Vec3& c, const int v[3], int levels,
+                      std::vector<FieldPatch>& out) {
+  if (levels > 0) {
+    const Vec3 ab = 0.5 * (a + b), bc = 0.5 * (b + c), ca = 0.5 * (c + a);
+    const int none[3] = {-1, -1, -1};
+    const int va[3] = {v[0], -1, -1}, vb[3] = {-1, v[1], -1}, vc[3] = {-1, -1, v[2]};
+    subdivideUniform(a, ab, ca, va, levels - 1, out);
+    subdivideUniform(ab, b, bc, vb, levels - 1, out);
+    subdivideUniform(ca, bc, c, vc, levels - 1, out);
+    subdivideUniform(bc, ca, ab, none, levels - 1, out);
+    return;
+  }
+  FieldPatch f;
+  f.p[0] = a;
+  f.p[1] = b;
+  f.p[2] = c;
+  for (int k = 0; k < 3; ++k) f.vertex[k] = v[k];
+  f.area = 0.5 * (b - a).cross(c - a).norm();
+  f.size = longestEdge(a, b, c);
+  f.centroid = (a + b + c) / 3;
+  out.push_back(f);
+}
+
 }  // namespace
+
+VecX integrateTractionField(const SurfaceMesh& s, Real young, Real poisson,
+                            const TractionField& field, Real resolution, const BemQuadrature& q) {
+  const KelvinKernel K(young, poisson);
+  const int n = s.numVertices();
+  std::vector<FieldPatch> all;
+  for (int f = 0; f < s.numFaces(); ++f) {
+    const Vec3 a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+    if (!((b - a).cross(c - a).norm() > 0)) continue;  // degenerate: no area, no load
+    int levels = 0;
+    for (Real size = longestEdge(a, b, c); size > resolution && levels < 6; size *= 0.5) ++levels;
+    const int v[3] = {s.F(f, 0), s.F(f, 1), s.F(f, 2)};
+    subdivideUniform(a, b, c, v, levels, all);
+  }
+  Real tmax = 0;
+  for (FieldPatch& f : all) {
+    int k = 0;
+    for (const TrianglePoint& g : gaussTriangle7()) {
+      f.y[k] = g.l0 * f.p[0] + g.l1 * f.p[1] + g.l2 * f.p[2];
+      f.t[k] = field(f.y[k]);
+      tmax = std::max(tmax, f.t[k].norm());
+      ++k;
+    }
+  }
+  std::vector<FieldPatch> loaded;
+  for (const FieldPatch& f : all) {
+    Real m = 0;
+    for (const Vec3& t : f.t) m = std::max(m, t.norm());
+    for (const Vec3& p : f.p) m = std::max(m, field(p).norm());
+    if (m > 1e-12 * tmax) loaded.push_back(f);
+  }
+  const std::vector<TrianglePoint> duffy = duffyTriangle(std::max(q.duffyOrder, 6));
+  VecX b = VecX::Zero(3 * n);
+  for (int i = 0; i < n; ++i) {
+    const Vec3 x = s.V.row(i).transpose();
+    Vec3 sum = Vec3::Zero();
+    for (const FieldPatch& f : loaded) {
+      int local = -1;
+      for (int k = 0; k < 3; ++k)
+        if (f.vertex[k] == i) local = k;
+      if (local >= 0) {
+        const Vec3& pa = f.p[local];
+        const Vec3& pb = f.p[(local + 1) % 3];
+        const Vec3& pc = f.p[(local + 2) % 3];
+        for (const TrianglePoint& g : duffy) {
+          const Vec3 y = g.l0 * pa + g.l1 * pb + g.l2 * pc;
+          sum += g.w * f.area * (K.displacement(y - x) * field(y));
+        }
+      } else if ((x - f.centroid).norm() < q.nearFactor * f.size) {
+        sum += integrateFieldNear(K, field, x, f.p[0], f.p[1], f.p[2], 0, q);
+      } else {
+        const auto& rule = gaussTriangle7();
+        for (int k = 0; k < 7; ++k)
+          sum += rule[k].w * f.area * (K.displacement(f.y[k] - x) * f.t[k]);
+      }
+    }
+    b.segment<3>(3 * i) = sum;
+  }
+  return b;
+}
 
 BemMatrices assembleBem(const SurfaceMesh& s, Real young, Real poisson, const BemQuadrature& q) {
   const KelvinKernel K(young, poisson);
@@ -237,20 +356,78 @@ DeformationMatrix computeDeformationMatrix(BemMatrices&& bem, const SurfaceMesh&
 
 VecX solveBem(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
               const VecX& traction) {
+  VecX p = traction;
+  for (int j : fixed) p.segment<3>(3 * j).setZero();
+  return solveBemRhs(bem, s, fixed, bem.G * p);
+}
+
+VecX solveBemRhs(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
+                 const VecX& rhsIn) {
   const int n = s.numVertices();
   const Eigen::Index n3 = 3 * n;
   std::vector<char> isFixed(n, 0);
   for (int j : fixed) isFixed[j] = 1;
   const bool bordered = fixed.empty();
   MatX A = mixedMatrix(bem, s.V, isFixed, bordered);
-  VecX p = traction;
-  for (int j : fixed) p.segment<3>(3 * j).setZero();
   MatX rhs = MatX::Zero(A.rows(), 1);
-  rhs.topRows(n3) = bem.G * p;
+  rhs.topRows(n3) = rhsIn;
   Eigen::PartialPivLU<Eigen::Ref<MatX>> lu(A);
   luSolveInPlace(lu, rhs);
   VecX u = rhs.col(0).head(n3);
   for (int j : fixed) u.segment<3>(3 * j).setZero();
+  return u;
+}
+
+VecX fixedFractions(const SurfaceMesh& s, const Box& box, int samples) {
+  const int n = s.numVertices(), K = std::max(1, samples);
+  VecX inside = VecX::Zero(n), total = VecX::Zero(n);
+  for (int f = 0; f < s.numFaces(); ++f) {
+    const Vec3 x[3] = {s.V.row(s.F(f, 0)), s.V.row(s.F(f, 1)), s.V.row(s.F(f, 2))};
+    const Real w = 0.5 * (x[1] - x[0]).cross(x[2] - x[0]).norm() / (K * K);
+    // Centroids of the K^2 sub-triangles: upright (i, j) and, where it exists, inverted.
+    const auto add = [&](Real l1, Real l2) {
+      const Vec3 N(1 - l1 - l2, l1, l2);
+      const bool in = box.contains(N[0] * x[0] + N[1] * x[1] + N[2] * x[2]);
+      for (int k = 0; k < 3; ++k) {
+        total[s.F(f, k)] += w * N[k];
+        if (in) inside[s.F(f, k)] += w * N[k];
+      }
+    };
+    for (int i = 0; i < K; ++i)
+      for (int j = 0; i + j < K; ++j) {
+        add((i + 1.0 / 3) / K, (j + 1.0 / 3) / K);
+        if (i + j < K - 1) add((i + 2.0 / 3) / K, (j + 2.0 / 3) / K);
+      }
+  }
+  VecX phi = VecX::Zero(n);
+  for (int j = 0; j < n; ++j)
+    if (total[j] > 0) phi[j] = inside[j] / total[j];
+  return phi;
+}
+
+VecX solveBemPartial(const BemMatrices& bem, const SurfaceMesh& s, const VecX& phi, Real young,
+                     const VecX& rhsIn) {
+  const int n = s.numVertices();
+  const Eigen::Index n3 = 3 * n;
+  const VecX area = nodalAreas(s);
+  const Real clamped = 1 - 1e-9;
+  bool anySupport = false;
+  for (int j = 0; j < n; ++j) anySupport = anySupport || phi[j] > 0;
+  std::vector<char> isFixed(n, 0);
+  for (int j = 0; j < n; ++j) isFixed[j] = phi[j] >= clamped;
+  MatX A = mixedMatrix(bem, s.V, isFixed, !anySupport);
+  for (int j = 0; j < n; ++j)
+    if (phi[j] > 0 && phi[j] < clamped && area[j] > 0) {
+      const Real k = young / std::sqrt(area[j]) * phi[j] / (1 - phi[j]);
+      A.block(0, 3 * j, n3, 3) += k * bem.G.middleCols(3 * j, 3);
+    }
+  MatX rhs = MatX::Zero(A.rows(), 1);
+  rhs.topRows(n3) = rhsIn;
+  Eigen::PartialPivLU<Eigen::Ref<MatX>> lu(A);
+  luSolveInPlace(lu, rhs);
+  VecX u = rhs.col(0).head(n3);
+  for (int j = 0; j < n; ++j)
+    if (isFixed[j]) u.segment<3>(3 * j).setZero();
   return u;
 }
 

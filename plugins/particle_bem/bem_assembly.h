@@ -27,6 +27,7 @@
 
 #include <deform/mesh.h>
 
+#include <functional>
 #include <vector>
 
 namespace deform::particle_bem {
@@ -74,5 +75,45 @@ DeformationMatrix computeDeformationMatrix(BemMatrices&& bem, const SurfaceMesh&
 /// tractions (3N, Pa; values at fixed nodes ignored), u = 0 at fixed nodes.
 VecX solveBem(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
               const VecX& traction);
+
+/// A traction field t(x) (Pa) prescribed on the surface, as a function of position.
+using TractionField = std::function<Vec3(const Vec3&)>;
+
+/// Right-hand side of eq. 2 for a traction FIELD rather than its nodal interpolant:
+///   b_i = int_Gamma U*(x_i, y) t(y) dGamma(y)       (3N, m)
+/// integrated over every element with the rules of assembleBem (seven-point rule, recursive
+/// subdivision near the source, Duffy from the source vertex), with elements further subdivided
+/// until they are no larger than `resolution` (m) so that the field is resolved; elements where
+/// |t| < 1e-12 max|t| at every quadrature point are skipped. (G p, with p the nodal values of
+/// t, is the same integral with t replaced by its linear interpolant.)
+VecX integrateTractionField(const SurfaceMesh& s, Real young, Real poisson, const TractionField& t,
+                            Real resolution, const BemQuadrature& q = {});
+
+/// One BEM solve with a given right-hand side b (3N; b = G p for nodal tractions p): nodal
+/// displacements (3N, m), u = 0 at fixed nodes. The fixed nodes' reaction tractions are
+/// unknowns on top of whatever b already carries.
+VecX solveBemRhs(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
+                 const VecX& rhs);
+
+/// Fraction of each node's traction support inside a box, phi_j = int_box N_j dGamma /
+/// int N_j dGamma (N_j the linear shape function), by the midpoint rule on a samples x samples
+/// subdivision of every triangle. 1 deep inside, 0 outside, in between on the box's edge.
+VecX fixedFractions(const SurfaceMesh& s, const Box& box, int samples = 16);
+
+/// One BEM solve with a fixed region that cuts through elements, each node constrained in
+/// proportion to its fixed fraction phi_j (fixedFractions):
+///  - phi_j = 1 (to 1e-9): u_j = 0, p_j unknown (as solveBemRhs);
+///  - 0 < phi_j < 1: an elastic support p_j = -k_j u_j added to the load, with
+///      k_j = E / sqrt(A_j) * phi_j / (1 - phi_j)     (Pa/m; A_j the lumped nodal area),
+///    i.e. the stiffness of tissue one element long (E / h) times the ratio of clamped to free
+///    support: stiffer the more of the node's support is clamped, a clamp in the limit phi -> 1
+///    and free at phi = 0. So the discrete support moves continuously with the region's edge
+///    instead of jumping when a node crosses it; columns j of A become H_j + k_j G_j;
+///  - phi_j = 0: free.
+/// The factor 1 in k_j is a modelling choice: the loss ratio of the liver cases moves by
+/// several percentage points between 0.3 and 3 (README, "Accuracy loss ratio").
+/// rhs as for solveBemRhs. Returns nodal displacements (3N, m).
+VecX solveBemPartial(const BemMatrices& bem, const SurfaceMesh& s, const VecX& phi, Real young,
+                     const VecX& rhs);
 
 }  // namespace deform::particle_bem

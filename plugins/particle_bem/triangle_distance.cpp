@@ -7,50 +7,6 @@
 
 namespace deform::particle_bem {
 
-Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c,
-                            Vec3& bary) {
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const Real d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) {
-    bary = Vec3(1, 0, 0);
-    return a;
-  }
-  const Vec3 bp = p - b;
-  const Real d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) {
-    bary = Vec3(0, 1, 0);
-    return b;
-  }
-  const Real vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-    const Real v = d1 / (d1 - d3);
-    bary = Vec3(1 - v, v, 0);
-    return a + v * ab;
-  }
-  const Vec3 cp = p - c;
-  const Real d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) {
-    bary = Vec3(0, 0, 1);
-    return c;
-  }
-  const Real vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-    const Real w = d2 / (d2 - d6);
-    bary = Vec3(1 - w, 0, w);
-    return a + w * ac;
-  }
-  const Real va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-    const Real w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    bary = Vec3(0, 1 - w, w);
-    return b + w * (c - b);
-  }
-  const Real denom = 1 / (va + vb + vc);
-  const Real v = vb * denom, w = vc * denom;
-  bary = Vec3(1 - v - w, v, w);
-  return a + v * ab + w * ac;
-}
-
 TriangleGrid::TriangleGrid(const MatX3& V, const MatX3i& F, Real cellSize) : m_V(V), m_F(F) {
   const Box box = boundingBox(V);
   if (cellSize <= 0) {
@@ -141,11 +97,10 @@ ClosestPoint TriangleGrid::closest(const Vec3& p) const {
             const int f = m_cellTris[t];
             if (m_stamp[f] == m_query) continue;
             m_stamp[f] = m_query;
-            Vec3 bary;
-            const Vec3 q = closestPointOnTriangle(p, m_V.row(m_F(f, 0)), m_V.row(m_F(f, 1)),
-                                                  m_V.row(m_F(f, 2)), bary);
-            const Real d = (q - p).norm();
-            if (d < best.distance) best = {q, bary, d, f};
+            const TriangleClosestPoint q = closestPointOnTriangle(
+                p, m_V.row(m_F(f, 0)), m_V.row(m_F(f, 1)), m_V.row(m_F(f, 2)));
+            const Real d = std::sqrt(q.dist2);
+            if (d < best.distance) best = {q.point, q.bary, d, f, q.feature};
           }
         }
       }
@@ -160,22 +115,30 @@ Real TriangleGrid::signedDistance(const Vec3& p, ClosestPoint* cpOut) const {
   const ClosestPoint cp = closest(p);
   if (cpOut) *cpOut = cp;
   if (cp.triangle < 0) return std::numeric_limits<Real>::infinity();
-  int zeros = 0, nonzero = -1, zero = -1;
-  for (int k = 0; k < 3; ++k) {
-    if (cp.bary[k] == 0) {
-      ++zeros;
-      zero = k;
-    } else {
-      nonzero = k;
-    }
-  }
-  Vec3 n;
-  if (zeros == 0) {
-    n = m_faceNormal.row(cp.triangle).transpose();
-  } else if (zeros == 1) {
-    n = m_edgeNormal[3 * cp.triangle + zero];
-  } else {
-    n = m_vertexNormal.row(m_F(cp.triangle, nonzero)).transpose();
+  // m_edgeNormal[3 f + k]: the edge opposite local vertex k.
+  Vec3 n = m_faceNormal.row(cp.triangle).transpose();
+  switch (cp.feature) {
+    case TriangleFeature::Face:
+      n = m_faceNormal.row(cp.triangle).transpose();
+      break;
+    case TriangleFeature::EdgeBC:
+      n = m_edgeNormal[3 * cp.triangle + 0];
+      break;
+    case TriangleFeature::EdgeCA:
+      n = m_edgeNormal[3 * cp.triangle + 1];
+      break;
+    case TriangleFeature::EdgeAB:
+      n = m_edgeNormal[3 * cp.triangle + 2];
+      break;
+    case TriangleFeature::VertexA:
+      n = m_vertexNormal.row(m_F(cp.triangle, 0)).transpose();
+      break;
+    case TriangleFeature::VertexB:
+      n = m_vertexNormal.row(m_F(cp.triangle, 1)).transpose();
+      break;
+    case TriangleFeature::VertexC:
+      n = m_vertexNormal.row(m_F(cp.triangle, 2)).transpose();
+      break;
   }
   return (p - cp.point).dot(n) < 0 ? -cp.distance : cp.distance;
 }

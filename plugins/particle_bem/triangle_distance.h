@@ -1,23 +1,23 @@
 // particle_bem: exact point-to-triangle-mesh distance with a uniform bucket grid, and the sign
-// of the distance from angle-weighted pseudo-normals (Baerentzen & Aanaes 2005). Written inside
-// the plugin because core has no distance query yet (see README).
+// of the distance from angle-weighted pseudo-normals (Baerentzen & Aanaes 2005). The closest
+// point on one triangle (and its barycentrics) is core's deform::closestPointOnTriangle
+// (deform/distance.h); the grid is kept because the plugin queries many points near one small
+// surface and returns the barycentrics the interpolation needs.
 #pragma once
 
+#include <deform/distance.h>
 #include <deform/mesh.h>
 
 #include <vector>
 
 namespace deform::particle_bem {
 
-/// Closest point to p on the triangle (a, b, c) (Voronoi-region walk, Ericson 2005 §5.1.5).
-/// bary: weights of a, b, c (exactly 0 on the excluded vertices of an edge or vertex region).
-Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, Vec3& bary);
-
 struct ClosestPoint {
   Vec3 point = Vec3::Zero();
   Vec3 bary = Vec3::Zero();  ///< weights of the triangle's three vertices
   Real distance = 0;         ///< unsigned, m
   int triangle = -1;
+  TriangleFeature feature = TriangleFeature::Face;  ///< where on the triangle the point lies
 };
 
 /// Closed triangle surface with its triangles bucketed into a uniform grid (each triangle in

@@ -240,5 +240,83 @@ TEST(LossRatio, SameMeshIsZeroAndRefinementIsSmall) {
   EXPECT_GT(r.maxFineDisplacement, 0);
 }
 
+TEST(TractionField, UniformFieldEqualsGTimesNodalValues) {
+  // A constant traction is its own linear interpolant, so int U* t equals G p with p = t at
+  // every node, up to the two quadratures (the field one subdivides further).
+  const SurfaceMesh s = icosphere(2, 0.05);
+  const Real E = 5000, nu = 0.4;
+  const BemMatrices bem = assembleBem(s, E, nu);
+  const Vec3 t(30, -10, 70);
+  VecX p(3 * s.numVertices());
+  for (int j = 0; j < s.numVertices(); ++j) p.segment<3>(3 * j) = t;
+  const VecX gp = bem.G * p;
+  const VecX b = integrateTractionField(
+      s, E, nu, [&](const Vec3&) { return t; }, 0.005);
+  EXPECT_LT((b - gp).norm(), 2e-3 * gp.norm());
+  // A field that vanishes on the lower half contributes nothing from the lower elements only:
+  // b changes when the field does (not a constant function of its argument).
+  const VecX half = integrateTractionField(
+      s, E, nu, [&](const Vec3& x) { return x[2] > 0 ? t : Vec3::Zero(); }, 0.005);
+  EXPECT_GT((half - b).norm(), 0.2 * b.norm());
+}
+
+TEST(FixedFractions, SphereBelowEquatorHasHalfTheArea) {
+  const SurfaceMesh s = icosphere(3, 0.05);
+  Box box;
+  box.lo = Vec3::Constant(-1);
+  box.hi = Vec3(1, 1, 0.0);
+  const VecX phi = fixedFractions(s, box);
+  const VecX A = nodalAreas(s);
+  Real inside = 0;
+  for (int j = 0; j < s.numVertices(); ++j) {
+    EXPECT_GE(phi[j], 0);
+    EXPECT_LE(phi[j], 1);
+    if (s.V(j, 2) < -0.01) {
+      EXPECT_EQ(phi[j], 1);
+    }
+    if (s.V(j, 2) > 0.01) {
+      EXPECT_EQ(phi[j], 0);
+    }
+    inside += phi[j] * A[j];
+  }
+  EXPECT_NEAR(inside / A.sum(), 0.5, 0.01);
+}
+
+TEST(PartialConstraints, ReduceToClampsAndMoveContinuously) {
+  const SurfaceMesh s = icosphere(2, 0.05);
+  const Real E = 5000, nu = 0.4;
+  const BemMatrices bem = assembleBem(s, E, nu);
+  VecX p = VecX::Zero(3 * s.numVertices());
+  std::vector<int> fixed;
+  VecX phi = VecX::Zero(s.numVertices());
+  for (int j = 0; j < s.numVertices(); ++j) {
+    if (s.V(j, 2) < -0.03) {
+      fixed.push_back(j);
+      phi[j] = 1;
+    }
+    if (s.V(j, 2) > 0.03) p.segment<3>(3 * j) = Vec3(0, 0, -100);
+  }
+  const VecX rhs = bem.G * p;
+  const VecX clamped = solveBemRhs(bem, s, fixed, rhs);
+  const VecX partial = solveBemPartial(bem, s, phi, E, rhs);
+  EXPECT_LT((partial - clamped).norm(), 1e-9 * clamped.norm());
+  // One more node, nearly clamped (phi -> 1) or barely touched (phi -> 0), approaches the
+  // clamped / free limits.
+  int edge = -1;
+  for (int j = 0; j < s.numVertices(); ++j)
+    if (phi[j] == 0 && (edge < 0 || s.V(j, 2) < s.V(edge, 2))) edge = j;
+  std::vector<int> more = fixed;
+  more.push_back(edge);
+  const VecX clampedMore = solveBemRhs(bem, s, more, rhs);
+  VecX phiNear = phi;
+  phiNear[edge] = 1 - 1e-6;
+  const VecX nearly = solveBemPartial(bem, s, phiNear, E, rhs);
+  EXPECT_GT((clampedMore - clamped).norm(), 1e-3 * clamped.norm());
+  EXPECT_LT((nearly - clampedMore).norm(), 1e-3 * (clampedMore - clamped).norm());
+  phiNear[edge] = 1e-6;
+  const VecX barely = solveBemPartial(bem, s, phiNear, E, rhs);
+  EXPECT_LT((barely - clamped).norm(), 1e-3 * (clampedMore - clamped).norm());
+}
+
 }  // namespace
 }  // namespace deform::particle_bem

@@ -23,9 +23,17 @@ TEST(TriangleDistance, ClosestPointMatchesDenseSampling) {
   std::uniform_real_distribution<Real> u(-1, 2);
   for (int t = 0; t < 50; ++t) {
     const Vec3 p(u(rng), u(rng), u(rng));
-    Vec3 bary;
-    const Vec3 q = closestPointOnTriangle(p, a, b, c, bary);
+    const TriangleClosestPoint cp = closestPointOnTriangle(p, a, b, c);  // core's, with bary
+    const Vec3 q = cp.point, bary = cp.bary;
     EXPECT_NEAR((bary[0] * a + bary[1] * b + bary[2] * c - q).norm(), 0, 1e-12);
+    EXPECT_NEAR(bary.sum(), 1, 1e-12);
+    EXPECT_GE(bary.minCoeff(), 0);
+    // Exactly zero weights off the feature: the grid's sign test relies on the feature.
+    const int zeros = int((bary.array() == 0).count());
+    const bool vertex = cp.feature == TriangleFeature::VertexA ||
+                        cp.feature == TriangleFeature::VertexB ||
+                        cp.feature == TriangleFeature::VertexC;
+    EXPECT_EQ(zeros, cp.feature == TriangleFeature::Face ? 0 : vertex ? 2 : 1);
     Real best = 1e30;
     for (int i = 0; i <= 200; ++i)
       for (int j = 0; i + j <= 200; ++j) {
@@ -35,6 +43,15 @@ TEST(TriangleDistance, ClosestPointMatchesDenseSampling) {
     EXPECT_LE((q - p).norm(), best + 1e-12);
     EXPECT_GE((q - p).norm(), best - 0.01);
   }
+}
+
+TEST(TriangleDistance, DegenerateTriangleBarycentricsReproduceThePoint) {
+  // Collinear corners: core falls back to the nearest edge; the weights must still give the point.
+  const Vec3 a(0, 0, 0), b(1, 0, 0), c(2, 0, 0), p(1.5, 0.3, 0);
+  const TriangleClosestPoint cp = closestPointOnTriangle(p, a, b, c);
+  EXPECT_NEAR((cp.point - Vec3(1.5, 0, 0)).norm(), 0, 1e-12);
+  EXPECT_NEAR((cp.bary[0] * a + cp.bary[1] * b + cp.bary[2] * c - cp.point).norm(), 0, 1e-12);
+  EXPECT_NEAR(cp.bary.sum(), 1, 1e-12);
 }
 
 TEST(DistanceField, SphereSignedDistance) {

@@ -17,6 +17,9 @@ struct TriangleClosestPoint {
   Vec3 point = Vec3::Zero();  ///< closest point on the triangle
   Real dist2 = 0;             ///< squared distance |p - point|^2, m^2
   TriangleFeature feature = TriangleFeature::Face;
+  /// Barycentric weights of a, b, c of `point` (sum 1; exactly 0 for the vertices not on the
+  /// feature, e.g. (1 - t, t, 0) on edge ab).
+  Vec3 bary = Vec3::Zero();
 };
 
 /// Exact closest point of p on the (closed, solid) triangle abc, by Voronoi regions of its
