@@ -94,11 +94,14 @@ struct ContactWorld::Impl {
   };
   std::vector<Body> bodies;
 
+  // A pool of proxy spheres: a query inserts only the proxies near an instrument and takes them
+  // out again, so the broadphase never holds thousands of densely packed leaves.
   std::vector<std::unique_ptr<btSphereShape>> proxyShapes;
   std::vector<std::unique_ptr<btCollisionObject>> proxies;
+  int inWorld = 0;
 
   ~Impl() {
-    for (auto& p : proxies) world.removeCollisionObject(p.get());
+    removeProxies();
     for (auto& b : bodies) world.removeCollisionObject(b.object.get());
   }
 
@@ -110,19 +113,27 @@ struct ContactWorld::Impl {
     broadphase.setAabb(o->getBroadphaseHandle(), lo, hi, &dispatcher);
   }
 
-  void rebuildProxies(Eigen::Index n) {
-    for (auto& p : proxies) world.removeCollisionObject(p.get());
-    proxies.clear();
-    proxyShapes.clear();
-    for (Eigen::Index i = 0; i < n; ++i) {
-      auto shape = std::make_unique<btSphereShape>(btScalar(1e-4));
-      auto obj = std::make_unique<btCollisionObject>();
-      obj->setCollisionShape(shape.get());
-      obj->setUserIndex(static_cast<int>(i));
-      world.addCollisionObject(obj.get(), kProxyGroup, kBodyGroup);
-      proxyShapes.push_back(std::move(shape));
-      proxies.push_back(std::move(obj));
+  void addProxy(int index, const btVector3& centre, btScalar radius) {
+    if (inWorld == static_cast<int>(proxies.size())) {
+      proxyShapes.push_back(std::make_unique<btSphereShape>(radius));
+      proxies.push_back(std::make_unique<btCollisionObject>());
+      proxies.back()->setCollisionShape(proxyShapes.back().get());
     }
+    btSphereShape* s = proxyShapes[inWorld].get();
+    if (s->getRadius() != radius) s->setUnscaledRadius(radius);
+    btCollisionObject* o = proxies[inWorld].get();
+    btTransform t;
+    t.setIdentity();
+    t.setOrigin(centre);
+    o->setWorldTransform(t);
+    o->setUserIndex(index);
+    world.addCollisionObject(o, kProxyGroup, kBodyGroup);
+    ++inWorld;
+  }
+
+  void removeProxies() {
+    for (int k = inWorld - 1; k >= 0; --k) world.removeCollisionObject(proxies[k].get());
+    inWorld = 0;
   }
 };
 
@@ -189,17 +200,22 @@ int ContactWorld::numBodies() const {
 std::vector<Contact> ContactWorld::query(const MatX3& centres, const VecX* radii) {
   Impl& w = *m_impl;
   const Eigen::Index n = centres.rows();
-  if (static_cast<Eigen::Index>(w.proxies.size()) != n) w.rebuildProxies(n);
+  if (w.bodies.empty()) return {};
+  // Only proxies inside the instruments' bounding box enter Bullet's world (and leave it after
+  // the query): the broadphase then pairs them with the instruments' parts.
+  btVector3 lo(BT_LARGE_FLOAT, BT_LARGE_FLOAT, BT_LARGE_FLOAT), hi = -lo;
+  for (const Impl::Body& b : w.bodies) {
+    const btBroadphaseProxy* h = b.object->getBroadphaseHandle();
+    lo.setMin(h->m_aabbMin);
+    hi.setMax(h->m_aabbMax);
+  }
   for (Eigen::Index i = 0; i < n; ++i) {
-    btCollisionObject* o = w.proxies[i].get();
     const Real r = radii ? std::max((*radii)[i], Real(1e-9)) : m_params.thickness;
-    btSphereShape* s = w.proxyShapes[i].get();
-    if (s->getRadius() != r) s->setUnscaledRadius(r);
-    btTransform t;
-    t.setIdentity();
-    t.setOrigin(btVector3(centres(i, 0), centres(i, 1), centres(i, 2)));
-    o->setWorldTransform(t);
-    w.setAabb(o);
+    const btVector3 c(centres(i, 0), centres(i, 1), centres(i, 2));
+    if (c.x() + r < lo.x() || c.y() + r < lo.y() || c.z() + r < lo.z() || c.x() - r > hi.x() ||
+        c.y() - r > hi.y() || c.z() - r > hi.z())
+      continue;
+    w.addProxy(static_cast<int>(i), c, r);
   }
   w.broadphase.calculateOverlappingPairs(&w.dispatcher);
 
@@ -227,6 +243,7 @@ std::vector<Contact> ContactWorld::query(const MatX3& centres, const VecX* radii
     c.normal = cb.normal;
     out.push_back(c);
   }
+  w.removeProxies();
   // Deepest per proxy, in proxy order (the pair cache's order is not part of the contract).
   std::sort(out.begin(), out.end(), [](const Contact& x, const Contact& y) {
     return x.proxy != y.proxy ? x.proxy < y.proxy : x.depth > y.depth;

@@ -85,8 +85,8 @@ class ContactWorld {
 
   /// Penetrating proxy spheres, at most one contact per proxy (the deepest over all instruments),
   /// sorted by proxy index. centres: #P by 3 (m); radii: #P (m), or nullptr for the contact
-  /// thickness. The proxy set is kept between calls (Bullet collision objects, only their
-  /// positions are updated) and rebuilt when #P changes.
+  /// thickness. Proxies inside the instruments' bounding box are inserted into Bullet's world as
+  /// spheres for the query (broadphase pairs, narrowphase depth) and taken out after it.
   std::vector<Contact> query(const MatX3& centres, const VecX* radii = nullptr);
 
   /// Reaction of the tissue on an instrument (N), applied at `at` (m, world); accumulated until
