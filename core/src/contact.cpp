@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #ifdef DEFORM_HAVE_BULLET
 #include <LinearMath/btAabbUtil2.h>
@@ -176,6 +177,13 @@ int ContactWorld::addBody(const RigidShape& shape) {
   m_impl->bodies.push_back(std::move(b));
   m_force.push_back(Vec3::Zero());
   m_torque.push_back(Vec3::Zero());
+  Real thin = std::numeric_limits<Real>::infinity();
+  for (const ShapePrimitive& p : shape.parts)
+    thin =
+        std::min(thin, p.kind == ShapePrimitive::Kind::Box ? p.halfExtents.minCoeff() : p.radius);
+  m_thinnest.push_back(thin);
+  m_settled.push_back(Vec3::Zero());
+  m_settledSet.push_back(0);
   return numBodies() - 1;
 }
 
@@ -187,6 +195,18 @@ void ContactWorld::setPose(int body, const Vec3& pos, const Mat3& R) {
   btCollisionObject* o = m_impl->bodies.at(body).object.get();
   o->setWorldTransform(t);
   m_impl->setAabb(o);
+  if (!m_settledSet[body]) {
+    m_settled[body] = pos;
+    m_settledSet[body] = 1;
+  }
+}
+
+Mat3 ContactWorld::rotation(int body) const {
+  const btMatrix3x3& b = m_impl->bodies.at(body).object->getWorldTransform().getBasis();
+  Mat3 R;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) R(i, j) = b[i][j];
+  return R;
 }
 
 Vec3 ContactWorld::position(int body) const {
@@ -270,6 +290,9 @@ void ContactWorld::setPose(int, const Vec3&, const Mat3&) {}
 Vec3 ContactWorld::position(int) const {
   return Vec3::Zero();
 }
+Mat3 ContactWorld::rotation(int) const {
+  return Mat3::Identity();
+}
 int ContactWorld::numBodies() const {
   return 0;
 }
@@ -290,6 +313,21 @@ Vec3 ContactWorld::reactionForce(int body) const {
 
 Vec3 ContactWorld::reactionTorque(int body) const {
   return m_torque.at(body);
+}
+
+Real ContactWorld::thinnestRadius(int body) const {
+  return m_thinnest.at(body);
+}
+
+Vec3 ContactWorld::settledPosition(int body) const {
+  return m_settled.at(body);
+}
+
+void ContactWorld::settle() {
+  for (int b = 0; b < numBodies(); ++b) {
+    m_settled[b] = position(b);
+    m_settledSet[b] = 1;
+  }
 }
 
 void ContactWorld::clearReactions() {
@@ -395,13 +433,19 @@ StepStatus solveWithContactConstraints(ContactWorld& world, const StepInput& in,
     const MatX3& x = model.nodes();
     owner.resize(static_cast<size_t>(x.rows()), -1);
     bool added = false;
-    for (const Contact& c : world.query(x)) {
+    // Nodes within twice the thickness count as touching and stay prescribed where they are (a
+    // node set exactly on the skin would otherwise be free in the next step, be pulled back in
+    // by the tissue and slide off the instrument); deeper ones go onto the skin.
+    const Real t = world.params().thickness;
+    const VecX radii = VecX::Constant(x.rows(), 2 * t);
+    for (const Contact& c : world.query(x, &radii)) {
       if (owner[c.proxy] >= 0 || std::binary_search(immovable.begin(), immovable.end(), c.proxy))
         continue;
       owner[c.proxy] = c.body;
       nodes[c.body].push_back(c.proxy);
-      targets[c.body].push_back(x.row(c.proxy).transpose() + c.depth * c.normal);
-      added = true;
+      targets[c.body].push_back(x.row(c.proxy).transpose() +
+                                std::max(c.depth - t, Real(0)) * c.normal);
+      added = c.depth > t || added;
     }
     if (!added && round > 0) break;
     StepInput aug = in;
@@ -426,6 +470,36 @@ StepStatus solveWithContactConstraints(ContactWorld& world, const StepInput& in,
       if (idx < f.size()) world.addReaction(lastBodies[k], f[idx], world.position(lastBodies[k]));
     }
   }
+  return status;
+}
+
+StepStatus solveAlongInstrumentPath(ContactWorld& world, const StepInput& in,
+                                    const ContactModelHooks& model,
+                                    const std::vector<int>& immovable, int maxRounds,
+                                    Real maxStepFraction) {
+  const int nb = world.numBodies();
+  std::vector<Vec3> from(nb), to(nb);
+  std::vector<Mat3> rot(nb);
+  int steps = 1;
+  for (int b = 0; b < nb; ++b) {
+    from[b] = world.settledPosition(b);
+    to[b] = world.position(b);
+    rot[b] = world.rotation(b);
+    const Real len = maxStepFraction * world.thinnestRadius(b);
+    if (len > 0 && std::isfinite(len))
+      steps = std::max(steps, static_cast<int>(std::ceil((to[b] - from[b]).norm() / len)));
+  }
+  steps = std::min(steps, 1000);
+  StepStatus status = StepStatus::Ok;
+  for (int s = 1; s <= steps; ++s) {
+    const Real a = Real(s) / steps;
+    for (int b = 0; b < nb; ++b) world.setPose(b, (1 - a) * from[b] + a * to[b], rot[b]);
+    world.clearReactions();
+    status = solveWithContactConstraints(world, in, model, immovable, maxRounds);
+    if (status != StepStatus::Ok) break;
+  }
+  for (int b = 0; b < nb; ++b) world.setPose(b, to[b], rot[b]);
+  world.settle();
   return status;
 }
 

@@ -1,5 +1,6 @@
 #include "metaballs_model.h"
 
+#include <deform/contact.h>
 #include "pbd_constraints.h"
 
 #include <algorithm>
@@ -61,7 +62,7 @@ ModelInfo metaballsModelInfo() {
       "organs for virtual surgery, The Visual Computer 31, doi:10.1007/s00371-015-1092-2";
   info.version = "1.0";
   info.capabilities = {Capability::Grasp, Capability::PointForce, Capability::Gravity,
-                       Capability::NeedsPrecompute};
+                       Capability::NeedsPrecompute, Capability::Contact};
   info.params = metaballsParams();
   info.create = [] { return std::make_unique<MetaballsModel>(); };
   return info;
@@ -329,6 +330,12 @@ StepStatus MetaballsModel::step(const StepInput& in) {
     }
     tLap += msSince(ts);
   }
+  // Contact: the spheres (current radii) are projected out of the instruments after the sweeps,
+  // like any other position constraint; kinematic spheres do not move.
+  if (in.contact) {
+    const VecX w = Eigen::Map<const VecX>(m_wEff.data(), n);
+    resolveContacts(*in.contact, m_p, w, dt, nullptr, &m_r);
+  }
   // Algorithm 3, lines 18-21.
   auto ts = Clock::now();
   const Real invDt = 1.0 / dt;
@@ -377,6 +384,9 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   ts = Clock::now();
   applySkinning(m_skin, m_x, m_r, m_skinFrame == Frame::Rotated ? m_rot.data() : nullptr,
                 m_surface);
+  // The skinned surface can bulge past the spheres: keep it out of the instruments too (display
+  // level, no force: the spheres carried it).
+  if (in.contact) projectPointsOut(*in.contact, m_surface);
   const double tSkin = msSince(ts);
 
   m_phase["pbd"] = tStretch;

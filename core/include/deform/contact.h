@@ -80,7 +80,14 @@ class ContactWorld {
   /// Pose of the instrument for the coming queries: x_world = pos + rot * x_body.
   void setPose(int body, const Vec3& pos, const Mat3& rot = Mat3::Identity());
   Vec3 position(int body) const;
+  Mat3 rotation(int body) const;
   int numBodies() const;
+  /// Radius of the body's thinnest part (sphere or capsule radius, half the box's smallest side).
+  Real thinnestRadius(int body) const;
+  /// Where the body was when a quasi-static model last resolved contact (settle()); its first
+  /// pose until then.
+  Vec3 settledPosition(int body) const;
+  void settle();
   const ContactParams& params() const { return m_params; }
 
   /// Penetrating proxy spheres, at most one contact per proxy (the deepest over all instruments),
@@ -106,6 +113,9 @@ class ContactWorld {
   ContactParams m_params;
   std::unique_ptr<Impl> m_impl;
   std::vector<Vec3> m_force, m_torque;
+  std::vector<Vec3> m_settled;
+  std::vector<char> m_settledSet;
+  std::vector<Real> m_thinnest;
   long long m_pairsTested = 0, m_contactsFound = 0;
 };
 
@@ -134,9 +144,10 @@ int projectPointsOut(ContactWorld& world, MatX3& points);
 /// Contact as prescribed positions, for models whose solver honours GraspInput as Dirichlet
 /// conditions (quasi-static and coupled solvers): each round calls solve(in') with in' = in plus
 /// one GraspInput per instrument (tool = -1) holding the nodes that penetrate it, with targets
-/// pushed out onto its surface. Round 0 tests the nodes at the step's start, each later round the
-/// nodes the previous solve produced; a node once in the set stays (its target kept) and only new
-/// penetrations are added; rounds stop when none is added or after maxRounds. The appended
+/// pushed out onto its surface (plus the thickness; nodes touching it, within twice the
+/// thickness, are held where they are). Round 0 tests the nodes at the step's start, each later
+/// round the nodes the previous solve produced; a node once in the set stays (its target kept) and
+/// only new penetrations are added; rounds stop when none is added or after maxRounds. The appended
 /// inputs' graspForces() (the tissue's force on them) become the instruments' reaction. Nodes in
 /// `immovable` (sorted) are never added. Returns the last solve's status.
 struct ContactModelHooks {
@@ -147,6 +158,17 @@ struct ContactModelHooks {
 StepStatus solveWithContactConstraints(ContactWorld& world, const StepInput& in,
                                        const ContactModelHooks& model,
                                        const std::vector<int>& immovable, int maxRounds);
+
+/// The same for quasi-static models, whose solves can be far apart along the instruments' path:
+/// the motion since the last settled poses is split into sub-steps of at most maxStepFraction of
+/// each instrument's thinnest radius, so that no node is swallowed whole between two solves (a
+/// node deeper than the radius would be pushed out of the wrong side); each sub-step runs
+/// solveWithContactConstraints() with the instruments there. The reaction is that of the last
+/// sub-step; the poses are settled at the end.
+StepStatus solveAlongInstrumentPath(ContactWorld& world, const StepInput& in,
+                                    const ContactModelHooks& model,
+                                    const std::vector<int>& immovable, int maxRounds,
+                                    Real maxStepFraction = 0.5);
 
 /// Row-major index and weight tables of an embedding (#S by K).
 using EmbeddingIds = Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
