@@ -40,11 +40,150 @@ Interaction::Interaction(const Scene& scene, const SurfaceMesh& restSurface)
     : m_scene(scene), m_rest(restSurface), m_attach(scene.tools.size()) {
   for (const LoadSpec& load : scene.loads)
     m_loadVertices.push_back(nearestVertex(m_rest.V, load.at));
+  buildWorlds();
 }
+
+Interaction::~Interaction() = default;
 
 void Interaction::reset() {
   m_attach.assign(m_scene.tools.size(), Attachment{});
   m_emptyGrasps.clear();
+  buildWorlds();
+}
+
+namespace {
+
+Mat3 sphereInertia(Real m, Real r) {
+  return Mat3::Identity() * (0.4 * m * r * r);
+}
+
+Mat3 boxInertia(Real m, const Vec3& half) {
+  const Vec3 s = 2.0 * half;
+  return Vec3(m / 12.0 * (s.y() * s.y() + s.z() * s.z()),
+              m / 12.0 * (s.x() * s.x() + s.z() * s.z()),
+              m / 12.0 * (s.x() * s.x() + s.y() * s.y()))
+      .asDiagonal();
+}
+
+/// A grasper's ODE body is its shaft, whose centre of mass is half a shaft above the jaws' hinge
+/// (the tool position).
+Vec3 grasperOffset(const ToolSpec& t) {
+  return Vec3(0, 0, 0.5 * t.dynamics->shaftLength);
+}
+
+}  // namespace
+
+void Interaction::buildWorlds() {
+  m_contact.reset();
+  m_dynamics.reset();
+  const size_t nt = m_scene.tools.size(), no = m_scene.objects.size();
+  m_toolContactBody.assign(nt, -1);
+  m_toolDynBody.assign(nt, -1);
+  m_objectContactBody.assign(no, -1);
+  m_objectDynBody.assign(no, -1);
+  m_toolPosBefore.assign(nt, Vec3::Zero());
+  m_handForces.clear();
+  if (m_scene.needsContact()) {
+    m_contact = std::make_unique<ContactWorld>(m_scene.contact);
+    for (size_t i = 0; i < nt; ++i) {
+      const ToolSpec& t = m_scene.tools[i];
+      if (t.type != ToolType::Probe) continue;
+      m_toolContactBody[i] = m_contact->addBody(probeShape(
+          t.radius, t.shaftLength, t.shaftRadius > 0 ? t.shaftRadius : t.radius, t.shaftAxis));
+      m_contact->setPose(m_toolContactBody[i], toolPosition(t.trajectory, 0.0));
+    }
+    for (size_t j = 0; j < no; ++j) {
+      m_objectContactBody[j] = m_contact->addBody(m_scene.objects[j].shape);
+      m_contact->setPose(m_objectContactBody[j], m_scene.objects[j].pos);
+    }
+  }
+  if (m_scene.needsDynamics()) {
+    m_dynamics = std::make_unique<InstrumentWorld>(m_scene.gravity);
+    for (size_t i = 0; i < nt; ++i) {
+      const ToolSpec& t = m_scene.tools[i];
+      if (!t.dynamics) continue;
+      const Vec3 p0 = toolPosition(t.trajectory, 0.0);
+      if (t.type == ToolType::Grasper) {
+        m_toolDynBody[i] = m_dynamics->addGrasper(t.dynamics->mass, t.dynamics->shaftLength,
+                                                  t.dynamics->jawLength, p0, t.dynamics->coupling);
+      } else {
+        m_toolDynBody[i] =
+            m_dynamics->addBody(t.dynamics->mass, sphereInertia(t.dynamics->mass, t.radius), p0,
+                                false, true, t.dynamics->coupling, true);
+      }
+      m_toolPosBefore[i] = p0;
+    }
+    for (size_t j = 0; j < no; ++j) {
+      const ObjectSpec& o = m_scene.objects[j];
+      const ShapePrimitive& p = o.shape.parts.front();
+      const Mat3 I = p.kind == ShapePrimitive::Kind::Box ? boxInertia(o.mass, p.halfExtents)
+                                                         : sphereInertia(o.mass, p.radius);
+      m_objectDynBody[j] =
+          m_dynamics->addBody(o.mass, I, o.pos, true, !o.trajectory.empty(), o.coupling);
+    }
+  }
+  const int nb = m_dynamics ? m_dynamics->numBodies() : 0;
+  m_reactionForce.assign(nb, Vec3::Zero());
+  m_reactionTorque.assign(nb, Vec3::Zero());
+}
+
+Vec3 Interaction::toolAt(size_t i, Real t) const {
+  const ToolSpec& tool = m_scene.tools[i];
+  if (m_toolDynBody[i] < 0) return toolPosition(tool.trajectory, t);
+  Vec3 p = m_dynamics->position(m_toolDynBody[i]);
+  if (tool.type == ToolType::Grasper)
+    p -= m_dynamics->rotation(m_toolDynBody[i]) * grasperOffset(tool);
+  return p;
+}
+
+std::vector<Vec3> Interaction::objectPositions() const {
+  std::vector<Vec3> out;
+  for (int b : m_objectDynBody) out.push_back(m_dynamics ? m_dynamics->position(b) : Vec3::Zero());
+  return out;
+}
+
+std::vector<std::string> Interaction::describeWorlds() const {
+  std::vector<std::string> out;
+  if (m_contact) {
+    int probes = 0;
+    for (int b : m_toolContactBody) probes += b >= 0;
+    out.push_back("bullet: btCollisionWorld (btDbvtBroadphase + Bullet narrowphase) with " +
+                  std::to_string(probes) + " probe(s) and " +
+                  std::to_string(m_scene.objects.size()) + " object(s); contact thickness " +
+                  std::to_string(m_scene.contact.thickness) + " m, " +
+                  std::to_string(m_scene.contact.passes) + " pass(es)");
+  }
+  if (m_dynamics) {
+    int tools = 0;
+    for (int b : m_toolDynBody) tools += b >= 0;
+    out.push_back("ode: dWorld with " + std::to_string(tools) + " virtually coupled tool(s) and " +
+                  std::to_string(m_scene.objects.size()) + " rigid object(s) (" +
+                  std::to_string(m_dynamics->numBodies()) + " bodies)");
+  }
+  return out;
+}
+
+void Interaction::finishStep(const StepInput& in, const Model& model) {
+  if (!m_dynamics) return;
+  std::fill(m_reactionForce.begin(), m_reactionForce.end(), Vec3::Zero());
+  std::fill(m_reactionTorque.begin(), m_reactionTorque.end(), Vec3::Zero());
+  if (m_contact) {
+    for (size_t i = 0; i < m_scene.tools.size(); ++i) {
+      if (m_toolContactBody[i] < 0 || m_toolDynBody[i] < 0) continue;
+      m_reactionForce[m_toolDynBody[i]] += m_contact->reactionForce(m_toolContactBody[i]);
+      m_reactionTorque[m_toolDynBody[i]] += m_contact->reactionTorque(m_toolContactBody[i]);
+    }
+    for (size_t j = 0; j < m_scene.objects.size(); ++j) {
+      m_reactionForce[m_objectDynBody[j]] += m_contact->reactionForce(m_objectContactBody[j]);
+      m_reactionTorque[m_objectDynBody[j]] += m_contact->reactionTorque(m_objectContactBody[j]);
+    }
+  }
+  const std::vector<Vec3> grasp = model.graspForces();
+  for (size_t g = 0; g < in.grasps.size() && g < grasp.size(); ++g) {
+    const int tool = in.grasps[g].tool;
+    if (tool >= 0 && tool < int(m_toolDynBody.size()) && m_toolDynBody[tool] >= 0)
+      m_reactionForce[m_toolDynBody[tool]] += grasp[g];
+  }
 }
 
 StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
@@ -55,6 +194,60 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
   const Real slack = kTimeSlack * dt;
   const MatX3& nodes = model.nodes();
 
+  if (m_dynamics) {
+    const auto hand = [&](const std::vector<KeyFrame>& traj, const Vec3& offset, int body) {
+      const Vec3 a = toolPosition(traj, t), b = toolPosition(traj, t + dt);
+      m_dynamics->setHand(body, b + offset, (b - a) / dt);
+    };
+    for (size_t i = 0; i < m_scene.tools.size(); ++i) {
+      const int b = m_toolDynBody[i];
+      if (b < 0) continue;
+      const ToolSpec& tool = m_scene.tools[i];
+      m_toolPosBefore[i] = toolAt(i, t);
+      const bool grasper = tool.type == ToolType::Grasper;
+      hand(tool.trajectory, grasper ? grasperOffset(tool) : Vec3::Zero(), b);
+      if (grasper) m_dynamics->setJaws(b, jawClosed(tool.trajectory, t + slack));
+    }
+    for (size_t j = 0; j < m_scene.objects.size(); ++j) {
+      if (!m_scene.objects[j].trajectory.empty())
+        hand(m_scene.objects[j].trajectory, Vec3::Zero(), m_objectDynBody[j]);
+    }
+    for (int b = 0; b < static_cast<int>(m_reactionForce.size()); ++b) {
+      m_dynamics->addForce(b, m_reactionForce[b], m_dynamics->position(b));
+      m_dynamics->addTorque(b, m_reactionTorque[b]);
+    }
+    m_dynamics->step(dt);
+    m_handForces.clear();
+    for (size_t i = 0; i < m_scene.tools.size(); ++i) {
+      if (m_toolDynBody[i] >= 0)
+        m_handForces.push_back({"tools/" + std::to_string(i),
+                                m_dynamics->couplingForce(m_toolDynBody[i]), toolAt(i, t + dt)});
+    }
+    for (size_t j = 0; j < m_scene.objects.size(); ++j) {
+      if (!m_scene.objects[j].trajectory.empty())
+        m_handForces.push_back({"objects/" + std::to_string(j),
+                                m_dynamics->couplingForce(m_objectDynBody[j]),
+                                m_dynamics->position(m_objectDynBody[j])});
+    }
+  }
+  if (m_contact) {
+    m_contact->clearReactions();
+    for (size_t i = 0; i < m_scene.tools.size(); ++i) {
+      const int b = m_toolContactBody[i];
+      if (b < 0) continue;
+      if (m_toolDynBody[i] >= 0) {
+        m_contact->setPose(b, toolAt(i, t + dt), m_dynamics->rotation(m_toolDynBody[i]));
+      } else {
+        m_contact->setPose(b, toolPosition(m_scene.tools[i].trajectory, t + dt));
+      }
+    }
+    for (size_t j = 0; j < m_scene.objects.size(); ++j) {
+      m_contact->setPose(m_objectContactBody[j], m_dynamics->position(m_objectDynBody[j]),
+                         m_dynamics->rotation(m_objectDynBody[j]));
+    }
+    in.contact = m_contact.get();
+  }
+
   for (size_t i = 0; i < m_scene.tools.size(); ++i) {
     const ToolSpec& tool = m_scene.tools[i];
     const Real r2 = tool.radius * tool.radius;
@@ -64,7 +257,7 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
       if (closed && !a.active) {
         a = Attachment{};
         a.active = true;
-        a.toolAtClose = toolPosition(tool.trajectory, t);
+        a.toolAtClose = m_toolDynBody[i] >= 0 ? m_toolPosBefore[i] : toolAt(i, t);
         for (Eigen::Index n = 0; n < nodes.rows(); ++n) {
           if ((nodes.row(n).transpose() - a.toolAtClose).squaredNorm() <= r2)
             a.nodes.push_back(static_cast<int>(n));
@@ -81,33 +274,12 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
         GraspInput g;
         g.tool = static_cast<int>(i);
         g.nodes = a.nodes;
-        const Vec3 shift = toolPosition(tool.trajectory, t + dt) - a.toolAtClose;
+        const Vec3 shift = toolAt(i, t + dt) - a.toolAtClose;
         g.targets = a.restPositions.rowwise() + shift.transpose();
         in.grasps.push_back(std::move(g));
       }
-    } else {
-      // A probe is a rigid sphere: nodes it would contain at the end of the step are pushed
-      // radially onto its surface, through the same attachment input as a grasp.
-      const Vec3 c = toolPosition(tool.trajectory, t + dt);
-      Vec3 motion = c - toolPosition(tool.trajectory, t);
-      if (motion.norm() <= 0) motion = Vec3(0, 0, -1);
-      GraspInput g;
-      g.tool = static_cast<int>(i);
-      std::vector<Vec3> targets;
-      for (Eigen::Index n = 0; n < nodes.rows(); ++n) {
-        const Vec3 d = nodes.row(n).transpose() - c;
-        if (d.squaredNorm() >= r2) continue;
-        const Real len = d.norm();
-        const Vec3 dir = len > tol::kDegenerateLength ? Vec3(d / len) : Vec3(motion.normalized());
-        g.nodes.push_back(static_cast<int>(n));
-        targets.push_back(c + tool.radius * dir);
-      }
-      if (!g.nodes.empty()) {
-        g.targets.resize(static_cast<Eigen::Index>(targets.size()), 3);
-        for (size_t k = 0; k < targets.size(); ++k) g.targets.row(k) = targets[k].transpose();
-        in.grasps.push_back(std::move(g));
-      }
     }
+    // Probes act through the contact world (set above), not through the grasp input.
   }
 
   for (size_t l = 0; l < m_scene.loads.size(); ++l) {

@@ -25,6 +25,8 @@ const char* capabilityName(Capability c) {
       return "tet_input";
     case Capability::QuasiStatic:
       return "quasi_static";
+    case Capability::Contact:
+      return "contact";
   }
   assert(false && "unknown Capability");
   return "unknown";

@@ -267,8 +267,17 @@ OrganSpec parseOrgan(const Ctx& c, const json& j, const std::string& path) {
   return o;
 }
 
+CouplingParams parseCoupling(const Ctx& c, const ObjectReader& r, CouplingParams p) {
+  if (const json* v = r.optional("stiffness")) p.stiffness = c.positive(*v, r.child("stiffness"));
+  if (const json* v = r.optional("damping")) {
+    p.damping = c.number(*v, r.child("damping"));
+    if (p.damping < 0) c.fail(r.child("damping"), "must be >= 0, got " + num(p.damping));
+  }
+  return p;
+}
+
 ToolSpec parseTool(const Ctx& c, const json& j, const std::string& path) {
-  ObjectReader r(j, path, c.file, {"type", "radius", "trajectory"});
+  ObjectReader r(j, path, c.file, {"type", "radius", "trajectory", "shaft", "dynamics"});
   ToolSpec t;
   const std::string type = c.string(r.required("type"), r.child("type"));
   if (type == "grasper") {
@@ -281,7 +290,78 @@ ToolSpec parseTool(const Ctx& c, const json& j, const std::string& path) {
   if (const json* v = r.optional("radius")) t.radius = c.positive(*v, r.child("radius"));
   t.trajectory = parseKeyFrames(c, r.required("trajectory"), r.child("trajectory"),
                                 t.type == ToolType::Grasper);
+  if (const json* v = r.optional("shaft")) {
+    if (t.type != ToolType::Probe) c.fail(r.child("shaft"), "applies only to probes");
+    ObjectReader sr(*v, r.child("shaft"), c.file, {"length", "radius", "axis"});
+    if (const json* x = sr.optional("length")) {
+      t.shaftLength = c.number(*x, sr.child("length"));
+      if (t.shaftLength < 0) c.fail(sr.child("length"), "must be >= 0, got " + num(t.shaftLength));
+    }
+    if (const json* x = sr.optional("radius")) t.shaftRadius = c.positive(*x, sr.child("radius"));
+    if (const json* x = sr.optional("axis")) {
+      t.shaftAxis = c.vec3(*x, sr.child("axis"));
+      if (!(t.shaftAxis.norm() > 0)) c.fail(sr.child("axis"), "must not be the zero vector");
+      t.shaftAxis.normalize();
+    }
+  }
+  if (const json* v = r.optional("dynamics")) {
+    std::vector<std::string> keys = {"mass", "stiffness", "damping"};
+    if (t.type == ToolType::Grasper) {
+      keys.push_back("jaw_length");
+      keys.push_back("shaft_length");
+    }
+    ObjectReader dr(*v, r.child("dynamics"), c.file, keys);
+    ToolDynamics d;
+    if (const json* x = dr.optional("mass")) d.mass = c.positive(*x, dr.child("mass"));
+    if (const json* x = dr.optional("jaw_length"))
+      d.jawLength = c.positive(*x, dr.child("jaw_length"));
+    if (const json* x = dr.optional("shaft_length"))
+      d.shaftLength = c.positive(*x, dr.child("shaft_length"));
+    d.coupling = parseCoupling(c, dr, d.coupling);
+    t.dynamics = d;
+  }
   return t;
+}
+
+ObjectSpec parseObject(const Ctx& c, const json& j, const std::string& path) {
+  ObjectReader r(j, path, c.file,
+                 {"shape", "radius", "size", "mass", "pos", "trajectory", "stiffness", "damping"});
+  ObjectSpec o;
+  o.shapeName = c.string(r.required("shape"), r.child("shape"));
+  ShapePrimitive p;
+  if (o.shapeName == "sphere") {
+    p.kind = ShapePrimitive::Kind::Sphere;
+    p.radius = c.positive(r.required("radius"), r.child("radius"));
+    if (r.has("size")) c.fail(r.child("size"), "applies only to boxes (spheres take \"radius\")");
+  } else if (o.shapeName == "box") {
+    p.kind = ShapePrimitive::Kind::Box;
+    const Vec3 size = c.vec3(r.required("size"), r.child("size"));
+    for (int i = 0; i < 3; ++i)
+      if (!(size[i] > 0)) c.fail(r.child("size") + "/" + std::to_string(i), "must be > 0");
+    p.halfExtents = 0.5 * size;
+    if (r.has("radius")) c.fail(r.child("radius"), "applies only to spheres (boxes take \"size\")");
+  } else {
+    c.fail(r.child("shape"), "expected \"sphere\" or \"box\", got \"" + o.shapeName + "\"");
+  }
+  o.shape.parts.push_back(p);
+  o.mass = c.positive(r.required("mass"), r.child("mass"));
+  o.pos = c.vec3(r.required("pos"), r.child("pos"));
+  if (const json* v = r.optional("trajectory"))
+    o.trajectory = parseKeyFrames(c, *v, r.child("trajectory"), false);
+  o.coupling = parseCoupling(c, r, o.coupling);
+  return o;
+}
+
+ContactParams parseContact(const Ctx& c, const json& j, const std::string& path) {
+  ObjectReader r(j, path, c.file, {"thickness", "passes"});
+  ContactParams p;
+  if (const json* v = r.optional("thickness")) p.thickness = c.positive(*v, r.child("thickness"));
+  if (const json* v = r.optional("passes")) {
+    const long long n = c.integer(*v, r.child("passes"));
+    if (n < 1 || n > 100) c.fail(r.child("passes"), "must be in [1, 100], got " + num(double(n)));
+    p.passes = static_cast<int>(n);
+  }
+  return p;
 }
 
 LoadSpec parseLoad(const Ctx& c, const json& j, const std::string& path) {
@@ -325,11 +405,22 @@ int Scene::numSteps() const {
   return static_cast<int>(std::llround(duration / dt));
 }
 
+bool Scene::needsContact() const {
+  return !objects.empty() || std::any_of(tools.begin(), tools.end(), [](const ToolSpec& t) {
+    return t.type == ToolType::Probe;
+  });
+}
+
+bool Scene::needsDynamics() const {
+  return !objects.empty() || std::any_of(tools.begin(), tools.end(),
+                                         [](const ToolSpec& t) { return t.dynamics.has_value(); });
+}
+
 Scene parseScene(const nlohmann::json& j, const std::string& file) {
   const Ctx c{file};
   ObjectReader r(j, "", file,
-                 {"name", "description", "organ", "gravity", "dt", "duration", "tools", "loads",
-                  "models", "reference", "samples", "compare_at", "output"});
+                 {"name", "description", "organ", "gravity", "dt", "duration", "tools", "objects",
+                  "contact", "loads", "models", "reference", "samples", "compare_at", "output"});
   Scene s;
   s.file = file;
   if (const json* v = r.optional("name")) {
@@ -355,6 +446,12 @@ Scene parseScene(const nlohmann::json& j, const std::string& file) {
     for (size_t i = 0; i < v->size(); ++i)
       s.tools.push_back(parseTool(c, (*v)[i], "/tools/" + std::to_string(i)));
   }
+  if (const json* v = r.optional("objects")) {
+    c.array(*v, "/objects");
+    for (size_t i = 0; i < v->size(); ++i)
+      s.objects.push_back(parseObject(c, (*v)[i], "/objects/" + std::to_string(i)));
+  }
+  if (const json* v = r.optional("contact")) s.contact = parseContact(c, *v, "/contact");
   if (const json* v = r.optional("loads")) {
     c.array(*v, "/loads");
     for (size_t i = 0; i < v->size(); ++i)

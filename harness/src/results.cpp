@@ -248,6 +248,33 @@ json runJson(const RunRecord& run) {
   if (!run.finalSurfaceFile.empty()) j["final_surface"] = run.finalSurfaceFile;
   if (!run.seriesFile.empty()) j["surface_series"] = run.seriesFile;
   if (!run.graspForceFile.empty()) j["grasp_forces"] = run.graspForceFile;
+  if (!run.worlds.empty()) j["worlds"] = run.worlds;
+  if (run.contactPairs >= 0)
+    j["contact"] = {{"pairs_tested", run.contactPairs}, {"contacts", run.contacts}};
+  if (!run.instruments.empty()) {
+    // The force the hand exerts on each dynamic instrument, per step (the hand feels minus it).
+    json hands = json::array();
+    for (size_t i = 0; i < run.instruments.size(); ++i) {
+      json t = json::array(), f = json::array(), x = json::array();
+      for (const HandForceSample& h : run.handForces) {
+        if (h.instrument != static_cast<int>(i)) continue;
+        t.push_back(h.step * run.dt);
+        f.push_back({finite(h.force.x()), finite(h.force.y()), finite(h.force.z())});
+        x.push_back({finite(h.position.x()), finite(h.position.y()), finite(h.position.z())});
+      }
+      hands.push_back({{"instrument", run.instruments[i]},
+                       {"unit", "N"},
+                       {"t_s", t},
+                       {"force_N", f},
+                       {"position_m", x}});
+    }
+    j["hand_forces"] = hands;
+  }
+  if (!run.objectsFinal.empty()) {
+    json o = json::array();
+    for (const Vec3& p : run.objectsFinal) o.push_back({p.x(), p.y(), p.z()});
+    j["objects_final_m"] = o;
+  }
   return j;
 }
 

@@ -1,5 +1,6 @@
 // The runner: one model through one scene with timing and divergence checks, and the whole
 // `deformbench run` pipeline around it.
+#include <deform/contact.h>
 #include <deform/interaction.h>
 #include <deform_harness/results.h>
 #include <deform_harness/runner.h>
@@ -85,13 +86,23 @@ std::vector<int> quasiStaticSolveSteps(const Scene& scene, int lastStep) {
 }
 
 std::string unsupportedReason(const ModelInfo& info, const Scene& scene) {
+  const auto lacks = [&](const std::string& what, Capability c) {
+    return what + " needs the " + capabilityName(c) + " capability, which " + info.name +
+           " does not have";
+  };
   for (size_t i = 0; i < scene.tools.size(); ++i) {
-    if (!info.has(Capability::Grasp)) {
-      return std::string("the scene's tool ") + std::to_string(i) + " (" +
-             (scene.tools[i].type == ToolType::Grasper ? "grasper" : "probe") +
-             ") needs the grasp capability, which " + info.name + " does not have";
-    }
+    const ToolSpec& t = scene.tools[i];
+    const std::string name = "the scene's tool " + std::to_string(i);
+    if (t.type == ToolType::Grasper && !info.has(Capability::Grasp))
+      return lacks(name + " (grasper)", Capability::Grasp);
+    if (t.type == ToolType::Probe && !info.has(Capability::Contact))
+      return lacks(name + " (probe)", Capability::Contact);
+    if (t.type == ToolType::Grasper && t.dynamics && !info.has(Capability::ReactionForce))
+      return lacks(name + " (a grasper with dynamics: the hand feels the grasp force)",
+                   Capability::ReactionForce);
   }
+  if (!scene.objects.empty() && !info.has(Capability::Contact))
+    return lacks("the scene's rigid objects", Capability::Contact);
   if (!scene.loads.empty() && !info.has(Capability::PointForce)) {
     return "the scene's loads need the point_force capability, which " + info.name +
            " does not have";
@@ -134,6 +145,8 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   rec.compared.clear();
   rec.series.clear();
   rec.graspForces.clear();
+  rec.handForces.clear();
+  rec.dt = scene.dt;
   rec.status = RunStatus::Ok;
 
   const Box box = boundingBox(organ.surface.V);
@@ -144,6 +157,7 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   const int nv = organ.surface.numVertices();
 
   Interaction interaction(scene, organ.surface);
+  rec.worlds = interaction.describeWorlds();
   std::map<std::string, std::vector<double>> phases;
   const bool sparse = options.quasiStaticAtComparedInstants.value_or(false);
   const std::vector<int> solveSteps = sparse ? quasiStaticSolveSteps(scene, n) : std::vector<int>{};
@@ -154,6 +168,13 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   for (int k = 0; k < n; ++k) {
     const Real t = k * scene.dt;
     const StepInput in = interaction.prepare(t, scene.dt, model);
+    const auto& hands = interaction.handForces();
+    if (k == 0) {
+      rec.instruments.clear();
+      for (const auto& h : hands) rec.instruments.push_back(h.instrument);
+    }
+    for (size_t h = 0; h < hands.size(); ++h)
+      rec.handForces.push_back({k + 1, static_cast<int>(h), hands[h].force, hands[h].position});
     if (sparse && !std::binary_search(solveSteps.begin(), solveSteps.end(), k + 1)) {
       // Not an instant anyone looks at: the quasi-static state between solves is not needed.
       rec.steps = k + 1;
@@ -175,6 +196,7 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
     }
     rec.stepMs.push_back(1e3 * secondsSince(t0));
     rec.steps = k + 1;
+    interaction.finishStep(in, model);
     const Real tEnd = (k + 1) * scene.dt;
 
     const MatX3& surface = model.surface();
@@ -219,6 +241,11 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   const MatX3i faces = model.surfaceFaces();
   rec.finalFaces = faces.rows() > 0 ? faces : organ.surface.F;
   rec.emptyGrasps = interaction.emptyGrasps();
+  rec.objectsFinal = interaction.objectPositions();
+  if (const ContactWorld* cw = interaction.contactWorld()) {
+    rec.contactPairs = cw->pairsTested();
+    rec.contacts = cw->contactsFound();
+  }
   for (int tool : rec.emptyGrasps) {
     rec.notes.push_back("the grasp of tool " + std::to_string(tool) +
                         " closed on no model node (nothing within its radius)");
@@ -460,6 +487,17 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
     for (const auto& e : rec.cacheEvents)
       explain("cache " + eventName(e.what) + ": " + p.label + " " + e.kind + " " + e.key);
     if (rec.status == RunStatus::Unsupported) explain("skipped " + p.label + ": " + rec.message);
+    if (rec.status != RunStatus::Unsupported) {
+      if (rec.worlds.empty()) {
+        explain(p.label + ": no Bullet or ODE world (the scene's tools are kinematic)");
+      } else {
+        for (const auto& w : rec.worlds) explain(p.label + ": created " + w);
+      }
+      if (rec.contactPairs >= 0)
+        explain(p.label + ": contact: " + std::to_string(rec.contactPairs) +
+                " broadphase pairs tested, " + std::to_string(rec.contacts) +
+                " penetrating proxies resolved");
+    }
     if (rec.solvedSteps >= 0) {
       explain(p.label + ": quasi-static, solved at " + std::to_string(rec.solvedSteps) + " of " +
               std::to_string(rec.steps) +

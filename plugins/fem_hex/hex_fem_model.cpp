@@ -1,5 +1,7 @@
 #include "hex_fem_model.h"
 
+#include <deform/contact.h>
+
 #include <deform/error.h>
 
 #include <algorithm>
@@ -549,6 +551,16 @@ StepStatus HexFemModel::step(const StepInput& in) {
   // Advance positions; grasped nodes land exactly on their targets.
   Eigen::Map<VecX>(m_x.data(), 3 * N) += h * m_v;
   for (int n : m_grasped) m_x.row(n) = m_target.row(n);
+  if (in.contact) {
+    // Contact on the embedded surface, spread to the grid nodes by the trilinear weights; fixed
+    // and grasped nodes do not move.
+    m_contactInvMass.resize(N);
+    for (int n = 0; n < N; ++n)
+      m_contactInvMass[n] =
+          (m_isFixed[n] || m_isGrasped[n] || !(m_mass[3 * n] > 0)) ? 0.0 : 1.0 / m_mass[3 * n];
+    resolveEmbeddedContacts(*in.contact, m_x, m_embedding.nodeIds, m_embedding.weights,
+                            m_contactInvMass, h, m_v.data());
+  }
   m_msSolve = msSince(t1);
 
   const auto t2 = Clock::now();

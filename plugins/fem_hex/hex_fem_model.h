@@ -124,6 +124,7 @@ class HexFemModel : public Model {
   // State.
   MatX3 m_x;
   VecX m_v;
+  VecX m_contactInvMass;  // N, 1/kg; 0 on fixed and grasped nodes (contact response)
   std::vector<Quat> m_q;
   std::vector<Mat3> m_R;
   MatX3 m_surface;

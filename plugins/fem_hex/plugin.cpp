@@ -94,7 +94,7 @@ DEFORM_PLUGIN(registry) {
       "Nesme et al. 2005, Efficient, physically plausible finite elements, Eurographics short";
   info.version = "1.0";
   info.capabilities = {Capability::Grasp, Capability::PointForce, Capability::Gravity,
-                       Capability::ReactionForce};
+                       Capability::ReactionForce, Capability::Contact};
   info.params = deform::fem_hex::paramSpecs();
   info.create = [] { return std::make_unique<deform::fem_hex::FemHexModel>(); };
   registry.add(std::move(info));

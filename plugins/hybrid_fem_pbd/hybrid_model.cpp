@@ -213,6 +213,7 @@ const CoarseAttachment& HybridModel::attachment(int i) {
 }
 
 StepStatus HybridModel::step(const StepInput& in) {
+  if (in.contact && !m_inContactStep) return stepWithContact(in);
   const int n = m_surf.numVertices();
   const Real dt = in.dt;
   auto t = Clock::now();

@@ -107,6 +107,9 @@ class HybridModel final : public Model {
  private:
   void rebuildMasses();
   const CoarseAttachment& attachment(int fineVertex);
+  /// step() with StepInput::contact: contact as prescribed vertices (hybrid_contact.cpp).
+  StepStatus stepWithContact(const StepInput& in);
+  bool m_inContactStep = false;
 
   HybridConfig m_cfg;
   std::string m_source;

@@ -14,8 +14,8 @@ DEFORM_PLUGIN(registry) {
       "Scientific Programming 2021, article 8343312 (hindawi.com/journals/sp/2021/8343312)";
   info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp,         C::PointForce, C::Gravity,
-                       C::ReactionForce, C::Cut,        C::NeedsPrecompute};
+  info.capabilities = {C::Grasp, C::PointForce,      C::Gravity, C::ReactionForce,
+                       C::Cut,   C::NeedsPrecompute, C::Contact};
   info.params = deform::hybrid::paramSpecs();
   info.create = [] { return std::make_unique<deform::hybrid::HybridModel>(); };
   registry.add(std::move(info));

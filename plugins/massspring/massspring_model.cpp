@@ -1,5 +1,7 @@
 #include "massspring_model.h"
 
+#include <deform/contact.h>
+
 #include <deform/mesh.h>
 
 #include <Eigen/IterativeLinearSolvers>
@@ -379,6 +381,14 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     m_phase["forces"] = std::chrono::duration<double, std::milli>(t1 - t0).count();
     m_phase["integrate"] = std::chrono::duration<double, std::milli>(t2 - t1).count();
     status = ok ? StepStatus::Ok : StepStatus::Diverged;
+  }
+  if (in.contact) {
+    // Contact after the integrator: nodes are projected out of the instruments and lose their
+    // inward normal velocity; fixed and grasped nodes stay where their constraint put them.
+    m_contactInvMass = m_invMass;
+    for (const GraspInput& g : in.grasps)
+      for (int i : g.nodes) m_contactInvMass[i] = 0;
+    resolveContacts(*in.contact, m_x, m_contactInvMass, h, &m_v);
   }
   if (!m_surfaceIdentity)
     for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);

@@ -70,6 +70,7 @@ class MassSpringModel final : public Model {
   MassSpringConfig m_config;
   MatX3 m_rest, m_x, m_v, m_f, m_xOld;
   VecX m_mass, m_invMass;  // invMass 0 for fixed or massless nodes
+  VecX m_contactInvMass;   // invMass with grasped nodes 0 too (contact response)
   std::vector<int> m_fixed;
   std::vector<Spring> m_springs;
   long long m_edgeSprings = 0, m_bendingSprings = 0, m_elements = 0;

@@ -1,5 +1,6 @@
 #include "metaballs_model.h"
 
+#include <deform/contact.h>
 #include "pbd_constraints.h"
 
 #include <algorithm>
@@ -61,7 +62,7 @@ ModelInfo metaballsModelInfo() {
       "organs for virtual surgery, The Visual Computer 31, doi:10.1007/s00371-015-1092-2";
   info.version = "1.0";
   info.capabilities = {Capability::Grasp, Capability::PointForce, Capability::Gravity,
-                       Capability::NeedsPrecompute};
+                       Capability::NeedsPrecompute, Capability::Contact};
   info.params = metaballsParams();
   info.create = [] { return std::make_unique<MetaballsModel>(); };
   return info;
@@ -335,6 +336,18 @@ StepStatus MetaballsModel::step(const StepInput& in) {
     projectLaplacianSweep(m_adjStart, m_adj, m_wEff.data(), m_ldata, P, kLap, m_simd);
     tLap += msSince(tl);
   }
+  // Contact: the spheres (current radii) are projected out of the instruments after the sweeps,
+  // like any other position constraint; kinematic spheres do not move.
+  if (in.contact) {
+    // The sweeps work on the padded rows P; the shared contact routine takes a #n by 3 matrix.
+    m_p.resize(n, 3);
+    for (int i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c) m_p(i, c) = P[4 * i + c];
+    const VecX w = Eigen::Map<const VecX>(m_wEff.data(), n);
+    resolveContacts(*in.contact, m_p, w, dt, nullptr, &m_r);
+    for (int i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c) P[4 * i + c] = m_p(i, c);
+  }
   // Algorithm 3, lines 18-21.
   auto ts = Clock::now();
   const Real invDt = 1.0 / dt;
@@ -385,6 +398,9 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   const bool skinRot = m_skinFrame == Frame::Rotated;
   packSphereFrames(m_x, m_r, skinRot ? m_rot.data() : nullptr, m_frames);
   applySkinningFrames(m_skin, m_frames.data(), skinRot, m_surface, m_simd);
+  // The skinned surface can bulge past the spheres: keep it out of the instruments too (display
+  // level, no force: the spheres carried it).
+  if (in.contact) projectPointsOut(*in.contact, m_surface);
   const double tSkin = msSince(ts);
 
   m_phases = {tStretch, tLap, tVol, tRot, tSkin};

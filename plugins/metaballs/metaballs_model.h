@@ -90,6 +90,7 @@ class MetaballsModel final : public Model {
 
   // state
   MatX3 m_x, m_v, m_f;
+  MatX3 m_p;               // contact only: the padded predicted positions as rows (see step())
   std::vector<Real> m_p4;  // (#S+1)*4 predicted positions, row #S the padding dummy
   VecX m_r;
   RotationBatch m_rotBatch;  // per-sphere A and warm-started quaternions

@@ -1,5 +1,6 @@
 #include "particle_bem_model.h"
 
+#include <deform/contact.h>
 #include "distance_field.h"
 #include "physics_points.h"
 #include "surface_decimation.h"
@@ -87,7 +88,7 @@ ModelInfo ParticleBemModel::info() {
       "University; no DOI given in the paper)";
   i.version = "1.0";
   i.capabilities = {Capability::Grasp, Capability::PointForce, Capability::Gravity,
-                    Capability::NeedsPrecompute};
+                    Capability::NeedsPrecompute, Capability::Contact};
   i.params = paramSpecs();
   i.create = [] { return std::make_unique<ParticleBemModel>(); };
   return i;
@@ -282,6 +283,25 @@ void ParticleBemModel::applyGrasps(const StepInput& in) {
     }
 }
 
+void ParticleBemModel::resolveParticleContacts(const StepInput& in) {
+  // Every interior particle is a sphere of half the particle spacing, the guided model's surface
+  // particles (the coarse surface's vertices) spheres of the contact thickness; fixed and grasped
+  // ones stay. Mass of a particle: its share of the organ (guided particles have none).
+  const Eigen::Index n = m_x.rows();
+  VecX invMass(n);
+  const Real share = m_material.density * m_spacing * m_spacing * m_spacing;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Real m = (!m_guided && i < m_mass.size()) ? m_mass[i] : share;
+    invMass[i] = (m_fixedMask[i] || !(m > 0)) ? 0.0 : 1.0 / m;
+  }
+  for (const GraspInput& g : in.grasps)
+    for (int i : g.nodes)
+      if (i >= 0 && i < n) invMass[i] = 0;
+  VecX radii = VecX::Constant(n, 0.5 * m_spacing);
+  if (m_guided) radii.head(m_coarse.numVertices()).setConstant(in.contact->params().thickness);
+  resolveContacts(*in.contact, m_x, invMass, in.dt, &m_v, &radii);
+}
+
 StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   const auto t0 = Clock::now();
   const int nc = m_coarse.numVertices();
@@ -335,6 +355,16 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   // Grasped coarse nodes: tractions so that their displacement is the prescribed one.
   std::vector<int> graspNodes;
   std::vector<Vec3> graspTargets;
+  if (in.contact) {
+    // Contact: surface particles inside an instrument are prescribed onto its surface through
+    // the same traction solve as a grasp, so the whole BEM surface answers the push.
+    const MatX3 surfaceParticles = m_x.topRows(nc);
+    for (const Contact& c : in.contact->query(surfaceParticles)) {
+      if (m_fixedMask[c.proxy]) continue;
+      graspNodes.push_back(c.proxy);
+      graspTargets.push_back(surfaceParticles.row(c.proxy).transpose() + c.depth * c.normal);
+    }
+  }
   for (const GraspInput& g : in.grasps)
     for (size_t a = 0; a < g.nodes.size(); ++a) {
       const int i = g.nodes[a];
@@ -374,10 +404,12 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
       if (i >= 0 && i < m_x.rows()) m_kinematic[i] = 1;
   springCorrection(m_x, m_v, m_target, m_springK, m_springC, in.dt, m_kinematic);
   applyGrasps(in);
+  if (in.contact) resolveParticleContacts(in);
   const auto t2 = Clock::now();
 
   m_coarseDisp = m_x.topRows(nc) - m_restCoarse;
   interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_surface);
+  if (in.contact) projectPointsOut(*in.contact, m_surface);  // display level, no force
   const auto t3 = Clock::now();
   m_times["surface"] = ms(t0, t1);
   m_times["correction"] = ms(t1, t2);
@@ -405,6 +437,7 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
     m_x.row(i) += in.dt * m_v.row(i);
   }
   applyGrasps(in);
+  if (in.contact) resolveParticleContacts(in);
   const auto t2 = Clock::now();
   mlsDeformationGradients(m_mls, m_rest, m_x, m_F);
   for (Eigen::Index v = 0; v < m_fineRest.rows(); ++v) {
@@ -417,6 +450,7 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
     }
     m_surface.row(v) = x.transpose();
   }
+  if (in.contact) projectPointsOut(*in.contact, m_surface);  // display level, no force
   const auto t3 = Clock::now();
   m_times["forces"] = ms(t0, t1);
   m_times["integration"] = ms(t1, t2);

@@ -55,6 +55,8 @@ class ParticleBemModel final : public Model {
   StepStatus stepGuided(const StepInput& in);
   StepStatus stepParticles(const StepInput& in);
   void applyGrasps(const StepInput& in);
+  /// Contact (deform/contact.h) on every particle, after the correction.
+  void resolveParticleContacts(const StepInput& in);
 
   bool m_guided = true;
   std::string m_source;

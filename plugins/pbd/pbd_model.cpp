@@ -1,5 +1,6 @@
 #include "pbd_model.h"
 
+#include <deform/contact.h>
 #include <deform/mesh.h>
 
 #include <algorithm>
@@ -493,6 +494,9 @@ StepStatus PbdModel::step(const StepInput& in) {
   std::fill(m_lambdaTet.begin(), m_lambdaTet.end(), 0.0);
   m_lambdaVolume = 0;
   projectAll(dt);
+  // Contact last, so that no node ends the step inside an instrument; the correction enters the
+  // velocity like any other projection (w = 0 for fixed and grasped nodes).
+  if (in.contact) resolveContacts(*in.contact, m_p, m_w, dt);
   const auto t2 = Clock::now();
 
   // Velocity update with damping, and the divergence check (NaN/Inf or leaving the box).

@@ -2,6 +2,7 @@
 // README.md for the method, the parameters and the reasons behind each choice.
 #include "fem_solver.h"
 
+#include <deform/contact.h>
 #include <deform/registry.h>
 #include <deform/tet_mesher.h>
 
@@ -78,6 +79,19 @@ class ReferenceFemModel final : public Model {
   }
 
   StepStatus step(const StepInput& in) override {
+    if (!in.contact) return solveOnce(in);
+    // Contact as prescribed positions (Dirichlet) on the penetrating nodes. Quasi-static: along
+    // the instruments' path since the last solve in sub-steps of half their thinnest radius, the
+    // active set grown over up to 4 solves each; a dynamic step cannot be re-solved: 1 solve.
+    const ContactModelHooks hooks{[this](const StepInput& x) { return solveOnce(x); },
+                                  [this]() -> const MatX3& { return m_nodes; },
+                                  [this] { return m_graspForces; }};
+    if (m_solveKind == SolveKind::QuasiStatic)
+      return solveAlongInstrumentPath(*in.contact, in, hooks, m_fixed, 4, 0.2);
+    return solveWithContactConstraints(*in.contact, in, hooks, m_fixed, 1);
+  }
+
+  StepStatus solveOnce(const StepInput& in) {
     const auto start = std::chrono::steady_clock::now();
     LoadCase lc;
     lc.fixedNodes = m_fixed;
@@ -239,7 +253,7 @@ DEFORM_PLUGIN(registry) {
   info.version = "1.0";
   info.capabilities = {Capability::Grasp,         Capability::PointForce,      Capability::Gravity,
                        Capability::ReactionForce, Capability::NeedsPrecompute, Capability::TetInput,
-                       Capability::QuasiStatic};
+                       Capability::QuasiStatic,   Capability::Contact};
   info.params = reffem::referenceFemParams();
   info.create = [] { return std::make_unique<reffem::ReferenceFemModel>(); };
   registry.add(std::move(info));

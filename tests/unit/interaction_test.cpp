@@ -1,5 +1,6 @@
 // Interaction: keyframe interpolation, jaw state, grasp attach/follow/release, point forces and
 // pin heads, probes, the focus point and the fixed region.
+#include <deform/contact.h>
 #include <deform/interaction.h>
 #include <gtest/gtest.h>
 
@@ -160,7 +161,7 @@ TEST(Interaction, PinHeadIsASpringToTheKeyframedPin) {
   EXPECT_TRUE(in.loads[0].force.isApprox(Vec3(0, 1.0, 0), 1e-12)) << in.loads[0].force.transpose();
 }
 
-TEST(Interaction, ProbePushesNodesOntoItsSphere) {
+TEST(Interaction, ProbeActsThroughTheContactWorldNotTheGraspInput) {
   Scene scene;
   ToolSpec probe;
   probe.type = ToolType::Probe;
@@ -171,12 +172,14 @@ TEST(Interaction, ProbePushesNodesOntoItsSphere) {
   Interaction inter(scene, rest);
   FixedNodesModel model(lineOfNodes());
   const StepInput in = inter.prepare(0.0, 0.01, model);
-  ASSERT_EQ(in.grasps.size(), 1u);
-  EXPECT_EQ(in.grasps[0].nodes.size(), 4u);
-  for (Eigen::Index k = 0; k < in.grasps[0].targets.rows(); ++k) {
-    EXPECT_NEAR((in.grasps[0].targets.row(k).transpose() - Vec3(0, 0, 0.005)).norm(), 0.01, 1e-12);
-  }
-  EXPECT_LT(in.grasps[0].targets(0, 2), 0) << "the node under the centre goes down";
+  EXPECT_TRUE(in.grasps.empty());
+  ASSERT_NE(in.contact, nullptr);
+  EXPECT_EQ(in.contact->numBodies(), 1);
+  EXPECT_TRUE(in.contact->position(0).isApprox(Vec3(0, 0, 0.005)));
+  // The four nodes within 1 cm of the tip centre are the ones the world reports.
+  const std::vector<Contact> c = in.contact->query(lineOfNodes());
+  EXPECT_EQ(c.size(), 4u);
+  EXPECT_EQ(inter.instrumentWorld(), nullptr) << "a kinematic probe needs no ODE world";
 }
 
 TEST(Interaction, FocusPointFallsBackToGraspThenCentre) {

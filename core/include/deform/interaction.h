@@ -7,11 +7,22 @@
 // each later step their targets are those positions translated by tool(t+dt) - tool(t_close).
 // When the jaws open they are released. A grasp that closes on no node attaches nothing (and is
 // reported). Point force: applied at the surface vertex nearest to `at` on the rest surface.
+//
+// Instruments (only when the scene asks): probes and rigid objects are bodies of a Bullet
+// ContactWorld (deform/contact.h) handed to the model through StepInput::contact; tools with
+// "dynamics" and objects are ODE bodies (deform/instruments.h). prepare() first advances the ODE
+// bodies over the step (virtual coupling to the keyframed hand, plus the tissue's reaction of the
+// previous step), then places every instrument at its pose for the end of the step. After the
+// model's step, finishStep() collects the tissue's reaction (contact forces, grasp forces) for the
+// next ODE step. A scene with kinematic graspers and loads only creates neither world.
 #pragma once
 
+#include <deform/contact.h>
+#include <deform/instruments.h>
 #include <deform/model.h>
 #include <deform/scene.h>
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -27,11 +38,33 @@ class Interaction {
  public:
   Interaction(const Scene& scene, const SurfaceMesh& restSurface);
 
+  ~Interaction();
+
   /// The input for the step from time t to t + dt, given the model's current nodes.
   StepInput prepare(Real t, Real dt, const Model& model);
+  /// After model.step(in): the tissue's reaction on dynamic instruments, for the next prepare().
+  void finishStep(const StepInput& in, const Model& model);
+
+  /// Force the hand exerts on each dynamic instrument over the last prepared step (the virtual
+  /// coupling's F_c; the hand feels -F_c), in scene order: tools with "dynamics", then objects
+  /// with a trajectory. Empty without an ODE world.
+  struct HandForce {
+    std::string instrument;        ///< "tools/0", "objects/1"
+    Vec3 force = Vec3::Zero();     ///< N
+    Vec3 position = Vec3::Zero();  ///< m, the body at the end of the step
+  };
+  const std::vector<HandForce>& handForces() const { return m_handForces; }
+  /// Positions (m) of the objects at the end of the last prepared step, in scene order.
+  std::vector<Vec3> objectPositions() const;
+
+  /// The worlds this interaction created (nullptr when the scene did not need them).
+  const ContactWorld* contactWorld() const { return m_contact.get(); }
+  const InstrumentWorld* instrumentWorld() const { return m_dynamics.get(); }
+  /// One line per created world, for --explain ("bullet: ...", "ode: ..."); empty if none.
+  std::vector<std::string> describeWorlds() const;
 
   /// Forget attachments (for Model::reset()).
-  void reset();
+  void reset();  // also rebuilds the instrument worlds at their initial state
 
   /// Surface vertex each load acts on (index into the rest surface), in scene order.
   const std::vector<int>& loadVertices() const { return m_loadVertices; }
@@ -48,11 +81,24 @@ class Interaction {
     std::vector<int> nodes;
     MatX3 restPositions;
   };
+  void buildWorlds();
+  /// Tool position at time t: the ODE body's when the tool has dynamics (its current position;
+  /// prepare() keeps the one before the step), else the keyframed one.
+  Vec3 toolAt(size_t tool, Real t) const;
+
   const Scene& m_scene;
   const SurfaceMesh& m_rest;
   std::vector<int> m_loadVertices;
   std::vector<Attachment> m_attach;
   std::vector<int> m_emptyGrasps;
+
+  std::unique_ptr<ContactWorld> m_contact;
+  std::unique_ptr<InstrumentWorld> m_dynamics;
+  std::vector<int> m_toolContactBody, m_toolDynBody;      // per tool, -1 when none
+  std::vector<int> m_objectContactBody, m_objectDynBody;  // per object
+  std::vector<Vec3> m_toolPosBefore;                      // dynamic tools, at the step's start
+  std::vector<Vec3> m_reactionForce, m_reactionTorque;    // per ODE body, from the last step
+  std::vector<HandForce> m_handForces;
 };
 
 }  // namespace deform

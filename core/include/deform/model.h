@@ -19,6 +19,8 @@
 
 namespace deform {
 
+class ContactWorld;
+
 /// Isotropic material, SI.
 struct Material {
   Real young = 5500.0;    ///< Young's modulus E, Pa
@@ -89,6 +91,11 @@ struct StepInput {
   Vec3 gravity = Vec3::Zero();
   std::vector<GraspInput> grasps;
   std::vector<PointLoad> loads;
+  /// Rigid instruments to keep the model's collision proxy out of (deform/contact.h), at their
+  /// poses for the end of the step; nullptr when the scene has none (no Bullet world exists).
+  /// Models with the "contact" capability call resolveContacts() (or query()) on it once their
+  /// own solve is done, so that no node ends the step inside an instrument.
+  ContactWorld* contact = nullptr;
 };
 
 enum class StepStatus { Ok, Diverged };

@@ -16,7 +16,8 @@
 #include <vector>
 
 /// Bumped whenever model.h, registry.h or anything they include changes layout.
-#define DEFORM_ABI_VERSION 1
+// 2: StepInput::contact (rigid instruments, deform/contact.h) and Capability::Contact.
+#define DEFORM_ABI_VERSION 2
 
 namespace deform {
 
@@ -29,6 +30,7 @@ enum class Capability {
   NeedsPrecompute,  ///< "needs_precompute": init() does expensive, cached work
   TetInput,         ///< "tet_input": uses Organ::volume when present
   QuasiStatic,      ///< "quasi_static": each step is an equilibrium solve (no inertia)
+  Contact,          ///< "contact": keeps its proxy out of StepInput::contact's instruments
 };
 
 /// Name used in scene files, `deformbench plugins` and results.json ("point_force", ...).

@@ -3,6 +3,8 @@
 // JSON path (e.g. "scenes/x.json: /models/0/params/iterations: must be >= 1, got 0").
 #pragma once
 
+#include <deform/contact.h>
+#include <deform/instruments.h>
 #include <deform/model.h>
 #include <deform/params.h>
 
@@ -21,10 +23,35 @@ struct KeyFrame {
 
 enum class ToolType { Grasper, Probe };
 
+/// "dynamics": the tool is a rigid body (ODE) driven towards its trajectory by a virtual
+/// coupling (deform/instruments.h) instead of following it exactly.
+struct ToolDynamics {
+  Real mass = 0.05;        ///< kg (a grasper's shaft; each jaw adds a tenth)
+  Real jawLength = 0.015;  ///< m, grasper jaws
+  Real shaftLength = 0.3;  ///< m, grasper shaft (inertia only)
+  CouplingParams coupling;
+};
+
 struct ToolSpec {
   ToolType type = ToolType::Grasper;
   Real radius = 0.005;               ///< m: grasp radius (grasper) or tip radius (probe)
   std::vector<KeyFrame> trajectory;  ///< times strictly increasing
+  /// Probe shaft (a cylinder with rounded end, from the tip centre along shaftAxis), m.
+  Real shaftLength = 0.1;
+  Real shaftRadius = 0;  ///< 0: the tip radius
+  Vec3 shaftAxis = Vec3::UnitZ();
+  std::optional<ToolDynamics> dynamics;
+};
+
+/// A rigid object (ODE body under gravity) that collides with the organ: it rests on it, or is
+/// pushed into it when it has a trajectory (then it is driven by a virtual coupling).
+struct ObjectSpec {
+  RigidShape shape;                  ///< one sphere or one box, centred at the body origin
+  std::string shapeName;             ///< "sphere" | "box"
+  Real mass = 0.01;                  ///< kg
+  Vec3 pos = Vec3::Zero();           ///< m, initial centre
+  std::vector<KeyFrame> trajectory;  ///< empty: free
+  CouplingParams coupling;
 };
 
 enum class LoadType { PointForce, PinHead };
@@ -69,6 +96,8 @@ struct Scene {
   Real dt = 1e-3;
   Real duration = 1.0;
   std::vector<ToolSpec> tools;
+  std::vector<ObjectSpec> objects;
+  ContactParams contact;  ///< "contact": the same for every model
   std::vector<LoadSpec> loads;
   std::vector<ModelSpec> models;
   std::optional<ModelSpec> reference;
@@ -78,6 +107,10 @@ struct Scene {
   int surfaceEvery = 0;  ///< for SurfaceOutput::Every
 
   int numSteps() const;  ///< round(duration / dt)
+  /// A probe or an object: models need the "contact" capability and the run a Bullet world.
+  bool needsContact() const;
+  /// A tool with "dynamics" or an object: the run needs an ODE world.
+  bool needsDynamics() const;
 };
 
 /// Parses and validates a scene file. Throws InputError.

@@ -37,6 +37,14 @@ struct GraspForceSample {
   Vec3 force = Vec3::Zero();  ///< N
 };
 
+/// The force the hand exerts on a dynamic instrument over one step (virtual coupling).
+struct HandForceSample {
+  int step = 0;                  ///< steps completed
+  int instrument = 0;            ///< index into RunRecord::instruments
+  Vec3 force = Vec3::Zero();     ///< N
+  Vec3 position = Vec3::Zero();  ///< m, the instrument at the end of the step
+};
+
 struct RunRecord {
   std::string plugin;  ///< plugin file name
   std::string model;   ///< model name within the plugin
@@ -67,6 +75,13 @@ struct RunRecord {
   std::vector<SurfaceSnapshot> compared;  ///< at the scene's compared instants, in order
   std::vector<SurfaceSnapshot> series;    ///< every N steps ("output": "every:N")
   std::vector<GraspForceSample> graspForces;
+  std::vector<std::string> worlds;       ///< Bullet / ODE worlds the run created (--explain)
+  std::vector<std::string> instruments;  ///< dynamic instruments ("tools/0"), hand force order
+  std::vector<HandForceSample> handForces;
+  Real dt = 0;                     ///< s, the scene's step (hand force times)
+  std::vector<Vec3> objectsFinal;  ///< m, rigid objects at the end of the run
+  long long contactPairs = -1;     ///< broadphase pairs tested (-1: no contact world)
+  long long contacts = -1;         ///< penetrating proxies found
 
   std::optional<ErrorMetrics> error;
   std::string referenceModel;  ///< model name of the reference the error is against
@@ -104,8 +119,9 @@ std::vector<int> quasiStaticSolveSteps(const Scene& scene, int lastStep = -1);
 /// each compare_at instant up to lastStep, else lastStep itself. lastStep < 0: the scene's last.
 std::vector<int> comparedSteps(const Scene& scene, int lastStep = -1);
 
-/// Why a model cannot run this scene ("" when it can): a grasp or probe tool without the grasp
-/// capability, a load without point_force.
+/// Why a model cannot run this scene ("" when it can): a grasper without the grasp capability,
+/// a probe or a rigid object without contact, a grasper with dynamics without reaction_force,
+/// a load without point_force.
 std::string unsupportedReason(const ModelInfo& info, const Scene& scene);
 
 /// Runs one model from creation to the end of the scene. Fills every field but the output files

@@ -1,0 +1,35 @@
+// Contact for the hybrid model (deform/contact.h): surface vertices that penetrate an instrument
+// are prescribed onto its surface like grasped vertices (the coarse FEM and the surface PBD both
+// see them). The step is re-run from the same start state up to 3 times, adding the vertices the
+// previous run left inside (control vertices follow the coarse FEM and can be carried in by it);
+// then the free vertices still inside are projected out (their inward normal velocity removed).
+#include "hybrid_model.h"
+
+#include <deform/contact.h>
+
+namespace deform::hybrid {
+
+StepStatus HybridModel::stepWithContact(const StepInput& in) {
+  const MatX3 x0 = m_surf.x, v0 = m_v;
+  m_inContactStep = true;
+  const ContactModelHooks hooks{[&](const StepInput& x) {
+                                  m_surf.x = x0;
+                                  m_v = v0;
+                                  return step(x);
+                                },
+                                [this]() -> const MatX3& { return m_surf.x; },
+                                {}};
+  StepStatus status = StepStatus::Ok;
+  try {
+    status = solveWithContactConstraints(*in.contact, in, hooks, m_fixedFine, 3);
+  } catch (...) {
+    m_inContactStep = false;
+    throw;
+  }
+  m_inContactStep = false;
+  if (status != StepStatus::Ok) return status;
+  if (m_w.size() == m_surf.x.rows()) resolveContacts(*in.contact, m_surf.x, m_w, in.dt, &m_v);
+  return m_surf.x.allFinite() ? StepStatus::Ok : StepStatus::Diverged;
+}
+
+}  // namespace deform::hybrid

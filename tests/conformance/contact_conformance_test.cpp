@@ -1,0 +1,197 @@
+// Contact conformance (issue F8), run against every plugin found like conformance_test.cpp: a
+// probe pressed into the organ leaves no node of a model with the "contact" capability inside
+// the probe after any step, and deforms the organ; a model without it is reported unsupported.
+// The dynamic grasper and a resting rigid object run on every model that supports them.
+#include <deform/contact.h>
+#include <deform/interaction.h>
+#include <deform/phantom.h>
+#include <deform/plugin_loader.h>
+#include <deform/scene.h>
+#include <deform_harness/runner.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+
+namespace deform::harness {
+namespace {
+
+using nlohmann::json;
+
+PluginLoader& contactLoader() {
+  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
+  return *l;
+}
+
+std::vector<std::string> plugins() {
+  try {
+    return PluginLoader({DEFORM_BUILD_PLUGIN_DIR}).discover();
+  } catch (const std::exception&) {
+    return {};
+  }
+}
+
+Cache& contactCache() {
+  static Cache c(Cache::defaultDir());
+  return c;
+}
+
+/// Signed distance to the probe: tip sphere (centre c, radius r) and shaft capsule (radius r,
+/// from c up along +z for L).
+Real probeDistance(const Vec3& p, const Vec3& c, Real r, Real L) {
+  const Real s = std::clamp((p - c).z(), Real(0), L);
+  return std::min((p - c).norm(), (p - c - Vec3(0, 0, s)).norm()) - r;
+}
+
+struct ProbeCase {
+  json scene;
+  Vec3 top;
+  Real radius = 0, depth = 0, shaft = 0;
+};
+
+/// The cube phantom, bottom fifth fixed, no gravity; a probe comes down onto the top centre and
+/// presses `depth` into it.
+ProbeCase probeCase() {
+  const SurfaceMesh s = makePhantom("cube", 0.5);
+  const Box b = boundingBox(s.V);
+  ProbeCase pc;
+  pc.top = Vec3(b.center().x(), b.center().y(), b.hi.z());
+  pc.radius = 0.15 * b.size().x();
+  pc.depth = 0.1 * b.size().z();  // deeper sharp indentations defeat Neo-Hookean Newton solves
+  pc.shaft = 0.5 * b.size().z();
+  const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
+  const Vec3 start = pc.top + Vec3(0, 0, pc.radius + 0.002);
+  const Vec3 end = pc.top + Vec3(0, 0, pc.radius - pc.depth);
+  json& j = pc.scene;
+  j["organ"] = {{"mesh", "phantom:cube"},
+                {"resolution", 0.5},
+                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
+                {"fixed",
+                 {{"box",
+                   {{b.lo.x() - m.x(), b.lo.y() - m.y(), b.lo.z() - m.z()},
+                    {b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.2 * b.size().z()}}}}}};
+  j["gravity"] = {0, 0, 0};
+  j["dt"] = 1e-3;
+  j["duration"] = 0.05;
+  j["tools"] = {{{"type", "probe"},
+                 {"radius", pc.radius},
+                 {"shaft", {{"length", pc.shaft}}},
+                 {"trajectory",
+                  {{{"t", 0.0}, {"pos", {start.x(), start.y(), start.z()}}},
+                   {{"t", 0.04}, {"pos", {end.x(), end.y(), end.z()}}}}}}};
+  j["contact"] = {{"thickness", 1e-4}};
+  j["models"] = json::array({{{"plugin", "any"}}});
+  return pc;
+}
+
+class ContactConformance : public ::testing::TestWithParam<std::string> {
+ protected:
+  const std::vector<ModelInfo>& models() {
+    return contactLoader().loadFile(contactLoader().locate(GetParam()));
+  }
+};
+
+TEST_P(ContactConformance, APressedProbeLeavesNoNodeInsideItAfterAnyStep) {
+  const ProbeCase pc = probeCase();
+  const Scene scene = parseScene(pc.scene, "");
+  const Organ organ = loadOrgan(scene);
+  int tested = 0;
+  for (const ModelInfo& info : models()) {
+    SCOPED_TRACE(info.name);
+    if (!info.has(Capability::Contact)) {
+      const RunRecord r =
+          runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
+      EXPECT_EQ(r.status, RunStatus::Unsupported) << "no contact capability, yet " << r.message;
+      continue;
+    }
+    ++tested;
+    Scene run = scene;
+    if (info.has(Capability::QuasiStatic)) run.dt = 0.01;
+    std::unique_ptr<Model> model = info.create();
+    const ParamValues params = ParamValues::defaults(info.params);
+    model->init(ModelSetup{organ, params, contactCache(), run.dt, run.gravity});
+    // Nodes the model pins cannot move; the probe never reaches the fixed slab.
+    const std::vector<int> fixed = fixedNodeIndices(model->nodes(), organ.fixed, organ.surface);
+    const bool nodesAreSurface = model->nodes().rows() == organ.surface.numVertices();
+    Interaction inter(run, organ.surface);
+    ASSERT_NE(inter.contactWorld(), nullptr);
+    Real worst = 1e9;
+    for (int k = 0; k < run.numSteps(); ++k) {
+      const StepInput in = inter.prepare(k * run.dt, run.dt, *model);
+      ASSERT_EQ(model->step(in), StepStatus::Ok) << "step " << k;
+      inter.finishStep(in, *model);
+      const Vec3 c = in.contact->position(0);
+      const MatX3& x = model->surface();
+      for (Eigen::Index i = 0; i < x.rows(); ++i)
+        worst = std::min(worst, probeDistance(x.row(i).transpose(), c, pc.radius, pc.shaft));
+      if (nodesAreSurface) {
+        const MatX3& n = model->nodes();
+        for (Eigen::Index i = 0; i < n.rows(); ++i) {
+          if (std::binary_search(fixed.begin(), fixed.end(), int(i))) continue;
+          worst = std::min(worst, probeDistance(n.row(i).transpose(), c, pc.radius, pc.shaft));
+        }
+      }
+    }
+    EXPECT_GE(worst, -1e-6) << "a node ended a step " << -worst << " m inside the probe";
+    // The probe went `depth` below the rest top: the top vertex was pushed down.
+    const int topV = nearestVertex(organ.surface.V, pc.top);
+    EXPECT_LT(model->surface()(topV, 2), pc.top.z() - 0.5 * pc.depth)
+        << "the probe did not push the organ";
+  }
+  if (tested == 0) GTEST_SKIP() << "no model of this plugin has the contact capability";
+}
+
+TEST_P(ContactConformance, ADynamicGrasperReportsAHandForceAndAnObjectRestsOnTheOrgan) {
+  const SurfaceMesh s = makePhantom("cube", 0.5);
+  const Box b = boundingBox(s.V);
+  json j = probeCase().scene;
+  j.erase("tools");
+  const Vec3 top(b.center().x(), b.center().y(), b.hi.z());
+  const Real radius = 0.2 * b.size().minCoeff();
+  const Vec3 grip = top - Vec3(0, 0, 0.1 * b.size().z());
+  j["gravity"] = {0, 0, -9.81};
+  j["duration"] = 0.1;
+  j["tools"] = {{{"type", "grasper"},
+                 {"radius", radius},
+                 // Critically damped for shaft + jaws (60 g): the tool settles without overshoot.
+                 {"dynamics", {{"mass", 0.05}, {"stiffness", 200}, {"damping", 7}}},
+                 {"trajectory",
+                  {{{"t", 0.0}, {"pos", {grip.x(), grip.y(), grip.z()}}, {"jaw", "closed"}},
+                   {{"t", 0.05}, {"pos", {grip.x(), grip.y(), grip.z() + 0.01}}}}}}};
+  const Real r = 0.15 * b.size().x();  // larger than the coarse node spacing (~12 mm)
+  const Vec3 objAt(b.lo.x() + 0.25 * b.size().x(), b.center().y(), b.hi.z() + r);
+  j["objects"] = {{{"shape", "sphere"},
+                   {"radius", r},
+                   {"mass", 0.005},
+                   {"pos", {objAt.x(), objAt.y(), objAt.z()}}}};
+  const Scene scene = parseScene(j, "");
+  const Organ organ = loadOrgan(scene);
+  int tested = 0;
+  for (const ModelInfo& info : models()) {
+    SCOPED_TRACE(info.name);
+    const std::string why = unsupportedReason(info, scene);
+    if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
+    ++tested;
+    const RunRecord rec =
+        runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
+    ASSERT_EQ(rec.status, RunStatus::Ok) << rec.message;
+    ASSERT_EQ(rec.instruments.size(), 1u);
+    EXPECT_EQ(rec.handForces.size(), static_cast<size_t>(scene.numSteps()));
+    EXPECT_EQ(rec.worlds.size(), 2u);
+    for (const HandForceSample& h : rec.handForces) EXPECT_TRUE(h.force.allFinite());
+    // Lifting tissue: at the end the hand pulls the tool up against the grasped tissue.
+    EXPECT_GT(rec.handForces.back().force.z(), 0.0);
+    ASSERT_EQ(rec.objectsFinal.size(), 1u);
+    // In free fall it would end 49 mm lower, below the organ's top; the organ holds it up (a
+    // surface model indents by a few millimetres under it, more between its coarse nodes).
+    EXPECT_GT(rec.objectsFinal[0].z(), b.hi.z()) << "the object sank through the organ";
+    EXPECT_LT(rec.objectsFinal[0].z(), objAt.z() + 1e-3) << "the object flew off";
+  }
+  if (tested == 0) GTEST_SKIP() << "no model of this plugin supports this scene";
+}
+
+INSTANTIATE_TEST_SUITE_P(Plugins, ContactConformance, ::testing::ValuesIn(plugins()),
+                         [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
+GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(ContactConformance);
+
+}  // namespace
+}  // namespace deform::harness
