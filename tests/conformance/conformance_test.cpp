@@ -304,6 +304,9 @@ TEST_P(Conformance, ViolentLoadEndsAsAStatusNeverACrashOrNan) {
   for (const ModelInfo& info : models()) {
     SCOPED_TRACE(info.name);
     if (!info.has(Capability::PointForce)) continue;
+    // A quasi-static reference has no time integration to blow up; its Newton load stepping
+    // on this load took 400 s (reference_fem, ending "ok"), too long for this suite.
+    if (info.has(Capability::QuasiStatic)) continue;
     ++tested;
     RunRecord r;
     ASSERT_NO_THROW(r = runModel(info, ParamValues::defaults(info.params), sceneFor(c.scene, info),
@@ -323,7 +326,7 @@ TEST_P(Conformance, ViolentLoadEndsAsAStatusNeverACrashOrNan) {
       EXPECT_FALSE(r.message.empty()) << statusName(r.status) << " without a message";
     }
   }
-  if (tested == 0) GTEST_SKIP() << "no model of this plugin has the point_force capability";
+  if (tested == 0) GTEST_SKIP() << "no dynamic model of this plugin has point forces";
 }
 
 INSTANTIATE_TEST_SUITE_P(Plugins, Conformance, ::testing::ValuesIn(pluginNames()),
