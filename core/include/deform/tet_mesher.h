@@ -32,11 +32,11 @@ struct TetMeshOptions {
   bool refineSurface = false;
   /// Wall-clock limit of the Gmsh child process, s.
   Real timeoutSeconds = 600;
+  /// Names the input in error messages (file path or "phantom:NAME").
+  std::string source;
   /// Refuse a self-intersecting surface before calling Gmsh (findSelfIntersections in
   /// mesh_check.h; milliseconds), with a message naming the first pair of triangles.
   bool checkSelfIntersections = true;
-  /// Names the input in error messages (file path or "phantom:NAME").
-  std::string source;
 };
 
 struct TetMeshQuality {
