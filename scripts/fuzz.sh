@@ -37,7 +37,10 @@ for p in PBD MASSSPRING REFERENCE_FEM FEM_HEX METABALLS PARTICLE_BEM HYBRID_FEM_
 done
 generator=()
 command -v ninja >/dev/null && [[ ! -f $build/CMakeCache.txt ]] && generator=(-G Ninja)
-cmake -S . -B "$build" "${generator[@]}" -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
+launcher=()
+command -v ccache >/dev/null &&
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+cmake -S . -B "$build" "${generator[@]}" "${launcher[@]}" -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
   -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g" -DDEFORM_SANITIZE=ON \
   -DDEFORM_BUILD_FUZZERS=ON -DDEFORM_BUILD_TESTS=OFF -DDEFORM_BUILD_BENCHMARKS=OFF \
   "${plugin_flags[@]}" >/dev/null

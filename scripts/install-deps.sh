@@ -6,7 +6,7 @@ PACKAGES=(
   libeigen3-dev libsuitesparse-dev libbullet-dev libode-dev libgmsh-dev libqhull-dev
   libnanoflann-dev nlohmann-json3-dev libcli11-dev libssl-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  clang libclang-rt-14-dev clang-format
+  clang libclang-rt-14-dev llvm clang-format
   libopenblas0-serial liblapack3
   python3-matplotlib python3-numpy
 )

@@ -6,7 +6,11 @@
 #   scripts/sanitize.sh            build + run everything
 #   scripts/sanitize.sh --quick    only the core, deformbench and the unit tests (no plugins, no
 #                                  conformance suite): the part that fits a CI budget
-#   scripts/sanitize.sh --no-run   build only (combine with --quick as the second argument)
+#   scripts/sanitize.sh --ci       what CI runs (.ci/run), bounded in time: the core, deformbench,
+#                                  the unit tests, the CLI error tests and the conformance suite
+#                                  for the plugins in SANITIZE_CI_PLUGINS only (default below)
+#   scripts/sanitize.sh --no-run   build only (combine with --quick or --ci)
+# SANITIZE_PLUGINS='a b' limits the plugins built (and the conformance suite) in any mode.
 # Tests too slow under the sanitizers (ASan + UBSan at -O1 runs the numerics 3-10x slower) are
 # excluded by name with SANITIZE_EXCLUDE, a ':'-separated list of gtest patterns (wildcards * ?)
 # applied to both test programs; the default is below, override it with
@@ -19,12 +23,14 @@ cd "$(dirname "$0")/.."
 
 run=1
 quick=0
+ci=0
 for a in "$@"; do
   case $a in
     --no-run) run=0 ;;
     --quick) quick=1 ;;
+    --ci) ci=1 ;;
     *)
-      echo "usage: $0 [--quick] [--no-run]" >&2
+      echo "usage: $0 [--quick | --ci] [--no-run]" >&2
       exit 2
       ;;
   esac
@@ -34,14 +40,22 @@ jobs=${SANITIZE_JOBS:-$(nproc)}
 # Default exclusions: see the README in tests/fuzz ("Sanitizer build") for why each is here.
 exclude=${SANITIZE_EXCLUDE-}
 cli_exclude=${SANITIZE_CLI_EXCLUDE-'^cli_run_'}
+# The conformance suite of every plugin under ASan takes more than 10 min on 2 cores; CI runs it
+# for these plugins (chosen to cover the core's kernels, the tet mesher and the sparse solvers):
+# see tests/README.md ("CI") for the measured times.
+plugins=${SANITIZE_PLUGINS-}
+[[ $ci -eq 1 && -z $plugins ]] && plugins=${SANITIZE_CI_PLUGINS-"pbd massspring reference_fem"}
 
 compilers=()
 [[ -n ${SANITIZE_CC:-} ]] && compilers+=(-DCMAKE_C_COMPILER="$SANITIZE_CC")
 [[ -n ${SANITIZE_CXX:-} ]] && compilers+=(-DCMAKE_CXX_COMPILER="$SANITIZE_CXX")
 generator=()
 command -v ninja >/dev/null && [[ ! -f $build/CMakeCache.txt ]] && generator=(-G Ninja)
+launcher=()
+command -v ccache >/dev/null &&
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
 # Debug at -O1: assertions stay on (Eigen's index checks too), and it runs far faster than -O0.
-cmake -S . -B "$build" "${generator[@]}" "${compilers[@]}" -DCMAKE_BUILD_TYPE=Debug \
+cmake -S . -B "$build" "${generator[@]}" "${compilers[@]}" "${launcher[@]}" -DCMAKE_BUILD_TYPE=Debug \
   -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g" -DCMAKE_C_FLAGS_DEBUG="-O1 -g" -DDEFORM_SANITIZE=ON \
   -DDEFORM_BUILD_TESTS=ON -DDEFORM_BUILD_BENCHMARKS=OFF >/dev/null
 
@@ -49,11 +63,20 @@ cmake -S . -B "$build" "${generator[@]}" "${compilers[@]}" -DCMAKE_BUILD_TYPE=De
 targets=(deform_core deformbench)
 tests=(deform_unit_tests deform_conformance_tests)
 [[ $quick -eq 1 ]] && tests=(deform_unit_tests)
+built_plugins=()
 for d in plugins/*/; do
   [[ $quick -eq 1 ]] && break
   p=$(basename "$d")
-  grep -q "deform_add_plugin(${p}\b" "$d/CMakeLists.txt" 2>/dev/null && targets+=("deform_$p")
+  [[ -n $plugins && " $plugins " != *" $p "* ]] && continue
+  grep -q "deform_add_plugin(${p}\b" "$d/CMakeLists.txt" 2>/dev/null && targets+=("deform_$p") &&
+    built_plugins+=("$p")
 done
+# With a plugin subset, the conformance suite runs only their instances (plus the loader check).
+conformance_filter=""
+if [[ -n $plugins ]]; then
+  conformance_filter="ConformanceSetup.*"
+  for p in "${built_plugins[@]}"; do conformance_filter+=":Plugins/Conformance.*/$p"; done
+fi
 for t in "${tests[@]}"; do
   if cmake --build "$build" --target help 2>/dev/null | grep -q "\b$t\b"; then targets+=("$t"); fi
 done
@@ -70,7 +93,11 @@ for t in "${tests[@]}"; do
   bin=$build/tests/$t
   [[ -x $bin ]] || continue
   filter=()
-  [[ -n $exclude ]] && filter=(--gtest_filter="-$exclude")
+  positive=""
+  [[ $t == deform_conformance_tests ]] && positive=$conformance_filter
+  if [[ -n $positive || -n $exclude ]]; then
+    filter=(--gtest_filter="${positive}${exclude:+-$exclude}")
+  fi
   echo "== $t ${filter[*]}"
   start=$SECONDS
   if ! "$bin" "${filter[@]}" --gtest_brief=1; then

@@ -149,8 +149,9 @@ void forEachEdge(const std::vector<HalfEdge>& he, Fn&& fn) {
   }
 }
 
-/// Number of vertices whose incident triangles do not form one fan connected through edges.
-int countNonManifoldVertices(const MatX3i& F, const std::vector<int>& faces) {
+/// Number of vertices whose incident triangles do not form one fan connected through edges;
+/// `first` receives the lowest such vertex.
+int countNonManifoldVertices(const MatX3i& F, const std::vector<int>& faces, int& first) {
   // A slot is one corner of one triangle (3 * position in `faces` + corner); the corners around a
   // vertex are joined when their triangles share an edge at that vertex.
   struct Spoke {
@@ -187,6 +188,7 @@ int countNonManifoldVertices(const MatX3i& F, const std::vector<int>& faces) {
   for (size_t i = 1; i < fans.size(); ++i) {
     // Count each vertex once, at its second fan.
     if (fans[i].first == fans[i - 1].first && (i < 2 || fans[i - 2].first != fans[i].first)) {
+      if (count == 0) first = fans[i].first;
       ++count;
     }
   }
@@ -213,6 +215,10 @@ std::vector<int> components(const MatX3i& F, const std::vector<int>& faces,
     comp[i] = rootId[size_t(r)];
   }
   return comp;
+}
+
+std::string edgeName(int a, int b) {
+  return "edge " + std::to_string(a) + "-" + std::to_string(b);
 }
 
 std::string formatVolume(Real v) {
@@ -252,27 +258,32 @@ MeshReport validateSurface(const SurfaceMesh& mesh) {
     return report;
   }
 
-  int nonFinite = 0;
-  for (Eigen::Index i = 0; i < V.rows(); ++i) nonFinite += !finiteRow(V, i);
+  // Each message ends with the first place (lowest index) where the defect occurs.
+  int nonFinite = 0, firstNonFinite = -1;
+  for (Eigen::Index i = 0; i < V.rows(); ++i) {
+    if (finiteRow(V, i)) continue;
+    if (nonFinite++ == 0) firstNonFinite = int(i);
+  }
   if (nonFinite > 0) {
     add(MeshDefect::NonFinite, nonFinite,
-        counted(nonFinite, "vertex", "vertices") + " with NaN or Inf coordinates");
+        counted(nonFinite, "vertex", "vertices") + " with NaN or Inf coordinates, first: vertex " +
+            std::to_string(firstNonFinite));
   }
 
   // Triangles usable for topology: indices in range and distinct.
   std::vector<int> faces;
   faces.reserve(size_t(nf));
   std::vector<char> referenced(size_t(nv), 0);
-  int outOfRange = 0, repeated = 0;
+  int outOfRange = 0, repeated = 0, firstOutOfRange = -1, firstDegenerate = -1;
   for (int f = 0; f < nf; ++f) {
     const int a = F(f, 0), b = F(f, 1), c = F(f, 2);
     if (std::min({a, b, c}) < 0 || std::max({a, b, c}) >= nv) {
-      ++outOfRange;
+      if (outOfRange++ == 0) firstOutOfRange = f;
       continue;
     }
     referenced[size_t(a)] = referenced[size_t(b)] = referenced[size_t(c)] = 1;
     if (a == b || b == c || a == c) {
-      ++repeated;
+      if (repeated++ == 0) firstDegenerate = f;
       continue;
     }
     faces.push_back(f);
@@ -280,62 +291,78 @@ MeshReport validateSurface(const SurfaceMesh& mesh) {
   if (outOfRange > 0) {
     add(MeshDefect::IndexOutOfRange, outOfRange,
         counted(outOfRange, "triangle", "triangles") + " with a vertex index out of range (" +
-            counted(nv, "vertex", "vertices") + ")");
+            counted(nv, "vertex", "vertices") + "), first: triangle " +
+            std::to_string(firstOutOfRange));
   }
 
   const Real diag = finiteBox(V).diagonal();
   if (nonFinite == 0) {
     const std::vector<int> rep = weldMap(V, finiteBox(V), tol::kRelativeWeld * diag);
-    int dup = 0;
-    for (int i = 0; i < nv; ++i) dup += rep[size_t(i)] != i;
+    int dup = 0, firstDup = -1;
+    for (int i = 0; i < nv; ++i) {
+      if (rep[size_t(i)] == i) continue;
+      if (dup++ == 0) firstDup = i;
+    }
     if (dup > 0)
       add(MeshDefect::DuplicateVertices, dup,
-          counted(dup, "duplicate vertex", "duplicate vertices"));
+          counted(dup, "duplicate vertex", "duplicate vertices") + ", first: vertex " +
+              std::to_string(firstDup) + " (at vertex " + std::to_string(rep[size_t(firstDup)]) +
+              ")");
   }
 
   int zeroArea = 0;
   if (nonFinite == 0) {
     const Real minArea = tol::kRelativeZeroArea * diag * diag;
-    for (int f : faces) zeroArea += triangleArea(V, F(f, 0), F(f, 1), F(f, 2)) <= minArea;
+    for (int f : faces) {
+      if (!(triangleArea(V, F(f, 0), F(f, 1), F(f, 2)) <= minArea)) continue;
+      if (zeroArea++ == 0 && (firstDegenerate < 0 || f < firstDegenerate)) firstDegenerate = f;
+    }
   }
   if (repeated + zeroArea > 0) {
-    add(MeshDefect::DegenerateTriangles, repeated + zeroArea,
+    const std::string what =
         repeated == 0
             ? counted(zeroArea, "zero-area triangle", "zero-area triangles")
             : counted(repeated + zeroArea, "degenerate triangle", "degenerate triangles") + " (" +
                   std::to_string(repeated) + " with a repeated vertex, " +
-                  std::to_string(zeroArea) + " zero-area)");
+                  std::to_string(zeroArea) + " zero-area)";
+    add(MeshDefect::DegenerateTriangles, repeated + zeroArea,
+        what + ", first: triangle " + std::to_string(firstDegenerate));
   }
 
   const std::vector<HalfEdge> he = halfEdges(F, faces);
   int boundary = 0, nonManifold = 0, inconsistent = 0;
+  std::string firstBoundary, firstNonManifold, firstInconsistent;  // edges in sorted order
   forEachEdge(he, [&](size_t b, size_t e) {
-    if (e - b == 1)
-      ++boundary;
-    else if (e - b > 2)
-      ++nonManifold;
-    else if (he[b].forward == he[b + 1].forward)
-      ++inconsistent;
+    if (e - b == 1) {
+      if (boundary++ == 0) firstBoundary = edgeName(he[b].lo, he[b].hi);
+    } else if (e - b > 2) {
+      if (nonManifold++ == 0) firstNonManifold = edgeName(he[b].lo, he[b].hi);
+    } else if (he[b].forward == he[b + 1].forward) {
+      if (inconsistent++ == 0) firstInconsistent = edgeName(he[b].lo, he[b].hi);
+    }
   });
   if (boundary > 0) {
     add(MeshDefect::BoundaryEdges, boundary,
-        counted(boundary, "boundary edge", "boundary edges") + " (holes)");
+        counted(boundary, "boundary edge", "boundary edges") + " (holes), first: " + firstBoundary);
   }
   if (nonManifold > 0) {
     add(MeshDefect::NonManifoldEdges, nonManifold,
         counted(nonManifold, "non-manifold edge", "non-manifold edges") +
-            " (shared by more than two triangles)");
+            " (shared by more than two triangles), first: " + firstNonManifold);
   }
-  const int nmVertices = countNonManifoldVertices(F, faces);
+  int firstNmVertex = -1;
+  const int nmVertices = countNonManifoldVertices(F, faces, firstNmVertex);
   if (nmVertices > 0) {
     add(MeshDefect::NonManifoldVertices, nmVertices,
         counted(nmVertices, "non-manifold vertex", "non-manifold vertices") +
-            " (triangles around it do not form one fan)");
+            " (triangles around it do not form one fan), first: vertex " +
+            std::to_string(firstNmVertex));
   }
   if (inconsistent > 0) {
     add(MeshDefect::InconsistentOrientation, inconsistent,
         counted(inconsistent, "edge", "edges") +
-            " with inconsistent orientation (both triangles traverse it the same way)");
+            " with inconsistent orientation (both triangles traverse it the same way), first: " +
+            firstInconsistent);
   }
   if (nonFinite == 0 && outOfRange == 0 && boundary == 0 && nonManifold == 0 && inconsistent == 0) {
     Real vol = 0;
@@ -349,9 +376,16 @@ MeshReport validateSurface(const SurfaceMesh& mesh) {
     }
   }
   int numComp = 0;
-  components(F, faces, he, numComp);
-  if (numComp > 1)
-    add(MeshDefect::MultipleComponents, numComp, counted(numComp, "component", "components"));
+  const std::vector<int> comp = components(F, faces, he, numComp);
+  if (numComp > 1) {
+    // Component ids follow the order of first appearance: the first triangle with id 1 is the
+    // first one not connected to triangle faces[0].
+    const size_t second = size_t(std::find(comp.begin(), comp.end(), 1) - comp.begin());
+    add(MeshDefect::MultipleComponents, numComp,
+        counted(numComp, "component", "components") + " (triangle " +
+            std::to_string(faces[second]) + " is not connected to triangle " +
+            std::to_string(faces[0]) + ")");
+  }
 
   const auto unreferenced = std::count(referenced.begin(), referenced.end(), 0);
   if (unreferenced > 0) {

@@ -797,6 +797,7 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog) {
   organ.fixed.surfaceVertices.erase(
       std::unique(organ.fixed.surfaceVertices.begin(), organ.fixed.surfaceVertices.end()),
       organ.fixed.surfaceVertices.end());
+  checkGraspsReachOrgan(scene, organ);
   return organ;
 }
 

@@ -1,5 +1,6 @@
 #include <deform/cache.h>
 #include <deform/error.h>
+#include <deform/mesh_check.h>
 #include <deform/tet_mesher.h>
 
 #include <fcntl.h>
@@ -442,6 +443,14 @@ TetMeshResult tetrahedralize(const SurfaceMesh& input, const TetMeshOptions& opt
     return InputError(options.source, "", "cannot tetrahedralise: " + why);
   };
   if (const std::string why = closednessProblem(input); !why.empty()) throw fail(why);
+  if (options.checkSelfIntersections) {
+    const SelfIntersectionReport si = findSelfIntersections(input, 1);
+    if (!si.ok()) {
+      throw fail("the surface self-intersects: " + si.message() +
+                 "; repair cannot fix this (remesh or edit the surface so that it bounds a "
+                 "valid volume)");
+    }
+  }
   const Real volume = signedVolume(input.V, input.F);
   if (!(volume > 0)) throw fail("surface encloses no positive volume (inward or self-overlapping)");
 

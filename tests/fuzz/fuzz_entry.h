@@ -26,7 +26,8 @@ namespace deform::fuzz {
 enum class Outcome { Accepted, Refused };
 
 /// Reads `data` as a mesh file called `name` (the extension picks the reader), then runs the
-/// validation and the repair on whatever was read, as loadOrgan does.
+/// validation and the repair on whatever was read, as loadOrgan does, and the self-intersection
+/// test.
 inline Outcome feedMesh(std::string_view data, const std::string& name) {
   LoadedMesh mesh;
   try {
@@ -44,6 +45,13 @@ inline Outcome feedMesh(std::string_view data, const std::string& name) {
   const RepairReport changes = repairSurface(repaired);
   (void)changes.lines();
   (void)validateSurface(repaired);
+  // The self-intersection test that tetrahedralize() runs before Gmsh, on the raw surface (any
+  // triangle soup: bad triangles are skipped) and on the repaired one.
+  (void)findSelfIntersections(mesh.surface).message();
+  try {
+    requireNoSelfIntersections(repaired, name);
+  } catch (const InputError&) {
+  }
   return Outcome::Accepted;
 }
 

@@ -81,8 +81,9 @@ TEST(MeshCheck, MissingFaceGivesBoundaryEdges) {
   const MeshReport r = validateSurface(m);
   EXPECT_EQ(defects(r), std::vector<MeshDefect>{MeshDefect::BoundaryEdges});
   EXPECT_EQ(r.issues[0].count, 3);
-  EXPECT_EQ(r.issues[0].message, "3 boundary edges (holes)");
-  EXPECT_EQ(requireMessage(m), "3 boundary edges (holes)");
+  // Face 7 (0, 3, 5) is gone: its edges 0-3, 0-5, 3-5 are open; the first in order is 0-3.
+  EXPECT_EQ(r.issues[0].message, "3 boundary edges (holes), first: edge 0-3");
+  EXPECT_EQ(requireMessage(m), "3 boundary edges (holes), first: edge 0-3");
 }
 
 TEST(MeshCheck, FinGivesNonManifoldEdge) {
@@ -95,7 +96,9 @@ TEST(MeshCheck, FinGivesNonManifoldEdge) {
   EXPECT_EQ(find(r, MeshDefect::BoundaryEdges)->count, 2);
   EXPECT_FALSE(r.has(MeshDefect::MultipleComponents));
   // Priority: holes are reported before non-manifold edges.
-  EXPECT_EQ(requireMessage(m), "2 boundary edges (holes)");
+  EXPECT_EQ(requireMessage(m), "2 boundary edges (holes), first: edge 0-6");
+  EXPECT_EQ(find(r, MeshDefect::NonManifoldEdges)->message,
+            "1 non-manifold edge (shared by more than two triangles), first: edge 0-2");
 }
 
 TEST(MeshCheck, TwoSolidsTouchingAtOneVertexGiveNonManifoldVertex) {
@@ -110,6 +113,8 @@ TEST(MeshCheck, TwoSolidsTouchingAtOneVertexGiveNonManifoldVertex) {
   const MeshReport r = validateSurface(m);
   ASSERT_TRUE(r.has(MeshDefect::NonManifoldVertices));
   EXPECT_EQ(find(r, MeshDefect::NonManifoldVertices)->count, 1);
+  const std::string nm = find(r, MeshDefect::NonManifoldVertices)->message;
+  EXPECT_NE(nm.find("one fan), first: vertex 0"), std::string::npos) << nm;
   EXPECT_FALSE(r.has(MeshDefect::BoundaryEdges));
   EXPECT_FALSE(r.has(MeshDefect::NonManifoldEdges));
   EXPECT_TRUE(r.has(MeshDefect::UnreferencedVertices));  // the orphaned vertex 7
@@ -120,7 +125,9 @@ TEST(MeshCheck, OneFlippedFaceGivesInconsistentOrientation) {
   std::swap(m.F(3, 1), m.F(3, 2));
   const MeshReport r = validateSurface(m);
   EXPECT_EQ(defects(r), std::vector<MeshDefect>{MeshDefect::InconsistentOrientation});
-  EXPECT_EQ(r.issues[0].count, 3);
+  EXPECT_EQ(r.issues[0].count, 3);  // all three edges of face 3 (3, 0, 4): 0-3 comes first
+  EXPECT_NE(r.issues[0].message.find("same way), first: edge 0-3"), std::string::npos)
+      << r.issues[0].message;
 }
 
 TEST(MeshCheck, AllFlippedGivesInward) {
@@ -135,7 +142,7 @@ TEST(MeshCheck, DisjointSolidsGiveComponents) {
   const SurfaceMesh m = disjointUnion(octahedron(), octahedron(), Vec3(5, 0, 0));
   const MeshReport r = validateSurface(m);
   EXPECT_EQ(defects(r), std::vector<MeshDefect>{MeshDefect::MultipleComponents});
-  EXPECT_EQ(r.issues[0].message, "2 components");
+  EXPECT_EQ(r.issues[0].message, "2 components (triangle 8 is not connected to triangle 0)");
 }
 
 TEST(MeshCheck, DuplicateVertexWithinWeldTolerance) {
@@ -144,9 +151,10 @@ TEST(MeshCheck, DuplicateVertexWithinWeldTolerance) {
   m.F(0, 0) = 6;
   MeshReport r = validateSurface(m);
   ASSERT_TRUE(r.has(MeshDefect::DuplicateVertices));
-  EXPECT_EQ(find(r, MeshDefect::DuplicateVertices)->message, "1 duplicate vertex");
+  EXPECT_EQ(find(r, MeshDefect::DuplicateVertices)->message,
+            "1 duplicate vertex, first: vertex 6 (at vertex 0)");
   EXPECT_TRUE(r.has(MeshDefect::BoundaryEdges));  // the split opens the surface
-  EXPECT_EQ(requireMessage(m), "1 duplicate vertex");
+  EXPECT_EQ(requireMessage(m), "1 duplicate vertex, first: vertex 6 (at vertex 0)");
 
   m.V(6, 0) = 1 + 1e-6;  // well outside the tolerance
   r = validateSurface(m);
@@ -159,22 +167,29 @@ TEST(MeshCheck, DegenerateTriangles) {
   appendFace(m, 2, 6, 4);              // zero area
   MeshReport r = validateSurface(m);
   ASSERT_TRUE(r.has(MeshDefect::DegenerateTriangles));
-  EXPECT_EQ(find(r, MeshDefect::DegenerateTriangles)->message, "1 zero-area triangle");
+  EXPECT_EQ(find(r, MeshDefect::DegenerateTriangles)->message,
+            "1 zero-area triangle, first: triangle 8");
   appendFace(m, 0, 0, 1);  // repeated index
   r = validateSurface(m);
   EXPECT_EQ(find(r, MeshDefect::DegenerateTriangles)->count, 2);
+  EXPECT_EQ(find(r, MeshDefect::DegenerateTriangles)->message,
+            "2 degenerate triangles (1 with a repeated vertex, 1 zero-area), first: triangle 8");
 }
 
 TEST(MeshCheck, NonFiniteIndexOutOfRangeEmptyUnreferenced) {
   SurfaceMesh m = octahedron();
   m.V(2, 1) = std::numeric_limits<double>::infinity();
   EXPECT_EQ(defects(validateSurface(m)).front(), MeshDefect::NonFinite);
+  EXPECT_EQ(validateSurface(m).issues[0].message,
+            "1 vertex with NaN or Inf coordinates, first: vertex 2");
 
   m = octahedron();
   m.F(5, 1) = 6;
   MeshReport r = validateSurface(m);
   EXPECT_EQ(defects(r).front(), MeshDefect::IndexOutOfRange);
   EXPECT_EQ(r.issues[0].count, 1);
+  EXPECT_EQ(r.issues[0].message,
+            "1 triangle with a vertex index out of range (6 vertices), first: triangle 5");
 
   EXPECT_EQ(defects(validateSurface(SurfaceMesh{})), std::vector<MeshDefect>{MeshDefect::Empty});
   EXPECT_NE(requireMessage(SurfaceMesh{}).find("empty"), std::string::npos);
@@ -191,7 +206,8 @@ TEST(MeshCheck, NonFiniteIndexOutOfRangeEmptyUnreferenced) {
 TEST(MeshCheck, FirstDefectWinsInPriorityOrder) {
   SurfaceMesh m = disjointUnion(octahedron(), octahedron(), Vec3(5, 0, 0));
   m.F.conservativeResize(15, 3);  // hole in the second one, and still two components
-  EXPECT_EQ(requireMessage(m), "3 boundary edges (holes)");
+  // The dropped face 15 is face 7 (0, 3, 5) of the second octahedron, shifted by 6 vertices.
+  EXPECT_EQ(requireMessage(m), "3 boundary edges (holes), first: edge 6-9");
 }
 
 TEST(MeshRepair, FixesDuplicatesFlipsStrayComponentAndJunk) {

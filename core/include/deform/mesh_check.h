@@ -6,6 +6,7 @@
 
 #include <deform/mesh.h>
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -79,5 +80,38 @@ struct RepairReport {
 /// is reported when more than half of the triangles end up reversed; flippedTriangles counts the
 /// others that changed); drop unreferenced vertices.
 RepairReport repairSurface(SurfaceMesh& mesh);
+
+/// Self-intersection test of a triangle surface: pairs of triangles whose relative interiors
+/// cross. Touching (a shared vertex or edge, a vertex resting on another triangle, two faces
+/// lying flat against each other without overlapping area) is not a self-intersection; two
+/// coplanar triangles overlapping with positive area (including a neighbour folded flat onto
+/// its neighbour across their shared edge) is. Broadphase: a uniform grid over the triangles'
+/// bounding boxes (cell about the mean triangle size), each candidate pair tested once in the
+/// grid cell holding the low corner of the two boxes' overlap. Narrowphase, in the spirit of
+/// Moller ("A fast triangle-triangle intersection test", JGT 2(2), 1997): the signed distances
+/// of each triangle's corners to the other's plane (a corner within 1e-9 of the pair's longest
+/// edge counts as on the plane); both triangles must have corners strictly on both sides, then
+/// the two intervals cut on the planes' common line must overlap by more than that tolerance.
+/// Neighbours are decided by their shared indices: one shared vertex -> the opposite edge of
+/// either triangle must pierce the other's interior; one shared edge -> only a flat fold (the
+/// opposite corner in the other's plane, on the same side of the edge) counts. Coplanar pairs
+/// are tested in 2-D (proper edge crossings, a corner or the centroid strictly inside, or for
+/// a shared vertex overlapping angular sectors). Triangles with an out-of-range or repeated
+/// index, a non-finite corner or zero area are skipped (validateSurface reports those).
+/// Deterministic; pairs are reported with first < second, sorted.
+struct SelfIntersectionReport {
+  long long pairs = 0;                     ///< number of intersecting triangle pairs
+  std::vector<std::array<int, 2>> listed;  ///< the first (sorted) pairs, at most maxListed
+  long long candidates = 0;                ///< box-overlapping pairs the narrowphase tested
+  bool ok() const { return pairs == 0; }
+  /// "37 pairs of self-intersecting triangles (first: 120 and 4411)"; "" when ok().
+  std::string message() const;
+};
+
+SelfIntersectionReport findSelfIntersections(const SurfaceMesh& mesh, int maxListed = 100);
+
+/// Throws InputError(file, "", message() + why repair cannot help) when the surface
+/// self-intersects. Models that build a volume (tetrahedralize() calls it before Gmsh) need it.
+void requireNoSelfIntersections(const SurfaceMesh& mesh, const std::string& file);
 
 }  // namespace deform

@@ -125,7 +125,14 @@ ParamValues resolveParams(const std::vector<ParamSpec>& specs, const nlohmann::j
 
 /// Loads the organ: phantom or file, scaled to metres, validated (or repaired when the scene
 /// asks; each change is appended to repairLog). Throws InputError naming the mesh file.
+/// Also checks every grasp against the loaded organ (checkGraspsReachOrgan).
 Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog = nullptr);
+
+/// Throws InputError(scene.file, "/tools/I/trajectory/K/pos", ...) when a grasper's jaws close
+/// (a "closed" keyframe after an "open" one, or the first keyframe) at a point outside the
+/// organ farther than the tool's radius from its surface: that grasp would attach nothing.
+/// Closing inside the organ is allowed (volumetric models grasp interior nodes).
+void checkGraspsReachOrgan(const Scene& scene, const Organ& organ);
 
 /// JSON of resolved parameter values (for results.json).
 nlohmann::json paramsToJson(const ParamValues& values);

@@ -34,6 +34,9 @@ struct TetMeshOptions {
   Real timeoutSeconds = 600;
   /// Names the input in error messages (file path or "phantom:NAME").
   std::string source;
+  /// Refuse a self-intersecting surface before calling Gmsh (findSelfIntersections in
+  /// mesh_check.h; milliseconds), with a message naming the first pair of triangles.
+  bool checkSelfIntersections = true;
 };
 
 struct TetMeshQuality {
@@ -55,7 +58,8 @@ struct TetMeshResult {
   double seconds = 0;  ///< wall time of meshing (including the child process)
 };
 
-/// Tetrahedralises a closed, manifold, outward-oriented surface (validate it first). Throws
+/// Tetrahedralises a closed, manifold, outward-oriented surface (validate it first) that does
+/// not self-intersect (checked unless options.checkSelfIntersections is false). Throws
 /// InputError(options.source, "", "cannot tetrahedralise: ...") when it cannot.
 TetMeshResult tetrahedralize(const SurfaceMesh& surface, const TetMeshOptions& options = {});
 
