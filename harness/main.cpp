@@ -6,6 +6,7 @@
 #include <deform/plugin_loader.h>
 #include <deform/scene.h>
 #include <deform_harness/bench.h>
+#include <deform_harness/child_process.h>
 #include <deform_harness/convergence.h>
 #include <deform_harness/progress.h>
 #include <deform_harness/results.h>
@@ -315,13 +316,32 @@ bool plot(const std::string& script, const std::vector<std::string>& args) {
   return false;
 }
 
-int cmdTables(const std::vector<std::string>& names, const CommonArgs& a, long long refElements) {
+struct TablesArgs {
+  CommonArgs common;
+  long long referenceElements = 0;
+  double timeout = 0;
+  bool resume = false;
+  bool inProcess = false;
+};
+
+int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
+  const CommonArgs& a = ta.common;
   PluginLoader loader(searchPath(a.pluginDirs));
   TablesOptions o;
   o.quick = a.quick;
   o.outDir = makeOutDir(a.out);
   o.cases = caseOptions(a);
-  o.referenceElements = refElements;
+  o.referenceElements = ta.referenceElements;
+  if (ta.resume && ta.inProcess)
+    throw InputError("--resume", "", "needs the cases in child processes (drop --in-process)");
+  if (!ta.inProcess) {
+    ChildCaseOptions child;
+    child.executable = selfExecutable();
+    child.pluginArgs = pluginDirArgs(loader.searchPath());
+    if (ta.timeout > 0) child.timeoutS = ta.timeout;
+    child.resume = ta.resume;
+    o.cases.child = child;
+  }
   std::vector<Table> tables;
   {
     Progress progress(0, "tables");
@@ -546,20 +566,27 @@ int realMain(int argc, char** argv) {
   };
 
   std::vector<std::string> tableNamesArg;
-  CommonArgs ta;
-  long long tableRefElements = 0;
+  TablesArgs ta;
   CLI::App* tables = app.add_subcommand(
       "tables",
       "regenerate the papers' tables (metaballs-construction, method-comparison, "
       "bem-timing, bem-accuracy, hybrid-accuracy, hybrid-timing, or all)");
   tables->add_option("name", tableNamesArg, "table name(s) or all")->required();
-  tables->add_option("--out", ta.out, "output folder")->required();
+  tables->add_option("--out", ta.common.out, "output folder")->required();
   tables
-      ->add_option("--reference-elements", tableRefElements,
+      ->add_option("--reference-elements", ta.referenceElements,
                    "tets of the reference FEM (default 20000; 4000 with --quick)")
       ->check(CLI::PositiveNumber);
-  tables->add_flag("--explain", ta.explain, "say what each case loaded, built, cached, skipped");
-  addCommon(tables, ta, true);
+  tables->add_flag("--explain", ta.common.explain,
+                   "say what each case loaded, built, cached, skipped");
+  tables
+      ->add_option("--timeout", ta.timeout,
+                   "seconds per case, each case running in its own process (default 900)")
+      ->check(CLI::PositiveNumber);
+  tables->add_flag("--resume", ta.resume, "reuse the cases already finished in --out");
+  tables->add_flag("--in-process", ta.inProcess,
+                   "run the cases in this process (no time limit, a crash ends the command)");
+  addCommon(tables, ta.common, true);
 
   std::string sweepScene;
   CommonArgs sa;
@@ -633,8 +660,8 @@ int realMain(int argc, char** argv) {
   }
   if (*phantom) return cmdPhantom(phName, phOut, phRes, phList);
   if (*tables) {
-    ta.pluginDirs = pluginDirs;
-    return cmdTables(tableNamesArg, ta, tableRefElements);
+    ta.common.pluginDirs = pluginDirs;
+    return cmdTables(tableNamesArg, ta);
   }
   if (*sweep) {
     sa.pluginDirs = pluginDirs;

@@ -1,10 +1,14 @@
 // Generated scenes run through the loader and runner, and the table writers (see cases.h).
 #include <deform/cache.h>
 #include <deform_harness/cases.h>
+#include <deform_harness/child_process.h>
+#include <deform_harness/results.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <sstream>
 
 namespace deform::harness {
@@ -29,6 +33,127 @@ const RunRecord* CaseResult::run(const std::string& label) const {
     if (r.label == label) return &r;
   return nullptr;
 }
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::string readText(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+/// A failed record for a run a failed child took down.
+RunRecord failedRun(const ojson& spec, bool isReference, const std::string& message) {
+  RunRecord r;
+  r.plugin = spec.value("plugin", "");
+  r.model = r.plugin;
+  r.label = spec.value("label", r.plugin);
+  r.isReference = isReference;
+  r.status = RunStatus::Failed;
+  r.message = message;
+  return r;
+}
+
+/// Fills c.result from outDir/results.json (when present) and the failed runs of case.json.
+void readCase(CaseResult& c, const ojson& caseDoc) {
+  BenchmarkResult b;
+  const fs::path results = c.outDir / "results.json";
+  if (fs::exists(results)) {
+    const nlohmann::json doc = nlohmann::json::parse(readText(results));
+    for (const auto& run : doc.at("runs")) b.runs.push_back(runFromJson(run));
+    if (doc.contains("organ")) {
+      c.organVertices = doc["organ"].value("vertices", -1);
+      c.organFaces = doc["organ"].value("triangles", -1);
+    }
+    b.resultsPath = results;
+  }
+  for (const auto& f : caseDoc.value("failed_runs", ojson::array()))
+    b.runs.push_back(failedRun(f, f.value("role", "model") == "reference", f.value("message", "")));
+  c.wallS = caseDoc.value("wall_s", 0.0);
+  c.result = std::move(b);
+}
+
+/// The case in a child process (see ChildCaseOptions), writing outDir/case.json last.
+void runCaseInChild(CaseResult& c, const ojson& pruned, const fs::path& runScene,
+                    const CaseOptions& options) {
+  const ChildCaseOptions& co = *options.child;
+  const auto start = Clock::now();
+  const auto job = [&](bool noReference, const std::string& log) {
+    ChildJob j;
+    j.argv = {co.executable};
+    j.argv.insert(j.argv.end(), co.pluginArgs.begin(), co.pluginArgs.end());
+    j.argv.insert(j.argv.end(), {"run", runScene.string(), "--out", c.outDir.string()});
+    if (options.cacheDir) {
+      if (options.cacheDir->empty()) {
+        j.argv.push_back("--no-cache");
+      } else {
+        j.argv.insert(j.argv.end(), {"--cache-dir", options.cacheDir->string()});
+      }
+    }
+    if (options.explain) j.argv.push_back("--explain");
+    if (options.run.maxSteps > 0)
+      j.argv.insert(j.argv.end(), {"--steps", std::to_string(options.run.maxSteps)});
+    if (noReference) j.argv.push_back("--no-reference");
+    j.log = c.outDir / log;
+    return j;
+  };
+  const auto failureOf = [&](const ChildOutcome& o, const ChildJob& j) {
+    std::string f = childFailure(o, co.timeoutS, lastLogLine(j.log, 300));
+    if (f.empty() && !fs::exists(c.outDir / "results.json")) f = "exit code 0 without results.json";
+    return f;
+  };
+  const auto forwardExplain = [&](const ChildJob& j) {
+    if (!options.explain) return;
+    std::istringstream lines(readText(j.log));
+    for (std::string line; std::getline(lines, line);)
+      if (line.rfind("explain: ", 0) == 0) options.explain(line.substr(9));
+  };
+
+  ojson caseDoc = {{"format", "deformbench-case/1"}, {"failed_runs", ojson::array()}};
+  fs::remove(c.outDir / "results.json");
+  const ChildJob first = job(false, "log.txt");
+  const std::string failure = failureOf(runChild(first, co.timeoutS), first);
+  forwardExplain(first);
+  caseDoc["child"] = failure.empty() ? "ok" : failure;
+  if (!failure.empty()) {
+    const bool hasReference = pruned.contains("reference");
+    std::string second;
+    if (hasReference) {
+      const ChildJob retry = job(true, "log_no_reference.txt");
+      second = failureOf(runChild(retry, co.timeoutS), retry);
+      forwardExplain(retry);
+      caseDoc["child_no_reference"] = second.empty() ? "ok" : second;
+    }
+    if (hasReference && second.empty()) {
+      caseDoc["failed_runs"].push_back(
+          {{"label", pruned["reference"].value("label", pruned["reference"].value("plugin", ""))},
+           {"plugin", pruned["reference"].value("plugin", "")},
+           {"role", "reference"},
+           {"message", failure + " (with the reference; the models then ran without it)"}});
+    } else {
+      fs::remove(c.outDir / "results.json");
+      for (const auto& m : pruned["models"])
+        caseDoc["failed_runs"].push_back({{"label", m.value("label", m.value("plugin", ""))},
+                                          {"plugin", m.value("plugin", "")},
+                                          {"role", "model"},
+                                          {"message", failure}});
+      if (hasReference)
+        caseDoc["failed_runs"].push_back(
+            {{"label", pruned["reference"].value("label", pruned["reference"].value("plugin", ""))},
+             {"plugin", pruned["reference"].value("plugin", "")},
+             {"role", "reference"},
+             {"message", failure}});
+    }
+  }
+  caseDoc["wall_s"] = std::chrono::duration<double>(Clock::now() - start).count();
+  writeFileAtomic(c.outDir / "case.json", caseDoc.dump(2) + "\n");
+  readCase(c, caseDoc);
+}
+
+}  // namespace
 
 CaseResult runSceneCase(const ojson& scene, const fs::path& sceneFile, const fs::path& outDir,
                         PluginLoader& loader, const CaseOptions& options) {
@@ -65,18 +190,42 @@ CaseResult runSceneCase(const ojson& scene, const fs::path& sceneFile, const fs:
   }
   fs::create_directories(outDir, ec);
   const fs::path runScene = outDir / "scene.json";
-  writeFileAtomic(runScene, pruned.dump(2) + "\n");
+  const std::string prunedText = pruned.dump(2) + "\n";
+  if (options.child && options.child->resume && fs::exists(outDir / "case.json") &&
+      readText(runScene) == prunedText) {
+    try {
+      readCase(c, ojson::parse(readText(outDir / "case.json")));
+      c.resumed = true;
+      return c;
+    } catch (const std::exception&) {
+      c.result.reset();  // unreadable: run it again
+    }
+  }
+  fs::remove(outDir / "case.json");
+  writeFileAtomic(runScene, prunedText);
+  if (options.child) {
+    try {
+      runCaseInChild(c, pruned, runScene, options);
+    } catch (const std::exception& e) {
+      c.error = e.what();
+    }
+    return c;
+  }
   BenchmarkOptions o;
   o.cacheDir = options.cacheDir;
   o.outDir = outDir;
   o.run = options.run;
   o.explain = options.explain;
   o.progress = options.progress;
+  const auto start = Clock::now();
   try {
     c.result = runBenchmark(runScene.string(), loader, o);
+    c.organVertices = c.result->organ.surface.numVertices();
+    c.organFaces = c.result->organ.surface.numFaces();
   } catch (const std::exception& e) {
     c.error = e.what();
   }
+  c.wallS = std::chrono::duration<double>(Clock::now() - start).count();
   return c;
 }
 

@@ -2,21 +2,14 @@
 #include <deform/cache.h>
 #include <deform/mesh.h>
 #include <deform/phantom.h>
+#include <deform_harness/child_process.h>
 #include <deform_harness/stability.h>
 
-#include <fcntl.h>
-#include <signal.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <cstring>
 #include <fstream>
 #include <map>
 #include <sstream>
-#include <thread>
 
 namespace deform::harness {
 
@@ -44,22 +37,6 @@ ojson stabilityParams(const std::string& plugin, bool quick) {
   if (plugin == "metaballs") return {{"spheres", 150}};
   if (plugin == "fem_hex") return {{"elements", 300}};
   return ojson::object();
-}
-
-std::string signalText(int sig) {
-  const char* name = sigabbrev_np(sig);
-  return "killed by signal " + std::to_string(sig) +
-         (name ? std::string(" (SIG") + name + ")" : "");
-}
-
-std::string tail(const fs::path& file, size_t maxChars) {
-  std::ifstream in(file);
-  std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
-  const auto nl = s.rfind('\n');
-  std::string last = nl == std::string::npos ? s : s.substr(nl + 1);
-  if (last.size() > maxChars) last = last.substr(last.size() - maxChars);
-  return last;
 }
 
 }  // namespace
@@ -178,20 +155,15 @@ ojson stabilityScene(const StabilityCase& c, const std::string& plugin, const oj
 StabilityRecord classifyStabilityRun(int waitStatus, bool timedOut, double timeoutS,
                                      const fs::path& resultsJson, const std::string& stderrTail) {
   StabilityRecord r;
-  if (timedOut) {
+  ChildOutcome outcome;
+  outcome.waitStatus = waitStatus;
+  outcome.timedOut = timedOut;
+  std::string failure = childFailure(outcome, timeoutS, stderrTail);
+  if (failure.empty() && !fs::exists(resultsJson))
+    failure = "exit code 0" + (stderrTail.empty() ? "" : ": " + stderrTail);
+  if (!failure.empty()) {
     r.status = "failed";
-    r.message = "timeout: no result after " + g(timeoutS) + " s (killed)";
-    return r;
-  }
-  if (WIFSIGNALED(waitStatus)) {
-    r.status = "failed";
-    r.message = signalText(WTERMSIG(waitStatus));
-    return r;
-  }
-  const int code = WIFEXITED(waitStatus) ? WEXITSTATUS(waitStatus) : -1;
-  if (code != 0 || !fs::exists(resultsJson)) {
-    r.status = "failed";
-    r.message = "exit code " + std::to_string(code) + (stderrTail.empty() ? "" : ": " + stderrTail);
+    r.message = failure;
     return r;
   }
   try {
@@ -229,35 +201,6 @@ ojson recordJson(const StabilityRecord& r) {
           {"wall_s", r.wallS}};
 }
 
-struct Child {
-  pid_t pid = -1;
-  StabilityRecord record;
-  fs::path dir, caseFile;
-  std::chrono::steady_clock::time_point start;
-  std::string label;
-};
-
-pid_t spawn(const std::vector<std::string>& argv, const fs::path& log) {
-  std::fflush(nullptr);
-  const pid_t pid = fork();
-  if (pid != 0) return pid;
-  // Child: own process group (so a timeout kills whatever it forked too), output to the log.
-  setpgid(0, 0);
-  const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  if (fd >= 0) {
-    dup2(fd, 1);
-    dup2(fd, 2);
-    close(fd);
-  }
-  std::vector<char*> args;
-  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  setenv("DEFORM_PROGRESS", "plain", 1);
-  execv(args[0], args.data());
-  std::fprintf(stderr, "cannot exec %s: %s\n", args[0], std::strerror(errno));
-  _exit(127);
-}
-
 }  // namespace
 
 std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityOptions& options,
@@ -281,12 +224,17 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     cases = kept;
   }
   const double timeout = options.timeoutS > 0 ? options.timeoutS : (options.quick ? 60.0 : 120.0);
-  std::string exe = options.executable;
-  if (exe.empty()) exe = fs::read_symlink("/proc/self/exe").string();
+  const std::string exe = options.executable.empty() ? selfExecutable() : options.executable;
   fs::create_directories(options.outDir);
 
+  /// A (model, case) to run: its record (status set when there is nothing to run).
+  struct Pending {
+    StabilityRecord record;
+    fs::path dir, caseFile;
+    std::string label;
+  };
   std::vector<StabilityRecord> records;
-  std::vector<Child> queue;
+  std::vector<Pending> pending;
   for (const std::string& plugin : models) {
     const std::string problem = pluginProblem(loader, plugin);
     for (const StabilityCase& c : cases) {
@@ -310,16 +258,16 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
           // unreadable: run it again
         }
       }
-      Child ch;
-      ch.record.model = plugin;
-      ch.record.caseId = c.id;
-      ch.record.group = c.group;
-      ch.caseFile = caseFile;
-      ch.dir = options.outDir / "runs" / plugin / c.id;
-      ch.label = plugin + " " + c.id;
+      Pending p;
+      p.record.model = plugin;
+      p.record.caseId = c.id;
+      p.record.group = c.group;
+      p.caseFile = caseFile;
+      p.dir = options.outDir / "runs" / plugin / c.id;
+      p.label = plugin + " " + c.id;
       if (!problem.empty()) {
-        ch.record.status = "failed";
-        ch.record.message = "plugin cannot be loaded: " + problem;
+        p.record.status = "failed";
+        p.record.message = "plugin cannot be loaded: " + problem;
       }
       const fs::path sceneFile = options.outDir / "scenes" / plugin / (c.id + ".json");
       fs::create_directories(sceneFile.parent_path());
@@ -327,81 +275,62 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
           sceneFile,
           stabilityScene(c, plugin, stabilityParams(plugin, options.quick), options.quick).dump(2) +
               "\n");
-      queue.push_back(ch);
+      pending.push_back(p);
     }
   }
-  if (progress) progress->addTotal(int(queue.size()));
+  if (progress) progress->addTotal(int(pending.size()));
 
-  const auto finishCase = [&](Child& ch) {
-    fs::create_directories(ch.caseFile.parent_path());
-    writeFileAtomic(ch.caseFile, recordJson(ch.record).dump(2) + "\n");
-    std::string result = ch.record.status;
-    if (ch.record.step >= 0) result += " at step " + std::to_string(ch.record.step);
-    if (ch.record.status == "failed") result += " (" + ch.record.message + ")";
-    if (progress) progress->finish(ch.label, result);
-    records.push_back(ch.record);
+  const auto finishCase = [&](const Pending& p) {
+    fs::create_directories(p.caseFile.parent_path());
+    writeFileAtomic(p.caseFile, recordJson(p.record).dump(2) + "\n");
+    std::string result = p.record.status;
+    if (p.record.step >= 0) result += " at step " + std::to_string(p.record.step);
+    if (p.record.status == "failed") result += " (" + p.record.message + ")";
+    if (progress) progress->finish(p.label, result);
+    records.push_back(p.record);
   };
 
-  std::vector<Child> running;
-  size_t next = 0;
-  const int jobs = std::max(1, options.jobs);
-  while (next < queue.size() || !running.empty()) {
-    while (next < queue.size() && int(running.size()) < jobs) {
-      Child ch = queue[next++];
-      if (!ch.record.status.empty()) {  // plugin did not load: nothing to run
-        finishCase(ch);
-        continue;
-      }
-      fs::remove_all(ch.dir);
-      fs::create_directories(ch.dir);
-      std::vector<std::string> argv = {exe};
-      for (const auto& d : options.pluginDirs) {
-        argv.push_back("--plugin-dir");
-        argv.push_back(d);
-      }
-      const fs::path scene =
-          options.outDir / "scenes" / ch.record.model / (ch.record.caseId + ".json");
-      argv.insert(argv.end(), {"run", scene.string(), "--out", ch.dir.string()});
-      if (!options.cacheDir.empty()) argv.insert(argv.end(), {"--cache-dir", options.cacheDir});
-      if (progress) progress->start(ch.label);
-      ch.start = std::chrono::steady_clock::now();
-      ch.pid = spawn(argv, ch.dir / "log.txt");
-      if (ch.pid < 0) {
-        ch.record.status = "failed";
-        ch.record.message = std::string("cannot fork: ") + std::strerror(errno);
-        finishCase(ch);
-        continue;
-      }
-      running.push_back(ch);
+  std::vector<ChildJob> jobs;
+  std::vector<Pending*> jobCase;
+  for (Pending& p : pending) {
+    if (!p.record.status.empty()) {  // plugin did not load: nothing to run
+      finishCase(p);
+      continue;
     }
-    bool any = false;
-    for (auto it = running.begin(); it != running.end();) {
-      int status = 0;
-      const double elapsed =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - it->start).count();
-      const pid_t w = waitpid(it->pid, &status, WNOHANG);
-      bool timedOut = false;
-      if (w == 0 && elapsed > timeout) {
-        kill(-it->pid, SIGKILL);
-        kill(it->pid, SIGKILL);
-        waitpid(it->pid, &status, 0);
-        timedOut = true;
-      } else if (w == 0) {
-        ++it;
-        continue;
-      }
-      const StabilityRecord r = classifyStabilityRun(
-          status, timedOut, timeout, it->dir / "results.json", tail(it->dir / "log.txt", 300));
-      it->record.status = r.status;
-      it->record.step = r.step;
-      it->record.message = r.message;
-      it->record.wallS = elapsed;
-      finishCase(*it);
-      it = running.erase(it);
-      any = true;
-    }
-    if (!any && !running.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    ChildJob job;
+    job.argv = {exe};
+    for (const auto& a : pluginDirArgs(options.pluginDirs)) job.argv.push_back(a);
+    const fs::path scene = options.outDir / "scenes" / p.record.model / (p.record.caseId + ".json");
+    job.argv.insert(job.argv.end(), {"run", scene.string(), "--out", p.dir.string()});
+    if (!options.cacheDir.empty())
+      job.argv.insert(job.argv.end(), {"--cache-dir", options.cacheDir});
+    job.log = p.dir / "log.txt";
+    jobs.push_back(job);
+    jobCase.push_back(&p);
   }
+  runChildren(
+      jobs, options.jobs, timeout,
+      [&](size_t i) {
+        fs::remove_all(jobCase[i]->dir);
+        fs::create_directories(jobCase[i]->dir);
+        if (progress) progress->start(jobCase[i]->label);
+      },
+      [&](size_t i, const ChildOutcome& o) {
+        Pending& p = *jobCase[i];
+        StabilityRecord r;
+        if (!o.spawnError.empty()) {
+          r.status = "failed";
+          r.message = o.spawnError;
+        } else {
+          r = classifyStabilityRun(o.waitStatus, o.timedOut, timeout, p.dir / "results.json",
+                                   lastLogLine(p.dir / "log.txt", 300));
+        }
+        p.record.status = r.status;
+        p.record.step = r.step;
+        p.record.message = r.message;
+        p.record.wallS = o.wallS;
+        finishCase(p);
+      });
 
   // Records in (model, case) order whatever order the children finished in.
   std::map<std::pair<std::string, std::string>, StabilityRecord> byKey;

@@ -2,6 +2,7 @@
 // runs. Paper figures are data copied from the papers in ../shared/papers.
 #include <deform/mesh.h>
 #include <deform/phantom.h>
+#include <deform_harness/child_process.h>
 #include <deform_harness/tables.h>
 
 #include <algorithm>
@@ -37,24 +38,31 @@ std::string forceTag(double f) {
   return s;
 }
 
+/// Appends `part` to a "; "-separated list (nothing when part is empty).
+void appendTo(std::string& list, const std::string& part) {
+  if (!part.empty()) list += (list.empty() ? "" : "; ") + part;
+}
+
 ojson model(const std::string& plugin, const std::string& label, ojson params = ojson::object()) {
   return {{"plugin", plugin}, {"label", label}, {"params", std::move(params)}};
 }
 
+ojson material() {
+  return {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}};
+}
+
 /// Organ block of a phantom with the bottom `fixedFraction` of its height fixed (a box a little
-/// larger than the organ in x and y).
+/// larger than the organ in x and y); the phantom's mesh goes to meshOut.
 ojson phantomOrgan(const std::string& name, double resolution, double fixedFraction,
-                   Box* boxOut = nullptr, SurfaceMesh* meshOut = nullptr) {
-  const SurfaceMesh s = makePhantom(name, resolution);
-  const Box b = boundingBox(s.V);
+                   SurfaceMesh& meshOut) {
+  meshOut = makePhantom(name, resolution);
+  const Box b = boundingBox(meshOut.V);
   const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
   const Vec3 lo = b.lo - m;
   const Vec3 hi(b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + fixedFraction * b.size().z());
-  if (boxOut) *boxOut = b;
-  if (meshOut) *meshOut = s;
   return {{"mesh", "phantom:" + name},
           {"resolution", resolution},
-          {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
+          {"material", material()},
           {"fixed", {{"box", ojson::array({vec(lo), vec(hi)})}}}};
 }
 
@@ -70,10 +78,29 @@ ojson baseScene(const std::string& name, const std::string& description, ojson o
   return j;
 }
 
-ojson reference(long long elements) {
-  return {{"plugin", "reference_fem"},
-          {"label", "reference_fem"},
-          {"params", {{"elements", elements}}}};
+/// The reference of a scene, its error samples (the 10 and 50 vertices nearest the load).
+void addReference(ojson& scene, ojson reference) {
+  scene["reference"] = std::move(reference);
+  scene["samples"] = {{"nearest", {10, 50}}};
+}
+
+ojson referenceFem(long long elements) {
+  return model("reference_fem", "reference_fem", {{"elements", elements}});
+}
+
+/// The surface vertex nearest the centre of the top of the bounding box.
+Vec3 topVertex(const SurfaceMesh& s) {
+  const Box b = boundingBox(s.V);
+  return s.V.row(nearestVertex(s.V, Vec3(b.center().x(), b.center().y(), b.hi.z()))).transpose();
+}
+
+/// A constant vertical point force fz (N) at `at` from t = 0 to `end`.
+ojson verticalForce(const Vec3& at, double fz, double end) {
+  return ojson::array({{{"type", "point_force"},
+                        {"at", vec(at)},
+                        {"force", {0, 0, fz}},
+                        {"start", 0.0},
+                        {"end", end}}});
 }
 
 /// A grasper closing at t = 0 on the point `depth` below the organ's top vertex (so that models
@@ -81,16 +108,27 @@ ojson reference(long long elements) {
 /// metres over the run.
 ojson graspFromTop(const SurfaceMesh& s, double depthFraction, double radiusFraction, double lift,
                    double duration) {
-  const Box b = boundingBox(s.V);
-  const int top = nearestVertex(s.V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
-  Vec3 p = s.V.row(top).transpose();
-  p.z() -= depthFraction * b.size().z();
-  const double radius = radiusFraction * b.size().z();
+  const double height = boundingBox(s.V).size().z();
+  const Vec3 p = topVertex(s) - Vec3(0, 0, depthFraction * height);
   return ojson::array({{{"type", "grasper"},
-                        {"radius", radius},
+                        {"radius", radiusFraction * height},
                         {"trajectory",
                          {{{"t", 0.0}, {"pos", vec(p)}, {"jaw", "closed"}},
                           {{"t", duration}, {"pos", vec(p + Vec3(0, 0, lift))}}}}}});
+}
+
+/// Columns of our figure and the paper's beside it: {key, header}, {paper_key, paperHeader}
+/// ("paper " + header when paperHeader is empty).
+std::vector<TableColumn> withPaper(const std::string& key, const std::string& header,
+                                   const std::string& paperHeader = "") {
+  return {{key, header}, {"paper_" + key, paperHeader.empty() ? "paper " + header : paperHeader}};
+}
+
+/// Concatenated column groups.
+std::vector<TableColumn> columns(std::initializer_list<std::vector<TableColumn>> groups) {
+  std::vector<TableColumn> out;
+  for (const auto& g : groups) out.insert(out.end(), g.begin(), g.end());
+  return out;
 }
 
 /// Value of a run's count, or null.
@@ -104,11 +142,28 @@ ojson stepMedian(const RunRecord* r) {
   return r->stepStats.median;
 }
 
-ojson rmse(const RunRecord* r, int k) {
+/// A figure of the run's error (null without one).
+ojson errorFigure(const RunRecord* r, const std::function<double(const ErrorMetrics&)>& get) {
   if (!r || !r->error) return nullptr;
-  for (const auto& [kk, v] : r->error->rmseNearest)
-    if (kk == k) return numberOrNull(1e3 * v);
-  return nullptr;
+  return numberOrNull(get(*r->error));
+}
+
+/// rmse_k in mm (null when the run has no such figure).
+ojson rmseMm(const RunRecord* r, int k) {
+  return errorFigure(r, [k](const ErrorMetrics& e) {
+    for (const auto& [kk, v] : e.rmseNearest)
+      if (kk == k) return 1e3 * v;
+    return std::nan("");
+  });
+}
+
+ojson lossRatio(const RunRecord* r) {
+  return errorFigure(r, [](const ErrorMetrics& e) { return e.lossRatio; });
+}
+
+/// The precomputation time of a run that stepped, or null.
+ojson precomputeS(const RunRecord* r) {
+  return r && r->steps > 0 ? ojson(r->precomputeS) : ojson(nullptr);
 }
 
 /// The status cell of a row: "ok", "diverged", ..., or "missing plugin X: why".
@@ -122,20 +177,26 @@ std::string statusOf(const CaseResult& c, const std::string& plugin, const RunRe
 /// A note on the row: the run's message and notes, and a missing reference.
 std::string noteOf(const CaseResult& c, const RunRecord* r, bool wantsError) {
   std::string s;
-  const auto add = [&](const std::string& t) {
-    if (!t.empty()) s += (s.empty() ? "" : "; ") + t;
-  };
   if (r) {
-    add(r->message);
-    for (const auto& n : r->notes) add(n);
+    appendTo(s, r->message);
+    for (const auto& n : r->notes) appendTo(s, n);
   }
   if (wantsError && c.missing.count("reference_fem"))
-    add("no error: reference_fem missing (" + c.missing.at("reference_fem") + ")");
+    appendTo(s, "no error: reference_fem missing (" + c.missing.at("reference_fem") + ")");
   return s;
 }
 
 std::string relativeTo(const fs::path& p, const fs::path& base) {
   return fs::relative(p, base).generic_string();
+}
+
+/// The cells every one-model row ends with: the status of `plugin`'s run r, the scene to rerun
+/// it, and the note.
+void caseCells(ojson& row, const CaseResult& c, const std::string& plugin, const RunRecord* r,
+               const fs::path& dir, bool wantsError) {
+  row["status"] = statusOf(c, plugin, r);
+  row["scene"] = relativeTo(c.sceneFile, dir);
+  row["note"] = noteOf(c, r, wantsError);
 }
 
 // ---------------------------------------------------------------------------------- the cases
@@ -148,6 +209,13 @@ struct Case {
 
 using Results = std::map<std::string, CaseResult>;
 
+/// The case of a row, or nullptr after marking the row as skipped by --quick (or not run).
+const CaseResult* caseOrSkipped(const Results& res, const std::string& id, bool quick, ojson& row) {
+  if (res.count(id)) return &res.at(id);
+  row["status"] = quick ? "skipped (--quick)" : "not run";
+  return nullptr;
+}
+
 struct TableDef {
   std::string name, title, source;
   std::vector<std::string> notes;
@@ -155,6 +223,26 @@ struct TableDef {
   std::vector<Case> cases;
   std::function<std::vector<ojson>(const Results&, const fs::path& outDir)> rows;
 };
+
+TableDef tableDef(const std::string& name, const std::string& title, const std::string& source,
+                  std::vector<TableColumn> cols) {
+  TableDef t;
+  t.name = name;
+  t.title = title;
+  t.source = source;
+  t.columns = std::move(cols);
+  return t;
+}
+
+/// The cells of a row in the order of the table's columns (keys without a column after them).
+ojson inColumnOrder(const ojson& row, const std::vector<TableColumn>& cols) {
+  ojson out = ojson::object();
+  for (const TableColumn& c : cols)
+    if (row.contains(c.key)) out[c.key] = row[c.key];
+  for (const auto& [k, v] : row.items())
+    if (!out.contains(k)) out[k] = v;
+  return out;
+}
 
 // ------------------------------------------------------------------- metaballs-construction
 
@@ -172,24 +260,16 @@ constexpr MetaballsPaperRow kMetaballsTable1[] = {
 };
 
 TableDef metaballsConstruction(const TablesOptions& o) {
-  TableDef t;
-  t.name = "metaballs-construction";
-  t.title = "metaballs construction and deformation per organ";
-  t.source = "Pan et al. 2015 (metaballs + PBD skinning), Table 1";
-  t.columns = {{"organ", "organ"},
-               {"status", "status"},
-               {"vertices", "vertices"},
-               {"paper_vertices", "paper vertices"},
-               {"spheres", "spheres"},
-               {"paper_spheres", "paper spheres"},
-               {"links", "links"},
-               {"paper_links", "paper links"},
-               {"construction_s", "construction s"},
-               {"paper_construction_s", "paper construction s"},
-               {"deformation_ms", "deformation ms"},
-               {"paper_deformation_ms", "paper deformation ms"},
-               {"scene", "scene"},
-               {"note", "note"}};
+  TableDef t =
+      tableDef("metaballs-construction", "metaballs construction and deformation per organ",
+               "Pan et al. 2015 (metaballs + PBD skinning), Table 1",
+               columns({{{"organ", "organ"}, {"status", "status"}},
+                        withPaper("vertices", "vertices"),
+                        withPaper("spheres", "spheres"),
+                        withPaper("links", "links"),
+                        withPaper("construction_s", "construction s"),
+                        withPaper("deformation_ms", "deformation ms"),
+                        {{"scene", "scene"}, {"note", "note"}}}));
   const double resolution = o.quick ? 0.25 : 1.0;
   const double duration = o.quick ? 0.05 : 0.5;
   t.notes = {"Our organs are the built-in phantoms (" +
@@ -200,7 +280,7 @@ TableDef metaballsConstruction(const TablesOptions& o) {
              "The paper's machine and mesh differ: compare trends, not absolute seconds."};
   for (const auto& p : kMetaballsTable1) {
     SurfaceMesh s;
-    ojson organ = phantomOrgan(p.organ, resolution, 0.15, nullptr, &s);
+    ojson organ = phantomOrgan(p.organ, resolution, 0.15, s);
     ojson j = baseScene(std::string("metaballs-construction-") + p.organ,
                         std::string("Metaballs built for the ") + p.organ +
                             " phantom and dragged up 2 cm by a grasper at its top.",
@@ -216,21 +296,18 @@ TableDef metaballsConstruction(const TablesOptions& o) {
       const RunRecord* r = c.run("metaballs");
       ojson row;
       row["organ"] = p.organ;
-      row["status"] = statusOf(c, "metaballs", r);
-      row["vertices"] = c.result ? ojson(c.result->organ.surface.numVertices()) : ojson(nullptr);
+      row["vertices"] = c.organVertices >= 0 ? ojson(c.organVertices) : ojson(nullptr);
       row["paper_vertices"] = p.vertices;
       row["spheres"] = countOf(r, "spheres");
       row["paper_spheres"] = p.spheres;
       row["links"] = countOf(r, "links");
       row["paper_links"] = p.links;
-      row["construction_s"] = r && r->status != RunStatus::Unsupported && r->steps > 0
-                                  ? ojson(r->precomputeS)
-                                  : ojson(nullptr);
+      row["construction_s"] =
+          r && r->status != RunStatus::Unsupported ? precomputeS(r) : ojson(nullptr);
       row["paper_construction_s"] = p.constructionS;
       row["deformation_ms"] = stepMedian(r);
       row["paper_deformation_ms"] = p.deformationMs;
-      row["scene"] = relativeTo(c.sceneFile, dir);
-      row["note"] = noteOf(c, r, false);
+      caseCells(row, c, "metaballs", r, dir, false);
       rows.push_back(row);
     }
     return rows;
@@ -243,11 +320,6 @@ TableDef metaballsConstruction(const TablesOptions& o) {
 struct MethodPaperCell {
   const char* counts;
   double ms;
-};
-struct MethodSpec {
-  const char* label;
-  const char* plugin;
-  const char* paperName;
 };
 // Pan et al. 2015, Table 2: elements/constraints and deformation ms, gallbladder then liver.
 const std::map<std::string, std::map<std::string, MethodPaperCell>>& methodPaper() {
@@ -278,24 +350,23 @@ std::string ourCounts(const RunRecord* r, const std::string& label) {
   return "";
 }
 
+/// The methods of Table 2 (label = plugin).
+constexpr const char* kMethods[] = {"fem_hex", "massspring", "pbd", "metaballs"};
+
 TableDef methodComparison(const TablesOptions& o, long long refElements) {
-  TableDef t;
-  t.name = "method-comparison";
-  t.title = "FEM (hex), mass-spring, PBD and metaballs on the gallbladder and the liver";
-  t.source = "Pan et al. 2015 (metaballs + PBD skinning), Table 2";
-  t.columns = {{"organ", "organ"},
-               {"method", "method"},
-               {"status", "status"},
-               {"counts", "elements/constraints"},
-               {"paper_counts", "paper elements/constraints"},
-               {"ms", "ms/step"},
-               {"paper_ms", "paper ms"},
-               {"rmse_10_mm", "rmse_10 mm"},
-               {"rmse_50_mm", "rmse_50 mm"},
-               {"rmse_all_mm", "rmse_all mm"},
-               {"loss_ratio", "loss ratio"},
-               {"scene", "scene"},
-               {"note", "note"}};
+  TableDef t =
+      tableDef("method-comparison",
+               "FEM (hex), mass-spring, PBD and metaballs on the gallbladder and the liver",
+               "Pan et al. 2015 (metaballs + PBD skinning), Table 2",
+               columns({{{"organ", "organ"}, {"method", "method"}, {"status", "status"}},
+                        withPaper("counts", "elements/constraints"),
+                        withPaper("ms", "ms/step", "paper ms"),
+                        {{"rmse_10_mm", "rmse_10 mm"},
+                         {"rmse_50_mm", "rmse_50 mm"},
+                         {"rmse_all_mm", "rmse_all mm"},
+                         {"loss_ratio", "loss ratio"},
+                         {"scene", "scene"},
+                         {"note", "note"}}}));
   const double duration = o.quick ? 0.25 : 1.0;
   t.notes = {
       "Scenes: the shipped grasp-and-lift scenes (liver at resolution 0.27, ~2.2k vertices "
@@ -308,10 +379,6 @@ TableDef methodComparison(const TablesOptions& o, long long refElements) {
       "constraints; metaballs links(+Laplacian) + spheres. Mass-spring uses explicit "
       "Euler as in the paper: divergence at 1 ms is an honest result.",
       "Our error column has no paper counterpart."};
-  const std::vector<MethodSpec> methods = {{"fem_hex", "fem_hex", "FEM"},
-                                           {"massspring", "massspring", "Mass-spring"},
-                                           {"pbd", "pbd", "PBD"},
-                                           {"metaballs", "metaballs", "Our method (metaballs)"}};
   struct OrganSetup {
     const char* organ;
     double resolution;
@@ -353,7 +420,7 @@ TableDef methodComparison(const TablesOptions& o, long long refElements) {
   for (const OrganSetup& os : organs) {
     ojson organ = {{"mesh", std::string("phantom:") + os.organ},
                    {"resolution", os.resolution},
-                   {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
+                   {"material", material()},
                    {"fixed", os.fixed}};
     ojson j = baseScene(std::string("method-comparison-") + os.organ,
                         std::string("Pan et al. 2015 Table 2 comparison on the ") + os.organ +
@@ -364,32 +431,29 @@ TableDef methodComparison(const TablesOptions& o, long long refElements) {
         {model("fem_hex", "fem_hex", {{"elements", os.femElements}}),
          model("massspring", "massspring", {{"integrator", "explicit_euler"}}), model("pbd", "pbd"),
          model("metaballs", "metaballs", {{"spheres", os.spheres}})});
-    j["reference"] = reference(refElements);
-    j["samples"] = {{"nearest", {10, 50}}};
+    addReference(j, referenceFem(refElements));
     t.cases.push_back({std::string("method/") + os.organ, j});
   }
-  t.rows = [methods](const Results& res, const fs::path& dir) {
+  t.rows = [](const Results& res, const fs::path& dir) {
     std::vector<ojson> rows;
     for (const char* organ : {"gallbladder", "liver"}) {
       const CaseResult& c = res.at(std::string("method/") + organ);
-      for (const MethodSpec& m : methods) {
-        const RunRecord* r = c.run(m.label);
-        const MethodPaperCell& paper = methodPaper().at(organ).at(m.label);
+      for (const char* m : kMethods) {
+        const RunRecord* r = c.run(m);
+        const MethodPaperCell& paper = methodPaper().at(organ).at(m);
         ojson row;
         row["organ"] = organ;
-        row["method"] = m.label;
-        row["status"] = statusOf(c, m.plugin, r);
-        const std::string counts = ourCounts(r, m.label);
+        row["method"] = m;
+        const std::string counts = ourCounts(r, m);
         row["counts"] = counts.empty() ? ojson(nullptr) : ojson(counts);
         row["paper_counts"] = paper.counts;
         row["ms"] = stepMedian(r);
         row["paper_ms"] = paper.ms;
-        row["rmse_10_mm"] = rmse(r, 10);
-        row["rmse_50_mm"] = rmse(r, 50);
-        row["rmse_all_mm"] = r && r->error ? numberOrNull(1e3 * r->error->rmseAll) : nullptr;
-        row["loss_ratio"] = r && r->error ? numberOrNull(r->error->lossRatio) : nullptr;
-        row["scene"] = relativeTo(c.sceneFile, dir);
-        row["note"] = noteOf(c, r, true);
+        row["rmse_10_mm"] = rmseMm(r, 10);
+        row["rmse_50_mm"] = rmseMm(r, 50);
+        row["rmse_all_mm"] = errorFigure(r, [](const ErrorMetrics& e) { return 1e3 * e.rmseAll; });
+        row["loss_ratio"] = lossRatio(r);
+        caseCells(row, c, m, r, dir, true);
         rows.push_back(row);
       }
     }
@@ -417,24 +481,15 @@ ojson phaseOf(const RunRecord* r, const std::string& phase) {
 }
 
 TableDef bemTiming(const TablesOptions& o) {
-  TableDef t;
-  t.name = "bem-timing";
-  t.title = "particles guided by precomputed BEM: time per step by phase";
-  t.source = "Zhu, Gu & Zhou 2010 (particles + precomputed BEM), Table 1";
-  t.columns = {{"model", "model"},
-               {"point_number", "point number"},
-               {"status", "status"},
-               {"surface_ms", "surface computation ms"},
-               {"paper_surface_ms", "paper surface ms"},
-               {"correction_ms", "position correction ms"},
-               {"paper_correction_ms", "paper correction ms"},
-               {"interpolation_ms", "surface interpolation ms"},
-               {"paper_interpolation_ms", "paper interpolation ms"},
-               {"overall_ms", "overall ms (step median)"},
-               {"paper_overall_ms", "paper overall ms"},
-               {"precompute_s", "precompute s"},
-               {"scene", "scene"},
-               {"note", "note"}};
+  TableDef t = tableDef(
+      "bem-timing", "particles guided by precomputed BEM: time per step by phase",
+      "Zhu, Gu & Zhou 2010 (particles + precomputed BEM), Table 1",
+      columns({{{"model", "model"}, {"point_number", "point number"}, {"status", "status"}},
+               withPaper("surface_ms", "surface computation ms", "paper surface ms"),
+               withPaper("correction_ms", "position correction ms", "paper correction ms"),
+               withPaper("interpolation_ms", "surface interpolation ms", "paper interpolation ms"),
+               withPaper("overall_ms", "overall ms (step median)", "paper overall ms"),
+               {{"precompute_s", "precompute s"}, {"scene", "scene"}, {"note", "note"}}}));
   const double duration = o.quick ? 0.05 : 0.3;
   t.notes = {
       "particle_bem (guided) on the liver phantom at resolution 0.27 (~2.2k vertices), "
@@ -446,10 +501,8 @@ TableDef bemTiming(const TablesOptions& o) {
           "wall time of step().",
       "The paper's machine: 2.26 GHz Pentium M (2010)."};
   SurfaceMesh s;
-  const ojson organ = phantomOrgan("liver", 0.27, 0.15, nullptr, &s);
-  const Box b = boundingBox(s.V);
-  const int top = nearestVertex(s.V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
-  const Vec3 beside = s.V.row(top).transpose() + Vec3(0.02, 0, 0);
+  const ojson organ = phantomOrgan("liver", 0.27, 0.15, s);
+  const Vec3 beside = topVertex(s) + Vec3(0.02, 0, 0);
   for (const auto& p : kBemTable1) {
     if (o.quick && p.points != 284 && p.points != 784) continue;
     ojson j = baseScene("bem-timing-" + std::to_string(p.points),
@@ -457,11 +510,7 @@ TableDef bemTiming(const TablesOptions& o) {
                             " surface particles on the liver phantom.",
                         organ, duration);
     j["tools"] = graspFromTop(s, 0.05, 0.12, 0.01, duration);
-    j["loads"] = ojson::array({{{"type", "point_force"},
-                                {"at", vec(beside)},
-                                {"force", {0, 0, -0.5}},
-                                {"start", 0.0},
-                                {"end", duration}}});
+    j["loads"] = verticalForce(beside, -0.5, duration);
     j["models"] =
         ojson::array({model("particle_bem", "particle_bem", {{"coarse_vertices", p.points}})});
     t.cases.push_back({"bem-timing/points_" + std::to_string(p.points), j});
@@ -470,7 +519,6 @@ TableDef bemTiming(const TablesOptions& o) {
   t.rows = [quick](const Results& res, const fs::path& dir) {
     std::vector<ojson> rows;
     for (const auto& p : kBemTable1) {
-      const std::string id = "bem-timing/points_" + std::to_string(p.points);
       ojson row;
       row["model"] = p.model;
       row["point_number"] = p.points;
@@ -478,21 +526,16 @@ TableDef bemTiming(const TablesOptions& o) {
       row["paper_correction_ms"] = p.correctionMs;
       row["paper_interpolation_ms"] = p.interpolationMs;
       row["paper_overall_ms"] = p.overallMs;
-      if (!res.count(id)) {
-        row["status"] = quick ? "skipped (--quick)" : "not run";
-        rows.push_back(row);
-        continue;
+      if (const CaseResult* c =
+              caseOrSkipped(res, "bem-timing/points_" + std::to_string(p.points), quick, row)) {
+        const RunRecord* r = c->run("particle_bem");
+        row["surface_ms"] = phaseOf(r, "surface");
+        row["correction_ms"] = phaseOf(r, "correction");
+        row["interpolation_ms"] = phaseOf(r, "interpolation");
+        row["overall_ms"] = stepMedian(r);
+        row["precompute_s"] = precomputeS(r);
+        caseCells(row, *c, "particle_bem", r, dir, false);
       }
-      const CaseResult& c = res.at(id);
-      const RunRecord* r = c.run("particle_bem");
-      row["status"] = statusOf(c, "particle_bem", r);
-      row["surface_ms"] = phaseOf(r, "surface");
-      row["correction_ms"] = phaseOf(r, "correction");
-      row["interpolation_ms"] = phaseOf(r, "interpolation");
-      row["overall_ms"] = stepMedian(r);
-      row["precompute_s"] = r && r->steps > 0 ? ojson(r->precomputeS) : ojson(nullptr);
-      row["scene"] = relativeTo(c.sceneFile, dir);
-      row["note"] = noteOf(c, r, false);
       rows.push_back(row);
     }
     return rows;
@@ -516,21 +559,15 @@ std::string bemAccuracyId(const BemAccuracyPaperRow& p) {
 }
 
 TableDef bemAccuracy(const TablesOptions& o) {
-  TableDef t;
-  t.name = "bem-accuracy";
-  t.title = "accuracy loss of the coarse BEM surface against BEM on the fine surface";
-  t.source = "Zhu, Gu & Zhou 2010 (particles + precomputed BEM), Table 2";
-  t.columns = {{"coarse_vertices", "coarse vertices"},
-               {"fine_vertices", "fine vertices"},
-               {"paper_fine_vertices", "paper fine vertices"},
-               {"fine_polygons", "fine polygons"},
-               {"vertex_ratio", "vertex ratio"},
-               {"paper_vertex_ratio", "paper vertex ratio"},
-               {"loss_ratio", "accuracy loss ratio"},
-               {"paper_loss_ratio", "paper loss ratio"},
-               {"status", "status"},
-               {"scene", "scene"},
-               {"note", "note"}};
+  TableDef t = tableDef("bem-accuracy",
+                        "accuracy loss of the coarse BEM surface against BEM on the fine surface",
+                        "Zhu, Gu & Zhou 2010 (particles + precomputed BEM), Table 2",
+                        columns({{{"coarse_vertices", "coarse vertices"}},
+                                 withPaper("fine_vertices", "fine vertices"),
+                                 {{"fine_polygons", "fine polygons"}},
+                                 withPaper("vertex_ratio", "vertex ratio"),
+                                 withPaper("loss_ratio", "accuracy loss ratio", "paper loss ratio"),
+                                 {{"status", "status"}, {"scene", "scene"}, {"note", "note"}}}));
   const double duration = o.quick ? 0.15 : 0.5;
   t.notes = {
       "The organ (the fine surface) is the liver phantom at the resolution giving about the "
@@ -546,27 +583,18 @@ TableDef bemAccuracy(const TablesOptions& o) {
   for (const auto& p : kBemTable2) {
     if (o.quick && !(p.coarse == 284 && p.fine != 574)) continue;
     // The liver phantom's vertex count scales about linearly with resolution (8122 at 1).
-    const double resolution = double(p.fine) / 8122.0;
     SurfaceMesh s;
-    const ojson organ = phantomOrgan("liver", resolution, 0.15, nullptr, &s);
-    const Box b = boundingBox(s.V);
-    const int top = nearestVertex(s.V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
+    const ojson organ = phantomOrgan("liver", double(p.fine) / 8122.0, 0.15, s);
     ojson j = baseScene("bem-accuracy-" + std::to_string(p.coarse) + "-" + std::to_string(p.fine),
                         "Zhu et al. 2010 Table 2 case: coarse " + std::to_string(p.coarse) +
                             " vertices against BEM on a fine liver of about " +
                             std::to_string(p.fine) + " vertices.",
                         organ, duration);
-    j["loads"] = ojson::array({{{"type", "point_force"},
-                                {"at", vec(s.V.row(top).transpose())},
-                                {"force", {0, 0, -0.5}},
-                                {"start", 0.0},
-                                {"end", duration + 1.0}}});
+    j["loads"] = verticalForce(topVertex(s), -0.5, duration + 1.0);
     j["models"] =
         ojson::array({model("particle_bem", "particle_bem", {{"coarse_vertices", p.coarse}})});
-    j["reference"] = {{"plugin", "particle_bem"},
-                      {"label", "bem_fine"},
-                      {"params", {{"coarse_vertices", std::min(20000, s.numVertices())}}}};
-    j["samples"] = {{"nearest", {10, 50}}};
+    addReference(j, model("particle_bem", "bem_fine",
+                          {{"coarse_vertices", std::min(20000, s.numVertices())}}));
     t.cases.push_back({bemAccuracyId(p), j});
   }
   const bool quick = o.quick;
@@ -578,28 +606,22 @@ TableDef bemAccuracy(const TablesOptions& o) {
       row["paper_fine_vertices"] = p.fine;
       row["paper_vertex_ratio"] = p.ratio;
       row["paper_loss_ratio"] = p.loss;
-      const std::string id = bemAccuracyId(p);
-      if (!res.count(id)) {
-        row["status"] = quick ? "skipped (--quick)" : "not run";
-        rows.push_back(row);
-        continue;
+      if (const CaseResult* c = caseOrSkipped(res, bemAccuracyId(p), quick, row)) {
+        const RunRecord* r = c->run("particle_bem");
+        if (c->organVertices >= 0) {
+          row["fine_vertices"] = c->organVertices;
+          row["fine_polygons"] = c->organFaces;
+          row["vertex_ratio"] = double(c->organVertices) / double(p.coarse);
+        }
+        row["loss_ratio"] = lossRatio(r);
+        caseCells(row, *c, "particle_bem", r, dir, false);
+        const RunRecord* ref = c->run("bem_fine");
+        if (ref && ref->status != RunStatus::Ok) {
+          std::string note = row["note"];
+          appendTo(note, "reference: " + ref->message);
+          row["note"] = note;
+        }
       }
-      const CaseResult& c = res.at(id);
-      const RunRecord* r = c.run("particle_bem");
-      row["status"] = statusOf(c, "particle_bem", r);
-      if (c.result) {
-        const int fine = c.result->organ.surface.numVertices();
-        row["fine_vertices"] = fine;
-        row["fine_polygons"] = c.result->organ.surface.numFaces();
-        row["vertex_ratio"] = double(fine) / double(p.coarse);
-      }
-      row["loss_ratio"] = r && r->error ? numberOrNull(r->error->lossRatio) : nullptr;
-      row["scene"] = relativeTo(c.sceneFile, dir);
-      std::string note = noteOf(c, r, false);
-      const RunRecord* ref = c.run("bem_fine");
-      if (ref && ref->status != RunStatus::Ok)
-        note += (note.empty() ? "" : "; ") + std::string("reference: ") + ref->message;
-      row["note"] = note;
       rows.push_back(row);
     }
     return rows;
@@ -617,6 +639,19 @@ struct HybridPhantom {
 constexpr HybridPhantom kHybridPhantoms[] = {
     {"cube", 1.0}, {"sphere", 1.0}, {"liver", 0.27}, {"steak", 1.0}};
 constexpr double kHybridForces[] = {0.5, 1.0, 2.0, 5.0, 10.0, 20.0};
+/// The compared models of the hybrid tables.
+struct HybridModel {
+  const char* plugin;  ///< = its label in the scenes
+  const char* key;     ///< of its columns ("<key>_ms", "<key>_rmse_mm") and status parts
+  const char* header;  ///< of its columns
+};
+constexpr HybridModel kHybridModels[] = {{"hybrid_fem_pbd", "hybrid", "hybrid"},
+                                         {"pbd", "pbd", "PBD"},
+                                         {"massspring", "massspring", "mass-spring"}};
+
+std::string hybridFigureKey(const HybridModel& m, bool timing) {
+  return std::string(m.key) + (timing ? "_ms" : "_rmse_mm");
+}
 
 struct HybridCase {
   const HybridPhantom* phantom;
@@ -644,9 +679,7 @@ std::vector<Case> hybridSceneCases(bool quick, long long refElements) {
   std::vector<Case> out;
   for (const HybridCase& hc : hybridCases(quick)) {
     SurfaceMesh s;
-    const ojson organ = phantomOrgan(hc.phantom->name, hc.phantom->resolution, 0.1, nullptr, &s);
-    const Box b = boundingBox(s.V);
-    const int top = nearestVertex(s.V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
+    const ojson organ = phantomOrgan(hc.phantom->name, hc.phantom->resolution, 0.1, s);
     ojson j = baseScene(std::string("hybrid-") + hc.phantom->name + "-" +
                             (hc.up ? "up-" : "down-") + forceTag(hc.force),
                         std::string("Hybrid FEM+PBD paper Sec. 8.3: ") +
@@ -654,16 +687,11 @@ std::vector<Case> hybridSceneCases(bool quick, long long refElements) {
                             number(hc.force) + " N at the top of the " + hc.phantom->name +
                             " phantom, bottom tenth fixed, E = 5.5 kPa, nu = 0.3, no gravity.",
                         organ, duration);
-    j["loads"] = ojson::array({{{"type", "point_force"},
-                                {"at", vec(s.V.row(top).transpose())},
-                                {"force", {0, 0, hc.up ? hc.force : -hc.force}},
-                                {"start", 0.0},
-                                {"end", duration + 1.0}}});
+    j["loads"] = verticalForce(topVertex(s), hc.up ? hc.force : -hc.force, duration + 1.0);
     j["models"] =
         ojson::array({model("hybrid_fem_pbd", "hybrid_fem_pbd"),
                       model("pbd", "pbd", {{"bending", true}}), model("massspring", "massspring")});
-    j["reference"] = reference(refElements);
-    j["samples"] = {{"nearest", {10, 50}}};
+    addReference(j, referenceFem(refElements));
     out.push_back({hc.id(), j});
   }
   return out;
@@ -683,19 +711,14 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
     row["force_N"] = hc.force;
     row["direction"] = hc.up ? "up" : "down";
     std::string status, note;
-    for (const char* m : {"hybrid_fem_pbd", "pbd", "massspring"}) {
-      const RunRecord* r = c.run(m);
-      const std::string key = std::string(m) == "hybrid_fem_pbd" ? "hybrid" : m;
-      const std::string st = statusOf(c, m, r);
-      if (st != "ok") status += (status.empty() ? "" : "; ") + key + ": " + st;
-      if (timing) {
-        row[key + "_ms"] = stepMedian(r);
-        row["paper_" + key + "_ms"] = nullptr;
-      } else {
-        row[key + "_rmse_mm"] = rmse(r, 50);
-        row["paper_" + key + "_rmse_mm"] = nullptr;
-      }
-      if (r && !r->message.empty()) note += (note.empty() ? "" : "; ") + key + ": " + r->message;
+    for (const HybridModel& m : kHybridModels) {
+      const RunRecord* r = c.run(m.plugin);
+      const std::string st = statusOf(c, m.plugin, r);
+      if (st != "ok") appendTo(status, std::string(m.key) + ": " + st);
+      const std::string figure = hybridFigureKey(m, timing);
+      row[figure] = timing ? stepMedian(r) : rmseMm(r, 50);
+      row["paper_" + figure] = nullptr;
+      if (r && !r->message.empty()) appendTo(note, std::string(m.key) + ": " + r->message);
     }
     const RunRecord* ref = c.run("reference_fem");
     if (timing) {
@@ -703,11 +726,10 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
       row["paper_fem_ms"] = nullptr;
     }
     if (c.missing.count("reference_fem")) {
-      status += (status.empty() ? "" : "; ") + std::string("reference: ") +
-                statusOf(c, "reference_fem", nullptr);
+      appendTo(status, "reference: " + statusOf(c, "reference_fem", nullptr));
     } else if (ref && ref->status != RunStatus::Ok) {
-      status += (status.empty() ? "" : "; ") + std::string("reference: ") + statusName(ref->status);
-      note += (note.empty() ? "" : "; ") + std::string("reference: ") + ref->message;
+      appendTo(status, std::string("reference: ") + statusName(ref->status));
+      appendTo(note, "reference: " + ref->message);
     }
     row["status"] = status.empty() ? "ok" : status;
     row["scene"] = relativeTo(c.sceneFile, dir);
@@ -717,65 +739,47 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
   return rows;
 }
 
-TableDef hybridAccuracy(const TablesOptions& o, long long refElements) {
-  TableDef t;
-  t.name = "hybrid-accuracy";
-  t.title = "RMSE of the 50 vertices nearest the load against the fine reference FEM";
-  t.source = "hybrid FEM+PBD paper (Scientific Programming 2021), Tables 2-3";
-  t.columns = {{"phantom", "phantom"},
-               {"force_N", "force N"},
-               {"direction", "direction"},
-               {"hybrid_rmse_mm", "hybrid rmse_50 mm"},
-               {"paper_hybrid_rmse_mm", "paper hybrid"},
-               {"pbd_rmse_mm", "PBD rmse_50 mm"},
-               {"paper_pbd_rmse_mm", "paper PBD"},
-               {"massspring_rmse_mm", "mass-spring rmse_50 mm"},
-               {"paper_massspring_rmse_mm", "paper mass-spring"},
-               {"status", "status"},
-               {"scene", "scene"},
-               {"note", "note"}};
-  t.notes = {
-      "Constant vertical point force at the top vertex nearest the top's centre, bottom "
-      "tenth fixed, E = 5.5 kPa, nu = 0.3, no gravity, " +
-          number(o.quick ? 0.2 : 1.0) + " s at 1 ms; reference_fem with " +
-          std::to_string(refElements) + " tets solved at the end of the run.",
-      kHybridNote};
+/// hybrid-accuracy (timing false) or hybrid-timing: the same cases, other figures.
+TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing) {
+  std::vector<TableColumn> figures;
+  for (const HybridModel& m : kHybridModels) {
+    const auto pair = withPaper(hybridFigureKey(m, timing),
+                                std::string(m.header) + (timing ? " ms" : " rmse_50 mm"),
+                                std::string("paper ") + m.header);
+    figures.insert(figures.end(), pair.begin(), pair.end());
+  }
+  if (timing) {
+    const auto fem = withPaper("fem_ms", "FEM ms per solve", "paper FEM");
+    figures.insert(figures.end(), fem.begin(), fem.end());
+  }
+  const char* source = "hybrid FEM+PBD paper (Scientific Programming 2021), ";
+  TableDef t =
+      timing ? tableDef("hybrid-timing", "ms per step of hybrid, PBD, mass-spring and the fine FEM",
+                        source + std::string("Tables 4-5"), {})
+             : tableDef("hybrid-accuracy",
+                        "RMSE of the 50 vertices nearest the load against the fine reference FEM",
+                        source + std::string("Tables 2-3"), {});
+  t.columns = columns({{{"phantom", "phantom"}, {"force_N", "force N"}, {"direction", "direction"}},
+                       figures,
+                       {{"status", "status"}, {"scene", "scene"}, {"note", "note"}}});
+  if (timing) {
+    t.notes = {"The same runs as hybrid-accuracy. FEM: reference_fem (" +
+                   std::to_string(refElements) +
+                   " tets, Neo-Hookean, quasi-static): wall time of one equilibrium solve at the "
+                   "compared instant from rest, with load stepping where Newton needed it.",
+               kHybridNote};
+  } else {
+    t.notes = {
+        "Constant vertical point force at the top vertex nearest the top's centre, bottom "
+        "tenth fixed, E = 5.5 kPa, nu = 0.3, no gravity, " +
+            number(o.quick ? 0.2 : 1.0) + " s at 1 ms; reference_fem with " +
+            std::to_string(refElements) + " tets solved at the end of the run.",
+        kHybridNote};
+  }
   t.cases = hybridSceneCases(o.quick, refElements);
   const bool quick = o.quick;
-  t.rows = [quick](const Results& res, const fs::path& dir) {
-    return hybridRows(res, dir, quick, false);
-  };
-  return t;
-}
-
-TableDef hybridTiming(const TablesOptions& o, long long refElements) {
-  TableDef t;
-  t.name = "hybrid-timing";
-  t.title = "ms per step of hybrid, PBD, mass-spring and the fine FEM";
-  t.source = "hybrid FEM+PBD paper (Scientific Programming 2021), Tables 4-5";
-  t.columns = {{"phantom", "phantom"},
-               {"force_N", "force N"},
-               {"direction", "direction"},
-               {"hybrid_ms", "hybrid ms"},
-               {"paper_hybrid_ms", "paper hybrid"},
-               {"pbd_ms", "PBD ms"},
-               {"paper_pbd_ms", "paper PBD"},
-               {"massspring_ms", "mass-spring ms"},
-               {"paper_massspring_ms", "paper mass-spring"},
-               {"fem_ms", "FEM ms per solve"},
-               {"paper_fem_ms", "paper FEM"},
-               {"status", "status"},
-               {"scene", "scene"},
-               {"note", "note"}};
-  t.notes = {"The same runs as hybrid-accuracy. FEM: reference_fem (" +
-                 std::to_string(refElements) +
-                 " tets, Neo-Hookean, quasi-static): wall time of one equilibrium solve at the "
-                 "compared instant from rest, with load stepping where Newton needed it.",
-             kHybridNote};
-  t.cases = hybridSceneCases(o.quick, refElements);
-  const bool quick = o.quick;
-  t.rows = [quick](const Results& res, const fs::path& dir) {
-    return hybridRows(res, dir, quick, true);
+  t.rows = [quick, timing](const Results& res, const fs::path& dir) {
+    return hybridRows(res, dir, quick, timing);
   };
   return t;
 }
@@ -789,33 +793,32 @@ std::vector<std::string> tableNames() {
 
 std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
                                const TablesOptions& options, Progress* progress) {
+  const auto all = tableNames();
   std::vector<std::string> wanted;
   for (const std::string& n : names) {
     if (n == "all") {
-      for (const auto& t : tableNames()) wanted.push_back(t);
-      continue;
-    }
-    const auto all = tableNames();
-    if (std::find(all.begin(), all.end(), n) == all.end()) {
+      wanted.insert(wanted.end(), all.begin(), all.end());
+    } else if (std::find(all.begin(), all.end(), n) == all.end()) {
       std::string list;
       for (const auto& t : all) list += (list.empty() ? "" : ", ") + t;
       throw InputError("tables", n, "unknown table (known: " + list + ", all)");
+    } else {
+      wanted.push_back(n);
     }
-    wanted.push_back(n);
   }
   const long long refElements =
       options.referenceElements > 0 ? options.referenceElements : (options.quick ? 4000 : 20000);
+  const std::map<std::string, std::function<TableDef()>> make = {
+      {"metaballs-construction", [&] { return metaballsConstruction(options); }},
+      {"method-comparison", [&] { return methodComparison(options, refElements); }},
+      {"bem-timing", [&] { return bemTiming(options); }},
+      {"bem-accuracy", [&] { return bemAccuracy(options); }},
+      {"hybrid-accuracy", [&] { return hybridTable(options, refElements, false); }},
+      {"hybrid-timing", [&] { return hybridTable(options, refElements, true); }}};
   std::vector<TableDef> defs;
   std::set<std::string> seen;
-  for (const std::string& n : wanted) {
-    if (!seen.insert(n).second) continue;
-    if (n == "metaballs-construction") defs.push_back(metaballsConstruction(options));
-    if (n == "method-comparison") defs.push_back(methodComparison(options, refElements));
-    if (n == "bem-timing") defs.push_back(bemTiming(options));
-    if (n == "bem-accuracy") defs.push_back(bemAccuracy(options));
-    if (n == "hybrid-accuracy") defs.push_back(hybridAccuracy(options, refElements));
-    if (n == "hybrid-timing") defs.push_back(hybridTiming(options, refElements));
-  }
+  for (const std::string& n : wanted)
+    if (seen.insert(n).second) defs.push_back(make.at(n)());
   // Every case once, in table order (hybrid-accuracy and hybrid-timing share theirs).
   std::vector<const Case*> order;
   std::set<std::string> ids;
@@ -835,11 +838,16 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
     if (!r.error.empty()) {
       summary = "not run (" + r.error + ")";
     } else {
-      for (const RunRecord& run : r.result->runs)
-        summary += (summary.empty() ? "" : ", ") + run.label + " " + statusName(run.status);
+      for (const RunRecord& run : r.result->runs) {
+        std::string part = run.label + " " + statusName(run.status);
+        if (run.status == RunStatus::Failed && options.cases.child)
+          part += " (" + run.message + ")";
+        summary += (summary.empty() ? "" : ", ") + part;
+      }
     }
     for (const auto& [plugin, why] : r.missing)
       summary += (summary.empty() ? "" : ", ") + plugin + " missing";
+    if (r.resumed) summary += " (resumed)";
     if (progress) progress->finish(c->id, summary);
     results.emplace(c->id, std::move(r));
   }
@@ -852,7 +860,8 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
     t.source = d.source;
     t.notes = d.notes;
     t.columns = d.columns;
-    t.rows = d.rows(results, options.outDir);
+    for (const ojson& row : d.rows(results, options.outDir))
+      t.rows.push_back(inColumnOrder(row, d.columns));
     writeTable(t, options.outDir);
     tables.push_back(std::move(t));
   }

@@ -12,6 +12,10 @@ namespace deform::reffem {
 
 namespace {
 
+/// Damped (line-searched, alpha < 1) Newton iterations allowed in one load step before it is
+/// declared failed and halved.
+constexpr int kMaxDampedIterations = 12;
+
 using Clock = std::chrono::steady_clock;
 
 std::array<Vec3, 4> gather(const VecX& x, const Vec4i& t) {
@@ -334,6 +338,7 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
       dc(d) = tgt(d) - xs(d);
       lift |= dc(d) != 0;
     }
+    int damped = 0;  // iterations whose line search cut the Newton step
     for (int it = 0; it <= opt.maxIterations; ++it) {
       objectiveGradient(xs, f, in, g);
       rep.residual = residual(g, f);
@@ -417,6 +422,9 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
         if (!(residual(gTrial, f) < rep.residual)) return false;
         alpha = 1;
       }
+      // A load step that keeps needing damped steps is too large for Newton's region of fast
+      // convergence: give up early so it is halved, instead of grinding to maxIterations.
+      if (alpha < 1 && ++damped > kMaxDampedIterations) return false;
       xs += alpha * step;
     }
     return false;
@@ -498,6 +506,61 @@ std::vector<std::pair<int, Vec3>> tractionForces(const TetMesh& mesh, const Vec3
     }
   }
   return {acc.begin(), acc.end()};
+}
+
+PointLoadSpreader::PointLoadSpreader(const TetMesh& mesh)
+    : m_rest(mesh.V),
+      m_area(VecX::Zero(mesh.numVertices())),
+      m_neighbors(size_t(mesh.numVertices())) {
+  const SurfaceMesh b = tetBoundary(mesh);
+  for (int f = 0; f < b.numFaces(); ++f) {
+    const Vec3 p0 = b.V.row(b.F(f, 0)), p1 = b.V.row(b.F(f, 1)), p2 = b.V.row(b.F(f, 2));
+    const Real third = (p1 - p0).cross(p2 - p0).norm() / 6.0;
+    for (int k = 0; k < 3; ++k) {
+      const int a = b.F(f, k), c = b.F(f, (k + 1) % 3);
+      m_area(a) += third;
+      m_neighbors[size_t(a)].push_back(c);
+      m_neighbors[size_t(c)].push_back(a);
+    }
+  }
+  for (auto& n : m_neighbors) {
+    std::sort(n.begin(), n.end());
+    n.erase(std::unique(n.begin(), n.end()), n.end());
+  }
+}
+
+PointLoadPatch PointLoadSpreader::patch(int c, Real radius) const {
+  PointLoadPatch p;
+  const Vec3 centre = m_rest.row(c).transpose();
+  Real longest = 0;
+  for (int n : m_neighbors[size_t(c)])
+    longest = std::max(longest, (m_rest.row(n).transpose() - centre).norm());
+  p.radius = std::max(radius, 1.5 * longest);
+  if (m_neighbors[size_t(c)].empty() || !(p.radius > 0)) {
+    p.nodes = {c};
+    p.weights = {1.0};
+    return p;
+  }
+  // Breadth-first over boundary edges, staying inside the disc.
+  std::vector<char> seen(m_neighbors.size(), 0);
+  seen[size_t(c)] = 1;
+  p.nodes.push_back(c);
+  for (size_t head = 0; head < p.nodes.size(); ++head) {
+    for (int n : m_neighbors[size_t(p.nodes[head])]) {
+      if (seen[size_t(n)] || (m_rest.row(n).transpose() - centre).norm() >= p.radius) continue;
+      seen[size_t(n)] = 1;
+      p.nodes.push_back(n);
+    }
+  }
+  std::vector<Real> k;
+  for (int i : p.nodes) {
+    const Real rho = (m_rest.row(i).transpose() - centre).norm() / p.radius;
+    k.push_back(m_area(i) * (1 - rho * rho));
+  }
+  Real sum = 0;
+  for (Real w : k) sum += w;
+  for (Real w : k) p.weights.push_back(w / sum);
+  return p;
 }
 
 }  // namespace deform::reffem

@@ -10,9 +10,10 @@
 // CHOLMOD's supernodal LL^T (pattern analysed once per set of constrained nodes). When K_ff is not
 // positive definite (Neo-Hookean far from rest), the element stress derivatives dP/dF are
 // projected onto the PSD cone (eigenvalues clamped at 0), then, if needed, a growing diagonal
-// shift is added. When a load step fails (no convergence, inverted elements that the line search
-// cannot leave), it is halved (load stepping on both Dirichlet targets and forces), down to
-// 1/1024 of the whole increment.
+// shift is added. When a load step fails (no convergence, more than 12 damped line-search
+// iterations, inverted elements that the line search cannot leave), it is halved (load stepping on
+// both Dirichlet targets and forces), down to 1/1024 of the whole increment; after a success the
+// next increment doubles (continuation).
 //
 // Dynamic (implicit Euler with step h, lumped mass M, Rayleigh damping C = alpha M + beta K):
 // x_{n+1} minimises the incremental potential
@@ -161,6 +162,40 @@ class EquilibriumSolver {
 /// solution; report filled when given.
 VecX solveEquilibrium(const FemSystem& system, const LoadCase& loads,
                       const SolveOptions& options = {}, SolveReport* report = nullptr);
+
+/// A point force spread over a small pressure patch of the boundary (see PointLoadSpreader).
+struct PointLoadPatch {
+  std::vector<int> nodes;     ///< boundary nodes of the patch, the centre first
+  std::vector<Real> weights;  ///< share of the force per node; sums to 1
+  Real radius = 0;            ///< R actually used, m
+};
+
+/// The consistent nodal load of a point force F applied "at boundary node c" of a continuum.
+/// A force on a single node is singular in 3D elasticity (the displacement under it grows
+/// without bound as the mesh is refined, and Neo-Hookean elements around the node invert under
+/// large forces), so the force is read as a pressure patch of radius R around c:
+///     t(x) = F k(|X - X_c|) / integral_patch k dA,   k(rho) = 1 - (rho / R)^2 for rho < R,
+/// a paraboloid profile (the Hertz contact pressure of a rigid sphere tip has the same support
+/// and is smooth at the centre), whose consistent lumped nodal load is
+///     f_i = F A_i k(rho_i) / sum_j A_j k(rho_j),
+/// A_i the lumped (one third of each incident triangle) boundary area of node i. The patch is
+/// the set of boundary nodes connected to c through boundary edges whose nodes all lie within R
+/// (so a thin organ's far side is never loaded). R = max(radius, 1.5 x the longest boundary edge
+/// at c): the patch always covers c's one-ring (each of whose nodes gets k >= 0.55), on any
+/// mesh. Distances are taken at rest (a dead load with a fixed distribution). The total force is
+/// F exactly.
+class PointLoadSpreader {
+ public:
+  /// Boundary triangles, lumped areas and adjacency of the mesh's boundary.
+  explicit PointLoadSpreader(const TetMesh& mesh);
+  /// The patch around node c; a node with no boundary triangle gets the whole force.
+  PointLoadPatch patch(int c, Real radius) const;
+
+ private:
+  MatX3 m_rest;
+  VecX m_area;                                ///< #N lumped boundary area, m^2 (0: interior)
+  std::vector<std::vector<int>> m_neighbors;  ///< boundary edges per node
+};
 
 /// Nodal forces equivalent to a uniform traction t (N/m^2) on the boundary triangles selected by
 /// `select` (a face is used when all three of its vertices pass): each triangle gives area/3 t

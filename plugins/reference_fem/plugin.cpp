@@ -7,6 +7,7 @@
 #include <deform/tet_mesher.h>
 
 #include <chrono>
+#include <map>
 
 namespace deform::reffem {
 
@@ -41,6 +42,9 @@ std::vector<ParamSpec> referenceFemParams() {
                       "stiffness-proportional damping (dynamic only; K at the step start)"),
       ParamSpec::real("mesh_timeout", "s", 600.0, 1.0, 86400.0,
                       "wall-clock limit of the Gmsh child process"),
+      ParamSpec::real("load_radius", "m", 0.03, 0.0, 1.0,
+                      "a point force is spread as a paraboloid pressure patch of this radius "
+                      "(at least the loaded vertex's one-ring) around its surface vertex"),
   };
 }
 
@@ -54,6 +58,7 @@ class ReferenceFemModel final : public Model {
     m_options.tolerance = p.real("newton_tolerance");
     m_options.maxIterations = int(p.integer("max_newton_iterations"));
     m_options.maxHalvings = int(p.integer("max_load_halvings"));
+    m_loadRadius = p.real("load_radius");
     m_alpha = p.real("rayleigh_alpha");
     m_beta = p.real("rayleigh_beta");
     m_dt = setup.dt;
@@ -75,6 +80,8 @@ class ReferenceFemModel final : public Model {
     }
     m_system = std::make_unique<FemSystem>(std::move(mesh), organ.material, model);
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
+    m_spreader = std::make_unique<PointLoadSpreader>(m_system->rest());
+    m_patches.clear();
     reset();
   }
 
@@ -105,9 +112,15 @@ class ReferenceFemModel final : public Model {
         lc.targets.bottomRows(1) = g.targets.row(Eigen::Index(k));
       }
     }
-    for (const PointLoad& l : in.loads)
-      if (l.surfaceVertex >= 0 && l.surfaceVertex < int(m_surfaceNode.size()))
-        lc.nodeForces.emplace_back(m_surfaceNode[size_t(l.surfaceVertex)], l.force);
+    for (const PointLoad& l : in.loads) {
+      if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_surfaceNode.size())) continue;
+      const int node = m_surfaceNode[size_t(l.surfaceVertex)];
+      auto it = m_patches.find(node);
+      if (it == m_patches.end())
+        it = m_patches.emplace(node, m_spreader->patch(node, m_loadRadius)).first;
+      for (size_t k = 0; k < it->second.nodes.size(); ++k)
+        lc.nodeForces.emplace_back(it->second.nodes[k], it->second.weights[k] * l.force);
+    }
 
     SolveReport rep;
     if (m_solveKind == SolveKind::QuasiStatic) {
@@ -225,6 +238,9 @@ class ReferenceFemModel final : public Model {
   SolveKind m_solveKind = SolveKind::QuasiStatic;
   SolveOptions m_options;
   Real m_alpha = 0, m_beta = 0, m_dt = 1e-3;
+  Real m_loadRadius = 0.03;
+  std::unique_ptr<PointLoadSpreader> m_spreader;
+  std::map<int, PointLoadPatch> m_patches;  ///< loaded node -> its pressure patch
   std::unique_ptr<FemSystem> m_system;
   std::unique_ptr<EquilibriumSolver> m_solver;
   std::vector<int> m_fixed;

@@ -5,6 +5,8 @@
 #include <deform/plugin_loader.h>
 #include <deform/scene.h>
 #include <deform_harness/bench.h>
+#include <deform_harness/cases.h>
+#include <deform_harness/child_process.h>
 #include <deform_harness/progress.h>
 #include <deform_harness/scripts.h>
 #include <deform_harness/stability.h>
@@ -114,6 +116,87 @@ TEST_F(TempDir, QuickHybridTimingRunsWhatLoadsAndSaysWhatIsMissing) {
   EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 5);
   const std::string md = readText(o.outDir / "hybrid-timing.md");
   EXPECT_NE(md.find("| phantom | force N |"), std::string::npos);
+}
+
+/// A small grasp-and-lift scene on the cube with the given models and reference.
+json childCaseScene(const json& models, const json& reference) {
+  json j = json::parse(R"({
+    "name": "child-case",
+    "organ": {"mesh": "phantom:cube", "resolution": 0.3,
+              "fixed": {"box": [[-1, -1, -1], [1, 1, -0.04]]}},
+    "gravity": [0, 0, 0], "dt": 0.01, "duration": 0.1,
+    "tools": [{"type": "grasper", "radius": 0.02,
+               "trajectory": [{"t": 0, "pos": [0, 0, 0.05], "jaw": "closed"},
+                              {"t": 0.1, "pos": [0, 0, 0.06]}]}]
+  })");
+  j["models"] = models;
+  j["reference"] = reference;
+  return j;
+}
+
+TEST_F(TempDir, TableCaseInAChildSurvivesACrashAndAHangAndResumes) {
+  PluginLoader loader({DEFORM_TEST_FIXTURE_PLUGIN_DIR, DEFORM_TABLES_TEST_PLUGIN_DIR});
+  CaseOptions o;
+  o.cacheDir = fs::path();
+  ChildCaseOptions child;
+  child.executable = DEFORMBENCH_EXE;
+  child.pluginArgs = pluginDirArgs(loader.searchPath());
+  child.timeoutS = 5;
+  o.child = child;
+  const json toy = {{"plugin", "toy"}, {"label", "toy"}, {"params", {{"gain", 0.5}}}};
+  const json exact = {{"plugin", "toy"}, {"label", "exact"}, {"params", json::object()}};
+  const auto crashy = [](const std::string& mode, const std::string& label) {
+    return json{{"plugin", "crashy"}, {"label", label}, {"params", {{"mode", mode}}}};
+  };
+  const auto run = [&](const json& scene, const std::string& id) {
+    return runSceneCase(scene, m_dir / "scenes" / (id + ".json"), m_dir / "runs" / id, loader, o);
+  };
+
+  // A model that crashes takes the child down: every run of the case is failed with the signal
+  // (the retry without the reference crashes too), and the command goes on.
+  const CaseResult crashed =
+      run(childCaseScene(json::array({crashy("segv", "crash"), toy}), exact), "crash");
+  EXPECT_TRUE(crashed.error.empty()) << crashed.error;
+  for (const char* label : {"crash", "toy", "exact"}) {
+    const RunRecord* r = crashed.run(label);
+    ASSERT_NE(r, nullptr) << label;
+    EXPECT_EQ(r->status, RunStatus::Failed) << label;
+    EXPECT_NE(r->message.find("SIGSEGV"), std::string::npos) << r->message;
+  }
+
+  // A reference that hangs is killed at the limit; the models then run alone and keep their
+  // figures (read back from the child's results.json), the reference is failed with the timeout.
+  const json hangScene = childCaseScene(json::array({toy}), crashy("hang", "ref"));
+  const CaseResult hung = run(hangScene, "hang");
+  const RunRecord* ref = hung.run("ref");
+  ASSERT_NE(ref, nullptr) << hung.error;
+  EXPECT_EQ(ref->status, RunStatus::Failed);
+  EXPECT_NE(ref->message.find("timeout"), std::string::npos) << ref->message;
+  const RunRecord* model = hung.run("toy");
+  ASSERT_NE(model, nullptr);
+  EXPECT_EQ(model->status, RunStatus::Ok) << model->message;
+  EXPECT_GT(model->stepStats.samples, 0);
+  EXPECT_GT(model->stepStats.median, 0.0);
+  EXPECT_FALSE(model->error.has_value()) << "no reference: no error";
+  EXPECT_GT(hung.organVertices, 0);
+  EXPECT_GE(hung.wallS, 5.0);
+  EXPECT_FALSE(hung.resumed);
+
+  // --resume: the finished case is read back, not run again; a changed scene is run again.
+  o.child->resume = true;
+  const CaseResult again = run(hangScene, "hang");
+  EXPECT_TRUE(again.resumed);
+  ASSERT_NE(again.run("ref"), nullptr);
+  EXPECT_EQ(again.run("ref")->message, ref->message);
+  EXPECT_EQ(again.run("toy")->stepStats.median, model->stepStats.median);
+  json changed = hangScene;
+  changed["reference"] = exact;
+  const CaseResult rerun = run(changed, "hang");
+  EXPECT_FALSE(rerun.resumed);
+  ASSERT_NE(rerun.run("toy"), nullptr);
+  EXPECT_EQ(rerun.run("toy")->status, RunStatus::Ok);
+  ASSERT_TRUE(rerun.run("toy")->error.has_value()) << "against the toy reference";
+  EXPECT_EQ(rerun.run("ref"), nullptr);
 }
 
 TEST(Tables, UnknownTableIsAnInputError) {

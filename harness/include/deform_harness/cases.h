@@ -18,12 +18,28 @@
 
 namespace deform::harness {
 
+/// Running a case in a child process: `deformbench run` on the case's scene with a wall-clock
+/// limit (child_process.h), so a crash or a hang of any run becomes a failed row and the command
+/// goes on. When the child fails (signal, timeout, non-zero exit) and the scene has a reference,
+/// the models are run once more alone (--no-reference) in a second child: the reference is then
+/// recorded failed with the reason and the models keep their rows (without error columns).
+struct ChildCaseOptions {
+  std::string executable;               ///< the deformbench program
+  std::vector<std::string> pluginArgs;  ///< e.g. pluginDirArgs(loader.searchPath())
+  double timeoutS = 900;                ///< per child
+  /// Reuse a case finished by an earlier command in the same outDir (its outDir/case.json exists
+  /// and the scene it ran is unchanged) instead of running it again.
+  bool resume = false;
+};
+
 struct CaseOptions {
   /// Cache folder: nullopt = Cache::defaultDir(); an empty path disables caching.
   std::optional<std::filesystem::path> cacheDir;
-  RunOptions run;
+  RunOptions run;  ///< in a child only maxSteps is passed on (as --steps)
   std::function<void(const std::string&)> explain;   ///< --explain lines (may be empty)
-  std::function<void(const std::string&)> progress;  ///< the runner's per-run lines
+  std::function<void(const std::string&)> progress;  ///< the runner's per-run lines (in-process)
+  /// Set: run the case in a child process; nullopt: in this process (no time limit).
+  std::optional<ChildCaseOptions> child;
 };
 
 struct CaseResult {
@@ -33,14 +49,19 @@ struct CaseResult {
   /// plugin name -> why it could not be loaded ("not found in ...", "ABI mismatch ...").
   std::map<std::string, std::string> missing;
   std::string error;  ///< the case could not run at all (bad scene, every plugin missing)
+  int organVertices = -1, organFaces = -1;  ///< the organ surface as loaded (-1: unknown)
+  double wallS = 0;                         ///< wall time of the case (children included), s
+  bool resumed = false;  ///< read back from an earlier command (ChildCaseOptions::resume)
 
   /// The run with this label (models carry explicit labels in generated scenes), or nullptr.
   const RunRecord* run(const std::string& label) const;
 };
 
 /// Writes `scene` to sceneFile, leaves out the models (and reference) whose plugin does not
-/// load, runs the rest with runBenchmark into outDir, and never throws for a model's or plugin's
-/// trouble (InputError of the scene itself is caught into `error` too).
+/// load, runs the rest with runBenchmark into outDir (in this process, or in a child when
+/// options.child is set; then `result` holds the runs read back from outDir/results.json, with
+/// failed records for the runs a failed child took down, and no scene or organ), and never throws
+/// for a model's or plugin's trouble (InputError of the scene itself is caught into `error` too).
 CaseResult runSceneCase(const nlohmann::ordered_json& scene, const std::filesystem::path& sceneFile,
                         const std::filesystem::path& outDir, PluginLoader& loader,
                         const CaseOptions& options);

@@ -36,6 +36,12 @@ nlohmann::ordered_json resultsJson(const Scene& scene, const Organ& organ,
 /// JSON of one run (an element of "runs").
 nlohmann::ordered_json runJson(const RunRecord& run);
 
+/// One element of "runs" read back into a record (the inverse of runJson() for the summary fields:
+/// identity, status, message, notes, counts, precompute_s, steps, step_ms, phase_ms, numeric,
+/// error; surfaces are not read). A null number reads as NaN. Throws std::exception (a JSON type
+/// error, an unknown status) on a malformed element.
+RunRecord runFromJson(const nlohmann::json& run);
+
 /// Writes outDir/results.json atomically; returns its path.
 std::filesystem::path writeResults(const std::filesystem::path& outDir,
                                    const nlohmann::ordered_json& doc);

@@ -11,7 +11,13 @@
 //   hybrid-timing           the same paper, Tables 4-5
 //
 // Output in DIR: <table>.md, <table>.csv, <table>.json; scenes/<group>/<case>.json (rerun any
-// row with `deformbench run`); runs/<group>/<case>/ (results.json and surfaces of that case).
+// row with `deformbench run`); runs/<group>/<case>/ (results.json and surfaces of that case, and
+// with child processes its log.txt and case.json).
+//
+// With options.cases.child set (the deformbench command's default) each case runs in its own
+// child process with a time limit (cases.h, ChildCaseOptions): a crash or a hang becomes rows
+// with status failed (the signal or the timeout) and the tables go on; --resume reuses finished
+// cases. Without it the cases run in this process (library callers, tests).
 #pragma once
 
 #include <deform_harness/cases.h>

@@ -1,0 +1,98 @@
+// Reading a results.json run back into a RunRecord (see results.h), for the long commands that
+// run their cases in child processes and build their rows from what the child wrote.
+#include <deform_harness/results.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace deform::harness {
+
+using json = nlohmann::json;
+
+namespace {
+
+double numberOrNaN(const json& j, const char* key) {
+  if (!j.contains(key) || !j[key].is_number()) return std::numeric_limits<double>::quiet_NaN();
+  return j[key].get<double>();
+}
+
+/// j[key] as a T, or `fallback` when it is absent or null.
+/// j[key] when it is an object, else an empty object (a copy: safe to iterate).
+json objectAt(const json& j, const char* key) {
+  return j.contains(key) && j[key].is_object() ? j[key] : json::object();
+}
+
+template <class T>
+T valueOr(const json& j, const char* key, T fallback) {
+  if (!j.contains(key) || j[key].is_null()) return fallback;
+  return j[key].get<T>();
+}
+
+RunStatus parseStatus(const std::string& s) {
+  for (RunStatus st :
+       {RunStatus::Ok, RunStatus::Diverged, RunStatus::Unsupported, RunStatus::Failed})
+    if (s == statusName(st)) return st;
+  throw std::runtime_error("unknown run status '" + s + "'");
+}
+
+}  // namespace
+
+RunRecord runFromJson(const json& j) {
+  RunRecord r;
+  r.model = j.at("model").get<std::string>();
+  r.plugin = j.value("plugin", "");
+  r.label = j.at("label").get<std::string>();
+  r.isReference = j.value("role", "model") == "reference";
+  r.params = j.value("params", json::object());
+  r.status = parseStatus(j.at("status").get<std::string>());
+  r.message = j.value("message", "");
+  r.notes = j.value("notes", std::vector<std::string>());
+  const json counts = objectAt(j, "counts");
+  for (const auto& [k, v] : counts.items())
+    if (v.is_number()) r.counts[k] = v.get<long long>();
+  r.precomputeS = valueOr(j, "precompute_s", 0.0);
+  r.steps = valueOr(j, "steps", 0);
+  r.plannedSteps = valueOr(j, "planned_steps", 0);
+  r.solvedSteps = valueOr(j, "solved_steps", -1);
+  if (j.contains("step_ms") && j["step_ms"].is_object()) {
+    const json& s = j["step_ms"];
+    r.stepStats.median = numberOrNaN(s, "median");
+    r.stepStats.p95 = numberOrNaN(s, "p95");
+    r.stepStats.max = numberOrNaN(s, "max");
+    r.stepStats.mean = numberOrNaN(s, "mean");
+    r.stepStats.samples = valueOr(s, "samples", 0);
+  }
+  const json phases = objectAt(j, "phase_ms");
+  for (const auto& [k, v] : phases.items())
+    r.phaseMs[k] = v.is_number() ? v.get<double>() : std::nan("");
+  const json numeric = objectAt(j, "numeric");
+  for (const auto& [k, v] : numeric.items())
+    if (v.is_number()) r.numeric[k] = v.get<long long>();
+  r.fixedNodes = valueOr(j, "fixed_nodes", 0);
+  if (j.contains("error") && j["error"].is_object()) {
+    const json& e = j["error"];
+    ErrorMetrics m;
+    for (const auto& [k, v] : e.items()) {
+      const std::string digits = k.rfind("rmse_", 0) == 0 ? k.substr(5) : "";
+      if (!digits.empty() && std::all_of(digits.begin(), digits.end(),
+                                         [](unsigned char c) { return std::isdigit(c); }))
+        m.rmseNearest.emplace_back(std::stoi(digits), numberOrNaN(e, k.c_str()));
+    }
+    std::sort(m.rmseNearest.begin(), m.rmseNearest.end());
+    m.rmseAll = numberOrNaN(e, "rmse_all");
+    m.max = numberOrNaN(e, "max");
+    m.lossRatio = numberOrNaN(e, "loss_ratio");
+    m.instants = valueOr(e, "instants", 0);
+    r.error = m;
+    r.referenceModel = e.value("reference", "");
+  }
+  r.finalSurfaceFile = j.value("final_surface", "");
+  r.seriesFile = j.value("surface_series", "");
+  r.graspForceFile = j.value("grasp_forces", "");
+  return r;
+}
+
+}  // namespace deform::harness
