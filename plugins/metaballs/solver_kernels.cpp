@@ -1,5 +1,7 @@
 #include "solver_kernels.h"
 
+#include <deform/simd_rows.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -85,28 +87,6 @@ inline long long projectOne(const StretchBatches& bt, StretchStepData& d, Real* 
 #ifdef DEFORM_METABALLS_HAVE_AVX512
 #define DEFORM_AVX512 __attribute__((target("avx512f,avx512vl,avx512dq")))
 
-// Corrections s * (dx, dy, dz) of eight links (columns) back to rows (x, y, z, 0), added to (add)
-// or subtracted from the rows x0 and stored at ptr.
-DEFORM_AVX512 inline void commitRows8(__m512d s, __m512d dx, __m512d dy, __m512d dz,
-                                      Real* const* ptr, const __m256d* x0, bool add) {
-  const __m512i lowRows = _mm512_set_epi64(11, 10, 3, 2, 9, 8, 1, 0);
-  const __m512i highRows = _mm512_set_epi64(15, 14, 7, 6, 13, 12, 5, 4);
-  const __m512d zero = _mm512_setzero_pd();
-  const __m512d cx = _mm512_mul_pd(s, dx), cy = _mm512_mul_pd(s, dy), cz = _mm512_mul_pd(s, dz);
-  const __m512d pe = _mm512_unpacklo_pd(cx, cy), po = _mm512_unpackhi_pd(cx, cy);
-  const __m512d qe = _mm512_unpacklo_pd(cz, zero), qo = _mm512_unpackhi_pd(cz, zero);
-  const __m512d r02 = _mm512_permutex2var_pd(pe, lowRows, qe);
-  const __m512d r46 = _mm512_permutex2var_pd(pe, highRows, qe);
-  const __m512d r13 = _mm512_permutex2var_pd(po, lowRows, qo);
-  const __m512d r57 = _mm512_permutex2var_pd(po, highRows, qo);
-  const __m256d rows[8] = {_mm512_castpd512_pd256(r02),    _mm512_castpd512_pd256(r13),
-                           _mm512_extractf64x4_pd(r02, 1), _mm512_extractf64x4_pd(r13, 1),
-                           _mm512_castpd512_pd256(r46),    _mm512_castpd512_pd256(r57),
-                           _mm512_extractf64x4_pd(r46, 1), _mm512_extractf64x4_pd(r57, 1)};
-  for (int k = 0; k < 8; ++k)
-    _mm256_storeu_pd(ptr[k], add ? _mm256_add_pd(x0[k], rows[k]) : _mm256_sub_pd(x0[k], rows[k]));
-}
-
 DEFORM_AVX512 long long sweepAvx512(const StretchBatches& bt, StretchStepData& d, Real* p4,
                                     Real k) {
   const __m512d tiny2 = _mm512_set1_pd(kTiny2), zero = _mm512_setzero_pd(), kk = _mm512_set1_pd(k);
@@ -151,8 +131,8 @@ DEFORM_AVX512 long long sweepAvx512(const StretchBatches& bt, StretchStepData& d
     lambda = _mm512_mask_add_pd(lambda, ok, lambda, dl);
     _mm512_storeu_pd(d.lambda.data() + i, lambda);
     const __m512d s = _mm512_maskz_div_pd(ok, dl, len);
-    commitRows8(_mm512_mul_pd(wa, s), dx, dy, dz, pa, xa, true);
-    commitRows8(_mm512_mul_pd(wb, s), dx, dy, dz, pb, xb, false);
+    simd::commitRows8(_mm512_mul_pd(wa, s), dx, dy, dz, pa, xa, true);
+    simd::commitRows8(_mm512_mul_pd(wb, s), dx, dy, dz, pb, xb, false);
   }
   return degenerate;
 }
