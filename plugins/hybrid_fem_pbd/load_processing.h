@@ -20,7 +20,9 @@
 
 namespace deform::hybrid {
 
-/// Closest point on triangle (a, b, c) to p, with its barycentric coordinates (sum 1, each >= 0).
+/// Closest point on triangle (a, b, c) to p, with its barycentric coordinates (sum 1, each >= 0):
+/// core's deform::closestPointOnTriangle (a degenerate triangle gives the closest point on its
+/// edges).
 Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, Vec3& bary);
 
 /// Where a fine node sits on the coarse surface: up to three coarse vertices and their linear
