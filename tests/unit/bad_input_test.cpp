@@ -22,22 +22,7 @@ namespace {
 
 using testing::octahedron;
 
-struct Bytes {
-  std::string s;
-  bool big = false;
-  template <class T>
-  Bytes& put(T v) {
-    char b[sizeof(T)];
-    std::memcpy(b, &v, sizeof(T));
-    if (big != (std::endian::native == std::endian::big)) std::reverse(b, b + sizeof(T));
-    s.append(b, sizeof(T));
-    return *this;
-  }
-  Bytes& text(const std::string& t) {
-    s += t;
-    return *this;
-  }
-};
+using testing::Bytes;
 
 std::string num(Real x) {
   std::ostringstream o;

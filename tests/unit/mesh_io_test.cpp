@@ -20,23 +20,7 @@ namespace {
 using testing::octahedron;
 using testing::ScratchDir;
 
-/// Little helper to assemble binary files with a chosen byte order.
-struct Bytes {
-  std::string s;
-  bool big = false;
-  template <class T>
-  Bytes& put(T v) {
-    char b[sizeof(T)];
-    std::memcpy(b, &v, sizeof(T));
-    if (big != (std::endian::native == std::endian::big)) std::reverse(b, b + sizeof(T));
-    s.append(b, sizeof(T));
-    return *this;
-  }
-  Bytes& text(const std::string& t) {
-    s += t;
-    return *this;
-  }
-};
+using testing::Bytes;
 
 /// Expects fn() to throw InputError naming `file` and `place`; returns the problem text.
 template <class Fn>

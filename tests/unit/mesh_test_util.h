@@ -4,6 +4,9 @@
 #include <deform/mesh.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <bit>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -43,6 +46,24 @@ class ScratchDir {
 
  private:
   std::filesystem::path m_path;
+};
+
+/// Assembles binary files with a chosen byte order (big = big-endian).
+struct Bytes {
+  std::string s;
+  bool big = false;
+  template <class T>
+  Bytes& put(T v) {
+    char b[sizeof(T)];
+    std::memcpy(b, &v, sizeof(T));
+    if (big != (std::endian::native == std::endian::big)) std::reverse(b, b + sizeof(T));
+    s.append(b, sizeof(T));
+    return *this;
+  }
+  Bytes& text(const std::string& t) {
+    s += t;
+    return *this;
+  }
 };
 
 }  // namespace deform::testing
