@@ -1,6 +1,7 @@
 // deformbench: the command-line program. Verbs (DESIGN.md "Command line"): plugins, run, phantom,
 // tables, sweep, stability, report, bench, converge. Bad input ends with one line "deformbench:
-// FILE: PLACE: PROBLEM" on stderr and exit code 2; an unexpected internal error exits 3.
+// FILE: PLACE: PROBLEM" on stderr and exit code 2; an unexpected internal error exits 3. `run
+// --strict` exits 1 when a model failed (results.json is still written whole).
 #include <deform/mesh_io.h>
 #include <deform/phantom.h>
 #include <deform/plugin_loader.h>
@@ -36,6 +37,7 @@ using nlohmann::json;
 
 constexpr int kExitBadInput = 2;
 constexpr int kExitInternal = 3;
+constexpr int kExitModelFailed = 1;
 
 std::string oneLine(std::string s) {
   std::replace(s.begin(), s.end(), '\n', ' ');
@@ -211,6 +213,7 @@ struct RunArgs {
   std::string cacheDir;
   bool noCache = false;
   int steps = -1;
+  bool strict = false;
   std::vector<std::string> pluginDirs;
 };
 
@@ -233,7 +236,18 @@ int cmdRun(const RunArgs& a) {
   std::cout << "\n";
   printTable(result);
   std::cout << "results: " << result.resultsPath.string() << "\n";
-  return 0;
+  if (!a.strict) return 0;
+  // A model that failed (bad input it alone refuses, such as a self-intersecting surface for a
+  // tet mesher, or an exception) is a row of the table; in strict mode it also fails the
+  // command, one line per failed run, for pipelines that must notice it.
+  int failed = 0;
+  for (const RunRecord& run : result.runs) {
+    if (run.status != RunStatus::Failed) continue;
+    std::cerr << "deformbench: " << a.scene << ": " << run.label << ": " << oneLine(run.message)
+              << "\n";
+    ++failed;
+  }
+  return failed ? kExitModelFailed : 0;
 }
 
 // ---------------------------------------------------------------------------------- phantom
@@ -547,6 +561,8 @@ int realMain(int argc, char** argv) {
   cacheOpt->excludes(noCacheOpt);
   run->add_option("--steps", ra.steps, "stop every run after this many steps (quick tries)")
       ->check(CLI::PositiveNumber);
+  run->add_flag("--strict", ra.strict,
+                "exit 1 when a model failed (one stderr line each; results.json still written)");
 
   std::string phName, phOut;
   double phRes = 1.0;
