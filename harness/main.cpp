@@ -233,6 +233,9 @@ int cmdRun(const RunArgs& a) {
     options.explain = [](const std::string& s) { std::cout << "explain: " << s << "\n"; };
   options.progress = [](const std::string& s) { std::cout << s << "\n" << std::flush; };
   const BenchmarkResult result = runBenchmark(a.scene, loader, options);
+  // What "repair" changed in the organ is part of the result (--explain said it already).
+  if (!a.explain)
+    for (const auto& line : result.organLog) std::cout << "organ: " << line << "\n";
   std::cout << "\n";
   printTable(result);
   std::cout << "results: " << result.resultsPath.string() << "\n";

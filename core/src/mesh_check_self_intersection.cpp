@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <limits>
 
 namespace deform {
@@ -336,13 +337,125 @@ SelfIntersectionReport findSelfIntersections(const SurfaceMesh& mesh, int maxLis
   return report;
 }
 
+std::vector<std::string> UntangleReport::lines() const {
+  if (pairsBefore == 0) return {};
+  const auto mm = [](Real v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.3g mm", 1e3 * v);
+    return std::string(buf);
+  };
+  const std::string pairs = std::to_string(pairsBefore) + (pairsBefore == 1 ? " pair" : " pairs") +
+                            " of self-intersecting triangles";
+  if (ok()) {
+    return {"untangled " + pairs + " by smoothing " + std::to_string(movedVertices) +
+            " vertices (largest move " + mm(maxMove) + ")"};
+  }
+  return {"could not untangle " + pairs + " by local smoothing (" + std::to_string(rounds) +
+          " rounds, largest move " + mm(maxMove) + "): surface left unchanged"};
+}
+
+UntangleReport untangleSelfIntersections(SurfaceMesh& mesh, int maxRounds, Real maxMoveEdges,
+                                         Real maxRegionFraction) {
+  UntangleReport rep;
+  SelfIntersectionReport si = findSelfIntersections(mesh, -1);
+  rep.pairsBefore = rep.pairsAfter = si.pairs;
+  if (si.ok()) return rep;
+
+  const int nv = mesh.numVertices();
+  std::vector<std::vector<int>> ring(static_cast<size_t>(nv));
+  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const int a = mesh.F(f, k), b = mesh.F(f, (k + 1) % 3);
+      if (a < 0 || b < 0 || a >= nv || b >= nv) continue;
+      ring[size_t(a)].push_back(b);
+      ring[size_t(b)].push_back(a);
+    }
+  }
+  for (auto& r : ring) {
+    std::sort(r.begin(), r.end());
+    r.erase(std::unique(r.begin(), r.end()), r.end());
+  }
+
+  const MatX3 original = mesh.V;
+  Real edgeSum = 0;
+  long long edges = 0;
+  for (int i = 0; i < nv; ++i)
+    for (int j : ring[size_t(i)])
+      if (j > i) {
+        edgeSum += (original.row(i) - original.row(j)).norm();
+        ++edges;
+      }
+  const Real maxMove = maxMoveEdges * (edges ? edgeSum / Real(edges) : Real(0));
+  const size_t maxRegion = static_cast<size_t>(maxRegionFraction * nv);
+  std::vector<char> seed(size_t(nv), 0);
+  const auto addPairs = [&](const SelfIntersectionReport& r) {
+    for (const auto& pr : r.listed)
+      for (int f : pr)
+        for (int k = 0; k < 3; ++k) seed[size_t(mesh.F(f, k))] = 1;
+  };
+  addPairs(si);
+
+  std::vector<int> region;
+  std::vector<char> inRegion(size_t(nv), 0);
+  MatX3 next;
+  int rings = 1;
+  for (int round = 1; round <= maxRounds; ++round) {
+    rep.rounds = round;
+    if (round % 3 == 0) ++rings;
+    // The region: the seed vertices grown by `rings` rings (breadth first, sorted: deterministic).
+    std::fill(inRegion.begin(), inRegion.end(), 0);
+    region.clear();
+    for (int i = 0; i < nv; ++i)
+      if (seed[size_t(i)]) {
+        inRegion[size_t(i)] = 1;
+        region.push_back(i);
+      }
+    for (int r = 0; r < rings; ++r) {
+      const size_t end = region.size();
+      for (size_t q = 0; q < end; ++q)
+        for (int j : ring[size_t(region[q])])
+          if (!inRegion[size_t(j)]) {
+            inRegion[size_t(j)] = 1;
+            region.push_back(j);
+          }
+    }
+    if (region.size() > maxRegion) break;
+    std::sort(region.begin(), region.end());
+    for (int sweep = 0; sweep < 3; ++sweep) {
+      next = mesh.V;
+      for (int i : region) {
+        const auto& nb = ring[size_t(i)];
+        if (nb.empty()) continue;
+        Vec3 mean = Vec3::Zero();
+        for (int j : nb) mean += mesh.V.row(j).transpose();
+        mean /= Real(nb.size());
+        next.row(i) = mesh.V.row(i) + 0.5 * (mean.transpose() - mesh.V.row(i));
+      }
+      mesh.V.swap(next);
+    }
+    rep.maxMove = (mesh.V - original).rowwise().norm().maxCoeff();
+    if (rep.maxMove > maxMove) break;
+    si = findSelfIntersections(mesh, -1);
+    if (si.ok()) {
+      rep.pairsAfter = 0;
+      for (int i = 0; i < nv; ++i) rep.movedVertices += mesh.V.row(i) != original.row(i);
+      return rep;
+    }
+    addPairs(si);
+  }
+  mesh.V = original;
+  rep.pairsAfter = rep.pairsBefore;
+  return rep;
+}
+
 void requireNoSelfIntersections(const SurfaceMesh& mesh, const std::string& file) {
   const SelfIntersectionReport r = findSelfIntersections(mesh, 1);
   if (r.ok()) return;
   throw InputError(file, "",
                    r.message() +
-                       "; repair cannot fix self-intersections: remesh or edit the surface so "
-                       "that it bounds a valid volume");
+                       "; \"repair\": true in the scene's organ untangles small folds by local "
+                       "smoothing; otherwise remesh or edit the surface so that it bounds a "
+                       "valid volume");
 }
 
 }  // namespace deform

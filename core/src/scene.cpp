@@ -789,6 +789,16 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog) {
       problem += " (\"repair\": true in the scene's organ would fix this)";
     throw InputError(spec.mesh, "", problem);
   }
+  if (spec.repair) {
+    // Small folds and tangles (scanned or smoothed organs have them) stop the tet meshers only;
+    // untangle them here so that every model gets the same surface.
+    const UntangleReport untangle = untangleSelfIntersections(organ.surface);
+    for (const auto& line : untangle.lines()) log(line);
+    if (untangle.movedVertices > 0 && organ.volume) {
+      organ.volume.reset();
+      log("dropped the tetrahedral volume: the untangled surface no longer matches it");
+    }
+  }
 
   organ.fixed.surfaceVertices.clear();
   for (const Vec3& p : fixedAt)

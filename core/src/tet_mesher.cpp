@@ -447,8 +447,9 @@ TetMeshResult tetrahedralize(const SurfaceMesh& input, const TetMeshOptions& opt
     const SelfIntersectionReport si = findSelfIntersections(input, 1);
     if (!si.ok()) {
       throw fail("the surface self-intersects: " + si.message() +
-                 "; repair cannot fix this (remesh or edit the surface so that it bounds a "
-                 "valid volume)");
+                 " (\"repair\": true in the scene's organ untangles small folds by local "
+                 "smoothing; otherwise remesh or edit the surface so that it bounds a valid "
+                 "volume)");
     }
   }
   const Real volume = signedVolume(input.V, input.F);

@@ -110,8 +110,34 @@ struct SelfIntersectionReport {
 
 SelfIntersectionReport findSelfIntersections(const SurfaceMesh& mesh, int maxListed = 100);
 
-/// Throws InputError(file, "", message() + why repair cannot help) when the surface
-/// self-intersects. Models that build a volume (tetrahedralize() calls it before Gmsh) need it.
+/// What untangleSelfIntersections() did.
+struct UntangleReport {
+  long long pairsBefore = 0;  ///< intersecting triangle pairs found first
+  long long pairsAfter = 0;   ///< left at the end (== pairsBefore when it gave up: mesh unchanged)
+  int movedVertices = 0;      ///< vertices whose position changed
+  Real maxMove = 0;           ///< m, the largest vertex displacement
+  int rounds = 0;             ///< smoothing rounds run
+  bool ok() const { return pairsAfter == 0; }
+  /// One line per change ("untangled 7 pairs of self-intersecting triangles by smoothing 31
+  /// vertices (largest move 0.41 mm)") or why it gave up; empty when there was nothing to do.
+  std::vector<std::string> lines() const;
+};
+
+/// Local repair of small self-intersections (folds and tangles of a few triangles, as scanned
+/// or smoothed organ surfaces have): the vertices of the intersecting triangles, grown by a few
+/// rings of neighbours, are moved by umbrella (uniform Laplacian) smoothing,
+/// x_i <- x_i + 1/2 (mean of its neighbours - x_i), three Jacobi sweeps a round, the region
+/// growing by a ring every third round and by the vertices of pairs still intersecting, until
+/// findSelfIntersections() finds none (at most maxRounds rounds). Connectivity and vertex order
+/// are untouched. A tangle that needs a vertex moved farther than maxMoveEdges mean edge
+/// lengths, a region of more than maxRegionFraction of the vertices, or more than maxRounds
+/// rounds is not a local defect: the mesh is restored and the report says so
+/// (pairsAfter == pairsBefore).
+UntangleReport untangleSelfIntersections(SurfaceMesh& mesh, int maxRounds = 24,
+                                         Real maxMoveEdges = 4, Real maxRegionFraction = 0.1);
+
+/// Throws InputError(file, "", message() + what to do) when the surface self-intersects.
+/// Models that build a volume (tetrahedralize() calls it before Gmsh) need it.
 void requireNoSelfIntersections(const SurfaceMesh& mesh, const std::string& file);
 
 }  // namespace deform
