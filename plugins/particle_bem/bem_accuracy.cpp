@@ -102,6 +102,9 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
                           ? ratio(c.fixedBox, false, FixedSupport::Clamp, false)
                           : r.ratio;
   r.ratioNodalLoad = ratio(c.fixedBox, true, FixedSupport::Clamp, false);
+  r.ratioPartial = c.support != FixedSupport::Partial
+                       ? ratio(c.fixedBox, false, FixedSupport::Partial, false)
+                       : r.ratio;
   for (Real shift : c.edgeShifts) {
     Box b = c.fixedBox;
     b.hi[2] += shift;

@@ -44,6 +44,7 @@ struct LossRatioResult {
   Real ratio = 0;            ///< field load, fixed region as LossRatioCase::support says
   Real ratioNodalClamp = 0;  ///< field load, nodes inside the box clamped
   Real ratioNodalLoad = 0;   ///< traction sampled at the nodes, nodes in the box clamped (old)
+  Real ratioPartial = 0;     ///< field load, partial constraints (FixedSupport::Partial)
   std::vector<Real> shiftedRatios;       ///< per edgeShifts, as `ratio`
   std::vector<Real> shiftedClampRatios;  ///< per edgeShifts, as `ratioNodalClamp`
   int coarseVertices = 0, fineVertices = 0;
