@@ -3,6 +3,7 @@
 #include "guided_particles.h"
 
 #include <cmath>
+#include <functional>
 
 namespace deform::particle_bem {
 
@@ -36,11 +37,18 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
     const SurfaceMesh* s;
     BemMatrices bem;
     VecX fieldRhs;
+    std::function<VecX(const Box&)> maskedRhs;  // the field zero in the (closed) box
   };
   const auto prepare = [&](const SurfaceMesh& s) {
-    Side side{&s, assembleBem(s, material.young, material.poisson, q), {}};
+    Side side{&s, assembleBem(s, material.young, material.poisson, q), {}, {}};
     side.fieldRhs =
         integrateTractionField(s, material.young, material.poisson, field, resolution, q);
+    side.maskedRhs = [&, ps = &s](const Box& box) {
+      const TractionField masked = [&](const Vec3& x) -> Vec3 {
+        return box.contains(x) ? Vec3::Zero() : field(x);
+      };
+      return integrateTractionField(*ps, material.young, material.poisson, masked, resolution, q);
+    };
     return side;
   };
   const Side fs = prepare(fine), cs = prepare(coarse);
@@ -48,13 +56,18 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
   const SurfaceMap map = mapToSurface(grid, fine.V);
   // R for one fixed box and one load representation; nodal loads at fixed nodes are dropped
   // (their tractions are unknowns), which G p did implicitly by zeroing them.
-  const auto ratio = [&](const Box& box, bool nodal, bool partial, bool keepStats) {
+  const auto ratio = [&](const Box& box, bool nodal, FixedSupport support, bool keepStats) {
     const auto solve = [&](const Side& side, int& nFixed) {
       const std::vector<int> fixed = nodesInBox(side.s->V, box);
       nFixed = int(fixed.size());
-      if (partial && !nodal)
+      if (support == FixedSupport::Partial && !nodal)
         return solveBemPartial(side.bem, *side.s, fixedFractions(*side.s, box), material.young,
                                side.fieldRhs);
+      if (support == FixedSupport::SupportFaces && !nodal) {
+        const SupportColumns sc =
+            supportColumns(*side.s, material.young, material.poisson, fixed, q);
+        return solveBemRhs(side.bem, *side.s, fixed, side.maskedRhs(box), &sc);
+      }
       VecX rhs = side.fieldRhs;
       if (nodal) {
         VecX p = gaussianTraction(side.s->V, c);
@@ -84,15 +97,21 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
     }
     return den > 0 ? num / den : 0;
   };
-  r.ratio = ratio(c.fixedBox, false, c.partialConstraints, true);
-  r.ratioNodalClamp = c.partialConstraints ? ratio(c.fixedBox, false, false, false) : r.ratio;
-  r.ratioNodalLoad = ratio(c.fixedBox, true, false, false);
+  r.ratio = ratio(c.fixedBox, false, c.support, true);
+  r.ratioNodalClamp = c.support != FixedSupport::Clamp
+                          ? ratio(c.fixedBox, false, FixedSupport::Clamp, false)
+                          : r.ratio;
+  r.ratioNodalLoad = ratio(c.fixedBox, true, FixedSupport::Clamp, false);
+  r.ratioPartial = c.support != FixedSupport::Partial
+                       ? ratio(c.fixedBox, false, FixedSupport::Partial, false)
+                       : r.ratio;
   for (Real shift : c.edgeShifts) {
     Box b = c.fixedBox;
     b.hi[2] += shift;
-    r.shiftedRatios.push_back(ratio(b, false, c.partialConstraints, false));
-    r.shiftedClampRatios.push_back(c.partialConstraints ? ratio(b, false, false, false)
-                                                        : r.shiftedRatios.back());
+    r.shiftedRatios.push_back(ratio(b, false, c.support, false));
+    r.shiftedClampRatios.push_back(c.support != FixedSupport::Clamp
+                                       ? ratio(b, false, FixedSupport::Clamp, false)
+                                       : r.shiftedRatios.back());
   }
   return r;
 }

@@ -22,22 +22,29 @@
 
 namespace deform::particle_bem {
 
+/// How the fixed region enters each mesh's BEM solve.
+enum class FixedSupport {
+  Partial,      ///< nodes constrained in proportion to their fixed fraction (solveBemPartial)
+  Clamp,        ///< nodes in the box clamped, reaction over all their faces (fixedNodeIndices)
+  SupportFaces  ///< nodes in the box clamped, reaction on the support faces only
+                ///< (SupportColumns): the exact clamp on a surface conforming to the box
+};
+
 struct LossRatioCase {
   Vec3 center = Vec3::Zero();    ///< m
   Real radius = 0.02;            ///< m
   Vec3 traction = Vec3::Zero();  ///< Pa, peak
   Box fixedBox;                  ///< nodes inside are fixed
   Real fieldResolution = 0;      ///< m; elements subdivided down to this (<= 0: radius / 4)
-  /// true: nodes constrained in proportion to their fixed fraction (solveBemPartial);
-  /// false: nodes inside the box clamped (what fixedNodeIndices gives the model).
-  bool partialConstraints = true;
+  FixedSupport support = FixedSupport::Partial;
   std::vector<Real> edgeShifts;  ///< m; extra ratios with fixedBox.hi.z moved by each shift
 };
 
 struct LossRatioResult {
-  Real ratio = 0;            ///< field load, fixed region as LossRatioCase::partialConstraints says
+  Real ratio = 0;            ///< field load, fixed region as LossRatioCase::support says
   Real ratioNodalClamp = 0;  ///< field load, nodes inside the box clamped
   Real ratioNodalLoad = 0;   ///< traction sampled at the nodes, nodes in the box clamped (old)
+  Real ratioPartial = 0;     ///< field load, partial constraints (FixedSupport::Partial)
   std::vector<Real> shiftedRatios;       ///< per edgeShifts, as `ratio`
   std::vector<Real> shiftedClampRatios;  ///< per edgeShifts, as `ratioNodalClamp`
   int coarseVertices = 0, fineVertices = 0;

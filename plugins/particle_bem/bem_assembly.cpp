@@ -54,6 +54,51 @@ void integrateRegular(const KelvinKernel& K, const Vec3& x, const Element& e, co
   }
 }
 
+// int_e T*(x, y) N_k(y) and int_e U*(x, y) N_k(y) of one (source node i at x, element) pair
+// into rowH / rowG (3 x 3N, columns of the element's nodes): seven-point rule (subdivided
+// near x), or the Duffy rule from x when x is one of the element's vertices.
+void integratePair(const KelvinKernel& K, const Vec3& x, int i, const Element& e,
+                   const std::vector<TrianglePoint>& duffy, const BemQuadrature& q,
+                   Eigen::Ref<MatX> rowH, Eigen::Ref<MatX> rowG, long long& subdivided,
+                   long long& singular) {
+  int local = -1;
+  for (int k = 0; k < 3; ++k)
+    if (e.v[k] == i) local = k;
+  if (local < 0) {
+    integrateRegular(K, x, e, Mat3::Identity(), 1.0, 0, q, rowH, rowG, subdivided);
+    return;
+  }
+  ++singular;
+  // Rotate so the source is the Duffy rule's first vertex.
+  const int a = local, b = (local + 1) % 3, c = (local + 2) % 3;
+  Mat3 U, T;
+  for (const TrianglePoint& g : duffy) {
+    const Vec3 y = g.l0 * e.p[a] + g.l1 * e.p[b] + g.l2 * e.p[c];
+    K.both(y - x, e.n, U, T);
+    const Real w = g.w * e.area;
+    rowG.middleCols<3>(3 * e.v[a]) += (w * g.l0) * U;
+    rowG.middleCols<3>(3 * e.v[b]) += (w * g.l1) * U;
+    rowG.middleCols<3>(3 * e.v[c]) += (w * g.l2) * U;
+    // T* N_i is strongly singular: its share goes into H_ii by the rigid-body trick.
+    rowH.middleCols<3>(3 * e.v[b]) += (w * g.l1) * T;
+    rowH.middleCols<3>(3 * e.v[c]) += (w * g.l2) * T;
+  }
+}
+
+bool makeElement(const SurfaceMesh& s, int f, Element& e) {
+  for (int k = 0; k < 3; ++k) {
+    e.v[k] = s.F(f, k);
+    e.p[k] = s.V.row(e.v[k]).transpose();
+  }
+  const Vec3 cr = (e.p[1] - e.p[0]).cross(e.p[2] - e.p[0]);
+  e.area = 0.5 * cr.norm();
+  if (!(e.area > 0)) return false;
+  e.n = cr.normalized();
+  e.centroid = (e.p[0] + e.p[1] + e.p[2]) / 3;
+  e.size = std::max({(e.p[1] - e.p[0]).norm(), (e.p[2] - e.p[1]).norm(), (e.p[0] - e.p[2]).norm()});
+  return true;
+}
+
 MatX rigidModes(const MatX3& V) {
   const int n = int(V.rows());
   const Vec3 c = V.colwise().mean().transpose();
@@ -72,7 +117,7 @@ MatX rigidModes(const MatX3& V) {
 
 // A of the mixed system (see header); bordered when `fixed` is empty.
 MatX mixedMatrix(const BemMatrices& bem, const MatX3& V, const std::vector<char>& isFixed,
-                 bool bordered) {
+                 bool bordered, const SupportColumns* support = nullptr) {
   const Eigen::Index n3 = bem.H.rows(), m = n3 + (bordered ? 6 : 0);
   MatX A = MatX::Zero(m, m);
   for (Eigen::Index j = 0; j < n3 / 3; ++j) {
@@ -81,6 +126,9 @@ MatX mixedMatrix(const BemMatrices& bem, const MatX3& V, const std::vector<char>
     else
       A.block(0, 3 * j, n3, 3) = bem.H.middleCols(3 * j, 3);
   }
+  if (support)
+    for (size_t k = 0; k < support->nodes.size(); ++k)
+      A.block(0, 3 * support->nodes[k], n3, 3) = -support->G.middleCols(3 * k, 3);
   if (bordered) {
     const MatX R = rigidModes(V);
     A.block(0, n3, n3, 6) = R;
@@ -224,54 +272,21 @@ BemMatrices assembleBem(const SurfaceMesh& s, Real young, Real poisson, const Be
   elems.reserve(nf);
   for (int f = 0; f < nf; ++f) {
     Element e;
-    for (int k = 0; k < 3; ++k) {
-      e.v[k] = s.F(f, k);
-      e.p[k] = s.V.row(e.v[k]).transpose();
-    }
-    const Vec3 cr = (e.p[1] - e.p[0]).cross(e.p[2] - e.p[0]);
-    e.area = 0.5 * cr.norm();
-    if (!(e.area > 0)) {
+    if (makeElement(s, f, e))
+      elems.push_back(e);
+    else
       ++out.degenerateTriangles;
-      continue;
-    }
-    e.n = cr.normalized();
-    e.centroid = (e.p[0] + e.p[1] + e.p[2]) / 3;
-    e.size =
-        std::max({(e.p[1] - e.p[0]).norm(), (e.p[2] - e.p[1]).norm(), (e.p[0] - e.p[2]).norm()});
-    elems.push_back(e);
   }
   const std::vector<TrianglePoint> duffy = duffyTriangle(q.duffyOrder);
   out.H = MatX::Zero(3 * n, 3 * n);
   out.G = MatX::Zero(3 * n, 3 * n);
   MatX rowH(3, 3 * n), rowG(3, 3 * n);
-  Mat3 U, T;
   for (int i = 0; i < n; ++i) {
     rowH.setZero();
     rowG.setZero();
     const Vec3 x = s.V.row(i).transpose();
-    for (const Element& e : elems) {
-      int local = -1;
-      for (int k = 0; k < 3; ++k)
-        if (e.v[k] == i) local = k;
-      if (local < 0) {
-        integrateRegular(K, x, e, Mat3::Identity(), 1.0, 0, q, rowH, rowG, out.subdividedPairs);
-        continue;
-      }
-      ++out.singularPairs;
-      // Rotate so the source is the Duffy rule's first vertex.
-      const int a = local, b = (local + 1) % 3, c = (local + 2) % 3;
-      for (const TrianglePoint& g : duffy) {
-        const Vec3 y = g.l0 * e.p[a] + g.l1 * e.p[b] + g.l2 * e.p[c];
-        K.both(y - x, e.n, U, T);
-        const Real w = g.w * e.area;
-        rowG.middleCols<3>(3 * e.v[a]) += (w * g.l0) * U;
-        rowG.middleCols<3>(3 * e.v[b]) += (w * g.l1) * U;
-        rowG.middleCols<3>(3 * e.v[c]) += (w * g.l2) * U;
-        // T* N_i is strongly singular: its share goes into H_ii by the rigid-body trick.
-        rowH.middleCols<3>(3 * e.v[b]) += (w * g.l1) * T;
-        rowH.middleCols<3>(3 * e.v[c]) += (w * g.l2) * T;
-      }
-    }
+    for (const Element& e : elems)
+      integratePair(K, x, i, e, duffy, q, rowH, rowG, out.subdividedPairs, out.singularPairs);
     if (q.rigidBodyDiagonal) {
       Mat3 sum = Mat3::Zero();
       for (int j = 0; j < n; ++j)
@@ -280,6 +295,62 @@ BemMatrices assembleBem(const SurfaceMesh& s, Real young, Real poisson, const Be
     }
     out.H.middleRows(3 * i, 3) = rowH;
     out.G.middleRows(3 * i, 3) = rowG;
+  }
+  return out;
+}
+
+SupportColumns supportColumns(const SurfaceMesh& s, Real young, Real poisson,
+                              const std::vector<int>& fixed, const BemQuadrature& q) {
+  const int n = s.numVertices();
+  std::vector<char> isFixed(n, 0);
+  for (int j : fixed) isFixed[j] = 1;
+  // Support faces: all three nodes fixed. Boundary nodes: fixed, with a face that is not.
+  std::vector<char> supportFace(s.numFaces(), 0), boundary(n, 0);
+  for (int f = 0; f < s.numFaces(); ++f)
+    supportFace[f] = isFixed[s.F(f, 0)] && isFixed[s.F(f, 1)] && isFixed[s.F(f, 2)];
+  for (int f = 0; f < s.numFaces(); ++f)
+    if (!supportFace[f])
+      for (int k = 0; k < 3; ++k) boundary[s.F(f, k)] = isFixed[s.F(f, k)];
+  SupportColumns out;
+  std::vector<int> slot(n, -1);
+  for (int j = 0; j < n; ++j)
+    if (boundary[j]) {
+      slot[j] = int(out.nodes.size());
+      out.nodes.push_back(j);
+    }
+  // Elements on the support that touch a boundary node, with node indices made local (0..2)
+  // so one pair's integrals land in a 3 x 9 block.
+  std::vector<Element> elems;
+  std::vector<std::array<int, 3>> global;
+  for (int f = 0; f < s.numFaces(); ++f) {
+    if (!supportFace[f]) continue;
+    Element e;
+    if (!makeElement(s, f, e)) continue;
+    if (slot[e.v[0]] < 0 && slot[e.v[1]] < 0 && slot[e.v[2]] < 0) continue;
+    global.push_back({e.v[0], e.v[1], e.v[2]});
+    elems.push_back(e);
+  }
+  out.G = MatX::Zero(3 * n, 3 * out.nodes.size());
+  const KelvinKernel K(young, poisson);
+  const std::vector<TrianglePoint> duffy = duffyTriangle(q.duffyOrder);
+  MatX h(3, 9), g(3, 9);
+  long long sub = 0, sing = 0;
+  for (int i = 0; i < n; ++i) {
+    const Vec3 x = s.V.row(i).transpose();
+    for (size_t a = 0; a < elems.size(); ++a) {
+      Element e = elems[a];
+      int local = -1;
+      for (int k = 0; k < 3; ++k) {
+        if (e.v[k] == i) local = k;
+        e.v[k] = k;
+      }
+      h.setZero();
+      g.setZero();
+      integratePair(K, x, local, e, duffy, q, h, g, sub, sing);
+      for (int k = 0; k < 3; ++k)
+        if (slot[global[a][k]] >= 0)
+          out.G.block<3, 3>(3 * i, 3 * slot[global[a][k]]) += g.middleCols<3>(3 * k);
+    }
   }
   return out;
 }
@@ -296,7 +367,8 @@ VecX nodalAreas(const SurfaceMesh& s) {
 
 DeformationMatrix computeDeformationMatrix(BemMatrices&& bem, const SurfaceMesh& s,
                                            const MatX3& normals, const std::vector<int>& fixed,
-                                           Real young, Real poisson, Real density) {
+                                           Real young, Real poisson, Real density,
+                                           const SupportColumns* support) {
   const int n = s.numVertices();
   const Eigen::Index n3 = 3 * n;
   DeformationMatrix out;
@@ -329,9 +401,15 @@ DeformationMatrix computeDeformationMatrix(BemMatrices&& bem, const SurfaceMesh&
       else
         gravRhs.topRows(n3) -= bem.G.middleCols(3 * j, 3) * pp.middleRows(3 * j, 3);
     }
+    if (support)  // a boundary node's traction on its free faces is the particular one
+      for (size_t k = 0; k < support->nodes.size(); ++k) {
+        const int j = support->nodes[k];
+        gravRhs.topRows(n3) -= (bem.G.middleCols(3 * j, 3) - support->G.middleCols(3 * k, 3)) *
+                               pp.middleRows(3 * j, 3);
+      }
   }
 
-  MatX A = mixedMatrix(bem, s.V, isFixed, out.bordered);
+  MatX A = mixedMatrix(bem, s.V, isFixed, out.bordered, support);
   bem.H.resize(0, 0);
   MatX B = std::move(bem.G);
   for (int j : fixed) B.middleCols(3 * j, 3).setZero();
@@ -362,13 +440,13 @@ VecX solveBem(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<in
 }
 
 VecX solveBemRhs(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
-                 const VecX& rhsIn) {
+                 const VecX& rhsIn, const SupportColumns* support) {
   const int n = s.numVertices();
   const Eigen::Index n3 = 3 * n;
   std::vector<char> isFixed(n, 0);
   for (int j : fixed) isFixed[j] = 1;
   const bool bordered = fixed.empty();
-  MatX A = mixedMatrix(bem, s.V, isFixed, bordered);
+  MatX A = mixedMatrix(bem, s.V, isFixed, bordered, support);
   MatX rhs = MatX::Zero(A.rows(), 1);
   rhs.topRows(n3) = rhsIn;
   Eigen::PartialPivLU<Eigen::Ref<MatX>> lu(A);

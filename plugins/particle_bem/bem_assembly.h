@@ -50,6 +50,23 @@ struct BemMatrices {
 BemMatrices assembleBem(const SurfaceMesh& s, Real young, Real poisson,
                         const BemQuadrature& q = {});
 
+/// Tractions on the boundary of a clamped region. With fixed nodes (u = 0, traction unknown)
+/// the support is the set of faces whose three nodes are all fixed; a fixed node with a free
+/// face too lies on the support's boundary, where the traction jumps: the unknown reaction
+/// acts on its support faces only, while on its free faces the traction is the known load.
+/// Using the whole column G_j for it (what nodal clamps do) spreads the reaction over the
+/// adjacent free elements, a support half an element larger whose size depends on the mesh.
+/// SupportColumns holds, for each boundary node j, the column block of G integrated over its
+/// support faces only,
+///   Gs_ij = sum_{e in support, j in e} int_e U*(x_i, y) N_j(y) dGamma      (3N x 3 per node),
+/// which replaces -G_j in the mixed system (the unknown is the support-side traction).
+struct SupportColumns {
+  std::vector<int> nodes;  ///< fixed nodes with at least one free face
+  MatX G;                  ///< 3N x 3 nodes.size(), m/Pa
+};
+SupportColumns supportColumns(const SurfaceMesh& s, Real young, Real poisson,
+                              const std::vector<int>& fixed, const BemQuadrature& q = {});
+
 /// Lumped nodal areas A_k = sum over adjacent triangles of area / 3 (m^2): a nodal traction p_k
 /// with linear interpolation carries the force int N_k p dGamma = A_k p_k.
 VecX nodalAreas(const SurfaceMesh& s);
@@ -67,9 +84,12 @@ struct DeformationMatrix {
 /// Gravity response: the particular solution u_p = alpha b |x - c|^2, alpha = -1 / (2 lambda +
 /// 8 mu), b = rho g, of Navier's equation with a uniform body force, plus a homogeneous BEM
 /// solution correcting its boundary values (u = 0 on fixed nodes, p = 0 elsewhere).
+/// support (optional): the boundary nodes' support-side columns (SupportColumns); without it
+/// every fixed node's reaction acts over all its faces (the first version).
 DeformationMatrix computeDeformationMatrix(BemMatrices&& bem, const SurfaceMesh& s,
                                            const MatX3& normals, const std::vector<int>& fixed,
-                                           Real young, Real poisson, Real density);
+                                           Real young, Real poisson, Real density,
+                                           const SupportColumns* support = nullptr);
 
 /// One BEM solve (the "standard BEM" of Table 2): nodal displacements (3N, m) for nodal
 /// tractions (3N, Pa; values at fixed nodes ignored), u = 0 at fixed nodes.
@@ -92,8 +112,9 @@ VecX integrateTractionField(const SurfaceMesh& s, Real young, Real poisson, cons
 /// One BEM solve with a given right-hand side b (3N; b = G p for nodal tractions p): nodal
 /// displacements (3N, m), u = 0 at fixed nodes. The fixed nodes' reaction tractions are
 /// unknowns on top of whatever b already carries.
+/// support (optional): as for computeDeformationMatrix.
 VecX solveBemRhs(const BemMatrices& bem, const SurfaceMesh& s, const std::vector<int>& fixed,
-                 const VecX& rhs);
+                 const VecX& rhs, const SupportColumns* support = nullptr);
 
 /// Fraction of each node's traction support inside a box, phi_j = int_box N_j dGamma /
 /// int N_j dGamma (N_j the linear shape function), by the midpoint rule on a samples x samples

@@ -1,6 +1,7 @@
 #include "particle_bem_model.h"
 
 #include <deform/contact.h>
+#include "conforming_surface.h"
 #include "distance_field.h"
 #include "physics_points.h"
 #include "surface_decimation.h"
@@ -14,7 +15,7 @@ namespace deform::particle_bem {
 
 namespace {
 
-constexpr const char* kMatrixVersion = "particle_bem.M/1";
+constexpr const char* kMatrixVersion = "particle_bem.M/2";
 
 using Clock = std::chrono::steady_clock;
 double ms(Clock::time_point a, Clock::time_point b) {
@@ -71,6 +72,10 @@ std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
       ParamSpec::flag("bem_gravity", true,
                       "gravity in the guided model through a precomputed particular solution "
                       "(the paper ignores gravity)"),
+      ParamSpec::flag("conforming_support", true,
+                      "cut the coarse surface along the fixed boxes' faces before decimation "
+                      "and keep that boundary, and let the clamp's reaction act on the support "
+                      "faces only (false: decimate the organ as is, nodal clamps)"),
       ParamSpec::integer("duffy_order", 6, 2, 16,
                          "Gauss-Legendre order of the Duffy rule on singular triangles"),
   };
@@ -125,7 +130,16 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
   const SurfaceMesh& S = setup.organ.surface;
   const ParamValues& p = setup.params;
   DecimationStats st;
-  m_coarse = decimateQuadric(S, int(p.integer("coarse_vertices")), &st);
+  const std::vector<Box>& boxes = setup.organ.fixed.boxes;
+  const bool conforming = p.flag("conforming_support");
+  if (conforming && !boxes.empty()) {
+    ConformStats cs;
+    m_coarse = decimateQuadric(conformToBoxes(S, boxes, &cs), int(p.integer("coarse_vertices")),
+                               boxes, &st);
+    m_numeric["conforming_split_edges"] = cs.splitEdges;
+  } else {
+    m_coarse = decimateQuadric(S, int(p.integer("coarse_vertices")), &st);
+  }
   m_numeric["decimation_refused_collapses"] = st.refusedTopology + st.refusedGeometry;
   const int nc = m_coarse.numVertices();
   const PhysicsPoints interior =
@@ -153,7 +167,7 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
   key.add(kMatrixVersion).add(m_coarse.V).add(m_coarse.F).add(m_material.young);
   key.add(m_material.poisson).add(m_material.density).add(int(coarseFixed.size()));
   for (int i : coarseFixed) key.add(i);
-  key.add(quad.duffyOrder).add(quad.nearFactor).add(quad.maxLevel);
+  key.add(quad.duffyOrder).add(quad.nearFactor).add(quad.maxLevel).add(int(conforming));
   bool loaded = false;
   if (auto bytes = setup.cache.get("particle_bem.M", key)) {
     try {
@@ -172,9 +186,12 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
   if (!loaded) {
     BemMatrices bem = assembleBem(m_coarse, m_material.young, m_material.poisson, quad);
     m_numeric["bem_degenerate_triangles"] = bem.degenerateTriangles;
-    m_bem = computeDeformationMatrix(std::move(bem), m_coarse,
-                                     vertexNormals(m_coarse.V, m_coarse.F), coarseFixed,
-                                     m_material.young, m_material.poisson, m_material.density);
+    SupportColumns support;
+    if (conforming)
+      support = supportColumns(m_coarse, m_material.young, m_material.poisson, coarseFixed, quad);
+    m_bem = computeDeformationMatrix(
+        std::move(bem), m_coarse, vertexNormals(m_coarse.V, m_coarse.F), coarseFixed,
+        m_material.young, m_material.poisson, m_material.density, conforming ? &support : nullptr);
     if (!m_bem.M.allFinite())
       throw InputError(m_source, "organ.mesh",
                        "the BEM system of the coarse surface is singular (degenerate surface?)");

@@ -1,8 +1,11 @@
 #include "surface_decimation.h"
 
+#include "conforming_surface.h"
+
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <queue>
 
 namespace deform::particle_bem {
@@ -30,7 +33,8 @@ Real quality(const Vec3& x0, const Vec3& x1, const Vec3& x2) {
 
 class Decimator {
  public:
-  Decimator(const SurfaceMesh& in, Real eps) : m_F(in.F) {
+  Decimator(const SurfaceMesh& in, Real eps, const std::vector<Box>& regions)
+      : m_F(in.F), m_regions(regions) {
     const int nv = in.numVertices(), nf = in.numFaces();
     m_x.resize(nv);
     for (int v = 0; v < nv; ++v) m_x[v] = in.V.row(v).transpose();
@@ -55,6 +59,7 @@ class Decimator {
     }
     m_reg = eps * (nf > 0 ? areaSum / nf : 0);
     m_alive = nv;
+    if (!m_regions.empty()) m_inside = facesInBoxes(in.V, in.F, m_regions);
   }
 
   void run(int target, DecimationStats& st) {
@@ -67,7 +72,10 @@ class Decimator {
       if (!m_vertexAlive[c.a] || !m_vertexAlive[c.b]) continue;
       if (m_stamp[c.a] != c.stampA || m_stamp[c.b] != c.stampB) continue;
       Vec3 v;
-      optimal(c.a, c.b, v);
+      if (!std::isfinite(optimal(c.a, c.b, v))) {
+        ++st.refusedGeometry;
+        continue;
+      }
       const int why = legal(c.a, c.b, v);
       if (why == 1) {
         ++st.refusedTopology;
@@ -114,6 +122,14 @@ class Decimator {
     return n;
   }
 
+  Real cost(int a, int b, const Vec3& v) const {
+    const Mat4 Q = m_Q[a] + m_Q[b];
+    const Vec3 mid = 0.5 * (m_x[a] + m_x[b]);
+    Vec4 vh;
+    vh << v, 1;
+    return vh.dot(Q * vh) + m_reg * (v - mid).squaredNorm();
+  }
+
   Real optimal(int a, int b, Vec3& v) const {
     const Mat4 Q = m_Q[a] + m_Q[b];
     const Vec3 mid = 0.5 * (m_x[a] + m_x[b]);
@@ -122,14 +138,69 @@ class Decimator {
     v = A.ldlt().solve(rhs);
     // Far from the edge the quadric is nearly flat: stay near the edge.
     if (!v.allFinite() || (v - mid).norm() > (m_x[a] - m_x[b]).norm()) v = mid;
-    Vec4 vh;
-    vh << v, 1;
-    return vh.dot(Q * vh) + m_reg * (v - mid).squaredNorm();
+    if (!m_regions.empty()) return conformingPosition(a, b, v);
+    return cost(a, b, v);
+  }
+
+  // Faces of vertex w of both tags: w lies on the fixed region's boundary curve.
+  bool onInterface(int w) const {
+    bool in = false, out = false;
+    for (int f : m_vf[w]) (m_inside[f] ? in : out) = true;
+    return in && out;
+  }
+
+  // Do the faces around a and b, with both moved to v, keep their side of the partition?
+  bool conformsAfter(int a, int b, const Vec3& v) const {
+    for (int w : {a, b})
+      for (int f : m_vf[w]) {
+        Vec3 y[3];
+        int moved = 0;
+        for (int k = 0; k < 3; ++k) {
+          const int u = m_F(f, k);
+          const bool isEnd = u == a || u == b;
+          moved += isEnd;
+          y[k] = isEnd ? v : m_x[u];
+        }
+        if (moved == 2) continue;  // removed by the collapse
+        if (!triangleConforms(y[0], y[1], y[2], m_inside[f] != 0, m_regions)) return false;
+      }
+    return true;
+  }
+
+  // With a fixed-region partition, the collapse point must keep every face on its side: the
+  // quadric optimum v if it does, else the cheapest of the optimum moved onto a box face plane
+  // that a and b share, a, b and the midpoint that does (a vertex on the boundary curve can
+  // then only slide along it). No candidate: +inf (legal() refuses it).
+  Real conformingPosition(int a, int b, Vec3& v) const {
+    std::vector<Vec3> cand = {v};
+    for (const Box& box : m_regions)
+      for (int axis = 0; axis < 3; ++axis)
+        for (const Real value : {box.lo[axis], box.hi[axis]})
+          if (m_x[a][axis] == value && m_x[b][axis] == value) {
+            Vec3 p = v;
+            p[axis] = value;
+            cand.push_back(p);
+          }
+    cand.push_back(m_x[a]);
+    cand.push_back(m_x[b]);
+    cand.push_back(0.5 * (m_x[a] + m_x[b]));
+    Real best = std::numeric_limits<Real>::infinity();
+    Vec3 chosen = v;
+    for (const Vec3& p : cand) {
+      const Real c = cost(a, b, p);
+      if (c < best && conformsAfter(a, b, p)) {
+        best = c;
+        chosen = p;
+      }
+    }
+    v = chosen;
+    return best;
   }
 
   void push(int a, int b) {
     Vec3 v;
     const Real cost = optimal(a, b, v) + m_reg * (m_x[a] - m_x[b]).squaredNorm();
+    if (!std::isfinite(cost)) return;  // no conforming position now; retried when a or b moves
     m_heap.push(
         {cost, std::min(a, b), std::max(a, b), m_stamp[std::min(a, b)], m_stamp[std::max(a, b)]});
   }
@@ -140,6 +211,15 @@ class Decimator {
     std::vector<int> common;
     std::set_intersection(na.begin(), na.end(), nb.begin(), nb.end(), std::back_inserter(common));
     if (common.size() != 2) return 1;
+    if (!m_regions.empty()) {
+      // Two vertices of the boundary curve joined by an edge that is not part of it: the
+      // collapse would pinch the fixed region.
+      if (onInterface(a) && onInterface(b)) {
+        const int f0 = sharedFace(a, b, -1), f1 = sharedFace(a, b, f0);
+        if (f0 < 0 || f1 < 0 || m_inside[f0] == m_inside[f1]) return 1;
+      }
+      if (!std::isfinite(cost(a, b, v)) || !conformsAfter(a, b, v)) return 2;
+    }
     int shared = 0;
     for (int f : m_vf[a])
       for (int k = 0; k < 3; ++k) shared += m_F(f, k) == b;
@@ -165,6 +245,15 @@ class Decimator {
       }
     }
     return 0;
+  }
+
+  int sharedFace(int a, int b, int skip) const {
+    for (int f : m_vf[a]) {
+      if (f == skip) continue;
+      for (int k = 0; k < 3; ++k)
+        if (m_F(f, k) == b) return f;
+    }
+    return -1;
   }
 
   void collapse(int a, int b, const Vec3& v) {
@@ -203,6 +292,8 @@ class Decimator {
   }
 
   MatX3i m_F;
+  std::vector<Box> m_regions;
+  std::vector<char> m_inside;  ///< per face: in the fixed region (only with m_regions)
   std::vector<Vec3> m_x;
   std::vector<Mat4> m_Q;
   std::vector<std::vector<int>> m_vf;
@@ -217,12 +308,18 @@ class Decimator {
 
 SurfaceMesh decimateQuadric(const SurfaceMesh& in, int targetVertices, DecimationStats* stats,
                             Real regulariser) {
+  return decimateQuadric(in, targetVertices, {}, stats, regulariser);
+}
+
+SurfaceMesh decimateQuadric(const SurfaceMesh& in, int targetVertices,
+                            const std::vector<Box>& fixedRegions, DecimationStats* stats,
+                            Real regulariser) {
   DecimationStats st;
   if (in.numVertices() <= targetVertices) {
     if (stats) *stats = st;
     return in;
   }
-  Decimator d(in, regulariser);
+  Decimator d(in, regulariser, fixedRegions);
   d.run(std::max(4, targetVertices), st);
   if (stats) *stats = st;
   return d.result();

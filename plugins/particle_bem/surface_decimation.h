@@ -11,9 +11,19 @@
 //    share exactly the two opposite vertices; no vertex left with valence < 3), flip a face
 //    (normal turns by more than ~80 degrees) or create a triangle whose quality
 //    4 sqrt(3) area / sum(edge^2) is below 0.1 (unless it was already that bad).
+//
+// With fixed regions (boxes; the input cut along their faces by conformToBoxes) the partition
+// of the triangles into "in the fixed region" and "outside" is kept: every face keeps its tag
+// and must stay on its side after a collapse (triangleConforms), so a vertex on the region's
+// boundary curve can only slide along the box face (the optimum moved onto the plane, or an
+// end point), an interior vertex merges into a boundary vertex at the boundary vertex's place,
+// and two boundary vertices joined by an edge that is not part of the curve are never merged.
+// The boundary curve stays a closed polyline on the box faces, coarser but exact to round-off.
 #pragma once
 
 #include <deform/mesh.h>
+
+#include <vector>
 
 namespace deform::particle_bem {
 
@@ -28,5 +38,12 @@ struct DecimationStats {
 /// when it already has <= targetVertices. Deterministic.
 SurfaceMesh decimateQuadric(const SurfaceMesh& in, int targetVertices,
                             DecimationStats* stats = nullptr, Real regulariser = 0.05);
+
+/// The same, keeping the partition of the surface by the fixed regions (header comment); the
+/// input should conform to them (conformToBoxes). Collapses with no position that keeps every
+/// face on its side are refused (counted in refusedGeometry).
+SurfaceMesh decimateQuadric(const SurfaceMesh& in, int targetVertices,
+                            const std::vector<Box>& fixedRegions, DecimationStats* stats = nullptr,
+                            Real regulariser = 0.05);
 
 }  // namespace deform::particle_bem

@@ -1,4 +1,5 @@
 // Tests of the particle_bem model class (guided and pure particle modes).
+#include "conforming_surface.h"
 #include "particle_bem_model.h"
 #include "test_support.h"
 
@@ -153,6 +154,39 @@ TEST(ParticleModel, PointLoadPushesAlongTheLoad) {
     ASSERT_EQ(m->step(in), StepStatus::Ok);
   }
   EXPECT_LT(m->surface()(v, 2) - fx.organ.surface.V(v, 2), -1e-4);
+}
+
+TEST(GuidedModel, CoarseSurfaceConformsToTheFixedBox) {
+  // conforming_support (default): the coarse surface is cut along the box's top face, so the
+  // fixed nodes (fixedNodeIndices, the closed box) are exactly the nodes of the faces in the
+  // box, and a load leaves them where they are; with the flag off the plain decimation
+  // crosses the box's face.
+  Fixture fx(true);
+  auto m = fx.make();
+  const SurfaceMesh& c = m->coarseSurface();
+  EXPECT_EQ(testing::badEdges(c), 0);
+  EXPECT_EQ(nonConformingFaces(c, fx.organ.fixed.boxes), 0);
+  const Real h = fx.organ.fixed.boxes[0].hi[2];
+  int onFace = 0;
+  for (int v = 0; v < c.numVertices(); ++v) onFace += c.V(v, 2) == h;
+  EXPECT_GE(onFace, 6);
+  const int v = topVertex(fx.organ.surface.V);
+  for (int s = 0; s < 100; ++s) {
+    StepInput in = input(s);
+    in.loads.push_back({v, Vec3(0.3, 0, -1.0)});
+    ASSERT_EQ(m->step(in), StepStatus::Ok);
+  }
+  int fixedCoarse = 0;
+  for (int i : m->fixedNodes())
+    if (i < c.numVertices()) {
+      EXPECT_EQ(m->nodes().row(i), c.V.row(i)) << i;
+      ++fixedCoarse;
+    }
+  EXPECT_GE(fixedCoarse, onFace);
+  EXPECT_GT((m->surface().row(v) - fx.organ.surface.V.row(v)).norm(), 1e-4);
+  fx.params.set("conforming_support", false);
+  auto plain = fx.make();
+  EXPECT_GT(nonConformingFaces(plain->coarseSurface(), fx.organ.fixed.boxes), 0);
 }
 
 }  // namespace
