@@ -202,4 +202,44 @@ Mat9 NeoHookeanMaterial::stressDerivative(const Mat3& F) const {
   return D;
 }
 
+Mat9 NeoHookeanMaterial::projectedStressDerivative(const Mat3& F) const {
+  Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Vec3 s = svd.singularValues();
+  const Real J = s.prod();
+  if (!(J > 0) || !(s(2) > 0)) return projectPositiveSemiDefinite(stressDerivative(F));
+  // det F > 0 with sigma >= 0 means det U det V = +1, so F = U Sigma V^T with psi(F) = psi(Sigma).
+  const Mat3 U = svd.matrixU(), V = svd.matrixV();
+  const Real mu = lame.mu, kappa = lame.bulk();
+  const Real I1 = s.squaredNorm();
+  const Real a = std::pow(J, -2.0 / 3.0);
+  const Real c = kappa * (J - 1.0) * J - mu / 3.0 * a * I1;
+  // d^2 psi / d sigma_i d sigma_j (psi_i = mu a sigma_i + c / sigma_i, see the header).
+  Mat3 H;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      H(i, j) = -2.0 / 3.0 * mu * a * (s(i) / s(j) + s(j) / s(i)) +
+                (2.0 / 9.0 * mu * a * I1 + kappa * (2.0 * J - 1.0) * J) / (s(i) * s(j)) +
+                (i == j ? mu * a - c / (s(i) * s(i)) : 0.0);
+  Eigen::SelfAdjointEigenSolver<Mat3> es(H);
+  Mat9 D = Mat9::Zero();
+  auto add = [&](Real lambda, const Mat3& Q) {  // Q in the singular frame, |Q| = 1
+    if (!(lambda > 0)) return;
+    const Mat3 M = U * Q * V.transpose();
+    const Vec9 q = vec(M);
+    D.noalias() += lambda * q * q.transpose();
+  };
+  for (int k = 0; k < 3; ++k) add(es.eigenvalues()(k), Mat3(es.eigenvectors().col(k).asDiagonal()));
+  const Real r = std::sqrt(0.5);
+  for (int i = 0; i < 3; ++i)
+    for (int j = i + 1; j < 3; ++j) {
+      Mat3 twist = Mat3::Zero(), flip = Mat3::Zero();
+      twist(i, j) = r;
+      twist(j, i) = -r;
+      flip(i, j) = flip(j, i) = r;
+      add(mu * a + c / (s(i) * s(j)), twist);
+      add(mu * a - c / (s(i) * s(j)), flip);
+    }
+  return D;
+}
+
 }  // namespace deform

@@ -5,15 +5,26 @@
 //     Pi(x) = sum_e V_e psi(F_e(x)) - f_ext . x,   f_ext = lumped gravity m_i g + point forces,
 // subject to Dirichlet conditions x_c = target_c (fixed nodes at rest, grasped nodes at their
 // tool targets), eliminated from the system. Newton: K_ff dx_f = -(g_f + K_fc dx_c), where the
-// Dirichlet increment dx_c is applied in the first iteration of each load step (linearised lift)
-// and later iterations only move free nodes, with Armijo backtracking on Pi. K is factorised with
-// CHOLMOD's supernodal LL^T (pattern analysed once per set of constrained nodes). When K_ff is not
-// positive definite (Neo-Hookean far from rest), the element stress derivatives dP/dF are
-// projected onto the PSD cone (eigenvalues clamped at 0), then, if needed, a growing diagonal
-// shift is added. When a load step fails (no convergence, more than 12 damped line-search
-// iterations, inverted elements that the line search cannot leave), it is halved (load stepping on
-// both Dirichlet targets and forces), down to 1/1024 of the whole increment; after a success the
-// next increment doubles (continuation).
+// Dirichlet increment dx_c is applied with the first iteration of each load step (linearised
+// lift; when the predicted state is inadmissible, i.e. has inverted elements, the step including
+// dx_c is shortened and the rest of dx_c is applied by the next iteration), later iterations
+// move free nodes only, with Armijo backtracking on Pi.
+// Linear solves (inexact Newton, Eisenstat & Walker, "Choosing the forcing terms in an inexact
+// Newton method", SIAM J. Sci. Comput. 17(1) 1996, choice 2): conjugate gradients on the exact
+// tangent K_ff, preconditioned by the CHOLMOD supernodal LL^T factor of an earlier tangent, to
+// |r| <= eta |rhs|, eta = min(0.1, 0.9 (|g_k| / |g_{k-1}|)^2) (1e-2 for a lift step), never
+// tighter than the final tolerance needs. The tangent is factorised afresh (pattern analysed once
+// per set of constrained nodes, lower triangle only) at the first iteration of a solve, when CG
+// does not converge in 60 iterations, after a CG solve that needed more than 25, and when CG meets
+// a direction of non-positive curvature (K_ff indefinite: Neo-Hookean far from rest); then the
+// step is a direct solve with that factor. An indefinite tangent is replaced by one whose element
+// stress derivatives dP/dF are projected onto the PSD cone (eigenvalues clamped at 0; closed form
+// for Neo-Hookean), then, if needed, a growing diagonal shift is added. The convergence test is on
+// the true residual, so the answer does not depend on these choices beyond the tolerance.
+// When a load step fails (no convergence, more than 12 damped line-search iterations, inverted
+// elements that the line search cannot leave), it is halved (load stepping on both Dirichlet
+// targets and forces), down to 1/1024 of the whole increment; after a success the next increment
+// doubles (continuation).
 //
 // Dynamic (implicit Euler with step h, lumped mass M, Rayleigh damping C = alpha M + beta K):
 // x_{n+1} minimises the incremental potential
@@ -70,6 +81,17 @@ struct SolveReport {
   Real residual = 0;         ///< final |g_free|_2, N
   Real forceScale = 0;       ///< max(|f_ext|, |reaction|, 1e-6 E diag^2), N
   double seconds = 0;
+  int failedLoadSteps = 0;       ///< load steps rejected (and halved)
+  int factorizations = 0;        ///< successful numerical factorisations
+  int failedFactorizations = 0;  ///< factorisations that found the matrix not positive definite
+  int pcgIterations = 0;         ///< conjugate-gradient iterations (preconditioned by a factor)
+  long long factorNonZeros = 0;  ///< nonzeros of the Cholesky factor L (CHOLMOD's analysis)
+  double factorFlops = 0;        ///< flops of one numerical factorisation (CHOLMOD's analysis)
+  /// Wall-time breakdown of `seconds` (s): pattern analysis (ordering, symbolic factorisation),
+  /// stiffness assembly (element tangents, projection, scatter), numerical factorisation,
+  /// triangular solves, and objective / gradient evaluations (line search, residuals).
+  double analyzeSeconds = 0, assemblySeconds = 0, factorSeconds = 0, solveSeconds = 0,
+         objectiveSeconds = 0;
 };
 
 /// Mesh, material, element rest data, lumped masses and the stiffness sparsity pattern.
@@ -145,17 +167,33 @@ class EquilibriumSolver {
   void prepareConstraints(const std::vector<int>& constrainedDofs);
   Real objective(const VecX& x, const VecX& f, const InertiaTerms* in) const;
   void objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in, VecX& g) const;
-  bool factorize(const VecX& x, const InertiaTerms* in, int& fallbacks);
+  /// Exact tangent at x into m_fullValues (full pattern) and m_opValues (free block, lower).
+  void assembleOperator(const VecX& x, const InertiaTerms* in);
+  void scatterFree(const VecX& full, const InertiaTerms* in, VecX& free) const;
+  /// Factorises the operator, else (when not positive definite, or known to be indefinite) the
+  /// tangent with PSD-projected element stress derivatives, else that with a growing diagonal
+  /// shift. A fallback (not the operator itself) is counted in `fallbacks`.
+  bool factorize(const VecX& x, const InertiaTerms* in, bool indefinite, int& fallbacks);
+  /// Solves K_ff x = b (operator m_opValues) to |residual| <= tolerance by conjugate gradients
+  /// preconditioned with the current factor. Returns the iterations, -1 when it did not converge
+  /// within maxIterations, -2 when it met a direction of non-positive curvature.
+  int preconditionedCg(const VecX& b, Real tolerance, int maxIterations, VecX& x);
 
   const FemSystem& m_sys;
   std::vector<int> m_constrainedDofs;  ///< sorted; the set the pattern below was built for
   bool m_prepared = false;
-  std::vector<int> m_freeIndex;   ///< dof -> free index or -1
-  std::vector<int> m_fullToFree;  ///< full-pattern value index -> free value index or -1
-  SparseMatrix m_Kff;
-  VecX m_fullValues;
+  std::vector<int> m_freeIndex;     ///< dof -> free index or -1
+  std::vector<int> m_fullToFree;    ///< full-pattern value index -> free value index or -1
+  SparseMatrix m_Kff;               ///< free block, lower triangle (values: what is factorised)
+  std::vector<int> m_freeDiagonal;  ///< free dof -> value index of its diagonal in m_Kff
+  VecX m_fullValues;                ///< exact tangent on the full pattern (K_fc for the lift)
+  VecX m_opValues;                  ///< exact tangent on m_Kff's pattern (the Newton operator)
+  bool m_haveFactor = false;        ///< m_chol holds a factor usable as a preconditioner
+  long long m_factorNonZeros = 0;
+  double m_factorFlops = 0;
   std::unique_ptr<SparseCholesky> m_chol;
   VecX m_gradient;
+  SolveReport* m_report = nullptr;  ///< the report of the running solve (timings), else null
 };
 
 /// Convenience: static equilibrium of `system` under `loads` from the rest state. Returns the 3N

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <random>
+#include <vector>
 
 using namespace deform;
 
@@ -168,6 +169,31 @@ TEST(TetElement, ProjectionGivesPositiveSemiDefinite) {
   Eigen::SelfAdjointEigenSolver<Mat9> es(P);
   EXPECT_GE(es.eigenvalues().minCoeff(), -1e-12);
   EXPECT_LT(Eigen::SelfAdjointEigenSolver<Mat9>(A).eigenvalues().minCoeff(), 0);  // was indefinite
+}
+
+TEST(TetElement, NeoHookeanAnalyticProjectionEqualsNumericalProjection) {
+  // Stretches, compressions (indefinite: negative twist eigenvalues) and repeated singular
+  // values (the identity, a uniform scaling, a uniaxial stretch), each rotated on both sides.
+  const NeoHookeanMaterial nh{kLame};
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<Real> u(-1, 1);
+  const std::vector<Vec3> stretches = {Vec3(1, 1, 1),       Vec3(0.8, 0.8, 0.8),
+                                       Vec3(1.3, 1, 1),     Vec3(0.6, 1.1, 1.1),
+                                       Vec3(0.5, 0.9, 1.7), Vec3(1.2, 0.95, 0.7)};
+  int indefinite = 0;
+  for (const Vec3& st : stretches)
+    for (int rep = 0; rep < 5; ++rep) {
+      const Mat3 R1 = Eigen::Quaternion<Real>(u(rng), u(rng), u(rng), u(rng)).normalized().matrix();
+      const Mat3 R2 = Eigen::Quaternion<Real>(u(rng), u(rng), u(rng), u(rng)).normalized().matrix();
+      const Mat3 F = R1 * st.asDiagonal() * R2;
+      const Mat9 D = nh.stressDerivative(F);
+      if (Eigen::SelfAdjointEigenSolver<Mat9>(D).eigenvalues().minCoeff() < -1e-9 * kLame.mu)
+        ++indefinite;
+      const Mat9 expected = projectPositiveSemiDefinite(D);
+      EXPECT_LE((nh.projectedStressDerivative(F) - expected).norm(), 1e-9 * expected.norm())
+          << "stretches " << st.transpose();
+    }
+  EXPECT_GT(indefinite, 0);  // the projection was exercised, not only the identity
 }
 
 TEST(TetElement, PolarDecompositionIsProperRotation) {

@@ -100,6 +100,18 @@ struct NeoHookeanMaterial {
   Real energyDensity(const Mat3& F) const;
   Mat3 stress(const Mat3& F) const;
   Mat9 stressDerivative(const Mat3& F) const;
+  /// projectPositiveSemiDefinite(stressDerivative(F)) in closed form (det F > 0), from the
+  /// analytic eigensystem of an isotropic energy psi(sigma_1, sigma_2, sigma_3) of the singular
+  /// values of F = U Sigma V^T (Teran, Sifakis, Irving & Fedkiw, "Robust quasistatic finite
+  /// elements and flesh simulation", SCA 2005, sec. 5; Smith, de Goes & Kim, "Analytic
+  /// eigensystems for isotropic distortion energies", ACM TOG 38(1) 2019, doi:10.1145/3241041):
+  /// six eigenmatrices U (e_i e_j^T -+ e_j e_i^T) V^T / sqrt 2 (i < j, twist and flip) with
+  /// eigenvalues (psi_i + psi_j) / (sigma_i + sigma_j) and (psi_i - psi_j) / (sigma_i - sigma_j),
+  /// and three U diag(q_k) V^T with q_k, lambda_k the eigenpairs of the 3x3 Hessian
+  /// d^2 psi / d sigma_i d sigma_j. For this energy psi_i = mu J^{-2/3} sigma_i + c / sigma_i,
+  /// c = kappa (J - 1) J - mu/3 J^{-2/3} I1, so the pair eigenvalues are
+  /// mu J^{-2/3} +- c / (sigma_i sigma_j), free of the 0/0 at repeated singular values.
+  Mat9 projectedStressDerivative(const Mat3& F) const;
 };
 
 /// Element energy, gradient (= -force) and stiffness of one tet.
@@ -123,14 +135,24 @@ void evaluateTet(const Material& material, const TetRest& rest, const std::array
   const Mat3 P = material.stress(F);
   for (int a = 0; a < 4; ++a) out.gradient.segment<3>(3 * a) = rest.volume * P * g.col(a);
   if (mode != TetEvalMode::Stiffness) return;
-  Mat9 D = material.stressDerivative(F);
-  if (projectSpd) D = projectPositiveSemiDefinite(D);
-  // G(i + 3 j, 3 a + i) = g_a(j)
-  Eigen::Matrix<Real, 9, 12> G = Eigen::Matrix<Real, 9, 12>::Zero();
+  Mat9 D;
+  if constexpr (requires { material.projectedStressDerivative(F); }) {
+    D = projectSpd ? material.projectedStressDerivative(F) : material.stressDerivative(F);
+  } else {
+    D = material.stressDerivative(F);
+    if (projectSpd) D = projectPositiveSemiDefinite(D);
+  }
+  // K = V G^T D G with G(i + 3 j, 3 a + i) = g_a(j), using G's structure: the 3-column block b
+  // of D G is sum_l g_b(l) D(:, 3 l .. 3 l + 2), the 3-row block a of G^T (D G) is
+  // sum_j g_a(j) (D G)(3 j .. 3 j + 2, :).
+  Eigen::Matrix<Real, 9, 12> DG;
+  for (int b = 0; b < 4; ++b)
+    DG.middleCols<3>(3 * b) =
+        g(0, b) * D.middleCols<3>(0) + g(1, b) * D.middleCols<3>(3) + g(2, b) * D.middleCols<3>(6);
   for (int a = 0; a < 4; ++a)
-    for (int j = 0; j < 3; ++j)
-      for (int i = 0; i < 3; ++i) G(i + 3 * j, 3 * a + i) = g(j, a);
-  out.stiffness.noalias() = rest.volume * G.transpose() * D * G;
+    out.stiffness.middleRows<3>(3 * a) =
+        rest.volume * (g(0, a) * DG.middleRows<3>(0) + g(1, a) * DG.middleRows<3>(3) +
+                       g(2, a) * DG.middleRows<3>(6));
 }
 
 /// Elastic nodal forces f = -dW/dx (#4 nodes by 3 packed as 12), zero energy check skipped.
