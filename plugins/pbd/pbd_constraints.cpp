@@ -1,5 +1,11 @@
 #include "pbd_constraints.h"
 
+// GCC 12 reports -Wmaybe-uninitialized inside its own AVX-512 intrinsics (their _mm512_undefined_*
+// pass-through operands, GCC bug 105593, fixed in GCC 13); nothing in this file is uninitialised.
+#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ < 13
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+
 #include <deform/simd_rows.h>
 
 #include <algorithm>
@@ -344,7 +350,7 @@ DEFORM_PBD_AVX512 LengthsF16 lengthsF16(const float* x4, const int* A, const int
   __m512 z[4];
   for (int k = 0; k < 4; ++k)
     z[k] = _mm512_insertf32x4(
-        _mm512_insertf32x4(_mm512_insertf32x4(_mm512_castps128_ps512(d[k]), d[k + 4], 1), d[k + 8],
+        _mm512_insertf32x4(_mm512_insertf32x4(_mm512_zextps128_ps512(d[k]), d[k + 4], 1), d[k + 8],
                            2),
         d[k + 12], 3);
   const __m512 t0 = _mm512_unpacklo_ps(z[0], z[1]);  // per chunk j: a.x b.x a.y b.y
