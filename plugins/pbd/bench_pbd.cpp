@@ -1,6 +1,7 @@
 // Google Benchmark: one PBD step on a liver-sized closed surface (~2.2k vertices, ~6.6k edges),
 // 10 iterations, under gravity with the bottom pinned. Variants: stretch + volume (the metaballs
-// paper's PBD baseline), + dihedral bending (the plugin default), classic stiffness.
+// paper's PBD baseline), + dihedral bending, classic stiffness; the default (float32) solver and,
+// for the first two, the double-precision one.
 #include "pbd_model.h"
 #include "test_meshes.h"
 
@@ -59,6 +60,20 @@ void BM_PbdStretchOnly(benchmark::State& s) {
   c.volume = false;
   runPbd(s, c);
 }
+// The same two configurations with the double-precision solver (precision = float64).
+void BM_PbdStretchOnlyF64(benchmark::State& s) {
+  pbd::PbdConfig c;
+  c.bending = false;
+  c.volume = false;
+  c.precision = pbd::Precision::Float64;
+  runPbd(s, c);
+}
+void BM_PbdStretchVolumeF64(benchmark::State& s) {
+  pbd::PbdConfig c;
+  c.bending = false;
+  c.precision = pbd::Precision::Float64;
+  runPbd(s, c);
+}
 void BM_PbdClassicStretchVolume(benchmark::State& s) {
   pbd::PbdConfig c;
   c.bending = false;
@@ -68,6 +83,8 @@ void BM_PbdClassicStretchVolume(benchmark::State& s) {
 
 BENCHMARK(BM_PbdStretchOnly)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_PbdStretchVolume)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_PbdStretchOnlyF64)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_PbdStretchVolumeF64)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_PbdClassicStretchVolume)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_PbdStretchVolumeBending)->Unit(benchmark::kMillisecond);
 

@@ -1,8 +1,16 @@
 #include "pbd_constraints.h"
 
+// GCC 12 reports -Wmaybe-uninitialized inside its own AVX-512 intrinsics (their _mm512_undefined_*
+// pass-through operands, GCC bug 105593, fixed in GCC 13); nothing in this file is uninitialised.
+#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ < 13
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+
 #include <deform/simd_rows.h>
 
 #include <algorithm>
+#include <type_traits>
+#include <vector>
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
@@ -17,36 +25,81 @@ namespace {
 // one cross product per triangle: around a vertex a of a closed surface the terms x_a x x_b of
 // the fan telescope away, so dV/dx_a = (1/6) sum_T (x_b x x_c) = (1/6) sum_T N_T with
 // N_T = (x_b - x_a) x (x_c - x_a) (a third of the area-weighted normals), and
-// V = (1/6) sum_T x_a . N_T. stride: doubles per particle in x and grad (3 or 4).
-Real volumeAndGradient(const Real* x, Eigen::Index n, int stride, const MatX3i& F, Real* grad) {
-  std::fill(grad, grad + n * stride, 0.0);
+// V = (1/6) sum_T x_a . N_T. stride: values per particle in x and grad (3 or 4). T: double, or
+// float for the single-precision solver (the volume is still summed in double).
+template <class T>
+Real volumeAndGradient(const T* x, Eigen::Index n, int stride, const MatX3i& F, T* grad) {
+  if (grad != nullptr) std::fill(grad, grad + n * stride, T(0));
   Real six = 0;
   for (Eigen::Index f = 0; f < F.rows(); ++f) {
-    const Real* xa = x + stride * F(f, 0);
-    const Real* xb = x + stride * F(f, 1);
-    const Real* xc = x + stride * F(f, 2);
-    const Real u0 = xb[0] - xa[0], u1 = xb[1] - xa[1], u2 = xb[2] - xa[2];
-    const Real v0 = xc[0] - xa[0], v1 = xc[1] - xa[1], v2 = xc[2] - xa[2];
-    const Real N0 = u1 * v2 - u2 * v1, N1 = u2 * v0 - u0 * v2, N2 = u0 * v1 - u1 * v0;
+    const T* xa = x + stride * F(f, 0);
+    const T* xb = x + stride * F(f, 1);
+    const T* xc = x + stride * F(f, 2);
+    const T u0 = xb[0] - xa[0], u1 = xb[1] - xa[1], u2 = xb[2] - xa[2];
+    const T v0 = xc[0] - xa[0], v1 = xc[1] - xa[1], v2 = xc[2] - xa[2];
+    const T N0 = u1 * v2 - u2 * v1, N1 = u2 * v0 - u0 * v2, N2 = u0 * v1 - u1 * v0;
     six += xa[0] * N0 + xa[1] * N1 + xa[2] * N2;
+    if (grad == nullptr) continue;
     for (int k = 0; k < 3; ++k) {
-      Real* g = grad + stride * F(f, k);
+      T* g = grad + stride * F(f, k);
       g[0] += N0;
       g[1] += N1;
       g[2] += N2;
     }
   }
-  for (Eigen::Index i = 0; i < n * stride; ++i) grad[i] /= 6.0;
+  if (grad != nullptr)
+    for (Eigen::Index i = 0; i < n * stride; ++i) grad[i] /= T(6);
   return six / 6.0;
 }
 
-bool volumeMultiplier(const Real* x, Eigen::Index n, int stride, const Real* w, const MatX3i& F,
-                      Real restVolume, Real alphaTilde, Real k, Real& lambda, Real* grad,
-                      Real& dl) {
-  const Real vol = volumeAndGradient(x, n, stride, F, grad);
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+// volumeAndGradient<float> on padded rows with SSE: the same operations in the same order as the
+// scalar template (N_k = u_{k+1} v_{k+2} - u_{k+2} v_{k+1}, the dot summed x + y then + z), so
+// the results are identical; a row costs one load and one store instead of three of each.
+Real volumeAndGradientRowsF(const float* x, Eigen::Index n, const MatX3i& F, float* grad) {
+  std::fill(grad, grad + 4 * n, 0.0f);
+  Real six = 0;
+  const int* f = F.data();  // row-major #F by 3
+  for (Eigen::Index t = 0; t < F.rows(); ++t, f += 3) {
+    const __m128 xa = _mm_load_ps(x + 4 * static_cast<size_t>(f[0]));
+    const __m128 u = _mm_sub_ps(_mm_load_ps(x + 4 * static_cast<size_t>(f[1])), xa);
+    const __m128 v = _mm_sub_ps(_mm_load_ps(x + 4 * static_cast<size_t>(f[2])), xa);
+    // yzx and zxy lane rotations of (x, y, z, 0).
+    const __m128 u1 = _mm_shuffle_ps(u, u, _MM_SHUFFLE(3, 0, 2, 1));
+    const __m128 u2 = _mm_shuffle_ps(u, u, _MM_SHUFFLE(3, 1, 0, 2));
+    const __m128 v1 = _mm_shuffle_ps(v, v, _MM_SHUFFLE(3, 0, 2, 1));
+    const __m128 v2 = _mm_shuffle_ps(v, v, _MM_SHUFFLE(3, 1, 0, 2));
+    const __m128 N = _mm_sub_ps(_mm_mul_ps(u1, v2), _mm_mul_ps(u2, v1));
+    alignas(16) float p[4];
+    _mm_store_ps(p, _mm_mul_ps(xa, N));
+    six += p[0] + p[1] + p[2];
+    for (int k = 0; k < 3; ++k) {
+      float* g = grad + 4 * static_cast<size_t>(f[k]);
+      _mm_store_ps(g, _mm_add_ps(_mm_load_ps(g), N));
+    }
+  }
+  const __m128 sixth = _mm_set1_ps(6.0f);
+  for (Eigen::Index i = 0; i < n; ++i)
+    _mm_store_ps(grad + 4 * i, _mm_div_ps(_mm_load_ps(grad + 4 * i), sixth));
+  return six / 6.0;
+}
+#endif
+
+template <class T>
+bool volumeMultiplier(const T* x, Eigen::Index n, int stride, const Real* w, const MatX3i& F,
+                      Real restVolume, Real alphaTilde, Real k, Real& lambda, T* grad, Real& dl,
+                      bool rowsSimd = false) {
+  Real vol;
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+  if constexpr (std::is_same_v<T, float>)
+    vol =
+        rowsSimd ? volumeAndGradientRowsF(x, n, F, grad) : volumeAndGradient(x, n, stride, F, grad);
+  else
+#endif
+    vol = volumeAndGradient(x, n, stride, F, grad);
   Real denom = 0;
   for (Eigen::Index i = 0; i < n; ++i) {
-    const Real* g = grad + stride * i;
+    const T* g = grad + stride * i;
     denom += w[i] * (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
   }
   // Gradients are ~ area; a vanishing denominator means every particle is immovable or the
@@ -58,10 +111,11 @@ bool volumeMultiplier(const Real* x, Eigen::Index n, int stride, const Real* w, 
 }
 
 // x += dl * w * grad, row by row.
-void applyVolumeCorrection(Real* x, Eigen::Index n, int stride, const Real* w, const Real* grad,
+template <class T>
+void applyVolumeCorrection(T* x, Eigen::Index n, int stride, const Real* w, const T* grad,
                            Real dl) {
   for (Eigen::Index i = 0; i < n; ++i) {
-    const Real s = w[i] * dl;
+    const T s = static_cast<T>(w[i] * dl);
     for (int k = 0; k < 3; ++k) x[stride * i + k] += s * grad[stride * i + k];
   }
 }
@@ -236,7 +290,188 @@ __attribute__((target("avx512f,avx512vl,avx512dq"))) long long projectPaddedAvx5
 }
 #endif
 
+// Single precision: the scalar reference of the AVX-512 path below. lengthOneF is shared with
+// distanceLengthsColourF (the rest lengths), so that a constraint at rest sees C = 0 exactly.
+constexpr float kTinyF = static_cast<float>(tol::kDegenerateLength * tol::kDegenerateLength);
+
+inline float lengthOneF(const float* xa, const float* xb, float& d0, float& d1, float& d2,
+                        bool& ok) {
+  d0 = xa[0] - xb[0];
+  d1 = xa[1] - xb[1];
+  d2 = xa[2] - xb[2];
+  const float len2 = d0 * d0 + d1 * d1 + d2 * d2;
+  ok = len2 > kTinyF;
+  return std::sqrt(std::max(len2, kTinyF));
+}
+
+inline long long projectPaddedOneF(float* x4, const DistanceBatchF& batch, size_t i) {
+  float* xa = x4 + batch.a[i];
+  float* xb = x4 + batch.b[i];
+  float d0, d1, d2;
+  bool ok;
+  const float len = lengthOneF(xa, xb, d0, d1, d2, ok);
+  const float dl =
+      ok ? batch.scale[i] * (batch.rest[i] - len - batch.alphaTilde[i] * batch.lambda[i]) : 0.0f;
+  batch.lambda[i] += dl;
+  const float s = dl / len;
+  const float sa = batch.wa[i] * s, sb = batch.wb[i] * s;
+  xa[0] += sa * d0;
+  xa[1] += sa * d1;
+  xa[2] += sa * d2;
+  xb[0] -= sb * d0;
+  xb[1] -= sb * d1;
+  xb[2] -= sb * d2;
+  return ok ? 0 : 1;
+}
+
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+#define DEFORM_PBD_AVX512 __attribute__((target("avx512f,avx512vl,avx512dq"), always_inline)) inline
+
+// Sixteen constraints of one colour per step. The step is bound by instruction throughput (the
+// row loads and stores, not the arithmetic: dropping the stores halves its time), so it is
+// written for few instructions per constraint: particle offsets are pre-scaled (one load, then
+// base + index * 4 addressing), the row differences d_k stay in registers, and the corrections
+// go back as x += (w dl / |d|)_k d_k with the factor broadcast inside its 128-bit chunk.
+struct LengthsF16 {
+  __m512 y;    // 1 / |d|
+  __m512 len;  // |d|
+  __mmask16 ok;
+};
+
+// Loads the rows of constraints i .. i + 15 and returns d_k = x_a - x_b (lane 3: 0 - 0) and the
+// lengths. The rows of constraints 4j + k go to 128-bit chunk j of Z_k; a 4 x 4 transpose inside
+// each chunk then gives columns dx, dy, dz in constraint order. 1/|d| comes from rsqrt14 refined
+// by one Newton step, y <- y (3/2 - x y^2 / 2) (relative error ~2^-27, below float rounding).
+DEFORM_PBD_AVX512 LengthsF16 lengthsF16(const float* x4, const int* A, const int* B, __m128* d) {
+  const __m512 tiny = _mm512_set1_ps(kTinyF);
+  const __m512 half = _mm512_set1_ps(0.5f), threeHalf = _mm512_set1_ps(1.5f);
+#pragma GCC unroll 16
+  for (int k = 0; k < 16; ++k) d[k] = _mm_sub_ps(_mm_load_ps(x4 + A[k]), _mm_load_ps(x4 + B[k]));
+  __m512 z[4];
+  for (int k = 0; k < 4; ++k)
+    z[k] = _mm512_insertf32x4(
+        _mm512_insertf32x4(_mm512_insertf32x4(_mm512_zextps128_ps512(d[k]), d[k + 4], 1), d[k + 8],
+                           2),
+        d[k + 12], 3);
+  const __m512 t0 = _mm512_unpacklo_ps(z[0], z[1]);  // per chunk j: a.x b.x a.y b.y
+  const __m512 t1 = _mm512_unpackhi_ps(z[0], z[1]);  // a.z b.z a.w b.w (a = 4j, b = 4j + 1)
+  const __m512 t2 = _mm512_unpacklo_ps(z[2], z[3]);
+  const __m512 t3 = _mm512_unpackhi_ps(z[2], z[3]);
+  const __m512 dx = _mm512_shuffle_ps(t0, t2, 0x44);
+  const __m512 dy = _mm512_shuffle_ps(t0, t2, 0xEE);
+  const __m512 dz = _mm512_shuffle_ps(t1, t3, 0x44);
+  const __m512 len2 = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(dx, dx), _mm512_mul_ps(dy, dy)),
+                                    _mm512_mul_ps(dz, dz));
+  LengthsF16 r;
+  r.ok = _mm512_cmp_ps_mask(len2, tiny, _CMP_GT_OQ);
+  const __m512 l2 = _mm512_max_ps(len2, tiny);
+  const __m512 y0 = _mm512_rsqrt14_ps(l2);
+  r.y = _mm512_mul_ps(
+      y0, _mm512_sub_ps(threeHalf, _mm512_mul_ps(_mm512_mul_ps(half, l2), _mm512_mul_ps(y0, y0))));
+  r.len = _mm512_mul_ps(l2, r.y);
+  // |d| is rounded here, as distanceLengthsColourF stores it: without this barrier the compiler
+  // fuses rest - l2 y into one multiply-add, and a constraint at rest would see C != 0.
+  asm("" : "+v"(r.len));
+  return r;
+}
+
+// Rows 4j .. 4j + 3 of a group: x_a += sa_k d_k, x_b -= sb_k d_k with the factors broadcast
+// from 128-bit chunk j of sa / sb.
+template <int j>
+DEFORM_PBD_AVX512 void commitChunkF4(float* x4, const int* A, const int* B, __m512 sa, __m512 sb,
+                                     const __m128* d) {
+  const __m128 ca = _mm512_extractf32x4_ps(sa, j), cb = _mm512_extractf32x4_ps(sb, j);
+  const auto row = [&]<int m>() {
+    float* pa = x4 + A[4 * j + m];
+    float* pb = x4 + B[4 * j + m];
+    const __m128 fa = _mm_shuffle_ps(ca, ca, m * 0x55), fb = _mm_shuffle_ps(cb, cb, m * 0x55);
+    _mm_store_ps(pa, _mm_add_ps(_mm_load_ps(pa), _mm_mul_ps(fa, d[4 * j + m])));
+    _mm_store_ps(pb, _mm_sub_ps(_mm_load_ps(pb), _mm_mul_ps(fb, d[4 * j + m])));
+  };
+  row.template operator()<0>();
+  row.template operator()<1>();
+  row.template operator()<2>();
+  row.template operator()<3>();
+}
+
+__attribute__((target("avx512f,avx512vl,avx512dq"))) long long projectPaddedF512(
+    float* x4, const DistanceBatchF& batch, size_t begin, size_t end) {
+  long long degenerate = 0;
+  size_t i = begin;
+  for (; i + 16 <= end; i += 16) {
+    const int* A = batch.a + i;
+    const int* B = batch.b + i;
+    __m128 d[16];
+    const LengthsF16 l = lengthsF16(x4, A, B, d);
+    const __m512 lambda = _mm512_loadu_ps(batch.lambda + i);
+    const __m512 inner =
+        _mm512_sub_ps(_mm512_sub_ps(_mm512_loadu_ps(batch.rest + i), l.len),
+                      _mm512_mul_ps(_mm512_loadu_ps(batch.alphaTilde + i), lambda));
+    const __m512 dl = _mm512_maskz_mul_ps(l.ok, _mm512_loadu_ps(batch.scale + i), inner);
+    _mm512_storeu_ps(batch.lambda + i, _mm512_add_ps(lambda, dl));
+    const __m512 s = _mm512_mul_ps(dl, l.y);
+    const __m512 sa = _mm512_mul_ps(_mm512_loadu_ps(batch.wa + i), s);
+    const __m512 sb = _mm512_mul_ps(_mm512_loadu_ps(batch.wb + i), s);
+    // Reload the particle offsets below instead of keeping 32 addresses alive across the
+    // arithmetic (the compiler would park them in vector registers: more instructions).
+    asm volatile("" ::: "memory");
+    commitChunkF4<0>(x4, A, B, sa, sb, d);
+    commitChunkF4<1>(x4, A, B, sa, sb, d);
+    commitChunkF4<2>(x4, A, B, sa, sb, d);
+    commitChunkF4<3>(x4, A, B, sa, sb, d);
+    degenerate += 16 - __builtin_popcount(l.ok);
+  }
+  for (; i < end; ++i) degenerate += projectPaddedOneF(x4, batch, i);
+  return degenerate;
+}
+
+__attribute__((target("avx512f,avx512vl,avx512dq"))) void lengthsF512(const float* x4, const int* a,
+                                                                      const int* b, size_t begin,
+                                                                      size_t end, float* len) {
+  size_t i = begin;
+  for (; i + 16 <= end; i += 16) {
+    __m128 d[16];
+    _mm512_storeu_ps(len + i, lengthsF16(x4, a + i, b + i, d).len);
+  }
+  float d0, d1, d2;
+  bool ok;
+  for (; i < end; ++i) len[i] = lengthOneF(x4 + a[i], x4 + b[i], d0, d1, d2, ok);
+}
+#undef DEFORM_PBD_AVX512
+#endif
+
 }  // namespace
+
+bool distanceSimdFloatAvailable() {
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+         __builtin_cpu_supports("avx512dq");
+#else
+  return false;
+#endif
+}
+
+long long projectDistanceColourPaddedF(float* x4, const DistanceBatchF& batch, size_t begin,
+                                       size_t end, bool simd) {
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+  static const bool kAvx512 = distanceSimdFloatAvailable();
+  if (simd && kAvx512) return projectPaddedF512(x4, batch, begin, end);
+#endif
+  long long degenerate = 0;
+  for (size_t i = begin; i < end; ++i) degenerate += projectPaddedOneF(x4, batch, i);
+  return degenerate;
+}
+
+void distanceLengthsColourF(const float* x4, const int* a, const int* b, size_t begin, size_t end,
+                            float* len, bool simd) {
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+  static const bool kAvx512 = distanceSimdFloatAvailable();
+  if (simd && kAvx512) return lengthsF512(x4, a, b, begin, end, len);
+#endif
+  float d0, d1, d2;
+  bool ok;
+  for (size_t i = begin; i < end; ++i) len[i] = lengthOneF(x4 + a[i], x4 + b[i], d0, d1, d2, ok);
+}
 
 bool distanceSimdAvailable() {
 #ifdef DEFORM_PBD_HAVE_AVX2_PATH
@@ -291,6 +526,26 @@ bool projectSurfaceVolumePadded(Real* x4, Eigen::Index n, const Real* w, const M
   if (!volumeMultiplier(x4, n, 4, w, F, restVolume, alphaTilde, k, lambda, grad4, dl)) return false;
   applyVolumeCorrection(x4, n, 4, w, grad4, dl);
   return true;
+}
+
+bool projectSurfaceVolumePaddedF(float* x4, Eigen::Index n, const Real* w, const MatX3i& F,
+                                 Real restVolume, Real alphaTilde, Real k, Real& lambda,
+                                 float* grad4, bool simd) {
+  Real dl = 0;
+  if (!volumeMultiplier(x4, n, 4, w, F, restVolume, alphaTilde, k, lambda, grad4, dl, simd))
+    return false;
+  applyVolumeCorrection(x4, n, 4, w, grad4, dl);
+  return true;
+}
+
+Real surfaceVolumePaddedF(const float* x4, Eigen::Index n, const MatX3i& F, bool simd) {
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+  if (simd) {
+    std::vector<float> grad(4 * static_cast<size_t>(n));
+    return volumeAndGradientRowsF(x4, n, F, grad.data());
+  }
+#endif
+  return volumeAndGradient<float>(x4, n, 4, F, nullptr);
 }
 
 }  // namespace deform::pbd

@@ -36,6 +36,9 @@ std::vector<ParamSpec> paramSpecs() {
                       "xpbd mode, surface input: shell thickness for stretch/bending compliance"),
       ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
                       "velocity damping rate: v <- v exp(-damping dt) each step"),
+      ParamSpec::choice("precision", "float32", {"float32", "float64"},
+                        "number type of the distance and global volume projections (positions "
+                        "relative to the organ's centre); state between steps stays double"),
   };
 }
 
@@ -52,6 +55,8 @@ PbdConfig configFromParams(const ParamValues& p) {
   c.volumeEverySweep = p.flag("volume_every_sweep");
   c.thickness = p.real("thickness");
   c.damping = p.real("damping");
+  c.precision = p.choiceAs<Precision>(
+      "precision", {{"float32", Precision::Float32}, {"float64", Precision::Float64}});
   return c;
 }
 
@@ -180,6 +185,38 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
   const auto base = reinterpret_cast<std::uintptr_t>(m_p4Storage.data());
   m_p4Offset = ((32 - base % 32) % 32) / sizeof(Real);
   m_graspMask.assign(N, 0);
+
+  m_f32 = m_config.precision == Precision::Float32;
+  m_p4fStorage.clear();
+  m_distRestF.clear();
+  if (m_f32) {
+    m_p4fStorage.assign(4 * static_cast<size_t>(N) + 4, 0.0f);
+    const auto fbase = reinterpret_cast<std::uintptr_t>(m_p4fStorage.data());
+    m_p4fOffset = ((16 - fbase % 16) % 16) / sizeof(float);
+    m_p = m_rest;
+    packPositions();
+    const float* x = p4f();
+    m_distA4.resize(m_distance.size());
+    m_distB4.resize(m_distance.size());
+    m_distRestF.resize(m_distance.size());
+    for (size_t i = 0; i < m_distance.size(); ++i) {
+      m_distA4[i] = 4 * m_distA[i];
+      m_distB4[i] = 4 * m_distB[i];
+    }
+    // Measured colour by colour like projectAll() projects them (same arithmetic, see
+    // distanceLengthsColourF), so that the rest state is exactly at rest.
+    for (size_t c = 0; c + 1 < m_distColours.size(); ++c) {
+      const size_t b = m_distColours[c], e = m_distColours[c + 1];
+      for (size_t i = b; i < e; i = (c == 63 ? i + 1 : e))
+        distanceLengthsColourF(x, m_distA4.data(), m_distB4.data(), i, c == 63 ? i + 1 : e,
+                               m_distRestF.data());
+    }
+    if (m_hasVolume) m_restVolumeF = surfaceVolumePaddedF(x, N, m_surfaceF);
+    m_distAlphaTildeF.resize(m_distance.size());
+    m_distScaleF.resize(m_distance.size());
+    m_distWaF.resize(m_distance.size());
+    m_distWbF.resize(m_distance.size());
+  }
   reset();
 }
 
@@ -343,6 +380,7 @@ void PbdModel::reset() {
   std::fill(m_graspMask.begin(), m_graspMask.end(), 0);
   m_lambdaVolume = 0;
   m_volumeGrad4.assign(4 * static_cast<size_t>(m_rest.rows()), 0.0);
+  m_volumeGrad4F.assign(m_f32 ? 4 * static_cast<size_t>(m_rest.rows()) : 0, 0.0f);
   m_degenerate = 0;
   m_graspForces.clear();
   m_phase.clear();
@@ -362,13 +400,29 @@ void PbdModel::refreshHotData(Real dt) {
     m_distWa[i] = m_w[c.a];
     m_distWb[i] = m_w[c.b];
   }
+  if (m_f32) {
+    for (size_t i = 0; i < m_distance.size(); ++i) {
+      m_distAlphaTildeF[i] = static_cast<float>(m_distAlphaTilde[i]);
+      m_distScaleF[i] = static_cast<float>(m_distScale[i]);
+      m_distWaF[i] = static_cast<float>(m_distWa[i]);
+      m_distWbF[i] = static_cast<float>(m_distWb[i]);
+    }
+  }
   m_hotDt = dt;
 }
 
 void PbdModel::packPositions() {
   const Real* P = m_p.data();
+  const Eigen::Index n = m_p.rows();
+  if (m_f32) {
+    float* x = p4f();
+    const Real c[3] = {m_boxCenter[0], m_boxCenter[1], m_boxCenter[2]};
+    for (Eigen::Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) x[4 * i + k] = static_cast<float>(P[3 * i + k] - c[k]);
+    return;
+  }
   Real* m_p4 = p4();
-  for (Eigen::Index i = 0; i < m_p.rows(); ++i) {
+  for (Eigen::Index i = 0; i < n; ++i) {
     m_p4[4 * i] = P[3 * i];
     m_p4[4 * i + 1] = P[3 * i + 1];
     m_p4[4 * i + 2] = P[3 * i + 2];
@@ -377,12 +431,43 @@ void PbdModel::packPositions() {
 
 void PbdModel::unpackPositions() {
   Real* P = m_p.data();
+  const Eigen::Index n = m_p.rows();
+  if (m_f32) {
+    // Only the float solver's change is added: P += (x - x0) with x0 = float(P - c) as packed
+    // (recomputed here rather than stored). A particle the solver did not move (fixed, grasped,
+    // or at rest) keeps its double position bit for bit, and the rounding to float does not
+    // accumulate from step to step.
+    const float* x = p4f();
+    const Real c[3] = {m_boxCenter[0], m_boxCenter[1], m_boxCenter[2]};
+    for (Eigen::Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        const float x0 = static_cast<float>(P[3 * i + k] - c[k]);
+        P[3 * i + k] += static_cast<Real>(x[4 * i + k] - x0);
+      }
+    return;
+  }
   const Real* m_p4 = p4();
-  for (Eigen::Index i = 0; i < m_p.rows(); ++i) {
+  for (Eigen::Index i = 0; i < n; ++i) {
     P[3 * i] = m_p4[4 * i];
     P[3 * i + 1] = m_p4[4 * i + 1];
     P[3 * i + 2] = m_p4[4 * i + 2];
   }
+}
+
+void PbdModel::projectVolume(Real dt) {
+  const Real at = m_volumeCompliance / (dt * dt);
+  const bool ok =
+      m_f32 ? projectSurfaceVolumePaddedF(p4f(), m_p.rows(), m_w.data(), m_surfaceF, m_restVolumeF,
+                                          at, m_kVolume, m_lambdaVolume, m_volumeGrad4F.data())
+            : projectSurfaceVolumePadded(p4(), m_p.rows(), m_w.data(), m_surfaceF, m_restVolume, at,
+                                         m_kVolume, m_lambdaVolume, m_volumeGrad4.data());
+  if (!ok) ++m_degenerate;
+}
+
+Vec3 PbdModel::volumeGradient(int node) const {
+  const size_t i = 4 * static_cast<size_t>(node);
+  if (m_f32) return Vec3(m_volumeGrad4F[i], m_volumeGrad4F[i + 1], m_volumeGrad4F[i + 2]);
+  return Vec3(m_volumeGrad4[i], m_volumeGrad4[i + 1], m_volumeGrad4[i + 2]);
 }
 
 void PbdModel::projectAll(Real dt) {
@@ -391,8 +476,16 @@ void PbdModel::projectAll(Real dt) {
   const DistanceBatch batch{m_distA.data(),          m_distB.data(),     m_distRest.data(),
                             m_distAlphaTilde.data(), m_distScale.data(), m_lambdaDist.data(),
                             m_distWa.data(),         m_distWb.data()};
+  const DistanceBatchF batchF{m_distA4.data(),          m_distB4.data(),     m_distRestF.data(),
+                              m_distAlphaTildeF.data(), m_distScaleF.data(), m_lambdaDistF.data(),
+                              m_distWaF.data(),         m_distWbF.data()};
   const size_t nColours = m_distColours.empty() ? 0 : m_distColours.size() - 1;
   Real* x4 = p4();
+  float* x4f = p4f();
+  const auto project = [&](size_t b, size_t e) {
+    return m_f32 ? projectDistanceColourPaddedF(x4f, batchF, b, e)
+                 : projectDistanceColourPadded(x4, batch, b, e);
+  };
   bool packed = false;
   for (int it = 0; it < m_config.iterations; ++it) {
     if (!packed) packPositions();
@@ -400,10 +493,9 @@ void PbdModel::projectAll(Real dt) {
     for (size_t c = 0; c < nColours; ++c) {
       const size_t b = m_distColours[c], e = m_distColours[c + 1];
       if (c == 63) {  // overflow colour: not independent, go one at a time
-        for (size_t i = b; i < e; ++i)
-          m_degenerate += projectDistanceColourPadded(x4, batch, i, i + 1);
+        for (size_t i = b; i < e; ++i) m_degenerate += project(i, i + 1);
       } else {
-        m_degenerate += projectDistanceColourPadded(x4, batch, b, e);
+        m_degenerate += project(b, e);
       }
     }
     const bool volumeNow =
@@ -445,10 +537,7 @@ void PbdModel::projectAll(Real dt) {
     if (volumeNow) {
       if (!packed) packPositions();
       packed = true;
-      if (!projectSurfaceVolumePadded(x4, m_p.rows(), W, m_surfaceF, m_restVolume,
-                                      m_volumeCompliance * invDt2, m_kVolume, m_lambdaVolume,
-                                      m_volumeGrad4.data()))
-        ++m_degenerate;
+      projectVolume(dt);
     }
   }
   if (packed) unpackPositions();
@@ -489,7 +578,10 @@ StepStatus PbdModel::step(const StepInput& in) {
     for (size_t k = 0; k < g.nodes.size(); ++k) m_p.row(g.nodes[k]) = g.targets.row(k);
   const auto t1 = Clock::now();
 
-  std::fill(m_lambdaDist.begin(), m_lambdaDist.end(), 0.0);
+  if (m_f32)
+    m_lambdaDistF.assign(m_distance.size(), 0.0f);
+  else
+    std::fill(m_lambdaDist.begin(), m_lambdaDist.end(), 0.0);
   std::fill(m_lambdaBend.begin(), m_lambdaBend.end(), 0.0);
   std::fill(m_lambdaTet.begin(), m_lambdaTet.end(), 0.0);
   m_lambdaVolume = 0;
@@ -568,7 +660,7 @@ void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
     const Vec3 d = m_x.row(a) - m_x.row(b);
     const Real len = d.norm();
     if (len <= tol::kDegenerateLength) continue;
-    const Vec3 f = (m_lambdaDist[i] * invDt2 / len) * d;
+    const Vec3 f = (lambdaDist(i) * invDt2 / len) * d;
     add(a, f);
     add(b, -f);
   }
@@ -594,10 +686,7 @@ void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
   }
   if (m_hasVolume)
     for (int i : m_hotGrasped)
-      nodeForce.row(i) +=
-          (m_lambdaVolume * invDt2) *
-          Vec3(m_volumeGrad4[4 * i], m_volumeGrad4[4 * i + 1], m_volumeGrad4[4 * i + 2])
-              .transpose();
+      nodeForce.row(i) += (m_lambdaVolume * invDt2) * volumeGradient(i).transpose();
   for (size_t g = 0; g < in.grasps.size(); ++g)
     for (int node : in.grasps[g].nodes) m_graspForces[g] += nodeForce.row(node).transpose();
 }

@@ -18,6 +18,9 @@
 namespace deform::pbd {
 
 enum class StiffnessMode { Classic, Xpbd };
+/// Number type of the solver state of the distance and global volume constraints (see README.md,
+/// "Precision"); the interface, the state between steps and the other constraints stay double.
+enum class Precision { Float32, Float64 };
 
 /// Resolved parameters (see paramSpecs() for units, ranges and meaning).
 struct PbdConfig {
@@ -31,6 +34,7 @@ struct PbdConfig {
   bool volumeEverySweep = false;  ///< project the global volume in every sweep, not only the last
   Real thickness = 0.01;          ///< m, shell thickness for XPBD compliances (surface input)
   Real damping = 1.0;             ///< 1/s, velocity damping rate
+  Precision precision = Precision::Float32;
 };
 
 /// The parameter declarations of the "pbd" plugin.
@@ -76,6 +80,11 @@ class PbdModel final : public Model {
   void listGraspConstraints();
   void packPositions();
   void unpackPositions();
+  void projectVolume(Real dt);
+  Real lambdaDist(size_t i) const {
+    return m_f32 ? static_cast<Real>(m_lambdaDistF[i]) : m_lambdaDist[i];
+  }
+  Vec3 volumeGradient(int node) const;
   void computeGraspForces(const StepInput& in, Real dt);
 
   PbdConfig m_config;
@@ -116,6 +125,19 @@ class PbdModel final : public Model {
   std::vector<Real> m_lambdaDist, m_lambdaBend, m_lambdaTet;
   Real m_lambdaVolume = 0;
   std::vector<Real> m_volumeGrad4;  // padded like the positions
+
+  // Single-precision state (precision = float32): positions relative to m_boxCenter padded to
+  // (x, y, z, 0) floats, 16-byte aligned from m_p4fOffset; the distance data in float; the rest
+  // lengths and the rest volume recomputed in float from the rounded rest positions, so that the
+  // rest state is exactly at rest.
+  bool m_f32 = false;
+  std::vector<float> m_p4fStorage;
+  size_t m_p4fOffset = 0;
+  float* p4f() { return m_p4fStorage.data() + m_p4fOffset; }
+  std::vector<int> m_distA4, m_distB4;  // 4 * particle index (row offsets in p4f())
+  std::vector<float> m_distRestF, m_distAlphaTildeF, m_distScaleF, m_distWaF, m_distWbF;
+  std::vector<float> m_lambdaDistF, m_volumeGrad4F;
+  Real m_restVolumeF = 0;
   Real m_hotDt = -1;
   std::vector<int> m_hotGrasped;  // grasped nodes the hot data was built for
   std::vector<unsigned char> m_graspMask;

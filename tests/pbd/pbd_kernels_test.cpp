@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdint>
 #include <random>
 
 namespace deform::pbd {
@@ -150,6 +151,146 @@ TEST(PbdDistance, ColourKernelMatchesSequentialProjection) {
     EXPECT_NEAR(lam1[i], lam3[i], 1e-14);
     EXPECT_EQ(simd[4 * a[i] + 3], 0.0);
   }
+}
+
+// ---- single precision (precision = float32) ----
+
+struct FloatColour {
+  int n;
+  std::vector<Vec3> x;  // 2 n particles, constraint i joins 2 i and 2 i + 1
+  std::vector<int> a4, b4;
+  std::vector<float> rest, at, scale, wa, wb;
+  std::vector<Real> restD, atD, scaleD, waD, wbD;
+  explicit FloatColour(int count) : n(count), x(2 * count), a4(count), b4(count) {
+    std::mt19937 rng(11);
+    for (auto& p : x) p = randomVec(rng, 0.1);
+    x[2 * 5 + 1] = x[2 * 5];  // one degenerate constraint (in the first vector group)
+    for (int i = 0; i < n; ++i) {
+      a4[i] = 4 * (2 * i);
+      b4[i] = 4 * (2 * i + 1);
+      restD.push_back(0.05 + 0.002 * i);
+      atD.push_back((i % 3) * 0.1);
+      waD.push_back(1.0 + 0.1 * (i % 4));
+      wbD.push_back((i % 5 == 0) ? 0.0 : 0.7);
+      scaleD.push_back(1.0 / (waD[i] + wbD[i] + atD[i]));
+      rest.push_back(static_cast<float>(restD[i]));
+      at.push_back(static_cast<float>(atD[i]));
+      scale.push_back(static_cast<float>(scaleD[i]));
+      wa.push_back(static_cast<float>(waD[i]));
+      wb.push_back(static_cast<float>(wbD[i]));
+    }
+  }
+  std::vector<float> padded() const {  // 16-byte aligned: 4 floats of headroom, offset returned
+    std::vector<float> x4(8 * static_cast<size_t>(n) + 4, 0.0f);
+    return x4;
+  }
+};
+
+float* alignedRows(std::vector<float>& storage, const std::vector<Vec3>& x) {
+  const auto base = reinterpret_cast<std::uintptr_t>(storage.data());
+  float* p = storage.data() + ((16 - base % 16) % 16) / sizeof(float);
+  for (size_t i = 0; i < x.size(); ++i)
+    for (int k = 0; k < 3; ++k) p[4 * i + k] = static_cast<float>(x[i][k]);
+  return p;
+}
+
+// The float colour kernel: SIMD (AVX-512, sixteen per step) against its scalar reference, and
+// both against the double kernel. n = 37: two vector groups and a tail of five.
+TEST(PbdDistanceFloat, ColourKernelMatchesScalarReferenceAndDoublePath) {
+  const FloatColour c(37);
+  std::vector<float> s1 = c.padded(), s2 = c.padded();
+  float* simd = alignedRows(s1, c.x);
+  float* scalar = alignedRows(s2, c.x);
+  std::vector<float> lam1(c.n, 0.01f), lam2(c.n, 0.01f);
+  const DistanceBatchF b1{c.a4.data(),    c.b4.data(), c.rest.data(), c.at.data(),
+                          c.scale.data(), lam1.data(), c.wa.data(),   c.wb.data()};
+  DistanceBatchF b2 = b1;
+  b2.lambda = lam2.data();
+  EXPECT_EQ(projectDistanceColourPaddedF(simd, b1, 0, c.n, true), 1);
+  EXPECT_EQ(projectDistanceColourPaddedF(scalar, b2, 0, c.n, false), 1);
+  // The SIMD path replaces sqrt and division by rsqrt14 + one Newton step (relative error
+  // ~2^-27) and may fuse multiply-adds: a few float roundings (2^-24 each) of values below 0.2 m,
+  // so 1e-7 m (~12 ulp at 0.2) bounds the difference.
+  for (int i = 0; i < 8 * c.n; ++i) EXPECT_NEAR(simd[i], scalar[i], 1e-7) << i;
+  for (int i = 0; i < c.n; ++i) EXPECT_NEAR(lam1[i], lam2[i], 1e-6 * std::abs(lam2[i]) + 1e-9);
+  for (int i = 0; i < 2 * c.n; ++i) EXPECT_EQ(simd[4 * i + 3], 0.0f);
+  // Against the double kernel: the float inputs are rounded (2^-24 relative); the corrections
+  // are O(|C|) <= 0.2 m, so 1e-6 m (~16 ulp) bounds the difference.
+  std::vector<Real> x4(8 * c.n, 0.0);
+  for (int i = 0; i < 2 * c.n; ++i)
+    for (int k = 0; k < 3; ++k) x4[4 * i + k] = c.x[i][k];
+  std::vector<int> a(c.n), b(c.n);
+  for (int i = 0; i < c.n; ++i) {
+    a[i] = c.a4[i] / 4;
+    b[i] = c.b4[i] / 4;
+  }
+  std::vector<Real> lam3(c.n, 0.01);
+  const DistanceBatch bd{a.data(),        b.data(),    c.restD.data(), c.atD.data(),
+                         c.scaleD.data(), lam3.data(), c.waD.data(),   c.wbD.data()};
+  EXPECT_EQ(projectDistanceColourPadded(x4.data(), bd, 0, c.n, false), 1);
+  for (int i = 0; i < 8 * c.n; ++i) EXPECT_NEAR(simd[i], x4[i], 1e-6) << i;
+  // and the constraints moved (the comparison is not vacuous)
+  Real moved = 0;
+  for (int i = 0; i < 2 * c.n; ++i)
+    for (int k = 0; k < 3; ++k) moved = std::max(moved, std::abs(x4[4 * i + k] - c.x[i][k]));
+  EXPECT_GT(moved, 1e-3);
+}
+
+// Rest lengths measured with distanceLengthsColourF give C = 0 bit for bit in the kernel: a
+// colour at rest does not move, on either path.
+TEST(PbdDistanceFloat, LengthsMeasuredByTheKernelArithmeticAreExactlyAtRest) {
+  FloatColour c(37);
+  c.x[2 * 5 + 1] += Vec3(0.01, 0, 0);  // no degenerate constraint here
+  for (bool simd : {true, false}) {
+    std::vector<float> s = c.padded();
+    float* x = alignedRows(s, c.x);
+    const std::vector<float> before(x, x + 8 * c.n);
+    std::vector<float> rest(c.n), lam(c.n, 0.0f);
+    distanceLengthsColourF(x, c.a4.data(), c.b4.data(), 0, c.n, rest.data(), simd);
+    const DistanceBatchF bf{c.a4.data(),    c.b4.data(), rest.data(), c.at.data(),
+                            c.scale.data(), lam.data(),  c.wa.data(), c.wb.data()};
+    EXPECT_EQ(projectDistanceColourPaddedF(x, bf, 0, c.n, simd), 0);
+    for (int i = 0; i < 8 * c.n; ++i) EXPECT_EQ(x[i], before[i]) << i << " simd " << simd;
+    for (int i = 0; i < c.n; ++i) EXPECT_EQ(lam[i], 0.0f);
+  }
+}
+
+// The float volume projection: SIMD rows and scalar reference identical (same operations in the
+// same order), and close to the double projection.
+TEST(PbdSurfaceVolumeFloat, RowsMatchScalarAndDouble) {
+  const SurfaceMesh m = testing::uvEllipsoid(8, 12, 0.05, 0.04, 0.03);
+  const Eigen::Index n = m.numVertices();
+  const Real v0 = signedVolume(m.V, m.F);
+  VecX w(n);
+  for (Eigen::Index i = 0; i < n; ++i) w[i] = 1.0 + 0.1 * (i % 5);
+  std::vector<Vec3> x(n);
+  for (Eigen::Index i = 0; i < n; ++i) x[i] = 1.1 * Vec3(m.V.row(i));
+  std::vector<float> s1(4 * n + 4), s2(4 * n + 4), g1(4 * n), g2(4 * n);
+  float* simd = alignedRows(s1, x);
+  float* scalar = alignedRows(s2, x);
+  Real lam1 = 0, lam2 = 0;
+  ASSERT_TRUE(
+      projectSurfaceVolumePaddedF(simd, n, w.data(), m.F, v0, 0.0, 1.0, lam1, g1.data(), true));
+  ASSERT_TRUE(
+      projectSurfaceVolumePaddedF(scalar, n, w.data(), m.F, v0, 0.0, 1.0, lam2, g2.data(), false));
+  EXPECT_EQ(lam1, lam2);
+  for (Eigen::Index i = 0; i < 4 * n; ++i) EXPECT_EQ(simd[i], scalar[i]) << i;
+  EXPECT_EQ(surfaceVolumePaddedF(simd, n, m.F, true), surfaceVolumePaddedF(simd, n, m.F, false));
+  std::vector<Real> xd(4 * n, 0.0), gd(4 * n);
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) xd[4 * i + k] = x[i][k];
+  Real lam3 = 0;
+  ASSERT_TRUE(
+      projectSurfaceVolumePadded(xd.data(), n, w.data(), m.F, v0, 0.0, 1.0, lam3, gd.data()));
+  // Positions ~0.06 m in float (ulp 4e-9 m): the corrections (~3 mm) agree to 1e-7 m.
+  Real moved = 0;
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(simd[4 * i + k], xd[4 * i + k], 1e-7);
+      moved = std::max(moved, std::abs(xd[4 * i + k] - x[i][k]));
+    }
+  EXPECT_GT(moved, 1e-4);
+  EXPECT_NEAR(lam1, lam3, 1e-5 * std::abs(lam3));
 }
 
 // ---- dihedral ----
