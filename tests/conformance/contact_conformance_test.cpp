@@ -1,7 +1,8 @@
 // Contact conformance (issue F8), run against every plugin found like conformance_test.cpp: a
 // probe pressed into the organ leaves no node of a model with the "contact" capability inside
 // the probe after any step, and deforms the organ; a model without it is reported unsupported.
-// The dynamic grasper and a resting rigid object run on every model that supports them.
+// The dynamic grasper and a resting rigid object run on every model that supports them; a rigid
+// object needs the "contact_reaction" capability (the organ holds it up by the reported reaction).
 #include <deform/contact.h>
 #include <deform/interaction.h>
 #include <deform/phantom.h>
@@ -169,12 +170,14 @@ TEST_P(ContactConformance, ADynamicGrasperReportsAHandForceAndAnObjectRestsOnThe
   for (const ModelInfo& info : models()) {
     SCOPED_TRACE(info.name);
     const std::string why = unsupportedReason(info, scene);
+    // A model whose contact reaction is not reported (no contact_reaction capability, e.g. one
+    // that prescribes penetrating nodes bilaterally) would let the object fall through: the
+    // scene's objects make it unsupported, with the reason.
+    if (!info.has(Capability::ContactReaction)) {
+      EXPECT_NE(why.find("contact_reaction"), std::string::npos) << why;
+      continue;
+    }
     if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
-    // hybrid_fem_pbd prescribes penetrating vertices through its coarse FEM, whose reaction at
-    // those nodes also carries the organ's own load (a bilateral constraint), so it reports only
-    // the reaction of its final projection: a free object is not held up. Known limitation,
-    // documented in plugins/hybrid_fem_pbd/README.md ("Contact with instruments").
-    if (info.name == "hybrid_fem_pbd") continue;
     ++tested;
     const RunRecord rec =
         runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
@@ -188,6 +191,50 @@ TEST_P(ContactConformance, ADynamicGrasperReportsAHandForceAndAnObjectRestsOnThe
     ASSERT_EQ(rec.objectsFinal.size(), 1u);
     // In free fall it would end 49 mm lower, below the organ's top; the organ holds it up (a
     // surface model indents by a few millimetres under it, more between its coarse nodes).
+    EXPECT_GT(rec.objectsFinal[0].z(), b.hi.z()) << "the object sank through the organ";
+    EXPECT_LT(rec.objectsFinal[0].z(), objAt.z() + 1e-3) << "the object flew off";
+  }
+  if (tested == 0) GTEST_SKIP() << "no model of this plugin supports this scene";
+}
+
+// The object alone, for every model that reports its contact reaction, including those without a
+// reaction_force at grasps (the grasper test above needs one): the organ holds a free object up,
+// and a model without contact_reaction is reported unsupported with the reason.
+TEST_P(ContactConformance, AFreeObjectRestsOnTheOrganOfEveryModelReportingItsContactReaction) {
+  const SurfaceMesh s = makePhantom("cube", 0.5);
+  const Box b = boundingBox(s.V);
+  json j = probeCase().scene;
+  j.erase("tools");
+  j["gravity"] = {0, 0, -9.81};
+  j["duration"] = 0.1;
+  const Real r = 0.15 * b.size().x();
+  const Vec3 objAt(b.center().x(), b.center().y(), b.hi.z() + r);
+  j["objects"] = {{{"shape", "sphere"},
+                   {"radius", r},
+                   {"mass", 0.005},
+                   {"pos", {objAt.x(), objAt.y(), objAt.z()}}}};
+  const Scene scene = parseScene(j, "");
+  const Organ organ = loadOrgan(scene);
+  int tested = 0;
+  for (const ModelInfo& info : models()) {
+    SCOPED_TRACE(info.name);
+    const std::string why = unsupportedReason(info, scene);
+    if (!info.has(Capability::Contact) || !info.has(Capability::ContactReaction)) {
+      const RunRecord rec =
+          runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
+      EXPECT_EQ(rec.status, RunStatus::Unsupported);
+      const char* needed = info.has(Capability::Contact) ? "contact_reaction" : "contact";
+      EXPECT_NE(rec.message.find(needed), std::string::npos) << rec.message;
+      continue;
+    }
+    // A quasi-static model solves only at the compared instants: no dynamic object to hold.
+    if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
+    ++tested;
+    const RunRecord rec =
+        runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
+    ASSERT_EQ(rec.status, RunStatus::Ok) << rec.message;
+    ASSERT_EQ(rec.objectsFinal.size(), 1u);
+    // In free fall the object would end 49 mm lower, below the organ's top.
     EXPECT_GT(rec.objectsFinal[0].z(), b.hi.z()) << "the object sank through the organ";
     EXPECT_LT(rec.objectsFinal[0].z(), objAt.z() + 1e-3) << "the object flew off";
   }
