@@ -43,6 +43,7 @@ struct ProbeRun {
   Real worst = 1e9;         ///< m, least |x - c| - r over the movable nodes after any step
   Real topDrop = 0;         ///< m, how far the probed (highest) node went down
   Real minReactionZ = 1e9;  ///< N, least reaction on the probe along z over contact steps
+  Real lastReactionZ = 0;   ///< N, the reaction on the probe along z in the last step
   int contactSteps = 0;     ///< steps with a reaction on the probe
   int farNodesMoved = 0;    ///< nodes never within 2 r of the probe that moved > 1e-5 m
   bool allOk = true;        ///< every step returned Ok
@@ -84,6 +85,7 @@ inline ProbeRun pressProbe(Model& m, const MatX3& rest, const std::vector<int>& 
       ++out.contactSteps;
       out.minReactionZ = std::min(out.minReactionZ, f.z());
     }
+    out.lastReactionZ = f.z();
   }
   out.topDrop = p.z() - m.nodes()(top, 2);
   for (Eigen::Index i = 0; i < rest.rows(); ++i)

@@ -12,6 +12,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 
 namespace deform::harness {
 namespace {
@@ -172,9 +174,10 @@ TEST_P(ContactConformance, ADynamicGrasperReportsAHandForceAndAnObjectRestsOnThe
     const std::string why = unsupportedReason(info, scene);
     // A model whose contact reaction is not reported (no contact_reaction capability, e.g. one
     // that prescribes penetrating nodes bilaterally) would let the object fall through: the
-    // scene's objects make it unsupported, with the reason.
+    // scene's objects make it unsupported (the reason is checked by the free-object test below;
+    // here another missing capability may be named first).
     if (!info.has(Capability::ContactReaction)) {
-      EXPECT_NE(why.find("contact_reaction"), std::string::npos) << why;
+      EXPECT_FALSE(why.empty());
       continue;
     }
     if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
@@ -234,9 +237,29 @@ TEST_P(ContactConformance, AFreeObjectRestsOnTheOrganOfEveryModelReportingItsCon
         runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
     ASSERT_EQ(rec.status, RunStatus::Ok) << rec.message;
     ASSERT_EQ(rec.objectsFinal.size(), 1u);
-    // In free fall the object would end 49 mm lower, below the organ's top.
-    EXPECT_GT(rec.objectsFinal[0].z(), b.hi.z()) << "the object sank through the organ";
-    EXPECT_LT(rec.objectsFinal[0].z(), objAt.z() + 1e-3) << "the object flew off";
+    // The organ sags under its own weight too (the softer surface models by 3 cm in this time, 60 %
+    // of free fall), so the object is judged by how it fell and against the model's final surface
+    // under it (vertices within 0.75 r of its vertical axis): it fell at least 3 mm less than in
+    // free fall (without a reported reaction nothing slows it down), and every vertex under it lies
+    // below its centre by at least r / 2 (a vertex touching the sphere that close to its axis is
+    // 0.66 r below it; one above the centre means the object sank into the organ).
+    const Vec3 o = rec.objectsFinal[0];
+    const Real t = scene.numSteps() * scene.dt;
+    const Real freeFall = objAt.z() - 0.5 * 9.81 * t * t;
+    EXPECT_GT(o.z(), freeFall + 3e-3) << "the object fell freely: the organ did not hold it";
+    const MatX3& x = rec.finalSurface;
+    Real top = -1e9;
+    int under = 0;
+    for (Eigen::Index i = 0; i < x.rows(); ++i) {
+      if (std::hypot(x(i, 0) - o.x(), x(i, 1) - o.y()) >= 0.75 * r) continue;
+      ++under;
+      top = std::max(top, x(i, 2));
+    }
+    ASSERT_GT(under, 0);
+    EXPECT_LT(top, o.z() - 0.5 * r) << "the object sank into the organ";
+    std::printf("%s: object %.4f m (free fall %.4f m), top under it %.4f m\n", info.name.c_str(),
+                o.z(), freeFall, top);
+    EXPECT_LT(o.z(), objAt.z() + 1e-3) << "the object flew off";
   }
   if (tested == 0) GTEST_SKIP() << "no model of this plugin supports this scene";
 }
