@@ -27,9 +27,25 @@ const char* capabilityName(Capability c) {
       return "quasi_static";
     case Capability::Contact:
       return "contact";
+    case Capability::ContactReaction:
+      return "contact_reaction";
   }
   assert(false && "unknown Capability");
   return "unknown";
+}
+
+// The last enumerator: capabilities are only ever appended (registry.h), so move this with them.
+constexpr Capability kLastCapability = Capability::ContactReaction;
+
+bool capabilityFromName(const std::string& name, Capability& out) {
+  for (int i = 0; i <= static_cast<int>(kLastCapability); ++i) {
+    const auto c = static_cast<Capability>(i);
+    if (name == capabilityName(c)) {
+      out = c;
+      return true;
+    }
+  }
+  return false;
 }
 
 bool ModelInfo::has(Capability c) const {

@@ -103,6 +103,11 @@ std::string unsupportedReason(const ModelInfo& info, const Scene& scene) {
   }
   if (!scene.objects.empty() && !info.has(Capability::Contact))
     return lacks("the scene's rigid objects", Capability::Contact);
+  // A free object is held up only by the reaction the model reports: without it the object falls
+  // through the organ, which would be scored as the model's behaviour.
+  if (!scene.objects.empty() && !info.has(Capability::ContactReaction))
+    return lacks("the scene's rigid objects (a free object rests on the reported contact reaction)",
+                 Capability::ContactReaction);
   if (!scene.loads.empty() && !info.has(Capability::PointForce)) {
     return "the scene's loads need the point_force capability, which " + info.name +
            " does not have";

@@ -15,7 +15,6 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 
 namespace deform::bullet_deformable {
@@ -205,8 +204,8 @@ void BulletDeformableModel::init(const TetMesh& mesh, std::vector<int> surfaceNo
     m_edges.row(Eigen::Index(e)) << edges[e][0], edges[e][1];
 
   const Box box = boundingBox(mesh.V);
-  m_boxCenter = box.center();
-  m_boxHalf = 0.5 * tol::kDivergenceBoxFactor * box.size().maxCoeff();
+  m_tail.boxCenter = box.center();
+  m_tail.boxHalf = 0.5 * tol::kDivergenceBoxFactor * box.size().maxCoeff();
   build();
 }
 
@@ -249,7 +248,9 @@ void BulletDeformableModel::build() {
   scratch.m_J = 1;
   b.m_tetraScratches.resize(b.m_tetras.size(), scratch);
   b.m_tetraScratchesTn.resize(b.m_tetras.size(), scratch);
-  b.m_cfg.collisions = 0;  // nothing to collide with; no self collision
+  // Bullet's own collision stays off (no self collision); instruments are handled by the shared
+  // contact response after the step (bullet_peer_step.h).
+  b.m_cfg.collisions = 0;
   b.m_cfg.drag = 0;
   b.m_sleepingThreshold = 0;
   b.setActivationState(DISABLE_DEACTIVATION);
@@ -276,22 +277,14 @@ void BulletDeformableModel::build() {
   w.deformableSolver.setLimits(m_config.newtonIterations, m_config.krylovIterations,
                                m_config.krylovTolerance);
 
-  m_grasped.clear();
-  pullPositions();
-}
-
-void BulletDeformableModel::pullPositions() {
-  const btSoftBody& b = *m_world->body;
-  m_x.resize(b.m_nodes.size(), 3);
-  for (int i = 0; i < b.m_nodes.size(); ++i)
-    for (int k = 0; k < 3; ++k) m_x(i, k) = b.m_nodes[i].m_x[k];
+  m_tail.grasped.clear();
+  bullet_peers::copyNodes(b, m_x);
   m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
   for (size_t i = 0; i < m_surfaceNode.size(); ++i)
     m_surface.row(Eigen::Index(i)) = m_x.row(m_surfaceNode[i]);
 }
 
 StepStatus BulletDeformableModel::step(const StepInput& in) {
-  const auto t0 = std::chrono::steady_clock::now();
   World& w = *m_world;
   btSoftBody& b = *w.body;
   const Real dt = in.dt > 0 ? in.dt : m_dt;
@@ -299,16 +292,7 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
   w.gravity->m_gravity = g;
   w.world->getWorldInfo().m_gravity = g;
 
-  std::vector<int> grasped;
-  for (const GraspInput& gr : in.grasps)
-    grasped.insert(grasped.end(), gr.nodes.begin(), gr.nodes.end());
-  std::sort(grasped.begin(), grasped.end());
-  grasped.erase(std::unique(grasped.begin(), grasped.end()), grasped.end());
-  if (grasped != m_grasped) {
-    for (int i : m_grasped) b.m_nodes[i].m_im = w.inverseMass[i];
-    for (int i : grasped) b.m_nodes[i].m_im = 0;
-    m_grasped = grasped;
-  }
+  bullet_peers::beginBulletStep(b, w.inverseMass, in.grasps, m_tail);
   for (const PointLoad& l : in.loads) {
     btSoftBody::Node& node = b.m_nodes[m_surfaceNode[size_t(l.surfaceVertex)]];
     node.m_v += btVector3(l.force.x(), l.force.y(), l.force.z()) * (node.m_im * dt);
@@ -322,18 +306,8 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
     }
 
   w.world->stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
-
-  for (const GraspInput& gr : in.grasps)
-    for (size_t k = 0; k < gr.nodes.size(); ++k)
-      b.m_nodes[gr.nodes[k]].m_x = btVector3(gr.targets(k, 0), gr.targets(k, 1), gr.targets(k, 2));
-  pullPositions();
-  m_phase["step"] =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-
-  if (!m_x.allFinite()) return StepStatus::Diverged;
-  if (((m_x.rowwise() - m_boxCenter.transpose()).cwiseAbs().maxCoeff()) > m_boxHalf)
-    return StepStatus::Diverged;
-  return StepStatus::Ok;
+  return bullet_peers::finishBulletStep(b, in, dt, m_tail, m_x, m_phase, &m_surfaceNode,
+                                        &m_surface);
 }
 
 void BulletDeformableModel::reset() {

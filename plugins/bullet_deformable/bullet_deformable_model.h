@@ -21,9 +21,12 @@
 // Fixed nodes have inverse mass 0 (Bullet then keeps their velocity; it is 0). Grasped nodes get
 // inverse mass 0 and the velocity (target - x) / dt before the step (kinematic), their mass is
 // restored on release. Point loads enter as the velocity impulse dt f / m before the step, which
-// equals a constant external force in the backward Euler step above.
+// equals a constant external force in the backward Euler step above. Contact with instruments:
+// the SDK's shared response on the tet nodes after Bullet's step (bullet_common/bullet_peer_step.h;
+// README.md, "Contact with instruments").
 #pragma once
 
+#include <bullet_peer_step.h>
 #include <deform/model.h>
 #include <deform/params.h>
 
@@ -77,7 +80,6 @@ class BulletDeformableModel final : public Model {
  private:
   struct World;
   void build();
-  void pullPositions();
 
   DeformableConfig m_config;
   Real m_dt = 0;
@@ -88,11 +90,9 @@ class BulletDeformableModel final : public Model {
   std::vector<int> m_surfaceNode;
   VecX m_mass;
   std::vector<int> m_fixed;
-  Vec3 m_boxCenter = Vec3::Zero();
-  Real m_boxHalf = 0;
 
   std::unique_ptr<World> m_world;
-  std::vector<int> m_grasped;
+  bullet_peers::PeerStepState m_tail;  // grasped set, divergence box, contact scratch
   MatX3 m_x;
   MatX3 m_surface;
   PhaseTimes m_phase;

@@ -15,7 +15,8 @@ DEFORM_PLUGIN(registry) {
       "ACM TOG 37(2), doi:10.1145/3180491";
   info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp, C::PointForce, C::Gravity, C::TetInput, C::NeedsPrecompute};
+  info.capabilities = {C::Grasp,           C::PointForce, C::Gravity,        C::TetInput,
+                       C::NeedsPrecompute, C::Contact,    C::ContactReaction};
   info.params = deform::bullet_deformable::paramSpecs();
   info.create = [] { return std::make_unique<deform::bullet_deformable::BulletDeformableModel>(); };
   registry.add(std::move(info));

@@ -26,4 +26,7 @@ if(NOT TARGET deform_bullet_double)
   target_include_directories(deform_bullet_double SYSTEM INTERFACE ${DEFORM_BULLET_INCLUDE_DIR})
   target_compile_definitions(deform_bullet_double INTERFACE BT_USE_DOUBLE_PRECISION)
   target_link_libraries(deform_bullet_double INTERFACE ${_bt_libs})
+  # bullet_peer_step.h: the step tail (grasps, shared instrument contact, divergence) both peers use.
+  get_filename_component(_bt_common "${CMAKE_CURRENT_LIST_DIR}/../bullet_common" ABSOLUTE)
+  target_include_directories(deform_bullet_double INTERFACE ${_bt_common})
 endif()

@@ -6,7 +6,6 @@
 #include <btBulletDynamicsCommon.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 
 namespace deform::bullet_softbody {
@@ -140,8 +139,8 @@ void BulletSoftBodyModel::init(const Organ& organ, const SoftBodyConfig& config,
   m_mass = nodeArea * (totalMass / nodeArea.sum());
 
   const Box box = boundingBox(s.V);
-  m_boxCenter = box.center();
-  m_boxHalf = 0.5 * tol::kDivergenceBoxFactor * box.size().maxCoeff();
+  m_tail.boxCenter = box.center();
+  m_tail.boxHalf = 0.5 * tol::kDivergenceBoxFactor * box.size().maxCoeff();
 
   build();
 }
@@ -191,7 +190,9 @@ void BulletSoftBodyModel::build() {
   b.m_cfg.kDP = dampingCoefficient(m_config.damping, m_dt);
   b.m_cfg.kVC =
       m_config.volume ? m_config.volumeScale * volumeCoefficient(m_material, m_restVolume) : 0.0;
-  b.m_cfg.collisions = 0;  // nothing to collide with; no self collision
+  // Bullet's own collision stays off (no self collision); instruments are handled by the shared
+  // contact response after the step (bullet_peer_step.h).
+  b.m_cfg.collisions = 0;
   // setPose records the rest volume V0 for kVC and calls updateConstants (rest lengths, areas)
   // while the body is at rest. Afterwards m_bUpdateRtCst must stay false: Bullet's
   // updateConstants() would reset every rest length to the current (deformed) length, which is
@@ -202,33 +203,19 @@ void BulletSoftBodyModel::build() {
   b.setActivationState(DISABLE_DEACTIVATION);
   w.world.addSoftBody(&b);
 
-  m_grasped.clear();
-  pullPositions();
-}
-
-void BulletSoftBodyModel::pullPositions() {
-  const btSoftBody& b = *m_world->body;
-  m_x.resize(b.m_nodes.size(), 3);
-  for (int i = 0; i < b.m_nodes.size(); ++i)
-    for (int k = 0; k < 3; ++k) m_x(i, k) = b.m_nodes[i].m_x[k];
+  m_tail.grasped.clear();
+  bullet_peers::copyNodes(b, m_x);
 }
 
 StepStatus BulletSoftBodyModel::step(const StepInput& in) {
-  const auto t0 = std::chrono::steady_clock::now();
   World& w = *m_world;
   btSoftBody& b = *w.body;
   const Real dt = in.dt > 0 ? in.dt : m_dt;
   w.world.getWorldInfo().m_gravity = btVector3(in.gravity.x(), in.gravity.y(), in.gravity.z());
 
   // Kinematic grasped nodes: inverse mass 0 and the velocity that lands them on the target.
-  std::vector<int> grasped;
-  graspedNodeSet(in.grasps, grasped);
-  if (grasped != m_grasped) {
-    for (int i : m_grasped) b.m_nodes[i].m_im = w.inverseMass[i];
-    for (int i : grasped) b.m_nodes[i].m_im = 0;
+  if (bullet_peers::beginBulletStep(b, w.inverseMass, in.grasps, m_tail))
     b.updateLinkConstants();  // link c0 = (w_a + w_b) / kLST
-    m_grasped = grasped;
-  }
   for (const GraspInput& g : in.grasps)
     for (size_t k = 0; k < g.nodes.size(); ++k) {
       btSoftBody::Node& node = b.m_nodes[g.nodes[k]];
@@ -239,18 +226,7 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
     b.addForce(btVector3(l.force.x(), l.force.y(), l.force.z()), l.surfaceVertex);
 
   w.world.stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
-
-  for (const GraspInput& g : in.grasps)
-    for (size_t k = 0; k < g.nodes.size(); ++k)
-      b.m_nodes[g.nodes[k]].m_x = btVector3(g.targets(k, 0), g.targets(k, 1), g.targets(k, 2));
-  pullPositions();
-  m_phase["step"] =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-
-  if (!m_x.allFinite()) return StepStatus::Diverged;
-  if (((m_x.rowwise() - m_boxCenter.transpose()).cwiseAbs().maxCoeff()) > m_boxHalf)
-    return StepStatus::Diverged;
-  return StepStatus::Ok;
+  return bullet_peers::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);
 }
 
 void BulletSoftBodyModel::reset() {

@@ -23,9 +23,12 @@
 //     (as in classic PBD): it is a defensible starting point, not a physical stiffness;
 //   - kDP = 1 - exp(-c dt) for a velocity damping rate c (1/s), as our PBD's damping.
 // Fixed nodes have inverse mass 0; grasped nodes get inverse mass 0 and the velocity that moves
-// them onto their targets in the step (kinematic), their mass is restored on release.
+// them onto their targets in the step (kinematic), their mass is restored on release. Contact
+// with instruments: the SDK's shared response on the nodes after Bullet's step
+// (bullet_common/bullet_peer_step.h; README.md, "Contact with instruments").
 #pragma once
 
+#include <bullet_peer_step.h>
 #include <deform/model.h>
 #include <deform/params.h>
 
@@ -92,7 +95,6 @@ class BulletSoftBodyModel final : public Model {
  private:
   struct World;  // the Bullet objects, rebuilt by reset()
   void build();
-  void pullPositions();
 
   SoftBodyConfig m_config;
   Real m_dt = 0;
@@ -104,11 +106,9 @@ class BulletSoftBodyModel final : public Model {
   VecX m_mass;      // #V
   std::vector<int> m_fixed;
   Real m_restVolume = 0;
-  Vec3 m_boxCenter = Vec3::Zero();
-  Real m_boxHalf = 0;
 
   std::unique_ptr<World> m_world;
-  std::vector<int> m_grasped;  // sorted nodes kinematic in the last step
+  bullet_peers::PeerStepState m_tail;  // grasped set, divergence box, contact scratch
   MatX3 m_x;
   PhaseTimes m_phase;
 };

@@ -15,7 +15,7 @@ DEFORM_PLUGIN(registry) {
       "Position based dynamics, doi:10.1016/j.jvcir.2007.01.005";
   info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp, C::PointForce, C::Gravity};
+  info.capabilities = {C::Grasp, C::PointForce, C::Gravity, C::Contact, C::ContactReaction};
   info.params = deform::bullet_softbody::paramSpecs();
   info.create = [] { return std::make_unique<deform::bullet_softbody::BulletSoftBodyModel>(); };
   registry.add(std::move(info));

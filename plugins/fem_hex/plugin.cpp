@@ -93,8 +93,9 @@ DEFORM_PLUGIN(registry) {
       "corotational: Mueller & Gross 2004, Interactive virtual materials, Graphics Interface; "
       "Nesme et al. 2005, Efficient, physically plausible finite elements, Eurographics short";
   info.version = "1.0";
-  info.capabilities = {Capability::Grasp, Capability::PointForce, Capability::Gravity,
-                       Capability::ReactionForce, Capability::Contact};
+  info.capabilities = {Capability::Grasp,   Capability::PointForce,
+                       Capability::Gravity, Capability::ReactionForce,
+                       Capability::Contact, Capability::ContactReaction};
   info.params = deform::fem_hex::paramSpecs();
   info.create = [] { return std::make_unique<deform::fem_hex::FemHexModel>(); };
   registry.add(std::move(info));

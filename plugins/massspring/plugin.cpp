@@ -15,8 +15,8 @@ DEFORM_PLUGIN(registry) {
       "Large steps in cloth simulation, SIGGRAPH '98, doi:10.1145/280814.280821";
   info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp,         C::PointForce, C::Gravity,
-                       C::ReactionForce, C::TetInput,   C::Contact};
+  info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,        C::ReactionForce,
+                       C::TetInput, C::Contact,    C::ContactReaction};
   info.params = deform::massspring::paramSpecs();
   info.create = [] { return std::make_unique<deform::massspring::MassSpringModel>(); };
   registry.add(std::move(info));

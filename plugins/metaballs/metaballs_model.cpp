@@ -61,8 +61,9 @@ ModelInfo metaballsModelInfo() {
       "Pan, Zhao, Zhao, Hao, Qin 2015, Metaballs-based physical modeling and deformation of "
       "organs for virtual surgery, The Visual Computer 31, doi:10.1007/s00371-015-1092-2";
   info.version = "1.0";
-  info.capabilities = {Capability::Grasp, Capability::PointForce, Capability::Gravity,
-                       Capability::NeedsPrecompute, Capability::Contact};
+  info.capabilities = {Capability::Grasp,   Capability::PointForce,
+                       Capability::Gravity, Capability::NeedsPrecompute,
+                       Capability::Contact, Capability::ContactReaction};
   info.params = metaballsParams();
   info.create = [] { return std::make_unique<MetaballsModel>(); };
   return info;

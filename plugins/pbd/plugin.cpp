@@ -15,8 +15,8 @@ DEFORM_PLUGIN(registry) {
       "XPBD, MIG '16, doi:10.1145/2994258.2994272";
   info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp,         C::PointForce, C::Gravity,
-                       C::ReactionForce, C::TetInput,   C::Contact};
+  info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,        C::ReactionForce,
+                       C::TetInput, C::Contact,    C::ContactReaction};
   info.params = deform::pbd::paramSpecs();
   info.create = [] { return std::make_unique<deform::pbd::PbdModel>(); };
   registry.add(std::move(info));

@@ -267,9 +267,10 @@ DEFORM_PLUGIN(registry) {
       "Gross, Graphics Interface 2004; Neo-Hookean (isochoric/volumetric split): Bonet & Wood, "
       "Nonlinear Continuum Mechanics for FEA, 2nd ed. 2008, doi:10.1017/CBO9780511755446";
   info.version = "1.0";
-  info.capabilities = {Capability::Grasp,         Capability::PointForce,      Capability::Gravity,
-                       Capability::ReactionForce, Capability::NeedsPrecompute, Capability::TetInput,
-                       Capability::QuasiStatic,   Capability::Contact};
+  info.capabilities = {
+      Capability::Grasp,         Capability::PointForce,      Capability::Gravity,
+      Capability::ReactionForce, Capability::NeedsPrecompute, Capability::TetInput,
+      Capability::QuasiStatic,   Capability::Contact,         Capability::ContactReaction};
   info.params = reffem::referenceFemParams();
   info.create = [] { return std::make_unique<reffem::ReferenceFemModel>(); };
   registry.add(std::move(info));

@@ -15,6 +15,8 @@ namespace {
 
 using deform::testing::bottomSlab;
 using deform::testing::maxDisplacement;
+using deform::testing::pressProbe;
+using deform::testing::ProbeRun;
 using deform::testing::topGrasp;
 
 constexpr Real kDt = 1e-3;
@@ -201,6 +203,32 @@ TEST_P(BulletDeformableForces, NoNanOverAGraspLift) {
     ASSERT_EQ(m.step(in), StepStatus::Ok) << "step " << s;
     ASSERT_TRUE(m.nodes().allFinite());
   }
+}
+
+TEST_P(BulletDeformableForces, APressedProbeKeepsNodesOutPushesTheBodyAndFeelsTheTissue) {
+  // As for bullet_softbody: no movable node ends a step inside the probe, the correction reaches
+  // Bullet's body (nodes the probe never came near follow), the tissue pushes the probe up.
+  const TetMesh& t = liverTets();
+  const std::vector<int> fixed = bottomSlab(t.V, 0.15);
+  DeformableConfig c;
+  c.force = GetParam();
+  BulletDeformableModel m;
+  m.init(t, identitySurface(), material(), c, kDt, fixed);
+  const Real r = 0.01, depth = 0.008;
+  const ProbeRun run = pressProbe(m, t.V, fixed, r, depth, 40, 20, kDt);
+  std::printf(
+      "bullet_deformable probe: worst %.3g m, top drop %.3g m, reaction z min %.3g N, last %.3g N, "
+      "%d far nodes moved, %d contact steps\n",
+      run.worst, run.topDrop, run.minReactionZ, run.lastReactionZ, run.farNodesMoved,
+      run.contactSteps);
+  EXPECT_TRUE(run.allOk);
+  EXPECT_GE(run.worst, -1e-9) << "a node ended a step inside the probe";
+  EXPECT_GT(run.topDrop, 0.5 * depth);
+  EXPECT_GE(run.contactSteps, 20);
+  EXPECT_GT(run.minReactionZ, 0.0) << "the tissue must push the probe up";
+  // Held 8 mm deep, the tissue pushes back with a finite force (not only round-off).
+  EXPECT_GT(run.lastReactionZ, 1e-3);
+  EXPECT_GT(run.farNodesMoved, 0);
 }
 
 INSTANTIATE_TEST_SUITE_P(Forces, BulletDeformableForces,

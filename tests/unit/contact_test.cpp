@@ -388,6 +388,8 @@ TEST(InstrumentScene, ToolsAndObjectsNeedTheirCapabilities) {
   info.capabilities.push_back(Capability::Contact);
   EXPECT_NE(harness::unsupportedReason(info, s).find("reaction_force"), std::string::npos);
   info.capabilities.push_back(Capability::ReactionForce);
+  EXPECT_NE(harness::unsupportedReason(info, s).find("contact_reaction"), std::string::npos);
+  info.capabilities.push_back(Capability::ContactReaction);
   EXPECT_EQ(harness::unsupportedReason(info, s), "");
   EXPECT_STREQ(capabilityName(Capability::Contact), "contact");
 }

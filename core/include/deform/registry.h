@@ -17,6 +17,10 @@
 
 /// Bumped whenever model.h, registry.h or anything they include changes layout.
 // 2: StepInput::contact (rigid instruments, deform/contact.h) and Capability::Contact.
+// Capability::ContactReaction was appended to the enum without a bump: no layout changed, the
+// existing enumerators keep their values, and a plugin built before it simply never declares it
+// (the harness then reports it unsupported on scenes with rigid objects, as for any capability
+// it lacks). Append new capabilities at the end; never reorder or renumber them.
 #define DEFORM_ABI_VERSION 2
 
 namespace deform {
@@ -31,7 +35,14 @@ enum class Capability {
   TetInput,         ///< "tet_input": uses Organ::volume when present
   QuasiStatic,      ///< "quasi_static": each step is an equilibrium solve (no inertia)
   Contact,          ///< "contact": keeps its proxy out of StepInput::contact's instruments
+  /// "contact_reaction": the whole force its contact response exerts on the instruments is
+  /// reported to StepInput::contact (ContactWorld::addReaction), so a free rigid object rests on
+  /// the organ and a probe feels the tissue. Required by scenes with rigid objects.
+  ContactReaction,
 };
+
+/// The capability named `name` (the spelling capabilityName() gives); false when unknown.
+bool capabilityFromName(const std::string& name, Capability& out);
 
 /// Name used in scene files, `deformbench plugins` and results.json ("point_force", ...).
 const char* capabilityName(Capability c);

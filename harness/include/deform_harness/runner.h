@@ -120,8 +120,8 @@ std::vector<int> quasiStaticSolveSteps(const Scene& scene, int lastStep = -1);
 std::vector<int> comparedSteps(const Scene& scene, int lastStep = -1);
 
 /// Why a model cannot run this scene ("" when it can): a grasper without the grasp capability,
-/// a probe or a rigid object without contact, a grasper with dynamics without reaction_force,
-/// a load without point_force.
+/// a probe or a rigid object without contact, a rigid object without contact_reaction, a grasper
+/// with dynamics without reaction_force, a load without point_force.
 std::string unsupportedReason(const ModelInfo& info, const Scene& scene);
 
 /// Runs one model from creation to the end of the scene. Fills every field but the output files

@@ -1,0 +1,118 @@
+// What the two Bullet peer plugins (bullet_softbody: btSoftBody on the organ surface;
+// bullet_deformable: btDeformableBody on a tet mesh) do around Bullet's own step, in one place.
+// Not a plugin: a header both include (through the deform_bullet_double target).
+//
+// Before the step: grasped nodes become kinematic (Bullet inverse mass 0; the model gives them the
+// velocity that lands them on their targets), released nodes get their inverse mass back.
+//
+// After the step (finishBulletStep):
+//   1. grasped nodes are put exactly on their targets;
+//   2. contact with the scene's rigid instruments (StepInput::contact) by the SDK's shared
+//      response, the same for every model (deform/contact.h, resolveContacts()): each node is a
+//      sphere of the contact thickness; a penetrating node i with inverse mass w_i > 0 moves out,
+//        x_i += d n,   v_i -= min(v_i . n, 0) n
+//      (Mueller et al. 2007, "Position based dynamics", Sec. 3.5, Eq. (9)-(10), static collider,
+//      plus an inelastic normal velocity), and -m_i (dx_i / dt + dv_i) / dt is reported to the
+//      instrument as the tissue's reaction. Bullet's own collision pipeline stays off
+//      (m_cfg.collisions = 0): the response is applied after Bullet's step, to its node positions
+//      and velocities, which are written back so that Bullet's next step starts from them;
+//   3. the nodes are copied out (and the organ's surface vertices, when they are a subset);
+//   4. divergence: NaN/Inf, or a node outside the cube of half side boxHalf about boxCenter.
+#pragma once
+
+#include <BulletSoftBody/btSoftBody.h>
+#include <deform/contact.h>
+#include <deform/model.h>
+
+#include <chrono>
+#include <vector>
+
+namespace deform::bullet_peers {
+
+/// Per-model state of the shared step tail. Scratch members keep their capacity across steps.
+struct PeerStepState {
+  Vec3 boxCenter = Vec3::Zero();  ///< m, centre of the divergence cube
+  Real boxHalf = 0;               ///< m, its half side
+  std::vector<int> grasped;       ///< sorted nodes kinematic in the last step
+  std::vector<int> graspScratch;
+  MatX3 velocity;  ///< #N by 3, m/s (contact only)
+  VecX invMass;    ///< #N, 1/kg (contact only)
+  MatX3 before;    ///< #N by 3, positions before the contact response
+  std::chrono::steady_clock::time_point start;
+};
+
+/// Makes the grasped nodes of `grasps` kinematic (inverse mass 0) and gives released nodes
+/// inverseMass back; records the step's start time. Returns true when the set changed (the
+/// caller refreshes whatever Bullet derives from the inverse masses).
+inline bool beginBulletStep(btSoftBody& b, const std::vector<btScalar>& inverseMass,
+                            const std::vector<GraspInput>& grasps, PeerStepState& s) {
+  s.start = std::chrono::steady_clock::now();
+  graspedNodeSet(grasps, s.graspScratch);
+  if (s.graspScratch == s.grasped) return false;
+  for (int i : s.grasped) b.m_nodes[i].m_im = inverseMass[size_t(i)];
+  for (int i : s.graspScratch) b.m_nodes[i].m_im = 0;
+  s.grasped.swap(s.graspScratch);
+  return true;
+}
+
+/// Node positions of b into x (#N by 3).
+inline void copyNodes(const btSoftBody& b, MatX3& x) {
+  x.resize(b.m_nodes.size(), 3);
+  for (int i = 0; i < b.m_nodes.size(); ++i)
+    for (int k = 0; k < 3; ++k) x(i, k) = b.m_nodes[i].m_x[k];
+}
+
+/// Steps 1-4 of the header comment after Bullet's stepSimulation(). x: the model's nodes (out).
+/// surfaceNode / surface: when given, surface row i = x row surfaceNode[i]. phase: "step" (the
+/// whole step since beginBulletStep()) and "contact" (the response alone) in ms.
+inline StepStatus finishBulletStep(btSoftBody& b, const StepInput& in, Real dt, PeerStepState& s,
+                                   MatX3& x, PhaseTimes& phase,
+                                   const std::vector<int>* surfaceNode = nullptr,
+                                   MatX3* surface = nullptr) {
+  using Clock = std::chrono::steady_clock;
+  for (const GraspInput& g : in.grasps)
+    for (size_t k = 0; k < g.nodes.size(); ++k)
+      b.m_nodes[g.nodes[k]].m_x = btVector3(g.targets(k, 0), g.targets(k, 1), g.targets(k, 2));
+  copyNodes(b, x);
+
+  const auto c0 = Clock::now();
+  if (in.contact) {
+    const int n = b.m_nodes.size();
+    s.velocity.resize(n, 3);
+    s.invMass.resize(n);
+    for (int i = 0; i < n; ++i) {
+      const btSoftBody::Node& node = b.m_nodes[i];
+      for (int k = 0; k < 3; ++k) s.velocity(i, k) = node.m_v[k];
+      s.invMass[i] = node.m_im;  // 0 for fixed and grasped nodes: they stay
+    }
+    s.before = x;
+    const ContactResolution r = resolveContacts(*in.contact, x, s.invMass, dt, &s.velocity);
+    if (r.contacts > 0) {
+      // Only moved nodes are written back: Bullet's state of every other node stays bit for bit.
+      for (int i = 0; i < n; ++i) {
+        if (x.row(i) == s.before.row(i)) continue;
+        btSoftBody::Node& node = b.m_nodes[i];
+        node.m_x = btVector3(x(i, 0), x(i, 1), x(i, 2));
+        node.m_v = btVector3(s.velocity(i, 0), s.velocity(i, 1), s.velocity(i, 2));
+        node.m_vn = node.m_v;
+      }
+      b.updateNormals();  // the volume force of the next step reads the face normals
+    }
+  }
+  const auto c1 = Clock::now();
+
+  if (surfaceNode && surface) {
+    surface->resize(Eigen::Index(surfaceNode->size()), 3);
+    for (size_t i = 0; i < surfaceNode->size(); ++i)
+      surface->row(Eigen::Index(i)) = x.row((*surfaceNode)[i]);
+  }
+  phase["step"] = std::chrono::duration<double, std::milli>(Clock::now() - s.start).count();
+  if (in.contact) phase["contact"] = std::chrono::duration<double, std::milli>(c1 - c0).count();
+
+  if (!x.allFinite()) return StepStatus::Diverged;
+  if ((x.rowwise() - s.boxCenter.transpose()).cwiseAbs().maxCoeff() > s.boxHalf)
+    return StepStatus::Diverged;
+  return StepStatus::Ok;
+}
+
+}  // namespace deform::bullet_peers
