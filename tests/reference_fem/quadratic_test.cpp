@@ -479,3 +479,29 @@ TEST(QuadraticTet, LiverRichardsonWithinOnePercent) {
   EXPECT_FALSE(p1.withinOnePercent);
   EXPECT_LT(p1.levels[2].peakDisplacement, 0.95 * peak);
 }
+
+// Implicit Euler with the HRZ-lumped mass and consistent gravity settles to the static P2
+// solution (a beam sagging under gravity, Rayleigh damping).
+TEST(QuadraticTet, DynamicImplicitEulerSettlesToStaticSolution) {
+  const TetMesh mesh =
+      structuredBoxTets(Vec3(0, -kB / 2, -kH / 2), Vec3(kL, kB / 2, kH / 2), Vec3i(10, 1, 1));
+  const FemSystem sys(mesh, material(1e6, kNu, kRho), MaterialModel::NeoHookean,
+                      ElementOrder::Quadratic);
+  LoadCase lc;
+  for (int i = 0; i < sys.numNodes(); ++i)
+    if (std::abs(sys.rest().V(i, 0)) < 1e-12) lc.fixedNodes.push_back(i);
+  lc.gravity = Vec3(0, 0, -9.81);
+  SolveReport rep;
+  const VecX xs = solveEquilibrium(sys, lc, {}, &rep);
+  ASSERT_TRUE(rep.converged);
+  EquilibriumSolver solver(sys);
+  VecX x = sys.restPositions(), v = VecX::Zero(x.size());
+  Real firstSag = 0;
+  for (int step = 0; step < 400; ++step) {
+    ASSERT_TRUE(solver.stepDynamic(lc, 5e-3, 5.0, 1e-3, x, v).converged) << step;
+    if (step == 0) firstSag = tipDeflection(sys, x);
+  }
+  EXPECT_GT(tipDeflection(sys, xs), 0.005);
+  EXPECT_LT(firstSag, 0.2 * tipDeflection(sys, xs));
+  EXPECT_NEAR(tipDeflection(sys, x), tipDeflection(sys, xs), 1e-3 * tipDeflection(sys, xs));
+}
