@@ -10,15 +10,16 @@ namespace {
 
 ConvergenceLevel solveLevel(const TetMesh& mesh, int numSurface, const Material& material,
                             MaterialModel model, const LoadCaseBuilder& loads,
-                            const SolveOptions& solve) {
+                            const SolveOptions& solve, ElementOrder order) {
   ConvergenceLevel L;
   L.elements = mesh.numTets();
   L.nodes = mesh.numVertices();
   const SurfaceMesh b = tetBoundary(mesh);
   L.h = std::cbrt(signedVolume(b.V, b.F) / Real(mesh.numTets()));
-  FemSystem sys(mesh, material, model);
+  FemSystem sys(mesh, material, model, order);
+  L.nodes = sys.numNodes();
   SolveReport rep;
-  const VecX x = solveEquilibrium(sys, loads(mesh), solve, &rep);
+  const VecX x = solveEquilibrium(sys, loads(sys), solve, &rep);
   L.converged = rep.converged;
   L.solveSeconds = rep.seconds;
   L.surfaceDisplacement.resize(numSurface, 3);
@@ -84,10 +85,10 @@ void richardson(ConvergenceStudy& s, const std::vector<char>& include) {
 ConvergenceStudy runConvergenceStudyOnMeshes(const std::vector<TetMesh>& meshes, int numSurface,
                                              const Material& material, MaterialModel model,
                                              const LoadCaseBuilder& loads,
-                                             const SolveOptions& solve) {
+                                             const SolveOptions& solve, ElementOrder order) {
   ConvergenceStudy s;
   for (const TetMesh& m : meshes)
-    s.levels.push_back(solveLevel(m, numSurface, material, model, loads, solve));
+    s.levels.push_back(solveLevel(m, numSurface, material, model, loads, solve, order));
   richardson(s, {});
   return s;
 }
@@ -97,7 +98,7 @@ ConvergenceStudy runConvergenceStudy(const SurfaceMesh& surface, const Material&
                                      const std::vector<long long>& elementCounts,
                                      const SolveOptions& solve,
                                      const std::vector<Vec3>& excludeNear, Real excludeRadius,
-                                     const std::string& source) {
+                                     const std::string& source, ElementOrder order) {
   ConvergenceStudy s;
   for (long long count : elementCounts) {
     TetMeshOptions o;
@@ -105,7 +106,8 @@ ConvergenceStudy runConvergenceStudy(const SurfaceMesh& surface, const Material&
     o.refineSurface = true;
     o.source = source;
     const TetMeshResult r = tetrahedralize(surface, o);
-    ConvergenceLevel L = solveLevel(r.mesh, surface.numVertices(), material, model, loads, solve);
+    ConvergenceLevel L =
+        solveLevel(r.mesh, surface.numVertices(), material, model, loads, solve, order);
     L.meshSeconds = r.seconds;
     s.levels.push_back(std::move(L));
   }

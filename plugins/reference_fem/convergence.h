@@ -40,8 +40,9 @@ struct ConvergenceStudy {
   bool withinOnePercent = false;  ///< asymptotic && relativeError <= 0.01
 };
 
-/// Builds the load case for a given tet mesh (nodes 0..#V-1 are the input surface vertices).
-using LoadCaseBuilder = std::function<LoadCase(const TetMesh&)>;
+/// Builds the load case for a given system (nodes 0..#V-1 are the input surface vertices; with
+/// quadratic elements the midside nodes follow, see FemSystem::rest()).
+using LoadCaseBuilder = std::function<LoadCase(const FemSystem&)>;
 
 /// Meshes `surface` at each target element count (refining the surface edges with the interior,
 /// see TetMeshOptions::refineSurface), solves the static problem from rest and estimates the
@@ -53,7 +54,8 @@ ConvergenceStudy runConvergenceStudy(const SurfaceMesh& surface, const Material&
                                      const std::vector<long long>& elementCounts,
                                      const SolveOptions& solve = {},
                                      const std::vector<Vec3>& excludeNear = {},
-                                     Real excludeRadius = 0, const std::string& source = "");
+                                     Real excludeRadius = 0, const std::string& source = "",
+                                     ElementOrder order = ElementOrder::Linear);
 
 /// Richardson analysis of three already-solved levels (fills observedOrder and the estimates).
 void richardson(ConvergenceStudy& study, const std::vector<char>& includeVertex);
@@ -63,6 +65,7 @@ void richardson(ConvergenceStudy& study, const std::vector<char>& includeVertex)
 ConvergenceStudy runConvergenceStudyOnMeshes(const std::vector<TetMesh>& meshes, int numSurface,
                                              const Material& material, MaterialModel model,
                                              const LoadCaseBuilder& loads,
-                                             const SolveOptions& solve = {});
+                                             const SolveOptions& solve = {},
+                                             ElementOrder order = ElementOrder::Linear);
 
 }  // namespace deform::reffem

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <string>
 
 namespace deform::reffem {
 
@@ -74,18 +75,68 @@ const char* materialModelName(MaterialModel m) {
 
 // ---- FemSystem ------------------------------------------------------------------------------
 
+ElementOrder parseElementOrder(long long order) {
+  if (order == 1) return ElementOrder::Linear;
+  if (order == 2) return ElementOrder::Quadratic;
+  throw InputError(
+      "", "params.element_order",
+      "element order must be 1 (4-node tets) or 2 (10-node tets), got " + std::to_string(order));
+}
+
 FemSystem::FemSystem(TetMesh rest, const Material& material, MaterialModel model,
                      CorotationalTangent corotationalTangent)
+    : FemSystem(std::move(rest), material, model, ElementOrder::Linear, corotationalTangent) {}
+
+void FemSystem::addMidsideNodes() {
+  const int nt = m_rest.numTets();
+  std::vector<std::pair<int, int>> all;
+  all.reserve(size_t(6 * nt));
+  for (int t = 0; t < nt; ++t)
+    for (const auto& e : kQuadraticEdges) {
+      const int a = m_rest.T(t, e[0]), b = m_rest.T(t, e[1]);
+      all.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  std::sort(all.begin(), all.end());
+  all.erase(std::unique(all.begin(), all.end()), all.end());
+  m_edges = std::move(all);
+  m_rest.V.conservativeResize(Eigen::Index(m_numCorners + int(m_edges.size())), 3);
+  for (size_t k = 0; k < m_edges.size(); ++k)
+    m_rest.V.row(Eigen::Index(m_numCorners + int(k))) =
+        0.5 * (m_rest.V.row(m_edges[k].first) + m_rest.V.row(m_edges[k].second));
+  for (int t = 0; t < nt; ++t)
+    for (int e = 0; e < 6; ++e)
+      m_elemNodes[size_t(10 * t + 4 + e)] =
+          edgeNode(m_rest.T(t, kQuadraticEdges[e][0]), m_rest.T(t, kQuadraticEdges[e][1]));
+}
+
+int FemSystem::edgeNode(int a, int b) const {
+  const std::pair<int, int> key(std::min(a, b), std::max(a, b));
+  const auto it = std::lower_bound(m_edges.begin(), m_edges.end(), key);
+  if (it == m_edges.end() || *it != key) return -1;
+  return m_numCorners + int(it - m_edges.begin());
+}
+
+FemSystem::FemSystem(TetMesh rest, const Material& material, MaterialModel model,
+                     ElementOrder order, CorotationalTangent corotationalTangent)
     : m_rest(std::move(rest)),
       m_material(material),
       m_model(model),
+      m_order(order),
       m_lame(LameParameters::fromYoungPoisson(material.young, material.poisson)),
-      m_corotationalTangent(corotationalTangent) {
+      m_corotationalTangent(corotationalTangent),
+      m_numCorners(m_rest.numVertices()) {
+  const int nt = m_rest.numTets(), nen = nodesPerElement();
+  m_elemNodes.resize(size_t(nt * nen));
+  for (int t = 0; t < nt; ++t)
+    for (int a = 0; a < 4; ++a) m_elemNodes[size_t(nen * t + a)] = m_rest.T(t, a);
+  if (order == ElementOrder::Quadratic) addMidsideNodes();
   const int n = m_rest.numVertices();
-  m_elements.resize(size_t(m_rest.numTets()));
+  m_elements.resize(size_t(nt));
+  if (order == ElementOrder::Quadratic) m_quadElements.resize(size_t(nt));
   m_mass = VecX::Zero(n);
+  m_gravityWeight = VecX::Zero(n);
   std::vector<std::vector<int>> nbrs(static_cast<size_t>(n));
-  for (int t = 0; t < m_rest.numTets(); ++t) {
+  for (int t = 0; t < nt; ++t) {
     const Vec4i tet = m_rest.T.row(t).transpose();
     TetRest& r = m_elements[size_t(t)];
     if (!makeTetRest(m_rest.V.row(tet(0)), m_rest.V.row(tet(1)), m_rest.V.row(tet(2)),
@@ -93,9 +144,18 @@ FemSystem::FemSystem(TetMesh rest, const Material& material, MaterialModel model
       ++m_degenerate;
       continue;
     }
-    for (int a = 0; a < 4; ++a) {
-      m_mass(tet(a)) += material.density * r.volume / 4.0;
-      for (int b = 0; b < 4; ++b) nbrs[size_t(tet(a))].push_back(tet(b));
+    const Real m = material.density * r.volume;
+    if (order == ElementOrder::Quadratic) m_quadElements[size_t(t)] = makeQuadraticTetRest(r);
+    for (int a = 0; a < nen; ++a) {
+      const int na = m_elemNodes[size_t(nen * t + a)];
+      if (order == ElementOrder::Quadratic) {
+        m_mass(na) += m * (a < 4 ? kQuadraticCornerMass : kQuadraticMidsideMass);
+        m_gravityWeight(na) += m * (a < 4 ? kQuadraticCornerShare : kQuadraticMidsideShare);
+      } else {
+        m_mass(na) += m / 4.0;
+        m_gravityWeight(na) += m / 4.0;
+      }
+      for (int b = 0; b < nen; ++b) nbrs[size_t(na)].push_back(m_elemNodes[size_t(nen * t + b)]);
     }
   }
   for (int i = 0; i < n; ++i) {  // every node couples to itself (isolated nodes too)
@@ -120,19 +180,22 @@ FemSystem::FemSystem(TetMesh rest, const Material& material, MaterialModel model
     }
   outer[3 * n] = pos;
   std::fill(m_pattern.valuePtr(), m_pattern.valuePtr() + nnz, 0.0);
-  m_slots.resize(size_t(m_rest.numTets()));
-  for (int t = 0; t < m_rest.numTets(); ++t) {
+  const int nd = 3 * nen;  // element dofs
+  m_slots.assign(size_t(nt) * size_t(nd * nd), 0);
+  for (int t = 0; t < nt; ++t) {
     if (!(m_elements[size_t(t)].volume > 0)) continue;
-    const Vec4i tet = m_rest.T.row(t).transpose();
-    for (int bj = 0; bj < 4; ++bj)
-      for (int ai = 0; ai < 4; ++ai) {
-        const auto& col = nbrs[size_t(tet(bj))];
-        const int off = int(std::lower_bound(col.begin(), col.end(), tet(ai)) - col.begin());
+    int* slot = m_slots.data() + size_t(t) * size_t(nd * nd);
+    for (int bj = 0; bj < nen; ++bj) {
+      const int nb = m_elemNodes[size_t(nen * t + bj)];
+      const auto& col = nbrs[size_t(nb)];
+      for (int ai = 0; ai < nen; ++ai) {
+        const int na = m_elemNodes[size_t(nen * t + ai)];
+        const int off = int(std::lower_bound(col.begin(), col.end(), na) - col.begin());
         for (int kb = 0; kb < 3; ++kb)
           for (int ka = 0; ka < 3; ++ka)
-            m_slots[size_t(t)][size_t((3 * bj + kb) * 12 + 3 * ai + ka)] =
-                outer[3 * tet(bj) + kb] + 3 * off + ka;
+            slot[(3 * bj + kb) * nd + 3 * ai + ka] = outer[3 * nb + kb] + 3 * off + ka;
       }
+    }
   }
 }
 
@@ -155,9 +218,30 @@ VecX FemSystem::restPositions() const {
   return Eigen::Map<const VecX>(MatX3(m_rest.V).data(), 3 * numNodes());
 }
 
+namespace {
+
+Mat3x10 gatherQuadratic(const VecX& x, const int* nodes) {
+  Mat3x10 p;
+  for (int a = 0; a < 10; ++a) p.col(a) = x.segment<3>(3 * nodes[a]);
+  return p;
+}
+
+}  // namespace
+
 Real FemSystem::elasticEnergy(const VecX& x) const {
   Real W = 0;
   forEachMaterial([&](const auto& mat) {
+    if (m_order == ElementOrder::Quadratic) {
+      QuadraticTetEvaluation e;
+      for (int t = 0; t < m_rest.numTets(); ++t) {
+        if (!(m_elements[size_t(t)].volume > 0)) continue;
+        evaluateQuadraticTet(mat, m_quadElements[size_t(t)],
+                             gatherQuadratic(x, &m_elemNodes[size_t(10 * t)]), TetEvalMode::Energy,
+                             e);
+        W += e.energy;
+      }
+      return;
+    }
     TetEvaluation e;
     for (int t = 0; t < m_rest.numTets(); ++t) {
       const TetRest& r = m_elements[size_t(t)];
@@ -172,6 +256,21 @@ Real FemSystem::elasticEnergy(const VecX& x) const {
 void FemSystem::elasticGradient(const VecX& x, VecX& g) const {
   g = VecX::Zero(3 * numNodes());
   forEachMaterial([&](const auto& mat) {
+    if (m_order == ElementOrder::Quadratic) {
+      QuadraticTetEvaluation e;
+      for (int t = 0; t < m_rest.numTets(); ++t) {
+        if (!(m_elements[size_t(t)].volume > 0)) continue;
+        const int* nodes = &m_elemNodes[size_t(10 * t)];
+        evaluateQuadraticTet(mat, m_quadElements[size_t(t)], gatherQuadratic(x, nodes),
+                             TetEvalMode::Gradient, e);
+        if (!std::isfinite(e.energy)) {  // inverted at a quadrature point: no stress defined
+          g.setConstant(std::numeric_limits<Real>::quiet_NaN());
+          return;
+        }
+        for (int a = 0; a < 10; ++a) g.segment<3>(3 * nodes[a]) += e.gradient.segment<3>(3 * a);
+      }
+      return;
+    }
     TetEvaluation e;
     for (int t = 0; t < m_rest.numTets(); ++t) {
       const TetRest& r = m_elements[size_t(t)];
@@ -186,22 +285,36 @@ void FemSystem::elasticGradient(const VecX& x, VecX& g) const {
 void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const {
   values = VecX::Zero(m_pattern.nonZeros());
   forEachMaterial([&](const auto& mat) {
+    if (m_order == ElementOrder::Quadratic) {
+      QuadraticTetEvaluation e;
+      for (int t = 0; t < m_rest.numTets(); ++t) {
+        if (!(m_elements[size_t(t)].volume > 0)) continue;
+        evaluateQuadraticTet(mat, m_quadElements[size_t(t)],
+                             gatherQuadratic(x, &m_elemNodes[size_t(10 * t)]),
+                             TetEvalMode::Stiffness, e, projectSpd);
+        if (!std::isfinite(e.energy)) continue;  // inverted: contributes nothing
+        const int* slot = m_slots.data() + size_t(t) * 900;
+        const Real* k = e.stiffness.data();  // column-major, matches the slot order
+        for (int i = 0; i < 900; ++i) values(slot[i]) += k[i];
+      }
+      return;
+    }
     TetEvaluation e;
     for (int t = 0; t < m_rest.numTets(); ++t) {
       const TetRest& r = m_elements[size_t(t)];
       if (!(r.volume > 0)) continue;
       evaluateTet(mat, r, gather(x, m_rest.T.row(t).transpose()), TetEvalMode::Stiffness, e,
                   projectSpd);
-      const auto& slot = m_slots[size_t(t)];
+      const int* slot = m_slots.data() + size_t(t) * 144;
       const Real* k = e.stiffness.data();  // column-major, matches the slot order
-      for (int i = 0; i < 144; ++i) values(slot[size_t(i)]) += k[i];
+      for (int i = 0; i < 144; ++i) values(slot[i]) += k[i];
     }
   });
 }
 
 VecX FemSystem::externalForce(const LoadCase& loads) const {
   VecX f(3 * numNodes());
-  for (int i = 0; i < numNodes(); ++i) f.segment<3>(3 * i) = m_mass(i) * loads.gravity;
+  for (int i = 0; i < numNodes(); ++i) f.segment<3>(3 * i) = m_gravityWeight(i) * loads.gravity;
   for (const auto& [node, force] : loads.nodeForces) f.segment<3>(3 * node) += force;
   return f;
 }
@@ -634,6 +747,27 @@ std::vector<std::pair<int, Vec3>> tractionForces(const TetMesh& mesh, const Vec3
   return {acc.begin(), acc.end()};
 }
 
+std::vector<std::pair<int, Vec3>> tractionForces(const FemSystem& system, const Vec3& traction,
+                                                 const std::function<bool(const Vec3&)>& select) {
+  if (system.order() != ElementOrder::Quadratic)
+    return tractionForces(system.rest(), traction, select);
+  const TetMesh& mesh = system.rest();
+  const SurfaceMesh b = tetBoundary(mesh);
+  std::map<int, Vec3> acc;
+  for (int f = 0; f < b.numFaces(); ++f) {
+    const Vec3 p0 = mesh.V.row(b.F(f, 0)), p1 = mesh.V.row(b.F(f, 1)), p2 = mesh.V.row(b.F(f, 2));
+    if (!select(p0) || !select(p1) || !select(p2)) continue;
+    const Real area = 0.5 * (p1 - p0).cross(p2 - p0).norm();
+    // integral of the 6-node triangle's shape functions: 0 at corners, area / 3 at midsides.
+    for (int k = 0; k < 3; ++k) {
+      const int m = system.edgeNode(b.F(f, k), b.F(f, (k + 1) % 3));
+      auto [it, fresh] = acc.try_emplace(m, Vec3::Zero());
+      it->second += area / 3.0 * traction;
+    }
+  }
+  return {acc.begin(), acc.end()};
+}
+
 PointLoadSpreader::PointLoadSpreader(const TetMesh& mesh)
     : m_rest(mesh.V),
       m_area(VecX::Zero(mesh.numVertices())),
@@ -652,6 +786,21 @@ PointLoadSpreader::PointLoadSpreader(const TetMesh& mesh)
   for (auto& n : m_neighbors) {
     std::sort(n.begin(), n.end());
     n.erase(std::unique(n.begin(), n.end()), n.end());
+  }
+}
+
+PointLoadSpreader::PointLoadSpreader(const FemSystem& system) : PointLoadSpreader(system.rest()) {
+  if (system.order() != ElementOrder::Quadratic) return;
+  const SurfaceMesh b = tetBoundary(system.rest());
+  m_nodeFaces.resize(size_t(system.numNodes()));
+  for (int f = 0; f < b.numFaces(); ++f) {
+    std::array<int, 6> n{};
+    for (int k = 0; k < 3; ++k) {
+      n[size_t(k)] = b.F(f, k);
+      n[size_t(3 + k)] = system.edgeNode(b.F(f, k), b.F(f, (k + 1) % 3));
+      m_nodeFaces[size_t(b.F(f, k))].push_back(int(m_quadFaces.size()));
+    }
+    m_quadFaces.push_back(n);
   }
 }
 
@@ -678,6 +827,7 @@ PointLoadPatch PointLoadSpreader::patch(int c, Real radius) const {
       p.nodes.push_back(n);
     }
   }
+  if (!m_quadFaces.empty()) return quadraticPatch(std::move(p));
   std::vector<Real> k;
   for (int i : p.nodes) {
     const Real rho = (m_rest.row(i).transpose() - centre).norm() / p.radius;
@@ -687,6 +837,73 @@ PointLoadPatch PointLoadSpreader::patch(int c, Real radius) const {
   for (Real w : k) sum += w;
   for (Real w : k) p.weights.push_back(w / sum);
   return p;
+}
+
+PointLoadPatch PointLoadSpreader::quadraticPatch(PointLoadPatch p) const {
+  const Vec3 centre = m_rest.row(p.nodes[0]).transpose();
+  std::vector<int> faces;
+  for (int i : p.nodes)
+    for (int f : m_nodeFaces[size_t(i)]) faces.push_back(f);
+  std::sort(faces.begin(), faces.end());
+  faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+  // 6-point degree-4 rule on the triangle (Strang & Fix 1973, table 4.1): barycentric
+  // (a, a, 1 - 2a) with weight wa and (b, b, 1 - 2b) with weight wb, and their permutations.
+  constexpr Real a = 0.445948490915965, wa = 0.223381589678011;
+  constexpr Real b = 0.091576213509771, wb = 0.109951743655322;
+  const std::array<std::pair<Vec3, Real>, 6> rule = {{{Vec3(a, a, 1 - 2 * a), wa},
+                                                      {Vec3(a, 1 - 2 * a, a), wa},
+                                                      {Vec3(1 - 2 * a, a, a), wa},
+                                                      {Vec3(b, b, 1 - 2 * b), wb},
+                                                      {Vec3(b, 1 - 2 * b, b), wb},
+                                                      {Vec3(1 - 2 * b, b, b), wb}}};
+  constexpr int kSub = 4;  // sub-triangles per edge: k is clamped at the circle rho = R
+  std::map<int, Real> load;
+  Real total = 0;
+  for (int f : faces) {
+    const auto& n = m_quadFaces[size_t(f)];
+    const Vec3 X0 = m_rest.row(n[0]), X1 = m_rest.row(n[1]), X2 = m_rest.row(n[2]);
+    const Real area = 0.5 * (X1 - X0).cross(X2 - X0).norm();
+    const Real subArea = area / (kSub * kSub);
+    std::array<Real, 6> fi{};
+    // Sub-triangles of the barycentric grid with spacing 1/kSub: upward (i, j), (i+1, j),
+    // (i, j+1) and downward (i+1, j), (i+1, j+1), (i, j+1) in (l1, l2) grid coordinates.
+    for (int i = 0; i < kSub; ++i)
+      for (int j = 0; i + j < kSub; ++j)
+        for (int down = 0; down < 2; ++down) {
+          if (down && i + j + 2 > kSub) continue;
+          std::array<Eigen::Vector2d, 3> c;
+          if (!down) {
+            c = {Eigen::Vector2d(i, j), Eigen::Vector2d(i + 1, j), Eigen::Vector2d(i, j + 1)};
+          } else {
+            c = {Eigen::Vector2d(i + 1, j), Eigen::Vector2d(i + 1, j + 1),
+                 Eigen::Vector2d(i, j + 1)};
+          }
+          for (const auto& [l, w] : rule) {
+            const Eigen::Vector2d s = (l(0) * c[0] + l(1) * c[1] + l(2) * c[2]) / kSub;
+            const Real L1 = s(0), L2 = s(1), L0 = 1 - L1 - L2;
+            const Vec3 X = L0 * X0 + L1 * X1 + L2 * X2;
+            const Real rho = (X - centre).norm() / p.radius;
+            const Real k = std::max<Real>(0, 1 - rho * rho) * w * subArea;
+            if (k == 0) continue;
+            const std::array<Real, 6> N = {L0 * (2 * L0 - 1), L1 * (2 * L1 - 1), L2 * (2 * L2 - 1),
+                                           4 * L0 * L1,       4 * L1 * L2,       4 * L2 * L0};
+            for (int q = 0; q < 6; ++q) fi[size_t(q)] += N[size_t(q)] * k;
+            total += k;
+          }
+        }
+    for (int q = 0; q < 6; ++q) load[n[size_t(q)]] += fi[size_t(q)];
+  }
+  PointLoadPatch out;
+  out.radius = p.radius;
+  if (!(total > 0)) return p;
+  out.nodes.push_back(p.nodes[0]);
+  out.weights.push_back(load[p.nodes[0]] / total);
+  for (const auto& [node, f] : load) {
+    if (node == p.nodes[0]) continue;
+    out.nodes.push_back(node);
+    out.weights.push_back(f / total);
+  }
+  return out;
 }
 
 }  // namespace deform::reffem

@@ -1,5 +1,14 @@
-// Reference FEM kernels: assembly of linear-tet hyperelasticity (deform/fem_tet.h) and its
-// quasi-static and implicit-Euler solves by Newton's method.
+// Reference FEM kernels: assembly of linear (4-node) or quadratic (10-node, quadratic_tet.h) tet
+// hyperelasticity (material points of deform/fem_tet.h) and its quasi-static and implicit-Euler
+// solves by Newton's method.
+//
+// Quadratic elements are built from the corner (P1) mesh by adding one node at the midpoint of
+// every edge (straight sides, so the polyhedral geometry is unchanged). The corner nodes keep
+// their indices 0..N-1 (so the surface vertices stay nodes 0..#V-1) and the midside nodes follow,
+// numbered in the order of their sorted (lower, higher) corner pairs. External loads are
+// consistent: gravity f_i = g integral rho N_i dV (a P2 corner node gets -1/20 of its elements'
+// weight, a midside node 1/5); the dynamic solve uses the HRZ-lumped mass (positive, see
+// quadratic_tet.h).
 //
 // Quasi-static: x minimises the total potential
 //     Pi(x) = sum_e V_e psi(F_e(x)) - f_ext . x,   f_ext = lumped gravity m_i g + point forces,
@@ -38,6 +47,8 @@
 // Positions are 3N vectors, node-major (x of node i at 3 i + k), metres.
 #pragma once
 
+#include "quadratic_tet.h"
+
 #include <deform/fem_tet.h>
 #include <deform/mesh.h>
 #include <deform/model.h>
@@ -56,6 +67,12 @@ enum class MaterialModel { Linear, Corotational, NeoHookean };
 /// "linear" | "corotational" | "neo_hookean"; throws InputError on anything else.
 MaterialModel parseMaterialModel(const std::string& name);
 const char* materialModelName(MaterialModel m);
+
+/// Interpolation order of the tetrahedra: 4-node (P1) or 10-node (P2, straight-sided).
+enum class ElementOrder { Linear = 1, Quadratic = 2 };
+
+/// 1 -> Linear, 2 -> Quadratic; throws InputError otherwise.
+ElementOrder parseElementOrder(long long order);
 
 /// Boundary conditions and loads of one solve.
 struct LoadCase {
@@ -99,13 +116,29 @@ class FemSystem {
  public:
   FemSystem(TetMesh rest, const Material& material, MaterialModel model,
             CorotationalTangent corotationalTangent = CorotationalTangent::Exact);
+  /// `rest` is the corner (P1) mesh; Quadratic adds the midside nodes (see the file comment).
+  FemSystem(TetMesh rest, const Material& material, MaterialModel model, ElementOrder order,
+            CorotationalTangent corotationalTangent = CorotationalTangent::Exact);
 
+  /// Rest nodes (all of them: corners, then midside nodes for P2) and the corner tets.
   const TetMesh& rest() const { return m_rest; }
   int numNodes() const { return m_rest.numVertices(); }
+  int numCornerNodes() const { return m_numCorners; }  ///< nodes of the P1 mesh
+  ElementOrder order() const { return m_order; }
+  int nodesPerElement() const { return m_order == ElementOrder::Quadratic ? 10 : 4; }
+  /// Node a (0..nodesPerElement()-1, corners first, then the edges of kQuadraticEdges) of tet t.
+  int elementNode(int t, int a) const { return m_elemNodes[size_t(t * nodesPerElement() + a)]; }
+  /// Midside node of the edge between corner nodes a and b (-1 when there is none).
+  int edgeNode(int a, int b) const;
   MaterialModel model() const { return m_model; }
   const Material& material() const { return m_material; }
-  VecX restPositions() const;                      ///< 3N
-  const VecX& nodeMass() const { return m_mass; }  ///< #N, kg (lumped: rho V / 4 per tet)
+  VecX restPositions() const;  ///< 3N
+  /// #N, kg: lumped mass (P1: rho V / 4 per tet; P2: HRZ, rho V / 36 per corner, 4 rho V / 27
+  /// per midside node). Used by the dynamic solve.
+  const VecX& nodeMass() const { return m_mass; }
+  /// #N, kg: integral rho N_i dV, the consistent gravity weight (P1: = nodeMass; P2: corners
+  /// -rho V / 20, midside nodes rho V / 5 per tet).
+  const VecX& gravityWeight() const { return m_gravityWeight; }
   long long degenerateElements() const { return m_degenerate; }  ///< skipped at rest
 
   /// Elastic energy sum_e V_e psi(F_e) (J); +inf when an element is inverted (Neo-Hookean).
@@ -116,22 +149,28 @@ class FemSystem {
   void stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const;
   const SparseMatrix& stiffnessPattern() const { return m_pattern; }
 
-  /// External force vector (3N) of a load case: m_i g + point forces.
+  /// External force vector (3N) of a load case: gravityWeight_i g + point forces.
   VecX externalForce(const LoadCase& loads) const;
 
  private:
   template <class Fn>
   void forEachMaterial(Fn&& fn) const;
+  void addMidsideNodes();
   TetMesh m_rest;
   Material m_material;
   MaterialModel m_model;
+  ElementOrder m_order = ElementOrder::Linear;
   LameParameters m_lame;
   CorotationalTangent m_corotationalTangent;
-  std::vector<TetRest> m_elements;  ///< one per tet (volume <= 0: degenerate, skipped)
-  VecX m_mass;
+  int m_numCorners = 0;
+  std::vector<int> m_elemNodes;                  ///< #tets x nodesPerElement()
+  std::vector<std::pair<int, int>> m_edges;      ///< sorted corner pairs of the midside nodes
+  std::vector<TetRest> m_elements;               ///< one per tet (volume <= 0: degenerate, skipped)
+  std::vector<QuadraticTetRest> m_quadElements;  ///< P2 only, one per tet
+  VecX m_mass, m_gravityWeight;
   long long m_degenerate = 0;
-  SparseMatrix m_pattern;                     ///< full symmetric pattern, values unused
-  std::vector<std::array<int, 144>> m_slots;  ///< element (12x12, col-major) -> value index
+  SparseMatrix m_pattern;    ///< full symmetric pattern, values unused
+  std::vector<int> m_slots;  ///< element stiffness (3n x 3n, col-major) -> value index, per tet
 };
 
 /// Extra terms of the dynamic incremental potential (see the file comment).
@@ -222,23 +261,41 @@ struct PointLoadPatch {
 /// at c): the patch always covers c's one-ring (each of whose nodes gets k >= 0.55), on any
 /// mesh. Distances are taken at rest (a dead load with a fixed distribution). The total force is
 /// F exactly.
+///
+/// Quadratic elements (constructed from a FemSystem): the same patch node set (over the corner
+/// nodes) and profile, but the consistent load of the 6-node boundary triangles,
+///     f_i = F integral N_i k dA / integral k dA,
+/// over the boundary triangles with a corner in the patch (k clamped at 0 outside R), integrated
+/// on 16 sub-triangles per triangle with the 6-point degree-4 rule (exact where k is a
+/// polynomial); nodes of those triangles (corners and midside) all get a share, which can be
+/// negative at corners (as the consistent load of a uniform pressure is 0 at a P2 corner).
 class PointLoadSpreader {
  public:
   /// Boundary triangles, lumped areas and adjacency of the mesh's boundary.
   explicit PointLoadSpreader(const TetMesh& mesh);
+  /// For the system's elements (P1: as above; P2: consistent on 6-node triangles).
+  explicit PointLoadSpreader(const FemSystem& system);
   /// The patch around node c; a node with no boundary triangle gets the whole force.
   PointLoadPatch patch(int c, Real radius) const;
 
  private:
+  PointLoadPatch quadraticPatch(PointLoadPatch p) const;
   MatX3 m_rest;
-  VecX m_area;                                ///< #N lumped boundary area, m^2 (0: interior)
-  std::vector<std::vector<int>> m_neighbors;  ///< boundary edges per node
+  VecX m_area;                                  ///< #N lumped boundary area, m^2 (0: interior)
+  std::vector<std::vector<int>> m_neighbors;    ///< boundary edges per node
+  std::vector<std::array<int, 6>> m_quadFaces;  ///< P2: boundary triangles (corners, then edges
+                                                ///< 01, 12, 20); empty for P1
+  std::vector<std::vector<int>> m_nodeFaces;    ///< P2: boundary triangles per corner node
 };
 
 /// Nodal forces equivalent to a uniform traction t (N/m^2) on the boundary triangles selected by
 /// `select` (a face is used when all three of its vertices pass): each triangle gives area/3 t
 /// to each corner. Returned as (node, force) pairs, one per node touched.
 std::vector<std::pair<int, Vec3>> tractionForces(const TetMesh& mesh, const Vec3& traction,
+                                                 const std::function<bool(const Vec3&)>& select);
+/// The same for the system's elements: P1 as above; P2 the consistent load of the 6-node
+/// triangles (0 on the corners, area/3 t on each midside node).
+std::vector<std::pair<int, Vec3>> tractionForces(const FemSystem& system, const Vec3& traction,
                                                  const std::function<bool(const Vec3&)>& select);
 
 }  // namespace deform::reffem

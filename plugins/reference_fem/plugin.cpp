@@ -23,7 +23,10 @@ std::vector<ParamSpec> referenceFemParams() {
                         "quasi_static: each step is an equilibrium solve; dynamic: implicit Euler "
                         "with the scene's dt"),
       ParamSpec::choice("material", "neo_hookean", {"linear", "corotational", "neo_hookean"},
-                        "constitutive model of the linear tets"),
+                        "constitutive model"),
+      ParamSpec::integer("element_order", 1, 1, 2,
+                         "1: 4-node (linear) tets; 2: 10-node (quadratic, straight-sided) tets "
+                         "with midside nodes added to the Gmsh mesh"),
       ParamSpec::integer("elements", 20000, 100, 5000000,
                          "target number of tets (used when edge_length is 0)"),
       ParamSpec::real("edge_length", "m", 0.0, 0.0, 1.0,
@@ -55,6 +58,7 @@ class ReferenceFemModel final : public Model {
     m_solveKind = p.choiceAs<SolveKind>(
         "solve", {{"quasi_static", SolveKind::QuasiStatic}, {"dynamic", SolveKind::Dynamic}});
     const MaterialModel model = parseMaterialModel(p.choice("material"));
+    const ElementOrder order = parseElementOrder(p.integer("element_order"));
     m_options.tolerance = p.real("newton_tolerance");
     m_options.maxIterations = int(p.integer("max_newton_iterations"));
     m_options.maxHalvings = int(p.integer("max_load_halvings"));
@@ -78,9 +82,9 @@ class ReferenceFemModel final : public Model {
       m_surfaceNode.resize(size_t(organ.surface.numVertices()));
       for (int i = 0; i < organ.surface.numVertices(); ++i) m_surfaceNode[size_t(i)] = i;
     }
-    m_system = std::make_unique<FemSystem>(std::move(mesh), organ.material, model);
+    m_system = std::make_unique<FemSystem>(std::move(mesh), organ.material, model, order);
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
-    m_spreader = std::make_unique<PointLoadSpreader>(m_system->rest());
+    m_spreader = std::make_unique<PointLoadSpreader>(*m_system);
     m_patches.clear();
     reset();
   }
