@@ -151,7 +151,9 @@ std::vector<std::string> Interaction::describeWorlds() const {
                   std::to_string(probes) + " probe(s) and " +
                   std::to_string(m_scene.objects.size()) + " object(s); contact thickness " +
                   std::to_string(m_scene.contact.thickness) + " m, " +
-                  std::to_string(m_scene.contact.passes) + " pass(es)");
+                  std::to_string(m_scene.contact.passes) + " pass(es), method " +
+                  contactMethodName(m_scene.contact.method) + ", friction " +
+                  std::to_string(m_scene.contact.friction));
   }
   if (m_dynamics) {
     int tools = 0;
