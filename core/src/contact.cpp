@@ -8,8 +8,8 @@
 #include <limits>
 
 #ifdef DEFORM_HAVE_BULLET
-#include <LinearMath/btAabbUtil2.h>
 #include <BulletCollision/CollisionShapes/btTriangleShape.h>
+#include <LinearMath/btAabbUtil2.h>
 #include <btBulletCollisionCommon.h>
 #endif
 
