@@ -802,7 +802,15 @@ StepStatus solveWithConstraints(ContactWorld& world, const StepInput& in,
           nodes[c.body].push_back(v);
           targets[c.body].push_back(x.row(v).transpose() + (c.bary[a] * c.depth / sum2) * c.normal);
         }
-        added = c.depth > 0.1 * t || added;
+        added = c.depth > t || added;  // the triangle is inside the instrument itself
+      }
+      // A vertex moved along the normal at the triangle's deepest point can still be inside a
+      // curved instrument: its target goes onto the skin like a penetrating node's.
+      for (int b = 0; b < bodies; ++b) {
+        if (targets[b].empty()) continue;
+        MatX3 at(static_cast<Eigen::Index>(targets[b].size()), 3);
+        for (size_t k = 0; k < targets[b].size(); ++k) at.row(k) = targets[b][k].transpose();
+        for (const Contact& c : world.query(at)) targets[b][c.proxy] += c.depth * c.normal;
       }
     }
     if (!added && round > 0) break;

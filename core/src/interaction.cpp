@@ -120,7 +120,10 @@ void Interaction::buildWorlds() {
                                                          : sphereInertia(o.mass, p.radius);
       m_objectDynBody[j] =
           m_dynamics->addBody(o.mass, I, o.pos, true, !o.trajectory.empty(), o.coupling);
+      // Objects collide with each other and with the grasper's jaws in ODE.
+      m_dynamics->setShape(m_objectDynBody[j], o.shape);
     }
+    m_dynamics->setFriction(m_scene.contact.friction);
   }
   const int nb = m_dynamics ? m_dynamics->numBodies() : 0;
   m_reactionForce.assign(nb, Vec3::Zero());

@@ -163,11 +163,21 @@ TEST_P(ContactConformance, ADynamicGrasperReportsAHandForceAndAnObjectRestsOnThe
                    {"radius", r},
                    {"mass", 0.005},
                    {"pos", {objAt.x(), objAt.y(), objAt.z()}}}};
-  const Scene scene = parseScene(j, "");
-  const Organ organ = loadOrgan(scene);
+  // Models colliding through their surface triangles (pbd, massspring, fem_hex) see the smooth
+  // top, which the grasp and gravity tilt by about 15 degrees there: a frictionless sphere slides
+  // off it within the run (vertex spheres held it in the dips between vertices). For them the
+  // contact has friction, so that it rolls instead and stays on the top.
+  json rough = j;
+  rough["contact"]["friction"] = 0.6;
+  const Scene roughScene = parseScene(rough, "");
+  const Scene sphereScene = parseScene(j, "");
+  const Organ organ = loadOrgan(sphereScene);
   int tested = 0;
   for (const ModelInfo& info : models()) {
     SCOPED_TRACE(info.name);
+    const bool triangles =
+        GetParam() == "pbd" || GetParam() == "massspring" || GetParam() == "fem_hex";
+    const Scene& scene = triangles ? roughScene : sphereScene;
     const std::string why = unsupportedReason(info, scene);
     if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
     // hybrid_fem_pbd prescribes penetrating vertices through its coarse FEM, whose reaction at
