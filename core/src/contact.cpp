@@ -560,6 +560,10 @@ ContactResolution resolveEmbeddedContacts(ContactWorld& world, MatX3& nodes,
 
 namespace {
 
+/// Below this barycentric share of movable nodes a triangle contact is left to its other
+/// triangles (and the fixed or grasped nodes that hold it).
+constexpr Real kMinMovableShare = 0.25;
+
 /// Surface vertex a = sum_k W(a,k) x_{I(a,k)}, or x_a itself when there is no embedding.
 struct SurfaceMap {
   const Eigen::Ref<const EmbeddingIds>* ids = nullptr;
@@ -608,6 +612,13 @@ struct Stencil {
     for (const auto& [n, cw] : terms) p += cw * Eigen::Map<const Vec3>(rows + 3 * n);
     return p;
   }
+  /// sum_j c_j over the movable nodes (1 when every node can move).
+  Real movableShare(const VecX& invMass) const {
+    Real s = 0;
+    for (const auto& [n, cw] : terms)
+      if (invMass[n] > 0) s += std::abs(cw);
+    return s;
+  }
   /// sum_j w_j c_j^2 over the movable nodes.
   Real generalizedInverseMass(const VecX& invMass) const {
     Real s = 0;
@@ -639,7 +650,9 @@ ContactResolution resolveTriangleContacts(ContactWorld& world, MatX3& x, const S
       if (pass == 0) res.maxDepth = std::max(res.maxDepth, c.depth);
       st.build(map, F, c);
       const Real W = st.generalizedInverseMass(invMass);
-      if (!(W > 0)) continue;
+      // A point held mostly by immovable nodes (a fixed or grasped vertex) cannot be moved by
+      // the rest: the minimum-norm motion of a node with a small weight c grows like d / c.
+      if (!(W > 0) || st.movableShare(invMass) < kMinMovableShare) continue;
       Vec3 pNow = st.apply(x.data());
       Vec3 pThen = Vec3::Zero();
       for (int a = 0; a < 3; ++a) pThen += c.bary[a] * atQuery.row(F(c.triangle, a)).transpose();
@@ -668,14 +681,26 @@ ContactResolution resolveTriangleContacts(ContactWorld& world, MatX3& x, const S
         const Vec3 tang = rel - rel.dot(c.normal) * c.normal;
         const Real len = tang.norm();
         if (len > 0) {
-          const Vec3 undo = len < mu * depth ? Vec3(-tang) : Vec3(-tang * (mu * depth / len));
+          const Real keep = len < mu * depth ? 1 : mu * depth / len;  // static: all of it
+          const Vec3 undo = -keep * tang;
+          // With a velocity state, the same share of p's tangential velocity relative to the
+          // instrument is removed (as the inward normal velocity is above).
+          Vec3 dvp = Vec3::Zero();
+          if (vel) {
+            const Vec3 vr = st.apply(vel) - world.bodyDisplacement(c.body, pNow) / dt;
+            dvp = -keep * (vr - vr.dot(c.normal) * c.normal);
+          }
           for (const auto& [n, cw] : st.terms) {
             const Real w = invMass[n];
             if (!(w > 0)) continue;
             const Vec3 dx = (w * cw / W) * undo;
             x.row(n) += dx.transpose();
-            if (vel) Eigen::Map<Vec3>(vel + 3 * n) += dx / dt;
-            impulse += dx / (dt * w);
+            Vec3 dv = Vec3::Zero();
+            if (vel) {
+              dv = (w * cw / W) * dvp;
+              Eigen::Map<Vec3>(vel + 3 * n) += dv;
+            }
+            impulse += (dx / dt + dv) / w;
           }
           pNow += undo;
         }
@@ -792,9 +817,13 @@ StepStatus solveWithConstraints(ContactWorld& world, const StepInput& in,
           const int v = (*faces)(c.triangle, a);
           return owner[v] < 0 && !std::binary_search(immovable.begin(), immovable.end(), v);
         };
+        Real share = 0;
         for (int a = 0; a < 3; ++a)
-          if (free(a)) sum2 += c.bary[a] * c.bary[a];
-        if (!(sum2 > 0)) continue;
+          if (free(a)) {
+            sum2 += c.bary[a] * c.bary[a];
+            share += c.bary[a];
+          }
+        if (!(sum2 > 0) || share < kMinMovableShare) continue;
         for (int a = 0; a < 3; ++a) {
           if (!free(a)) continue;
           const int v = (*faces)(c.triangle, a);

@@ -257,14 +257,18 @@ ContactResolution resolveEmbeddedContacts(ContactWorld& world, MatX3& nodes,
 ///   dx_a = w_a b_a d n / sum_b w_b b_b^2,   w the inverse masses,
 ///
 /// contact after contact with the depth updated to the motion so far (Gauss-Seidel), for up to
-/// 4 x passes passes. Points closer than the thickness include the vertices, so this replaces
+/// 4 x passes passes. A contact whose movable vertices hold less than a quarter of the
+/// barycentric weight is skipped (fixed or grasped vertices hold that point; the minimum-norm
+/// motion of a vertex of weight b grows like d / b). Points closer than the thickness include the
+/// vertices, so this replaces
 /// resolveContacts() on the surface vertices. With v, p's inward normal velocity is removed the
 /// same way (v_p . n -> 0) and dx is not added to v. With x0 (the positions at the step's start)
 /// and contact.friction mu > 0, Coulomb friction as positions (Macklin et al. 2014, "Unified
 /// particle physics for real-time applications", Sec. 6.1, Eq. (24)-(25)): the tangential
 /// motion of p relative to the instrument over the step, dt_p = [(p - p(x0)) -
 /// bodyDisplacement(p)]_tangent, is undone when |dt_p| < mu d (static), else shortened by
-/// mu d (kinetic); with v the same correction / dt is taken off the velocity. The reaction on
+/// mu d (kinetic); with v the same share of p's tangential velocity relative to the
+/// instrument is removed. The reaction on
 /// the instrument is minus the impulse given to the vertices, normal and tangential parts:
 /// -sum_a m_a (dx_a / dt + dv_a) / dt at p. x: #N by 3 (m); F: #F by 3 rows of x; invMass: #N
 /// (1/kg, 0 = immovable); v: #N by 3 (m/s) or nullptr; x0: #N by 3 (m) or nullptr (no friction).
