@@ -1,5 +1,6 @@
 // Contact between rigid instruments and model proxies through Bullet's collision world.
 #include <deform/contact.h>
+#include <deform/distance.h>
 #include <deform/error.h>
 
 #include <algorithm>
@@ -7,6 +8,7 @@
 #include <limits>
 
 #ifdef DEFORM_HAVE_BULLET
+#include <BulletCollision/CollisionShapes/btTriangleShape.h>
 #include <LinearMath/btAabbUtil2.h>
 #include <btBulletCollisionCommon.h>
 #endif
@@ -80,6 +82,32 @@ struct DeepestCallback : btCollisionWorld::ContactResultCallback {
   }
 };
 
+/// Keeps the closest result per triangle, separated ones (within the callback's threshold)
+/// included, with the point on the triangle.
+struct ClosestCallback : btCollisionWorld::ContactResultCallback {
+  const btCollisionObject* proxy = nullptr;
+  Real closest = std::numeric_limits<Real>::infinity();
+  Vec3 normal = Vec3::UnitZ();
+  Vec3 point = Vec3::Zero();
+  bool found = false;
+
+  btScalar addSingleResult(btManifoldPoint& cp, const btCollisionObjectWrapper* w0, int, int,
+                           const btCollisionObjectWrapper*, int, int) override {
+    const Real dist = cp.getDistance();
+    if (dist >= m_closestDistanceThreshold || (found && dist >= closest)) return 0;
+    const bool proxyIsA = w0->getCollisionObject() == proxy;
+    Vec3 n = eig(cp.m_normalWorldOnB);  // from B to A
+    if (!proxyIsA) n = -n;
+    const Real len = n.norm();
+    if (!(len > 0.5)) return 0;
+    closest = dist;
+    normal = n / len;
+    point = eig(proxyIsA ? cp.getPositionWorldOnA() : cp.getPositionWorldOnB());
+    found = true;
+    return 0;
+  }
+};
+
 }  // namespace
 
 struct ContactWorld::Impl {
@@ -103,6 +131,7 @@ struct ContactWorld::Impl {
 
   ~Impl() {
     removeProxies();
+    removeTriangles();
     for (auto& b : bodies) world.removeCollisionObject(b.object.get());
   }
 
@@ -135,6 +164,44 @@ struct ContactWorld::Impl {
   void removeProxies() {
     for (int k = inWorld - 1; k >= 0; --k) world.removeCollisionObject(proxies[k].get());
     inWorld = 0;
+  }
+
+  // The same pool for surface triangles; their broadphase boxes are padded by the thickness.
+  std::vector<std::unique_ptr<btTriangleShape>> triangleShapes;
+  std::vector<std::unique_ptr<btCollisionObject>> triangles;
+  int trianglesInWorld = 0;
+
+  void addTriangle(int index, const btVector3& a, const btVector3& b, const btVector3& c,
+                   btScalar pad) {
+    if (trianglesInWorld == static_cast<int>(triangles.size())) {
+      triangleShapes.push_back(std::make_unique<btTriangleShape>(a, b, c));
+      triangleShapes.back()->setMargin(kMargin);
+      triangles.push_back(std::make_unique<btCollisionObject>());
+      triangles.back()->setCollisionShape(triangleShapes.back().get());
+    }
+    btTriangleShape* s = triangleShapes[trianglesInWorld].get();
+    s->m_vertices1[0] = a;
+    s->m_vertices1[1] = b;
+    s->m_vertices1[2] = c;
+    btCollisionObject* o = triangles[trianglesInWorld].get();
+    btTransform t;
+    t.setIdentity();
+    o->setWorldTransform(t);
+    o->setUserIndex(index);
+    world.addCollisionObject(o, kProxyGroup, kBodyGroup);
+    btVector3 lo = a, hi = a;
+    lo.setMin(b);
+    lo.setMin(c);
+    hi.setMax(b);
+    hi.setMax(c);
+    const btVector3 p(pad, pad, pad);
+    broadphase.setAabb(o->getBroadphaseHandle(), lo - p, hi + p, &dispatcher);
+    ++trianglesInWorld;
+  }
+
+  void removeTriangles() {
+    for (int k = trianglesInWorld - 1; k >= 0; --k) world.removeCollisionObject(triangles[k].get());
+    trianglesInWorld = 0;
   }
 };
 
@@ -184,10 +251,14 @@ int ContactWorld::addBody(const RigidShape& shape) {
   m_thinnest.push_back(thin);
   m_settled.push_back(Vec3::Zero());
   m_settledSet.push_back(0);
+  m_prevPos.push_back(Vec3::Zero());
+  m_prevRot.push_back(Mat3::Identity());
   return numBodies() - 1;
 }
 
 void ContactWorld::setPose(int body, const Vec3& pos, const Mat3& R) {
+  m_prevPos.at(body) = m_settledSet[body] ? position(body) : pos;
+  m_prevRot.at(body) = m_settledSet[body] ? rotation(body) : R;
   btTransform t;
   t.setOrigin(bt(pos));
   t.setBasis(
@@ -275,6 +346,71 @@ std::vector<Contact> ContactWorld::query(const MatX3& centres, const VecX* radii
   return out;
 }
 
+std::vector<TriangleContact> ContactWorld::queryTriangles(const MatX3& V, const MatX3i& F) {
+  Impl& w = *m_impl;
+  if (w.bodies.empty()) return {};
+  const Real t = m_params.thickness;
+  btVector3 lo(BT_LARGE_FLOAT, BT_LARGE_FLOAT, BT_LARGE_FLOAT), hi = -lo;
+  for (const Impl::Body& b : w.bodies) {
+    const btBroadphaseProxy* h = b.object->getBroadphaseHandle();
+    lo.setMin(h->m_aabbMin);
+    hi.setMax(h->m_aabbMax);
+  }
+  const auto vertex = [&](int i) { return btVector3(V(i, 0), V(i, 1), V(i, 2)); };
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    const btVector3 a = vertex(F(f, 0)), b = vertex(F(f, 1)), c = vertex(F(f, 2));
+    btVector3 tlo = a, thi = a;
+    tlo.setMin(b);
+    tlo.setMin(c);
+    thi.setMax(b);
+    thi.setMax(c);
+    if (tlo.x() - t > hi.x() || tlo.y() - t > hi.y() || tlo.z() - t > hi.z() ||
+        thi.x() + t < lo.x() || thi.y() + t < lo.y() || thi.z() + t < lo.z())
+      continue;
+    w.addTriangle(static_cast<int>(f), a, b, c, t);
+  }
+  w.broadphase.calculateOverlappingPairs(&w.dispatcher);
+
+  std::vector<TriangleContact> out;
+  btBroadphasePairArray& pairs = w.broadphase.getOverlappingPairCache()->getOverlappingPairArray();
+  for (int k = 0; k < pairs.size(); ++k) {
+    auto* a = static_cast<btCollisionObject*>(pairs[k].m_pProxy0->m_clientObject);
+    auto* b = static_cast<btCollisionObject*>(pairs[k].m_pProxy1->m_clientObject);
+    if (a->getUserIndex() < 0) std::swap(a, b);
+    if (a->getUserIndex() < 0 || b->getUserIndex() >= 0) continue;
+    const btBroadphaseProxy* pa = a->getBroadphaseHandle();
+    const btBroadphaseProxy* pb = b->getBroadphaseHandle();
+    if (!TestAabbAgainstAabb2(pa->m_aabbMin, pa->m_aabbMax, pb->m_aabbMin, pb->m_aabbMax)) continue;
+    ++m_pairsTested;
+    ClosestCallback cb;
+    cb.proxy = a;
+    cb.m_closestDistanceThreshold = t;
+    w.world.contactPairTest(a, b, cb);
+    if (!cb.found) continue;
+    TriangleContact c;
+    c.triangle = a->getUserIndex();
+    c.body = -1 - b->getUserIndex();
+    c.depth = t - cb.closest;
+    c.normal = cb.normal;
+    const int f = c.triangle;
+    c.bary = closestPointOnTriangle(cb.point, V.row(F(f, 0)).transpose(),
+                                    V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose())
+                 .bary;
+    out.push_back(c);
+  }
+  w.removeTriangles();
+  std::sort(out.begin(), out.end(), [](const TriangleContact& x, const TriangleContact& y) {
+    return x.triangle != y.triangle ? x.triangle < y.triangle : x.depth > y.depth;
+  });
+  out.erase(std::unique(out.begin(), out.end(),
+                        [](const TriangleContact& x, const TriangleContact& y) {
+                          return x.triangle == y.triangle;
+                        }),
+            out.end());
+  m_contactsFound += static_cast<long long>(out.size());
+  return out;
+}
+
 #else  // no Bullet: the world cannot be built; the harness reports it before any run
 
 struct ContactWorld::Impl {};
@@ -299,6 +435,9 @@ int ContactWorld::numBodies() const {
 std::vector<Contact> ContactWorld::query(const MatX3&, const VecX*) {
   return {};
 }
+std::vector<TriangleContact> ContactWorld::queryTriangles(const MatX3&, const MatX3i&) {
+  return {};
+}
 
 #endif
 
@@ -313,6 +452,11 @@ Vec3 ContactWorld::reactionForce(int body) const {
 
 Vec3 ContactWorld::reactionTorque(int body) const {
   return m_torque.at(body);
+}
+
+Vec3 ContactWorld::bodyDisplacement(int body, const Vec3& p) const {
+  const Vec3 local = rotation(body).transpose() * (p - position(body));
+  return p - (m_prevPos.at(body) + m_prevRot.at(body) * local);
 }
 
 Real ContactWorld::thinnestRadius(int body) const {
@@ -414,15 +558,233 @@ ContactResolution resolveEmbeddedContacts(ContactWorld& world, MatX3& nodes,
   return res;
 }
 
+namespace {
+
+/// Below this barycentric share of movable nodes a triangle contact is left to its other
+/// triangles (and the fixed or grasped nodes that hold it).
+constexpr Real kMinMovableShare = 0.25;
+
+/// Surface vertex a = sum_k W(a,k) x_{I(a,k)}, or x_a itself when there is no embedding.
+struct SurfaceMap {
+  const Eigen::Ref<const EmbeddingIds>* ids = nullptr;
+  const Eigen::Ref<const EmbeddingWeights>* weights = nullptr;
+
+  /// The surface vertices: x itself, or evaluated into `buffer`.
+  const MatX3& surface(const MatX3& x, MatX3& buffer) const {
+    if (!ids) return x;
+    const Eigen::Index S = ids->rows(), K = ids->cols();
+    buffer.setZero(S, 3);
+    for (Eigen::Index a = 0; a < S; ++a)
+      for (Eigen::Index k = 0; k < K; ++k) buffer.row(a) += (*weights)(a, k) * x.row((*ids)(a, k));
+    return buffer;
+  }
+  template <class Fn>
+  void forEachNode(int a, Fn fn) const {
+    if (!ids) {
+      fn(a, Real(1));
+      return;
+    }
+    for (Eigen::Index k = 0; k < ids->cols(); ++k)
+      if ((*weights)(a, k) != 0) fn((*ids)(a, k), (*weights)(a, k));
+  }
+};
+
+/// A triangle contact point as a weighted sum of nodes, p = sum_j c_j x_{n_j} (nodes merged).
+struct Stencil {
+  std::vector<std::pair<int, Real>> terms;
+
+  void build(const SurfaceMap& map, const MatX3i& F, const TriangleContact& c) {
+    terms.clear();
+    for (int a = 0; a < 3; ++a) {
+      if (c.bary[a] == 0) continue;
+      map.forEachNode(F(c.triangle, a), [&](int n, Real w) {
+        for (auto& t : terms)
+          if (t.first == n) {
+            t.second += c.bary[a] * w;
+            return;
+          }
+        terms.emplace_back(n, c.bary[a] * w);
+      });
+    }
+  }
+  Vec3 apply(const Real* rows) const {
+    Vec3 p = Vec3::Zero();
+    for (const auto& [n, cw] : terms) p += cw * Eigen::Map<const Vec3>(rows + 3 * n);
+    return p;
+  }
+  /// sum_j c_j over the movable nodes (1 when every node can move).
+  Real movableShare(const VecX& invMass) const {
+    Real s = 0;
+    for (const auto& [n, cw] : terms)
+      if (invMass[n] > 0) s += std::abs(cw);
+    return s;
+  }
+  /// sum_j w_j c_j^2 over the movable nodes.
+  Real generalizedInverseMass(const VecX& invMass) const {
+    Real s = 0;
+    for (const auto& [n, cw] : terms)
+      if (invMass[n] > 0) s += invMass[n] * cw * cw;
+    return s;
+  }
+};
+
+ContactResolution resolveTriangleContacts(ContactWorld& world, MatX3& x, const SurfaceMap& map,
+                                          const MatX3i& F, const VecX& invMass, Real dt, Real* vel,
+                                          const MatX3* x0) {
+  ContactResolution res;
+  const Real mu = world.params().friction;
+  const bool friction = x0 && mu > 0;
+  const int passes = 4 * std::max(world.params().passes, 1);
+  MatX3 buffer;
+  Stencil st;
+  for (int pass = 0; pass < passes; ++pass) {
+    const MatX3& S = map.surface(x, buffer);
+    const std::vector<TriangleContact> contacts = world.queryTriangles(S, F);
+    if (pass == 0) res.contacts = static_cast<int>(contacts.size());
+    if (contacts.empty()) break;
+    // The surface at the query (x changes below): each depth is updated by the motion since.
+    MatX3 copy;
+    if (!map.ids) copy = x;
+    const MatX3& atQuery = map.ids ? S : copy;
+    for (const TriangleContact& c : contacts) {
+      if (pass == 0) res.maxDepth = std::max(res.maxDepth, c.depth);
+      st.build(map, F, c);
+      const Real W = st.generalizedInverseMass(invMass);
+      // A point held mostly by immovable nodes (a fixed or grasped vertex) cannot be moved by
+      // the rest: the minimum-norm motion of a node with a small weight c grows like d / c.
+      if (!(W > 0) || st.movableShare(invMass) < kMinMovableShare) continue;
+      Vec3 pNow = st.apply(x.data());
+      Vec3 pThen = Vec3::Zero();
+      for (int a = 0; a < 3; ++a) pThen += c.bary[a] * atQuery.row(F(c.triangle, a)).transpose();
+      const Real depth = c.depth - (pNow - pThen).dot(c.normal);
+      if (!(depth > 0)) continue;
+      Vec3 impulse = Vec3::Zero();  // given to the nodes, N s
+      // Normal: move p by depth n, remove p's inward normal velocity.
+      Real vn = 0;
+      if (vel) vn = std::min(st.apply(vel).dot(c.normal), Real(0));
+      for (const auto& [n, cw] : st.terms) {
+        const Real w = invMass[n];
+        if (!(w > 0)) continue;
+        const Vec3 dx = (w * cw * depth / W) * c.normal;
+        x.row(n) += dx.transpose();
+        Vec3 dv = Vec3::Zero();
+        if (vel) {
+          dv = (-w * cw * vn / W) * c.normal;
+          Eigen::Map<Vec3>(vel + 3 * n) += dv;
+        }
+        impulse += (dx / dt + dv) / w;
+      }
+      pNow += depth * c.normal;
+      if (friction) {
+        // Macklin et al. 2014, Eq. (24)-(25): tangential motion relative to the instrument.
+        const Vec3 rel = (pNow - st.apply(x0->data())) - world.bodyDisplacement(c.body, pNow);
+        const Vec3 tang = rel - rel.dot(c.normal) * c.normal;
+        const Real len = tang.norm();
+        if (len > 0) {
+          const Real keep = len < mu * depth ? 1 : mu * depth / len;  // static: all of it
+          const Vec3 undo = -keep * tang;
+          // With a velocity state, the same share of p's tangential velocity relative to the
+          // instrument is removed (as the inward normal velocity is above).
+          Vec3 dvp = Vec3::Zero();
+          if (vel) {
+            const Vec3 vr = st.apply(vel) - world.bodyDisplacement(c.body, pNow) / dt;
+            dvp = -keep * (vr - vr.dot(c.normal) * c.normal);
+          }
+          for (const auto& [n, cw] : st.terms) {
+            const Real w = invMass[n];
+            if (!(w > 0)) continue;
+            const Vec3 dx = (w * cw / W) * undo;
+            x.row(n) += dx.transpose();
+            Vec3 dv = Vec3::Zero();
+            if (vel) {
+              dv = (w * cw / W) * dvp;
+              Eigen::Map<Vec3>(vel + 3 * n) += dv;
+            }
+            impulse += (dx / dt + dv) / w;
+          }
+          pNow += undo;
+        }
+      }
+      world.addReaction(c.body, -impulse / dt, pNow);
+    }
+  }
+  return res;
+}
+
+ContactResolution penaltyTriangleForces(ContactWorld& world, const MatX3& x, const SurfaceMap& map,
+                                        const MatX3i& F, const Real* vel, Real dt, Real* force) {
+  ContactResolution res;
+  const ContactParams& prm = world.params();
+  MatX3 buffer;
+  const MatX3& S = map.surface(x, buffer);
+  const std::vector<TriangleContact> contacts = world.queryTriangles(S, F);
+  res.contacts = static_cast<int>(contacts.size());
+  Stencil st;
+  for (const TriangleContact& c : contacts) {
+    res.maxDepth = std::max(res.maxDepth, c.depth);
+    const Vec3 a = S.row(F(c.triangle, 0)), b = S.row(F(c.triangle, 1)),
+               e = S.row(F(c.triangle, 2));
+    const Real area = 0.5 * (b - a).cross(e - a).norm();
+    const Vec3 p = c.bary[0] * a + c.bary[1] * b + c.bary[2] * e;
+    st.build(map, F, c);
+    Real vn = 0;
+    if (vel && dt > 0) vn = (st.apply(vel) - world.bodyDisplacement(c.body, p) / dt).dot(c.normal);
+    const Real fn = area * (prm.stiffness * c.depth - prm.damping * std::min(vn, Real(0)));
+    if (!(fn > 0)) continue;
+    const Vec3 f = fn * c.normal;
+    for (const auto& [n, cw] : st.terms) Eigen::Map<Vec3>(force + 3 * n) += cw * f;
+    world.addReaction(c.body, -f, p);
+  }
+  return res;
+}
+
+}  // namespace
+
+ContactResolution resolveSurfaceContacts(ContactWorld& world, MatX3& x, const MatX3i& F,
+                                         const VecX& invMass, Real dt, MatX3* v, const MatX3* x0) {
+  return resolveTriangleContacts(world, x, SurfaceMap{}, F, invMass, dt, v ? v->data() : nullptr,
+                                 x0);
+}
+
+ContactResolution resolveEmbeddedSurfaceContacts(ContactWorld& world, MatX3& nodes,
+                                                 const Eigen::Ref<const EmbeddingIds>& ids,
+                                                 const Eigen::Ref<const EmbeddingWeights>& weights,
+                                                 const MatX3i& F, const VecX& invMass, Real dt,
+                                                 Real* nodeVelocity, const MatX3* nodes0) {
+  return resolveTriangleContacts(world, nodes, SurfaceMap{&ids, &weights}, F, invMass, dt,
+                                 nodeVelocity, nodes0);
+}
+
+ContactResolution addPenaltyContactForces(ContactWorld& world, const MatX3& x, const MatX3i& F,
+                                          const MatX3* v, Real dt, MatX3& force) {
+  return penaltyTriangleForces(world, x, SurfaceMap{}, F, v ? v->data() : nullptr, dt,
+                               force.data());
+}
+
+ContactResolution addEmbeddedPenaltyContactForces(ContactWorld& world, const MatX3& nodes,
+                                                  const Eigen::Ref<const EmbeddingIds>& ids,
+                                                  const Eigen::Ref<const EmbeddingWeights>& weights,
+                                                  const MatX3i& F, const Real* nodeVelocity,
+                                                  Real dt, Real* nodeForce) {
+  return penaltyTriangleForces(world, nodes, SurfaceMap{&ids, &weights}, F, nodeVelocity, dt,
+                               nodeForce);
+}
+
+const char* contactMethodName(ContactMethod m) {
+  return m == ContactMethod::Penalty ? "penalty" : "projection";
+}
+
 int projectPointsOut(ContactWorld& world, MatX3& points) {
   const std::vector<Contact> contacts = world.query(points);
   for (const Contact& c : contacts) points.row(c.proxy) += (c.depth * c.normal).transpose();
   return static_cast<int>(contacts.size());
 }
 
-StepStatus solveWithContactConstraints(ContactWorld& world, const StepInput& in,
-                                       const ContactModelHooks& model,
-                                       const std::vector<int>& immovable, int maxRounds) {
+namespace {
+
+StepStatus solveWithConstraints(ContactWorld& world, const StepInput& in,
+                                const ContactModelHooks& model, const MatX3i* faces,
+                                const std::vector<int>& immovable, int maxRounds) {
   const int bodies = world.numBodies();
   std::vector<std::vector<int>> nodes(bodies);
   std::vector<std::vector<Vec3>> targets(bodies);
@@ -446,6 +808,39 @@ StepStatus solveWithContactConstraints(ContactWorld& world, const StepInput& in,
       targets[c.body].push_back(x.row(c.proxy).transpose() +
                                 std::max(c.depth - t, Real(0)) * c.normal);
       added = c.depth > t || added;
+    }
+    if (faces) {
+      for (const TriangleContact& c : world.queryTriangles(x, *faces)) {
+        // Spread d n over the triangle's free, movable vertices (minimum norm).
+        Real sum2 = 0;
+        const auto free = [&](int a) {
+          const int v = (*faces)(c.triangle, a);
+          return owner[v] < 0 && !std::binary_search(immovable.begin(), immovable.end(), v);
+        };
+        Real share = 0;
+        for (int a = 0; a < 3; ++a)
+          if (free(a)) {
+            sum2 += c.bary[a] * c.bary[a];
+            share += c.bary[a];
+          }
+        if (!(sum2 > 0) || share < kMinMovableShare) continue;
+        for (int a = 0; a < 3; ++a) {
+          if (!free(a)) continue;
+          const int v = (*faces)(c.triangle, a);
+          owner[v] = c.body;
+          nodes[c.body].push_back(v);
+          targets[c.body].push_back(x.row(v).transpose() + (c.bary[a] * c.depth / sum2) * c.normal);
+        }
+        added = c.depth > t || added;  // the triangle is inside the instrument itself
+      }
+      // A vertex moved along the normal at the triangle's deepest point can still be inside a
+      // curved instrument: its target goes onto the skin like a penetrating node's.
+      for (int b = 0; b < bodies; ++b) {
+        if (targets[b].empty()) continue;
+        MatX3 at(static_cast<Eigen::Index>(targets[b].size()), 3);
+        for (size_t k = 0; k < targets[b].size(); ++k) at.row(k) = targets[b][k].transpose();
+        for (const Contact& c : world.query(at)) targets[b][c.proxy] += c.depth * c.normal;
+      }
     }
     if (!added && round > 0) break;
     StepInput aug = in;
@@ -473,10 +868,10 @@ StepStatus solveWithContactConstraints(ContactWorld& world, const StepInput& in,
   return status;
 }
 
-StepStatus solveAlongInstrumentPath(ContactWorld& world, const StepInput& in,
-                                    const ContactModelHooks& model,
-                                    const std::vector<int>& immovable, int maxRounds,
-                                    Real maxStepFraction) {
+StepStatus alongInstrumentPath(ContactWorld& world, const StepInput& in,
+                               const ContactModelHooks& model, const MatX3i* faces,
+                               const std::vector<int>& immovable, int maxRounds,
+                               Real maxStepFraction) {
   const int nb = world.numBodies();
   std::vector<Vec3> from(nb), to(nb);
   std::vector<Mat3> rot(nb);
@@ -495,12 +890,40 @@ StepStatus solveAlongInstrumentPath(ContactWorld& world, const StepInput& in,
     const Real a = Real(s) / steps;
     for (int b = 0; b < nb; ++b) world.setPose(b, (1 - a) * from[b] + a * to[b], rot[b]);
     world.clearReactions();
-    status = solveWithContactConstraints(world, in, model, immovable, maxRounds);
+    status = solveWithConstraints(world, in, model, faces, immovable, maxRounds);
     if (status != StepStatus::Ok) break;
   }
   for (int b = 0; b < nb; ++b) world.setPose(b, to[b], rot[b]);
   world.settle();
   return status;
+}
+
+}  // namespace
+
+StepStatus solveWithContactConstraints(ContactWorld& world, const StepInput& in,
+                                       const ContactModelHooks& model,
+                                       const std::vector<int>& immovable, int maxRounds) {
+  return solveWithConstraints(world, in, model, nullptr, immovable, maxRounds);
+}
+
+StepStatus solveWithSurfaceContactConstraints(ContactWorld& world, const StepInput& in,
+                                              const ContactModelHooks& model, const MatX3i& faces,
+                                              const std::vector<int>& immovable, int maxRounds) {
+  return solveWithConstraints(world, in, model, &faces, immovable, maxRounds);
+}
+
+StepStatus solveAlongInstrumentPath(ContactWorld& world, const StepInput& in,
+                                    const ContactModelHooks& model,
+                                    const std::vector<int>& immovable, int maxRounds,
+                                    Real maxStepFraction) {
+  return alongInstrumentPath(world, in, model, nullptr, immovable, maxRounds, maxStepFraction);
+}
+
+StepStatus solveSurfaceAlongInstrumentPath(ContactWorld& world, const StepInput& in,
+                                           const ContactModelHooks& model, const MatX3i& faces,
+                                           const std::vector<int>& immovable, int maxRounds,
+                                           Real maxStepFraction) {
+  return alongInstrumentPath(world, in, model, &faces, immovable, maxRounds, maxStepFraction);
 }
 
 }  // namespace deform

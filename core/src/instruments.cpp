@@ -27,6 +27,10 @@ Vec3 vec(const dReal* p) {
   return Vec3(p[0], p[1], p[2]);
 }
 
+// Collision categories: jaws collide with shaped bodies, shaped bodies with both.
+constexpr unsigned long kJawCategory = 1, kShapeCategory = 2;
+constexpr int kMaxContactsPerPair = 8;
+
 }  // namespace
 
 struct InstrumentWorld::Impl {
@@ -43,15 +47,72 @@ struct InstrumentWorld::Impl {
   };
   std::vector<Body> bodies;
   std::vector<dBodyID> jawBodies;
+  dSpaceID space = nullptr;
+  dJointGroupID contacts = nullptr;
+  Real mu = 0;
+  int lastContacts = 0;
 
   Impl(const Vec3& g) {
     dInitODE2(0);
     world = dWorldCreate();
     dWorldSetGravity(world, g.x(), g.y(), g.z());
+    space = dSimpleSpaceCreate(nullptr);
+    contacts = dJointGroupCreate(0);
   }
   ~Impl() {
+    dJointGroupDestroy(contacts);
+    dSpaceDestroy(space);  // destroys its geoms
     dWorldDestroy(world);  // destroys its bodies and joints
     dCloseODE();
+  }
+
+  dGeomID addGeom(dBodyID body, const ShapePrimitive& p, unsigned long category) {
+    dGeomID g = nullptr;
+    switch (p.kind) {
+      case ShapePrimitive::Kind::Sphere:
+        g = dCreateSphere(space, p.radius);
+        break;
+      case ShapePrimitive::Kind::Capsule:
+        g = dCreateCapsule(space, p.radius, p.length);
+        break;
+      case ShapePrimitive::Kind::Box:
+        g = dCreateBox(space, 2 * p.halfExtents.x(), 2 * p.halfExtents.y(), 2 * p.halfExtents.z());
+        break;
+    }
+    dGeomSetBody(g, body);
+    dGeomSetOffsetPosition(g, p.centre.x(), p.centre.y(), p.centre.z());
+    if (p.kind == ShapePrimitive::Kind::Capsule) {
+      // ODE's capsule lies along its local z axis.
+      const Mat3 R = Eigen::Quaternion<Real>::FromTwoVectors(Vec3::UnitZ(), p.axis.normalized())
+                         .toRotationMatrix();
+      dMatrix3 m;
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) m[4 * i + j] = R(i, j);
+        m[4 * i + 3] = 0;
+      }
+      dGeomSetOffsetRotation(g, m);
+    }
+    dGeomSetCategoryBits(g, category);
+    dGeomSetCollideBits(
+        g, category == kJawCategory ? kShapeCategory : (kJawCategory | kShapeCategory));
+    return g;
+  }
+
+  static void nearCallback(void* data, dGeomID a, dGeomID b) {
+    Impl& w = *static_cast<Impl*>(data);
+    const dBodyID ba = dGeomGetBody(a), bb = dGeomGetBody(b);
+    if (ba == bb || (ba && bb && dAreConnected(ba, bb))) return;
+    dContact c[kMaxContactsPerPair];
+    const int n = dCollide(a, b, kMaxContactsPerPair, &c[0].geom, sizeof(dContact));
+    for (int i = 0; i < n; ++i) {
+      c[i].surface.mode = dContactSoftERP | dContactSoftCFM | (w.mu > 0 ? dContactApprox1 : 0);
+      c[i].surface.mu = w.mu;
+      c[i].surface.soft_erp = 0.2;
+      c[i].surface.soft_cfm = 1e-6;
+      const dJointID j = dJointCreateContact(w.world, w.contacts, &c[i]);
+      dJointAttach(j, ba, bb);
+    }
+    w.lastContacts += n;
   }
 };
 
@@ -108,8 +169,27 @@ int InstrumentWorld::addGrasper(Real mass, Real shaftLength, Real jawLength, con
     dJointSetHingeParam(h, dParamFMax, kJawMotorTorque);
     s.jaw[k] = h;
     m_impl->jawBodies.push_back(jaw);
+    // A jaw as a box a fifth of its length thick, centred on its body (they collide with shaped
+    // bodies only, never with each other).
+    ShapePrimitive box;
+    box.kind = ShapePrimitive::Kind::Box;
+    box.halfExtents = Vec3(0.1 * jawLength, 0.1 * jawLength, 0.5 * jawLength);
+    m_impl->addGeom(jaw, box, kJawCategory);
   }
   return shaft;
+}
+
+void InstrumentWorld::setShape(int body, const RigidShape& shape) {
+  for (const ShapePrimitive& p : shape.parts)
+    m_impl->addGeom(m_impl->bodies.at(body).id, p, kShapeCategory);
+}
+
+void InstrumentWorld::setFriction(Real mu) {
+  m_impl->mu = mu;
+}
+
+int InstrumentWorld::lastContacts() const {
+  return m_impl->lastContacts;
 }
 
 void InstrumentWorld::setJaws(int grasper, bool closed) {
@@ -147,7 +227,10 @@ void InstrumentWorld::step(Real dt) {
     b.lastCoupling = deform::couplingForce(b.coupling, b.handPos, b.handVel, x, v);
     dBodyAddForce(b.id, b.lastCoupling.x(), b.lastCoupling.y(), b.lastCoupling.z());
   }
+  m_impl->lastContacts = 0;
+  dSpaceCollide(m_impl->space, m_impl.get(), &Impl::nearCallback);
   dWorldStep(m_impl->world, dt);
+  dJointGroupEmpty(m_impl->contacts);
   for (Impl::Body& b : m_impl->bodies) {
     if (!b.holdOrientation) continue;
     dMatrix3 R;
@@ -194,6 +277,11 @@ int InstrumentWorld::addBody(Real, const Mat3&, const Vec3&, bool, bool, const C
 }
 int InstrumentWorld::addGrasper(Real, Real, Real, const Vec3&, const CouplingParams&) {
   return -1;
+}
+void InstrumentWorld::setShape(int, const RigidShape&) {}
+void InstrumentWorld::setFriction(Real) {}
+int InstrumentWorld::lastContacts() const {
+  return 0;
 }
 void InstrumentWorld::setJaws(int, bool) {}
 Real InstrumentWorld::jawAngle(int) const {

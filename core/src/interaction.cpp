@@ -120,7 +120,10 @@ void Interaction::buildWorlds() {
                                                          : sphereInertia(o.mass, p.radius);
       m_objectDynBody[j] =
           m_dynamics->addBody(o.mass, I, o.pos, true, !o.trajectory.empty(), o.coupling);
+      // Objects collide with each other and with the grasper's jaws in ODE.
+      m_dynamics->setShape(m_objectDynBody[j], o.shape);
     }
+    m_dynamics->setFriction(m_scene.contact.friction);
   }
   const int nb = m_dynamics ? m_dynamics->numBodies() : 0;
   m_reactionForce.assign(nb, Vec3::Zero());
@@ -151,7 +154,9 @@ std::vector<std::string> Interaction::describeWorlds() const {
                   std::to_string(probes) + " probe(s) and " +
                   std::to_string(m_scene.objects.size()) + " object(s); contact thickness " +
                   std::to_string(m_scene.contact.thickness) + " m, " +
-                  std::to_string(m_scene.contact.passes) + " pass(es)");
+                  std::to_string(m_scene.contact.passes) + " pass(es), method " +
+                  contactMethodName(m_scene.contact.method) + ", friction " +
+                  std::to_string(m_scene.contact.friction));
   }
   if (m_dynamics) {
     int tools = 0;

@@ -353,13 +353,37 @@ ObjectSpec parseObject(const Ctx& c, const json& j, const std::string& path) {
 }
 
 ContactParams parseContact(const Ctx& c, const json& j, const std::string& path) {
-  ObjectReader r(j, path, c.file, {"thickness", "passes"});
+  ObjectReader r(j, path, c.file,
+                 {"thickness", "passes", "method", "stiffness", "damping", "friction"});
   ContactParams p;
   if (const json* v = r.optional("thickness")) p.thickness = c.positive(*v, r.child("thickness"));
   if (const json* v = r.optional("passes")) {
     const long long n = c.integer(*v, r.child("passes"));
     if (n < 1 || n > 100) c.fail(r.child("passes"), "must be in [1, 100], got " + num(double(n)));
     p.passes = static_cast<int>(n);
+  }
+  if (const json* v = r.optional("method")) {
+    const std::string m = c.string(*v, r.child("method"));
+    if (m == "projection")
+      p.method = ContactMethod::Projection;
+    else if (m == "penalty")
+      p.method = ContactMethod::Penalty;
+    else
+      c.fail(r.child("method"), "expected \"projection\" or \"penalty\", got \"" + m + "\"");
+  }
+  const bool penalty = p.method == ContactMethod::Penalty;
+  if (const json* v = r.optional("stiffness")) {
+    if (!penalty) c.fail(r.child("stiffness"), "applies only to \"method\": \"penalty\"");
+    p.stiffness = c.positive(*v, r.child("stiffness"));
+  }
+  if (const json* v = r.optional("damping")) {
+    if (!penalty) c.fail(r.child("damping"), "applies only to \"method\": \"penalty\"");
+    p.damping = c.number(*v, r.child("damping"));
+    if (p.damping < 0) c.fail(r.child("damping"), "must be >= 0, got " + num(p.damping));
+  }
+  if (const json* v = r.optional("friction")) {
+    p.friction = c.number(*v, r.child("friction"));
+    if (p.friction < 0) c.fail(r.child("friction"), "must be >= 0, got " + num(p.friction));
   }
   return p;
 }

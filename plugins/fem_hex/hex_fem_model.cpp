@@ -128,6 +128,7 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   m_restCenter = restBox.center();
   m_divergenceRadius = tol::kDivergenceBoxFactor * restBox.diagonal();
   m_surface.resize(organ.surface.numVertices(), 3);
+  m_surfaceF = organ.surface.F;
   reset();
 }
 
@@ -464,6 +465,12 @@ StepStatus HexFemModel::step(const StepInput& in) {
     }
   }
 
+  const bool penalty = in.contact && in.contact->params().method == ContactMethod::Penalty;
+  if (penalty)
+    addEmbeddedPenaltyContactForces(*in.contact, m_x, m_embedding.nodeIds, m_embedding.weights,
+                                    m_surfaceF, m_v.data(), h, m_fext.data());
+  if (in.contact) m_stepStart = m_x;
+
   const bool corot = m_config.elastic == ElasticModel::Corotational;
   if (corot) updateRotations();
 
@@ -551,15 +558,15 @@ StepStatus HexFemModel::step(const StepInput& in) {
   // Advance positions; grasped nodes land exactly on their targets.
   Eigen::Map<VecX>(m_x.data(), 3 * N) += h * m_v;
   for (int n : m_grasped) m_x.row(n) = m_target.row(n);
-  if (in.contact) {
-    // Contact on the embedded surface, spread to the grid nodes by the trilinear weights; fixed
-    // and grasped nodes do not move.
+  if (in.contact && !penalty) {
+    // Contact on the embedded surface triangles, spread to the grid nodes by the barycentric and
+    // trilinear weights; fixed and grasped nodes do not move.
     m_contactInvMass.resize(N);
     for (int n = 0; n < N; ++n)
       m_contactInvMass[n] =
           (m_isFixed[n] || m_isGrasped[n] || !(m_mass[3 * n] > 0)) ? 0.0 : 1.0 / m_mass[3 * n];
-    resolveEmbeddedContacts(*in.contact, m_x, m_embedding.nodeIds, m_embedding.weights,
-                            m_contactInvMass, h, m_v.data());
+    resolveEmbeddedSurfaceContacts(*in.contact, m_x, m_embedding.nodeIds, m_embedding.weights,
+                                   m_surfaceF, m_contactInvMass, h, m_v.data(), &m_stepStart);
   }
   m_msSolve = msSince(t1);
 

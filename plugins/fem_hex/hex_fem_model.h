@@ -128,6 +128,8 @@ class HexFemModel : public Model {
   std::vector<Quat> m_q;
   std::vector<Mat3> m_R;
   MatX3 m_surface;
+  MatX3i m_surfaceF;  // the organ's triangles over m_surface: the collision proxy
+  MatX3 m_stepStart;  // nodes at the step's start (contact friction)
 
   // Per-step work (allocated once).
   std::vector<char> m_isGrasped;      // N

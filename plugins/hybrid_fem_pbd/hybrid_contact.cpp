@@ -2,7 +2,9 @@
 // are prescribed onto its surface like grasped vertices (the coarse FEM and the surface PBD both
 // see them). The step is re-run from the same start state up to 3 times, adding the vertices the
 // previous run left inside (control vertices follow the coarse FEM and can be carried in by it);
-// then the free vertices still inside are projected out (their inward normal velocity removed).
+// then the surface triangles still within the contact thickness are projected out (their inward
+// normal velocity removed, Coulomb friction from the step's start): this also catches a tool
+// thinner than the vertex spacing, which no vertex would report.
 #include "hybrid_model.h"
 
 #include <deform/contact.h>
@@ -28,7 +30,8 @@ StepStatus HybridModel::stepWithContact(const StepInput& in) {
   }
   m_inContactStep = false;
   if (status != StepStatus::Ok) return status;
-  if (m_w.size() == m_surf.x.rows()) resolveContacts(*in.contact, m_surf.x, m_w, in.dt, &m_v);
+  if (m_w.size() == m_surf.x.rows())
+    resolveSurfaceContacts(*in.contact, m_surf.x, m_surf.faces(), m_w, in.dt, &m_v, &x0);
   return m_surf.x.allFinite() ? StepStatus::Ok : StepStatus::Diverged;
 }
 

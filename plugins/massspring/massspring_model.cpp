@@ -76,6 +76,10 @@ void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
     buildSurface(organ);
   }
   const int N = static_cast<int>(m_rest.rows());
+  m_contactF = organ.surface.F;
+  if (!m_surfaceIdentity)
+    for (Eigen::Index f = 0; f < m_contactF.rows(); ++f)
+      for (int k = 0; k < 3; ++k) m_contactF(f, k) = m_surfaceRows.at(m_contactF(f, k));
   for (Spring& s : m_springs)
     s.c = springDamping(m_config.dampingRatio, s.k, m_mass[s.a], m_mass[s.b]);
   // Springs in the order of their first node: neighbouring springs then touch nearby memory.
@@ -334,6 +338,13 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     for (int i : g.nodes) m_graspMask[i] = 1;
   for (const GraspInput& g : in.grasps)
     for (int i : g.nodes) m_xOld.row(i) = m_x.row(i);
+  const bool penalty = in.contact && in.contact->params().method == ContactMethod::Penalty;
+  if (in.contact) m_stepStart = m_x;
+  if (penalty) {
+    // Penalty contact: a force on the surface triangles for this step (explicit in the contact).
+    m_contactForce.setZero(m_x.rows(), 3);
+    addPenaltyContactForces(*in.contact, m_x, m_contactF, &m_v, h, m_contactForce);
+  }
 
   StepStatus status;
   if (m_config.integrator == Integrator::ImplicitEuler) {
@@ -344,6 +355,7 @@ StepStatus MassSpringModel::step(const StepInput& in) {
       const int node = m_surfaceIdentity ? l.surfaceVertex : m_surfaceRows.at(l.surfaceVertex);
       m_f.row(node) += l.force.transpose();
     }
+    if (penalty) m_f += m_contactForce;
     const auto t1 = Clock::now();
     const int N = static_cast<int>(m_x.rows());
     const Real alpha = m_config.massDamping;
@@ -382,13 +394,14 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     m_phase["integrate"] = std::chrono::duration<double, std::milli>(t2 - t1).count();
     status = ok ? StepStatus::Ok : StepStatus::Diverged;
   }
-  if (in.contact) {
-    // Contact after the integrator: nodes are projected out of the instruments and lose their
-    // inward normal velocity; fixed and grasped nodes stay where their constraint put them.
+  if (in.contact && !penalty) {
+    // Contact after the integrator: the surface triangles are projected out of the instruments
+    // and lose their inward normal velocity; fixed and grasped nodes stay where their
+    // constraint put them.
     m_contactInvMass = m_invMass;
     for (const GraspInput& g : in.grasps)
       for (int i : g.nodes) m_contactInvMass[i] = 0;
-    resolveContacts(*in.contact, m_x, m_contactInvMass, h, &m_v);
+    resolveSurfaceContacts(*in.contact, m_x, m_contactF, m_contactInvMass, h, &m_v, &m_stepStart);
   }
   if (!m_surfaceIdentity)
     for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);
@@ -408,6 +421,7 @@ StepStatus MassSpringModel::stepImplicit(const StepInput& in, Real h) {
     const int node = m_surfaceIdentity ? l.surfaceVertex : m_surfaceRows.at(l.surfaceVertex);
     m_f.row(node) += l.force.transpose();
   }
+  if (in.contact && in.contact->params().method == ContactMethod::Penalty) m_f += m_contactForce;
   const Real alpha = m_config.massDamping;
   for (int i = 0; i < N; ++i)
     m_f.row(i) += m_mass[i] * (in.gravity.transpose() - alpha * m_v.row(i));

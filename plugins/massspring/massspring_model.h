@@ -78,6 +78,9 @@ class MassSpringModel final : public Model {
   bool m_surfaceIdentity = true;
   std::vector<int> m_surfaceRows;
   MatX3 m_surface;
+  MatX3i m_contactF;     // surface triangles as node rows: the collision proxy
+  MatX3 m_stepStart;     // positions at the step's start (contact friction)
+  MatX3 m_contactForce;  // penalty contact forces of the step (N)
 
   // Implicit Euler: the system matrix with a fixed pattern, and where each spring's four 3x3
   // blocks and each node's diagonal block live in its value array (index of the block's first

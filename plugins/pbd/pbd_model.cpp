@@ -142,6 +142,10 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
     buildSurface(organ);
   }
   const int N = static_cast<int>(m_rest.rows());
+  m_contactF = organ.surface.F;
+  if (!m_surfaceIdentity)
+    for (Eigen::Index f = 0; f < m_contactF.rows(); ++f)
+      for (int k = 0; k < 3; ++k) m_contactF(f, k) = m_surfaceRows.at(m_contactF(f, k));
 
   // Colour 63 collects every constraint once 63 colours are used: it is not independent, so it
   // is projected one by one (see projectAll()).
@@ -586,9 +590,10 @@ StepStatus PbdModel::step(const StepInput& in) {
   std::fill(m_lambdaTet.begin(), m_lambdaTet.end(), 0.0);
   m_lambdaVolume = 0;
   projectAll(dt);
-  // Contact last, so that no node ends the step inside an instrument; the correction enters the
-  // velocity like any other projection (w = 0 for fixed and grasped nodes).
-  if (in.contact) resolveContacts(*in.contact, m_p, m_w, dt);
+  // Contact last, on the surface triangles, so that no surface point ends the step inside an
+  // instrument; the correction (friction included, measured from the step's start m_x) enters
+  // the velocity like any other projection (w = 0 for fixed and grasped nodes).
+  if (in.contact) resolveSurfaceContacts(*in.contact, m_p, m_contactF, m_w, dt, nullptr, &m_x);
   const auto t2 = Clock::now();
 
   // Velocity update with damping, and the divergence check (NaN/Inf or leaving the box).

@@ -103,6 +103,7 @@ class PbdModel final : public Model {
   std::vector<int> m_surfaceRows;  // surface vertex -> node when not the identity
   MatX3 m_surface;
   MatX3i m_surfaceF;  // triangles (node indices) for the global volume constraint
+  MatX3i m_contactF;  // surface triangles (node indices): the collision proxy
 
   std::vector<DistanceConstraint> m_distance;
   std::vector<DihedralConstraint> m_dihedral;

@@ -84,6 +84,10 @@ class ReferenceFemModel final : public Model {
     }
     m_system = std::make_unique<FemSystem>(std::move(mesh), organ.material, model, order);
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
+    // The organ's triangles as node rows: the contact proxy besides the nodes themselves.
+    m_contactF = organ.surface.F;
+    for (Eigen::Index f = 0; f < m_contactF.rows(); ++f)
+      for (int k = 0; k < 3; ++k) m_contactF(f, k) = m_surfaceNode.at(size_t(m_contactF(f, k)));
     m_spreader = std::make_unique<PointLoadSpreader>(*m_system);
     m_patches.clear();
     reset();
@@ -98,8 +102,8 @@ class ReferenceFemModel final : public Model {
                                   [this]() -> const MatX3& { return m_nodes; },
                                   [this] { return m_graspForces; }};
     if (m_solveKind == SolveKind::QuasiStatic)
-      return solveAlongInstrumentPath(*in.contact, in, hooks, m_fixed, 4, 0.2);
-    return solveWithContactConstraints(*in.contact, in, hooks, m_fixed, 1);
+      return solveSurfaceAlongInstrumentPath(*in.contact, in, hooks, m_contactF, m_fixed, 4, 0.2);
+    return solveWithSurfaceContactConstraints(*in.contact, in, hooks, m_contactF, m_fixed, 1);
   }
 
   StepStatus solveOnce(const StepInput& in) {
@@ -249,6 +253,7 @@ class ReferenceFemModel final : public Model {
   std::unique_ptr<EquilibriumSolver> m_solver;
   std::vector<int> m_fixed;
   std::vector<int> m_surfaceNode;
+  MatX3i m_contactF;  ///< organ triangles as node rows (contact proxy)
   VecX m_x, m_v, m_fPrev;
   MatX3 m_nodes, m_surface;
   std::vector<Vec3> m_graspForces;

@@ -369,8 +369,8 @@ TEST(InstrumentScene, UnknownOrMisplacedKeysAreErrorsWithTheirPath) {
   j["contact"]["passes"] = 0;
   expectSceneError(j, "/contact/passes", "must be in [1, 100]");
   j = instrumentScene();
-  j["contact"]["friction"] = 0.3;
-  expectSceneError(j, "/contact/friction", "unknown key");
+  j["contact"]["restitution"] = 0.3;
+  expectSceneError(j, "/contact/restitution", "unknown key");
   j = instrumentScene();
   j["objects"][0].erase("mass");
   expectSceneError(j, "/objects/0/mass", "required key is missing");

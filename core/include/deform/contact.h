@@ -29,6 +29,13 @@
 
 namespace deform {
 
+/// How force-based models answer contact (scene key "contact.method").
+///  - Projection: positions are projected out of the instruments (every model; the default).
+///  - Penalty: force-based models (massspring, fem_hex dynamic) receive a penalty force on their
+///    surface triangles instead, f = A (k_A d - c_A min(v_n, 0)) n (see addPenaltyContactForces);
+///    other models keep the projection.
+enum class ContactMethod { Projection, Penalty };
+
 /// Scene-level contact parameters, identical for every model (scene key "contact").
 struct ContactParams {
   /// m: radius of the sphere around each node that is kept out of the instruments (the contact
@@ -37,6 +44,16 @@ struct ContactParams {
   /// Projection passes per resolveContacts() call: a node pushed out of one part of an
   /// instrument into another is fixed by the next pass.
   int passes = 2;
+  ContactMethod method = ContactMethod::Projection;
+  /// Pa/m (N/m^3), penalty only: pressure per metre of penetration; a triangle of area A
+  /// penetrated by d carries the force k_A A d, so the total force does not depend on the
+  /// model's mesh resolution (a per-proxy N/m stiffness would grow with the proxy count).
+  Real stiffness = 1e6;
+  /// Pa s/m (N s/m^3), penalty only: pressure per unit approach speed, c_A A max(-v_n, 0).
+  Real damping = 1e3;
+  /// Coulomb friction coefficient mu (static = kinetic) of the projection response of
+  /// resolveSurfaceContacts() (0: frictionless, the behaviour before it existed).
+  Real friction = 0;
 };
 
 /// One primitive of a rigid instrument, in the instrument's body frame (m).
@@ -68,6 +85,22 @@ struct Contact {
   Vec3 normal = Vec3::UnitZ();  ///< unit, out of the instrument
 };
 
+/// A model surface triangle that comes within the contact thickness of an instrument: its points
+/// closer than the thickness are pushed out when the triangle's deepest point moves by
+/// depth along normal.
+///
+///   depth = thickness - dist_B(T),  dist_B(T) = min over the triangle T of phi_B (< 0: overlap),
+///
+/// computed by Bullet's narrowphase on a btTriangleShape (sphere-triangle exactly, capsules and
+/// boxes by GJK/EPA).
+struct TriangleContact {
+  int triangle = -1;            ///< row of the faces given to queryTriangles()
+  int body = -1;                ///< instrument (addBody() order)
+  Real depth = 0;               ///< m, > 0
+  Vec3 normal = Vec3::UnitZ();  ///< unit, out of the instrument
+  Vec3 bary = Vec3::Zero();     ///< barycentric weights of the triangle's deepest point
+};
+
 class ContactWorld {
  public:
   explicit ContactWorld(const ContactParams& params = {});
@@ -96,6 +129,18 @@ class ContactWorld {
   /// spheres for the query (broadphase pairs, narrowphase depth) and taken out after it.
   std::vector<Contact> query(const MatX3& centres, const VecX* radii = nullptr);
 
+  /// Surface triangles that come within the contact thickness of an instrument, at most one
+  /// contact per triangle (the deepest over all instruments), sorted by triangle index. V: #V by
+  /// 3 (m); F: #F by 3 rows of V. Triangles whose (thickened) bounding box meets the instruments'
+  /// box enter Bullet's world as btTriangleShapes for the query and leave it after it (so a tool
+  /// thinner than the vertex spacing is found where vertex spheres would let it pass).
+  std::vector<TriangleContact> queryTriangles(const MatX3& V, const MatX3i& F);
+
+  /// Displacement (m) since the body's previous pose (the one before the last setPose()) of the
+  /// body's material point that is now at p: the instrument's motion over the step, which a
+  /// friction or damping law measures relative motion against.
+  Vec3 bodyDisplacement(int body, const Vec3& p) const;
+
   /// Reaction of the tissue on an instrument (N), applied at `at` (m, world); accumulated until
   /// clearReactions() (the harness clears before every step).
   void addReaction(int body, const Vec3& force, const Vec3& at);
@@ -114,6 +159,8 @@ class ContactWorld {
   std::unique_ptr<Impl> m_impl;
   std::vector<Vec3> m_force, m_torque;
   std::vector<Vec3> m_settled;
+  std::vector<Vec3> m_prevPos;
+  std::vector<Mat3> m_prevRot;
   std::vector<char> m_settledSet;
   std::vector<Real> m_thinnest;
   long long m_pairsTested = 0, m_contactsFound = 0;
@@ -170,6 +217,19 @@ StepStatus solveAlongInstrumentPath(ContactWorld& world, const StepInput& in,
                                     const std::vector<int>& immovable, int maxRounds,
                                     Real maxStepFraction = 0.5);
 
+/// The same two with the model's surface triangles as proxy too (issue F8): faces is #F by 3 rows
+/// of model.nodes(). Besides the penetrating nodes, every triangle within the thickness of an
+/// instrument (ContactWorld::queryTriangles(), which finds a tool thinner than the vertex
+/// spacing) prescribes its not yet prescribed, movable vertices: x_a + b_a d n / sum_b b_b^2
+/// (the smallest motion of the vertices that moves the triangle's deepest point by d n).
+StepStatus solveWithSurfaceContactConstraints(ContactWorld& world, const StepInput& in,
+                                              const ContactModelHooks& model, const MatX3i& faces,
+                                              const std::vector<int>& immovable, int maxRounds);
+StepStatus solveSurfaceAlongInstrumentPath(ContactWorld& world, const StepInput& in,
+                                           const ContactModelHooks& model, const MatX3i& faces,
+                                           const std::vector<int>& immovable, int maxRounds,
+                                           Real maxStepFraction = 0.5);
+
 /// Row-major index and weight tables of an embedding (#S by K).
 using EmbeddingIds = Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using EmbeddingWeights = Eigen::Matrix<Real, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
@@ -186,5 +246,70 @@ ContactResolution resolveEmbeddedContacts(ContactWorld& world, MatX3& nodes,
                                           const Eigen::Ref<const EmbeddingWeights>& weights,
                                           const VecX& invMass, Real dt,
                                           Real* nodeVelocity = nullptr);
+
+/// The response on surface triangles, for models whose collision proxy is their surface
+/// (issue F8: "the surface triangles"): each triangle within the thickness of an instrument is
+/// pushed out at its deepest point p = sum_a b_a x_a (b its barycentric weights) by d n, the
+/// correction spread over its movable vertices as the smallest mass-weighted motion that moves
+/// p by d n (the PBD distribution of Mueller et al. 2007, Eq. (8), for the constraint
+/// C = n . (p - p0) - d with grad_{x_a} C = b_a n):
+///
+///   dx_a = w_a b_a d n / sum_b w_b b_b^2,   w the inverse masses,
+///
+/// contact after contact with the depth updated to the motion so far (Gauss-Seidel), for up to
+/// 4 x passes passes. A contact whose movable vertices hold less than a quarter of the
+/// barycentric weight is skipped (fixed or grasped vertices hold that point; the minimum-norm
+/// motion of a vertex of weight b grows like d / b). Points closer than the thickness include the
+/// vertices, so this replaces
+/// resolveContacts() on the surface vertices. With v, p's inward normal velocity is removed the
+/// same way (v_p . n -> 0) and dx is not added to v. With x0 (the positions at the step's start)
+/// and contact.friction mu > 0, Coulomb friction as positions (Macklin et al. 2014, "Unified
+/// particle physics for real-time applications", Sec. 6.1, Eq. (24)-(25)): the tangential
+/// motion of p relative to the instrument over the step, dt_p = [(p - p(x0)) -
+/// bodyDisplacement(p)]_tangent, is undone when |dt_p| < mu d (static), else shortened by
+/// mu d (kinetic); with v the same share of p's tangential velocity relative to the
+/// instrument is removed. The reaction on
+/// the instrument is minus the impulse given to the vertices, normal and tangential parts:
+/// -sum_a m_a (dx_a / dt + dv_a) / dt at p. x: #N by 3 (m); F: #F by 3 rows of x; invMass: #N
+/// (1/kg, 0 = immovable); v: #N by 3 (m/s) or nullptr; x0: #N by 3 (m) or nullptr (no friction).
+ContactResolution resolveSurfaceContacts(ContactWorld& world, MatX3& x, const MatX3i& F,
+                                         const VecX& invMass, Real dt, MatX3* v = nullptr,
+                                         const MatX3* x0 = nullptr);
+
+/// The same for a surface embedded in the nodes (fem_hex): surface vertex s = sum_k W(s,k)
+/// x_{I(s,k)} (ids, weights as in resolveEmbeddedContacts()); F: #F by 3 rows of the embedded
+/// surface. A triangle's deepest point is sum_a b_a sum_k W(a,k) x_{I(a,k)}, its correction
+/// spread over those nodes by the same minimum-norm rule. nodeVelocity: 3 #N (node-major, m/s)
+/// or nullptr; nodes0: the nodes at the step's start (friction) or nullptr.
+ContactResolution resolveEmbeddedSurfaceContacts(ContactWorld& world, MatX3& nodes,
+                                                 const Eigen::Ref<const EmbeddingIds>& ids,
+                                                 const Eigen::Ref<const EmbeddingWeights>& weights,
+                                                 const MatX3i& F, const VecX& invMass, Real dt,
+                                                 Real* nodeVelocity = nullptr,
+                                                 const MatX3* nodes0 = nullptr);
+
+/// Penalty contact (contact.method = penalty) for force-based models: every surface triangle
+/// within the thickness of an instrument receives, at its deepest point p, the force
+///
+///   f = max(0, A (k_A d - c_A min(v_n, 0))) n,   v_n = (v_p - bodyDisplacement(p) / dt) . n,
+///
+/// A the triangle's area, k_A = contact.stiffness (Pa/m), c_A = contact.damping (Pa s/m),
+/// distributed to the vertices as f_a = b_a f (the consistent load of a point force); -f is the
+/// instrument's reaction. The model adds `force` (N, #N by 3, accumulated into) to its external
+/// forces for the coming step. v: #N by 3 (m/s) or nullptr (no damping). Explicit: stable while
+/// k_A A dt^2 / m stays below about 1 (m the vertex mass).
+ContactResolution addPenaltyContactForces(ContactWorld& world, const MatX3& x, const MatX3i& F,
+                                          const MatX3* v, Real dt, MatX3& force);
+
+/// The same on an embedded surface: f_a is spread to the nodes as W(a,k) f_a. nodeVelocity,
+/// nodeForce: 3 #N, node-major (nodeVelocity may be nullptr).
+ContactResolution addEmbeddedPenaltyContactForces(ContactWorld& world, const MatX3& nodes,
+                                                  const Eigen::Ref<const EmbeddingIds>& ids,
+                                                  const Eigen::Ref<const EmbeddingWeights>& weights,
+                                                  const MatX3i& F, const Real* nodeVelocity,
+                                                  Real dt, Real* nodeForce);
+
+/// "projection" or "penalty" (the scene's spelling).
+const char* contactMethodName(ContactMethod m);
 
 }  // namespace deform

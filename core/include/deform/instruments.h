@@ -19,6 +19,7 @@
 // the joints); the coupling and the tissue's forces are explicit over the step.
 #pragma once
 
+#include <deform/contact.h>
 #include <deform/types.h>
 
 #include <memory>
@@ -56,6 +57,16 @@ class InstrumentWorld {
   /// Returns the shaft body.
   int addGrasper(Real mass, Real shaftLength, Real jawLength, const Vec3& pos,
                  const CouplingParams& coupling);
+  /// Gives a body a collision shape (its primitives in the body frame, as contact.h's
+  /// RigidShape): bodies with shapes and the grasper's jaws collide with each other through ODE
+  /// (dCollide on geoms in a simple space, a contact joint per contact point, Coulomb friction
+  /// mu = setFriction()), except a grasper's two jaws with each other and bodies joined by a
+  /// joint. Without shapes nothing collides (the default).
+  void setShape(int body, const RigidShape& shape);
+  /// Coulomb friction of the body-body contacts (default 0: frictionless).
+  void setFriction(Real mu);
+  /// Contact points between bodies in the last step.
+  int lastContacts() const;
   /// Jaw command of a grasper's shaft body.
   void setJaws(int grasper, bool closed);
   /// Current opening angle of a grasper's first jaw, rad (0 closed).
