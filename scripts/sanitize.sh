@@ -77,8 +77,19 @@ if [[ -n $plugins ]]; then
   conformance_filter="ConformanceSetup.*"
   for p in "${built_plugins[@]}"; do conformance_filter+=":Plugins/Conformance.*/$p"; done
 fi
+# The list is read whole first: `cmake --build --target help | grep -q` under pipefail fails
+# whenever grep exits at an early match and cmake then dies of SIGPIPE, which silently dropped
+# the conformance suite from the CI run.
+available=$(cmake --build "$build" --target help 2>/dev/null || true)
 for t in "${tests[@]}"; do
-  if cmake --build "$build" --target help 2>/dev/null | grep -q "\b$t\b"; then targets+=("$t"); fi
+  if grep -qw -- "$t" <<<"$available"; then targets+=("$t"); fi
+done
+# Every test program asked for must exist: a missing one is a broken build, not a skip.
+for t in "${tests[@]}"; do
+  [[ " ${targets[*]} " == *" $t "* ]] || {
+    echo "sanitize.sh: test target $t not found in $build" >&2
+    exit 1
+  }
 done
 echo "sanitize.sh: building ${targets[*]}"
 cmake --build "$build" -j "$jobs" --target "${targets[@]}"
