@@ -166,6 +166,37 @@ struct ContactWorld::Impl {
     inWorld = 0;
   }
 
+  /// The union of the instruments' broadphase boxes: only proxies inside it enter the world.
+  void bodiesBox(btVector3& lo, btVector3& hi) const {
+    lo = btVector3(BT_LARGE_FLOAT, BT_LARGE_FLOAT, BT_LARGE_FLOAT);
+    hi = -lo;
+    for (const Body& b : bodies) {
+      const btBroadphaseProxy* h = b.object->getBroadphaseHandle();
+      lo.setMin(h->m_aabbMin);
+      hi.setMax(h->m_aabbMax);
+    }
+  }
+
+  /// Runs the broadphase and calls fn(proxy, body) for every pair of a proxy (user index >= 0)
+  /// and an instrument (user index < 0) whose tight boxes overlap. The broadphase pairs leaves by
+  /// their fattened volumes (Bullet's global 5 cm margin), hence the second test.
+  template <class Fn>
+  void forEachProxyBodyPair(Fn&& fn) {
+    broadphase.calculateOverlappingPairs(&dispatcher);
+    btBroadphasePairArray& pairs = broadphase.getOverlappingPairCache()->getOverlappingPairArray();
+    for (int k = 0; k < pairs.size(); ++k) {
+      auto* a = static_cast<btCollisionObject*>(pairs[k].m_pProxy0->m_clientObject);
+      auto* b = static_cast<btCollisionObject*>(pairs[k].m_pProxy1->m_clientObject);
+      if (a->getUserIndex() < 0) std::swap(a, b);
+      if (a->getUserIndex() < 0 || b->getUserIndex() >= 0) continue;
+      const btBroadphaseProxy* pa = a->getBroadphaseHandle();
+      const btBroadphaseProxy* pb = b->getBroadphaseHandle();
+      if (!TestAabbAgainstAabb2(pa->m_aabbMin, pa->m_aabbMax, pb->m_aabbMin, pb->m_aabbMax))
+        continue;
+      fn(a, b);
+    }
+  }
+
   // The same pool for surface triangles; their broadphase boxes are padded by the thickness.
   std::vector<std::unique_ptr<btTriangleShape>> triangleShapes;
   std::vector<std::unique_ptr<btCollisionObject>> triangles;
@@ -294,12 +325,8 @@ std::vector<Contact> ContactWorld::query(const MatX3& centres, const VecX* radii
   if (w.bodies.empty()) return {};
   // Only proxies inside the instruments' bounding box enter Bullet's world (and leave it after
   // the query): the broadphase then pairs them with the instruments' parts.
-  btVector3 lo(BT_LARGE_FLOAT, BT_LARGE_FLOAT, BT_LARGE_FLOAT), hi = -lo;
-  for (const Impl::Body& b : w.bodies) {
-    const btBroadphaseProxy* h = b.object->getBroadphaseHandle();
-    lo.setMin(h->m_aabbMin);
-    hi.setMax(h->m_aabbMax);
-  }
+  btVector3 lo, hi;
+  w.bodiesBox(lo, hi);
   for (Eigen::Index i = 0; i < n; ++i) {
     const Real r = radii ? std::max((*radii)[i], Real(1e-9)) : m_params.thickness;
     const btVector3 c(centres(i, 0), centres(i, 1), centres(i, 2));
@@ -308,32 +335,20 @@ std::vector<Contact> ContactWorld::query(const MatX3& centres, const VecX* radii
       continue;
     w.addProxy(static_cast<int>(i), c, r);
   }
-  w.broadphase.calculateOverlappingPairs(&w.dispatcher);
-
   std::vector<Contact> out;
-  btBroadphasePairArray& pairs = w.broadphase.getOverlappingPairCache()->getOverlappingPairArray();
-  for (int k = 0; k < pairs.size(); ++k) {
-    auto* a = static_cast<btCollisionObject*>(pairs[k].m_pProxy0->m_clientObject);
-    auto* b = static_cast<btCollisionObject*>(pairs[k].m_pProxy1->m_clientObject);
-    if (a->getUserIndex() < 0) std::swap(a, b);
-    if (a->getUserIndex() < 0 || b->getUserIndex() >= 0) continue;
-    // The broadphase pairs leaves by their fattened volumes (Bullet's global 5 cm margin): keep
-    // only pairs whose tight boxes overlap.
-    const btBroadphaseProxy* pa = a->getBroadphaseHandle();
-    const btBroadphaseProxy* pb = b->getBroadphaseHandle();
-    if (!TestAabbAgainstAabb2(pa->m_aabbMin, pa->m_aabbMax, pb->m_aabbMin, pb->m_aabbMax)) continue;
+  w.forEachProxyBodyPair([&](btCollisionObject* a, btCollisionObject* b) {
     ++m_pairsTested;
     DeepestCallback cb;
     cb.proxy = a;
     w.world.contactPairTest(a, b, cb);
-    if (!cb.found) continue;
+    if (!cb.found) return;
     Contact c;
     c.proxy = a->getUserIndex();
     c.body = -1 - b->getUserIndex();
     c.depth = -cb.deepest;
     c.normal = cb.normal;
     out.push_back(c);
-  }
+  });
   w.removeProxies();
   // Deepest per proxy, in proxy order (the pair cache's order is not part of the contract).
   std::sort(out.begin(), out.end(), [](const Contact& x, const Contact& y) {
@@ -350,12 +365,8 @@ std::vector<TriangleContact> ContactWorld::queryTriangles(const MatX3& V, const 
   Impl& w = *m_impl;
   if (w.bodies.empty()) return {};
   const Real t = m_params.thickness;
-  btVector3 lo(BT_LARGE_FLOAT, BT_LARGE_FLOAT, BT_LARGE_FLOAT), hi = -lo;
-  for (const Impl::Body& b : w.bodies) {
-    const btBroadphaseProxy* h = b.object->getBroadphaseHandle();
-    lo.setMin(h->m_aabbMin);
-    hi.setMax(h->m_aabbMax);
-  }
+  btVector3 lo, hi;
+  w.bodiesBox(lo, hi);
   const auto vertex = [&](int i) { return btVector3(V(i, 0), V(i, 1), V(i, 2)); };
   for (Eigen::Index f = 0; f < F.rows(); ++f) {
     const btVector3 a = vertex(F(f, 0)), b = vertex(F(f, 1)), c = vertex(F(f, 2));
@@ -369,24 +380,14 @@ std::vector<TriangleContact> ContactWorld::queryTriangles(const MatX3& V, const 
       continue;
     w.addTriangle(static_cast<int>(f), a, b, c, t);
   }
-  w.broadphase.calculateOverlappingPairs(&w.dispatcher);
-
   std::vector<TriangleContact> out;
-  btBroadphasePairArray& pairs = w.broadphase.getOverlappingPairCache()->getOverlappingPairArray();
-  for (int k = 0; k < pairs.size(); ++k) {
-    auto* a = static_cast<btCollisionObject*>(pairs[k].m_pProxy0->m_clientObject);
-    auto* b = static_cast<btCollisionObject*>(pairs[k].m_pProxy1->m_clientObject);
-    if (a->getUserIndex() < 0) std::swap(a, b);
-    if (a->getUserIndex() < 0 || b->getUserIndex() >= 0) continue;
-    const btBroadphaseProxy* pa = a->getBroadphaseHandle();
-    const btBroadphaseProxy* pb = b->getBroadphaseHandle();
-    if (!TestAabbAgainstAabb2(pa->m_aabbMin, pa->m_aabbMax, pb->m_aabbMin, pb->m_aabbMax)) continue;
+  w.forEachProxyBodyPair([&](btCollisionObject* a, btCollisionObject* b) {
     ++m_pairsTested;
     ClosestCallback cb;
     cb.proxy = a;
     cb.m_closestDistanceThreshold = t;
     w.world.contactPairTest(a, b, cb);
-    if (!cb.found) continue;
+    if (!cb.found) return;
     TriangleContact c;
     c.triangle = a->getUserIndex();
     c.body = -1 - b->getUserIndex();
@@ -397,7 +398,7 @@ std::vector<TriangleContact> ContactWorld::queryTriangles(const MatX3& V, const 
                                     V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose())
                  .bary;
     out.push_back(c);
-  }
+  });
   w.removeTriangles();
   std::sort(out.begin(), out.end(), [](const TriangleContact& x, const TriangleContact& y) {
     return x.triangle != y.triangle ? x.triangle < y.triangle : x.depth > y.depth;
