@@ -9,6 +9,8 @@
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
 
+#include "conformance_common.h"
+
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -18,20 +20,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-PluginLoader& loader() {
-  // One loader for the whole test program: plugins stay loaded until every model is gone.
-  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
-  return *l;
-}
-
-std::vector<std::string> pluginNames() {
-  try {
-    return PluginLoader({DEFORM_BUILD_PLUGIN_DIR}).discover();
-  } catch (const std::exception&) {
-    return {};
-  }
-}
 
 /// A phantom scene: organ, fixed slab at the bottom (fraction of the height), no gravity.
 json phantomScene(const std::string& phantom, double resolution, double fixedFraction,
@@ -66,11 +54,6 @@ Case makeCase(const json& j) {
   return c;
 }
 
-Cache& cache() {
-  static Cache c(Cache::defaultDir());
-  return c;
-}
-
 /// The scene as a model runs it: a quasi-static model has no inertia, so the time step only
 /// samples the trajectory; 10 ms keeps the reference-class solvers to seconds per test.
 Scene sceneFor(const Scene& scene, const ModelInfo& info) {
@@ -81,7 +64,9 @@ Scene sceneFor(const Scene& scene, const ModelInfo& info) {
 
 class Conformance : public ::testing::TestWithParam<std::string> {
  protected:
-  const std::vector<ModelInfo>& models() { return loader().loadFile(loader().locate(GetParam())); }
+  const std::vector<ModelInfo>& models() {
+    return conformanceLoader().loadFile(conformanceLoader().locate(GetParam()));
+  }
 };
 
 Real maxDisplacement(const MatX3& x, const MatX3& rest) {
@@ -97,7 +82,7 @@ TEST_P(Conformance, CountsSurfaceAndNodesAfterInit) {
     std::unique_ptr<Model> model = info.create();
     ASSERT_TRUE(model);
     const ParamValues params = ParamValues::defaults(info.params);
-    model->init(ModelSetup{c.organ, params, cache(), c.scene.dt, c.scene.gravity});
+    model->init(ModelSetup{c.organ, params, conformanceCache(), c.scene.dt, c.scene.gravity});
     const Counts counts = model->counts();
     // Counts are sizes: none negative, and the model has something (a count of a disabled
     // feature, e.g. bending constraints switched off, may be 0).
@@ -123,7 +108,7 @@ TEST_P(Conformance, RestStaysAtRestWithoutGravity) {
   for (const ModelInfo& info : models()) {
     SCOPED_TRACE(info.name);
     const RunRecord r = runModel(info, ParamValues::defaults(info.params), sceneFor(c.scene, info),
-                                 c.organ, cache());
+                                 c.organ, conformanceCache());
     ASSERT_EQ(r.status, RunStatus::Ok) << r.message;
     EXPECT_EQ(r.steps, sceneFor(c.scene, info).numSteps());
     EXPECT_LT(maxDisplacement(r.finalSurface, c.organ.surface.V),
@@ -143,7 +128,7 @@ TEST_P(Conformance, GravitySagsTheOrgan) {
     if (!info.has(Capability::Gravity)) continue;
     ++tested;
     const RunRecord r = runModel(info, ParamValues::defaults(info.params), sceneFor(c.scene, info),
-                                 c.organ, cache());
+                                 c.organ, conformanceCache());
     ASSERT_EQ(r.status, RunStatus::Ok) << r.message;
     const VecX dz = r.finalSurface.col(2) - c.organ.surface.V.col(2);
     EXPECT_LT(dz.mean(), -1e-7) << "mean z displacement " << dz.mean() << " m";
@@ -172,7 +157,7 @@ TEST_P(Conformance, GraspMovesTheGraspedRegionWithTheTool) {
     if (!info.has(Capability::Grasp)) continue;
     ++tested;
     const RunRecord r = runModel(info, ParamValues::defaults(info.params), sceneFor(c.scene, info),
-                                 c.organ, cache());
+                                 c.organ, conformanceCache());
     ASSERT_EQ(r.status, RunStatus::Ok) << r.message;
     EXPECT_TRUE(r.emptyGrasps.empty()) << "the grasp closed on no node";
     const std::vector<int> region = nearestVertices(c.organ.surface.V, top, 5);
@@ -197,7 +182,7 @@ TEST_P(Conformance, PointForceMovesTheLoadedVertexAlongTheForce) {
     if (!info.has(Capability::PointForce)) continue;
     ++tested;
     const RunRecord r = runModel(info, ParamValues::defaults(info.params), sceneFor(c.scene, info),
-                                 c.organ, cache());
+                                 c.organ, conformanceCache());
     ASSERT_EQ(r.status, RunStatus::Ok) << r.message;
     const int v = nearestVertex(c.organ.surface.V, top);
     EXPECT_GT(r.finalSurface(v, 2) - c.organ.surface.V(v, 2), 0.0);
@@ -227,7 +212,7 @@ TEST_P(Conformance, ResetThenRerunReproducesBitForBit) {
     if (!info.has(Capability::Grasp)) scene.tools.clear();
     std::unique_ptr<Model> model = info.create();
     const ParamValues params = ParamValues::defaults(info.params);
-    model->init(ModelSetup{c.organ, params, cache(), scene.dt, scene.gravity});
+    model->init(ModelSetup{c.organ, params, conformanceCache(), scene.dt, scene.gravity});
     RunRecord a, b2;
     simulate(*model, scene, c.organ, RunOptions{}, a);
     ASSERT_EQ(a.status, RunStatus::Ok) << a.message;
@@ -274,7 +259,7 @@ TEST_P(Conformance, NoNanOnTheShippedScenes) {
       const Scene run = sceneFor(scene, info);
       RunOptions o;
       o.maxSteps = static_cast<int>(std::lround(0.15 / run.dt));  // past the grasps' closing
-      const RunRecord r = runModel(info, params, run, organ, cache(), o);
+      const RunRecord r = runModel(info, params, run, organ, conformanceCache(), o);
       ++ran;
       EXPECT_EQ(r.status, RunStatus::Ok) << r.message;
       EXPECT_TRUE(r.finalSurface.allFinite());
@@ -310,7 +295,7 @@ TEST_P(Conformance, ViolentLoadEndsAsAStatusNeverACrashOrNan) {
     ++tested;
     RunRecord r;
     ASSERT_NO_THROW(r = runModel(info, ParamValues::defaults(info.params), sceneFor(c.scene, info),
-                                 c.organ, cache()));
+                                 c.organ, conformanceCache()));
     std::cout << "[ extreme  ] " << info.name << ": " << statusName(r.status) << " after "
               << r.steps << " steps" << (r.message.empty() ? "" : ": " + r.message) << "\n";
     EXPECT_NE(r.status, RunStatus::Unsupported);
@@ -329,17 +314,17 @@ TEST_P(Conformance, ViolentLoadEndsAsAStatusNeverACrashOrNan) {
   if (tested == 0) GTEST_SKIP() << "no dynamic model of this plugin has point forces";
 }
 
-INSTANTIATE_TEST_SUITE_P(Plugins, Conformance, ::testing::ValuesIn(pluginNames()),
+INSTANTIATE_TEST_SUITE_P(Plugins, Conformance, ::testing::ValuesIn(conformancePluginNames()),
                          [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(Conformance);
 
 TEST(ConformanceSetup, EveryPluginFoundLoadsAndRegistersAModel) {
-  const std::vector<std::string> names = pluginNames();
+  const std::vector<std::string> names = conformancePluginNames();
   if (names.empty()) GTEST_SKIP() << "no plugin in " << DEFORM_BUILD_PLUGIN_DIR << " yet";
   for (const std::string& name : names) {
     SCOPED_TRACE(name);
     const std::vector<ModelInfo>* models = nullptr;
-    EXPECT_NO_THROW(models = &loader().loadFile(loader().locate(name)));
+    EXPECT_NO_THROW(models = &conformanceLoader().loadFile(conformanceLoader().locate(name)));
     if (models) {
       EXPECT_FALSE(models->empty());
     }

@@ -11,6 +11,8 @@
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
 
+#include "conformance_common.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -19,24 +21,6 @@ namespace deform::harness {
 namespace {
 
 using nlohmann::json;
-
-PluginLoader& contactLoader() {
-  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
-  return *l;
-}
-
-std::vector<std::string> plugins() {
-  try {
-    return PluginLoader({DEFORM_BUILD_PLUGIN_DIR}).discover();
-  } catch (const std::exception&) {
-    return {};
-  }
-}
-
-Cache& contactCache() {
-  static Cache c(Cache::defaultDir());
-  return c;
-}
 
 /// Signed distance to the probe: tip sphere (centre c, radius r) and shaft capsule (radius r,
 /// from c up along +z for L).
@@ -89,7 +73,7 @@ ProbeCase probeCase() {
 class ContactConformance : public ::testing::TestWithParam<std::string> {
  protected:
   const std::vector<ModelInfo>& models() {
-    return contactLoader().loadFile(contactLoader().locate(GetParam()));
+    return conformanceLoader().loadFile(conformanceLoader().locate(GetParam()));
   }
 };
 
@@ -102,7 +86,7 @@ TEST_P(ContactConformance, APressedProbeLeavesNoNodeInsideItAfterAnyStep) {
     SCOPED_TRACE(info.name);
     if (!info.has(Capability::Contact)) {
       const RunRecord r =
-          runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
+          runModel(info, ParamValues::defaults(info.params), scene, organ, conformanceCache());
       EXPECT_EQ(r.status, RunStatus::Unsupported) << "no contact capability, yet " << r.message;
       continue;
     }
@@ -111,7 +95,7 @@ TEST_P(ContactConformance, APressedProbeLeavesNoNodeInsideItAfterAnyStep) {
     if (info.has(Capability::QuasiStatic)) run.dt = 0.01;
     std::unique_ptr<Model> model = info.create();
     const ParamValues params = ParamValues::defaults(info.params);
-    model->init(ModelSetup{organ, params, contactCache(), run.dt, run.gravity});
+    model->init(ModelSetup{organ, params, conformanceCache(), run.dt, run.gravity});
     // Nodes the model pins cannot move; the probe never reaches the fixed slab.
     const std::vector<int> fixed = fixedNodeIndices(model->nodes(), organ.fixed, organ.surface);
     const bool nodesAreSurface = model->nodes().rows() == organ.surface.numVertices();
@@ -193,7 +177,7 @@ TEST_P(ContactConformance, ADynamicGrasperReportsAHandForceAndAnObjectRestsOnThe
     if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
     ++tested;
     const RunRecord rec =
-        runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
+        runModel(info, ParamValues::defaults(info.params), scene, organ, conformanceCache());
     ASSERT_EQ(rec.status, RunStatus::Ok) << rec.message;
     ASSERT_EQ(rec.instruments.size(), 1u);
     EXPECT_EQ(rec.handForces.size(), static_cast<size_t>(scene.numSteps()));
@@ -239,7 +223,7 @@ TEST_P(ContactConformance, AFreeObjectRestsOnTheOrganOfEveryModelReportingItsCon
     const std::string why = unsupportedReason(info, scene);
     if (!info.has(Capability::Contact) || !info.has(Capability::ContactReaction)) {
       const RunRecord rec =
-          runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
+          runModel(info, ParamValues::defaults(info.params), scene, organ, conformanceCache());
       EXPECT_EQ(rec.status, RunStatus::Unsupported);
       const char* needed = info.has(Capability::Contact) ? "contact_reaction" : "contact";
       EXPECT_NE(rec.message.find(needed), std::string::npos) << rec.message;
@@ -249,7 +233,7 @@ TEST_P(ContactConformance, AFreeObjectRestsOnTheOrganOfEveryModelReportingItsCon
     if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
     ++tested;
     const RunRecord rec =
-        runModel(info, ParamValues::defaults(info.params), scene, organ, contactCache());
+        runModel(info, ParamValues::defaults(info.params), scene, organ, conformanceCache());
     ASSERT_EQ(rec.status, RunStatus::Ok) << rec.message;
     ASSERT_EQ(rec.objectsFinal.size(), 1u);
     // The organ sags under its own weight too (the softer surface models by 3 cm in this time, 60 %
@@ -279,7 +263,7 @@ TEST_P(ContactConformance, AFreeObjectRestsOnTheOrganOfEveryModelReportingItsCon
   if (tested == 0) GTEST_SKIP() << "no model of this plugin supports this scene";
 }
 
-INSTANTIATE_TEST_SUITE_P(Plugins, ContactConformance, ::testing::ValuesIn(plugins()),
+INSTANTIATE_TEST_SUITE_P(Plugins, ContactConformance, ::testing::ValuesIn(conformancePluginNames()),
                          [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(ContactConformance);
 

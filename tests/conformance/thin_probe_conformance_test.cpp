@@ -11,6 +11,8 @@
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
 
+#include "conformance_common.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -18,24 +20,6 @@ namespace deform::harness {
 namespace {
 
 using nlohmann::json;
-
-PluginLoader& thinProbeLoader() {
-  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
-  return *l;
-}
-
-std::vector<std::string> plugins() {
-  try {
-    return PluginLoader({DEFORM_BUILD_PLUGIN_DIR}).discover();
-  } catch (const std::exception&) {
-    return {};
-  }
-}
-
-Cache& thinProbeCache() {
-  static Cache c(Cache::defaultDir());
-  return c;
-}
 
 /// Plugins whose contact proxy is their surface (triangles); metaballs and particle_bem collide
 /// with spheres of their own and are not asked this.
@@ -95,14 +79,15 @@ TEST_P(ThinProbeConformance, AThinTipInTheMiddleOfACoarseTriangleLeavesNoSurface
   const Scene scene = parseScene(j, "");
   const Organ organ = loadOrgan(scene);
   int tested = 0;
-  for (const ModelInfo& info : thinProbeLoader().loadFile(thinProbeLoader().locate(GetParam()))) {
+  for (const ModelInfo& info :
+       conformanceLoader().loadFile(conformanceLoader().locate(GetParam()))) {
     SCOPED_TRACE(info.name);
     if (!info.has(Capability::Contact)) continue;
     ++tested;
     Scene run = scene;
     if (info.has(Capability::QuasiStatic)) run.dt = 0.01;
     std::unique_ptr<Model> model = info.create();
-    model->init(ModelSetup{organ, ParamValues::defaults(info.params), thinProbeCache(), run.dt,
+    model->init(ModelSetup{organ, ParamValues::defaults(info.params), conformanceCache(), run.dt,
                            run.gravity});
     Interaction inter(run, organ.surface);
     Real worst = 1e9, deepestVertex = 1e9;
@@ -183,7 +168,8 @@ TEST_P(ThinProbeConformance, FrictionDragsTheSurfaceUnderASlidingBoxAndFrictionl
   j["models"] = json::array({{{"plugin", "any"}}});
   const int topV = nearestVertex(s.V, top);
   int tested = 0;
-  for (const ModelInfo& info : thinProbeLoader().loadFile(thinProbeLoader().locate(GetParam()))) {
+  for (const ModelInfo& info :
+       conformanceLoader().loadFile(conformanceLoader().locate(GetParam()))) {
     SCOPED_TRACE(info.name);
     const auto dragged = [&](Real mu) {
       json k = j;
@@ -191,8 +177,8 @@ TEST_P(ThinProbeConformance, FrictionDragsTheSurfaceUnderASlidingBoxAndFrictionl
       const Scene scene = parseScene(k, "");
       const Organ organ = loadOrgan(scene);
       std::unique_ptr<Model> model = info.create();
-      model->init(ModelSetup{organ, ParamValues::defaults(info.params), thinProbeCache(), scene.dt,
-                             scene.gravity});
+      model->init(ModelSetup{organ, ParamValues::defaults(info.params), conformanceCache(),
+                             scene.dt, scene.gravity});
       Interaction inter(scene, organ.surface);
       for (int k = 0; k < scene.numSteps(); ++k) {
         const StepInput in = inter.prepare(k * scene.dt, scene.dt, *model);
@@ -216,7 +202,8 @@ TEST_P(ThinProbeConformance, FrictionDragsTheSurfaceUnderASlidingBoxAndFrictionl
   if (tested == 0) GTEST_SKIP() << "no model of this plugin supports a coupled object";
 }
 
-INSTANTIATE_TEST_SUITE_P(Plugins, ThinProbeConformance, ::testing::ValuesIn(plugins()),
+INSTANTIATE_TEST_SUITE_P(Plugins, ThinProbeConformance,
+                         ::testing::ValuesIn(conformancePluginNames()),
                          [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });
 GTEST_ALLOW_UNINSTANTIATED_PARAMETERIZED_TEST(ThinProbeConformance);
 
