@@ -280,6 +280,7 @@ int ContactWorld::addBody(const RigidShape& shape) {
     thin =
         std::min(thin, p.kind == ShapePrimitive::Kind::Box ? p.halfExtents.minCoeff() : p.radius);
   m_thinnest.push_back(thin);
+  m_invMass.push_back(0);
   m_settled.push_back(Vec3::Zero());
   m_settledSet.push_back(0);
   m_prevPos.push_back(Vec3::Zero());
@@ -460,6 +461,14 @@ Vec3 ContactWorld::bodyDisplacement(int body, const Vec3& p) const {
   return p - (m_prevPos.at(body) + m_prevRot.at(body) * local);
 }
 
+void ContactWorld::setInverseMass(int body, Real invMass) {
+  m_invMass.at(body) = std::isfinite(invMass) && invMass > 0 ? invMass : 0;
+}
+
+Real ContactWorld::inverseMass(int body) const {
+  return m_invMass.at(body);
+}
+
 Real ContactWorld::thinnestRadius(int body) const {
   return m_thinnest.at(body);
 }
@@ -480,9 +489,44 @@ void ContactWorld::clearReactions() {
   std::fill(m_torque.begin(), m_torque.end(), Vec3::Zero());
 }
 
+namespace {
+
+/// The two-body share of a contact correction (mass splitting by inverse masses): a tissue point
+/// of generalized inverse mass W against a body of inverse mass w_b moves by W / (W + w_b) of the
+/// depth, the body takes the rest through the reaction (its next rigid-body step moves it by
+/// w_b dt times minus the impulse given to the tissue). The bodies' motion predicted that way is
+/// kept while the contacts are resolved in sequence (Gauss-Seidel), so a later contact with the
+/// same body sees the depth its earlier ones left: depth' = depth + delta_b . n.
+class BodyExchange {
+ public:
+  explicit BodyExchange(const ContactWorld& world)
+      : m_world(world), m_moved(size_t(world.numBodies()), Vec3::Zero()) {}
+
+  /// The tissue's share of a correction against `body`, W the tissue point's inverse mass.
+  Real tissueShare(int body, Real W) const {
+    const Real wb = m_world.inverseMass(body);
+    return wb > 0 ? W / (W + wb) : Real(1);
+  }
+  /// Depth left once the body's predicted motion is taken into account.
+  Real depth(int body, Real depth, const Vec3& normal) const {
+    return depth + m_moved[size_t(body)].dot(normal);
+  }
+  /// The body receives -impulse (N s): it will move by -w_b dt impulse.
+  void push(int body, const Vec3& impulse, Real dt) {
+    m_moved[size_t(body)] -= m_world.inverseMass(body) * dt * impulse;
+  }
+
+ private:
+  const ContactWorld& m_world;
+  std::vector<Vec3> m_moved;
+};
+
+}  // namespace
+
 ContactResolution resolveContacts(ContactWorld& world, MatX3& x, const VecX& invMass, Real dt,
                                   MatX3* v, const VecX* radii) {
   ContactResolution res;
+  BodyExchange bodies(world);
   const int passes = std::max(world.params().passes, 1);
   for (int pass = 0; pass < passes; ++pass) {
     const std::vector<Contact> contacts = world.query(x, radii);
@@ -492,18 +536,22 @@ ContactResolution resolveContacts(ContactWorld& world, MatX3& x, const VecX& inv
       const Real w = invMass[c.proxy];
       if (!(w > 0)) continue;
       if (pass == 0) res.maxDepth = std::max(res.maxDepth, c.depth);
-      const Vec3 dx = c.depth * c.normal;
+      const Real depth = bodies.depth(c.body, c.depth, c.normal);
+      if (!(depth > 0)) continue;
+      const Real share = bodies.tissueShare(c.body, w);
+      const Vec3 dx = share * depth * c.normal;
       x.row(c.proxy) += dx.transpose();
       Vec3 impulsePerMass = dx / dt;
       if (v) {
         const Real vn = v->row(c.proxy).dot(c.normal);
         if (vn < 0) {
-          v->row(c.proxy) -= (vn * c.normal).transpose();
-          impulsePerMass -= vn * c.normal;
+          v->row(c.proxy) -= (share * vn * c.normal).transpose();
+          impulsePerMass -= share * vn * c.normal;
         }
       }
-      const Vec3 onNode = impulsePerMass / (w * dt);
-      world.addReaction(c.body, -onNode, x.row(c.proxy).transpose());
+      const Vec3 impulse = impulsePerMass / w;
+      bodies.push(c.body, impulse, dt);
+      world.addReaction(c.body, -impulse / dt, x.row(c.proxy).transpose());
     }
   }
   return res;
@@ -521,6 +569,7 @@ ContactResolution resolveEmbeddedContacts(ContactWorld& world, MatX3& nodes,
     for (Eigen::Index k = 0; k < K; ++k) p += weights(s, k) * nodes.row(ids(s, k)).transpose();
     return p;
   };
+  BodyExchange bodies(world);
   const int passes = 4 * std::max(world.params().passes, 1);
   for (int pass = 0; pass < passes; ++pass) {
     for (Eigen::Index s = 0; s < S; ++s) points.row(s) = pointOf(s).transpose();
@@ -531,28 +580,39 @@ ContactResolution resolveEmbeddedContacts(ContactWorld& world, MatX3& nodes,
       if (pass == 0) res.maxDepth = std::max(res.maxDepth, c.depth);
       // Depth left after the corrections of the contacts before this one.
       const Vec3 now = pointOf(c.proxy);
-      const Real depth = c.depth - (now - points.row(c.proxy).transpose()).dot(c.normal);
+      const Real depth = bodies.depth(
+          c.body, c.depth - (now - points.row(c.proxy).transpose()).dot(c.normal), c.normal);
       if (!(depth > 0)) continue;
-      Real sumW2 = 0;
-      for (Eigen::Index k = 0; k < K; ++k)
-        if (invMass[ids(c.proxy, k)] > 0) sumW2 += weights(c.proxy, k) * weights(c.proxy, k);
+      Real sumW2 = 0, W = 0;
+      for (Eigen::Index k = 0; k < K; ++k) {
+        const Real w = invMass[ids(c.proxy, k)], c2 = weights(c.proxy, k) * weights(c.proxy, k);
+        if (w > 0) {
+          sumW2 += c2;
+          W += w * c2;
+        }
+      }
       if (!(sumW2 > 0)) continue;
+      // The point's generalized inverse mass for the split: sum_k w_k c_k^2 (the correction
+      // itself keeps its equal-weight rule, c_k / sum c^2).
+      const Real share = bodies.tissueShare(c.body, W);
       for (Eigen::Index k = 0; k < K; ++k) {
         const int a = ids(c.proxy, k);
         const Real w = invMass[a];
         if (!(w > 0) || weights(c.proxy, k) == 0) continue;
-        const Vec3 dx = (weights(c.proxy, k) * depth / sumW2) * c.normal;
+        const Vec3 dx = (share * weights(c.proxy, k) * depth / sumW2) * c.normal;
         nodes.row(a) += dx.transpose();
         Vec3 impulsePerMass = dx / dt;
         if (nodeVelocity) {
           Eigen::Map<Vec3> v(nodeVelocity + 3 * a);
           const Real vn = v.dot(c.normal);
           if (vn < 0) {
-            v -= vn * c.normal;
-            impulsePerMass -= vn * c.normal;
+            v -= share * vn * c.normal;
+            impulsePerMass -= share * vn * c.normal;
           }
         }
-        world.addReaction(c.body, -impulsePerMass / (w * dt), nodes.row(a).transpose());
+        const Vec3 impulse = impulsePerMass / w;
+        bodies.push(c.body, impulse, dt);
+        world.addReaction(c.body, -impulse / dt, nodes.row(a).transpose());
       }
     }
   }
@@ -638,6 +698,7 @@ ContactResolution resolveTriangleContacts(ContactWorld& world, MatX3& x, const S
   const int passes = 4 * std::max(world.params().passes, 1);
   MatX3 buffer;
   Stencil st;
+  BodyExchange bodies(world);
   for (int pass = 0; pass < passes; ++pass) {
     const MatX3& S = map.surface(x, buffer);
     const std::vector<TriangleContact> contacts = world.queryTriangles(S, F);
@@ -657,12 +718,15 @@ ContactResolution resolveTriangleContacts(ContactWorld& world, MatX3& x, const S
       Vec3 pNow = st.apply(x.data());
       Vec3 pThen = Vec3::Zero();
       for (int a = 0; a < 3; ++a) pThen += c.bary[a] * atQuery.row(F(c.triangle, a)).transpose();
-      const Real depth = c.depth - (pNow - pThen).dot(c.normal);
-      if (!(depth > 0)) continue;
+      const Real left = bodies.depth(c.body, c.depth - (pNow - pThen).dot(c.normal), c.normal);
+      if (!(left > 0)) continue;
+      // The tissue's share of the correction (all of it against a body the hand drives).
+      const Real share = bodies.tissueShare(c.body, W);
+      const Real depth = share * left;
       Vec3 impulse = Vec3::Zero();  // given to the nodes, N s
-      // Normal: move p by depth n, remove p's inward normal velocity.
+      // Normal: move p by depth n, remove (its share of) p's inward normal velocity.
       Real vn = 0;
-      if (vel) vn = std::min(st.apply(vel).dot(c.normal), Real(0));
+      if (vel) vn = share * std::min(st.apply(vel).dot(c.normal), Real(0));
       for (const auto& [n, cw] : st.terms) {
         const Real w = invMass[n];
         if (!(w > 0)) continue;
@@ -706,6 +770,7 @@ ContactResolution resolveTriangleContacts(ContactWorld& world, MatX3& x, const S
           pNow += undo;
         }
       }
+      bodies.push(c.body, impulse, dt);
       world.addReaction(c.body, -impulse / dt, pNow);
     }
   }

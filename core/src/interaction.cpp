@@ -124,6 +124,15 @@ void Interaction::buildWorlds() {
       m_dynamics->setShape(m_objectDynBody[j], o.shape);
     }
     m_dynamics->setFriction(m_scene.contact.friction);
+    // Bodies with dynamics take their share of each contact correction (ContactWorld's
+    // two-body exchange); kinematic tools stay immovable for the tissue.
+    if (m_contact) {
+      for (size_t i = 0; i < nt; ++i)
+        if (m_toolContactBody[i] >= 0 && m_scene.tools[i].dynamics)
+          m_contact->setInverseMass(m_toolContactBody[i], 1.0 / m_scene.tools[i].dynamics->mass);
+      for (size_t j = 0; j < no; ++j)
+        m_contact->setInverseMass(m_objectContactBody[j], 1.0 / m_scene.objects[j].mass);
+    }
   }
   const int nb = m_dynamics ? m_dynamics->numBodies() : 0;
   m_reactionForce.assign(nb, Vec3::Zero());

@@ -117,6 +117,36 @@ TEST(ResolveContacts, PushesNodesOutAndTheToolFeelsTheOppositeImpulse) {
   EXPECT_EQ(w.reactionForce(b), Vec3::Zero());
 }
 
+// Several nodes against one light body, resolved in sequence: the body's predicted motion from
+// the first contacts reduces the depth the later ones see, so the body is not pushed by more than
+// the penetration (the one-way response pushed every node out and gave the body all of it).
+TEST(ResolveContacts, NodesAgainstALightBodyShareTheDepthAndDoNotOverpushIt) {
+  const Real dt = 1e-3, bodyMass = 0.001, nodeMass = 0.01;
+  ContactWorld w;
+  const int b = w.addBody(probeShape(0.01, 0, 0, Vec3::UnitZ()));
+  const Vec3 c(0, 0, 0.0095);  // a sphere 0.5 mm into the plane z = 0
+  w.setPose(b, c);
+  w.setInverseMass(b, 1.0 / bodyMass);
+  MatX3 x(3, 3);
+  x << 0, 0, 0,  //
+      0.0005, 0, 0, -0.0005, 0.0003, 0;
+  const MatX3 before = x;
+  const VecX invMass = VecX::Constant(3, 1.0 / nodeMass);
+  resolveContacts(w, x, invMass, dt);
+  // The body moves up by w_b F dt^2 in its next step; the deepest node, directly below it, must
+  // end out of the body at that position (within the contact skin), and the body must not move
+  // more than the penetration of the deepest node (0.5 mm + thickness).
+  const Vec3 dxBody = w.reactionForce(b) * dt * dt / bodyMass;
+  EXPECT_GT(dxBody.z(), 0.0) << "the body is pushed up (out of the tissue)";
+  EXPECT_LT(dxBody.z(), 0.0005 + 1e-4 + 1e-9) << "no more than the penetration";
+  const Vec3 cNext = c + dxBody;
+  for (int i = 0; i < 3; ++i)
+    EXPECT_GE((x.row(i).transpose() - cNext).norm(), 0.01 - 1e-4 - 1e-9) << "node " << i;
+  // The heavy nodes (10 g against 1 g) moved by at most a tenth of what the body did.
+  for (int i = 0; i < 3; ++i)
+    EXPECT_LE((x.row(i) - before.row(i)).norm(), 0.1 * dxBody.norm() + 1e-12) << "node " << i;
+}
+
 TEST(ResolveEmbeddedContacts, MovesTheEmbeddedPointsOutThroughTheirNodes) {
   ContactWorld w;
   const Vec3 c(0.5, 0.5, 1.0);

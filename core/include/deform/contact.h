@@ -149,6 +149,14 @@ class ContactWorld {
   Vec3 reactionTorque(int body) const;
   void clearReactions();
 
+  /// Inverse mass (1/kg) of a body that the tissue's reaction moves (a free object, a tool with
+  /// dynamics): the contact responses then share each correction between the tissue and the body
+  /// in proportion to their inverse masses (a two-body exchange), so a light object is not
+  /// thrown off by heavy tissue pushed out of it. 0 (the default): the body is driven by the hand
+  /// and the tissue alone moves out of it.
+  void setInverseMass(int body, Real invMass);
+  Real inverseMass(int body) const;
+
   /// Statistics since construction: broadphase pairs passed to the narrowphase, contacts found.
   long long pairsTested() const { return m_pairsTested; }
   long long contactsFound() const { return m_contactsFound; }
@@ -163,6 +171,7 @@ class ContactWorld {
   std::vector<Mat3> m_prevRot;
   std::vector<char> m_settledSet;
   std::vector<Real> m_thinnest;
+  std::vector<Real> m_invMass;
   long long m_pairsTested = 0, m_contactsFound = 0;
 };
 
