@@ -10,8 +10,8 @@
 #include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 #include <btBulletDynamicsCommon.h>
 #include <deform/cache.h>
-#include <deform/kdtree.h>
 #include <deform/tet_mesher.h>
+#include <deform/tet_nodes.h>
 
 #include <algorithm>
 #include <array>
@@ -157,16 +157,7 @@ void BulletDeformableModel::init(const ModelSetup& setup) {
         std::swap(mesh.T(t, 2), mesh.T(t, 3));
     }
     // The loader's surface of a tet file is the boundary over the same nodes: match by position.
-    const KdTree3 tree(mesh.V);
-    const Real tolerance = 1e-9 * std::max<Real>(boundingBox(mesh.V).diagonal(), 1e-300);
-    for (int i = 0; i < organ.surface.numVertices(); ++i) {
-      const Vec3 p = organ.surface.V.row(i);
-      const int n = tree.nearest(p);
-      if (n < 0 || (mesh.V.row(n).transpose() - p).norm() > tolerance)
-        throw InputError(organ.source, "vertex " + std::to_string(i),
-                         "surface vertex is not a node of the volume mesh");
-      surfaceNode[size_t(i)] = n;
-    }
+    surfaceNode = surfaceVertexNodes(organ, mesh.V);
   } else {
     mesh = meshSurface(organ, config.targetTets, setup.cache);
     for (int i = 0; i < organ.surface.numVertices(); ++i) surfaceNode[size_t(i)] = i;

@@ -1,5 +1,7 @@
 #include "massspring_model.h"
 
+#include <deform/tet_nodes.h>
+
 #include <deform/contact.h>
 
 #include <deform/mesh.h>
@@ -172,42 +174,16 @@ void MassSpringModel::buildTets(const Organ& organ) {
   const SurfaceMesh& S = organ.surface;
   m_surfaceIdentity = S.numVertices() == N && S.V == T.V;
   m_surfaceRows.clear();
-  if (!m_surfaceIdentity) {
-    const Real weld = tol::kRelativeWeld * std::max(boundingBox(T.V).diagonal(), Real(1e-9));
-    for (int i = 0; i < S.numVertices(); ++i) {
-      const int nd = nearestVertex(T.V, S.V.row(i).transpose());
-      if (nd < 0 || (T.V.row(nd) - S.V.row(i)).norm() > weld)
-        throw InputError(organ.source, "organ.surface vertex " + std::to_string(i),
-                         "surface vertex is not a node of the tetrahedral mesh");
-      m_surfaceRows.push_back(nd);
-    }
-  }
+  if (!m_surfaceIdentity) m_surfaceRows = surfaceVertexNodes(organ, T.V);
   const Material& mat = organ.material;
-  m_mass = VecX::Zero(N);
-  std::map<std::pair<int, int>, Real> edgeVolume;
-  for (int t = 0; t < T.numTets(); ++t) {
-    int p[4];
-    for (int i = 0; i < 4; ++i) {
-      p[i] = T.T(t, i);
-      if (p[i] < 0 || p[i] >= N)
-        throw InputError(organ.source, "organ.volume tet " + std::to_string(t),
-                         "node index out of range");
-    }
-    const Real vol = tetVolume(T.V.row(p[0]), T.V.row(p[1]), T.V.row(p[2]), T.V.row(p[3]));
-    if (!(vol > 0))
-      throw InputError(organ.source, "organ.volume tet " + std::to_string(t),
-                       "tetrahedron is degenerate or inverted at rest");
-    for (int i = 0; i < 4; ++i) m_mass[p[i]] += mat.density * vol / 4.0;
-    for (int i = 0; i < 4; ++i)
-      for (int j = i + 1; j < 4; ++j)
-        edgeVolume[{std::min(p[i], p[j]), std::max(p[i], p[j])}] += vol;
-  }
-  for (const auto& [e, vol] : edgeVolume) {
+  const TetMeasures tm = measureTets(T, mat.density, organ.source);
+  m_mass = tm.nodeMass;
+  for (Eigen::Index e = 0; e < tm.edges.rows(); ++e) {
     Spring s;
-    s.a = e.first;
-    s.b = e.second;
+    s.a = tm.edges(e, 0);
+    s.b = tm.edges(e, 1);
     s.rest = (T.V.row(s.a) - T.V.row(s.b)).norm();
-    s.k = volumeSpringStiffness(mat.young, s.rest, vol);
+    s.k = volumeSpringStiffness(mat.young, s.rest, tm.edgeVolume[e]);
     m_springs.push_back(s);
   }
   m_edgeSprings = static_cast<long long>(m_springs.size());

@@ -1,5 +1,7 @@
 #include "pbd_model.h"
 
+#include <deform/tet_nodes.h>
+
 #include <deform/contact.h>
 #include <deform/mesh.h>
 
@@ -320,20 +322,10 @@ void PbdModel::buildTets(const Organ& organ) {
   const SurfaceMesh& S = organ.surface;
   m_surfaceIdentity = S.numVertices() == N && S.V == T.V;
   m_surfaceRows.clear();
-  if (!m_surfaceIdentity) {
-    const Real weld = tol::kRelativeWeld * std::max(boundingBox(T.V).diagonal(), Real(1e-9));
-    for (int i = 0; i < S.numVertices(); ++i) {
-      const int nd = nearestVertex(T.V, S.V.row(i).transpose());
-      if (nd < 0 || (T.V.row(nd) - S.V.row(i)).norm() > weld)
-        throw InputError(organ.source, "organ.surface vertex " + std::to_string(i),
-                         "surface vertex is not a node of the tetrahedral mesh");
-      m_surfaceRows.push_back(nd);
-    }
-  }
+  if (!m_surfaceIdentity) m_surfaceRows = surfaceVertexNodes(organ, T.V);
 
-  m_mass = VecX::Zero(N);
-  // Per-edge share: sum of the volumes of the tets containing it.
-  std::map<std::pair<int, int>, Real> edgeVolume;
+  const TetMeasures tm = measureTets(T, mat.density, organ.source);
+  m_mass = tm.nodeMass;
   const Real K = bulkModulus(mat);
   const Real G = mat.young / (2.0 * (1.0 + mat.poisson));
   // Edge springs k = gamma sum V_T / L^2 with gamma = 5G/2 give an isotropic network with shear
@@ -341,35 +333,21 @@ void PbdModel::buildTets(const Organ& organ) {
   // et al. 2019). Below nu = 1/4 that would be negative: clamp to zero (nu_eff = 1/4).
   const Real gamma = 2.5 * G;
   const Real extraK = std::max<Real>(K - 5.0 * G / 3.0, 0.0);
-  for (int t = 0; t < T.numTets(); ++t) {
-    TetVolumeConstraint c;
-    Vec3 x[4];
-    for (int i = 0; i < 4; ++i) {
-      c.p[i] = T.T(t, i);
-      if (c.p[i] < 0 || c.p[i] >= N)
-        throw InputError(organ.source, "organ.volume tet " + std::to_string(t),
-                         "node index out of range");
-      x[i] = T.V.row(c.p[i]);
-    }
-    c.restVolume = tetVolume(x[0], x[1], x[2], x[3]);
-    if (!(c.restVolume > 0))
-      throw InputError(organ.source, "organ.volume tet " + std::to_string(t),
-                       "tetrahedron is degenerate or inverted at rest");
-    for (int i = 0; i < 4; ++i) m_mass[c.p[i]] += mat.density * c.restVolume / 4.0;
-    for (int i = 0; i < 4; ++i)
-      for (int j = i + 1; j < 4; ++j)
-        edgeVolume[{std::min(c.p[i], c.p[j]), std::max(c.p[i], c.p[j])}] += c.restVolume;
-    if (extraK > 0 || !xpbd) {
+  if (extraK > 0 || !xpbd) {
+    for (int t = 0; t < T.numTets(); ++t) {
+      TetVolumeConstraint c;
+      for (int i = 0; i < 4; ++i) c.p[i] = T.T(t, i);
+      c.restVolume = tm.tetVolume[t];
       c.compliance = xpbd ? (std::isinf(extraK) ? 0.0 : c.restVolume / extraK) : 0.0;
       m_tet.push_back(c);
     }
   }
-  for (const auto& [e, vol] : edgeVolume) {
+  for (Eigen::Index e = 0; e < tm.edges.rows(); ++e) {
     DistanceConstraint c;
-    c.a = e.first;
-    c.b = e.second;
+    c.a = tm.edges(e, 0);
+    c.b = tm.edges(e, 1);
     c.rest = (T.V.row(c.a) - T.V.row(c.b)).norm();
-    c.compliance = xpbd ? c.rest * c.rest / (gamma * vol) : 0.0;
+    c.compliance = xpbd ? c.rest * c.rest / (gamma * tm.edgeVolume[e]) : 0.0;
     m_distance.push_back(c);
   }
 }
