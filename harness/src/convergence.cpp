@@ -122,8 +122,8 @@ std::string convergenceSummary(const ConvergenceResult& r) {
     levels += (levels.empty() ? "" : " / ") +
               std::to_string(l.elements > 0 ? l.elements : l.targetElements);
   if (std::isnan(r.relativeError))
-    return "no discretisation error estimate: " +
-           (r.message.empty() ? std::string("no levels ran") : r.message) + " (levels " + levels +
+    return "no discretisation error estimate (" +
+           (r.message.empty() ? std::string("no levels ran") : r.message) + "; levels " + levels +
            " tets)";
   return "estimated discretisation error " + percent(r.relativeError) + " of the peak (levels " +
          levels + " tets, p = " + fixed(r.order, 2) + ")";
