@@ -143,6 +143,70 @@ TEST_F(TempDir, QuickHybridTimingRunsWhatLoadsAndSaysWhatIsMissing) {
 
 // ------------------------------------------------------------------------- reference check
 
+/// Whether every named plugin is built.
+bool built(const std::vector<std::string>& names) {
+  PluginLoader probe({DEFORM_BUILD_PLUGIN_DIR});
+  const auto found = probe.discover();
+  for (const auto& n : names)
+    if (std::find(found.begin(), found.end(), n) == found.end()) return false;
+  return true;
+}
+
+/// The notes of a table file that contain `part`.
+std::vector<std::string> notesWith(const json& table, const std::string& part) {
+  std::vector<std::string> out;
+  for (const auto& n : table["notes"])
+    if (n.get<std::string>().find(part) != std::string::npos) out.push_back(n);
+  return out;
+}
+
+TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
+  if (!built({"massspring", "reference_fem"}))
+    GTEST_SKIP() << "massspring or reference_fem is not built";
+  // One cheap model (a case needs one) and the reference.
+  PluginLoader loader({pluginSubset(m_dir / "plugins", {"massspring", "reference_fem"}).string()});
+  TablesOptions o;
+  o.quick = true;
+  o.outDir = m_dir / "out";
+  o.cases.cacheDir = m_dir / "cache";
+  // 800 target tets: the study's levels (100, 286, 800 targets) are all about the coarsest mesh
+  // the cube's surface allows, so the reference cannot be shown converged.
+  o.referenceElements = 800;
+  buildTables({"hybrid-accuracy"}, loader, o, nullptr);
+  const json doc = readJson(o.outDir / "hybrid-accuracy.json");
+  const auto notes = notesWith(doc, "reference (hybrid/cube_down_20N): reference_fem P1");
+  ASSERT_EQ(notes.size(), 1u) << doc["notes"].dump();
+  EXPECT_TRUE(notes[0].find("estimated discretisation error") != std::string::npos ||
+              notes[0].find("no discretisation error estimate") != std::string::npos)
+      << notes[0];
+  const auto warnings = notesWith(doc, "warning: reference (hybrid/cube_down_20N)");
+  ASSERT_EQ(warnings.size(), 1u) << doc["notes"].dump();
+  const std::string md = readText(o.outDir / "hybrid-accuracy.md");
+  EXPECT_NE(md.find(notes[0]), std::string::npos);
+  EXPECT_NE(md.find(warnings[0]), std::string::npos);
+  // The study: three levels whose finest is the table's reference (the same target count).
+  const json study = readJson(o.outDir / "convergence/hybrid/cube_down_20N/convergence.json");
+  ASSERT_EQ(study["levels"].size(), 3u);
+  EXPECT_EQ(study["levels"][2]["target_elements"], 800);
+  EXPECT_EQ(study["levels"][0]["target_elements"], 100);
+  EXPECT_EQ(study["cached"], false);
+  EXPECT_EQ(study["converged"], false);
+
+  // The command again (child processes, the same cache): the study is read from the cache, the
+  // note is the same, and the warning is printed on stdout.
+  const fs::path out2 = m_dir / "out2", log = m_dir / "log.txt";
+  const std::string cmd =
+      std::string(DEFORMBENCH_EXE) + " --plugin-dir " + (m_dir / "plugins").string() +
+      " tables hybrid-accuracy --quick --reference-elements 800 --out " + out2.string() +
+      " --cache-dir " + (m_dir / "cache").string() + " > " + log.string() + " 2>&1";
+  ASSERT_EQ(exitCodeOf(cmd), 0) << readText(log);
+  EXPECT_EQ(readJson(out2 / "convergence/hybrid/cube_down_20N/convergence.json")["cached"], true);
+  const json again = readJson(out2 / "hybrid-accuracy.json");
+  EXPECT_EQ(notesWith(again, "reference (hybrid/cube_down_20N): reference_fem P1"), notes);
+  const std::string printed = readText(log);
+  EXPECT_NE(printed.find("\n" + warnings[0] + "\n"), std::string::npos) << printed;
+}
+
 TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) {
   // Levels of u_k = u + C h_k^2: the estimate recovers p = 2 and the finest level's error C h2^2.
   const double h0 = 0.01, h1 = 0.0071, h2 = 0.005, peak = 0.01;
