@@ -524,6 +524,8 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
               << " mm, peak |u| = " << fmt(1e3 * l.peakDisplacement) << " mm, " << l.status << ", "
               << fmt(l.solveS) << " s\n";
   }
+  if (r.cached)
+    std::cout << "(the study was read from the precomputation cache; --no-cache reruns it)\n";
   if (!r.message.empty()) {
     std::cout << "warning: " << r.message << "\n";
     return 0;

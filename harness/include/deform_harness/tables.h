@@ -18,6 +18,14 @@
 // child process with a time limit (cases.h, ChildCaseOptions): a crash or a hang becomes rows
 // with status failed (the signal or the timeout) and the tables go on; --resume reuses finished
 // cases. Without it the cases run in this process (library callers, tests).
+//
+// Reference check (issue F2): after the cases, each distinct reference a table uses
+// (method-comparison: one per organ; the hybrid tables: per phantom the 20 N downward case) is
+// run through the convergence study of convergence.h at 1/8, 1/2.8 and 1 x its target tets, the
+// finest level being the table's reference itself, in this process and cached. The table's notes
+// get "reference (CASE): ..., estimated discretisation error X% of the peak (levels ..., p = ...)"
+// and, when the estimate is above 1%, not asymptotic or missing, a "warning: reference (CASE):"
+// note; the study is written to DIR/convergence/CASE/.
 #pragma once
 
 #include <deform_harness/cases.h>
