@@ -191,6 +191,12 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
   EXPECT_EQ(study["levels"][0]["target_elements"], 100);
   EXPECT_EQ(study["cached"], false);
   EXPECT_EQ(study["converged"], false);
+  const json results = readJson(o.outDir / "runs/hybrid/cube_down_20N/results.json");
+  long long referenceTets = -1;
+  for (const auto& run : results["runs"])
+    if (run["label"] == "reference_fem") referenceTets = run["counts"]["elements"];
+  EXPECT_EQ(study["levels"][2]["elements"], referenceTets) << "the finest level is the same mesh";
+  EXPECT_NE(notes[0].find(std::to_string(referenceTets) + " tets"), std::string::npos) << notes[0];
 
   // The command again (child processes, the same cache): the study is read from the cache, the
   // note is the same, and the warning is printed on stdout.
