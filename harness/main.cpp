@@ -26,7 +26,6 @@
 #include <iostream>
 #include <map>
 #include <optional>
-#include <set>
 #include <sstream>
 
 namespace {
@@ -377,10 +376,7 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
   std::cout << "\ntables: " << o.outDir.string() << " (<table>.md/.csv/.json; scenes/ to rerun "
             << "any row with deformbench run)\n";
   // The reference checks' warnings again at the end, where they are seen.
-  std::set<std::string> warned;
-  for (const Table& t : tables)
-    for (const std::string& n : t.notes)
-      if (n.rfind("warning: ", 0) == 0 && warned.insert(n).second) std::cout << n << "\n";
+  for (const std::string& w : tableWarnings(tables)) std::cout << w << "\n";
   return 0;
 }
 

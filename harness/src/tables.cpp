@@ -886,6 +886,15 @@ std::vector<std::string> tableNames() {
           "bem-accuracy",           "hybrid-accuracy",   "hybrid-timing"};
 }
 
+std::vector<std::string> tableWarnings(const std::vector<Table>& tables) {
+  std::vector<std::string> out;
+  std::set<std::string> seen;
+  for (const Table& t : tables)
+    for (const std::string& n : t.notes)
+      if (n.rfind("warning: ", 0) == 0 && seen.insert(n).second) out.push_back(n);
+  return out;
+}
+
 std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
                                const TablesOptions& options, Progress* progress) {
   const auto all = tableNames();

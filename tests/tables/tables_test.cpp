@@ -130,10 +130,12 @@ TEST_F(TempDir, QuickHybridTimingRunsWhatLoadsAndSaysWhatIsMissing) {
   EXPECT_NE(md.find("convergence not checked"), std::string::npos);
   EXPECT_FALSE(fs::exists(o.outDir / "convergence"));
 
-  // --no-reference-check: the table says the check was skipped.
+  // --no-reference-check: the table says the check was skipped (no plugin at all: nothing runs).
+  fs::create_directories(m_dir / "no_plugins");
+  PluginLoader none({(m_dir / "no_plugins").string()});
   o.referenceCheck = false;
   o.outDir = m_dir / "out_unchecked";
-  buildTables({"hybrid-timing"}, loader, o, nullptr);
+  buildTables({"hybrid-timing"}, none, o, nullptr);
   const json unchecked = readJson(o.outDir / "hybrid-timing.json");
   const std::string notes = unchecked["notes"].dump();
   EXPECT_NE(notes.find("convergence not checked (--no-reference-check)"), std::string::npos)
@@ -163,17 +165,19 @@ std::vector<std::string> notesWith(const json& table, const std::string& part) {
 TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
   if (!built({"massspring", "reference_fem"}))
     GTEST_SKIP() << "massspring or reference_fem is not built";
-  // One cheap model (a case needs one) and the reference.
-  PluginLoader loader({pluginSubset(m_dir / "plugins", {"massspring", "reference_fem"}).string()});
+  // One cheap model (a case needs one) and the reference. 800 target tets: the study's levels
+  // (100, 286, 800 targets) are all about the coarsest mesh the cube's surface allows, so the
+  // reference cannot be shown converged.
+  const fs::path plugins = pluginSubset(m_dir / "plugins", {"massspring", "reference_fem"});
+  const fs::path out = m_dir / "out", cache = m_dir / "cache";
+  PluginLoader loader({plugins.string()});
   TablesOptions o;
   o.quick = true;
-  o.outDir = m_dir / "out";
-  o.cases.cacheDir = m_dir / "cache";
-  // 800 target tets: the study's levels (100, 286, 800 targets) are all about the coarsest mesh
-  // the cube's surface allows, so the reference cannot be shown converged.
+  o.outDir = out;
+  o.cases.cacheDir = cache;
   o.referenceElements = 800;
-  buildTables({"hybrid-accuracy"}, loader, o, nullptr);
-  const json doc = readJson(o.outDir / "hybrid-accuracy.json");
+  const auto tables = buildTables({"hybrid-accuracy"}, loader, o, nullptr);
+  const json doc = readJson(out / "hybrid-accuracy.json");
   const auto notes = notesWith(doc, "reference (hybrid/cube_down_20N): reference_fem P1");
   ASSERT_EQ(notes.size(), 1u) << doc["notes"].dump();
   EXPECT_TRUE(notes[0].find("estimated discretisation error") != std::string::npos ||
@@ -181,36 +185,39 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
       << notes[0];
   const auto warnings = notesWith(doc, "warning: reference (hybrid/cube_down_20N)");
   ASSERT_EQ(warnings.size(), 1u) << doc["notes"].dump();
-  const std::string md = readText(o.outDir / "hybrid-accuracy.md");
+  const std::string md = readText(out / "hybrid-accuracy.md");
   EXPECT_NE(md.find(notes[0]), std::string::npos);
   EXPECT_NE(md.find(warnings[0]), std::string::npos);
-  // The study: three levels whose finest is the table's reference (the same target count).
-  const json study = readJson(o.outDir / "convergence/hybrid/cube_down_20N/convergence.json");
+  EXPECT_EQ(tableWarnings(tables), warnings) << "what the command prints at the end";
+
+  // The study: three levels whose finest is the table's reference (same target, same mesh).
+  const json study = readJson(out / "convergence/hybrid/cube_down_20N/convergence.json");
   ASSERT_EQ(study["levels"].size(), 3u);
   EXPECT_EQ(study["levels"][2]["target_elements"], 800);
   EXPECT_EQ(study["levels"][0]["target_elements"], 100);
   EXPECT_EQ(study["cached"], false);
   EXPECT_EQ(study["converged"], false);
-  const json results = readJson(o.outDir / "runs/hybrid/cube_down_20N/results.json");
+  const json results = readJson(out / "runs/hybrid/cube_down_20N/results.json");
   long long referenceTets = -1;
   for (const auto& run : results["runs"])
     if (run["label"] == "reference_fem") referenceTets = run["counts"]["elements"];
   EXPECT_EQ(study["levels"][2]["elements"], referenceTets) << "the finest level is the same mesh";
   EXPECT_NE(notes[0].find(std::to_string(referenceTets) + " tets"), std::string::npos) << notes[0];
 
-  // The command again (child processes, the same cache): the study is read from the cache, the
-  // note is the same, and the warning is printed on stdout.
-  const fs::path out2 = m_dir / "out2", log = m_dir / "log.txt";
-  const std::string cmd =
-      std::string(DEFORMBENCH_EXE) + " --plugin-dir " + (m_dir / "plugins").string() +
-      " tables hybrid-accuracy --quick --reference-elements 800 --out " + out2.string() +
-      " --cache-dir " + (m_dir / "cache").string() + " > " + log.string() + " 2>&1";
-  ASSERT_EQ(exitCodeOf(cmd), 0) << readText(log);
-  EXPECT_EQ(readJson(out2 / "convergence/hybrid/cube_down_20N/convergence.json")["cached"], true);
-  const json again = readJson(out2 / "hybrid-accuracy.json");
-  EXPECT_EQ(notesWith(again, "reference (hybrid/cube_down_20N): reference_fem P1"), notes);
-  const std::string printed = readText(log);
-  EXPECT_NE(printed.find("\n" + warnings[0] + "\n"), std::string::npos) << printed;
+  // The same study again (as a second tables run would ask for it): read from the cache.
+  ConvergeOptions co;
+  co.baseElements = 800;
+  co.factors = {1.0 / 8.0, 1.0 / 2.8, 1.0};
+  co.outDir = m_dir / "again";
+  co.cacheDir = cache;
+  const ConvergenceResult cached =
+      runConvergence((out / "scenes/hybrid/cube_down_20N.json").string(), loader, co, nullptr);
+  EXPECT_TRUE(cached.cached);
+  ASSERT_EQ(cached.levels.size(), 3u);
+  EXPECT_EQ(cached.levels[2].elements, referenceTets);
+  EXPECT_EQ(cached.d12, study["d12_m"].get<double>());
+  EXPECT_FALSE(fs::exists(co.outDir / "level_0")) << "nothing was run";
+  EXPECT_EQ(readJson(co.outDir / "convergence.json")["cached"], true);
 }
 
 TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) {

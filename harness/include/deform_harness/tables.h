@@ -54,6 +54,10 @@ std::vector<std::string> tableNames();
 /// Builds the named tables ("all" expands to every one; an unknown name is an InputError),
 /// runs their cases (each case once even when two tables share it), writes every file into
 /// options.outDir and returns the tables. progress may be null.
+/// The "warning: ..." notes of the tables (each once, in order): what the command prints at the
+/// end of its output.
+std::vector<std::string> tableWarnings(const std::vector<Table>& tables);
+
 std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
                                const TablesOptions& options, Progress* progress);
 
