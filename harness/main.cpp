@@ -339,6 +339,7 @@ struct TablesArgs {
   double timeout = 0;
   bool resume = false;
   bool inProcess = false;
+  bool noReferenceCheck = false;
 };
 
 int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
@@ -349,6 +350,7 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
   o.outDir = makeOutDir(a.out);
   o.cases = caseOptions(a);
   o.referenceElements = ta.referenceElements;
+  o.referenceCheck = !ta.noReferenceCheck;
   if (ta.resume && ta.inProcess)
     throw InputError("--resume", "", "needs the cases in child processes (drop --in-process)");
   if (!ta.inProcess) {
@@ -373,6 +375,8 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
   }
   std::cout << "\ntables: " << o.outDir.string() << " (<table>.md/.csv/.json; scenes/ to rerun "
             << "any row with deformbench run)\n";
+  // The reference checks' warnings again at the end, where they are seen.
+  for (const std::string& w : tableWarnings(tables)) std::cout << w << "\n";
   return 0;
 }
 
@@ -516,6 +520,8 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
               << " mm, peak |u| = " << fmt(1e3 * l.peakDisplacement) << " mm, " << l.status << ", "
               << fmt(l.solveS) << " s\n";
   }
+  if (r.cached)
+    std::cout << "(the study was read from the precomputation cache; --no-cache reruns it)\n";
   if (!r.message.empty()) {
     std::cout << "warning: " << r.message << "\n";
     return 0;
@@ -594,8 +600,11 @@ int realMain(int argc, char** argv) {
   tables->add_option("--out", ta.common.out, "output folder")->required();
   tables
       ->add_option("--reference-elements", ta.referenceElements,
-                   "tets of the reference FEM (default 20000; 4000 with --quick)")
+                   "target tets of the reference FEM, quadratic (default 20000; 4000 with --quick)")
       ->check(CLI::PositiveNumber);
+  tables->add_flag("--no-reference-check", ta.noReferenceCheck,
+                   "skip the convergence study of each table's reference (three solves at 1/8, "
+                   "1/2.8 and 1 x its tets; cached)");
   tables->add_flag("--explain", ta.common.explain,
                    "say what each case loaded, built, cached, skipped");
   tables

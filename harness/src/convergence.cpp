@@ -1,10 +1,12 @@
 // The reference's mesh convergence from three runs of the reference plugin (see convergence.h).
+#include <deform/cache.h>
 #include <deform/interaction.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/convergence.h>
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 
 namespace deform::harness {
@@ -44,35 +46,188 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
   out.converged = out.asymptotic && out.relativeError <= 0.01;
 }
 
+namespace {
+
+constexpr const char* kCacheKind = "harness.convergence";
+constexpr const char* kCacheVersion = "harness.convergence/1";
+
+ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
+  ojson doc;
+  doc["format"] = "deformbench-convergence/1";
+  doc["scene"] = sceneFile;
+  doc["levels"] = ojson::array();
+  for (const auto& l : r.levels)
+    doc["levels"].push_back({{"target_elements", l.targetElements},
+                             {"elements", l.elements},
+                             {"h_m", l.h},
+                             {"peak_displacement_m", l.peakDisplacement},
+                             {"status", l.status},
+                             {"wall_s", l.solveS}});
+  doc["d01_m"] = r.d01;
+  doc["d12_m"] = r.d12;
+  doc["order"] = numberOrNull(r.order);
+  doc["error_estimate_m"] = numberOrNull(r.errorEstimate);
+  doc["relative_error"] = numberOrNull(r.relativeError);
+  doc["asymptotic"] = r.asymptotic;
+  doc["converged"] = r.converged;
+  doc["message"] = r.message;
+  doc["cached"] = r.cached;
+  return doc;
+}
+
+double numberOrNaN(const ojson& j, const char* key) {
+  return j.contains(key) && j[key].is_number() ? j[key].get<double>() : NAN;
+}
+
+ConvergenceResult fromJson(const ojson& doc) {
+  ConvergenceResult r;
+  for (const auto& l : doc.at("levels")) {
+    ConvergenceLevelResult level;
+    level.targetElements = l.at("target_elements").get<long long>();
+    level.elements = l.at("elements").get<long long>();
+    level.h = l.at("h_m").get<double>();
+    level.peakDisplacement = l.at("peak_displacement_m").get<double>();
+    level.status = l.at("status").get<std::string>();
+    level.solveS = l.at("wall_s").get<double>();
+    r.levels.push_back(level);
+  }
+  r.d01 = doc.at("d01_m").get<double>();
+  r.d12 = doc.at("d12_m").get<double>();
+  r.order = numberOrNaN(doc, "order");
+  r.errorEstimate = numberOrNaN(doc, "error_estimate_m");
+  r.relativeError = numberOrNaN(doc, "relative_error");
+  r.asymptotic = doc.at("asymptotic").get<bool>();
+  r.converged = doc.at("converged").get<bool>();
+  r.message = doc.at("message").get<std::string>();
+  return r;
+}
+
+std::string percent(double fraction) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g%%", 100 * fraction);
+  return buf;
+}
+
+std::string fixed(double v, int digits) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+}  // namespace
+
+std::string convergenceSummary(const ConvergenceResult& r) {
+  std::string levels;
+  for (const auto& l : r.levels)
+    levels += (levels.empty() ? "" : " / ") +
+              std::to_string(l.elements > 0 ? l.elements : l.targetElements);
+  if (std::isnan(r.relativeError))
+    return "no discretisation error estimate (" +
+           (r.message.empty() ? std::string("no levels ran") : r.message) + "; levels " + levels +
+           " tets)";
+  return "estimated discretisation error " + percent(r.relativeError) + " of the peak (levels " +
+         levels + " tets, p = " + fixed(r.order, 2) + ")";
+}
+
+std::string convergenceWarning(const ConvergenceResult& r) {
+  if (r.converged) return "";
+  if (std::isnan(r.relativeError))
+    return "the reference's convergence is unknown (" +
+           (r.message.empty() ? std::string("no estimate") : r.message) + ")";
+  std::string w;
+  if (r.relativeError > 0.01) w = "the reference is not converged to 1% of the peak";
+  if (!r.asymptotic)
+    w +=
+        std::string(w.empty() ? "the estimate is unreliable" : ", and the estimate is unreliable") +
+        ": the levels are not in the asymptotic range (p = " + fixed(r.order, 2) + ")";
+  return w + ": read its errors as bounds of " + percent(r.relativeError) + " of the peak or more";
+}
+
 ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loader,
                                  const ConvergeOptions& options, Progress* progress) {
-  const Scene scene = parseSceneFile(sceneFile);
-  if (!scene.reference)
-    throw InputError(sceneFile, "/reference", "the scene has no reference to check");
   std::ifstream in(sceneFile);
-  ojson base = ojson::parse(in);
+  if (!in) throw InputError(sceneFile, "", "cannot read the scene");
+  ojson scene;
+  try {
+    scene = ojson::parse(in);
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(sceneFile, "", std::string("not JSON: ") + e.what());
+  }
+  return runConvergence(scene, sceneFile, loader, options, progress);
+}
+
+ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFile,
+                                 PluginLoader& loader, const ConvergeOptions& options,
+                                 Progress* progress) {
+  ojson base = scene;
   if (base.contains("organ") && base["organ"].contains("mesh")) {
     const std::string mesh = base["organ"]["mesh"];
     if (mesh.rfind("phantom:", 0) != 0 && !fs::path(mesh).is_absolute())
       base["organ"]["mesh"] =
           fs::absolute(fs::path(sceneFile).parent_path() / mesh).lexically_normal().string();
   }
+  const Scene parsed = parseScene(nlohmann::json::parse(base.dump()), sceneFile);
+  if (!parsed.reference)
+    throw InputError(sceneFile, "/reference", "the scene has no reference to check");
+  if (options.factors.size() != 3 || !(options.factors[0] > 0) ||
+      !(options.factors[0] < options.factors[1] && options.factors[1] < options.factors[2]))
+    throw InputError(sceneFile, "convergence levels",
+                     "need three increasing positive element factors");
   ojson ref = base["reference"];
   long long n = options.baseElements;
   if (n <= 0 && ref.contains("params") && ref["params"].contains("elements"))
     n = ref["params"]["elements"].get<long long>();
   if (n <= 0) n = 5000;
-  const Organ organ = loadOrgan(scene);
+  const Organ organ = loadOrgan(parsed);
   const double volume = std::fabs(signedVolume(organ.surface.V, organ.surface.F));
-  const Interaction interaction(scene, organ.surface);
   const double exclude = options.excludeRadius >= 0 ? options.excludeRadius
                                                     : 0.1 * boundingBox(organ.surface.V).diagonal();
+
+  // The cache key: everything the levels' answers depend on. The models are not run.
+  std::optional<CacheKey> key;
+  const std::string plugin = ref.value("plugin", "");
+  try {
+    CacheKey k;
+    k.add(kCacheVersion);
+    ojson what = base;
+    what.erase("models");
+    what.erase("name");
+    what.erase("description");
+    k.add(what.dump());
+    k.add(n).add(exclude);
+    for (double f : options.factors) k.add(f);
+    k.add(sha256File(loader.locate(plugin)));
+    const std::string mesh = base["organ"].value("mesh", "");
+    if (mesh.rfind("phantom:", 0) != 0) k.add(sha256File(mesh));
+    key = k;
+  } catch (const std::exception&) {
+    // No plugin file to hash (the levels will report it missing) or an unreadable mesh: the
+    // study runs uncached.
+  }
+  const fs::path cacheDir = options.cacheDir ? *options.cacheDir : Cache::defaultDir();
+  Cache cache(cacheDir);
+  if (key) {
+    if (auto hit = cache.get(kCacheKind, *key)) {
+      try {
+        ByteReader r(*hit);
+        ConvergenceResult out = fromJson(ojson::parse(r.string()));
+        out.cached = true;
+        fs::create_directories(options.outDir);
+        writeFileAtomic(options.outDir / "convergence.json", toJson(out, sceneFile).dump(2) + "\n");
+        return out;
+      } catch (const std::exception&) {
+        // An entry of another layout: recompute and overwrite it.
+      }
+    }
+  }
+
+  const Interaction interaction(parsed, organ.surface);
   // Left out: vertices near a point load (singular) and near where a grasp closes (the nodes
   // a grasp attaches are those of each mesh within its radius, so the boundary condition
   // itself changes with the mesh there).
   std::vector<Vec3> centres;
   for (int v : interaction.loadVertices()) centres.push_back(organ.surface.V.row(v).transpose());
-  for (const ToolSpec& tool : scene.tools)
+  for (const ToolSpec& tool : parsed.tools)
     for (const KeyFrame& k : tool.trajectory)
       if (k.jawClosed) {
         centres.push_back(k.pos);
@@ -85,7 +240,7 @@ ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loa
 
   ConvergenceResult out;
   std::vector<MatX3> displacement;
-  const std::vector<double> factors = {1.0, 2.8, 8.0};
+  const std::vector<double>& factors = options.factors;
   if (progress) progress->addTotal(int(factors.size()));
   for (size_t k = 0; k < factors.size(); ++k) {
     ConvergenceLevelResult level;
@@ -127,37 +282,27 @@ ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loa
   }
   if (displacement.size() != 3) {
     out.message = "no estimate: not every level ran to its compared instant";
-    return out;
+  } else {
+    const auto maxDiff = [&](const MatX3& a, const MatX3& b) {
+      double m = 0;
+      for (Eigen::Index i = 0; i < a.rows(); ++i)
+        if (include[size_t(i)]) m = std::max(m, (a.row(i) - b.row(i)).norm());
+      return m;
+    };
+    richardsonEstimate(out.levels[0].h, out.levels[1].h, out.levels[2].h,
+                       maxDiff(displacement[0], displacement[1]),
+                       maxDiff(displacement[1], displacement[2]), out.levels[2].peakDisplacement,
+                       out);
   }
-  const auto maxDiff = [&](const MatX3& a, const MatX3& b) {
-    double m = 0;
-    for (Eigen::Index i = 0; i < a.rows(); ++i)
-      if (include[size_t(i)]) m = std::max(m, (a.row(i) - b.row(i)).norm());
-    return m;
-  };
-  richardsonEstimate(
-      out.levels[0].h, out.levels[1].h, out.levels[2].h, maxDiff(displacement[0], displacement[1]),
-      maxDiff(displacement[1], displacement[2]), out.levels[2].peakDisplacement, out);
-  ojson doc;
-  doc["format"] = "deformbench-convergence/1";
-  doc["scene"] = sceneFile;
-  doc["levels"] = ojson::array();
-  for (const auto& l : out.levels)
-    doc["levels"].push_back({{"target_elements", l.targetElements},
-                             {"elements", l.elements},
-                             {"h_m", l.h},
-                             {"peak_displacement_m", l.peakDisplacement},
-                             {"status", l.status},
-                             {"wall_s", l.solveS}});
-  doc["d01_m"] = out.d01;
-  doc["d12_m"] = out.d12;
-  doc["order"] = numberOrNull(out.order);
-  doc["error_estimate_m"] = numberOrNull(out.errorEstimate);
-  doc["relative_error"] = numberOrNull(out.relativeError);
-  doc["asymptotic"] = out.asymptotic;
-  doc["converged"] = out.converged;
-  doc["message"] = out.message;
+  const ojson doc = toJson(out, sceneFile);
   writeFileAtomic(options.outDir / "convergence.json", doc.dump(2) + "\n");
+  // Only a study whose every level ran is kept: a missing plugin or a failed level may not
+  // recur.
+  if (key && displacement.size() == 3) {
+    ByteWriter w;
+    w.string(doc.dump());
+    cache.put(kCacheKind, *key, w.bytes());
+  }
   return out;
 }
 

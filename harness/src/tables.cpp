@@ -3,6 +3,7 @@
 #include <deform/mesh.h>
 #include <deform/phantom.h>
 #include <deform_harness/child_process.h>
+#include <deform_harness/convergence.h>
 #include <deform_harness/tables.h>
 
 #include <algorithm>
@@ -20,6 +21,18 @@ using ojson = nlohmann::ordered_json;
 namespace {
 
 // ------------------------------------------------------------------------------------ helpers
+
+/// Element order of the method-comparison reference: quadratic (10-node) tets, since linear
+/// ones are ~10% too stiff on the liver at any affordable size (plugins/reference_fem/README.md).
+constexpr int kReferenceOrder = 2;
+/// Element order of the hybrid tables' reference: linear for now. Their cases press up to 20 N
+/// on one vertex of a 5.5 kPa phantom; with quadratic tets the reference's Newton solve of the
+/// cube's 20 N downward case did not finish in 15 min at 3k tets (linear: 0.45 s at 4.5k), which
+/// would time every such case out. The tables' reference check says how far from converged
+/// the linear reference is; switch this to 2 once the solver handles those loads.
+constexpr int kHybridReferenceOrder = 1;
+/// Target tets of the reference (a multiple of 8: the check's coarsest level is 1/8 of it).
+constexpr long long kReferenceElements = 20000, kQuickReferenceElements = 4000;
 
 ojson vec(const Vec3& v) {
   return ojson::array({v.x(), v.y(), v.z()});
@@ -84,8 +97,16 @@ void addReference(ojson& scene, ojson reference) {
   scene["samples"] = {{"nearest", {10, 50}}};
 }
 
-ojson referenceFem(long long elements) {
-  return model("reference_fem", "reference_fem", {{"elements", elements}});
+/// The tables' reference FEM with `elements` target tets of the given order (1 or 2).
+ojson referenceFem(long long elements, int order) {
+  return model("reference_fem", "reference_fem",
+               {{"elements", elements}, {"element_order", order}});
+}
+
+/// "20000 target P2 (10-node) tets": how the notes name the reference's elements.
+std::string referenceTets(long long elements, int order) {
+  return std::to_string(elements) + " target P" + std::to_string(order) + " (" +
+         (order == 2 ? "10" : "4") + "-node) tets";
 }
 
 /// The surface vertex nearest the centre of the top of the bounding box.
@@ -219,6 +240,8 @@ const CaseResult* caseOrSkipped(const Results& res, const std::string& id, bool 
 struct TableDef {
   std::string name, title, source;
   std::vector<std::string> notes;
+  /// Cases whose reference the table checks for convergence: one per distinct reference.
+  std::vector<std::string> checks;
   std::vector<TableColumn> columns;
   std::vector<Case> cases;
   std::function<std::vector<ojson>(const Results&, const fs::path& outDir)> rows;
@@ -372,9 +395,9 @@ TableDef methodComparison(const TablesOptions& o, long long refElements) {
       "Scenes: the shipped grasp-and-lift scenes (liver at resolution 0.27, ~2.2k vertices "
       "as in the paper's PBD comparison; gallbladder at resolution 1), " +
           number(duration) + " s at 1 ms; error against reference_fem (" +
-          std::to_string(refElements) +
-          " tets, Neo-Hookean, quasi-static, solved at the "
-          "end of the run).",
+          referenceTets(refElements, kReferenceOrder) +
+          ", Neo-Hookean, quasi-static, solved where the grasp closes and at the end of the "
+          "run).",
       "Counts: fem_hex elements; mass-spring springs; PBD distance + volume/bending "
       "constraints; metaballs links(+Laplacian) + spheres. Mass-spring uses explicit "
       "Euler as in the paper: divergence at 1 ms is an honest result.",
@@ -431,8 +454,9 @@ TableDef methodComparison(const TablesOptions& o, long long refElements) {
         {model("fem_hex", "fem_hex", {{"elements", os.femElements}}),
          model("massspring", "massspring", {{"integrator", "explicit_euler"}}), model("pbd", "pbd"),
          model("metaballs", "metaballs", {{"spheres", os.spheres}})});
-    addReference(j, referenceFem(refElements));
+    addReference(j, referenceFem(refElements, kReferenceOrder));
     t.cases.push_back({std::string("method/") + os.organ, j});
+    t.checks.push_back(t.cases.back().id);
   }
   t.rows = [](const Results& res, const fs::path& dir) {
     std::vector<ojson> rows;
@@ -639,6 +663,8 @@ struct HybridPhantom {
 constexpr HybridPhantom kHybridPhantoms[] = {
     {"cube", 1.0}, {"sphere", 1.0}, {"liver", 0.27}, {"steak", 1.0}};
 constexpr double kHybridForces[] = {0.5, 1.0, 2.0, 5.0, 10.0, 20.0};
+/// The direction of the hybrid case whose reference is checked (with the largest force).
+constexpr bool kCheckedHybridUp = false;
 /// The compared models of the hybrid tables.
 struct HybridModel {
   const char* plugin;  ///< = its label in the scenes
@@ -691,7 +717,7 @@ std::vector<Case> hybridSceneCases(bool quick, long long refElements) {
     j["models"] =
         ojson::array({model("hybrid_fem_pbd", "hybrid_fem_pbd"),
                       model("pbd", "pbd", {{"bending", true}}), model("massspring", "massspring")});
-    addReference(j, referenceFem(refElements));
+    addReference(j, referenceFem(refElements, kHybridReferenceOrder));
     out.push_back({hc.id(), j});
   }
   return out;
@@ -739,6 +765,24 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
   return rows;
 }
 
+/// The cases whose reference the hybrid tables check: per phantom the one with the largest
+/// force, pressing down (kCheckedHybridUp: compression under the load is the harder case). The
+/// phantoms' references differ in mesh and in load; one study per phantom keeps the cost at about
+/// one case's reference x 1.5 per phantom rather than per row.
+std::vector<std::string> hybridChecks(bool quick) {
+  std::map<std::string, HybridCase> worst;
+  for (const HybridCase& hc : hybridCases(quick)) {
+    if (hc.up != kCheckedHybridUp) continue;
+    auto it = worst.find(hc.phantom->name);
+    if (it == worst.end() || hc.force > it->second.force)
+      worst.insert_or_assign(hc.phantom->name, hc);
+  }
+  std::vector<std::string> out;
+  for (const HybridPhantom& p : kHybridPhantoms)
+    if (worst.count(p.name)) out.push_back(worst.at(p.name).id());
+  return out;
+}
+
 /// hybrid-accuracy (timing false) or hybrid-timing: the same cases, other figures.
 TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing) {
   std::vector<TableColumn> figures;
@@ -764,8 +808,8 @@ TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing)
                        {{"status", "status"}, {"scene", "scene"}, {"note", "note"}}});
   if (timing) {
     t.notes = {"The same runs as hybrid-accuracy. FEM: reference_fem (" +
-                   std::to_string(refElements) +
-                   " tets, Neo-Hookean, quasi-static): wall time of one equilibrium solve at the "
+                   referenceTets(refElements, kHybridReferenceOrder) +
+                   ", Neo-Hookean, quasi-static): wall time of one equilibrium solve at the "
                    "compared instant from rest, with load stepping where Newton needed it.",
                kHybridNote};
   } else {
@@ -773,10 +817,11 @@ TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing)
         "Constant vertical point force at the top vertex nearest the top's centre, bottom "
         "tenth fixed, E = 5.5 kPa, nu = 0.3, no gravity, " +
             number(o.quick ? 0.2 : 1.0) + " s at 1 ms; reference_fem with " +
-            std::to_string(refElements) + " tets solved at the end of the run.",
+            referenceTets(refElements, kHybridReferenceOrder) + " solved at the end of the run.",
         kHybridNote};
   }
   t.cases = hybridSceneCases(o.quick, refElements);
+  t.checks = hybridChecks(o.quick);
   const bool quick = o.quick;
   t.rows = [quick, timing](const Results& res, const fs::path& dir) {
     return hybridRows(res, dir, quick, timing);
@@ -784,11 +829,70 @@ TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing)
   return t;
 }
 
+/// What a table says about one of its references: a note, and a warning when the reference is
+/// not shown converged to 1% of the peak displacement.
+struct ReferenceCheck {
+  std::string note, warning;
+};
+
+/// The convergence study of case c's reference (convergence.h) at three levels, the finest being
+/// the reference the table used (same params, same target count: the same mesh and answer), so
+/// the estimate is the error of the figures in the table.
+ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& loader,
+                              const TablesOptions& o, Progress* progress) {
+  ReferenceCheck out;
+  const std::string what = "reference (" + c.id + ")";
+  const ojson& ref = c.scene["reference"];
+  const std::string plugin = ref.value("plugin", "");
+  const RunRecord* run = r.run(ref.value("label", plugin));
+  if (!run || run->status != RunStatus::Ok) {
+    out.note = what + ": convergence not checked: " + statusOf(r, plugin, run);
+    return out;
+  }
+  const ojson& params = ref["params"];
+  ConvergeOptions co;
+  co.baseElements = params.value("elements", 0LL);
+  co.factors = {1.0 / 8.0, 1.0 / 2.8, 1.0};
+  co.outDir = o.outDir / "convergence" / c.id;
+  co.cacheDir = o.cases.cacheDir;
+  const fs::path sceneFile = o.outDir / "scenes" / (c.id + ".json");
+  if (progress) progress->start("reference check " + c.id);
+  ConvergenceResult res;
+  try {
+    res = runConvergence(c.scene, sceneFile.string(), loader, co, nullptr);
+  } catch (const std::exception& e) {
+    res.message = e.what();
+  }
+  std::string elements = "? tets";
+  if (run->counts.count("elements"))
+    elements = std::to_string(run->counts.at("elements")) + " tets";
+  out.note = what + ": " + plugin + " P" + std::to_string(params.value("element_order", 1)) + " " +
+             params.value("material", std::string("neo_hookean")) + ", " + elements + ", " +
+             convergenceSummary(res) + "; study in " +
+             relativeTo(co.outDir / "convergence.json", o.outDir) + ".";
+  const std::string w = convergenceWarning(res);
+  if (!w.empty()) out.warning = "warning: " + what + ": " + w + ".";
+  if (progress)
+    progress->finish("reference check " + c.id,
+                     (w.empty() ? std::string("converged") : std::string("not shown converged")) +
+                         (res.cached ? " (cached)" : ""));
+  return out;
+}
+
 }  // namespace
 
 std::vector<std::string> tableNames() {
   return {"metaballs-construction", "method-comparison", "bem-timing",
           "bem-accuracy",           "hybrid-accuracy",   "hybrid-timing"};
+}
+
+std::vector<std::string> tableWarnings(const std::vector<Table>& tables) {
+  std::vector<std::string> out;
+  std::set<std::string> seen;
+  for (const Table& t : tables)
+    for (const std::string& n : t.notes)
+      if (n.rfind("warning: ", 0) == 0 && seen.insert(n).second) out.push_back(n);
+  return out;
 }
 
 std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
@@ -807,7 +911,9 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
     }
   }
   const long long refElements =
-      options.referenceElements > 0 ? options.referenceElements : (options.quick ? 4000 : 20000);
+      options.referenceElements > 0
+          ? options.referenceElements
+          : (options.quick ? kQuickReferenceElements : kReferenceElements);
   const std::map<std::string, std::function<TableDef()>> make = {
       {"metaballs-construction", [&] { return metaballsConstruction(options); }},
       {"method-comparison", [&] { return methodComparison(options, refElements); }},
@@ -852,6 +958,22 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
     results.emplace(c->id, std::move(r));
   }
 
+  // Each distinct reference once (the hybrid tables share theirs).
+  std::map<std::string, ReferenceCheck> checks;
+  if (options.referenceCheck) {
+    std::vector<const Case*> toCheck;
+    for (const TableDef& d : defs)
+      for (const std::string& id : d.checks)
+        if (!checks.count(id) && results.count(id)) {
+          checks[id] = {};
+          for (const Case* c : order)
+            if (c->id == id) toCheck.push_back(c);
+        }
+    if (progress) progress->addTotal(int(toCheck.size()));
+    for (const Case* c : toCheck)
+      checks[c->id] = checkReference(*c, results.at(c->id), loader, options, progress);
+  }
+
   std::vector<Table> tables;
   for (const TableDef& d : defs) {
     Table t;
@@ -859,6 +981,13 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
     t.title = d.title;
     t.source = d.source;
     t.notes = d.notes;
+    if (!d.checks.empty() && !options.referenceCheck)
+      t.notes.push_back("reference: convergence not checked (--no-reference-check).");
+    for (const std::string& id : d.checks) {
+      if (!checks.count(id)) continue;
+      t.notes.push_back(checks.at(id).note);
+      if (!checks.at(id).warning.empty()) t.notes.push_back(checks.at(id).warning);
+    }
     t.columns = d.columns;
     for (const ojson& row : d.rows(results, options.outDir))
       t.rows.push_back(inColumnOrder(row, d.columns));

@@ -7,6 +7,7 @@
 #include <deform_harness/bench.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/child_process.h>
+#include <deform_harness/convergence.h>
 #include <deform_harness/progress.h>
 #include <deform_harness/scripts.h>
 #include <deform_harness/stability.h>
@@ -15,6 +16,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -116,6 +118,141 @@ TEST_F(TempDir, QuickHybridTimingRunsWhatLoadsAndSaysWhatIsMissing) {
   EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 5);
   const std::string md = readText(o.outDir / "hybrid-timing.md");
   EXPECT_NE(md.find("| phantom | force N |"), std::string::npos);
+
+  // The reference check: reference_fem is missing, so the table says its reference was not
+  // checked (and runs no study) instead of claiming anything.
+  bool notChecked = false;
+  for (const auto& n : doc["notes"])
+    if (n.get<std::string>().find("reference (hybrid/cube_down_20N): convergence not checked: "
+                                  "missing plugin reference_fem") != std::string::npos)
+      notChecked = true;
+  EXPECT_TRUE(notChecked) << doc["notes"].dump();
+  EXPECT_NE(md.find("convergence not checked"), std::string::npos);
+  EXPECT_FALSE(fs::exists(o.outDir / "convergence"));
+
+  // --no-reference-check: the table says the check was skipped (no plugin at all: nothing runs).
+  fs::create_directories(m_dir / "no_plugins");
+  PluginLoader none({(m_dir / "no_plugins").string()});
+  o.referenceCheck = false;
+  o.outDir = m_dir / "out_unchecked";
+  buildTables({"hybrid-timing"}, none, o, nullptr);
+  const json unchecked = readJson(o.outDir / "hybrid-timing.json");
+  const std::string notes = unchecked["notes"].dump();
+  EXPECT_NE(notes.find("convergence not checked (--no-reference-check)"), std::string::npos)
+      << notes;
+  EXPECT_EQ(notes.find("reference (hybrid/"), std::string::npos) << notes;
+}
+
+// ------------------------------------------------------------------------- reference check
+
+/// Whether every named plugin is built.
+bool built(const std::vector<std::string>& names) {
+  PluginLoader probe({DEFORM_BUILD_PLUGIN_DIR});
+  const auto found = probe.discover();
+  for (const auto& n : names)
+    if (std::find(found.begin(), found.end(), n) == found.end()) return false;
+  return true;
+}
+
+/// The notes of a table file that contain `part`.
+std::vector<std::string> notesWith(const json& table, const std::string& part) {
+  std::vector<std::string> out;
+  for (const auto& n : table["notes"])
+    if (n.get<std::string>().find(part) != std::string::npos) out.push_back(n);
+  return out;
+}
+
+TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
+  if (!built({"massspring", "reference_fem"}))
+    GTEST_SKIP() << "massspring or reference_fem is not built";
+  // One cheap model (a case needs one) and the reference. 800 target tets: the study's levels
+  // (100, 286, 800 targets) are all about the coarsest mesh the cube's surface allows, so the
+  // reference cannot be shown converged.
+  const fs::path plugins = pluginSubset(m_dir / "plugins", {"massspring", "reference_fem"});
+  const fs::path out = m_dir / "out", cache = m_dir / "cache";
+  PluginLoader loader({plugins.string()});
+  TablesOptions o;
+  o.quick = true;
+  o.outDir = out;
+  o.cases.cacheDir = cache;
+  o.referenceElements = 800;
+  const auto tables = buildTables({"hybrid-accuracy"}, loader, o, nullptr);
+  const json doc = readJson(out / "hybrid-accuracy.json");
+  const auto notes = notesWith(doc, "reference (hybrid/cube_down_20N): reference_fem P1");
+  ASSERT_EQ(notes.size(), 1u) << doc["notes"].dump();
+  EXPECT_TRUE(notes[0].find("estimated discretisation error") != std::string::npos ||
+              notes[0].find("no discretisation error estimate") != std::string::npos)
+      << notes[0];
+  const auto warnings = notesWith(doc, "warning: reference (hybrid/cube_down_20N)");
+  ASSERT_EQ(warnings.size(), 1u) << doc["notes"].dump();
+  const std::string md = readText(out / "hybrid-accuracy.md");
+  EXPECT_NE(md.find(notes[0]), std::string::npos);
+  EXPECT_NE(md.find(warnings[0]), std::string::npos);
+  EXPECT_EQ(tableWarnings(tables), warnings) << "what the command prints at the end";
+
+  // The study: three levels whose finest is the table's reference (same target, same mesh).
+  const json study = readJson(out / "convergence/hybrid/cube_down_20N/convergence.json");
+  ASSERT_EQ(study["levels"].size(), 3u);
+  EXPECT_EQ(study["levels"][2]["target_elements"], 800);
+  EXPECT_EQ(study["levels"][0]["target_elements"], 100);
+  EXPECT_EQ(study["cached"], false);
+  EXPECT_EQ(study["converged"], false);
+  const json results = readJson(out / "runs/hybrid/cube_down_20N/results.json");
+  long long referenceTets = -1;
+  for (const auto& run : results["runs"])
+    if (run["label"] == "reference_fem") referenceTets = run["counts"]["elements"];
+  EXPECT_EQ(study["levels"][2]["elements"], referenceTets) << "the finest level is the same mesh";
+  EXPECT_NE(notes[0].find(std::to_string(referenceTets) + " tets"), std::string::npos) << notes[0];
+
+  // The same study again (as a second tables run would ask for it): read from the cache.
+  ConvergeOptions co;
+  co.baseElements = 800;
+  co.factors = {1.0 / 8.0, 1.0 / 2.8, 1.0};
+  co.outDir = m_dir / "again";
+  co.cacheDir = cache;
+  const ConvergenceResult cached =
+      runConvergence((out / "scenes/hybrid/cube_down_20N.json").string(), loader, co, nullptr);
+  EXPECT_TRUE(cached.cached);
+  ASSERT_EQ(cached.levels.size(), 3u);
+  EXPECT_EQ(cached.levels[2].elements, referenceTets);
+  EXPECT_EQ(cached.d12, study["d12_m"].get<double>());
+  EXPECT_FALSE(fs::exists(co.outDir / "level_0")) << "nothing was run";
+  EXPECT_EQ(readJson(co.outDir / "convergence.json")["cached"], true);
+}
+
+TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) {
+  // Levels of u_k = u + C h_k^2: the estimate recovers p = 2 and the finest level's error C h2^2.
+  const double h0 = 0.01, h1 = 0.0071, h2 = 0.005, peak = 0.01;
+  for (const double c : {0.5, 50.0}) {
+    ConvergenceResult r;
+    for (double h : {h0, h1, h2}) r.levels.push_back({0, 1000, h, peak, "ok", 1.0});
+    richardsonEstimate(h0, h1, h2, c * (h0 * h0 - h1 * h1), c * (h1 * h1 - h2 * h2), peak, r);
+    EXPECT_NEAR(r.order, 2.0, 1e-6);
+    EXPECT_NEAR(r.errorEstimate, c * h2 * h2, 1e-9 * c);
+    EXPECT_TRUE(r.asymptotic);
+    const std::string summary = convergenceSummary(r);
+    EXPECT_NE(summary.find("p = 2.00"), std::string::npos) << summary;
+    const double percent = 100 * c * h2 * h2 / peak;  // 0.125% and 12.5%
+    EXPECT_EQ(r.converged, percent <= 1) << percent;
+    const std::string warning = convergenceWarning(r);
+    EXPECT_EQ(warning.empty(), percent <= 1) << warning;
+    if (percent > 1) EXPECT_NE(warning.find("not converged to 1%"), std::string::npos) << warning;
+  }
+  // Differences that shrink faster than the element order allows (p = 6): small estimate, but
+  // warned.
+  ConvergenceResult fast;
+  const auto h6 = [](double h) { return std::pow(h, 6); };
+  richardsonEstimate(h0, h1, h2, 1e6 * (h6(h0) - h6(h1)), 1e6 * (h6(h1) - h6(h2)), 0.01, fast);
+  EXPECT_NEAR(fast.order, 6.0, 1e-6);
+  EXPECT_FALSE(fast.asymptotic);
+  EXPECT_LT(fast.relativeError, 0.01);
+  EXPECT_NE(convergenceWarning(fast).find("asymptotic"), std::string::npos);
+  // Levels that do not refine: no estimate, and the warning says the convergence is unknown.
+  ConvergenceResult flat;
+  richardsonEstimate(h0, h0, h0, 1e-3, 1e-3, 0.01, flat);
+  EXPECT_TRUE(std::isnan(flat.relativeError));
+  EXPECT_NE(convergenceSummary(flat).find("no discretisation error estimate"), std::string::npos);
+  EXPECT_NE(convergenceWarning(flat).find("unknown"), std::string::npos);
 }
 
 /// A small grasp-and-lift scene on the cube with the given models and reference.

@@ -9,12 +9,18 @@
 // here on runs of the plugin rather than on its kernels). Vertices within `excludeRadius` of a
 // point load (singular in 3D elasticity) or of where a grasp closes (the attached node set
 // depends on the mesh) are left out.
+//
+// The study is deterministic, so its result is kept in the precomputation cache (kind
+// "harness.convergence"), keyed by the scene as run (organ, loads, tools, times, the reference
+// and its params), the levels, the excluded radius and the SHA-256 of the reference plugin's
+// shared object (and of the organ's mesh file): a rebuilt plugin or a changed scene recomputes.
 #pragma once
 
 #include <deform/plugin_loader.h>
 #include <deform_harness/progress.h>
 
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -37,6 +43,7 @@ struct ConvergenceResult {
   bool asymptotic = false;  ///< 0.5 <= p <= 4
   bool converged = false;   ///< asymptotic && relativeError <= 1%
   std::string message;      ///< why there is no estimate, if there is none
+  bool cached = false;      ///< read from the precomputation cache, not recomputed
 };
 
 /// Richardson analysis of three levels (h0 > h1 > h2, differences d01, d12): fills order,
@@ -46,12 +53,29 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
 
 struct ConvergeOptions {
   long long baseElements = 0;  ///< N; 0: the scene reference's own "elements" (else 5000)
+  /// Level k targets llround(factors[k] * N) elements: three, increasing. {1/8, 1/2.8, 1} makes
+  /// the finest level the reference at N itself (what the tables check).
+  std::vector<double> factors = {1.0, 2.8, 8.0};
   std::filesystem::path outDir;
   std::optional<std::filesystem::path> cacheDir;
   double excludeRadius = -1;  ///< m; < 0: 10% of the organ's bounding-box diagonal
 };
 
+/// Runs the study on the scene file (writes options.outDir/convergence.json and level_k/).
 ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loader,
                                  const ConvergeOptions& options, Progress* progress);
+
+/// The same on a scene given as JSON; a relative organ mesh path is resolved against the folder
+/// of `sceneFile` (which names the scene in messages and need not exist).
+ConvergenceResult runConvergence(const nlohmann::ordered_json& scene, const std::string& sceneFile,
+                                 PluginLoader& loader, const ConvergeOptions& options,
+                                 Progress* progress);
+
+/// One line: "estimated discretisation error X% of the peak (levels a / b / c tets, p = q)", or
+/// why there is no estimate.
+std::string convergenceSummary(const ConvergenceResult& r);
+
+/// The warning the study calls for ("" when the reference is converged to 1%).
+std::string convergenceWarning(const ConvergenceResult& r);
 
 }  // namespace deform::harness

@@ -18,6 +18,14 @@
 // child process with a time limit (cases.h, ChildCaseOptions): a crash or a hang becomes rows
 // with status failed (the signal or the timeout) and the tables go on; --resume reuses finished
 // cases. Without it the cases run in this process (library callers, tests).
+//
+// Reference check (issue F2): after the cases, each distinct reference a table uses
+// (method-comparison: one per organ; the hybrid tables: per phantom the 20 N downward case) is
+// run through the convergence study of convergence.h at 1/8, 1/2.8 and 1 x its target tets, the
+// finest level being the table's reference itself, in this process and cached. The table's notes
+// get "reference (CASE): ..., estimated discretisation error X% of the peak (levels ..., p = ...)"
+// and, when the estimate is above 1%, not asymptotic or missing, a "warning: reference (CASE):"
+// note; the study is written to DIR/convergence/CASE/.
 #pragma once
 
 #include <deform_harness/cases.h>
@@ -33,8 +41,11 @@ struct TablesOptions {
   bool quick = false;  ///< fewer cases, shorter runs and a coarser reference (for CI)
   std::filesystem::path outDir;
   CaseOptions cases;
-  /// Tets of the reference FEM; 0: 4000 with --quick, else 20000.
+  /// Target tets of the reference FEM (quadratic tets); 0: the default (tables.cpp).
   long long referenceElements = 0;
+  /// Run the convergence study of each distinct reference (convergence.h) and put its estimate
+  /// in the table's notes, with a warning line when it is not converged to 1% of the peak.
+  bool referenceCheck = true;
 };
 
 /// Names of the six tables, in DESIGN.md's order.
@@ -43,6 +54,10 @@ std::vector<std::string> tableNames();
 /// Builds the named tables ("all" expands to every one; an unknown name is an InputError),
 /// runs their cases (each case once even when two tables share it), writes every file into
 /// options.outDir and returns the tables. progress may be null.
+/// The "warning: ..." notes of the tables (each once, in order): what the command prints at the
+/// end of its output.
+std::vector<std::string> tableWarnings(const std::vector<Table>& tables);
+
 std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
                                const TablesOptions& options, Progress* progress);
 
