@@ -51,6 +51,57 @@ Eigen::Map<const SparseMatrix> withValues(const SparseMatrix& pattern, const Vec
                                         values.data());
 }
 
+/// Fill-reducing elimination order of the graph of `nodes` (indices into the 3N x 3N pattern P,
+/// whose 3x3 node blocks are dense): CHOLMOD's nested dissection (NESDIS: METIS bisection with
+/// constrained minimum degree on the parts) of the node-level pattern. Returns positions into
+/// `nodes` in elimination order. Why nodes, not dofs: the graph is 9x smaller, so the ordering
+/// takes ~20 ms instead of ~0.15 s on the 51k-tet liver, and the factor is as sparse (5.79
+/// Gflop; METIS on the dof graph, CHOLMOD's own choice there: 5.85; METIS on nodes 6.03; AMD 12).
+std::vector<int> freeNodeOrdering(const SparseMatrix& P, const std::vector<int>& nodes) {
+  const int nn = int(nodes.size());
+  std::vector<int> local(size_t(P.rows() / 3), -1);
+  for (int k = 0; k < nn; ++k) local[size_t(nodes[size_t(k)])] = k;
+  cholmod_common c;
+  cholmod_start(&c);
+  c.print = 0;
+  long long nnz = 0;
+  for (int k = 0; k < nn; ++k) {
+    const int col = 3 * nodes[size_t(k)];
+    nnz += (P.outerIndexPtr()[col + 1] - P.outerIndexPtr()[col]) / 3;
+  }
+  cholmod_sparse* A =
+      cholmod_allocate_sparse(size_t(nn), size_t(nn), size_t(nnz), 1, 1, -1, CHOLMOD_PATTERN, &c);
+  int* Ap = static_cast<int*>(A->p);
+  int* Ai = static_cast<int*>(A->i);
+  int q = 0;
+  for (int k = 0; k < nn; ++k) {
+    Ap[k] = q;
+    const int col = 3 * nodes[size_t(k)];
+    std::vector<int> rows;
+    for (int p = P.outerIndexPtr()[col]; p < P.outerIndexPtr()[col + 1]; p += 3) {
+      const int r = local[size_t(P.innerIndexPtr()[p] / 3)];
+      if (r >= k) rows.push_back(r);
+    }
+    std::sort(rows.begin(), rows.end());
+    for (int r : rows) Ai[q++] = r;
+  }
+  Ap[nn] = q;
+  c.nmethods = 1;
+  c.method[0].ordering = CHOLMOD_NESDIS;
+  cholmod_factor* L = cholmod_analyze(A, &c);
+  std::vector<int> perm(static_cast<size_t>(nn));
+  if (L) {
+    const int* Lp = static_cast<const int*>(L->Perm);
+    for (int k = 0; k < nn; ++k) perm[size_t(k)] = Lp[k];
+  } else {
+    for (int k = 0; k < nn; ++k) perm[size_t(k)] = k;
+  }
+  cholmod_free_factor(&L, &c);
+  cholmod_free_sparse(&A, &c);
+  cholmod_finish(&c);
+  return perm;
+}
+
 }  // namespace
 
 MaterialModel parseMaterialModel(const std::string& name) {
@@ -324,37 +375,62 @@ VecX FemSystem::externalForce(const LoadCase& loads) const {
 void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
   if (m_prepared && dofs == m_constrainedDofs) return;
   m_constrainedDofs = dofs;
-  const int ndof = 3 * m_sys.numNodes();
+  const int n = m_sys.numNodes(), ndof = 3 * n;
   m_freeIndex.assign(size_t(ndof), 0);
   for (int d : dofs) m_freeIndex[size_t(d)] = -1;
-  int nf = 0;
-  for (int d = 0; d < ndof; ++d)
-    if (m_freeIndex[size_t(d)] >= 0) m_freeIndex[size_t(d)] = nf++;
   const SparseMatrix& P = m_sys.stiffnessPattern();
-  m_fullToFree.assign(size_t(P.nonZeros()), -1);
-  std::vector<Triplet> trip;
-  for (int c = 0; c < ndof; ++c) {
-    if (m_freeIndex[size_t(c)] < 0) continue;
-    for (int p = P.outerIndexPtr()[c]; p < P.outerIndexPtr()[c + 1]; ++p) {
-      const int r = P.innerIndexPtr()[p];
-      if (r >= c && m_freeIndex[size_t(r)] >= 0)
-        trip.emplace_back(m_freeIndex[size_t(r)], m_freeIndex[size_t(c)], 0.0);
-    }
+  int nf = 0;
+  {
+    // Free dofs numbered node by node in a fill-reducing order of the node graph, so CHOLMOD
+    // factorises in the given order (see freeNodeOrdering).
+    std::vector<int> nodes;
+    for (int i = 0; i < n; ++i)
+      if (m_freeIndex[size_t(3 * i)] >= 0 || m_freeIndex[size_t(3 * i + 1)] >= 0 ||
+          m_freeIndex[size_t(3 * i + 2)] >= 0)
+        nodes.push_back(i);
+    const std::vector<int> perm = freeNodeOrdering(P, nodes);
+    for (int k : perm)
+      for (int a = 0; a < 3; ++a)
+        if (m_freeIndex[size_t(3 * nodes[size_t(k)] + a)] >= 0)
+          m_freeIndex[size_t(3 * nodes[size_t(k)] + a)] = nf++;
   }
-  m_Kff.resize(nf, nf);
-  m_Kff.setFromTriplets(trip.begin(), trip.end());
-  m_Kff.makeCompressed();
-  // K_ff holds its lower triangle only (CHOLMOD reads no more). Map full-pattern entries to it
-  // (both are sorted by column, then row).
+  // K_ff holds its lower triangle only (CHOLMOD reads no more): entries (fr, fc), fr >= fc, of
+  // the full pattern's free block, each remembered by its full-pattern index.
+  std::vector<int> count(size_t(nf) + 1, 0);
   for (int c = 0; c < ndof; ++c) {
     const int fc = m_freeIndex[size_t(c)];
     if (fc < 0) continue;
-    int q = m_Kff.outerIndexPtr()[fc];
     for (int p = P.outerIndexPtr()[c]; p < P.outerIndexPtr()[c + 1]; ++p) {
-      const int r = P.innerIndexPtr()[p];
-      if (r >= c && m_freeIndex[size_t(r)] >= 0) m_fullToFree[size_t(p)] = q++;
+      const int fr = m_freeIndex[size_t(P.innerIndexPtr()[p])];
+      if (fr >= fc) ++count[size_t(fc) + 1];
     }
   }
+  for (int fc = 0; fc < nf; ++fc) count[size_t(fc) + 1] += count[size_t(fc)];
+  std::vector<std::pair<int, int>> entries(size_t(count[size_t(nf)]));  // (row, full index)
+  {
+    std::vector<int> next(count.begin(), count.end() - 1);
+    for (int c = 0; c < ndof; ++c) {
+      const int fc = m_freeIndex[size_t(c)];
+      if (fc < 0) continue;
+      for (int p = P.outerIndexPtr()[c]; p < P.outerIndexPtr()[c + 1]; ++p) {
+        const int fr = m_freeIndex[size_t(P.innerIndexPtr()[p])];
+        if (fr >= fc) entries[size_t(next[size_t(fc)]++)] = {fr, p};
+      }
+    }
+  }
+  m_Kff.resize(nf, nf);
+  m_Kff.resizeNonZeros(Eigen::Index(entries.size()));
+  m_fullToFree.assign(size_t(P.nonZeros()), -1);
+  for (int fc = 0; fc < nf; ++fc) {
+    m_Kff.outerIndexPtr()[fc] = count[size_t(fc)];
+    std::sort(entries.begin() + count[size_t(fc)], entries.begin() + count[size_t(fc) + 1]);
+  }
+  m_Kff.outerIndexPtr()[nf] = count[size_t(nf)];
+  for (size_t q = 0; q < entries.size(); ++q) {
+    m_Kff.innerIndexPtr()[q] = entries[q].first;
+    m_fullToFree[size_t(entries[q].second)] = int(q);
+  }
+  m_Kff.coeffs().setZero();
   m_freeDiagonal.assign(size_t(nf), 0);
   for (int fc = 0; fc < nf; ++fc) {
     m_freeDiagonal[size_t(fc)] = m_Kff.outerIndexPtr()[fc];  // lower CSC: diagonal comes first
@@ -366,6 +442,8 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
   m_chol->cholmod().print = 0;  // a non-PD matrix is handled here, not printed
   if (nf > 0) {
     ScopedTimer timer(m_report->analyzeSeconds);
+    m_chol->cholmod().nmethods = 1;  // m_Kff is already in fill-reducing order
+    m_chol->cholmod().method[0].ordering = CHOLMOD_NATURAL;
     m_chol->analyzePattern(m_Kff);
     m_factorNonZeros = static_cast<long long>(m_chol->cholmod().lnz);
     m_factorFlops = m_chol->cholmod().fl;
@@ -446,6 +524,7 @@ bool EquilibriumSolver::factorize(const VecX& x, const InertiaTerms* in, bool in
     }
     {
       ScopedTimer timer(m_report->factorSeconds);
+      const SerialOpenMpScope serial;
       m_chol->factorize(m_Kff);
     }
     if (m_chol->info() == Eigen::Success) {
