@@ -304,8 +304,9 @@ Real FemSystem::elasticEnergy(const VecX& x) const {
   return W;
 }
 
-void FemSystem::elasticGradient(const VecX& x, VecX& g) const {
-  g = VecX::Zero(3 * numNodes());
+Real FemSystem::elasticGradient(const VecX& x, VecX& g) const {
+  g.setZero(3 * numNodes());
+  Real W = 0;
   forEachMaterial([&](const auto& mat) {
     if (m_order == ElementOrder::Quadratic) {
       QuadraticTetEvaluation e;
@@ -316,8 +317,10 @@ void FemSystem::elasticGradient(const VecX& x, VecX& g) const {
                              TetEvalMode::Gradient, e);
         if (!std::isfinite(e.energy)) {  // inverted at a quadrature point: no stress defined
           g.setConstant(std::numeric_limits<Real>::quiet_NaN());
+          W = std::numeric_limits<Real>::infinity();
           return;
         }
+        W += e.energy;
         for (int a = 0; a < 10; ++a) g.segment<3>(3 * nodes[a]) += e.gradient.segment<3>(3 * a);
       }
       return;
@@ -328,9 +331,12 @@ void FemSystem::elasticGradient(const VecX& x, VecX& g) const {
       if (!(r.volume > 0)) continue;
       const Vec4i tet = m_rest.T.row(t).transpose();
       evaluateTet(mat, r, gather(x, tet), TetEvalMode::Gradient, e);
+      W += e.energy;
+      if (!std::isfinite(e.energy)) continue;  // inverted: no stress (e.gradient is not set)
       for (int a = 0; a < 4; ++a) g.segment<3>(3 * tet(a)) += e.gradient.segment<3>(3 * a);
     }
   });
+  return W;
 }
 
 void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const {
@@ -466,16 +472,24 @@ Real EquilibriumSolver::objective(const VecX& x, const VecX& f, const InertiaTer
   return phi;
 }
 
-void EquilibriumSolver::objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in,
+Real EquilibriumSolver::objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in,
                                           VecX& g) const {
   ScopedTimer timer(m_report->objectiveSeconds);
-  m_sys.elasticGradient(x, g);
+  Real phi = m_sys.elasticGradient(x, g);
   g -= f;
+  if (!std::isfinite(phi)) phi = std::numeric_limits<Real>::infinity();
+  phi -= f.dot(x);
   if (in) {
+    phi += 0.5 * (in->weight.array() * (x - in->center).array().square()).sum();
     g.array() += in->weight.array() * (x - in->center).array();
-    if (in->dampingValues.size())
-      g += withValues(m_sys.stiffnessPattern(), in->dampingValues) * (x - in->dampingCenter);
+    if (in->dampingValues.size()) {
+      const VecX d = x - in->dampingCenter;
+      const VecX Kd = withValues(m_sys.stiffnessPattern(), in->dampingValues) * d;
+      phi += 0.5 * d.dot(Kd);
+      g += Kd;
+    }
   }
+  return phi;
 }
 
 void EquilibriumSolver::assembleOperator(const VecX& x, const InertiaTerms* in) {
@@ -627,8 +641,11 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
     }
     int damped = 0;  // iterations whose line search cut the Newton step
     Real prevResidual = 0;
+    Real phiCur = 0;     // objective at xs
+    bool haveG = false;  // g and phiCur already hold xs's values (from the line search)
     for (int it = 0; it <= opt.maxIterations; ++it) {
-      objectiveGradient(xs, f, in, g);
+      if (!haveG) phiCur = objectiveGradient(xs, f, in, g);
+      haveG = false;
       rep.residual = residual(g, f);
       if (!lift && rep.residual <= opt.tolerance * rep.forceScale) return true;
       if (it == opt.maxIterations || nf == 0) {
@@ -689,15 +706,18 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
         // the next iteration, from a state whose tangent has seen part of the motion.
         step += dc;
         Real alpha = 1;
-        for (int ls = 0; ls < 20 && !std::isfinite(objective(xs + alpha * step, f, in)); ++ls)
+        Real phiLift = objective(xs + step, f, in);
+        for (int ls = 0; ls < 20 && !std::isfinite(phiLift); ++ls) {
           alpha *= 0.5;
-        if (!std::isfinite(objective(xs + alpha * step, f, in))) return false;
+          phiLift = objective(xs + alpha * step, f, in);
+        }
+        if (!std::isfinite(phiLift)) return false;
         xs += alpha * step;
         dc *= 1 - alpha;
         lift = alpha < 1;
         continue;
       }
-      const Real phi0 = objective(xs, f, in);
+      const Real phi0 = phiCur;
       const Real slope = g.dot(step);
       if (!(slope < 0)) return false;
       if (-slope <= 1e-13 * std::abs(phi0)) {
@@ -705,22 +725,30 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
         // Take the full Newton step; if it no longer halves the residual, the residual has
         // reached its round-off floor and the state is accepted as converged.
         const VecX xt = xs + step;
-        if (!std::isfinite(objective(xt, f, in))) return false;
-        objectiveGradient(xt, f, in, gTrial);
+        const Real phiT = objectiveGradient(xt, f, in, gTrial);
+        if (!std::isfinite(phiT)) return false;
         const Real before = rep.residual, after = residual(gTrial, f);
         xs = xt;
         if (!(after < 0.5 * before)) {
           rep.residual = after;
           return after <= 1e3 * opt.tolerance * rep.forceScale;
         }
+        g.swap(gTrial);
+        phiCur = phiT;
+        haveG = true;
         continue;
       }
       Real alpha = 1;
       bool accepted = false;
+      Real phiNext = 0;
       for (int ls = 0; ls < 30; ++ls, alpha *= 0.5) {
-        const Real phi = objective(xs + alpha * step, f, in);
+        // The full step is usually accepted: its gradient is computed with the energy and
+        // serves the next iteration.
+        const Real phi = ls == 0 ? objectiveGradient(xs + step, f, in, gTrial)
+                                 : objective(xs + alpha * step, f, in);
         if (phi <= phi0 + 1e-4 * alpha * slope) {
           accepted = true;
+          phiNext = phi;
           break;
         }
       }
@@ -728,18 +756,23 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
         // Near the solution Pi changes below round-off: accept a full step that lowers the
         // residual.
         const VecX xt = xs + step;
-        const Real phi1 = objective(xt, f, in);
+        const Real phi1 = objectiveGradient(xt, f, in, gTrial);
         if (!std::isfinite(phi1)) return false;
         // Only a round-off-level rise of Pi qualifies; otherwise the direction is poor.
         if (phi1 - phi0 > 1e-10 * std::max(std::abs(phi0), rep.forceScale * 1e-3)) return false;
-        objectiveGradient(xt, f, in, gTrial);
         if (!(residual(gTrial, f) < rep.residual)) return false;
         alpha = 1;
+        phiNext = phi1;
       }
       // A load step that keeps needing damped steps is too large for Newton's region of fast
       // convergence: give up early so it is halved, instead of grinding to maxIterations.
       if (alpha < 1 && ++damped > kMaxDampedIterations) return false;
       xs += alpha * step;
+      if (alpha == 1) {
+        g.swap(gTrial);
+        phiCur = phiNext;
+        haveG = true;
+      }
     }
     return false;
   };

@@ -143,8 +143,8 @@ class FemSystem {
 
   /// Elastic energy sum_e V_e psi(F_e) (J); +inf when an element is inverted (Neo-Hookean).
   Real elasticEnergy(const VecX& x) const;
-  /// dW/dx (3N), N.
-  void elasticGradient(const VecX& x, VecX& g) const;
+  /// dW/dx (3N), N; returns the elastic energy (as elasticEnergy, computed in the same pass).
+  Real elasticGradient(const VecX& x, VecX& g) const;
   /// Tangent stiffness values on the full 3N x 3N pattern (stiffnessPattern()).
   void stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const;
   const SparseMatrix& stiffnessPattern() const { return m_pattern; }
@@ -205,7 +205,8 @@ class EquilibriumSolver {
                     const SolveOptions& options);
   void prepareConstraints(const std::vector<int>& constrainedDofs);
   Real objective(const VecX& x, const VecX& f, const InertiaTerms* in) const;
-  void objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in, VecX& g) const;
+  /// Gradient into g; returns the objective (as objective()) from the same element pass.
+  Real objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in, VecX& g) const;
   /// Exact tangent at x into m_fullValues (full pattern) and m_opValues (free block, lower).
   void assembleOperator(const VecX& x, const InertiaTerms* in);
   void scatterFree(const VecX& full, const InertiaTerms* in, VecX& free) const;
