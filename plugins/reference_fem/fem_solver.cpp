@@ -340,7 +340,20 @@ Real FemSystem::elasticGradient(const VecX& x, VecX& g) const {
 }
 
 void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const {
-  values = VecX::Zero(m_pattern.nonZeros());
+  values.setZero(m_pattern.nonZeros());
+  addStiffness(x, projectSpd, [&](int p, Real k) { values(p) += k; });
+}
+
+void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd,
+                                const std::vector<int>& map, Eigen::Index size) const {
+  values.setZero(size);
+  addStiffness(x, projectSpd, [&](int p, Real k) {
+    if (const int q = map[size_t(p)]; q >= 0) values(q) += k;
+  });
+}
+
+template <class Add>
+void FemSystem::addStiffness(const VecX& x, bool projectSpd, Add&& add) const {
   forEachMaterial([&](const auto& mat) {
     if (m_order == ElementOrder::Quadratic) {
       QuadraticTetEvaluation e;
@@ -352,7 +365,7 @@ void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd) co
         if (!std::isfinite(e.energy)) continue;  // inverted: contributes nothing
         const int* slot = m_slots.data() + size_t(t) * 900;
         const Real* k = e.stiffness.data();  // column-major, matches the slot order
-        for (int i = 0; i < 900; ++i) values(slot[i]) += k[i];
+        for (int i = 0; i < 900; ++i) add(slot[i], k[i]);
       }
       return;
     }
@@ -364,7 +377,7 @@ void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd) co
                   projectSpd);
       const int* slot = m_slots.data() + size_t(t) * 144;
       const Real* k = e.stiffness.data();  // column-major, matches the slot order
-      for (int i = 0; i < 144; ++i) values(slot[i]) += k[i];
+      for (int i = 0; i < 144; ++i) add(slot[i], k[i]);
     }
   });
 }
@@ -492,19 +505,37 @@ Real EquilibriumSolver::objectiveGradient(const VecX& x, const VecX& f, const In
   return phi;
 }
 
-void EquilibriumSolver::assembleOperator(const VecX& x, const InertiaTerms* in) {
+void EquilibriumSolver::assembleOperator(const VecX& x, const InertiaTerms* in, bool full) {
+  assembleFree(x, in, false, full, m_opValues);
+}
+
+void EquilibriumSolver::assembleFree(const VecX& x, const InertiaTerms* in, bool projectSpd,
+                                     bool full, VecX& free) {
+  if (full || (in && in->dampingValues.size())) {
+    {
+      ScopedTimer timer(m_report->assemblySeconds);
+      m_sys.stiffnessValues(x, m_fullValues, projectSpd);
+    }
+    if (in && in->dampingValues.size()) m_fullValues += in->dampingValues;
+    scatterFree(m_fullValues, in, free);
+    return;
+  }
+  // Straight into the free block (same sums in the same order as through the full pattern).
   {
     ScopedTimer timer(m_report->assemblySeconds);
-    m_sys.stiffnessValues(x, m_fullValues, false);
+    m_sys.stiffnessValues(x, free, projectSpd, m_fullToFree, m_Kff.nonZeros());
   }
-  if (in && in->dampingValues.size()) m_fullValues += in->dampingValues;
-  scatterFree(m_fullValues, in, m_opValues);
+  addInertiaDiagonal(in, free);
 }
 
 void EquilibriumSolver::scatterFree(const VecX& full, const InertiaTerms* in, VecX& free) const {
-  free = VecX::Zero(m_Kff.nonZeros());
+  free.setZero(m_Kff.nonZeros());
   for (size_t p = 0; p < m_fullToFree.size(); ++p)
     if (m_fullToFree[p] >= 0) free(m_fullToFree[p]) += full(Eigen::Index(p));
+  addInertiaDiagonal(in, free);
+}
+
+void EquilibriumSolver::addInertiaDiagonal(const InertiaTerms* in, VecX& free) const {
   if (in)
     for (size_t d = 0; d < m_freeIndex.size(); ++d)
       if (m_freeIndex[d] >= 0)
@@ -514,19 +545,13 @@ void EquilibriumSolver::scatterFree(const VecX& full, const InertiaTerms* in, Ve
 bool EquilibriumSolver::factorize(const VecX& x, const InertiaTerms* in, bool indefinite,
                                   int& fallbacks) {
   m_haveFactor = false;
-  VecX projected;
+  VecX& projected = m_projectedValues;
   for (int attempt = indefinite ? 1 : 0; attempt < 8; ++attempt) {
     if (attempt == 0) {
       m_Kff.coeffs() = m_opValues;
     } else if (attempt == 1) {
       // Not positive definite: project the element stress derivatives onto the PSD cone.
-      VecX full;
-      {
-        ScopedTimer timer(m_report->assemblySeconds);
-        m_sys.stiffnessValues(x, full, true);
-      }
-      if (in && in->dampingValues.size()) full += in->dampingValues;
-      scatterFree(full, in, projected);
+      assembleFree(x, in, true, false, projected);
       m_Kff.coeffs() = projected;
     } else {
       Real mean = 0;
@@ -657,7 +682,7 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
         }
         return false;
       }
-      assembleOperator(xs, in);
+      assembleOperator(xs, in, lift);  // the lift needs K_fc (full pattern)
       ++rep.newtonIterations;
       for (int d = 0; d < ndof; ++d)
         if (m_freeIndex[size_t(d)] >= 0) rhs(m_freeIndex[size_t(d)]) = -g(d);

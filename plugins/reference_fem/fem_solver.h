@@ -147,6 +147,10 @@ class FemSystem {
   Real elasticGradient(const VecX& x, VecX& g) const;
   /// Tangent stiffness values on the full 3N x 3N pattern (stiffnessPattern()).
   void stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const;
+  /// The same values gathered into another pattern: values gets `size` entries, and entry p of
+  /// the full pattern is added to values(map[p]) when map[p] >= 0 (dropped otherwise).
+  void stiffnessValues(const VecX& x, VecX& values, bool projectSpd, const std::vector<int>& map,
+                       Eigen::Index size) const;
   const SparseMatrix& stiffnessPattern() const { return m_pattern; }
 
   /// External force vector (3N) of a load case: gravityWeight_i g + point forces.
@@ -155,6 +159,9 @@ class FemSystem {
  private:
   template <class Fn>
   void forEachMaterial(Fn&& fn) const;
+  /// Calls add(full-pattern index, value) for every element stiffness entry.
+  template <class Add>
+  void addStiffness(const VecX& x, bool projectSpd, Add&& add) const;
   void addMidsideNodes();
   TetMesh m_rest;
   Material m_material;
@@ -207,8 +214,12 @@ class EquilibriumSolver {
   Real objective(const VecX& x, const VecX& f, const InertiaTerms* in) const;
   /// Gradient into g; returns the objective (as objective()) from the same element pass.
   Real objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in, VecX& g) const;
-  /// Exact tangent at x into m_fullValues (full pattern) and m_opValues (free block, lower).
-  void assembleOperator(const VecX& x, const InertiaTerms* in);
+  /// Exact tangent at x into m_opValues (free block, lower) and, when `full` (the lift needs
+  /// K_fc) or with stiffness damping, first into m_fullValues (full pattern).
+  void assembleOperator(const VecX& x, const InertiaTerms* in, bool full);
+  /// Tangent at x (projectSpd: PSD-projected) with the inertia terms on the free block (lower).
+  void assembleFree(const VecX& x, const InertiaTerms* in, bool projectSpd, bool full, VecX& free);
+  void addInertiaDiagonal(const InertiaTerms* in, VecX& free) const;
   void scatterFree(const VecX& full, const InertiaTerms* in, VecX& free) const;
   /// Factorises the operator, else (when not positive definite, or known to be indefinite) the
   /// tangent with PSD-projected element stress derivatives, else that with a growing diagonal
@@ -228,6 +239,7 @@ class EquilibriumSolver {
   std::vector<int> m_freeDiagonal;  ///< free dof -> value index of its diagonal in m_Kff
   VecX m_fullValues;                ///< exact tangent on the full pattern (K_fc for the lift)
   VecX m_opValues;                  ///< exact tangent on m_Kff's pattern (the Newton operator)
+  VecX m_projectedValues;           ///< projected tangent on m_Kff's pattern (buffer reused)
   bool m_haveFactor = false;        ///< m_chol holds a factor usable as a preconditioner
   long long m_factorNonZeros = 0;
   double m_factorFlops = 0;
