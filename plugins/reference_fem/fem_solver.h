@@ -23,7 +23,8 @@
 // tangent K_ff, preconditioned by the CHOLMOD supernodal LL^T factor of an earlier tangent, to
 // |r| <= eta |rhs|, eta = min(0.1, 0.9 (|g_k| / |g_{k-1}|)^2) (1e-2 for a lift step), never
 // tighter than the final tolerance needs. The tangent is factorised afresh (pattern analysed once
-// per set of constrained nodes, lower triangle only) at the first iteration of a solve, when CG
+// per set of constrained nodes, lower triangle only, free dofs numbered node by node in CHOLMOD's
+// nested-dissection order of the node graph) at the first iteration of a solve, when CG
 // does not converge in 60 iterations, after a CG solve that needed more than 25, and when CG meets
 // a direction of non-positive curvature (K_ff indefinite: Neo-Hookean far from rest); then the
 // step is a direct solve with that factor. An indefinite tangent is replaced by one whose element
