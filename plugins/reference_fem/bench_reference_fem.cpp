@@ -13,6 +13,9 @@
 #include <sys/resource.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <string>
 
 using namespace deform;
 using namespace deform::reffem;
@@ -81,7 +84,17 @@ void BM_QuasiStaticGraspLift(benchmark::State& state) {
   for (size_t k = 0; k < lc.prescribedNodes.size(); ++k)
     lc.targets.row(k) = m.mesh.V.row(lc.prescribedNodes[k]) + Vec3(0, 0, 0.02).transpose();
   SolveReport rep;
-  for (auto _ : state) benchmark::DoNotOptimize(solveEquilibrium(sys, lc, {}, &rep));
+  VecX x;
+  rusage before{}, after{};
+  getrusage(RUSAGE_SELF, &before);
+  for (auto _ : state) benchmark::DoNotOptimize(x = solveEquilibrium(sys, lc, {}, &rep));
+  getrusage(RUSAGE_SELF, &after);
+  // DEFORM_BENCH_DUMP=dir: write the solution (3N doubles, raw) to dir/<material>.bin, to compare
+  // the answers of two builds.
+  if (const char* dir = std::getenv("DEFORM_BENCH_DUMP")) {
+    std::ofstream out(std::string(dir) + "/" + materialModelName(model) + ".bin", std::ios::binary);
+    out.write(reinterpret_cast<const char*>(x.data()), std::streamsize(x.size() * sizeof(Real)));
+  }
   state.SetLabel(materialModelName(model));
   state.counters["tets"] = double(m.mesh.numTets());
   state.counters["dofs"] = double(3 * sys.numNodes());
@@ -98,11 +111,20 @@ void BM_QuasiStaticGraspLift(benchmark::State& state) {
   state.counters["cg_solve_s"] = rep.solveSeconds;
   state.counters["objective_s"] = rep.objectiveSeconds;
   state.counters["peak_rss_MB"] = peakRssMb();
+  // Where wall time goes besides this thread's user time: kernel time (page faults of fresh
+  // allocations), minor page faults, and involuntary context switches (another process ran).
+  const auto seconds = [](const timeval& t) { return double(t.tv_sec) + 1e-6 * double(t.tv_usec); };
+  state.counters["user_s"] = seconds(after.ru_utime) - seconds(before.ru_utime);
+  state.counters["sys_s"] = seconds(after.ru_stime) - seconds(before.ru_stime);
+  state.counters["minor_faults"] = double(after.ru_minflt - before.ru_minflt);
+  state.counters["invol_switches"] = double(after.ru_nivcsw - before.ru_nivcsw);
 }
 BENCHMARK(BM_QuasiStaticGraspLift)
     ->Arg(int(MaterialModel::Linear))
     ->Arg(int(MaterialModel::Corotational))
     ->Arg(int(MaterialModel::NeoHookean))
+    ->MeasureProcessCPUTime()  // CPU of every thread (CHOLMOD's OpenMP helpers, if any)
+    ->UseRealTime()
     ->Unit(benchmark::kMillisecond)
     ->Iterations(1);
 

@@ -23,7 +23,8 @@
 // tangent K_ff, preconditioned by the CHOLMOD supernodal LL^T factor of an earlier tangent, to
 // |r| <= eta |rhs|, eta = min(0.1, 0.9 (|g_k| / |g_{k-1}|)^2) (1e-2 for a lift step), never
 // tighter than the final tolerance needs. The tangent is factorised afresh (pattern analysed once
-// per set of constrained nodes, lower triangle only) at the first iteration of a solve, when CG
+// per set of constrained nodes, lower triangle only, free dofs numbered node by node in CHOLMOD's
+// nested-dissection order of the node graph) at the first iteration of a solve, when CG
 // does not converge in 60 iterations, after a CG solve that needed more than 25, and when CG meets
 // a direction of non-positive curvature (K_ff indefinite: Neo-Hookean far from rest); then the
 // step is a direct solve with that factor. An indefinite tangent is replaced by one whose element
@@ -143,10 +144,14 @@ class FemSystem {
 
   /// Elastic energy sum_e V_e psi(F_e) (J); +inf when an element is inverted (Neo-Hookean).
   Real elasticEnergy(const VecX& x) const;
-  /// dW/dx (3N), N.
-  void elasticGradient(const VecX& x, VecX& g) const;
+  /// dW/dx (3N), N; returns the elastic energy (as elasticEnergy, computed in the same pass).
+  Real elasticGradient(const VecX& x, VecX& g) const;
   /// Tangent stiffness values on the full 3N x 3N pattern (stiffnessPattern()).
   void stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const;
+  /// The same values gathered into another pattern: values gets `size` entries, and entry p of
+  /// the full pattern is added to values(map[p]) when map[p] >= 0 (dropped otherwise).
+  void stiffnessValues(const VecX& x, VecX& values, bool projectSpd, const std::vector<int>& map,
+                       Eigen::Index size) const;
   const SparseMatrix& stiffnessPattern() const { return m_pattern; }
 
   /// External force vector (3N) of a load case: gravityWeight_i g + point forces.
@@ -155,6 +160,9 @@ class FemSystem {
  private:
   template <class Fn>
   void forEachMaterial(Fn&& fn) const;
+  /// Calls add(full-pattern index, value) for every element stiffness entry.
+  template <class Add>
+  void addStiffness(const VecX& x, bool projectSpd, Add&& add) const;
   void addMidsideNodes();
   TetMesh m_rest;
   Material m_material;
@@ -205,9 +213,14 @@ class EquilibriumSolver {
                     const SolveOptions& options);
   void prepareConstraints(const std::vector<int>& constrainedDofs);
   Real objective(const VecX& x, const VecX& f, const InertiaTerms* in) const;
-  void objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in, VecX& g) const;
-  /// Exact tangent at x into m_fullValues (full pattern) and m_opValues (free block, lower).
-  void assembleOperator(const VecX& x, const InertiaTerms* in);
+  /// Gradient into g; returns the objective (as objective()) from the same element pass.
+  Real objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in, VecX& g) const;
+  /// Exact tangent at x into m_opValues (free block, lower) and, when `full` (the lift needs
+  /// K_fc) or with stiffness damping, first into m_fullValues (full pattern).
+  void assembleOperator(const VecX& x, const InertiaTerms* in, bool full);
+  /// Tangent at x (projectSpd: PSD-projected) with the inertia terms on the free block (lower).
+  void assembleFree(const VecX& x, const InertiaTerms* in, bool projectSpd, bool full, VecX& free);
+  void addInertiaDiagonal(const InertiaTerms* in, VecX& free) const;
   void scatterFree(const VecX& full, const InertiaTerms* in, VecX& free) const;
   /// Factorises the operator, else (when not positive definite, or known to be indefinite) the
   /// tangent with PSD-projected element stress derivatives, else that with a growing diagonal
@@ -227,6 +240,7 @@ class EquilibriumSolver {
   std::vector<int> m_freeDiagonal;  ///< free dof -> value index of its diagonal in m_Kff
   VecX m_fullValues;                ///< exact tangent on the full pattern (K_fc for the lift)
   VecX m_opValues;                  ///< exact tangent on m_Kff's pattern (the Newton operator)
+  VecX m_projectedValues;           ///< projected tangent on m_Kff's pattern (buffer reused)
   bool m_haveFactor = false;        ///< m_chol holds a factor usable as a preconditioner
   long long m_factorNonZeros = 0;
   double m_factorFlops = 0;

@@ -4,9 +4,12 @@
 #include "fem_solver.h"
 #include "test_shapes.h"
 
+#include <dlfcn.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
+#include <string>
 
 using namespace deform;
 using namespace deform::reffem;
@@ -378,4 +381,50 @@ TEST(ReferenceFemConvergence, RichardsonRecoversKnownOrderAndError) {
   const Real trueError = (C * std::pow(0.0019, p)).rowwise().norm().maxCoeff();
   EXPECT_NEAR(s.errorEstimate, trueError, 1e-6 * trueError);
   EXPECT_TRUE(s.asymptotic);
+}
+
+namespace {
+
+int processThreads() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line))
+    if (line.rfind("Threads:", 0) == 0) return std::stoi(line.substr(8));
+  return -1;
+}
+
+}  // namespace
+
+// CHOLMOD 3's supernodal factorisation opens OpenMP regions with num_threads(4), regardless of
+// OMP_NUM_THREADS; the solver factorises under SerialOpenMpScope, so a solve large enough to have
+// big supernodes starts no thread (libgomp keeps a thread once started, so the count would grow).
+TEST(EquilibriumSolver, FactorisationStartsNoThreads) {
+  const int before = processThreads();
+  if (before < 0) GTEST_SKIP() << "no /proc/self/status";
+  FemSystem sys(structuredBoxTets(Vec3::Zero(), Vec3(0.1, 0.1, 0.1), Vec3i(16, 16, 16)), Material{},
+                MaterialModel::Linear);
+  LoadCase lc;
+  lc.gravity = Vec3(0, 0, -9.81);
+  for (int i = 0; i < sys.numNodes(); ++i)
+    if (sys.rest().V(i, 2) < 1e-9) lc.fixedNodes.push_back(i);
+  SolveReport rep;
+  solveEquilibrium(sys, lc, {}, &rep);
+  ASSERT_TRUE(rep.converged);
+  EXPECT_GE(rep.factorizations, 1);
+  EXPECT_EQ(processThreads(), before);
+}
+
+// The scope switches OpenMP parallel regions off and restores the previous setting.
+TEST(SerialOpenMpScope, RestoresMaxActiveLevels) {
+  void* gomp = dlopen("libgomp.so.1", RTLD_LAZY | RTLD_NOLOAD);
+  if (!gomp) GTEST_SKIP() << "no OpenMP runtime loaded";
+  auto get = reinterpret_cast<int (*)()>(dlsym(gomp, "omp_get_max_active_levels"));
+  ASSERT_NE(get, nullptr);
+  const int outside = get();
+  {
+    const SerialOpenMpScope serial;
+    EXPECT_EQ(get(), 0);
+  }
+  EXPECT_EQ(get(), outside);
+  dlclose(gomp);
 }
