@@ -102,6 +102,7 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
     // Analysed once per model: worth trying every ordering CHOLMOD has (AMD, METIS, nested
     // dissection, ...) and keeping the one with the least fill, since every step solves with it.
     m_chol.cholmod().nmethods = config.tryAllOrderings ? 9 : 0;
+    const SerialOpenMpScope serial;  // CHOLMOD's own OpenMP threads: see sparse.h
     m_chol.analyzePattern(m_A);
     if (m_chol.info() != Eigen::Success) {
       throw InputError(where, "fem_hex", "CHOLMOD could not analyse the system matrix");
@@ -252,7 +253,10 @@ void HexFemModel::constrainAndFactorize(bool constrained) {
       }
     }
   }
-  m_chol.factorize(m_A);
+  {
+    const SerialOpenMpScope serial;
+    m_chol.factorize(m_A);
+  }
   m_factorOk = m_chol.info() == Eigen::Success;
   m_factorNonZeros = static_cast<long long>(m_chol.cholmod().lnz);
   m_factorGrasped = constrained ? m_grasped : std::vector<int>{};

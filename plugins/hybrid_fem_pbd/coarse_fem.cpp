@@ -62,6 +62,7 @@ void CoarseLinearFem::init(const TetMesh& mesh, const Material& material,
   }
   m_chol = std::make_unique<SparseCholesky>();
   if (m_numFree > 0) {
+    const SerialOpenMpScope serial;  // CHOLMOD's own OpenMP threads: see sparse.h
     m_chol->compute(m_K);
     if (m_chol->info() != Eigen::Success)
       throw InputError(source, "hybrid coarse volume mesh",
