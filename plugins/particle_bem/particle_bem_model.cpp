@@ -76,6 +76,10 @@ std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
                       "cut the coarse surface along the fixed boxes' faces before decimation "
                       "and keep that boundary, and let the clamp's reaction act on the support "
                       "faces only (false: decimate the organ as is, nodal clamps)"),
+      ParamSpec::choice("surface_transfer", "gradient", {"gradient", "linear"},
+                        "how the fine surface follows the coarse surface particles: gradient = "
+                        "half-gradient Hermite blend with one-ring recovered gradients, linear = "
+                        "barycentric interpolation on the closest coarse triangle"),
       ParamSpec::integer("duffy_order", 6, 2, 16,
                          "Gauss-Legendre order of the Duffy rule on singular triangles"),
   };
@@ -206,6 +210,11 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
 
   const TriangleGrid coarseGrid(m_coarse.V, m_coarse.F);
   m_map = mapToSurface(coarseGrid, S.V);
+  m_transfer = p.choiceAs<SurfaceTransfer>(
+      "surface_transfer",
+      {{"gradient", SurfaceTransfer::Gradient}, {"linear", SurfaceTransfer::Linear}});
+  if (m_transfer == SurfaceTransfer::Gradient)
+    m_gradient = makeGradientTransfer(m_coarse.V, m_coarse.F, m_map);
 
   const Real meanEdge = [&] {
     Real sum = 0;
@@ -425,7 +434,10 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   const auto t2 = Clock::now();
 
   m_coarseDisp = m_x.topRows(nc) - m_restCoarse;
-  interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_surface);
+  if (m_transfer == SurfaceTransfer::Gradient)
+    interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_gradient, m_surface);
+  else
+    interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_surface);
   if (in.contact) projectPointsOut(*in.contact, m_surface);  // display level, no force
   const auto t3 = Clock::now();
   m_times["surface"] = ms(t0, t1);
