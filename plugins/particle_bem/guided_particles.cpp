@@ -31,7 +31,7 @@ GradientTransfer makeGradientTransfer(const MatX3& coarseV, const MatX3i& coarse
                                       const SurfaceMap& map) {
   GradientTransfer g;
   const Eigen::Index nf = coarseF.rows();
-  g.faceGrad = MatX::Zero(nf, 9);
+  g.faceGrad = GradientTransfer::MatX9::Zero(nf, 9);
   g.cornerWeight = MatX3::Zero(nf, 3);
   VecX area = VecX::Zero(nf), around = VecX::Zero(coarseV.rows());
   for (Eigen::Index f = 0; f < nf; ++f) {

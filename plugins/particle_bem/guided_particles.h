@@ -49,9 +49,10 @@ enum class SurfaceTransfer { Linear, Gradient };
 
 /// Precomputed data of the gradient transfer.
 struct GradientTransfer {
-  MatX faceGrad;        ///< #coarse F x 9: grad N_0, grad N_1, grad N_2 of each face (1/m)
+  using MatX9 = Eigen::Matrix<Real, Eigen::Dynamic, 9, Eigen::RowMajor>;  ///< rows contiguous
+  MatX9 faceGrad;       ///< #coarse F x 9: grad N_0, grad N_1, grad N_2 of each face (1/m)
   MatX3 cornerWeight;   ///< #coarse F x 3: face area / total area around that corner's vertex
-  MatX offsets;         ///< #fine x 9: 1/2 b_k (p - X_k) for the three corners k (m)
+  MatX9 offsets;        ///< #fine x 9: 1/2 b_k (p - X_k) for the three corners k (m)
   std::vector<Mat3> D;  ///< workspace: recovered displacement gradient per coarse vertex
 };
 
