@@ -83,9 +83,13 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
       if (support == FixedSupport::Partial && !nodal)
         return solveBemPartial(side.bem, *side.s, fixedFractions(*side.s, box), material.young,
                                side.fieldRhs);
-      if (support == FixedSupport::SupportFaces && !nodal) {
-        const SupportColumns sc =
-            supportColumns(*side.s, material.young, material.poisson, fixed, q);
+      if ((support == FixedSupport::SupportFaces ||
+           support == FixedSupport::SupportFacesSingular) &&
+          !nodal) {
+        SupportColumns sc = supportColumns(*side.s, material.young, material.poisson, fixed, q);
+        if (support == FixedSupport::SupportFacesSingular)
+          sc = withSingularSupport(
+              sc, side.bem.G, singularSupport(*side.s, material.young, material.poisson, fixed));
         return solveBemRhs(side.bem, *side.s, fixed, side.maskedRhs(box), &sc);
       }
       VecX rhs = side.fieldRhs;
@@ -136,6 +140,8 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
   r.ratioPartial = c.support != FixedSupport::Partial
                        ? ratio(c.fixedBox, false, FixedSupport::Partial, false)
                        : r.ratio;
+  if (c.support == FixedSupport::SupportFacesSingular)
+    r.ratioSupportFaces = ratio(c.fixedBox, false, FixedSupport::SupportFaces, false);
   for (Real shift : c.edgeShifts) {
     Box b = c.fixedBox;
     b.hi[2] += shift;

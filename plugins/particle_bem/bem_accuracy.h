@@ -26,10 +26,12 @@ namespace deform::particle_bem {
 
 /// How the fixed region enters each mesh's BEM solve.
 enum class FixedSupport {
-  Partial,      ///< nodes constrained in proportion to their fixed fraction (solveBemPartial)
-  Clamp,        ///< nodes in the box clamped, reaction over all their faces (fixedNodeIndices)
-  SupportFaces  ///< nodes in the box clamped, reaction on the support faces only
-                ///< (SupportColumns): the exact clamp on a surface conforming to the box
+  Partial,       ///< nodes constrained in proportion to their fixed fraction (solveBemPartial)
+  Clamp,         ///< nodes in the box clamped, reaction over all their faces (fixedNodeIndices)
+  SupportFaces,  ///< nodes in the box clamped, reaction on the support faces only
+                 ///< (SupportColumns): the exact clamp on a surface conforming to the box
+  SupportFacesSingular  ///< the same with the s^(-1/2) reaction on the support faces along
+                        ///< the curve (singularSupport): the model's run time
 };
 
 struct LossRatioCase {
@@ -54,6 +56,8 @@ struct LossRatioResult {
   Real ratioNodalClamp = 0;    ///< field load, nodes inside the box clamped
   Real ratioNodalLoad = 0;     ///< traction sampled at the nodes, nodes in the box clamped (old)
   Real ratioPartial = 0;       ///< field load, partial constraints (FixedSupport::Partial)
+  /// field load, FixedSupport::SupportFaces (when `support` is SupportFacesSingular)
+  Real ratioSupportFaces = 0;
   std::vector<Real> shiftedRatios;       ///< per edgeShifts, as `ratio`
   std::vector<Real> shiftedClampRatios;  ///< per edgeShifts, as `ratioNodalClamp`
   int coarseVertices = 0, fineVertices = 0;

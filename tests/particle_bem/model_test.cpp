@@ -106,6 +106,24 @@ TEST(GuidedModel, SurfaceTransferChangesOnlyTheFineSurface) {
   EXPECT_THROW(bad.make(), InputError);
 }
 
+TEST(GuidedModel, SingularSupportChangesMAndIsInTheCacheKey) {
+  Fixture fl(true), fs(true);
+  fs.params.set("singular_support", true);
+  const std::string dir =
+      (std::filesystem::temp_directory_path() / "particle_bem_singular_cache").string();
+  std::filesystem::remove_all(dir);
+  Cache cache(dir);
+  auto ml = fl.make(&cache), ms = fs.make(&cache);  // the second must not reuse the first's M
+  EXPECT_GT(ms->numericCounters().at("singular_support_faces"), 0);
+  EXPECT_EQ(ml->numericCounters().count("singular_support_faces"), 0u);
+  const MatX& Ml = ml->deformationMatrix().M;
+  const MatX& Ms = ms->deformationMatrix().M;
+  ASSERT_EQ(Ml.rows(), Ms.rows());
+  EXPECT_GT((Ms - Ml).norm(), 1e-3 * Ml.norm());
+  EXPECT_LT((Ms - Ml).norm(), 0.5 * Ml.norm());
+  std::filesystem::remove_all(dir);
+}
+
 TEST(GuidedModel, GraspReachesTargetAndResetReproduces) {
   Fixture fx(true);
   auto m = fx.make();
