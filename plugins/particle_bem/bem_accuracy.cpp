@@ -52,8 +52,28 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
     return side;
   };
   const Side fs = prepare(fine), cs = prepare(coarse);
-  const TriangleGrid grid(coarse.V, coarse.F);
+  const TriangleGrid grid(coarse.V, coarse.F), fineGrid(fine.V, fine.F);
   const SurfaceMap map = mapToSurface(grid, fine.V);
+  GradientTransfer gradient = makeGradientTransfer(coarse.V, coarse.F, map);
+  const MatX3 zeroFine = MatX3::Zero(fine.numVertices(), 3);
+  const auto toFine = [&](const MatX3& coarseDisp, SurfaceTransfer t) {
+    MatX3 out;
+    if (t == SurfaceTransfer::Gradient)
+      interpolateDisplacement(map, coarse.F, zeroFine, coarseDisp, gradient, out);
+    else
+      interpolateDisplacement(map, coarse.F, zeroFine, coarseDisp, out);
+    return out;
+  };
+  const auto lossRatio = [](const MatX3& uo, const MatX3& uimp, Real* displacementRatio) {
+    Real num = 0, den = 0, imp = 0;
+    for (Eigen::Index v = 0; v < uo.rows(); ++v) {
+      num += (uo.row(v) - uimp.row(v)).norm();
+      den += uo.row(v).norm();
+      imp += uimp.row(v).norm();
+    }
+    if (displacementRatio) *displacementRatio = den > 0 ? imp / den : 0;
+    return den > 0 ? num / den : 0;
+  };
   // R for one fixed box and one load representation; nodal loads at fixed nodes are dropped
   // (their tractions are unknowns), which G p did implicitly by zeroing them.
   const auto ratio = [&](const Box& box, bool nodal, FixedSupport support, bool keepStats) {
@@ -63,9 +83,13 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
       if (support == FixedSupport::Partial && !nodal)
         return solveBemPartial(side.bem, *side.s, fixedFractions(*side.s, box), material.young,
                                side.fieldRhs);
-      if (support == FixedSupport::SupportFaces && !nodal) {
-        const SupportColumns sc =
-            supportColumns(*side.s, material.young, material.poisson, fixed, q);
+      if ((support == FixedSupport::SupportFaces ||
+           support == FixedSupport::SupportFacesSingular) &&
+          !nodal) {
+        SupportColumns sc = supportColumns(*side.s, material.young, material.poisson, fixed, q);
+        if (support == FixedSupport::SupportFacesSingular)
+          sc = withSingularSupport(
+              sc, side.bem.G, singularSupport(*side.s, material.young, material.poisson, fixed));
         return solveBemRhs(side.bem, *side.s, fixed, side.maskedRhs(box), &sc);
       }
       VecX rhs = side.fieldRhs;
@@ -78,24 +102,35 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
     };
     int nf = 0, nc = 0;
     const VecX uf = solve(fs, nf), uc = solve(cs, nc);
-    MatX3 coarseDisp(coarse.numVertices(), 3);
+    MatX3 coarseDisp(coarse.numVertices(), 3), fineDisp(fine.numVertices(), 3);
     for (int j = 0; j < coarse.numVertices(); ++j) coarseDisp.row(j) = uc.segment<3>(3 * j);
-    MatX3 interp;
-    interpolateDisplacement(map, coarse.F, MatX3::Zero(fine.numVertices(), 3), coarseDisp, interp);
-    Real num = 0, den = 0, maxU = 0;
+    for (int v = 0; v < fine.numVertices(); ++v) fineDisp.row(v) = uf.segment<3>(3 * v);
+    if (!keepStats) return lossRatio(fineDisp, toFine(coarseDisp, c.transfer), nullptr);
+    r.coarseFixed = nc;
+    r.fineFixed = nf;
+    Real sum = 0, maxU = 0;
     for (int v = 0; v < fine.numVertices(); ++v) {
-      const Vec3 uo = uf.segment<3>(3 * v);
-      num += (uo - interp.row(v).transpose()).norm();
-      den += uo.norm();
-      maxU = std::max(maxU, uo.norm());
+      sum += fineDisp.row(v).norm();
+      maxU = std::max(maxU, fineDisp.row(v).norm());
     }
-    if (keepStats) {
-      r.coarseFixed = nc;
-      r.fineFixed = nf;
-      r.maxFineDisplacement = maxU;
-      r.meanFineDisplacement = den / std::max(1, fine.numVertices());
-    }
-    return den > 0 ? num / den : 0;
+    r.maxFineDisplacement = maxU;
+    r.meanFineDisplacement = sum / std::max(1, fine.numVertices());
+    r.ratioLinearTransfer =
+        lossRatio(fineDisp, toFine(coarseDisp, SurfaceTransfer::Linear),
+                  c.transfer == SurfaceTransfer::Linear ? &r.displacementRatio : nullptr);
+    r.ratioGradientTransfer =
+        lossRatio(fineDisp, toFine(coarseDisp, SurfaceTransfer::Gradient),
+                  c.transfer == SurfaceTransfer::Gradient ? &r.displacementRatio : nullptr);
+    // The transfer alone: the fine solution at the coarse vertices (closest point on the fine
+    // surface, linear) and back.
+    MatX3 fineAtCoarse;
+    interpolateDisplacement(mapToSurface(fineGrid, coarse.V), fine.F,
+                            MatX3::Zero(coarse.numVertices(), 3), fineDisp, fineAtCoarse);
+    r.roundTripLinear = lossRatio(fineDisp, toFine(fineAtCoarse, SurfaceTransfer::Linear), nullptr);
+    r.roundTripGradient =
+        lossRatio(fineDisp, toFine(fineAtCoarse, SurfaceTransfer::Gradient), nullptr);
+    return c.transfer == SurfaceTransfer::Gradient ? r.ratioGradientTransfer
+                                                   : r.ratioLinearTransfer;
   };
   r.ratio = ratio(c.fixedBox, false, c.support, true);
   r.ratioNodalClamp = c.support != FixedSupport::Clamp
@@ -105,6 +140,8 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
   r.ratioPartial = c.support != FixedSupport::Partial
                        ? ratio(c.fixedBox, false, FixedSupport::Partial, false)
                        : r.ratio;
+  if (c.support == FixedSupport::SupportFacesSingular)
+    r.ratioSupportFaces = ratio(c.fixedBox, false, FixedSupport::SupportFaces, false);
   for (Real shift : c.edgeShifts) {
     Box b = c.fixedBox;
     b.hi[2] += shift;

@@ -1,7 +1,8 @@
 // particle_bem: the paper's accuracy measure (§6, Table 2). The same load case is solved by the
 // standard BEM on a fine surface (u^o_i at its vertices) and on the coarse surface, whose
-// nodal displacements are interpolated to the fine vertices through the closest coarse triangle
-// (u^imp_i, what the guided model shows). The accuracy loss ratio is
+// nodal displacements are carried to the fine vertices through the closest coarse triangle
+// (u^imp_i, what the guided model shows: by default the gradient transfer of
+// guided_particles.h, the model's default `surface_transfer`). The accuracy loss ratio is
 //   R = sum_i |u^o_i - u^imp_i| / sum_i |u^o_i|
 // over the fine vertices. The load must be the same physical load on both meshes, so it is a
 // smooth traction field t(x) = t0 exp(-|x - c|^2 / r^2) integrated over each mesh's elements
@@ -16,6 +17,7 @@
 #pragma once
 
 #include "bem_assembly.h"
+#include "guided_particles.h"
 
 #include <deform/mesh.h>
 #include <deform/model.h>
@@ -24,10 +26,12 @@ namespace deform::particle_bem {
 
 /// How the fixed region enters each mesh's BEM solve.
 enum class FixedSupport {
-  Partial,      ///< nodes constrained in proportion to their fixed fraction (solveBemPartial)
-  Clamp,        ///< nodes in the box clamped, reaction over all their faces (fixedNodeIndices)
-  SupportFaces  ///< nodes in the box clamped, reaction on the support faces only
-                ///< (SupportColumns): the exact clamp on a surface conforming to the box
+  Partial,       ///< nodes constrained in proportion to their fixed fraction (solveBemPartial)
+  Clamp,         ///< nodes in the box clamped, reaction over all their faces (fixedNodeIndices)
+  SupportFaces,  ///< nodes in the box clamped, reaction on the support faces only
+                 ///< (SupportColumns): the exact clamp on a surface conforming to the box
+  SupportFacesSingular  ///< the same with the s^(-1/2) reaction on the support faces along
+                        ///< the curve (singularSupport): the model's run time
 };
 
 struct LossRatioCase {
@@ -38,13 +42,22 @@ struct LossRatioCase {
   Real fieldResolution = 0;      ///< m; elements subdivided down to this (<= 0: radius / 4)
   FixedSupport support = FixedSupport::Partial;
   std::vector<Real> edgeShifts;  ///< m; extra ratios with fixedBox.hi.z moved by each shift
+  SurfaceTransfer transfer = SurfaceTransfer::Gradient;  ///< coarse -> fine, as the model
 };
 
 struct LossRatioResult {
-  Real ratio = 0;            ///< field load, fixed region as LossRatioCase::support says
-  Real ratioNodalClamp = 0;  ///< field load, nodes inside the box clamped
-  Real ratioNodalLoad = 0;   ///< traction sampled at the nodes, nodes in the box clamped (old)
-  Real ratioPartial = 0;     ///< field load, partial constraints (FixedSupport::Partial)
+  Real ratio = 0;                  ///< field load, fixed region as LossRatioCase::support says
+  Real ratioLinearTransfer = 0;    ///< `ratio` with the linear coarse -> fine transfer
+  Real ratioGradientTransfer = 0;  ///< `ratio` with the gradient transfer
+  /// `ratio`'s fine solution carried to the coarse vertices (linear, closest point) and back
+  /// (linear / gradient transfer): what the transfer alone costs
+  Real roundTripLinear = 0, roundTripGradient = 0;
+  Real displacementRatio = 0;  ///< sum |u^imp| / sum |u^o| of `ratio` (< 1: coarse stiffer)
+  Real ratioNodalClamp = 0;    ///< field load, nodes inside the box clamped
+  Real ratioNodalLoad = 0;     ///< traction sampled at the nodes, nodes in the box clamped (old)
+  Real ratioPartial = 0;       ///< field load, partial constraints (FixedSupport::Partial)
+  /// field load, FixedSupport::SupportFaces (when `support` is SupportFacesSingular)
+  Real ratioSupportFaces = 0;
   std::vector<Real> shiftedRatios;       ///< per edgeShifts, as `ratio`
   std::vector<Real> shiftedClampRatios;  ///< per edgeShifts, as `ratioNodalClamp`
   int coarseVertices = 0, fineVertices = 0;

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <map>
 
 namespace deform::particle_bem {
 
@@ -297,6 +298,125 @@ BemMatrices assembleBem(const SurfaceMesh& s, Real young, Real poisson, const Be
     out.G.middleRows(3 * i, 3) = rowG;
   }
   return out;
+}
+
+SingularSupport singularSupport(const SurfaceMesh& s, Real young, Real poisson,
+                                const std::vector<int>& fixed) {
+  const int n = s.numVertices(), nf = s.numFaces();
+  SingularSupport out;
+  std::vector<char> isFixed(n, 0), onCurve(n, 0), support(nf, 0);
+  for (int j : fixed) isFixed[j] = 1;
+  for (int t = 0; t < nf; ++t)
+    support[t] = isFixed[s.F(t, 0)] && isFixed[s.F(t, 1)] && isFixed[s.F(t, 2)];
+  for (int t = 0; t < nf; ++t)
+    if (!support[t])
+      for (int k = 0; k < 3; ++k)
+        if (isFixed[s.F(t, k)]) onCurve[s.F(t, k)] = 1;
+  std::map<std::pair<int, int>, std::array<int, 2>> edgeFaces;
+  for (int t = 0; t < nf; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const int a = s.F(t, k), b = s.F(t, (k + 1) % 3);
+      auto [it, fresh] =
+          edgeFaces.try_emplace({std::min(a, b), std::max(a, b)}, std::array<int, 2>{-1, -1});
+      it->second[it->second[0] < 0 ? 0 : 1] = t;
+    }
+  const KelvinKernel K(young, poisson);
+  std::vector<Real> gx, gw;
+  gaussLegendre01(5, gx, gw);
+  // Graded towards tau = 0 (the curve) and sigma = 0 (a curve vertex of an edge face).
+  const std::vector<Real> br = {0, 1.0 / 64, 1.0 / 32, 1.0 / 16, 0.125, 0.25, 0.5, 0.75, 1};
+  std::vector<int> column(n, -1);
+  std::vector<std::array<int, 3>> faces;  // (a, b, c) in collapse order
+  std::vector<char> edgeType;
+  for (int t = 0; t < nf; ++t) {
+    if (!support[t]) continue;
+    int curveEdges = 0, edge = -1, curveVertices = 0, vertex = -1;
+    for (int k = 0; k < 3; ++k) {
+      const int a = s.F(t, k), b = s.F(t, (k + 1) % 3);
+      const auto& f2 = edgeFaces.at({std::min(a, b), std::max(a, b)});
+      const int other = f2[0] == t ? f2[1] : f2[0];
+      if (other >= 0 && !support[other]) {
+        ++curveEdges;
+        edge = k;
+      }
+      if (onCurve[a]) {
+        ++curveVertices;
+        vertex = k;
+      }
+    }
+    if (curveVertices == 0 || curveEdges > 1) continue;
+    const int k0 = curveEdges == 1 ? edge : vertex;
+    faces.push_back({s.F(t, k0), s.F(t, (k0 + 1) % 3), s.F(t, (k0 + 2) % 3)});
+    edgeType.push_back(curveEdges == 1);
+    (curveEdges == 1 ? out.edgeFaces : out.vertexFaces)++;
+    for (int j : faces.back())
+      if (column[j] < 0) {
+        column[j] = int(out.nodes.size());
+        out.nodes.push_back(j);
+      }
+  }
+  out.delta = MatX::Zero(3 * n, 3 * out.nodes.size());
+  for (size_t f = 0; f < faces.size(); ++f) {
+    const Vec3 A = s.V.row(faces[f][0]).transpose(), B = s.V.row(faces[f][1]).transpose(),
+               C = s.V.row(faces[f][2]).transpose();
+    const Real area = 0.5 * (B - A).cross(C - A).norm();
+    if (!(area > 0)) continue;
+    for (size_t ti = 0; ti + 1 < br.size(); ++ti)
+      for (size_t si = 0; si + 1 < br.size(); ++si)
+        for (size_t p = 0; p < gx.size(); ++p)
+          for (size_t q = 0; q < gx.size(); ++q) {
+            const Real tau = br[ti] + (br[ti + 1] - br[ti]) * gx[p];
+            const Real sig = br[si] + (br[si + 1] - br[si]) * gx[q];
+            const Real wq = gw[p] * gw[q] * (br[ti + 1] - br[ti]) * (br[si + 1] - br[si]);
+            const Real t2 = tau * tau;
+            Vec3 y;
+            Real N[3], dw;
+            if (edgeType[f]) {  // y = (1 - t)((1 - sig) A + sig B) + t C, dA = 2 area (1 - t)
+              y = (1 - t2) * ((1 - sig) * A + sig * B) + t2 * C;
+              N[0] = (1 - t2) * (1 - sig);
+              N[1] = (1 - t2) * sig;
+              N[2] = t2;
+              dw = 4 * area * (1 - t2) * (1 - tau) * wq;  // (w - 1) dA with t = tau^2
+            } else {  // y = A + rho ((1 - sig)(B - A) + sig (C - A)), dA = 2 area rho
+              y = A + t2 * ((1 - sig) * (B - A) + sig * (C - A));
+              N[0] = 1 - t2;
+              N[1] = t2 * (1 - sig);
+              N[2] = t2 * sig;
+              dw = 4 * area * t2 * (1 - tau) * wq;
+            }
+            for (int i = 0; i < n; ++i) {
+              const Vec3 r = y - s.V.row(i).transpose();
+              if (r.squaredNorm() == 0) continue;
+              const Mat3 U = K.displacement(r) * dw;
+              for (int k = 0; k < 3; ++k)
+                out.delta.block<3, 3>(3 * i, 3 * column[faces[f][k]]) += N[k] * U;
+            }
+          }
+  }
+  return out;
+}
+
+SupportColumns withSingularSupport(const SupportColumns& sc, const MatX& G,
+                                   const SingularSupport& corr) {
+  SupportColumns out;
+  out.nodes = sc.nodes;
+  for (int j : corr.nodes)
+    if (std::find(sc.nodes.begin(), sc.nodes.end(), j) == sc.nodes.end()) out.nodes.push_back(j);
+  out.G.resize(G.rows(), 3 * out.nodes.size());
+  for (size_t k = 0; k < out.nodes.size(); ++k) {
+    const int j = out.nodes[k];
+    out.G.middleCols(3 * k, 3) =
+        k < sc.nodes.size() ? MatX(sc.G.middleCols(3 * k, 3)) : MatX(G.middleCols(3 * j, 3));
+    const auto c = std::find(corr.nodes.begin(), corr.nodes.end(), j);
+    if (c != corr.nodes.end())
+      out.G.middleCols(3 * k, 3) += corr.delta.middleCols(3 * (c - corr.nodes.begin()), 3);
+  }
+  return out;
+}
+
+void addToColumns(MatX& G, const SingularSupport& corr) {
+  for (size_t k = 0; k < corr.nodes.size(); ++k)
+    G.middleCols(3 * corr.nodes[k], 3) += corr.delta.middleCols(3 * k, 3);
 }
 
 SupportColumns supportColumns(const SurfaceMesh& s, Real young, Real poisson,

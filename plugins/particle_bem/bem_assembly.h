@@ -67,6 +67,37 @@ struct SupportColumns {
 SupportColumns supportColumns(const SurfaceMesh& s, Real young, Real poisson,
                               const std::vector<int>& fixed, const BemQuadrature& q = {});
 
+/// The clamp edge's singular reaction. At the edge of a clamped region the reaction traction
+/// grows like s^(-1/2) with the distance s from the edge (the clamped-free half-plane exponent
+/// 1/2 +- i ln(3 - 4 nu) / 2 pi; its real part is used), which linear traction elements of
+/// ~2 cm cannot follow: the coarse solution is then too stiff and converges slowly (README,
+/// "Fourth pass"). On the support faces along the support's boundary curve the reaction is
+/// therefore represented as p(y) = w(y) sum_j N_j(y) p_j with
+///   w = lambda_c^(-1/2)      on a face with an edge (a, b) on the curve (c the third vertex,
+///                            lambda_c its barycentric = the distance from ab over c's),
+///   w = (1 - lambda_a)^(-1/2) on a face touching the curve at the vertex a only,
+/// so w = 1 at the vertices off the curve (continuous with the neighbouring support faces) and
+/// the exponent is the theory's, with no constant. The integrals int U* N_j w use collapsed
+/// coordinates (t = tau^2 from the edge, rho = tau^2 from the vertex), which remove the
+/// s^(-1/2) factor (and the 1/r of a source at the collapse vertex), on a graded 8 x 8 grid of
+/// 5 x 5 Gauss-Legendre cells. Faces with two or three curve edges keep w = 1.
+/// delta holds, per affected fixed node j, int U* N_j (w - 1) over its faces along the curve.
+struct SingularSupport {
+  std::vector<int> nodes;  ///< fixed nodes with a support face along the curve
+  MatX delta;              ///< 3N x 3 nodes.size(), m/Pa
+  int edgeFaces = 0, vertexFaces = 0;
+};
+SingularSupport singularSupport(const SurfaceMesh& s, Real young, Real poisson,
+                                const std::vector<int>& fixed);
+
+/// The reaction columns with the singular correction, for solveBemRhs /
+/// computeDeformationMatrix: every node of `sc` and of `corr`, column (Gs_j or G_j) + delta_j.
+/// For computeDeformationMatrix also add delta to G's columns (addToColumns) so that the
+/// boundary nodes' free-face part G_j - Gs_j stays the same.
+SupportColumns withSingularSupport(const SupportColumns& sc, const MatX& G,
+                                   const SingularSupport& corr);
+void addToColumns(MatX& G, const SingularSupport& corr);
+
 /// Lumped nodal areas A_k = sum over adjacent triangles of area / 3 (m^2): a nodal traction p_k
 /// with linear interpolation carries the force int N_k p dGamma = A_k p_k.
 VecX nodalAreas(const SurfaceMesh& s);

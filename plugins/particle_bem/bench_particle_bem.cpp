@@ -10,6 +10,8 @@
 
 #include <map>
 #include <memory>
+#include <string>
+#include <tuple>
 
 namespace {
 
@@ -40,11 +42,12 @@ struct Setup {
   int loadVertex = 0;
 };
 
-Setup& setup(int coarse, bool guided) {
-  static std::map<std::pair<int, bool>, std::unique_ptr<Setup>> all;
-  auto& s = all[{coarse, guided}];
+Setup& setup(int coarse, bool guided, const std::string& transfer) {
+  static std::map<std::tuple<int, bool, std::string>, std::unique_ptr<Setup>> all;
+  auto& s = all[{coarse, guided, transfer}];
   if (s) return *s;
   s = std::make_unique<Setup>();
+  s->params.set("surface_transfer", transfer);
   s->params.set("coarse_vertices", (long long)coarse);
   s->params.set("guidance", guided);
   s->params.set("points", (long long)(guided ? 300 : coarse));
@@ -61,8 +64,8 @@ Setup& setup(int coarse, bool guided) {
   return *s;
 }
 
-void stepBenchmark(benchmark::State& state, bool guided) {
-  Setup& s = setup(int(state.range(0)), guided);
+void stepBenchmark(benchmark::State& state, bool guided, const std::string& transfer = "gradient") {
+  Setup& s = setup(int(state.range(0)), guided, transfer);
   s.model.reset();
   int step = 0;
   std::map<std::string, double> phases;
@@ -90,6 +93,12 @@ void BM_GuidedStep(benchmark::State& state) {
   stepBenchmark(state, true);
 }
 BENCHMARK(BM_GuidedStep)->Arg(284)->Arg(1144)->Unit(benchmark::kMillisecond);
+
+// The same with the linear coarse -> fine transfer (surface_transfer = linear).
+void BM_GuidedStepLinearTransfer(benchmark::State& state) {
+  stepBenchmark(state, true, "linear");
+}
+BENCHMARK(BM_GuidedStepLinearTransfer)->Arg(284)->Arg(1144)->Unit(benchmark::kMillisecond);
 
 void BM_ParticleStep(benchmark::State& state) {
   stepBenchmark(state, false);

@@ -27,6 +27,72 @@ void interpolateDisplacement(const SurfaceMap& map, const MatX3i& coarseF, const
   }
 }
 
+GradientTransfer makeGradientTransfer(const MatX3& coarseV, const MatX3i& coarseF,
+                                      const SurfaceMap& map) {
+  GradientTransfer g;
+  const Eigen::Index nf = coarseF.rows();
+  g.faceGrad = GradientTransfer::MatX9::Zero(nf, 9);
+  g.cornerWeight = MatX3::Zero(nf, 3);
+  VecX area = VecX::Zero(nf), around = VecX::Zero(coarseV.rows());
+  for (Eigen::Index f = 0; f < nf; ++f) {
+    Vec3 x[3];
+    for (int k = 0; k < 3; ++k) x[k] = coarseV.row(coarseF(f, k)).transpose();
+    const Vec3 n = (x[1] - x[0]).cross(x[2] - x[0]);
+    const Real a2 = n.norm();
+    if (!(a2 > 0)) continue;  // degenerate face: no gradient, no weight
+    area[f] = 0.5 * a2;
+    // grad N_i = n x (x_(i+2) - x_(i+1)) / (2A) with n the unit normal.
+    for (int i = 0; i < 3; ++i)
+      g.faceGrad.block<1, 3>(f, 3 * i) =
+          (n.cross(x[(i + 2) % 3] - x[(i + 1) % 3]) / (a2 * a2)).transpose();
+    for (int k = 0; k < 3; ++k) around[coarseF(f, k)] += area[f];
+  }
+  for (Eigen::Index f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) {
+      const Real s = around[coarseF(f, k)];
+      g.cornerWeight(f, k) = s > 0 ? area[f] / s : 0;
+    }
+  const Eigen::Index nv = Eigen::Index(map.triangle.size());
+  g.offsets.resize(nv, 9);
+  for (Eigen::Index v = 0; v < nv; ++v) {
+    const int t = map.triangle[v];
+    Vec3 p = Vec3::Zero();
+    for (int k = 0; k < 3; ++k) p += map.bary(v, k) * coarseV.row(coarseF(t, k)).transpose();
+    for (int k = 0; k < 3; ++k)
+      g.offsets.block<1, 3>(v, 3 * k) =
+          0.5 * map.bary(v, k) * (p - coarseV.row(coarseF(t, k)).transpose()).transpose();
+  }
+  g.D.assign(coarseV.rows(), Mat3::Zero());
+  return g;
+}
+
+void recoverGradients(const GradientTransfer& g, const MatX3i& coarseF, const MatX3& coarseDisp,
+                      std::vector<Mat3>& D) {
+  D.assign(coarseDisp.rows(), Mat3::Zero());
+  for (Eigen::Index f = 0; f < coarseF.rows(); ++f) {
+    Mat3 Df = Mat3::Zero();
+    for (int i = 0; i < 3; ++i)
+      Df.noalias() += coarseDisp.row(coarseF(f, i)).transpose() * g.faceGrad.block<1, 3>(f, 3 * i);
+    for (int k = 0; k < 3; ++k) D[coarseF(f, k)] += g.cornerWeight(f, k) * Df;
+  }
+}
+
+void interpolateDisplacement(const SurfaceMap& map, const MatX3i& coarseF, const MatX3& fineRest,
+                             const MatX3& coarseDisp, GradientTransfer& g, MatX3& out) {
+  recoverGradients(g, coarseF, coarseDisp, g.D);
+  out.resize(fineRest.rows(), 3);
+  for (Eigen::Index v = 0; v < fineRest.rows(); ++v) {
+    const int t = map.triangle[v];
+    Vec3 u = fineRest.row(v).transpose();
+    for (int k = 0; k < 3; ++k) {
+      const int c = coarseF(t, k);
+      u += map.bary(v, k) * coarseDisp.row(c).transpose() +
+           g.D[c] * g.offsets.block<1, 3>(v, 3 * k).transpose();
+    }
+    out.row(v) = u.transpose();
+  }
+}
+
 void SparseTraction::add(int node, const Vec3& p) {
   for (size_t k = 0; k < nodes.size(); ++k)
     if (nodes[k] == node) {

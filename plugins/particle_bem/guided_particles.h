@@ -11,8 +11,18 @@
 //        dv/dt = k (target - x) - c v,
 //     integrated by backward Euler, which for one linear particle is exact to solve:
 //        v' = (v + dt k (target - x)) / (1 + dt c + dt^2 k),  x' = x + dt v';
-//  4. interpolation: each fine-surface vertex follows the displacement of the closest point on
-//     the coarse surface (barycentric on the closest coarse triangle, precomputed).
+//  4. interpolation: each fine-surface vertex follows the displacement of the closest point p on
+//     the coarse surface (barycentrics b_k on the closest coarse triangle, precomputed), either
+//     linearly, u(p) = sum_k b_k u_k, or (SurfaceTransfer::Gradient, the default) with the
+//     nodal displacement gradients D_k recovered from the one-ring (area-weighted mean of the
+//     linear elements' gradients, Zienkiewicz-Zhu style) as a half-gradient Hermite blend
+//        u(p) = sum_k b_k (u_k + 1/2 D_k (p - X_k)).
+//     With exact gradients on a flat triangle this is exact for quadratic fields: the linear
+//     interpolant errs by +1/2 sum_k b_k d_k^T H d_k (d_k = X_k - p) and the nodal first-order
+//     extrapolations u_k + D_k (p - X_k) by -sum_k b_k d_k^T H d_k, so the half step cancels the
+//     curvature term; a linear field is reproduced exactly (sum_k b_k (p - X_k) = 0). The mean
+//     of the element gradients is exact for quadratics at a vertex whose one-ring is centrally
+//     symmetric; on curved coarse surfaces it carries an O(h x dihedral angle) error.
 #pragma once
 
 #include "triangle_distance.h"
@@ -33,6 +43,29 @@ SurfaceMap mapToSurface(const TriangleGrid& coarse, const MatX3& fine);
 /// out_v = fineRest_v + sum_k bary_vk * coarseDisp_(F(tri_v, k)).
 void interpolateDisplacement(const SurfaceMap& map, const MatX3i& coarseF, const MatX3& fineRest,
                              const MatX3& coarseDisp, MatX3& out);
+
+/// How the fine surface follows the coarse one (step 4 above).
+enum class SurfaceTransfer { Linear, Gradient };
+
+/// Precomputed data of the gradient transfer.
+struct GradientTransfer {
+  using MatX9 = Eigen::Matrix<Real, Eigen::Dynamic, 9, Eigen::RowMajor>;  ///< rows contiguous
+  MatX9 faceGrad;       ///< #coarse F x 9: grad N_0, grad N_1, grad N_2 of each face (1/m)
+  MatX3 cornerWeight;   ///< #coarse F x 3: face area / total area around that corner's vertex
+  MatX9 offsets;        ///< #fine x 9: 1/2 b_k (p - X_k) for the three corners k (m)
+  std::vector<Mat3> D;  ///< workspace: recovered displacement gradient per coarse vertex
+};
+
+GradientTransfer makeGradientTransfer(const MatX3& coarseV, const MatX3i& coarseF,
+                                      const SurfaceMap& map);
+
+/// D_k = sum over faces f around k of w_fk sum_i u_(F(f,i)) grad N_i^T (3x3, D d = du).
+void recoverGradients(const GradientTransfer& g, const MatX3i& coarseF, const MatX3& coarseDisp,
+                      std::vector<Mat3>& D);
+
+/// out_v = fineRest_v + sum_k (bary_vk coarseDisp_k + D_k offsets_vk), F = F(tri_v, k).
+void interpolateDisplacement(const SurfaceMap& map, const MatX3i& coarseF, const MatX3& fineRest,
+                             const MatX3& coarseDisp, GradientTransfer& g, MatX3& out);
 
 /// Sparse traction vector: loaded coarse nodes and their tractions (Pa).
 struct SparseTraction {

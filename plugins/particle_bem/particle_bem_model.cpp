@@ -15,7 +15,7 @@ namespace deform::particle_bem {
 
 namespace {
 
-constexpr const char* kMatrixVersion = "particle_bem.M/2";
+constexpr const char* kMatrixVersion = "particle_bem.M/3";
 
 using Clock = std::chrono::steady_clock;
 double ms(Clock::time_point a, Clock::time_point b) {
@@ -76,6 +76,14 @@ std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
                       "cut the coarse surface along the fixed boxes' faces before decimation "
                       "and keep that boundary, and let the clamp's reaction act on the support "
                       "faces only (false: decimate the organ as is, nodal clamps)"),
+      ParamSpec::flag("singular_support", false,
+                      "with conforming_support: the clamp's reaction on the support faces along "
+                      "its edge carries the edge singularity s^(-1/2) (false: linear reaction "
+                      "elements throughout)"),
+      ParamSpec::choice("surface_transfer", "gradient", {"gradient", "linear"},
+                        "how the fine surface follows the coarse surface particles: gradient = "
+                        "half-gradient Hermite blend with one-ring recovered gradients, linear = "
+                        "barycentric interpolation on the closest coarse triangle"),
       ParamSpec::integer("duffy_order", 6, 2, 16,
                          "Gauss-Legendre order of the Duffy rule on singular triangles"),
   };
@@ -132,6 +140,7 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
   DecimationStats st;
   const std::vector<Box>& boxes = setup.organ.fixed.boxes;
   const bool conforming = p.flag("conforming_support");
+  const bool singular = conforming && p.flag("singular_support");
   if (conforming && !boxes.empty()) {
     ConformStats cs;
     m_coarse = decimateQuadric(conformToBoxes(S, boxes, &cs), int(p.integer("coarse_vertices")),
@@ -168,6 +177,7 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
   key.add(m_material.poisson).add(m_material.density).add(int(coarseFixed.size()));
   for (int i : coarseFixed) key.add(i);
   key.add(quad.duffyOrder).add(quad.nearFactor).add(quad.maxLevel).add(int(conforming));
+  key.add(int(singular));
   bool loaded = false;
   if (auto bytes = setup.cache.get("particle_bem.M", key)) {
     try {
@@ -187,8 +197,16 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
     BemMatrices bem = assembleBem(m_coarse, m_material.young, m_material.poisson, quad);
     m_numeric["bem_degenerate_triangles"] = bem.degenerateTriangles;
     SupportColumns support;
-    if (conforming)
+    if (conforming) {
       support = supportColumns(m_coarse, m_material.young, m_material.poisson, coarseFixed, quad);
+      if (singular) {
+        const SingularSupport corr =
+            singularSupport(m_coarse, m_material.young, m_material.poisson, coarseFixed);
+        support = withSingularSupport(support, bem.G, corr);
+        addToColumns(bem.G, corr);  // keeps the boundary nodes' free-face part G_j - Gs_j
+        m_numeric["singular_support_faces"] = corr.edgeFaces + corr.vertexFaces;
+      }
+    }
     m_bem = computeDeformationMatrix(
         std::move(bem), m_coarse, vertexNormals(m_coarse.V, m_coarse.F), coarseFixed,
         m_material.young, m_material.poisson, m_material.density, conforming ? &support : nullptr);
@@ -206,6 +224,11 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
 
   const TriangleGrid coarseGrid(m_coarse.V, m_coarse.F);
   m_map = mapToSurface(coarseGrid, S.V);
+  m_transfer = p.choiceAs<SurfaceTransfer>(
+      "surface_transfer",
+      {{"gradient", SurfaceTransfer::Gradient}, {"linear", SurfaceTransfer::Linear}});
+  if (m_transfer == SurfaceTransfer::Gradient)
+    m_gradient = makeGradientTransfer(m_coarse.V, m_coarse.F, m_map);
 
   const Real meanEdge = [&] {
     Real sum = 0;
@@ -425,7 +448,10 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   const auto t2 = Clock::now();
 
   m_coarseDisp = m_x.topRows(nc) - m_restCoarse;
-  interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_surface);
+  if (m_transfer == SurfaceTransfer::Gradient)
+    interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_gradient, m_surface);
+  else
+    interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_surface);
   if (in.contact) projectPointsOut(*in.contact, m_surface);  // display level, no force
   const auto t3 = Clock::now();
   m_times["surface"] = ms(t0, t1);

@@ -6,7 +6,9 @@
 // Each step: sparse traction vector -> U = M P (eq. 6) -> damped virtual springs pull every
 // particle to its target (surface particles: X + U; interior particles: X + inverse-distance
 // weighted U of their 8 nearest coarse nodes) -> the fine organ surface follows the coarse
-// surface particles by barycentric interpolation. See guided_particles.h, bem_assembly.h.
+// surface particles (barycentric interpolation, by default enriched with the one-ring recovered
+// displacement gradients: guided_particles.h, SurfaceTransfer). See guided_particles.h,
+// bem_assembly.h.
 //
 // guidance = false (the paper's pure particle model for small tissues, §4): nodes() are the
 // interior physics points, moved by MLS point-based elasticity (sph_elasticity.h) with gravity,
@@ -75,6 +77,8 @@ class ParticleBemModel final : public Model {
   DeformationMatrix m_bem;
   VecX m_nodalArea;
   SurfaceMap m_map;
+  SurfaceTransfer m_transfer = SurfaceTransfer::Gradient;
+  GradientTransfer m_gradient;
   std::vector<std::array<int, 8>> m_interiorNodes;
   std::vector<std::array<Real, 8>> m_interiorWeights;
   Real m_springK = 0, m_springC = 0;

@@ -65,7 +65,8 @@ TriangleGrid::TriangleGrid(const MatX3& V, const MatX3i& F, Real cellSize) : m_V
       const Real angle = std::acos(std::clamp(e1.dot(e2), Real(-1), Real(1)));
       m_vertexNormal.row(F(f, k)) += angle * n.transpose();
       const int a = F(f, (k + 1) % 3), b = F(f, (k + 2) % 3);
-      edgeSum[{std::min(a, b), std::max(a, b)}] += n;
+      // try_emplace: operator[] would default-construct the Eigen vector, uninitialised.
+      edgeSum.try_emplace({std::min(a, b), std::max(a, b)}, Vec3::Zero()).first->second += n;
     }
   }
   for (int f = 0; f < F.rows(); ++f)

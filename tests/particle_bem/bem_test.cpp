@@ -238,6 +238,13 @@ TEST(LossRatio, SameMeshIsZeroAndRefinementIsSmall) {
   EXPECT_GT(r.ratio, 1e-4);  // different meshes do differ
   EXPECT_LT(r.ratio, 0.15);
   EXPECT_GT(r.maxFineDisplacement, 0);
+  // The gradient transfer (the default, as the model) loses less than the linear one when the
+  // fine solution goes to the coarse vertices and back; both are reported.
+  EXPECT_GT(r.roundTripLinear, 0);
+  EXPECT_LT(r.roundTripGradient, r.roundTripLinear);
+  EXPECT_EQ(r.ratio, r.ratioGradientTransfer);
+  EXPECT_GT(r.displacementRatio, 0.8);
+  EXPECT_LT(r.displacementRatio, 1.2);
 }
 
 TEST(TractionField, UniformFieldEqualsGTimesNodalValues) {

@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <iostream>
 
 namespace deform::particle_bem {
@@ -143,6 +145,60 @@ TEST(SupportColumns, ExactClampConvergesFasterThanNodalClamp) {
             << ", nodal clamp " << r.ratioNodalClamp << "\n";
   EXPECT_GT(r.ratio, 1e-4);
   EXPECT_LT(r.ratio, 0.5 * r.ratioNodalClamp);
+}
+
+}  // namespace
+}  // namespace deform::particle_bem
+
+namespace deform::particle_bem {
+namespace {
+
+TEST(SingularSupport, ColumnsAreTheCorrectedSupportColumnsAndMeshesAgree) {
+  // Same spheres as above. The corrected columns: boundary nodes Gs_j + delta_j, the other
+  // fixed nodes of the curve faces G_j + delta_j; only fixed nodes touching the curve.
+  const std::vector<Box> boxes = {bottomBox(-0.0317)};
+  const SurfaceMesh coarse = conformToBoxes(testing::icosphere(2, 0.05), boxes);
+  const SurfaceMesh fine = conformToBoxes(testing::icosphere(3, 0.05), boxes);
+  const Material m{5000, 0.45, 1000};
+  const std::vector<int> fixed = nodesInBox(coarse.V, boxes[0]);
+  const BemMatrices bem = assembleBem(coarse, m.young, m.poisson);
+  const SupportColumns sc = supportColumns(coarse, m.young, m.poisson, fixed);
+  const SingularSupport corr = singularSupport(coarse, m.young, m.poisson, fixed);
+  EXPECT_GT(corr.edgeFaces, 0);
+  EXPECT_GT(corr.nodes.size(), sc.nodes.size());  // the curve nodes and their support neighbours
+  for (int j : corr.nodes)
+    EXPECT_TRUE(std::find(fixed.begin(), fixed.end(), j) != fixed.end()) << j;
+  for (int j : sc.nodes)
+    EXPECT_TRUE(std::find(corr.nodes.begin(), corr.nodes.end(), j) != corr.nodes.end()) << j;
+  // w > 1 everywhere on those faces: the correction's diagonal blocks (a source on its own
+  // faces, U* positive definite) are positive.
+  for (size_t k = 0; k < corr.nodes.size(); ++k)
+    EXPECT_GT((corr.delta.block<3, 3>(3 * corr.nodes[k], 3 * k).trace()), 0);
+  const SupportColumns all = withSingularSupport(sc, bem.G, corr);
+  ASSERT_EQ(all.nodes.size(), corr.nodes.size());
+  for (size_t k = 0; k < all.nodes.size(); ++k) {
+    const int j = all.nodes[k];
+    const size_t c = std::find(corr.nodes.begin(), corr.nodes.end(), j) - corr.nodes.begin();
+    const auto s = std::find(sc.nodes.begin(), sc.nodes.end(), j);
+    const MatX base = s != sc.nodes.end() ? MatX(sc.G.middleCols(3 * (s - sc.nodes.begin()), 3))
+                                          : MatX(bem.G.middleCols(3 * j, 3));
+    EXPECT_LT((all.G.middleCols(3 * k, 3) - base - corr.delta.middleCols(3 * c, 3)).norm(),
+              1e-12 * base.norm());
+  }
+  // Both meshes with the singular reaction still agree (a wrong weight or quadrature would
+  // part them). Not asserted: that it beats linear reaction elements here -- on these spheres
+  // it does not (1.9% against 1.4%), on the liver it does (README, "Fourth pass").
+  LossRatioCase lc;
+  lc.center = Vec3(0, 0, 0.05);
+  lc.radius = 0.03;
+  lc.traction = Vec3(0, 0, -200);
+  lc.fixedBox = boxes[0];
+  lc.support = FixedSupport::SupportFacesSingular;
+  const LossRatioResult r = bemLossRatio(coarse, fine, m, lc);
+  std::cout << "sphere 162/642: R singular reaction " << r.ratio << ", linear reaction "
+            << r.ratioSupportFaces << "\n";
+  EXPECT_GT(r.ratio, 1e-4);
+  EXPECT_LT(r.ratio, 0.03);
 }
 
 }  // namespace

@@ -82,6 +82,48 @@ TEST(GuidedModel, PointLoadDisplacesAlongTheLoad) {
   EXPECT_LT((m->surface().row(bottom) - fx.organ.surface.V.row(bottom)).norm(), 0.2 * u.norm());
 }
 
+TEST(GuidedModel, SurfaceTransferChangesOnlyTheFineSurface) {
+  // The same loaded run with the gradient (default) and the linear transfer: identical
+  // particles, fine surfaces that differ (the transfer is used) by a fraction of the motion.
+  Fixture fg(true), fl(true);
+  fl.params.set("surface_transfer", std::string("linear"));
+  auto mg = fg.make(), ml = fl.make();
+  const int v = topVertex(fg.organ.surface.V);
+  for (int s = 0; s < 200; ++s) {
+    StepInput in = input(s);
+    in.loads.push_back({v, Vec3(0.2, 0, -1.0)});
+    ASSERT_EQ(mg->step(in), StepStatus::Ok);
+    ASSERT_EQ(ml->step(in), StepStatus::Ok);
+  }
+  EXPECT_EQ(mg->nodes(), ml->nodes());
+  const MatX3 ug = mg->surface() - fg.organ.surface.V, ul = ml->surface() - fl.organ.surface.V;
+  const Real diff = (ug - ul).rowwise().norm().mean(), motion = ul.rowwise().norm().mean();
+  EXPECT_GT(motion, 1e-5);
+  EXPECT_GT(diff, 1e-4 * motion);
+  EXPECT_LT(diff, 0.2 * motion);
+  Fixture bad(true);
+  bad.params.set("surface_transfer", std::string("cubic"));
+  EXPECT_THROW(bad.make(), InputError);
+}
+
+TEST(GuidedModel, SingularSupportChangesMAndIsInTheCacheKey) {
+  Fixture fl(true), fs(true);
+  fs.params.set("singular_support", true);
+  const std::string dir =
+      (std::filesystem::temp_directory_path() / "particle_bem_singular_cache").string();
+  std::filesystem::remove_all(dir);
+  Cache cache(dir);
+  auto ml = fl.make(&cache), ms = fs.make(&cache);  // the second must not reuse the first's M
+  EXPECT_GT(ms->numericCounters().at("singular_support_faces"), 0);
+  EXPECT_EQ(ml->numericCounters().count("singular_support_faces"), 0u);
+  const MatX& Ml = ml->deformationMatrix().M;
+  const MatX& Ms = ms->deformationMatrix().M;
+  ASSERT_EQ(Ml.rows(), Ms.rows());
+  EXPECT_GT((Ms - Ml).norm(), 1e-3 * Ml.norm());
+  EXPECT_LT((Ms - Ml).norm(), 0.5 * Ml.norm());
+  std::filesystem::remove_all(dir);
+}
+
 TEST(GuidedModel, GraspReachesTargetAndResetReproduces) {
   Fixture fx(true);
   auto m = fx.make();

@@ -1,0 +1,153 @@
+// Tests of the coarse -> fine surface transfer (guided_particles.h): the half-gradient Hermite
+// blend with one-ring recovered gradients against the linear interpolation.
+#include "guided_particles.h"
+#include "test_support.h"
+#include "triangle_distance.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace deform::particle_bem {
+namespace {
+
+using testing::icosphere;
+
+// A flat n x n grid in z = 0 whose squares are all split along the same diagonal, so every
+// interior vertex has a centrally symmetric one-ring of six triangles.
+SurfaceMesh flatGrid(int n, Real h) {
+  SurfaceMesh s;
+  s.V.resize(n * n, 3);
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) s.V.row(j * n + i) << i * h, j * h, 0;
+  s.F.resize(2 * (n - 1) * (n - 1), 3);
+  int f = 0;
+  for (int j = 0; j + 1 < n; ++j)
+    for (int i = 0; i + 1 < n; ++i) {
+      const int a = j * n + i, b = a + 1, c = a + n, d = c + 1;
+      s.F.row(f++) << a, b, d;
+      s.F.row(f++) << a, d, c;
+    }
+  return s;
+}
+
+using Field = Vec3 (*)(const Vec3&);
+
+Vec3 quadratic(const Vec3& x) {
+  return Vec3(3 * x[0] * x[0] + 0.5 * x[0] * x[1] - x[1], -2 * x[1] * x[1] + x[0] + 0.1,
+              4 * x[0] * x[1] - x[0] * x[0] + 2 * x[1] * x[1]);
+}
+
+Vec3 linear(const Vec3& x) {
+  return Vec3(0.3 * x[0] - 0.2 * x[1] + 0.01, 0.5 * x[1], -x[0] + 0.4 * x[1] + 0.02 * x[2]);
+}
+
+MatX3 sample(const MatX3& V, Field u) {
+  MatX3 out(V.rows(), 3);
+  for (Eigen::Index v = 0; v < V.rows(); ++v) out.row(v) = u(V.row(v).transpose()).transpose();
+  return out;
+}
+
+// Random points inside the given triangles, as a SurfaceMap, and their positions.
+SurfaceMap randomPoints(const SurfaceMesh& s, const std::vector<int>& triangles, int perTriangle,
+                        MatX3& points) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<Real> U(0, 1);
+  SurfaceMap m;
+  const int n = int(triangles.size()) * perTriangle;
+  m.triangle.resize(n);
+  m.bary.resize(n, 3);
+  points.resize(n, 3);
+  for (int q = 0; q < n; ++q) {
+    const int t = triangles[q / perTriangle];
+    Real a = U(rng), b = U(rng);
+    if (a + b > 1) {
+      a = 1 - a;
+      b = 1 - b;
+    }
+    m.triangle[q] = t;
+    m.bary.row(q) << 1 - a - b, a, b;
+    points.row(q) =
+        (1 - a - b) * s.V.row(s.F(t, 0)) + a * s.V.row(s.F(t, 1)) + b * s.V.row(s.F(t, 2));
+  }
+  return m;
+}
+
+Real maxError(const MatX3& got, const MatX3& points, Field u) {
+  Real e = 0;
+  for (Eigen::Index v = 0; v < points.rows(); ++v)
+    e = std::max(e, (got.row(v).transpose() - u(points.row(v).transpose())).norm());
+  return e;
+}
+
+TEST(GradientTransfer, ExactForQuadraticFieldsWhereOneRingsAreSymmetric) {
+  const int n = 8;
+  const SurfaceMesh g = flatGrid(n, 0.01);
+  // Triangles whose three vertices are interior (full one-rings).
+  std::vector<int> inner;
+  for (int f = 0; f < g.numFaces(); ++f) {
+    bool ok = true;
+    for (int k = 0; k < 3; ++k) {
+      const int v = g.F(f, k), i = v % n, j = v / n;
+      ok = ok && i > 0 && j > 0 && i < n - 1 && j < n - 1;
+    }
+    if (ok) inner.push_back(f);
+  }
+  ASSERT_GT(inner.size(), 20u);
+  MatX3 points;
+  const SurfaceMap map = randomPoints(g, inner, 5, points);
+  GradientTransfer gt = makeGradientTransfer(g.V, g.F, map);
+  const MatX3 nodal = sample(g.V, quadratic), zero = MatX3::Zero(points.rows(), 3);
+  MatX3 lin, grad;
+  interpolateDisplacement(map, g.F, zero, nodal, lin);
+  interpolateDisplacement(map, g.F, zero, nodal, gt, grad);
+  const Real linearError = maxError(lin, points, quadratic);
+  EXPECT_GT(linearError, 1e-5);  // the linear interpolant does miss the curvature
+  EXPECT_LT(maxError(grad, points, quadratic), 1e-12);
+}
+
+TEST(GradientTransfer, ReproducesLinearFieldsOnAFlatMeshEverywhere) {
+  const SurfaceMesh g = flatGrid(6, 0.02);
+  std::vector<int> all(g.numFaces());
+  for (int f = 0; f < g.numFaces(); ++f) all[f] = f;
+  MatX3 points;
+  const SurfaceMap map = randomPoints(g, all, 4, points);
+  GradientTransfer gt = makeGradientTransfer(g.V, g.F, map);
+  std::vector<Mat3> D;
+  recoverGradients(gt, g.F, sample(g.V, linear), D);
+  Mat3 A;  // the field's gradient restricted to the plane z = 0
+  A << 0.3, -0.2, 0, 0, 0.5, 0, -1, 0.4, 0;
+  for (const Mat3& d : D) EXPECT_LT((d - A).norm(), 1e-12);
+  MatX3 grad;
+  interpolateDisplacement(map, g.F, MatX3::Zero(points.rows(), 3), sample(g.V, linear), gt, grad);
+  EXPECT_LT(maxError(grad, points, linear), 1e-14);
+}
+
+Vec3 smooth(const Vec3& x) {
+  return 1e-3 * Vec3(std::sin(20 * x[0]) + x[1] * 30, std::cos(25 * x[1]) * (1 + 10 * x[2]),
+                     std::sin(15 * (x[0] + x[2])));
+}
+
+TEST(GradientTransfer, BeatsLinearOnACurvedSurfaceAndKeepsTheRestState) {
+  // Coarse icosphere, "fine" vertices: a finer icosphere mapped by closest point, as the model.
+  const SurfaceMesh coarse = icosphere(3, 0.05), fine = icosphere(5, 0.05);
+  const TriangleGrid grid(coarse.V, coarse.F);
+  const SurfaceMap map = mapToSurface(grid, fine.V);
+  GradientTransfer gt = makeGradientTransfer(coarse.V, coarse.F, map);
+  MatX3 out;
+  interpolateDisplacement(map, coarse.F, fine.V, MatX3::Zero(coarse.numVertices(), 3), gt, out);
+  EXPECT_EQ((out - fine.V).cwiseAbs().maxCoeff(), 0);  // at rest the fine surface is exact
+  // Error of each transfer against the field at the fine vertices (mean over vertices).
+  const MatX3 nodal = sample(coarse.V, smooth), exact = sample(fine.V, smooth);
+  const MatX3 zero = MatX3::Zero(fine.numVertices(), 3);
+  MatX3 lin, grad;
+  interpolateDisplacement(map, coarse.F, zero, nodal, lin);
+  interpolateDisplacement(map, coarse.F, zero, nodal, gt, grad);
+  const Real eLin = (lin - exact).rowwise().norm().mean();
+  const Real eGrad = (grad - exact).rowwise().norm().mean();
+  EXPECT_GT(eLin, 0);
+  EXPECT_LT(eGrad, 0.5 * eLin) << "linear " << eLin << ", gradient " << eGrad;
+}
+
+}  // namespace
+}  // namespace deform::particle_bem
