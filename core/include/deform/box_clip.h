@@ -55,4 +55,10 @@ struct BoxClipResult {
 BoxClipResult clipSurfaceByBoxes(const SurfaceMesh& surface, const std::vector<Box>& boxes,
                                  const BoxClipOptions& options = {});
 
+/// Per triangle of (V, F): 1 when its three vertices lie exactly on one face plane of one box
+/// (x_k = lo_k or x_k = hi_k, compared bit for bit) within that box: a cap of
+/// clipSurfaceByBoxes, or a refinement of one; 0 otherwise (the organ's own surface). Does not
+/// need CGAL.
+std::vector<char> facesOnBoxFaces(const MatX3& V, const MatX3i& F, const std::vector<Box>& boxes);
+
 }  // namespace deform
