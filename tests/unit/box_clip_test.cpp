@@ -311,3 +311,14 @@ TEST(BoxClip, LiverPhantomWithTheLiverPokeBoxes) {
   EXPECT_LT(signedVolume(r.surface.V, r.surface.F), signedVolume(s.V, s.F));
   EXPECT_GT(minInteriorCapAngleDeg(r), 12.0);
 }
+
+TEST(BoxClip, BoxStrictlyInsideLeavesACavity) {
+  const SurfaceMesh s = gridCube(3);
+  const std::vector<Box> boxes = {box(Vec3(-0.2, -0.3, -0.1), Vec3(0.4, 0.1, 0.5))};
+  const BoxClipResult r = clipSurfaceByBoxes(s, boxes);
+  expectValidClip(s, boxes, r);
+  EXPECT_TRUE(validateSurface(r.surface).has(MeshDefect::MultipleComponents));
+  EXPECT_NEAR(signedVolume(r.surface.V, r.surface.F), 8.0 - 0.6 * 0.4 * 0.6, 1e-12);
+  EXPECT_EQ(r.removedInput, 0);
+  EXPECT_EQ(r.boxesCut, 1);
+}
