@@ -11,6 +11,7 @@
 
 #include <array>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <unordered_map>
 
@@ -102,7 +103,42 @@ BoxClipResult clipSurfaceByBoxes(const SurfaceMesh& surface, const std::vector<B
   BoxClipResult out;
   const Box organBox = boundingBox(surface.V);
   std::vector<Box> used;
-  ExactMesh organ = exactSurface(surface, src);
+  for (const Box& b : boxes)
+    if (!(b.hi.array() <= b.lo.array()).any() && overlapsOpen(b, organBox)) used.push_back(b);
+  // Snap vertices a small fraction of an edge away from a box face onto it (see the header).
+  SurfaceMesh snapped = surface;
+  if (options.snapFraction > 0 && !used.empty()) {
+    std::vector<Real> shortest(size_t(surface.numVertices()), std::numeric_limits<Real>::max());
+    const MatX2i E = uniqueEdges(surface.F);
+    for (Eigen::Index e = 0; e < E.rows(); ++e) {
+      const Real l = (surface.V.row(E(e, 0)) - surface.V.row(E(e, 1))).norm();
+      for (int k = 0; k < 2; ++k)
+        shortest[size_t(E(e, k))] = std::min(shortest[size_t(E(e, k))], l);
+    }
+    for (int i = 0; i < surface.numVertices(); ++i) {
+      const Real tol = options.snapFraction * shortest[size_t(i)];
+      bool moved = false;
+      for (const Box& b : used) {
+        for (int k = 0; k < 3; ++k) {
+          bool over = true;
+          for (int j = 0; j < 3; ++j)
+            if (j != k && (snapped.V(i, j) < b.lo[j] - tol || snapped.V(i, j) > b.hi[j] + tol))
+              over = false;
+          if (!over) continue;
+          for (const Real v : {b.lo[k], b.hi[k]}) {
+            const Real d = std::abs(snapped.V(i, k) - v);
+            if (d > 0 && d < tol) {
+              snapped.V(i, k) = v;
+              moved = true;
+            }
+          }
+        }
+      }
+      out.snappedInput += moved;
+    }
+  }
+  used.clear();
+  ExactMesh organ = exactSurface(snapped, src);
   for (size_t i = 0; i < boxes.size(); ++i) {
     const Box& b = boxes[i];
     if ((b.hi.array() <= b.lo.array()).any() || !overlapsOpen(b, organBox)) continue;
@@ -204,7 +240,7 @@ BoxClipResult clipSurfaceByBoxes(const SurfaceMesh& surface, const std::vector<B
   // Output order: kept input vertices (found by exact coordinates) in input order, then the rest.
   std::unordered_map<std::array<double, 3>, int, CoordHash> inputAt;
   for (int i = 0; i < surface.numVertices(); ++i)
-    inputAt.emplace(std::array<double, 3>{surface.V(i, 0), surface.V(i, 1), surface.V(i, 2)}, i);
+    inputAt.emplace(std::array<double, 3>{snapped.V(i, 0), snapped.V(i, 1), snapped.V(i, 2)}, i);
   std::vector<int> meshVertexOfInput(size_t(surface.numVertices()), -1);
   for (Mesh::Vertex_index v : mesh.vertices()) {
     const auto& p = mesh.point(v);

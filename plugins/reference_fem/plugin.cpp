@@ -15,7 +15,7 @@ namespace deform::reffem {
 
 namespace {
 
-constexpr const char* kMeshCacheVersion = "reference_fem.tets/2";
+constexpr const char* kMeshCacheVersion = "reference_fem.tets/3";
 
 enum class SolveKind { QuasiStatic, Dynamic };
 
@@ -106,6 +106,10 @@ class ReferenceFemModel final : public Model {
     }
     m_system = std::make_unique<FemSystem>(std::move(mesh), organ.material, model, order);
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
+    // A pinned vertex reports its rest position exactly (a vertex snapped onto a box face by
+    // clipSurfaceByBoxes is a node a hair's breadth from it).
+    m_isFixed.assign(size_t(m_system->numNodes()), 0);
+    for (int n : m_fixed) m_isFixed[size_t(n)] = 1;
     m_spreader = std::make_unique<PointLoadSpreader>(*m_system);
     m_patches.clear();
     reset();
@@ -292,7 +296,7 @@ class ReferenceFemModel final : public Model {
     m_nodes = Eigen::Map<const MatX3>(m_x.data(), n, 3);
     m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
     for (size_t i = 0; i < m_surfaceNode.size(); ++i)
-      if (m_surfaceNode[i] < 0)
+      if (m_surfaceNode[i] < 0 || m_isFixed[size_t(m_surfaceNode[i])])
         m_surface.row(Eigen::Index(i)) = m_restSurface.row(Eigen::Index(i));
       else
         m_surface.row(Eigen::Index(i)) = m_x.segment<3>(3 * m_surfaceNode[i]).transpose();
@@ -308,7 +312,8 @@ class ReferenceFemModel final : public Model {
   std::unique_ptr<EquilibriumSolver> m_solver;
   std::vector<int> m_fixed;
   std::vector<int> m_surfaceNode;  ///< surface vertex -> node; -1: inside a fixed box, no node
-  MatX3 m_restSurface;             ///< reported for the vertices that are no node
+  MatX3 m_restSurface;             ///< reported for the vertices that are no node or pinned
+  std::vector<char> m_isFixed;     ///< per node: pinned by the fixed region
   long long m_pinnedOutside = 0;   ///< surface vertices with no node
   MatX3i m_contactF;               ///< organ triangles as node rows (contact proxy)
   VecX m_x, m_v, m_fPrev;

@@ -27,6 +27,11 @@ namespace deform {
 struct BoxClipOptions {
   /// Target edge length of the cap triangles (m). 0: the mean edge length of the input surface.
   Real capEdgeLength = 0;
+  /// A vertex closer to a box face plane than snapFraction x its shortest incident edge (and
+  /// over that face, within the same margin) is first moved onto the plane, so that the cut does
+  /// not pass a hair's breadth from it and leave sliver triangles (and sliver tets) behind. It
+  /// then lies on the closed box: pinned. 0: no snapping, every outside vertex kept exactly.
+  Real snapFraction = 0.05;
   /// Names the input in error messages (file path or "phantom:NAME").
   std::string source;
 };
@@ -36,19 +41,22 @@ struct BoxClipResult {
   /// vertices first, in input order (so inputToClipped is increasing where >= 0), then the new
   /// vertices (cut points on box faces, cap vertices).
   SurfaceMesh surface;
-  /// Per input vertex: its index in `surface` (same coordinates, bit for bit), or -1 when the
-  /// vertex is not on the clipped surface (inside the union of the boxes).
+  /// Per input vertex: its index in `surface` (same coordinates, bit for bit, unless snapped onto
+  /// a box plane), or -1 when the vertex is not on the clipped surface (inside the union of the
+  /// boxes).
   std::vector<int> inputToClipped;
   /// Per triangle of `surface`: 1 on a box face (a cap: pinned), 0 part of the organ's surface.
   std::vector<char> capFace;
   int boxesCut = 0;      ///< boxes that removed some volume (the others were no-ops)
   int removedInput = 0;  ///< input vertices with inputToClipped == -1
+  int snappedInput = 0;  ///< input vertices moved onto a box plane (BoxClipOptions::snapFraction)
 };
 
 /// The organ surface (closed, manifold, outward; validated) minus the union of the boxes.
 /// Every cap vertex lies exactly (bit for bit) on its box face plane(s); vertices of the input
-/// outside the closed boxes are kept exactly. Boxes that do not overlap the organ are skipped;
-/// a box with zero extent along an axis removes nothing. Overlapping boxes are fine. A box
+/// outside the closed boxes are kept exactly, except those snapped onto a plane (see
+/// BoxClipOptions::snapFraction), which then lie on a box. Boxes that do not overlap the organ are
+/// skipped; a box with zero extent along an axis removes nothing. Overlapping boxes are fine. A box
 /// strictly inside the organ leaves a cavity (a second closed component). Throws
 /// InputError(options.source, "fixed boxes", ...) when the boxes contain the whole organ, or when
 /// the boolean operation fails. Deterministic.
