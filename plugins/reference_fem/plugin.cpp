@@ -89,21 +89,20 @@ class ReferenceFemModel final : public Model {
     m_restSurface = organ.surface.V;
     m_pinnedOutside = 0;
     for (int n : m_surfaceNode) m_pinnedOutside += n < 0;
-    if (m_pinnedOutside == 0) {
-      // The organ's triangles as node rows: the contact proxy besides the nodes themselves.
-      m_contactF = organ.surface.F;
-      for (Eigen::Index f = 0; f < m_contactF.rows(); ++f)
-        for (int k = 0; k < 3; ++k) m_contactF(f, k) = m_surfaceNode.at(size_t(m_contactF(f, k)));
-    } else {
-      // Conforming mesh: the organ's part of the tets' boundary (the caps inside the organ are
-      // no surface an instrument can touch, and they are pinned anyway).
-      const SurfaceMesh b = tetBoundary(mesh);
-      const std::vector<char> cap = facesOnBoxFaces(b.V, b.F, organ.fixed.boxes);
-      m_contactF.resize(Eigen::Index(std::count(cap.begin(), cap.end(), 0)), 3);
-      Eigen::Index r = 0;
-      for (Eigen::Index f = 0; f < b.F.rows(); ++f)
-        if (!cap[size_t(f)]) m_contactF.row(r++) = b.F.row(f);
+    // The organ's triangles as node rows: the contact proxy besides the nodes themselves (the
+    // surface the harness draws and checks against instruments). With a conforming mesh the
+    // triangles with a vertex inside a fixed box (no node) are left out: they are clamped there.
+    m_contactF.resize(organ.surface.F.rows(), 3);
+    Eigen::Index rows = 0;
+    for (Eigen::Index f = 0; f < organ.surface.F.rows(); ++f) {
+      bool nodes = true;
+      for (int k = 0; k < 3; ++k) {
+        m_contactF(rows, k) = m_surfaceNode.at(size_t(organ.surface.F(f, k)));
+        nodes = nodes && m_contactF(rows, k) >= 0;
+      }
+      rows += nodes;
     }
+    m_contactF.conservativeResize(rows, 3);
     m_system = std::make_unique<FemSystem>(std::move(mesh), organ.material, model, order);
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
     // A pinned vertex reports its rest position exactly (a vertex snapped onto a box face by
