@@ -5,6 +5,7 @@ PACKAGES=(
   build-essential cmake pkg-config git
   libeigen3-dev libsuitesparse-dev libbullet-dev libode-dev libgmsh-dev libqhull-dev
   libnanoflann-dev nlohmann-json3-dev libcli11-dev libssl-dev
+  libcgal-dev libgmp-dev libmpfr-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev llvm clang-format
   libopenblas0-serial liblapack3

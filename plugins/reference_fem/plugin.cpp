@@ -2,10 +2,12 @@
 // README.md for the method, the parameters and the reasons behind each choice.
 #include "fem_solver.h"
 
+#include <deform/box_clip.h>
 #include <deform/contact.h>
 #include <deform/registry.h>
 #include <deform/tet_mesher.h>
 
+#include <algorithm>
 #include <chrono>
 #include <map>
 
@@ -13,7 +15,7 @@ namespace deform::reffem {
 
 namespace {
 
-constexpr const char* kMeshCacheVersion = "reference_fem.tets/1";
+constexpr const char* kMeshCacheVersion = "reference_fem.tets/3";
 
 enum class SolveKind { QuasiStatic, Dynamic };
 
@@ -34,6 +36,10 @@ std::vector<ParamSpec> referenceFemParams() {
       ParamSpec::flag("refine_surface", true,
                       "split surface edges longer than the edge length before meshing (the "
                       "input vertices stay nodes with their indices)"),
+      ParamSpec::flag("conform_fixed", true,
+                      "mesh the organ minus the fixed boxes (caps pinned, u = 0), so the clamped "
+                      "boundary is the same at every refinement; false: mesh the whole organ and "
+                      "pin the nodes that fall inside the boxes"),
       ParamSpec::real("newton_tolerance", "1", 1e-8, 1e-14, 1e-2,
                       "converged when |free residual| <= this * max(|external force|, |reaction|)"),
       ParamSpec::integer("max_newton_iterations", 100, 1, 10000, "Newton iterations per load step"),
@@ -78,16 +84,31 @@ class ReferenceFemModel final : public Model {
       }
       m_surfaceNode = mapSurfaceToNodes(organ, mesh);
     } else {
-      mesh = meshSurface(organ, p, setup.cache);
-      m_surfaceNode.resize(size_t(organ.surface.numVertices()));
-      for (int i = 0; i < organ.surface.numVertices(); ++i) m_surfaceNode[size_t(i)] = i;
+      m_surfaceNode = meshSurface(organ, p, setup.cache, mesh);
     }
+    m_restSurface = organ.surface.V;
+    m_pinnedOutside = 0;
+    for (int n : m_surfaceNode) m_pinnedOutside += n < 0;
+    // The organ's triangles as node rows: the contact proxy besides the nodes themselves (the
+    // surface the harness draws and checks against instruments). With a conforming mesh the
+    // triangles with a vertex inside a fixed box (no node) are left out: they are clamped there.
+    m_contactF.resize(organ.surface.F.rows(), 3);
+    Eigen::Index rows = 0;
+    for (Eigen::Index f = 0; f < organ.surface.F.rows(); ++f) {
+      bool nodes = true;
+      for (int k = 0; k < 3; ++k) {
+        m_contactF(rows, k) = m_surfaceNode.at(size_t(organ.surface.F(f, k)));
+        nodes = nodes && m_contactF(rows, k) >= 0;
+      }
+      rows += nodes;
+    }
+    m_contactF.conservativeResize(rows, 3);
     m_system = std::make_unique<FemSystem>(std::move(mesh), organ.material, model, order);
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
-    // The organ's triangles as node rows: the contact proxy besides the nodes themselves.
-    m_contactF = organ.surface.F;
-    for (Eigen::Index f = 0; f < m_contactF.rows(); ++f)
-      for (int k = 0; k < 3; ++k) m_contactF(f, k) = m_surfaceNode.at(size_t(m_contactF(f, k)));
+    // A pinned vertex reports its rest position exactly (a vertex snapped onto a box face by
+    // clipSurfaceByBoxes is a node a hair's breadth from it).
+    m_isFixed.assign(size_t(m_system->numNodes()), 0);
+    for (int n : m_fixed) m_isFixed[size_t(n)] = 1;
     m_spreader = std::make_unique<PointLoadSpreader>(*m_system);
     m_patches.clear();
     reset();
@@ -123,6 +144,7 @@ class ReferenceFemModel final : public Model {
     for (const PointLoad& l : in.loads) {
       if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_surfaceNode.size())) continue;
       const int node = m_surfaceNode[size_t(l.surfaceVertex)];
+      if (node < 0) continue;  // a vertex inside a fixed box: the support takes the load
       auto it = m_patches.find(node);
       if (it == m_patches.end())
         it = m_patches.emplace(node, m_spreader->patch(node, m_loadRadius)).first;
@@ -175,7 +197,8 @@ class ReferenceFemModel final : public Model {
   Counts counts() const override {
     return {{"nodes", m_system->numNodes()},
             {"elements", m_system->rest().numTets()},
-            {"fixed_nodes", (long long)m_fixed.size()}};
+            {"fixed_nodes", (long long)m_fixed.size()},
+            {"surface_vertices_not_nodes", m_pinnedOutside}};
   }
   PhaseTimes phaseTimes() const override { return m_phase; }
   NumericCounters numericCounters() const override {
@@ -188,33 +211,65 @@ class ReferenceFemModel final : public Model {
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
  private:
-  static TetMesh meshSurface(const Organ& organ, const ParamValues& p, Cache& cache) {
+  /// Tetrahedralises the organ's surface (or, with conform_fixed and fixed boxes, the organ minus
+  /// the boxes: clipSurfaceByBoxes) into `mesh`; returns surface vertex -> node, -1 for a vertex
+  /// inside a fixed box that is no node (pinned: it stays at rest).
+  static std::vector<int> meshSurface(const Organ& organ, const ParamValues& p, Cache& cache,
+                                      TetMesh& mesh) {
     TetMeshOptions o;
     o.edgeLength = p.real("edge_length");
     o.targetElements = p.integer("elements");
     o.refineSurface = p.flag("refine_surface");
     o.timeoutSeconds = p.real("mesh_timeout");
     o.source = organ.source;
+    const int nv = organ.surface.numVertices();
+    const bool conform = p.flag("conform_fixed") && !organ.fixed.boxes.empty();
     CacheKey key;
     key.add(kMeshCacheVersion).add(organ.surface.V).add(organ.surface.F);
     key.add(o.edgeLength).add(o.targetElements).add((long long)o.refineSurface);
+    key.add((long long)conform);
+    if (conform)
+      for (const Box& b : organ.fixed.boxes)
+        for (int k = 0; k < 3; ++k) key.add(b.lo[k]).add(b.hi[k]);
     if (auto hit = cache.get("reference_fem.tets", key)) {
       try {
         ByteReader r(*hit);
         TetMesh m;
+        Eigen::VectorXi map;
         r.matrix(m.V);
         r.matrix(m.T);
-        if (m.numVertices() >= organ.surface.numVertices() && m.numTets() > 0) return m;
+        r.matrix(map);
+        if (map.size() == nv && m.numTets() > 0 && map.maxCoeff() < m.numVertices()) {
+          mesh = std::move(m);
+          return std::vector<int>(map.data(), map.data() + map.size());
+        }
       } catch (const std::exception&) {
         // fall through: remesh
       }
     }
-    const TetMeshResult r = tetrahedralize(organ.surface, o);
+    Eigen::VectorXi map = Eigen::VectorXi::LinSpaced(nv, 0, nv - 1);
+    TetMeshResult r;
+    if (conform) {
+      BoxClipOptions c;
+      c.source = organ.source;
+      // Cap triangles about as long as the interior tet edges.
+      c.capEdgeLength = o.edgeLength > 0
+                            ? o.edgeLength
+                            : edgeLengthForElements(signedVolume(organ.surface.V, organ.surface.F),
+                                                    o.targetElements);
+      const BoxClipResult clip = clipSurfaceByBoxes(organ.surface, organ.fixed.boxes, c);
+      map = Eigen::Map<const Eigen::VectorXi>(clip.inputToClipped.data(), nv);
+      r = tetrahedralize(clip.surface, o);
+    } else {
+      r = tetrahedralize(organ.surface, o);
+    }
     ByteWriter w;
     w.matrix(r.mesh.V);
     w.matrix(r.mesh.T);
+    w.matrix(map);
     cache.put("reference_fem.tets", key, w.bytes());
-    return r.mesh;
+    mesh = r.mesh;
+    return std::vector<int>(map.data(), map.data() + map.size());
   }
 
   /// Surface vertex -> node of a given tet mesh, by position (the loader's surface of a tet
@@ -240,7 +295,10 @@ class ReferenceFemModel final : public Model {
     m_nodes = Eigen::Map<const MatX3>(m_x.data(), n, 3);
     m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
     for (size_t i = 0; i < m_surfaceNode.size(); ++i)
-      m_surface.row(Eigen::Index(i)) = m_x.segment<3>(3 * m_surfaceNode[i]).transpose();
+      if (m_surfaceNode[i] < 0 || m_isFixed[size_t(m_surfaceNode[i])])
+        m_surface.row(Eigen::Index(i)) = m_restSurface.row(Eigen::Index(i));
+      else
+        m_surface.row(Eigen::Index(i)) = m_x.segment<3>(3 * m_surfaceNode[i]).transpose();
   }
 
   SolveKind m_solveKind = SolveKind::QuasiStatic;
@@ -252,8 +310,11 @@ class ReferenceFemModel final : public Model {
   std::unique_ptr<FemSystem> m_system;
   std::unique_ptr<EquilibriumSolver> m_solver;
   std::vector<int> m_fixed;
-  std::vector<int> m_surfaceNode;
-  MatX3i m_contactF;  ///< organ triangles as node rows (contact proxy)
+  std::vector<int> m_surfaceNode;  ///< surface vertex -> node; -1: inside a fixed box, no node
+  MatX3 m_restSurface;             ///< reported for the vertices that are no node or pinned
+  std::vector<char> m_isFixed;     ///< per node: pinned by the fixed region
+  long long m_pinnedOutside = 0;   ///< surface vertices with no node
+  MatX3i m_contactF;               ///< organ triangles as node rows (contact proxy)
   VecX m_x, m_v, m_fPrev;
   MatX3 m_nodes, m_surface;
   std::vector<Vec3> m_graspForces;
