@@ -76,10 +76,10 @@ std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
                       "cut the coarse surface along the fixed boxes' faces before decimation "
                       "and keep that boundary, and let the clamp's reaction act on the support "
                       "faces only (false: decimate the organ as is, nodal clamps)"),
-      ParamSpec::flag("singular_support", false,
+      ParamSpec::flag("singular_support", true,
                       "with conforming_support: the clamp's reaction on the support faces along "
                       "its edge carries the edge singularity s^(-1/2) (false: linear reaction "
-                      "elements throughout)"),
+                      "elements throughout, which converge to the same solution more slowly)"),
       ParamSpec::choice("surface_transfer", "gradient", {"gradient", "linear"},
                         "how the fine surface follows the coarse surface particles: gradient = "
                         "half-gradient Hermite blend with one-ring recovered gradients, linear = "

@@ -108,7 +108,9 @@ TEST(GuidedModel, SurfaceTransferChangesOnlyTheFineSurface) {
 
 TEST(GuidedModel, SingularSupportChangesMAndIsInTheCacheKey) {
   Fixture fl(true), fs(true);
-  fs.params.set("singular_support", true);
+  fl.params.set("singular_support", false);
+  // The singular reaction is the default discretisation (README, "Fifth pass").
+  EXPECT_TRUE(fs.params.flag("singular_support"));
   const std::string dir =
       (std::filesystem::temp_directory_path() / "particle_bem_singular_cache").string();
   std::filesystem::remove_all(dir);
