@@ -1,6 +1,8 @@
 #include "guided_particles.h"
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 
 namespace deform::particle_bem {
 
@@ -136,6 +138,50 @@ void springCorrection(MatX3& x, MatX3& v, const MatX3& target, Real stiffness, R
     v.row(i) = (v.row(i) + dt * stiffness * (target.row(i) - x.row(i))) * denom;
     x.row(i) += dt * v.row(i);
   }
+}
+
+std::vector<std::pair<int, Real>> pressurePatchShares(const SurfaceMesh& s, const Vec3& c, Real R) {
+  std::map<int, Real> share;
+  Real total = 0;
+  if (!(R > 0)) return {};
+  const Real R2 = R * R;
+  for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+    const Vec3 v[3] = {s.V.row(s.F(f, 0)).transpose(), s.V.row(s.F(f, 1)).transpose(),
+                       s.V.row(s.F(f, 2)).transpose()};
+    // Skip triangles whose bounding sphere (about the centroid) misses the patch.
+    const Vec3 g = (v[0] + v[1] + v[2]) / 3;
+    const Real rg = std::max({(v[0] - g).norm(), (v[1] - g).norm(), (v[2] - g).norm()});
+    if ((g - c).norm() > R + rg) continue;
+    const Real area = 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).norm();
+    if (!(area > 0)) continue;
+    const Real longest =
+        std::max({(v[1] - v[0]).norm(), (v[2] - v[1]).norm(), (v[0] - v[2]).norm()});
+    const int n = std::clamp(static_cast<int>(std::ceil(4 * longest / R)), 1, 64);
+    const Real subArea = area / (Real(n) * n);
+    // Sub-triangle centroids in lattice coordinates (a, b) -> barycentrics (1 - a/n - b/n, a/n,
+    // b/n): n(n+1)/2 upward ones at (i + 1/3, j + 1/3), n(n-1)/2 downward at (i + 2/3, j + 2/3).
+    const auto sample = [&](Real a, Real b) {
+      const Real b1 = a / n, b2 = b / n, b0 = 1 - b1 - b2;
+      const Vec3 x = b0 * v[0] + b1 * v[1] + b2 * v[2];
+      const Real w = 1 - (x - c).squaredNorm() / R2;
+      if (!(w > 0)) return;
+      const Real ww = w * subArea;
+      total += ww;
+      share[s.F(f, 0)] += b0 * ww;
+      share[s.F(f, 1)] += b1 * ww;
+      share[s.F(f, 2)] += b2 * ww;
+    };
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; i + j < n; ++j) {
+        sample(i + Real(1) / 3, j + Real(1) / 3);
+        if (i + j < n - 1) sample(i + Real(2) / 3, j + Real(2) / 3);
+      }
+  }
+  std::vector<std::pair<int, Real>> out;
+  if (!(total > 0)) return out;
+  for (const auto& [node, w] : share)
+    if (w > 0) out.emplace_back(node, w / total);
+  return out;
 }
 
 }  // namespace deform::particle_bem

@@ -32,6 +32,20 @@
 
 namespace deform::particle_bem {
 
+/// A point force spread as a pressure patch of radius R around its surface point c (a tool's
+/// contact area, the same physical patch on every mesh, so that surfaces of different resolution
+/// carry the same traction field; a force on one node would load an element-sized area that
+/// shrinks with refinement, around a displacement that is log-singular under a true point load):
+///
+///   t(x) = f w(x) / int w dGamma,   w(x) = max(0, 1 - |x - c|^2 / R^2)   (paraboloid),
+///
+/// as the nodal shares c_k = int N_k w dGamma / int w dGamma (sum_k c_k = 1: the resultant is f)
+/// of the linear shape functions N_k over the triangles of s (rest positions), by the midpoint
+/// rule on a regular subdivision of each triangle into sub-triangles of size at most R / 4.
+/// Returns (node, c_k) pairs with c_k > 0, sorted by node; empty when no sample point lies within
+/// R of c (R much smaller than the elements: the caller falls back to the closest triangle).
+std::vector<std::pair<int, Real>> pressurePatchShares(const SurfaceMesh& s, const Vec3& c, Real R);
+
 /// Fine vertex -> (coarse triangle, barycentric weights of its closest point).
 struct SurfaceMap {
   std::vector<int> triangle;  ///< #fine

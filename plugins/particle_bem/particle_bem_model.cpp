@@ -59,6 +59,10 @@ std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
                          "interior physics points (lattice inside the organ)"),
       ParamSpec::integer("coarse_vertices", 600, 12, 20000,
                          "vertices of the coarse BEM surface = surface particles"),
+      ParamSpec::real("load_radius", "m", 0.03, 0.0, 1.0,
+                      "a point force is spread as a paraboloid pressure patch of this radius "
+                      "over the coarse surface (as reference_fem does); 0: on the closest coarse "
+                      "triangle's nodes by barycentric weights"),
       ParamSpec::real("spring_stiffness", "1/s^2", 2500.0, 1e-3, 1e9,
                       "virtual spring stiffness per unit mass pulling particles to BEM targets"),
       ParamSpec::real("spring_damping", "1/s", 100.0, 0.0, 1e7,
@@ -163,6 +167,8 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
   for (int i : m_fixed)
     if (i < nc) coarseFixed.push_back(i);
 
+  m_loadRadius = p.real("load_radius");
+  m_patchShares.clear();
   m_springK = p.real("spring_stiffness");
   m_springC = p.real("spring_damping");
   m_repulsion = p.flag("repulsion");
@@ -348,6 +354,20 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   m_P.clear();
   for (const PointLoad& l : in.loads) {
     if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_map.triangle.size())) continue;
+    if (m_loadRadius > 0) {
+      auto it = m_patchShares.find(l.surfaceVertex);
+      if (it == m_patchShares.end()) {
+        const SurfaceMesh rest{m_restCoarse, m_coarse.F};
+        it = m_patchShares
+                 .emplace(l.surfaceVertex,
+                          pressurePatchShares(rest, m_fineRest.row(l.surfaceVertex).transpose(),
+                                              m_loadRadius))
+                 .first;
+      }
+      for (const auto& [node, c] : it->second)
+        if (!m_fixedMask[node]) m_P.add(node, c * l.force / m_nodalArea[node]);
+      if (!it->second.empty()) continue;
+    }
     const int t = m_map.triangle[l.surfaceVertex];
     for (int k = 0; k < 3; ++k) {
       const int node = m_coarse.F(t, k);

@@ -25,6 +25,7 @@
 #include <deform/model.h>
 #include <deform/registry.h>
 
+#include <map>
 #include <memory>
 
 namespace deform::particle_bem {
@@ -91,6 +92,9 @@ class ParticleBemModel final : public Model {
   MatX3 m_verletRef;
   bool m_verletValid = false;
   SparseTraction m_P;
+  Real m_loadRadius = 0;  ///< m, pressure patch of a point force (0: the closest triangle)
+  /// Fine vertex -> its patch's nodal shares (pressurePatchShares), computed on first use.
+  std::map<int, std::vector<std::pair<int, Real>>> m_patchShares;
   VecX m_U, m_graspRhs, m_graspP;
   GraspSolver m_graspSolver;
   MatX3 m_coarseDisp;

@@ -6,6 +6,7 @@
 #include <deform/contact.h>
 #include <deform/registry.h>
 #include <deform/tet_mesher.h>
+#include <deform/tet_nodes.h>
 
 #include <algorithm>
 #include <chrono>
@@ -82,7 +83,7 @@ class ReferenceFemModel final : public Model {
         if (tetVolume(mesh.V.row(r(0)), mesh.V.row(r(1)), mesh.V.row(r(2)), mesh.V.row(r(3))) < 0)
           std::swap(mesh.T(t, 2), mesh.T(t, 3));
       }
-      m_surfaceNode = mapSurfaceToNodes(organ, mesh);
+      m_surfaceNode = surfaceVertexNodes(organ, mesh.V);
     } else {
       m_surfaceNode = meshSurface(organ, p, setup.cache, mesh);
     }
@@ -270,24 +271,6 @@ class ReferenceFemModel final : public Model {
     cache.put("reference_fem.tets", key, w.bytes());
     mesh = r.mesh;
     return std::vector<int>(map.data(), map.data() + map.size());
-  }
-
-  /// Surface vertex -> node of a given tet mesh, by position (the loader's surface of a tet
-  /// file is the volume's boundary over the same nodes).
-  static std::vector<int> mapSurfaceToNodes(const Organ& organ, const TetMesh& mesh) {
-    const SurfaceMesh& s = organ.surface;
-    std::vector<int> map(size_t(s.numVertices()));
-    const Real tol = 1e-9 * std::max<Real>(boundingBox(mesh.V).diagonal(), 1e-300);
-    const bool prefix = s.numVertices() <= mesh.numVertices() &&
-                        (s.V - mesh.V.topRows(s.numVertices())).cwiseAbs().maxCoeff() <= tol;
-    for (int i = 0; i < s.numVertices(); ++i) {
-      const int n = prefix ? i : nearestVertex(mesh.V, s.V.row(i).transpose());
-      if (n < 0 || (mesh.V.row(n) - s.V.row(i)).norm() > tol)
-        throw InputError(organ.source, "vertex " + std::to_string(i),
-                         "surface vertex is not a node of the tetrahedral volume");
-      map[size_t(i)] = n;
-    }
-    return map;
   }
 
   void updatePositions() {

@@ -82,6 +82,35 @@ TEST(GuidedModel, PointLoadDisplacesAlongTheLoad) {
   EXPECT_LT((m->surface().row(bottom) - fx.organ.surface.V.row(bottom)).norm(), 0.2 * u.norm());
 }
 
+// A point force is spread over the load_radius patch (default 3 cm, as reference_fem); with
+// load_radius 0 it goes to the closest coarse triangle's three nodes. The same force then moves
+// the loaded vertex less (the load is spread) and its neighbours relatively more.
+TEST(GuidedModel, PointForcePressurePatchSpreadsTheLoad) {
+  Fixture patch(true), node(true);
+  node.params.set("load_radius", 0.0);
+  auto mp = patch.make(), mn = node.make();
+  const int v = topVertex(patch.organ.surface.V);
+  for (int s = 0; s < 300; ++s) {
+    StepInput in = input(s);
+    in.loads.push_back({v, Vec3(0, 0, -0.5)});
+    ASSERT_EQ(mp->step(in), StepStatus::Ok);
+    ASSERT_EQ(mn->step(in), StepStatus::Ok);
+  }
+  const MatX3 up = mp->surface() - patch.organ.surface.V, un = mn->surface() - node.organ.surface.V;
+  EXPECT_LT(up(v, 2), 0);
+  EXPECT_LT(-up(v, 2), -un(v, 2)) << "spread over 3 cm, the loaded vertex sinks less";
+  // A vertex 2 cm from the loaded one: a larger share of the loaded vertex's motion.
+  int ring = -1;
+  for (int i = 0; i < patch.organ.surface.V.rows(); ++i) {
+    const Real d = (patch.organ.surface.V.row(i) - patch.organ.surface.V.row(v)).norm();
+    if (d > 0.015 && d < 0.025 &&
+        (ring < 0 || patch.organ.surface.V(i, 2) > patch.organ.surface.V(ring, 2)))
+      ring = i;
+  }
+  ASSERT_GE(ring, 0);
+  EXPECT_GT(up(ring, 2) / up(v, 2), un(ring, 2) / un(v, 2));
+}
+
 TEST(GuidedModel, SurfaceTransferChangesOnlyTheFineSurface) {
   // The same loaded run with the gradient (default) and the linear transfer: identical
   // particles, fine surfaces that differ (the transfer is used) by a fraction of the motion.

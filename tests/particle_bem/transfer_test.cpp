@@ -149,5 +149,41 @@ TEST(GradientTransfer, BeatsLinearOnACurvedSurfaceAndKeepsTheRestState) {
   EXPECT_LT(eGrad, 0.5 * eLin) << "linear " << eLin << ", gradient " << eGrad;
 }
 
+// A point force spread as a pressure patch: the shares sum to 1 (the resultant is the force),
+// only nodes whose support meets the patch carry load, on a flat symmetric grid the patch about a
+// vertex is symmetric and its centre carries the largest share, and the shares do not depend on
+// the mesh beyond its resolution (the centroid of the load is the patch centre on both grids).
+TEST(PressurePatch, SharesSumToOneStayWithinTheRadiusAndCentreOnThePatch) {
+  const Real R = 0.03;
+  for (const int n : {21, 41}) {
+    SCOPED_TRACE(n);
+    const Real h = 0.2 / (n - 1);
+    const SurfaceMesh s = flatGrid(n, h);
+    const int mid = (n / 2) * n + n / 2;
+    const Vec3 c = s.V.row(mid).transpose();
+    const auto shares = pressurePatchShares(s, c, R);
+    ASSERT_FALSE(shares.empty());
+    Real sum = 0, centreShare = 0, largest = 0;
+    Vec3 centroid = Vec3::Zero();
+    for (const auto& [node, w] : shares) {
+      EXPECT_GT(w, 0);
+      // A node carries load only if one of its triangles comes within R of c.
+      EXPECT_LT((s.V.row(node).transpose() - c).norm(), R + 1.5 * h) << node;
+      sum += w;
+      centroid += w * s.V.row(node).transpose();
+      if (node == mid) centreShare = w;
+      largest = std::max(largest, w);
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-12);
+    EXPECT_EQ(centreShare, largest);
+    EXPECT_LT((centroid - c).norm(), 1e-3 * R) << "the load's centroid is the patch centre";
+  }
+  // A patch far smaller than the elements that catches no sample point: empty (the model falls
+  // back to the closest triangle), never a division by zero.
+  const SurfaceMesh coarse = flatGrid(3, 0.1);
+  EXPECT_TRUE(pressurePatchShares(coarse, Vec3(0.1, 0.1, 0), 1e-4).empty());
+  EXPECT_TRUE(pressurePatchShares(coarse, Vec3(0.1, 0.1, 0), 0.0).empty());
+}
+
 }  // namespace
 }  // namespace deform::particle_bem
