@@ -1,4 +1,4 @@
-// reference_fem with conform_fixed (default): the tets fill the organ minus the fixed box, so
+// reference_fem with conform_fixed (opt-in): the tets fill the organ minus the fixed box, so
 // the clamped boundary is the box face itself. Checked through the plugin: no node lies inside
 // the box, every node on the box is pinned (zero displacement after a loaded solve, P1 and P2),
 // the surface vertices inside the box are no nodes and report their rest positions, a point load
