@@ -148,6 +148,7 @@ TEST(ReferenceFemConformingFixed, BoxAroundTheWholeOrganIsAnInputError) {
   organ.fixed.boxes[0].hi = b.hi + Vec3::Constant(0.01);
   const ModelInfo& info = loader().load("reference_fem");
   ParamValues p = ParamValues::defaults(info.params);
+  p.set("conform_fixed", true);
   std::unique_ptr<Model> m = info.create();
   try {
     m->init(ModelSetup{organ, p, cache(), 0.01, Vec3(0, 0, -9.81)});
