@@ -119,6 +119,40 @@ void BM_QuasiStaticGraspLift(benchmark::State& state) {
   state.counters["minor_faults"] = double(after.ru_minflt - before.ru_minflt);
   state.counters["invol_switches"] = double(after.ru_nivcsw - before.ru_nivcsw);
 }
+/// One assembly of the full stiffness pattern's values at a deformed state (the grasp-lift's
+/// linearised lift applied as a smooth field: every element strained), per material; arg 1 = 1:
+/// with the PSD projection of the element stress derivatives.
+void BM_StiffnessAssembly(benchmark::State& state) {
+  const TetMeshResult& m = mesh50k();
+  Material mat;
+  mat.poisson = 0.45;
+  FemSystem sys(m.mesh, mat, MaterialModel(state.range(0)));
+  const Box box = boundingBox(m.mesh.V);
+  VecX x = sys.restPositions();
+  for (int i = 0; i < sys.numNodes(); ++i) {
+    const Real s = (m.mesh.V(i, 2) - box.lo.z()) / box.size().z();
+    x(3 * i + 2) += 0.1 * s * s * box.size().z();                // up to 10% stretch along z
+    x(3 * i) += 0.05 * s * (m.mesh.V(i, 1) - box.center().y());  // and shear
+  }
+  VecX values;
+  for (auto _ : state) {
+    sys.stiffnessValues(x, values, state.range(1) != 0);
+    benchmark::DoNotOptimize(values.data());
+  }
+  state.SetLabel(std::string(materialModelName(MaterialModel(state.range(0)))) +
+                 (state.range(1) ? " projected" : ""));
+  state.counters["tets"] = double(m.mesh.numTets());
+  state.counters["ns_per_tet"] =
+      benchmark::Counter(double(m.mesh.numTets()), benchmark::Counter::kIsIterationInvariantRate |
+                                                       benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_StiffnessAssembly)
+    ->Args({int(MaterialModel::Linear), 0})
+    ->Args({int(MaterialModel::Corotational), 0})
+    ->Args({int(MaterialModel::NeoHookean), 0})
+    ->Args({int(MaterialModel::NeoHookean), 1})
+    ->Unit(benchmark::kMillisecond);
+
 BENCHMARK(BM_QuasiStaticGraspLift)
     ->Arg(int(MaterialModel::Linear))
     ->Arg(int(MaterialModel::Corotational))

@@ -457,6 +457,7 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
       throw std::logic_error("reference_fem: stiffness pattern without a diagonal entry");
   }
   m_haveFactor = false;
+  installCholmodAllocator();  // large pages for the factor (see sparse.h)
   m_chol = std::make_unique<SparseCholesky>();
   m_chol->cholmod().print = 0;  // a non-PD matrix is handled here, not printed
   if (nf > 0) {

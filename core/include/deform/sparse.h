@@ -36,4 +36,15 @@ class SerialOpenMpScope {
   int m_saved = -1;  ///< previous max-active-levels, -1: nothing changed
 };
 
+/// Routes CHOLMOD's large allocations (>= 2 MiB: the factor's values, the supernodal update
+/// workspace, permuted copies of the matrix) to memory mapped in 2 MiB-aligned blocks advised
+/// for transparent huge pages (madvise MADV_HUGEPAGE), and keeps freed blocks for reuse (up to
+/// 1 GiB); smaller requests go to malloc. Why: each numerical factorisation allocates and frees
+/// tens of MB, which glibc returns to the kernel and page-faults back in 4 KiB at a time
+/// (measured on the 51k-tet liver Neo-Hookean solve: 48,800 minor faults and 0.3-0.5 s of
+/// kernel time out of 2.8 s; 1,450 faults with large pages). Installs itself once per process
+/// (SuiteSparse's allocator hooks are global); memory CHOLMOD obtained before is still freed
+/// correctly. Thread-safe. Call before creating a SparseCholesky.
+void installCholmodAllocator();
+
 }  // namespace deform
