@@ -25,12 +25,11 @@ Mat3 cofactor(const Mat3& F) {
   return H;
 }
 
-Mat3 cofactorDerivative(const Mat3& F, const Mat3& dF) {
-  Mat3 dH;
-  dH.col(0) = dF.col(1).cross(F.col(2)) + F.col(1).cross(dF.col(2));
-  dH.col(1) = dF.col(2).cross(F.col(0)) + F.col(2).cross(dF.col(0));
-  dH.col(2) = dF.col(0).cross(F.col(1)) + F.col(0).cross(dF.col(1));
-  return dH;
+/// J^{-2/3}: cbrt is several times cheaper than pow; pow's value (NaN, inf) for J <= 0.
+Real jMinusTwoThirds(Real J) {
+  if (!(J > 0)) return std::pow(J, -2.0 / 3.0);
+  const Real c = std::cbrt(J);
+  return 1.0 / (c * c);
 }
 
 Mat3 cross(const Vec3& w) {
@@ -166,7 +165,7 @@ Real NeoHookeanMaterial::energyDensity(const Mat3& F) const {
   const Real J = F.determinant();
   if (!(J > 0)) return std::numeric_limits<Real>::infinity();
   const Real I1 = F.squaredNorm();
-  return 0.5 * lame.mu * (std::pow(J, -2.0 / 3.0) * I1 - 3.0) +
+  return 0.5 * lame.mu * (jMinusTwoThirds(J) * I1 - 3.0) +
          0.5 * lame.bulk() * (J - 1.0) * (J - 1.0);
 }
 
@@ -175,30 +174,37 @@ Mat3 NeoHookeanMaterial::stress(const Mat3& F) const {
   const Real J = F.determinant();
   const Real I1 = F.squaredNorm();
   const Mat3 H = cofactor(F);
-  const Real a = std::pow(J, -2.0 / 3.0);
+  const Real a = jMinusTwoThirds(J);
   return lame.mu * a * F + (-lame.mu / 3.0 * I1 * a / J + lame.bulk() * (J - 1.0)) * H;
 }
 
 Mat9 NeoHookeanMaterial::stressDerivative(const Mat3& F) const {
+  // P = mu a F + (b + c) H with a = J^{-2/3}, b = -mu/3 I1 J^{-5/3}, c = kappa (J - 1), so with
+  // dJ = H : dF, dI1 = 2 F : dF and f = vec F, h = vec H:
+  //   dP/dF = mu a I + alpha (f h^T + h f^T) + beta h h^T + (b + c) dH/dF,
+  //   alpha = -2/3 mu J^{-5/3}, beta = 5/9 mu I1 J^{-8/3} + kappa,
+  // and dH/dF maps dF's column l to H's column j by the cross-product matrices of F's columns
+  // (H = [F1 x F2, F2 x F0, F0 x F1]).
   const Real J = F.determinant();
   const Real I1 = F.squaredNorm();
   const Mat3 H = cofactor(F);
   const Real kappa = lame.bulk(), mu = lame.mu;
-  const Real a = std::pow(J, -2.0 / 3.0);  // J^{-2/3}
-  const Real a5 = a / J;                   // J^{-5/3}
-  const Real a8 = a5 / J;                  // J^{-8/3}
+  const Real a = jMinusTwoThirds(J);
+  const Real a5 = a / J, a8 = a5 / J;
   const Real b = -mu / 3.0 * I1 * a5;
   const Real c = kappa * (J - 1.0);
-  Mat9 D;
-  for (int k = 0; k < 9; ++k) {
-    const Mat3 dF = basis(k);
-    const Real dJ = (H.array() * dF.array()).sum();
-    const Real dI1 = 2.0 * (F.array() * dF.array()).sum();
-    const Real da = -2.0 / 3.0 * a5 * dJ;
-    const Real db = -mu / 3.0 * (dI1 * a5 - 5.0 / 3.0 * I1 * a8 * dJ);
-    const Real dc = kappa * dJ;
-    D.col(k) = vec(mu * a * dF + mu * da * F + (db + dc) * H + (b + c) * cofactorDerivative(F, dF));
-  }
+  const Real alpha = -2.0 / 3.0 * mu * a5, beta = 5.0 / 9.0 * mu * I1 * a8 + kappa;
+  const Vec9 f = vec(F), h = vec(H);
+  Mat9 D = alpha * (f * h.transpose() + h * f.transpose()) + beta * h * h.transpose();
+  D.diagonal().array() += mu * a;
+  const Real s = b + c;
+  const Mat3 X0 = s * cross(F.col(0)), X1 = s * cross(F.col(1)), X2 = s * cross(F.col(2));
+  D.block<3, 3>(0, 3) -= X2;
+  D.block<3, 3>(0, 6) += X1;
+  D.block<3, 3>(3, 0) += X2;
+  D.block<3, 3>(3, 6) -= X0;
+  D.block<3, 3>(6, 0) -= X1;
+  D.block<3, 3>(6, 3) += X0;
   return D;
 }
 
@@ -211,7 +217,7 @@ Mat9 NeoHookeanMaterial::projectedStressDerivative(const Mat3& F) const {
   const Mat3 U = svd.matrixU(), V = svd.matrixV();
   const Real mu = lame.mu, kappa = lame.bulk();
   const Real I1 = s.squaredNorm();
-  const Real a = std::pow(J, -2.0 / 3.0);
+  const Real a = jMinusTwoThirds(J);
   const Real c = kappa * (J - 1.0) * J - mu / 3.0 * a * I1;
   // d^2 psi / d sigma_i d sigma_j (psi_i = mu a sigma_i + c / sigma_i, see the header).
   Mat3 H;

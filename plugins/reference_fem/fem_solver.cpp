@@ -23,6 +23,8 @@ constexpr Real kMaxForcing = 0.1;
 constexpr Real kLiftForcing = 1e-2;
 constexpr int kRefactorCg = 25;
 constexpr int kMaxCg = 60;
+constexpr Real kArmijo = 1e-4;           // sufficient decrease (delta)
+constexpr Real kObjectiveNoise = 1e-10;  // relative round-off allowed in Pi for that condition
 
 using Clock = std::chrono::steady_clock;
 
@@ -341,19 +343,27 @@ Real FemSystem::elasticGradient(const VecX& x, VecX& g) const {
 
 void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const {
   values.setZero(m_pattern.nonZeros());
-  addStiffness(x, projectSpd, [&](int p, Real k) { values(p) += k; });
-}
-
-void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd,
-                                const std::vector<int>& map, Eigen::Index size) const {
-  values.setZero(size);
-  addStiffness(x, projectSpd, [&](int p, Real k) {
-    if (const int q = map[size_t(p)]; q >= 0) values(q) += k;
+  const int nd = 3 * nodesPerElement(), nn = nd * nd;
+  forEachElementStiffness(x, projectSpd, [&](int t, const Real* k) {
+    const int* slot = m_slots.data() + size_t(t) * size_t(nn);
+    for (int i = 0; i < nn; ++i) values(slot[i]) += k[i];
   });
 }
 
-template <class Add>
-void FemSystem::addStiffness(const VecX& x, bool projectSpd, Add&& add) const {
+void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd,
+                                const std::vector<int>& slots, Eigen::Index size) const {
+  values.setZero(size);
+  const int nd = 3 * nodesPerElement(), np = nd * (nd + 1) / 2;
+  forEachElementStiffness(x, projectSpd, [&](int t, const Real* k) {
+    const int* slot = slots.data() + size_t(t) * size_t(np);
+    for (int c = 0; c < nd; ++c, k += nd)
+      for (int r = c; r < nd; ++r, ++slot)
+        if (*slot >= 0) values(*slot) += k[r];
+  });
+}
+
+template <class Sink>
+void FemSystem::forEachElementStiffness(const VecX& x, bool projectSpd, Sink&& sink) const {
   forEachMaterial([&](const auto& mat) {
     if (m_order == ElementOrder::Quadratic) {
       QuadraticTetEvaluation e;
@@ -363,9 +373,7 @@ void FemSystem::addStiffness(const VecX& x, bool projectSpd, Add&& add) const {
                              gatherQuadratic(x, &m_elemNodes[size_t(10 * t)]),
                              TetEvalMode::Stiffness, e, projectSpd);
         if (!std::isfinite(e.energy)) continue;  // inverted: contributes nothing
-        const int* slot = m_slots.data() + size_t(t) * 900;
-        const Real* k = e.stiffness.data();  // column-major, matches the slot order
-        for (int i = 0; i < 900; ++i) add(slot[i], k[i]);
+        sink(t, e.stiffness.data());             // column-major, matches the slot order
       }
       return;
     }
@@ -375,9 +383,7 @@ void FemSystem::addStiffness(const VecX& x, bool projectSpd, Add&& add) const {
       if (!(r.volume > 0)) continue;
       evaluateTet(mat, r, gather(x, m_rest.T.row(t).transpose()), TetEvalMode::Stiffness, e,
                   projectSpd);
-      const int* slot = m_slots.data() + size_t(t) * 144;
-      const Real* k = e.stiffness.data();  // column-major, matches the slot order
-      for (int i = 0; i < 144; ++i) add(slot[i], k[i]);
+      sink(t, e.stiffness.data());
     }
   });
 }
@@ -388,8 +394,6 @@ VecX FemSystem::externalForce(const LoadCase& loads) const {
   for (const auto& [node, force] : loads.nodeForces) f.segment<3>(3 * node) += force;
   return f;
 }
-
-// ---- EquilibriumSolver ----------------------------------------------------------------------
 
 void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
   if (m_prepared && dofs == m_constrainedDofs) return;
@@ -448,6 +452,21 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
   for (size_t q = 0; q < entries.size(); ++q) {
     m_Kff.innerIndexPtr()[q] = entries[q].first;
     m_fullToFree[size_t(entries[q].second)] = int(q);
+  }
+  // Each element entry pair (r, c) / (c, r) lands on the one of its two full-pattern entries
+  // that lies in K_ff's lower triangle (or nowhere, when a dof is constrained).
+  {
+    const int nt = m_sys.rest().numTets(), nd = 3 * m_sys.nodesPerElement();
+    const int np = nd * (nd + 1) / 2;
+    m_elementFreeSlots.assign(size_t(nt) * size_t(np), -1);
+    for (int t = 0; t < nt; ++t) {
+      int* slot = m_elementFreeSlots.data() + size_t(t) * size_t(np);
+      for (int c = 0; c < nd; ++c)
+        for (int r = c; r < nd; ++r, ++slot) {
+          const int q = m_fullToFree[size_t(m_sys.elementSlot(t, r, c))];
+          *slot = q >= 0 ? q : m_fullToFree[size_t(m_sys.elementSlot(t, c, r))];
+        }
+    }
   }
   m_Kff.coeffs().setZero();
   m_freeDiagonal.assign(size_t(nf), 0);
@@ -521,10 +540,11 @@ void EquilibriumSolver::assembleFree(const VecX& x, const InertiaTerms* in, bool
     scatterFree(m_fullValues, in, free);
     return;
   }
-  // Straight into the free block (same sums in the same order as through the full pattern).
+  // Straight into the free block's lower triangle: each element adds one entry of every
+  // symmetric pair (the full-pattern path may add the other one: equal up to round-off).
   {
     ScopedTimer timer(m_report->assemblySeconds);
-    m_sys.stiffnessValues(x, free, projectSpd, m_fullToFree, m_Kff.nonZeros());
+    m_sys.stiffnessValues(x, free, projectSpd, m_elementFreeSlots, m_Kff.nonZeros());
   }
   addInertiaDiagonal(in, free);
 }
@@ -772,7 +792,14 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
         // serves the next iteration.
         const Real phi = ls == 0 ? objectiveGradient(xs + step, f, in, gTrial)
                                  : objective(xs + alpha * step, f, in);
-        if (phi <= phi0 + 1e-4 * alpha * slope) {
+        // Armijo, or for the full step the approximate Wolfe condition of Hager & Zhang ("A new
+        // conjugate gradient method with guaranteed descent and an efficient line search",
+        // SIAM J. Optim. 16(1) 2005, eq. 4.2): near the solution the decrease of Pi drops to
+        // the round-off of its sum, and the derivative along the step, g(x + s) . s <=
+        // (2 delta - 1) g(x) . s, judges it where Pi's values cannot.
+        if (phi <= phi0 + kArmijo * alpha * slope ||
+            (ls == 0 && phi <= phi0 + kObjectiveNoise * std::abs(phi0) &&
+             gTrial.dot(step) <= (2 * kArmijo - 1) * slope)) {
           accepted = true;
           phiNext = phi;
           break;
