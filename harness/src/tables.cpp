@@ -632,7 +632,7 @@ TableDef bemAccuracy(const TablesOptions& o) {
           "sum|u_ref| over the fine vertices at the end of the run (" +
           number(duration) +
           " s; a 0.5 N force presses on the liver's top, bottom 15% "
-          "fixed, no gravity).",
+          "fixed, E = 5.5 kPa, nu = 0.3, no gravity).",
       "Where the coarse count exceeds the fine one (paper rows with ratio < 1) our "
       "decimation cannot add vertices: the model's coarse surface is then the organ surface "
       "cut along the box and decimated to at most the coarse count, near the reference "
@@ -640,9 +640,10 @@ TableDef bemAccuracy(const TablesOptions& o) {
       "Two measures, both R = sum|u_o - u_imp| / sum|u_o| over the fine vertices (the "
       "paper's definition, Table 2), against the paper's figure (paper loss ratio): "
       "'accuracy loss ratio' (loss_ratio) is the whole model run above (point force as a "
-      "3 cm pressure patch, particles, virtual springs, transfer to the organ surface; at the "
-      "compared instant the springs are at rest, so it equals the static BEM answer to the "
-      "same load); 'static BEM loss ratio (paper's measure)' (static_loss_ratio) is the "
+      "3 cm pressure patch, particles, virtual springs, transfer to the organ surface; under "
+      "a constant load the springs scale every displacement by the same factor on both runs, "
+      "1 at the compared instant, so it equals the static BEM answer to that load); 'static BEM "
+      "loss ratio (paper's measure)' (static_loss_ratio) is the "
       "paper's own measure, static BEM only: both surfaces decimated from the 8122-vertex "
       "liver, the same Gaussian traction field (500 Pa, r = 3 cm) integrated over each "
       "mesh's elements, nu = 0.45, the model's discretisation (conforming support, "
