@@ -366,8 +366,7 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   const auto t0 = Clock::now();
   const int nc = m_coarse.numVertices();
   m_P.clear();
-  m_patchU.setZero(3 * nc);
-  VecX& patchU = m_patchU;
+  m_patchU.setZero(3 * nc);  // displacement of the patch loads (their precomputed responses)
   for (const PointLoad& l : in.loads) {
     if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_map.triangle.size())) continue;
     if (m_loadRadius > 0) {
@@ -391,7 +390,7 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
             if (q[k] != 0 && !m_fixedMask[k]) W.noalias() += q[k] * m_bem.M.middleCols(3 * k, 3);
           r = m_patchResponse.emplace(l.surfaceVertex, std::move(W)).first;
         }
-        patchU.noalias() += r->second * l.force;
+        m_patchU.noalias() += r->second * l.force;
         continue;
       } else {
         for (const auto& [node, c] : it->second)
