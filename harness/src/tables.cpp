@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <set>
@@ -580,8 +581,30 @@ constexpr BemAccuracyPaperRow kBemTable2[] = {
     {608, 506, 1008, 0.83, 0.014}, {608, 1000, 1996, 1.64, 0.033}, {608, 1216, 2428, 0, 0},
     {608, 1586, 3168, 2.61, 0.062}};
 
+/// coarse_vertices of the bem-accuracy reference: particle_bem's maximum (no decimation).
+constexpr int kBemFineVertices = 20000;
+
 std::string bemAccuracyId(const BemAccuracyPaperRow& p) {
   return "bem-accuracy/coarse_" + std::to_string(p.coarse) + "_fine_" + std::to_string(p.fine);
+}
+
+/// The paper's static measure, as `bem_tables accuracy --out FILE` writes it (particle_bem).
+constexpr const char* kBemStaticFile = "bem-accuracy-static.json";
+
+/// The rows of that file's bem-accuracy table (empty when the file is absent or unreadable: the
+/// static columns stay blank).
+ojson bemStaticRows(const fs::path& file) {
+  std::ifstream in(file);
+  if (!in) return ojson::array();
+  try {
+    const ojson j = ojson::parse(in);
+    for (const ojson& t : j.is_array() ? j : ojson::array({j}))
+      if (t.is_object() && t.value("name", "") == "bem-accuracy" && t.contains("rows") &&
+          t["rows"].is_array())
+        return t["rows"];
+  } catch (const std::exception&) {
+  }
+  return ojson::array();
 }
 
 TableDef bemAccuracy(const TablesOptions& o) {
@@ -593,19 +616,44 @@ TableDef bemAccuracy(const TablesOptions& o) {
                                  {{"fine_polygons", "fine polygons"}},
                                  withPaper("vertex_ratio", "vertex ratio"),
                                  withPaper("loss_ratio", "accuracy loss ratio", "paper loss ratio"),
-                                 {{"status", "status"}, {"scene", "scene"}, {"note", "note"}}}));
+                                 {{"status", "status"}, {"scene", "scene"}, {"note", "note"}},
+                                 {{"static_loss_ratio", "static BEM loss ratio (paper's measure)"},
+                                  {"static_fine_vertices", "static fine vertices"},
+                                  {"static_vertex_ratio", "static vertex ratio"}}}));
   const double duration = o.quick ? 0.15 : 0.5;
   t.notes = {
       "The organ (the fine surface) is the liver phantom at the resolution giving about the "
       "paper's fine vertex count; the model is particle_bem with coarse_vertices = the "
-      "coarse count; the reference is the same plugin run with coarse_vertices = the fine "
-      "count (no decimation: BEM on the fine surface). Loss ratio = sum|u_ref - u| / "
-      "sum|u_ref| over the fine vertices at the end of the run (" +
+      "coarse count; the reference is the same plugin run without decimation (coarse_vertices "
+      "= " +
+          std::to_string(kBemFineVertices) +
+          ": BEM on the whole fine surface, cut along the fixed box's top face, so it has a few "
+          "more nodes than the fine vertices, which are among them). Loss ratio = sum|u_ref - u| / "
+          "sum|u_ref| over the fine vertices at the end of the run (" +
           number(duration) +
           " s; a 0.5 N force presses on the liver's top, bottom 15% "
-          "fixed, no gravity).",
+          "fixed, E = 5.5 kPa, nu = 0.3, no gravity).",
       "Where the coarse count exceeds the fine one (paper rows with ratio < 1) our "
-      "decimation cannot add vertices, so the model equals the reference (loss 0)."};
+      "decimation cannot add vertices: the model's coarse surface is then the organ surface "
+      "cut along the box and decimated to at most the coarse count, near the reference "
+      "(a small loss).",
+      "Two measures, both R = sum|u_o - u_imp| / sum|u_o| over the fine vertices (the "
+      "paper's definition, Table 2), against the paper's figure (paper loss ratio): "
+      "'accuracy loss ratio' (loss_ratio) is the whole model run above (point force as a "
+      "3 cm pressure patch, particles, virtual springs, transfer to the organ surface; under "
+      "a constant load the springs scale every displacement by the same factor on both runs, "
+      "1 at the compared instant, so it equals the static BEM answer to that load); 'static BEM "
+      "loss ratio (paper's measure)' (static_loss_ratio) is the "
+      "paper's own measure, static BEM only: both surfaces decimated from the 8122-vertex "
+      "liver, the same Gaussian traction field (500 Pa, r = 3 cm) integrated over each "
+      "mesh's elements, nu = 0.45, the model's discretisation (conforming support, "
+      "singular reaction, gradient transfer). It is read from " +
+          std::string(kBemStaticFile) +
+          " in the output folder, written by the particle_bem program `bem_tables accuracy "
+          "--out <out>/" +
+          kBemStaticFile +
+          "` (about 15 min; blank when that file is absent). The issue's goal, R <= 3% at a "
+          "vertex ratio of 2, is stated on the paper's measure."};
   for (const auto& p : kBemTable2) {
     if (o.quick && !(p.coarse == 284 && p.fine != 574)) continue;
     // The liver phantom's vertex count scales about linearly with resolution (8122 at 1).
@@ -619,16 +667,27 @@ TableDef bemAccuracy(const TablesOptions& o) {
     j["loads"] = verticalForce(topVertex(s), -0.5, duration + 1.0);
     j["models"] =
         ojson::array({model("particle_bem", "particle_bem", {{"coarse_vertices", p.coarse}})});
-    addReference(j, model("particle_bem", "bem_fine",
-                          {{"coarse_vertices", std::min(20000, s.numVertices())}}));
+    // The reference's BEM surface is the whole organ surface: coarse_vertices at the
+    // parameter's maximum, since with the conforming support (the default) the organ surface is
+    // first cut along the fixed box, which adds vertices (562 -> 633 at the 574 row); a count of
+    // the organ's vertices would decimate that cut surface back, a coarser reference (1.9%
+    // instead of 1.1% from the organ surface subdivided once, particle_bem README "Sixth pass").
+    addReference(j, model("particle_bem", "bem_fine", {{"coarse_vertices", kBemFineVertices}}));
     t.cases.push_back({bemAccuracyId(p), j});
   }
   const bool quick = o.quick;
   t.rows = [quick](const Results& res, const fs::path& dir) {
+    const ojson statics = bemStaticRows(dir / kBemStaticFile);
     std::vector<ojson> rows;
     for (const auto& p : kBemTable2) {
       ojson row;
       row["coarse_vertices"] = p.coarse;
+      for (const ojson& s : statics)
+        if (s.value("coarse_vertices", -1) == p.coarse && s.value("fine_vertices", -1) == p.fine) {
+          row["static_loss_ratio"] = s.value("loss_ratio", ojson(nullptr));
+          row["static_fine_vertices"] = s["fine_vertices"];
+          row["static_vertex_ratio"] = s.value("vertex_ratio", ojson(nullptr));
+        }
       if (p.ratio > 0) {
         row["paper_fine_vertices"] = p.fine;
         row["paper_vertex_ratio"] = p.ratio;

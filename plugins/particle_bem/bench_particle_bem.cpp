@@ -42,12 +42,13 @@ struct Setup {
   int loadVertex = 0;
 };
 
-Setup& setup(int coarse, bool guided, const std::string& transfer) {
-  static std::map<std::tuple<int, bool, std::string>, std::unique_ptr<Setup>> all;
-  auto& s = all[{coarse, guided, transfer}];
+Setup& setup(int coarse, bool guided, const std::string& transfer, const std::string& patch) {
+  static std::map<std::tuple<int, bool, std::string, std::string>, std::unique_ptr<Setup>> all;
+  auto& s = all[{coarse, guided, transfer, patch}];
   if (s) return *s;
   s = std::make_unique<Setup>();
   s->params.set("surface_transfer", transfer);
+  s->params.set("patch_traction", patch);
   s->params.set("coarse_vertices", (long long)coarse);
   s->params.set("guidance", guided);
   s->params.set("points", (long long)(guided ? 300 : coarse));
@@ -64,8 +65,9 @@ Setup& setup(int coarse, bool guided, const std::string& transfer) {
   return *s;
 }
 
-void stepBenchmark(benchmark::State& state, bool guided, const std::string& transfer = "gradient") {
-  Setup& s = setup(int(state.range(0)), guided, transfer);
+void stepBenchmark(benchmark::State& state, bool guided, const std::string& transfer = "gradient",
+                   const std::string& patch = "consistent") {
+  Setup& s = setup(int(state.range(0)), guided, transfer, patch);
   s.model.reset();
   int step = 0;
   std::map<std::string, double> phases;
@@ -93,6 +95,12 @@ void BM_GuidedStep(benchmark::State& state) {
   stepBenchmark(state, true);
 }
 BENCHMARK(BM_GuidedStep)->Arg(284)->Arg(1144)->Unit(benchmark::kMillisecond);
+
+// The same with the lumped pressure-patch tractions (patch_traction = lumped, the first version).
+void BM_GuidedStepLumpedPatch(benchmark::State& state) {
+  stepBenchmark(state, true, "gradient", "lumped");
+}
+BENCHMARK(BM_GuidedStepLumpedPatch)->Arg(284)->Arg(1144)->Unit(benchmark::kMillisecond);
 
 // The same with the linear coarse -> fine transfer (surface_transfer = linear).
 void BM_GuidedStepLinearTransfer(benchmark::State& state) {

@@ -184,4 +184,33 @@ std::vector<std::pair<int, Real>> pressurePatchShares(const SurfaceMesh& s, cons
   return out;
 }
 
+SparseMatrix surfaceMassMatrix(const SurfaceMesh& s) {
+  std::vector<Triplet> t;
+  t.reserve(9 * size_t(s.numFaces()));
+  for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+    const Vec3 a = s.V.row(s.F(f, 0)).transpose(), b = s.V.row(s.F(f, 1)).transpose(),
+               c = s.V.row(s.F(f, 2)).transpose();
+    const Real area = 0.5 * (b - a).cross(c - a).norm();
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        t.emplace_back(s.F(f, i), s.F(f, j), area / 12 * (i == j ? 2 : 1));
+  }
+  SparseMatrix m(s.numVertices(), s.numVertices());
+  m.setFromTriplets(t.begin(), t.end());
+  return m;
+}
+
+PatchProjection::PatchProjection(const SurfaceMesh& s) : m_n(s.numVertices()) {
+  auto ldlt = std::make_shared<Eigen::SimplicialLDLT<SparseMatrix>>(surfaceMassMatrix(s));
+  m_ok = ldlt->info() == Eigen::Success;
+  m_ldlt = std::move(ldlt);
+}
+
+VecX PatchProjection::tractionPerForce(const std::vector<std::pair<int, Real>>& shares) const {
+  VecX c = VecX::Zero(m_n);
+  for (const auto& [node, share] : shares) c[node] += share;
+  if (!m_ok) return VecX::Zero(m_n);
+  return m_ldlt->solve(c);
+}
+
 }  // namespace deform::particle_bem

@@ -63,6 +63,11 @@ std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
                       "a point force is spread as a paraboloid pressure patch of this radius "
                       "over the coarse surface (as reference_fem does); 0: on the closest coarse "
                       "triangle's nodes by barycentric weights"),
+      ParamSpec::choice("patch_traction", "consistent", {"consistent", "lumped"},
+                        "how the pressure patch becomes nodal tractions of the linear traction "
+                        "space: consistent = L2 projection (consistent mass matrix, the field's "
+                        "nodal loads kept), lumped = share / lumped nodal area (the first "
+                        "version; spreads the patch wider on coarse elements)"),
       ParamSpec::real("spring_stiffness", "1/s^2", 2500.0, 1e-3, 1e9,
                       "virtual spring stiffness per unit mass pulling particles to BEM targets"),
       ParamSpec::real("spring_damping", "1/s", 100.0, 0.0, 1e7,
@@ -169,6 +174,10 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
 
   m_loadRadius = p.real("load_radius");
   m_patchShares.clear();
+  m_patchResponse.clear();
+  m_patchTraction = p.choiceAs<PatchTraction>(
+      "patch_traction",
+      {{"consistent", PatchTraction::Consistent}, {"lumped", PatchTraction::Lumped}});
   m_springK = p.real("spring_stiffness");
   m_springC = p.real("spring_damping");
   m_repulsion = p.flag("repulsion");
@@ -227,6 +236,11 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
     setup.cache.put("particle_bem.M", key, w.bytes());
   }
   m_nodalArea = nodalAreas(m_coarse);
+  m_patchProjection = PatchProjection();
+  if (m_loadRadius > 0 && m_patchTraction == PatchTraction::Consistent) {
+    m_patchProjection = PatchProjection(m_coarse);
+    if (!m_patchProjection.ok()) ++m_numeric["singular_mass_matrix"];  // lumped fallback
+  }
 
   const TriangleGrid coarseGrid(m_coarse.V, m_coarse.F);
   m_map = mapToSurface(coarseGrid, S.V);
@@ -352,6 +366,7 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   const auto t0 = Clock::now();
   const int nc = m_coarse.numVertices();
   m_P.clear();
+  m_patchU.setZero(3 * nc);  // displacement of the patch loads (their precomputed responses)
   for (const PointLoad& l : in.loads) {
     if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_map.triangle.size())) continue;
     if (m_loadRadius > 0) {
@@ -364,9 +379,24 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
                                               m_loadRadius))
                  .first;
       }
-      for (const auto& [node, c] : it->second)
-        if (!m_fixedMask[node]) m_P.add(node, c * l.force / m_nodalArea[node]);
-      if (!it->second.empty()) continue;
+      if (it->second.empty()) {
+        // no sample within R: the closest triangle below
+      } else if (m_patchProjection.ok()) {
+        auto r = m_patchResponse.find(l.surfaceVertex);
+        if (r == m_patchResponse.end()) {
+          const VecX q = m_patchProjection.tractionPerForce(it->second);
+          MatX W = MatX::Zero(3 * nc, 3);
+          for (int k = 0; k < nc; ++k)
+            if (q[k] != 0 && !m_fixedMask[k]) W.noalias() += q[k] * m_bem.M.middleCols(3 * k, 3);
+          r = m_patchResponse.emplace(l.surfaceVertex, std::move(W)).first;
+        }
+        m_patchU.noalias() += r->second * l.force;
+        continue;
+      } else {
+        for (const auto& [node, c] : it->second)
+          if (!m_fixedMask[node]) m_P.add(node, c * l.force / m_nodalArea[node]);
+        continue;
+      }
     }
     const int t = m_map.triangle[l.surfaceVertex];
     for (int k = 0; k < 3; ++k) {
@@ -408,7 +438,7 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
       ++m_numeric["repulsion_pairs"];
     }
   }
-  m_U.setZero();
+  m_U = m_patchU;
   accumulateDisplacement(m_bem.M, m_P, m_U);
   if (m_bemGravity) m_U.noalias() += m_bem.gravity * in.gravity;
 

@@ -95,7 +95,13 @@ class ParticleBemModel final : public Model {
   Real m_loadRadius = 0;  ///< m, pressure patch of a point force (0: the closest triangle)
   /// Fine vertex -> its patch's nodal shares (pressurePatchShares), computed on first use.
   std::map<int, std::vector<std::pair<int, Real>>> m_patchShares;
-  VecX m_U, m_graspRhs, m_graspP;
+  PatchTraction m_patchTraction = PatchTraction::Consistent;
+  PatchProjection m_patchProjection;
+  /// Fine vertex -> displacement of the coarse nodes per unit force at it (3N x 3, m/N):
+  /// sum_k q_k M(:, 3k..3k+2) with q the consistent patch tractions (PatchTraction), computed
+  /// on first use, so a step costs one 3N x 3 product per loaded vertex.
+  std::map<int, MatX> m_patchResponse;
+  VecX m_U, m_patchU, m_graspRhs, m_graspP;
   GraspSolver m_graspSolver;
   MatX3 m_coarseDisp;
 

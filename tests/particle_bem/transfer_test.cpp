@@ -1,5 +1,6 @@
 // Tests of the coarse -> fine surface transfer (guided_particles.h): the half-gradient Hermite
 // blend with one-ring recovered gradients against the linear interpolation.
+#include "bem_assembly.h"
 #include "guided_particles.h"
 #include "test_support.h"
 #include "triangle_distance.h"
@@ -183,6 +184,53 @@ TEST(PressurePatch, SharesSumToOneStayWithinTheRadiusAndCentreOnThePatch) {
   const SurfaceMesh coarse = flatGrid(3, 0.1);
   EXPECT_TRUE(pressurePatchShares(coarse, Vec3(0.1, 0.1, 0), 1e-4).empty());
   EXPECT_TRUE(pressurePatchShares(coarse, Vec3(0.1, 0.1, 0), 0.0).empty());
+}
+
+// The consistent patch tractions (PatchTraction::Consistent): the resultant is the force, the
+// nodal loads int N_k t_h of the projected field are the patch's shares, and the projected field
+// has the patch's spread. On a plane the paraboloid patch t = w / int w has second moment
+// int |x - c|^2 t = R^2 / 3; on elements of 2/3 R the lumped form p_k = c_k / A_k spreads the
+// load by about an element (larger moment), the consistent one keeps it.
+TEST(PressurePatch, ConsistentTractionsKeepTheResultantAndThePatchSpread) {
+  const Real R = 0.03, h = 0.02;
+  const int n = 15;
+  const SurfaceMesh s = flatGrid(n, h);
+  const Vec3 c = s.V.row((n / 2) * n + n / 2).transpose();
+  const auto shares = pressurePatchShares(s, c, R);
+  const PatchProjection proj(s);
+  ASSERT_TRUE(proj.ok());
+  const VecX q = proj.tractionPerForce(shares);
+  const VecX A = nodalAreas(s);
+  VecX lumped = VecX::Zero(s.numVertices());
+  for (const auto& [k, w] : shares) lumped[k] = w / A[k];
+  EXPECT_NEAR(A.dot(q), 1.0, 1e-12);
+  EXPECT_NEAR(A.dot(lumped), 1.0, 1e-12);
+  const VecX loads = surfaceMassMatrix(s) * q;
+  for (const auto& [k, w] : shares) EXPECT_NEAR(loads[k], w, 1e-12);
+  // int |x - c|^2 sum_k p_k N_k over the grid (midpoint rule on 16 x 16 sub-triangles).
+  const auto secondMoment = [&](const VecX& p) {
+    Real m = 0;
+    const int sub = 16;
+    for (int f = 0; f < s.numFaces(); ++f) {
+      const Vec3 v[3] = {s.V.row(s.F(f, 0)).transpose(), s.V.row(s.F(f, 1)).transpose(),
+                         s.V.row(s.F(f, 2)).transpose()};
+      const Real area = 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).norm() / (sub * sub);
+      for (int i = 0; i < sub; ++i)
+        for (int j = 0; i + j < sub; ++j)
+          for (int up = 0; up < (i + j < sub - 1 ? 2 : 1); ++up) {
+            const Real b1 = (i + (up ? 2.0 : 1.0) / 3) / sub, b2 = (j + (up ? 2.0 : 1.0) / 3) / sub;
+            const Real b0 = 1 - b1 - b2;
+            const Vec3 x = b0 * v[0] + b1 * v[1] + b2 * v[2];
+            const Real t = b0 * p[s.F(f, 0)] + b1 * p[s.F(f, 1)] + b2 * p[s.F(f, 2)];
+            m += (x - c).squaredNorm() * t * area;
+          }
+    }
+    return m;
+  };
+  const Real exact = R * R / 3, consistent = secondMoment(q), lump = secondMoment(lumped);
+  EXPECT_LT(std::abs(consistent - exact), 0.1 * exact) << consistent << " vs " << exact;
+  EXPECT_GT(lump, 1.3 * exact) << "the lumped form spreads the patch";
+  EXPECT_LT(std::abs(consistent - exact), 0.5 * std::abs(lump - exact));
 }
 
 }  // namespace
