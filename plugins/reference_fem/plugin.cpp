@@ -16,7 +16,7 @@ namespace deform::reffem {
 
 namespace {
 
-constexpr const char* kMeshCacheVersion = "reference_fem.tets/3";
+constexpr const char* kMeshCacheVersion = "reference_fem.tets/4";
 
 enum class SolveKind { QuasiStatic, Dynamic };
 
@@ -37,7 +37,7 @@ std::vector<ParamSpec> referenceFemParams() {
       ParamSpec::flag("refine_surface", true,
                       "split surface edges longer than the edge length before meshing (the "
                       "input vertices stay nodes with their indices)"),
-      ParamSpec::flag("conform_fixed", false,
+      ParamSpec::flag("conform_fixed", true,
                       "mesh the organ minus the fixed boxes (caps pinned, u = 0), so the clamped "
                       "boundary is the same at every refinement; false: mesh the whole organ and "
                       "pin the nodes that fall inside the boxes"),
