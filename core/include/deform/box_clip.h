@@ -64,7 +64,10 @@ struct BoxClipResult {
 /// skipped; a box with zero extent along an axis removes nothing. Overlapping boxes are fine. A box
 /// strictly inside the organ leaves a cavity (a second closed component). Throws
 /// InputError(options.source, "fixed boxes", ...) when the boxes contain the whole organ, or when
-/// the boolean operation fails. Deterministic.
+/// the boolean operation fails. Deterministic: the same input gives the same output bit for bit
+/// in any process, whatever it allocated before (the corefinement's output, whose order follows
+/// heap addresses, is put in a canonical order with exactly rounded coordinates before the caps
+/// are remeshed).
 BoxClipResult clipSurfaceByBoxes(const SurfaceMesh& surface, const std::vector<Box>& boxes,
                                  const BoxClipOptions& options = {});
 
