@@ -9,6 +9,7 @@
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/boost/graph/helpers.h>
 
+#include <algorithm>
 #include <array>
 #include <cstring>
 #include <limits>
@@ -157,30 +158,60 @@ BoxClipResult clipSurfaceByBoxes(const SurfaceMesh& surface, const std::vector<B
     organ = std::move(diff);
   }
 
-  // To doubles. Kept input vertices convert exactly (no arithmetic was done on them); a cut
-  // point's plane coordinate is exactly the box's value, its others are rounded.
+  // To doubles, in a canonical order. The corefinement's output order is not a function of its
+  // input: its box-intersection pass identifies boxes by their heap addresses
+  // (Box_intersection_d::ID_FROM_BOX_ADDRESS), so the order in which cut points and faces are
+  // created depends on the process's allocation history, and the cap remeshing below (which is
+  // order-dependent) then gave different meshes for the same input in different processes. Nor is
+  // CGAL::to_double of a lazy exact number: it returns the midpoint of whatever interval
+  // approximation the evaluation path left behind. So every coordinate is rounded from its exact
+  // value, vertices are sorted by their coordinates (exact comparison breaks ties) and faces by
+  // their vertex indices (rotated to start at the smallest, keeping the orientation).
+  // Kept input vertices convert exactly; a cut point's plane coordinate is exactly the box's
+  // value, its others are the exact value rounded.
   Mesh mesh;
   std::map<Plane, int> planeId;
   auto patch = mesh.add_property_map<Mesh::Face_index, int>("f:patch", 0).first;
   {
-    std::vector<Mesh::Vertex_index> vmap(organ.number_of_vertices() +
+    std::vector<ExactMesh::Vertex_index> order(organ.vertices().begin(), organ.vertices().end());
+    std::vector<std::array<double, 3>> x(organ.number_of_vertices() +
                                          organ.number_of_removed_vertices());
-    for (ExactMesh::Vertex_index v : organ.vertices()) {
+    for (ExactMesh::Vertex_index v : order) {
       const EK::Point_3& p = organ.point(v);
-      vmap[size_t(v)] = mesh.add_vertex(
-          IK::Point_3(CGAL::to_double(p.x()), CGAL::to_double(p.y()), CGAL::to_double(p.z())));
+      x[size_t(v)] = {CGAL::to_double(CGAL::exact(p.x())), CGAL::to_double(CGAL::exact(p.y())),
+                      CGAL::to_double(CGAL::exact(p.z()))};
     }
+    std::sort(order.begin(), order.end(),
+              [&](ExactMesh::Vertex_index a, ExactMesh::Vertex_index b) {
+                if (x[size_t(a)] != x[size_t(b)]) return x[size_t(a)] < x[size_t(b)];
+                return CGAL::compare_xyz(organ.point(a), organ.point(b)) == CGAL::SMALLER;
+              });
+    std::vector<int> rank(x.size(), -1);
+    std::vector<Mesh::Vertex_index> vmap;
+    vmap.reserve(order.size());
+    for (size_t i = 0; i < order.size(); ++i) {
+      rank[size_t(order[i])] = int(i);
+      const auto& c = x[size_t(order[i])];
+      vmap.push_back(mesh.add_vertex(IK::Point_3(c[0], c[1], c[2])));
+    }
+    std::vector<std::array<int, 3>> faces;
+    faces.reserve(organ.number_of_faces());
     for (ExactMesh::Face_index f : organ.faces()) {
-      std::array<EK::Point_3, 3> p;
-      std::array<Mesh::Vertex_index, 3> v;
+      std::array<int, 3> t;
       int k = 0;
-      for (ExactMesh::Vertex_index u : CGAL::vertices_around_face(organ.halfedge(f), organ)) {
-        p[size_t(k)] = organ.point(u);
-        v[size_t(k++)] = vmap[size_t(u)];
-      }
-      const Mesh::Face_index g = mesh.add_face(v[0], v[1], v[2]);
+      for (ExactMesh::Vertex_index u : CGAL::vertices_around_face(organ.halfedge(f), organ))
+        t[size_t(k++)] = rank[size_t(u)];
+      std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
+      faces.push_back(t);
+    }
+    std::sort(faces.begin(), faces.end());
+    for (const auto& t : faces) {
+      const Mesh::Face_index g =
+          mesh.add_face(vmap[size_t(t[0])], vmap[size_t(t[1])], vmap[size_t(t[2])]);
       if (g == Mesh::null_face())
         throw InputError(src, "fixed boxes", "the clipped surface is not manifold");
+      std::array<EK::Point_3, 3> p;
+      for (int k = 0; k < 3; ++k) p[size_t(k)] = organ.point(order[size_t(t[size_t(k)])]);
       const Plane pl = capPlane(p, used);
       if (pl.axis >= 0) patch[g] = planeId.emplace(pl, int(planeId.size()) + 1).first->second;
     }

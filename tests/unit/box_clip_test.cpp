@@ -100,7 +100,8 @@ void expectValidClip(const SurfaceMesh& in, const std::vector<Box>& boxes, const
       continue;
     }
     ++snapped;
-    EXPECT_LT((q - p).norm(), 0.05 * shortestEdge(in, i) * std::sqrt(3.0)) << "vertex " << i;
+    EXPECT_LT((q - p).norm(), BoxClipOptions{}.snapFraction * shortestEdge(in, i) * std::sqrt(3.0))
+        << "vertex " << i;
     bool onPlane = false;
     for (const Box& b : boxes)
       for (int k = 0; k < 3; ++k) onPlane |= q[k] == b.lo[k] || q[k] == b.hi[k];
