@@ -370,7 +370,9 @@ TEST(BoxClip, VertexNearAPlaneIsSnappedOntoIt) {
   EXPECT_EQ(q.snappedInput, 0);
   for (int i = 0; i < s.numVertices(); ++i) {
     const int c = q.inputToClipped[size_t(i)];
-    if (c >= 0) EXPECT_TRUE((q.surface.V.row(c).array() == s.V.row(i).array()).all()) << i;
+    if (c >= 0) {
+      EXPECT_TRUE((q.surface.V.row(c).array() == s.V.row(i).array()).all()) << i;
+    }
   }
   EXPECT_NEAR(signedVolume(q.surface.V, q.surface.F), 8.0 - (1.5 + 5e-5) * 2 * (1 - 5e-5), 1e-12);
 }
