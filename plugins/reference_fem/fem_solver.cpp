@@ -459,12 +459,19 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
     const int nt = m_sys.rest().numTets(), nd = 3 * m_sys.nodesPerElement();
     const int np = nd * (nd + 1) / 2;
     m_elementFreeSlots.assign(size_t(nt) * size_t(np), -1);
+    const int nen = m_sys.nodesPerElement();
+    std::array<int, 30> free{};  // free index of each element dof (-1: constrained)
     for (int t = 0; t < nt; ++t) {
+      for (int a = 0; a < nen; ++a)
+        for (int k = 0; k < 3; ++k)
+          free[size_t(3 * a + k)] = m_freeIndex[size_t(3 * m_sys.elementNode(t, a) + k)];
       int* slot = m_elementFreeSlots.data() + size_t(t) * size_t(np);
       for (int c = 0; c < nd; ++c)
         for (int r = c; r < nd; ++r, ++slot) {
-          const int q = m_fullToFree[size_t(m_sys.elementSlot(t, r, c))];
-          *slot = q >= 0 ? q : m_fullToFree[size_t(m_sys.elementSlot(t, c, r))];
+          const int fr = free[size_t(r)], fc = free[size_t(c)];
+          if (fr < 0 || fc < 0) continue;  // stays -1
+          *slot = m_fullToFree[size_t(fr >= fc ? m_sys.elementSlot(t, r, c)
+                                               : m_sys.elementSlot(t, c, r))];
         }
     }
   }
@@ -480,7 +487,6 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
   m_chol = std::make_unique<SparseCholesky>();
   m_chol->cholmod().print = 0;  // a non-PD matrix is handled here, not printed
   if (nf > 0) {
-    ScopedTimer timer(m_report->analyzeSeconds);
     m_chol->cholmod().nmethods = 1;  // m_Kff is already in fill-reducing order
     m_chol->cholmod().method[0].ordering = CHOLMOD_NATURAL;
     m_chol->analyzePattern(m_Kff);
@@ -652,7 +658,10 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
   }
   std::sort(cdofs.begin(), cdofs.end());
   cdofs.erase(std::unique(cdofs.begin(), cdofs.end()), cdofs.end());
-  prepareConstraints(cdofs);
+  {
+    ScopedTimer timer(rep.analyzeSeconds);  // ordering, K_ff pattern, slots, symbolic factor
+    prepareConstraints(cdofs);
+  }
 
   const VecX fEnd = m_sys.externalForce(loads);
   const VecX fStart = fStartIn.size() == ndof ? fStartIn : VecX::Zero(ndof);

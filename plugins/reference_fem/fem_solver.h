@@ -105,7 +105,8 @@ struct SolveReport {
   int pcgIterations = 0;         ///< conjugate-gradient iterations (preconditioned by a factor)
   long long factorNonZeros = 0;  ///< nonzeros of the Cholesky factor L (CHOLMOD's analysis)
   double factorFlops = 0;        ///< flops of one numerical factorisation (CHOLMOD's analysis)
-  /// Wall-time breakdown of `seconds` (s): pattern analysis (ordering, symbolic factorisation),
+  /// Wall-time breakdown of `seconds` (s): pattern analysis (when the constrained set is new:
+  /// ordering, the free block's pattern and element slots, symbolic factorisation),
   /// stiffness assembly (element tangents, projection, scatter), numerical factorisation,
   /// triangular solves, and objective / gradient evaluations (line search, residuals).
   double analyzeSeconds = 0, assemblySeconds = 0, factorSeconds = 0, solveSeconds = 0,
