@@ -644,7 +644,7 @@ ojson bemStaticRowsFromPlugin(PluginLoader& loader, const std::vector<std::pair<
   return reply.value("rows", ojson::array());
 }
 
-TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader) {
+TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader, Progress* progress) {
   TableDef t = tableDef("bem-accuracy",
                         "accuracy loss of the coarse BEM surface against BEM on the fine surface",
                         "Zhu, Gu & Zhou 2010 (particles + precomputed BEM), Table 2",
@@ -717,7 +717,9 @@ TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader) {
   }
   const bool quick = o.quick;
   const fs::path cacheDir = o.cases.cacheDir ? *o.cases.cacheDir : Cache::defaultDir();
-  t.rows = [quick, cacheDir, &loader](const Results& res, const fs::path& dir) {
+  // The static measure is one more step of the command's progress (minutes when not cached).
+  if (progress) progress->addTotal(1);
+  t.rows = [quick, cacheDir, &loader, progress](const Results& res, const fs::path& dir) {
     // The static measure: the file's rows when the user put one there, else the plugin's.
     ojson statics = bemStaticRowsFromFile(dir / kBemStaticFile);
     std::string staticError;
@@ -725,11 +727,22 @@ TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader) {
       std::vector<std::pair<int, int>> pairs;
       for (const auto& p : kBemTable2)
         if (!quick || (p.coarse == 284 && p.fine != 574)) pairs.emplace_back(p.coarse, p.fine);
+      const std::string what = "bem-accuracy static measure (particle_bem)";
+      if (progress) progress->start(what);
       try {
         statics = bemStaticRowsFromPlugin(loader, pairs, cacheDir);
       } catch (const std::exception& e) {
         staticError = std::string("static measure not computed: ") + e.what();
       }
+      int cached = 0;
+      for (const ojson& s : statics) cached += s.value("cached", false) ? 1 : 0;
+      if (progress)
+        progress->finish(what, staticError.empty()
+                                   ? "ok (" + std::to_string(cached) + " of " +
+                                         std::to_string(statics.size()) + " rows cached)"
+                                   : "not computed");
+    } else if (progress) {
+      progress->addTotal(-1);  // read from the file: no step
     }
     std::vector<ojson> rows;
     for (const auto& p : kBemTable2) {
@@ -1040,7 +1053,7 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       {"metaballs-construction", [&] { return metaballsConstruction(options); }},
       {"method-comparison", [&] { return methodComparison(options, refElements); }},
       {"bem-timing", [&] { return bemTiming(options); }},
-      {"bem-accuracy", [&] { return bemAccuracy(options, loader); }},
+      {"bem-accuracy", [&] { return bemAccuracy(options, loader, progress); }},
       {"hybrid-accuracy", [&] { return hybridTable(options, refElements, false); }},
       {"hybrid-timing", [&] { return hybridTable(options, refElements, true); }}};
   std::vector<TableDef> defs;
