@@ -1,10 +1,13 @@
 // The six tables (see tables.h): their cases as generated scenes, and the rows built from the
 // runs. Paper figures are data copied from the papers in ../shared/papers.
+#include <deform/cache.h>
 #include <deform/mesh.h>
 #include <deform/phantom.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/convergence.h>
 #include <deform_harness/tables.h>
+
+#include <dlfcn.h>
 
 #include <algorithm>
 #include <cmath>
@@ -588,12 +591,16 @@ std::string bemAccuracyId(const BemAccuracyPaperRow& p) {
   return "bem-accuracy/coarse_" + std::to_string(p.coarse) + "_fine_" + std::to_string(p.fine);
 }
 
-/// The paper's static measure, as `bem_tables accuracy --out FILE` writes it (particle_bem).
+/// The paper's static measure, as `bem_tables accuracy --out FILE` writes it (particle_bem): when
+/// this file is in the output folder its rows override the computed ones.
 constexpr const char* kBemStaticFile = "bem-accuracy-static.json";
 
-/// The rows of that file's bem-accuracy table (empty when the file is absent or unreadable: the
-/// static columns stay blank).
-ojson bemStaticRows(const fs::path& file) {
+/// particle_bem's optional export computing the static measure (plugins/particle_bem/plugin.cpp):
+/// const char* f(const char* requestJson), the reply JSON owned by the plugin.
+constexpr const char* kBemStaticSymbol = "deform_particle_bem_static_accuracy";
+
+/// The rows of that file's bem-accuracy table (empty when the file is absent or unreadable).
+ojson bemStaticRowsFromFile(const fs::path& file) {
   std::ifstream in(file);
   if (!in) return ojson::array();
   try {
@@ -607,7 +614,37 @@ ojson bemStaticRows(const fs::path& file) {
   return ojson::array();
 }
 
-TableDef bemAccuracy(const TablesOptions& o) {
+/// The static measure for the given (coarse, fine) pairs from the particle_bem plugin's optional
+/// export (each row cached in cacheDir by the plugin). Throws std::runtime_error saying why it
+/// is unavailable (plugin not found, no such export, the plugin's error).
+ojson bemStaticRowsFromPlugin(PluginLoader& loader, const std::vector<std::pair<int, int>>& pairs,
+                              const fs::path& cacheDir) {
+  const std::string path = loader.locate("particle_bem");
+  void* h = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+  if (!h) throw std::runtime_error(path + ": cannot load (" + std::string(dlerror()) + ")");
+  using Fn = const char* (*)(const char*);
+  const auto fn = reinterpret_cast<Fn>(dlsym(h, kBemStaticSymbol));
+  if (!fn) {
+    dlclose(h);
+    throw std::runtime_error(path + ": no " + kBemStaticSymbol + " (an older plugin)");
+  }
+  ojson q = {{"organ", "phantom:liver"}, {"cache_dir", cacheDir.string()}};
+  q["rows"] = ojson::array();
+  for (const auto& [c, f] : pairs) q["rows"].push_back({c, f});
+  ojson reply;
+  try {
+    reply = ojson::parse(fn(q.dump().c_str()));
+  } catch (const std::exception& e) {
+    dlclose(h);
+    throw std::runtime_error(std::string("particle_bem static accuracy: bad reply: ") + e.what());
+  }
+  dlclose(h);
+  if (reply.contains("error"))
+    throw std::runtime_error("particle_bem static accuracy: " + reply["error"].get<std::string>());
+  return reply.value("rows", ojson::array());
+}
+
+TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader, Progress* progress) {
   TableDef t = tableDef("bem-accuracy",
                         "accuracy loss of the coarse BEM surface against BEM on the fine surface",
                         "Zhu, Gu & Zhou 2010 (particles + precomputed BEM), Table 2",
@@ -647,12 +684,15 @@ TableDef bemAccuracy(const TablesOptions& o) {
       "paper's own measure, static BEM only: both surfaces decimated from the 8122-vertex "
       "liver, the same Gaussian traction field (500 Pa, r = 3 cm) integrated over each "
       "mesh's elements, nu = 0.45, the model's discretisation (conforming support, "
-      "singular reaction, gradient transfer). It is read from " +
-          std::string(kBemStaticFile) +
-          " in the output folder, written by the particle_bem program `bem_tables accuracy "
-          "--out <out>/" +
+      "singular reaction, gradient transfer): the headline loss_ratio of the particle_bem "
+      "program `bem_tables accuracy`, computed here through the plugin's optional export " +
+          std::string(kBemStaticSymbol) +
+          " (one BEM assembly and solve per surface, about 1-2 min for the seven rows on 2 "
+          "cores, each row then kept in the precomputation cache); static fine vertices are "
+          "those of the solved fine surface (cut along the box, decimated). A file " +
+          kBemStaticFile + " in the output folder (`bem_tables accuracy --out <out>/" +
           kBemStaticFile +
-          "` (about 15 min; blank when that file is absent). The issue's goal, R <= 3% at a "
+          "`) overrides the computed rows. The issue's goal, R <= 3% at a "
           "vertex ratio of 2, is stated on the paper's measure."};
   for (const auto& p : kBemTable2) {
     if (o.quick && !(p.coarse == 284 && p.fine != 574)) continue;
@@ -676,8 +716,34 @@ TableDef bemAccuracy(const TablesOptions& o) {
     t.cases.push_back({bemAccuracyId(p), j});
   }
   const bool quick = o.quick;
-  t.rows = [quick](const Results& res, const fs::path& dir) {
-    const ojson statics = bemStaticRows(dir / kBemStaticFile);
+  const fs::path cacheDir = o.cases.cacheDir ? *o.cases.cacheDir : Cache::defaultDir();
+  // The static measure is one more step of the command's progress (minutes when not cached).
+  if (progress) progress->addTotal(1);
+  t.rows = [quick, cacheDir, &loader, progress](const Results& res, const fs::path& dir) {
+    // The static measure: the file's rows when the user put one there, else the plugin's.
+    ojson statics = bemStaticRowsFromFile(dir / kBemStaticFile);
+    std::string staticError;
+    if (statics.empty()) {
+      std::vector<std::pair<int, int>> pairs;
+      for (const auto& p : kBemTable2)
+        if (!quick || (p.coarse == 284 && p.fine != 574)) pairs.emplace_back(p.coarse, p.fine);
+      const std::string what = "bem-accuracy static measure (particle_bem)";
+      if (progress) progress->start(what);
+      try {
+        statics = bemStaticRowsFromPlugin(loader, pairs, cacheDir);
+      } catch (const std::exception& e) {
+        staticError = std::string("static measure not computed: ") + e.what();
+      }
+      int cached = 0;
+      for (const ojson& s : statics) cached += s.value("cached", false) ? 1 : 0;
+      if (progress)
+        progress->finish(what, staticError.empty()
+                                   ? "ok (" + std::to_string(cached) + " of " +
+                                         std::to_string(statics.size()) + " rows cached)"
+                                   : "not computed");
+    } else if (progress) {
+      progress->addTotal(-1);  // read from the file: no step
+    }
     std::vector<ojson> rows;
     for (const auto& p : kBemTable2) {
       ojson row;
@@ -685,7 +751,8 @@ TableDef bemAccuracy(const TablesOptions& o) {
       for (const ojson& s : statics)
         if (s.value("coarse_vertices", -1) == p.coarse && s.value("fine_vertices", -1) == p.fine) {
           row["static_loss_ratio"] = s.value("loss_ratio", ojson(nullptr));
-          row["static_fine_vertices"] = s["fine_vertices"];
+          // The solved fine surface (the plugin's rows; the file's rows name it fine_vertices).
+          row["static_fine_vertices"] = s.value("fine_surface_vertices", s["fine_vertices"]);
           row["static_vertex_ratio"] = s.value("vertex_ratio", ojson(nullptr));
         }
       if (p.ratio > 0) {
@@ -708,6 +775,11 @@ TableDef bemAccuracy(const TablesOptions& o) {
           appendTo(note, "reference: " + ref->message);
           row["note"] = note;
         }
+      }
+      if (!staticError.empty() && (!quick || (p.coarse == 284 && p.fine != 574))) {
+        std::string note = row.contains("note") && row["note"].is_string() ? row["note"] : "";
+        appendTo(note, staticError);
+        row["note"] = note;
       }
       rows.push_back(row);
     }
@@ -981,7 +1053,7 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       {"metaballs-construction", [&] { return metaballsConstruction(options); }},
       {"method-comparison", [&] { return methodComparison(options, refElements); }},
       {"bem-timing", [&] { return bemTiming(options); }},
-      {"bem-accuracy", [&] { return bemAccuracy(options); }},
+      {"bem-accuracy", [&] { return bemAccuracy(options, loader, progress); }},
       {"hybrid-accuracy", [&] { return hybridTable(options, refElements, false); }},
       {"hybrid-timing", [&] { return hybridTable(options, refElements, true); }}};
   std::vector<TableDef> defs;

@@ -41,8 +41,13 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
   };
   const auto prepare = [&](const SurfaceMesh& s) {
     Side side{&s, assembleBem(s, material.young, material.poisson, q), {}, {}};
-    side.fieldRhs =
-        integrateTractionField(s, material.young, material.poisson, field, resolution, q);
+    // The support-face solves use the masked field only; without the variants nothing else
+    // needs the whole field's right-hand side (an integral over every element per node).
+    const bool supportOnly = !c.variants && (c.support == FixedSupport::SupportFaces ||
+                                             c.support == FixedSupport::SupportFacesSingular);
+    if (!supportOnly)
+      side.fieldRhs =
+          integrateTractionField(s, material.young, material.poisson, field, resolution, q);
     side.maskedRhs = [&, ps = &s](const Box& box) {
       const TractionField masked = [&](const Vec3& x) -> Vec3 {
         return box.contains(x) ? Vec3::Zero() : field(x);
@@ -133,6 +138,7 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
                                                    : r.ratioLinearTransfer;
   };
   r.ratio = ratio(c.fixedBox, false, c.support, true);
+  if (!c.variants) return r;
   r.ratioNodalClamp = c.support != FixedSupport::Clamp
                           ? ratio(c.fixedBox, false, FixedSupport::Clamp, false)
                           : r.ratio;

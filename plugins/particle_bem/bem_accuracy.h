@@ -43,6 +43,9 @@ struct LossRatioCase {
   FixedSupport support = FixedSupport::Partial;
   std::vector<Real> edgeShifts;  ///< m; extra ratios with fixedBox.hi.z moved by each shift
   SurfaceTransfer transfer = SurfaceTransfer::Gradient;  ///< coarse -> fine, as the model
+  /// false: only LossRatioResult::ratio and its statistics (one solve per mesh); the other
+  /// figures (each a further solve per mesh) stay 0
+  bool variants = true;
 };
 
 struct LossRatioResult {

@@ -5,10 +5,12 @@
 #include "particle_bem_model.h"
 #include "surface_decimation.h"
 
+#include <deform/cache.h>
 #include <deform/phantom.h>
 
 #include <algorithm>
 #include <chrono>
+#include <map>
 
 namespace deform::particle_bem {
 
@@ -219,6 +221,70 @@ nlohmann::json bemAccuracyTable(const TableOptions& o) {
            "reaction on the support faces only, partial / nodal_clamp: as above on those "
            "meshes"},
           {"rows", out}};
+}
+
+nlohmann::json bemStaticAccuracy(const SurfaceMesh& organ,
+                                 const std::vector<std::pair<int, int>>& rows,
+                                 const std::filesystem::path& cacheDir) {
+  const Box box = boundingBox(organ.V);
+  LossRatioCase c;
+  c.center = organ.V.row(topVertex(organ.V)).transpose();
+  c.radius = 0.15 * box.size().maxCoeff();
+  c.traction = Vec3(0, 0, -500);
+  c.fixedBox = bottomBox(organ.V, 0.15);
+  c.support = FixedSupport::SupportFacesSingular;
+  c.variants = false;
+  const Material material{5500, 0.45, 1000};
+  const std::vector<Box> boxes = {c.fixedBox};
+  Cache cache(cacheDir);
+  std::optional<SurfaceMesh> conforming;  // built on the first miss only
+  std::map<int, SurfaceMesh> decimated;   // the coarse counts recur across rows
+  const auto surface = [&](int n) -> const SurfaceMesh& {
+    if (!conforming) conforming = conformToBoxes(organ, boxes);
+    auto it = decimated.find(n);
+    if (it == decimated.end())
+      it = decimated.emplace(n, decimateQuadric(*conforming, n, boxes)).first;
+    return it->second;
+  };
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& [coarseN, fineN] : rows) {
+    const auto t0 = std::chrono::steady_clock::now();
+    CacheKey key;
+    // "v1": bump when bemLossRatio, the decimation, the assembly or this case change.
+    key.add("particle_bem.static_accuracy v1").add(organ.V).add(organ.F).add(coarseN).add(fineN);
+    key.add(material.young).add(material.poisson).add(c.radius).add(c.traction[2]);
+    nlohmann::json row;
+    if (const auto hit = cache.get("particle_bem.static_accuracy", key)) {
+      try {
+        ByteReader r(*hit);
+        row = nlohmann::json::parse(r.string());
+        row["cached"] = true;
+      } catch (const std::exception&) {
+        row = nlohmann::json();
+      }
+    }
+    if (row.is_null()) {
+      const SurfaceMesh& coarse = surface(coarseN);
+      const SurfaceMesh& fine = surface(fineN);
+      const LossRatioResult res = bemLossRatio(coarse, fine, material, c);
+      row = {{"coarse_vertices", coarseN},
+             {"fine_vertices", fineN},
+             {"coarse_surface_vertices", coarse.numVertices()},
+             {"fine_surface_vertices", fine.numVertices()},
+             {"fine_surface_polygons", fine.numFaces()},
+             {"vertex_ratio", double(fine.numVertices()) / coarse.numVertices()},
+             {"loss_ratio", res.ratio},
+             {"displacement_ratio", res.displacementRatio},
+             {"mean_fine_displacement_m", res.meanFineDisplacement}};
+      ByteWriter w;
+      w.string(row.dump());
+      cache.put("particle_bem.static_accuracy", key, w.bytes());
+      row["cached"] = false;
+    }
+    row["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    out.push_back(row);
+  }
+  return out;
 }
 
 }  // namespace deform::particle_bem
