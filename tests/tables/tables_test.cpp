@@ -302,7 +302,9 @@ TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) 
     EXPECT_EQ(r.converged, percent <= 1) << percent;
     const std::string warning = convergenceWarning(r);
     EXPECT_EQ(warning.empty(), percent <= 1) << warning;
-    if (percent > 1) EXPECT_NE(warning.find("not converged to 1%"), std::string::npos) << warning;
+    if (percent > 1) {
+      EXPECT_NE(warning.find("not converged to 1%"), std::string::npos) << warning;
+    }
   }
   // Differences that shrink faster than the element order allows (p = 6): small estimate, but
   // warned.
