@@ -5,6 +5,13 @@
 //
 // Use the DEFORM_PLUGIN macro below to define both. Registration is explicit, in one place; no
 // static self-registration.
+//
+// A plugin may export further, optional C symbols for a table that needs more than a model run;
+// the harness looks them up with dlsym and does without them when absent (blank columns and a
+// note). The one in use: particle_bem's
+//   extern "C" const char* deform_particle_bem_static_accuracy(const char* requestJson);
+// (the BEM loss ratio of the paper's Table 2 without a model run; request and reply are JSON,
+// the reply string is owned by the plugin: see plugins/particle_bem/README.md).
 #pragma once
 
 #include <deform/model.h>
