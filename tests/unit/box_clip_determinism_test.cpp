@@ -17,15 +17,8 @@ using namespace deform;
 
 namespace {
 
-Box box(Vec3 lo, Vec3 hi) {
-  Box b;
-  b.lo = lo;
-  b.hi = hi;
-  return b;
-}
-
-const std::vector<Box> kLiverBoxes = {box(Vec3(-0.11, -0.08, -0.05), Vec3(0.11, -0.035, 0.05)),
-                                      box(Vec3(-0.11, -0.08, -0.05), Vec3(0.11, 0.03, -0.032))};
+const std::vector<Box> kLiverBoxes = {Box{Vec3(-0.11, -0.08, -0.05), Vec3(0.11, -0.035, 0.05)},
+                                      Box{Vec3(-0.11, -0.08, -0.05), Vec3(0.11, 0.03, -0.032)}};
 
 /// Leaves the heap in a different state: blocks of pseudo-random sizes, every other one freed.
 std::vector<std::unique_ptr<char[]>> churnHeap(std::uint32_t seed, int blocks) {
