@@ -395,6 +395,8 @@ VecX FemSystem::externalForce(const LoadCase& loads) const {
   return f;
 }
 
+// ---- EquilibriumSolver ----------------------------------------------------------------------
+
 void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
   if (m_prepared && dofs == m_constrainedDofs) return;
   m_constrainedDofs = dofs;
@@ -460,15 +462,15 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
     const int np = nd * (nd + 1) / 2;
     m_elementFreeSlots.assign(size_t(nt) * size_t(np), -1);
     const int nen = m_sys.nodesPerElement();
-    std::array<int, 30> free{};  // free index of each element dof (-1: constrained)
+    std::array<int, 30> dofFree{};  // free index of each element dof (-1: constrained)
     for (int t = 0; t < nt; ++t) {
       for (int a = 0; a < nen; ++a)
         for (int k = 0; k < 3; ++k)
-          free[size_t(3 * a + k)] = m_freeIndex[size_t(3 * m_sys.elementNode(t, a) + k)];
+          dofFree[size_t(3 * a + k)] = m_freeIndex[size_t(3 * m_sys.elementNode(t, a) + k)];
       int* slot = m_elementFreeSlots.data() + size_t(t) * size_t(np);
       for (int c = 0; c < nd; ++c)
         for (int r = c; r < nd; ++r, ++slot) {
-          const int fr = free[size_t(r)], fc = free[size_t(c)];
+          const int fr = dofFree[size_t(r)], fc = dofFree[size_t(c)];
           if (fr < 0 || fc < 0) continue;  // stays -1
           *slot = m_fullToFree[size_t(fr >= fc ? m_sys.elementSlot(t, r, c)
                                                : m_sys.elementSlot(t, c, r))];
