@@ -32,6 +32,18 @@ Real jMinusTwoThirds(Real J) {
   return 1.0 / (c * c);
 }
 
+/// Neo-Hookean d^2 psi / d sigma_i d sigma_j at singular values s (psi_i = mu a sigma_i +
+/// c / sigma_i, a = J^{-2/3}, c = kappa (J - 1) J - mu/3 a I1; see fem_tet.h).
+Mat3 singularValueHessian(Real mu, Real kappa, const Vec3& s, Real J, Real I1, Real a, Real c) {
+  Mat3 H;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      H(i, j) = -2.0 / 3.0 * mu * a * (s(i) / s(j) + s(j) / s(i)) +
+                (2.0 / 9.0 * mu * a * I1 + kappa * (2.0 * J - 1.0) * J) / (s(i) * s(j)) +
+                (i == j ? mu * a - c / (s(i) * s(i)) : 0.0);
+  return H;
+}
+
 Mat3 cross(const Vec3& w) {
   Mat3 W;
   W << 0, -w(2), w(1), w(2), 0, -w(0), -w(1), w(0), 0;
@@ -209,6 +221,31 @@ Mat9 NeoHookeanMaterial::stressDerivative(const Mat3& F) const {
 }
 
 Mat9 NeoHookeanMaterial::projectedStressDerivative(const Mat3& F) const {
+  // The nine eigenvalues of dP/dF depend on the singular values alone (see the header): when
+  // all of them are positive with a margin far above round-off, the projection changes nothing
+  // and the exact tangent (closed form, no SVD) is returned. The singular values come from the
+  // eigenvalues of F^T F (closed form); only the sign test uses them.
+  if (const Real J = F.determinant(); J > 0) {
+    Eigen::SelfAdjointEigenSolver<Mat3> ce;
+    ce.computeDirect(F.transpose() * F, Eigen::EigenvaluesOnly);
+    const Vec3 s = ce.eigenvalues().cwiseMax(0).cwiseSqrt();
+    if (s.minCoeff() > 0) {
+      const Real mu = lame.mu, kappa = lame.bulk();
+      const Real I1 = F.squaredNorm();
+      const Real a = jMinusTwoThirds(J);
+      const Real c = kappa * (J - 1.0) * J - mu / 3.0 * a * I1;
+      const Real margin = 1e-6 * (mu + kappa);
+      bool positive = true;
+      for (int i = 0; i < 3 && positive; ++i)
+        for (int j = i + 1; j < 3 && positive; ++j)
+          positive = mu * a - std::abs(c) / (s(i) * s(j)) >= margin;
+      if (positive) {
+        Eigen::SelfAdjointEigenSolver<Mat3> he;
+        he.computeDirect(singularValueHessian(mu, kappa, s, J, I1, a, c), Eigen::EigenvaluesOnly);
+        if (he.eigenvalues().minCoeff() >= margin) return stressDerivative(F);
+      }
+    }
+  }
   Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
   const Vec3 s = svd.singularValues();
   const Real J = s.prod();
@@ -219,13 +256,7 @@ Mat9 NeoHookeanMaterial::projectedStressDerivative(const Mat3& F) const {
   const Real I1 = s.squaredNorm();
   const Real a = jMinusTwoThirds(J);
   const Real c = kappa * (J - 1.0) * J - mu / 3.0 * a * I1;
-  // d^2 psi / d sigma_i d sigma_j (psi_i = mu a sigma_i + c / sigma_i, see the header).
-  Mat3 H;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      H(i, j) = -2.0 / 3.0 * mu * a * (s(i) / s(j) + s(j) / s(i)) +
-                (2.0 / 9.0 * mu * a * I1 + kappa * (2.0 * J - 1.0) * J) / (s(i) * s(j)) +
-                (i == j ? mu * a - c / (s(i) * s(i)) : 0.0);
+  const Mat3 H = singularValueHessian(mu, kappa, s, J, I1, a, c);
   Eigen::SelfAdjointEigenSolver<Mat3> es(H);
   Mat9 D = Mat9::Zero();
   auto add = [&](Real lambda, const Mat3& Q) {  // Q in the singular frame, |Q| = 1
