@@ -38,6 +38,19 @@ int topVertex(const MatX3& V) {
   return t;
 }
 
+/// The accuracy table's load case on `organ` (both the bem_tables program and the harness's
+/// static columns use it): a 500 Pa downward traction over 15% of the largest extent around the
+/// top vertex, the bottom 15% fixed.
+LossRatioCase tableLoadCase(const SurfaceMesh& organ) {
+  const Box box = boundingBox(organ.V);
+  LossRatioCase c;
+  c.center = organ.V.row(topVertex(organ.V)).transpose();
+  c.radius = 0.15 * box.size().maxCoeff();
+  c.traction = Vec3(0, 0, -500);
+  c.fixedBox = bottomBox(organ.V, 0.15);
+  return c;
+}
+
 }  // namespace
 
 nlohmann::json bemTimingTable(const TableOptions& o) {
@@ -128,12 +141,7 @@ nlohmann::json bemAccuracyTable(const TableOptions& o) {
                                  {608, 1000, 1.64, 0.033}, {608, 1216, 0, 0},
                                  {608, 1586, 2.61, 0.062}};
   const SurfaceMesh liver = makePhantom("liver");
-  const Box box = boundingBox(liver.V);
-  LossRatioCase c;
-  c.center = liver.V.row(topVertex(liver.V)).transpose();
-  c.radius = 0.15 * box.size().maxCoeff();
-  c.traction = Vec3(0, 0, -500);
-  c.fixedBox = bottomBox(liver.V, 0.15);
+  LossRatioCase c = tableLoadCase(liver);
   c.edgeShifts = {-0.0005, 0.0005};
   const Material material{5500, 0.45, 1000};
   // Both surfaces cut along the fixed box's top face and decimated keeping that boundary.
@@ -226,12 +234,7 @@ nlohmann::json bemAccuracyTable(const TableOptions& o) {
 nlohmann::json bemStaticAccuracy(const SurfaceMesh& organ,
                                  const std::vector<std::pair<int, int>>& rows,
                                  const std::filesystem::path& cacheDir) {
-  const Box box = boundingBox(organ.V);
-  LossRatioCase c;
-  c.center = organ.V.row(topVertex(organ.V)).transpose();
-  c.radius = 0.15 * box.size().maxCoeff();
-  c.traction = Vec3(0, 0, -500);
-  c.fixedBox = bottomBox(organ.V, 0.15);
+  LossRatioCase c = tableLoadCase(organ);
   c.support = FixedSupport::SupportFacesSingular;
   c.variants = false;
   const Material material{5500, 0.45, 1000};
