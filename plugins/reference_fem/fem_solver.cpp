@@ -344,31 +344,56 @@ Real FemSystem::elasticGradient(const VecX& x, VecX& g) const {
 void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd) const {
   values.setZero(m_pattern.nonZeros());
   const int nd = 3 * nodesPerElement(), nn = nd * nd;
-  forEachElementStiffness(x, projectSpd, [&](int t, const Real* k) {
-    const int* slot = m_slots.data() + size_t(t) * size_t(nn);
-    for (int i = 0; i < nn; ++i) values(slot[i]) += k[i];
-  });
+  forEachElementStiffness(
+      x, projectSpd,
+      [&](int t, const Real* k) {
+        const int* slot = m_slots.data() + size_t(t) * size_t(nn);
+        for (int i = 0; i < nn; ++i) values(slot[i]) += k[i];
+      },
+      [](int) { return true; });
 }
 
-void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd,
-                                const std::vector<int>& slots, Eigen::Index size) const {
-  values.setZero(size);
+void FemSystem::stiffnessValues(const VecX& x, Eigen::Ref<VecX> values, bool projectSpd,
+                                const std::vector<int>& slots) const {
+  values.setZero();
   const int nd = 3 * nodesPerElement(), np = nd * (nd + 1) / 2;
-  forEachElementStiffness(x, projectSpd, [&](int t, const Real* k) {
-    const int* slot = slots.data() + size_t(t) * size_t(np);
-    for (int c = 0; c < nd; ++c, k += nd)
-      for (int r = c; r < nd; ++r, ++slot)
-        if (*slot >= 0) values(*slot) += k[r];
-  });
+  forEachElementStiffness(
+      x, projectSpd,
+      [&](int t, const Real* k) {
+        const int* slot = slots.data() + size_t(t) * size_t(np);
+        for (int c = 0; c < nd; ++c, k += nd)
+          for (int r = c; r < nd; ++r, ++slot)
+            if (*slot >= 0) values(*slot) += k[r];
+      },
+      [](int) { return true; });
 }
 
-template <class Sink>
-void FemSystem::forEachElementStiffness(const VecX& x, bool projectSpd, Sink&& sink) const {
+void FemSystem::stiffnessTimes(const VecX& x, const VecX& v, VecX& out) const {
+  out.setZero(3 * numNodes());
+  const int nen = nodesPerElement(), nd = 3 * nen;
+  VecX ve(nd), ke(nd);
+  forEachElementStiffness(
+      x, false,
+      [&](int t, const Real* k) {
+        for (int a = 0; a < nen; ++a) ve.segment<3>(3 * a) = v.segment<3>(3 * elementNode(t, a));
+        ke.noalias() = Eigen::Map<const MatX>(k, nd, nd) * ve;
+        for (int a = 0; a < nen; ++a) out.segment<3>(3 * elementNode(t, a)) += ke.segment<3>(3 * a);
+      },
+      [&](int t) {
+        for (int a = 0; a < nen; ++a)
+          if ((v.segment<3>(3 * elementNode(t, a)).array() != 0).any()) return true;
+        return false;
+      });
+}
+
+template <class Sink, class Want>
+void FemSystem::forEachElementStiffness(const VecX& x, bool projectSpd, Sink&& sink,
+                                        Want&& want) const {
   forEachMaterial([&](const auto& mat) {
     if (m_order == ElementOrder::Quadratic) {
       QuadraticTetEvaluation e;
       for (int t = 0; t < m_rest.numTets(); ++t) {
-        if (!(m_elements[size_t(t)].volume > 0)) continue;
+        if (!(m_elements[size_t(t)].volume > 0) || !want(t)) continue;
         evaluateQuadraticTet(mat, m_quadElements[size_t(t)],
                              gatherQuadratic(x, &m_elemNodes[size_t(10 * t)]),
                              TetEvalMode::Stiffness, e, projectSpd);
@@ -380,7 +405,7 @@ void FemSystem::forEachElementStiffness(const VecX& x, bool projectSpd, Sink&& s
     TetEvaluation e;
     for (int t = 0; t < m_rest.numTets(); ++t) {
       const TetRest& r = m_elements[size_t(t)];
-      if (!(r.volume > 0)) continue;
+      if (!(r.volume > 0) || !want(t)) continue;
       evaluateTet(mat, r, gather(x, m_rest.T.row(t).transpose()), TetEvalMode::Stiffness, e,
                   projectSpd);
       sink(t, e.stiffness.data());
@@ -533,62 +558,62 @@ Real EquilibriumSolver::objectiveGradient(const VecX& x, const VecX& f, const In
   return phi;
 }
 
-void EquilibriumSolver::assembleOperator(const VecX& x, const InertiaTerms* in, bool full) {
-  assembleFree(x, in, false, full, m_opValues);
-}
-
-void EquilibriumSolver::assembleFree(const VecX& x, const InertiaTerms* in, bool projectSpd,
-                                     bool full, VecX& free) {
-  if (full || (in && in->dampingValues.size())) {
+void EquilibriumSolver::assembleFree(const VecX& x, const InertiaTerms* in, bool projectSpd) {
+  Eigen::Map<VecX> free(m_Kff.valuePtr(), m_Kff.nonZeros());
+  if (in && in->dampingValues.size()) {
     {
       ScopedTimer timer(m_report->assemblySeconds);
       m_sys.stiffnessValues(x, m_fullValues, projectSpd);
     }
-    if (in && in->dampingValues.size()) m_fullValues += in->dampingValues;
-    scatterFree(m_fullValues, in, free);
-    return;
+    m_fullValues += in->dampingValues;
+    free.setZero();
+    for (size_t p = 0; p < m_fullToFree.size(); ++p)
+      if (m_fullToFree[p] >= 0) free(m_fullToFree[p]) += m_fullValues(Eigen::Index(p));
+  } else {
+    // Straight into the free block's lower triangle: each element adds one entry of every
+    // symmetric pair.
+    ScopedTimer timer(m_report->assemblySeconds);
+    m_sys.stiffnessValues(x, free, projectSpd, m_elementFreeSlots);
   }
-  // Straight into the free block's lower triangle: each element adds one entry of every
-  // symmetric pair (the full-pattern path may add the other one: equal up to round-off).
+  addInertiaDiagonal(in);
+}
+
+void EquilibriumSolver::addInertiaDiagonal(const InertiaTerms* in) {
+  if (!in) return;
+  Real* values = m_Kff.valuePtr();
+  for (size_t d = 0; d < m_freeIndex.size(); ++d)
+    if (m_freeIndex[d] >= 0)
+      values[m_freeDiagonal[size_t(m_freeIndex[d])]] += in->weight(Eigen::Index(d));
+}
+
+void EquilibriumSolver::subtractLiftForce(const VecX& x, const InertiaTerms* in, const VecX& dc,
+                                          VecX& rhs) {
   {
     ScopedTimer timer(m_report->assemblySeconds);
-    m_sys.stiffnessValues(x, free, projectSpd, m_elementFreeSlots, m_Kff.nonZeros());
+    m_sys.stiffnessTimes(x, dc, m_liftForce);
   }
-  addInertiaDiagonal(in, free);
-}
-
-void EquilibriumSolver::scatterFree(const VecX& full, const InertiaTerms* in, VecX& free) const {
-  free.setZero(m_Kff.nonZeros());
-  for (size_t p = 0; p < m_fullToFree.size(); ++p)
-    if (m_fullToFree[p] >= 0) free(m_fullToFree[p]) += full(Eigen::Index(p));
-  addInertiaDiagonal(in, free);
-}
-
-void EquilibriumSolver::addInertiaDiagonal(const InertiaTerms* in, VecX& free) const {
-  if (in)
-    for (size_t d = 0; d < m_freeIndex.size(); ++d)
-      if (m_freeIndex[d] >= 0)
-        free(m_freeDiagonal[size_t(m_freeIndex[d])]) += in->weight(Eigen::Index(d));
+  if (in && in->dampingValues.size())
+    m_liftForce += withValues(m_sys.stiffnessPattern(), in->dampingValues) * dc;
+  // The inertia terms are diagonal: no coupling of free and constrained dofs.
+  for (size_t d = 0; d < m_freeIndex.size(); ++d)
+    if (m_freeIndex[d] >= 0) rhs(m_freeIndex[d]) -= m_liftForce(Eigen::Index(d));
 }
 
 bool EquilibriumSolver::factorize(const VecX& x, const InertiaTerms* in, bool indefinite,
                                   int& fallbacks) {
   m_haveFactor = false;
-  VecX& projected = m_projectedValues;
+  Real shifted = 0;  // diagonal shift already in m_Kff
   for (int attempt = indefinite ? 1 : 0; attempt < 8; ++attempt) {
-    if (attempt == 0) {
-      m_Kff.coeffs() = m_opValues;
-    } else if (attempt == 1) {
+    if (attempt == 1) {
       // Not positive definite: project the element stress derivatives onto the PSD cone.
-      assembleFree(x, in, true, false, projected);
-      m_Kff.coeffs() = projected;
-    } else {
+      assembleFree(x, in, true);
+    } else if (attempt > 1) {
       Real mean = 0;
-      for (int fd : m_freeDiagonal) mean += projected(fd);
+      for (int fd : m_freeDiagonal) mean += m_Kff.valuePtr()[fd] - shifted;
       mean /= std::max<size_t>(m_freeDiagonal.size(), 1);
       const Real shift = 1e-8 * std::pow(10.0, attempt - 2) * mean;
-      m_Kff.coeffs() = projected;
-      for (int fd : m_freeDiagonal) m_Kff.coeffs()(fd) += shift;
+      for (int fd : m_freeDiagonal) m_Kff.valuePtr()[fd] += shift - shifted;
+      shifted = shift;
     }
     {
       ScopedTimer timer(m_report->factorSeconds);
@@ -609,9 +634,7 @@ bool EquilibriumSolver::factorize(const VecX& x, const InertiaTerms* in, bool in
 int EquilibriumSolver::preconditionedCg(const VecX& b, Real tolerance, int maxIterations,
                                         VecX& xOut) {
   ScopedTimer timer(m_report->solveSeconds);
-  const Eigen::Map<const SparseMatrix> K(m_Kff.rows(), m_Kff.cols(), m_Kff.nonZeros(),
-                                         m_Kff.outerIndexPtr(), m_Kff.innerIndexPtr(),
-                                         m_opValues.data());
+  const SparseMatrix& K = m_Kff;  // the exact tangent (assembled this iteration)
   xOut = VecX::Zero(b.size());
   VecX r = b, z = m_chol->solve(r), p = z, q(b.size());
   Real rz = r.dot(z);
@@ -714,20 +737,11 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
         }
         return false;
       }
-      assembleOperator(xs, in, lift);  // the lift needs K_fc (full pattern)
+      assembleFree(xs, in, false);  // the exact tangent: CG's operator
       ++rep.newtonIterations;
       for (int d = 0; d < ndof; ++d)
         if (m_freeIndex[size_t(d)] >= 0) rhs(m_freeIndex[size_t(d)]) = -g(d);
-      if (lift) {  // rhs_f -= K_fc dc
-        const SparseMatrix& P = m_sys.stiffnessPattern();
-        for (int c : cdofs) {
-          if (dc(c) == 0) continue;
-          for (int p = P.outerIndexPtr()[c]; p < P.outerIndexPtr()[c + 1]; ++p) {
-            const int fr = m_freeIndex[size_t(P.innerIndexPtr()[p])];
-            if (fr >= 0) rhs(fr) -= m_fullValues(p) * dc(c);
-          }
-        }
-      }
+      if (lift) subtractLiftForce(xs, in, dc, rhs);
       // Inexact Newton: K dx = rhs is solved by conjugate gradients preconditioned with an
       // earlier factorisation, to the relative accuracy eta (Eisenstat & Walker's choice 2,
       // capped at 0.1, never finer than the final tolerance needs); the tangent is factorised

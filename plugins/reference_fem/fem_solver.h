@@ -155,8 +155,11 @@ class FemSystem {
   /// >= 0 (dropped otherwise), i the position of (r, c) in the column-major lower triangle
   /// (c = 0: r = 0..n-1, then c = 1: r = 1..n-1, ...), P = n (n + 1) / 2, n = 3
   /// nodesPerElement(). Why: half the scatter of the full element matrix, and no second lookup.
-  void stiffnessValues(const VecX& x, VecX& values, bool projectSpd, const std::vector<int>& slots,
-                       Eigen::Index size) const;
+  void stiffnessValues(const VecX& x, Eigen::Ref<VecX> values, bool projectSpd,
+                       const std::vector<int>& slots) const;
+  /// out = K(x) v (3N): the exact tangent applied element by element, skipping the elements on
+  /// whose nodes v vanishes (the lift's K_fc dc touches only the elements of moving nodes).
+  void stiffnessTimes(const VecX& x, const VecX& v, VecX& out) const;
   /// Full-pattern index of element stiffness entry (r, c) of tet t (column-major, r, c < 3
   /// nodesPerElement()).
   int elementSlot(int t, int r, int c) const {
@@ -172,9 +175,9 @@ class FemSystem {
   template <class Fn>
   void forEachMaterial(Fn&& fn) const;
   /// Calls sink(t, k) with the column-major element stiffness k (3n x 3n) of every tet t that
-  /// is not degenerate nor inverted.
-  template <class Sink>
-  void forEachElementStiffness(const VecX& x, bool projectSpd, Sink&& sink) const;
+  /// is not degenerate nor inverted, and for which want(t) holds.
+  template <class Sink, class Want>
+  void forEachElementStiffness(const VecX& x, bool projectSpd, Sink&& sink, Want&& want) const;
   void addMidsideNodes();
   TetMesh m_rest;
   Material m_material;
@@ -227,20 +230,21 @@ class EquilibriumSolver {
   Real objective(const VecX& x, const VecX& f, const InertiaTerms* in) const;
   /// Gradient into g; returns the objective (as objective()) from the same element pass.
   Real objectiveGradient(const VecX& x, const VecX& f, const InertiaTerms* in, VecX& g) const;
-  /// Exact tangent at x into m_opValues (free block, lower) and, when `full` (the lift needs
-  /// K_fc) or with stiffness damping, first into m_fullValues (full pattern).
-  void assembleOperator(const VecX& x, const InertiaTerms* in, bool full);
-  /// Tangent at x (projectSpd: PSD-projected) with the inertia terms on the free block (lower).
-  void assembleFree(const VecX& x, const InertiaTerms* in, bool projectSpd, bool full, VecX& free);
-  void addInertiaDiagonal(const InertiaTerms* in, VecX& free) const;
-  void scatterFree(const VecX& full, const InertiaTerms* in, VecX& free) const;
-  /// Factorises the operator, else (when not positive definite, or known to be indefinite) the
-  /// tangent with PSD-projected element stress derivatives, else that with a growing diagonal
-  /// shift. A fallback (not the operator itself) is counted in `fallbacks`.
+  /// Tangent at x (projectSpd: PSD-projected) with the inertia terms into m_Kff's values (free
+  /// block, lower). With stiffness damping it goes through m_fullValues (full pattern).
+  void assembleFree(const VecX& x, const InertiaTerms* in, bool projectSpd);
+  void addInertiaDiagonal(const InertiaTerms* in);
+  /// rhs -= K_fc dc (dc: the increments of the constrained dofs), element by element.
+  void subtractLiftForce(const VecX& x, const InertiaTerms* in, const VecX& dc, VecX& rhs);
+  /// Factorises m_Kff (the exact tangent, assembled by the caller), else (when not positive
+  /// definite, or known to be indefinite) the tangent with PSD-projected element stress
+  /// derivatives, else that with a growing diagonal shift. A fallback (not the operator
+  /// itself) is counted in `fallbacks`. m_Kff holds what was factorised afterwards.
   bool factorize(const VecX& x, const InertiaTerms* in, bool indefinite, int& fallbacks);
-  /// Solves K_ff x = b (operator m_opValues) to |residual| <= tolerance by conjugate gradients
-  /// preconditioned with the current factor. Returns the iterations, -1 when it did not converge
-  /// within maxIterations, -2 when it met a direction of non-positive curvature.
+  /// Solves K_ff x = b (the operator: m_Kff's values, the exact tangent) to |residual| <=
+  /// tolerance by conjugate gradients preconditioned with the current factor. Returns the
+  /// iterations, -1 when it did not converge within maxIterations, -2 when it met a direction
+  /// of non-positive curvature.
   int preconditionedCg(const VecX& b, Real tolerance, int maxIterations, VecX& x);
 
   const FemSystem& m_sys;
@@ -249,12 +253,13 @@ class EquilibriumSolver {
   std::vector<int> m_freeIndex;         ///< dof -> free index or -1
   std::vector<int> m_fullToFree;        ///< full-pattern value index -> free value index or -1
   std::vector<int> m_elementFreeSlots;  ///< element lower-triangle entry -> free value index
-  SparseMatrix m_Kff;                   ///< free block, lower triangle (values: what is factorised)
-  std::vector<int> m_freeDiagonal;      ///< free dof -> value index of its diagonal in m_Kff
-  VecX m_fullValues;                    ///< exact tangent on the full pattern (K_fc for the lift)
-  VecX m_opValues;                      ///< exact tangent on m_Kff's pattern (the Newton operator)
-  VecX m_projectedValues;               ///< projected tangent on m_Kff's pattern (buffer reused)
-  bool m_haveFactor = false;            ///< m_chol holds a factor usable as a preconditioner
+  /// Free block, lower triangle. Its values are the tangent of the current Newton iteration:
+  /// the exact one (CG's operator) until a factorisation needs the projected one instead.
+  SparseMatrix m_Kff;
+  std::vector<int> m_freeDiagonal;  ///< free dof -> value index of its diagonal in m_Kff
+  VecX m_fullValues;                ///< full-pattern tangent (stiffness damping only)
+  VecX m_liftForce;                 ///< K dc (3N), buffer of subtractLiftForce
+  bool m_haveFactor = false;        ///< m_chol holds a factor usable as a preconditioner
   long long m_factorNonZeros = 0;
   double m_factorFlops = 0;
   std::unique_ptr<SparseCholesky> m_chol;
