@@ -35,17 +35,18 @@ const OpenMpLevels& openMpLevels() {
   return levels;
 }
 
-/// The allocator behind installCholmodAllocator(). Large blocks are anonymous mappings rounded up
-/// to whole 2 MiB pages; `live` maps each handed-out block to its mapped size (so free and
-/// realloc recognise them, and anything else is malloc's), `cache` holds freed blocks by size.
-class LargePageAllocator {
+/// The allocator behind installCholmodAllocator() and largePageAllocate(). Large blocks are
+/// anonymous mappings rounded up to whole 2 MiB pages; `live` maps each handed-out block to its
+/// mapped size (so free and realloc recognise them, and anything else is malloc's), `cache` holds
+/// freed blocks by size.
+class PageCache {
  public:
   static constexpr size_t kPage = size_t(2) << 20;
   static constexpr size_t kCacheLimit = size_t(1) << 30;
 
-  static LargePageAllocator& instance() {
-    static LargePageAllocator* a = new LargePageAllocator;  // never destroyed: CHOLMOD may free
-    return *a;                                              // in other static destructors
+  static PageCache& instance() {
+    static PageCache* a = new PageCache;  // never destroyed: CHOLMOD may free
+    return *a;                            // in other static destructors
   }
 
   void* allocate(size_t bytes, bool zero) {
@@ -120,22 +121,22 @@ class LargePageAllocator {
 };
 
 void* cholmodMalloc(size_t bytes) {
-  return LargePageAllocator::instance().allocate(bytes, false);
+  return PageCache::instance().allocate(bytes, false);
 }
 
 void* cholmodCalloc(size_t count, size_t size) {
   if (size != 0 && count > SIZE_MAX / size) return nullptr;
-  return LargePageAllocator::instance().allocate(count * size, true);
+  return PageCache::instance().allocate(count * size, true);
 }
 
 void cholmodFree(void* p) {
-  if (p && !LargePageAllocator::instance().release(p)) std::free(p);
+  if (p && !PageCache::instance().release(p)) std::free(p);
 }
 
 void* cholmodRealloc(void* p, size_t bytes) {
-  LargePageAllocator& a = LargePageAllocator::instance();
+  PageCache& a = PageCache::instance();
   const size_t old = p ? a.blockSize(p) : 0;
-  if (p && old == 0 && bytes < LargePageAllocator::kPage) return std::realloc(p, bytes);
+  if (p && old == 0 && bytes < PageCache::kPage) return std::realloc(p, bytes);
   if (old >= bytes) return p;  // a large block shrinking (or growing within its pages)
   void* q = a.allocate(bytes, false);
   if (!q || !p) return q;
@@ -145,6 +146,14 @@ void* cholmodRealloc(void* p, size_t bytes) {
 }
 
 }  // namespace
+
+void* largePageAllocate(size_t bytes) {
+  return PageCache::instance().allocate(bytes, false);
+}
+
+void largePageFree(void* p, size_t /*bytes*/) noexcept {
+  if (p && !PageCache::instance().release(p)) std::free(p);
+}
 
 void installCholmodAllocator() {
   static std::once_flag once;

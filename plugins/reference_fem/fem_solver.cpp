@@ -354,13 +354,13 @@ void FemSystem::stiffnessValues(const VecX& x, VecX& values, bool projectSpd) co
 }
 
 void FemSystem::stiffnessValues(const VecX& x, Eigen::Ref<VecX> values, bool projectSpd,
-                                const std::vector<int>& slots) const {
+                                const int* slots) const {
   values.setZero();
   const int nd = 3 * nodesPerElement(), np = nd * (nd + 1) / 2;
   forEachElementStiffness(
       x, projectSpd,
       [&](int t, const Real* k) {
-        const int* slot = slots.data() + size_t(t) * size_t(np);
+        const int* slot = slots + size_t(t) * size_t(np);
         for (int c = 0; c < nd; ++c, k += nd)
           for (int r = c; r < nd; ++r, ++slot)
             if (*slot >= 0) values(*slot) += k[r];
@@ -456,7 +456,8 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
     }
   }
   for (int fc = 0; fc < nf; ++fc) count[size_t(fc) + 1] += count[size_t(fc)];
-  std::vector<std::pair<int, int>> entries(size_t(count[size_t(nf)]));  // (row, full index)
+  std::vector<std::pair<int, int>, LargePageAllocator<std::pair<int, int>>> entries(
+      size_t(count[size_t(nf)]));  // (row, full index)
   {
     std::vector<int> next(count.begin(), count.end() - 1);
     for (int c = 0; c < ndof; ++c) {
@@ -573,7 +574,7 @@ void EquilibriumSolver::assembleFree(const VecX& x, const InertiaTerms* in, bool
     // Straight into the free block's lower triangle: each element adds one entry of every
     // symmetric pair.
     ScopedTimer timer(m_report->assemblySeconds);
-    m_sys.stiffnessValues(x, free, projectSpd, m_elementFreeSlots);
+    m_sys.stiffnessValues(x, free, projectSpd, m_elementFreeSlots.data());
   }
   addInertiaDiagonal(in);
 }

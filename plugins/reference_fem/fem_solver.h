@@ -156,7 +156,7 @@ class FemSystem {
   /// (c = 0: r = 0..n-1, then c = 1: r = 1..n-1, ...), P = n (n + 1) / 2, n = 3
   /// nodesPerElement(). Why: half the scatter of the full element matrix, and no second lookup.
   void stiffnessValues(const VecX& x, Eigen::Ref<VecX> values, bool projectSpd,
-                       const std::vector<int>& slots) const;
+                       const int* slots) const;
   /// out = K(x) v (3N): the exact tangent applied element by element, skipping the elements on
   /// whose nodes v vanishes (the lift's K_fc dc touches only the elements of moving nodes).
   void stiffnessTimes(const VecX& x, const VecX& v, VecX& out) const;
@@ -250,9 +250,12 @@ class EquilibriumSolver {
   const FemSystem& m_sys;
   std::vector<int> m_constrainedDofs;  ///< sorted; the set the pattern below was built for
   bool m_prepared = false;
-  std::vector<int> m_freeIndex;         ///< dof -> free index or -1
-  std::vector<int> m_fullToFree;        ///< full-pattern value index -> free value index or -1
-  std::vector<int> m_elementFreeSlots;  ///< element lower-triangle entry -> free value index
+  std::vector<int> m_freeIndex;  ///< dof -> free index or -1
+  /// Full-pattern value index -> free value index or -1, and element lower-triangle entry ->
+  /// free value index. Large (7 and 16 MB on the 51k-tet liver) and rebuilt per constraint set:
+  /// on cached huge pages (see LargePageAllocator).
+  std::vector<int, LargePageAllocator<int>> m_fullToFree;
+  std::vector<int, LargePageAllocator<int>> m_elementFreeSlots;
   /// Free block, lower triangle. Its values are the tangent of the current Newton iteration:
   /// the exact one (CG's operator) until a factorisation needs the projected one instead.
   SparseMatrix m_Kff;

@@ -86,3 +86,25 @@ TEST(CholmodAllocator, KeepsTheMallocContract) {
   SuiteSparse_config.free_func(before);
   SuiteSparse_config.free_func(nullptr);  // a no-op, as free(NULL)
 }
+
+TEST(LargePageAllocator, LargeVectorsAreOnAlignedReusedBlocksAndSmallOnesOnMalloc) {
+  using Vector = std::vector<int, LargePageAllocator<int>>;
+  // 40 MiB: no other test here frees a block of 40-80 MiB, which the cache could hand out too.
+  const size_t n = (size_t(40) << 20) / sizeof(int);
+  const int* first = nullptr;
+  {
+    Vector v(n, 7);
+    first = v.data();
+    EXPECT_EQ(reinterpret_cast<uintptr_t>(first) % (size_t(2) << 20), 0u);  // huge-page aligned
+    EXPECT_EQ(v[n - 1], 7);
+  }
+  Vector w(n, -1);  // the freed block comes back, its content overwritten
+  EXPECT_EQ(w.data(), first);
+  EXPECT_EQ(w[0], -1);
+  EXPECT_EQ(w[n - 1], -1);
+  Vector small(100, 3);  // under 2 MiB: malloc's, freed by free (ASan checks the pairing)
+  EXPECT_EQ(small[99], 3);
+  small.assign(2 * n, 5);  // grows into a large block
+  EXPECT_EQ(small[2 * n - 1], 5);
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(small.data()) % (size_t(2) << 20), 0u);
+}
