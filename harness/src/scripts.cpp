@@ -58,7 +58,10 @@ ScriptResult runScript(const std::string& script, const std::vector<std::string>
   // No __pycache__ beside the shipped scripts (they may live in a read-only install).
   std::string cmd = "PYTHONDONTWRITEBYTECODE=1 " + quote(pythonInterpreter()) + " " +
                     quote((fs::path(dir) / script).string());
-  for (const auto& a : args) cmd += " " + quote(a);
+  for (const auto& a : args) {
+    cmd += ' ';  // not " " + quote(a): GCC 12 warns falsely (-Wrestrict) on that operator+
+    cmd += quote(a);
+  }
   cmd += " 2>&1";
   std::fflush(nullptr);
   FILE* p = popen(cmd.c_str(), "r");

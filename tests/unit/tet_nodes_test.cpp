@@ -39,15 +39,20 @@ TEST(TetMeasures, VolumesMassesAndEdgeSharesOfAFiveTetCube) {
   ASSERT_EQ(tm.edges.rows(), 18);
   for (Eigen::Index e = 0; e < tm.edges.rows(); ++e) {
     EXPECT_LT(tm.edges(e, 0), tm.edges(e, 1));
-    if (e > 0)
+    if (e > 0) {
       EXPECT_TRUE(tm.edges(e - 1, 0) < tm.edges(e, 0) ||
                   (tm.edges(e - 1, 0) == tm.edges(e, 0) && tm.edges(e - 1, 1) < tm.edges(e, 1)));
+    }
   }
   // Cube edge 0-1 belongs to the corner tet at 0 only: v / 6; face diagonal 1-2 to the corner
   // tets at 0 and 3 and the central one: v / 6 + v / 6 + v / 3.
   for (Eigen::Index e = 0; e < tm.edges.rows(); ++e) {
-    if (tm.edges(e, 0) == 0 && tm.edges(e, 1) == 1) EXPECT_NEAR(tm.edgeVolume[e], v / 6, 1e-18);
-    if (tm.edges(e, 0) == 1 && tm.edges(e, 1) == 2) EXPECT_NEAR(tm.edgeVolume[e], 2 * v / 3, 1e-18);
+    if (tm.edges(e, 0) == 0 && tm.edges(e, 1) == 1) {
+      EXPECT_NEAR(tm.edgeVolume[e], v / 6, 1e-18);
+    }
+    if (tm.edges(e, 0) == 1 && tm.edges(e, 1) == 2) {
+      EXPECT_NEAR(tm.edgeVolume[e], 2 * v / 3, 1e-18);
+    }
   }
 }
 
