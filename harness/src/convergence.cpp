@@ -49,7 +49,7 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
 namespace {
 
 constexpr const char* kCacheKind = "harness.convergence";
-constexpr const char* kCacheVersion = "harness.convergence/1";
+constexpr const char* kCacheVersion = "harness.convergence/2";  // 2: RMS differences
 
 ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   ojson doc;
@@ -65,6 +65,8 @@ ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
                              {"wall_s", l.solveS}});
   doc["d01_m"] = r.d01;
   doc["d12_m"] = r.d12;
+  doc["rms_d01_m"] = numberOrNull(r.rms01);
+  doc["rms_d12_m"] = numberOrNull(r.rms12);
   doc["order"] = numberOrNull(r.order);
   doc["error_estimate_m"] = numberOrNull(r.errorEstimate);
   doc["relative_error"] = numberOrNull(r.relativeError);
@@ -93,6 +95,8 @@ ConvergenceResult fromJson(const ojson& doc) {
   }
   r.d01 = doc.at("d01_m").get<double>();
   r.d12 = doc.at("d12_m").get<double>();
+  r.rms01 = numberOrNaN(doc, "rms_d01_m");
+  r.rms12 = numberOrNaN(doc, "rms_d12_m");
   r.order = numberOrNaN(doc, "order");
   r.errorEstimate = numberOrNaN(doc, "error_estimate_m");
   r.relativeError = numberOrNaN(doc, "relative_error");
@@ -125,8 +129,12 @@ std::string convergenceSummary(const ConvergenceResult& r) {
     return "no discretisation error estimate (" +
            (r.message.empty() ? std::string("no levels ran") : r.message) + "; levels " + levels +
            " tets)";
+  std::string rms;
+  if (std::isfinite(r.rms12) && r.levels.size() == 3 && r.levels[2].peakDisplacement > 0)
+    rms = "; RMS level differences " + percent(r.rms01 / r.levels[2].peakDisplacement) + " then " +
+          percent(r.rms12 / r.levels[2].peakDisplacement);
   return "estimated discretisation error " + percent(r.relativeError) + " of the peak (levels " +
-         levels + " tets, p = " + fixed(r.order, 2) + ")";
+         levels + " tets, p = " + fixed(r.order, 2) + rms + ")";
 }
 
 std::string convergenceWarning(const ConvergenceResult& r) {
@@ -289,10 +297,22 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
         if (include[size_t(i)]) m = std::max(m, (a.row(i) - b.row(i)).norm());
       return m;
     };
+    const auto rmsDiff = [&](const MatX3& a, const MatX3& b) {
+      double sum = 0;
+      long long n = 0;
+      for (Eigen::Index i = 0; i < a.rows(); ++i)
+        if (include[size_t(i)]) {
+          sum += (a.row(i) - b.row(i)).squaredNorm();
+          ++n;
+        }
+      return n > 0 ? std::sqrt(sum / double(n)) : NAN;
+    };
     richardsonEstimate(out.levels[0].h, out.levels[1].h, out.levels[2].h,
                        maxDiff(displacement[0], displacement[1]),
                        maxDiff(displacement[1], displacement[2]), out.levels[2].peakDisplacement,
                        out);
+    out.rms01 = rmsDiff(displacement[0], displacement[1]);
+    out.rms12 = rmsDiff(displacement[1], displacement[2]);
   }
   const ojson doc = toJson(out, sceneFile);
   writeFileAtomic(options.outDir / "convergence.json", doc.dump(2) + "\n");

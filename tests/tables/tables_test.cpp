@@ -282,6 +282,12 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
   ASSERT_EQ(cached.levels.size(), 3u);
   EXPECT_EQ(cached.levels[2].elements, referenceTets);
   EXPECT_EQ(cached.d12, study["d12_m"].get<double>());
+  // The RMS differences: over the same vertices as the max, so positive and not above it.
+  ASSERT_TRUE(study["rms_d12_m"].is_number());
+  EXPECT_GT(study["rms_d12_m"].get<double>(), 0.0);
+  EXPECT_LE(study["rms_d12_m"].get<double>(), study["d12_m"].get<double>());
+  EXPECT_LE(study["rms_d01_m"].get<double>(), study["d01_m"].get<double>());
+  EXPECT_EQ(cached.rms12, study["rms_d12_m"].get<double>());
   EXPECT_FALSE(fs::exists(co.outDir / "level_0")) << "nothing was run";
   EXPECT_EQ(readJson(co.outDir / "convergence.json")["cached"], true);
 }
@@ -298,6 +304,11 @@ TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) 
     EXPECT_TRUE(r.asymptotic);
     const std::string summary = convergenceSummary(r);
     EXPECT_NE(summary.find("p = 2.00"), std::string::npos) << summary;
+    EXPECT_EQ(summary.find("RMS"), std::string::npos) << "no RMS differences given";
+    r.rms01 = 2e-5;
+    r.rms12 = 1e-5;
+    EXPECT_NE(convergenceSummary(r).find("RMS level differences 0.2% then 0.1%"), std::string::npos)
+        << convergenceSummary(r);
     const double percent = 100 * c * h2 * h2 / peak;  // 0.125% and 12.5%
     EXPECT_EQ(r.converged, percent <= 1) << percent;
     const std::string warning = convergenceWarning(r);

@@ -38,7 +38,11 @@ struct ConvergenceLevelResult {
 struct ConvergenceResult {
   std::vector<ConvergenceLevelResult> levels;
   double d01 = 0, d12 = 0;  ///< m
-  double order = NAN;       ///< observed p
+  /// m: root mean square over the same vertices of the level differences |u_0 - u_1|,
+  /// |u_1 - u_2| (the scale of the reference's error in the tables' RMS columns, where d01,
+  /// d12 give it in the max norm); NaN without three levels.
+  double rms01 = NAN, rms12 = NAN;
+  double order = NAN;  ///< observed p
   double errorEstimate = NAN, relativeError = NAN;
   bool asymptotic = false;  ///< 0.5 <= p <= 4
   bool converged = false;   ///< asymptotic && relativeError <= 1%
