@@ -196,6 +196,12 @@ def organ_figure(results_path):
     return fig, caption
 
 
+def run_hash(label):
+    """The URL hash that makes a viewer show one run (and the reference)."""
+    from urllib.parse import quote
+    return "#run=" + quote(label, safe="()=,.")
+
+
 def run_point_text(r, ms, err, err_name):
     params = ", ".join("%s=%s" % kv for kv in sorted((r.get("params") or {}).items()))
     return "%s (%s)\n%s\n%s %.4g mm, %.4g ms/step%s" % (
@@ -276,8 +282,15 @@ def results_table(path, viewer_href=None):
     with open(path) as f:
         doc = json.load(f)
     rows, links = [], []
+
+    def href_of(r):
+        # The folder's own viewer is on this page (an anchor); another page filters by run.
+        if not viewer_href:
+            return None
+        return viewer_href if viewer_href.startswith("#") else viewer_href + run_hash(r["label"])
+
     for r in doc["runs"]:
-        links.append(viewer_href + "#run=" + r["label"] if viewer_href else None)
+        links.append(href_of(r))
         e = r.get("error") or {}
         sm = r.get("step_ms") or {}
         rows.append({
@@ -307,7 +320,7 @@ def results_table(path, viewer_href=None):
             continue
         pts.append({"x": sm["median"], "y": 1e3 * e["rmse_all"], "series": r.get("model", "?"),
                     "text": run_point_text(r, sm["median"], e["rmse_all"], "rmse_all"),
-                    "href": viewer_href + "#run=" + r["label"] if viewer_href else None,
+                    "href": href_of(r),
                     "valid": r.get("valid", True) is not False})
     plot = svg_scatter(pts, "ms per step (median)", "rmse_all (mm)") if len(pts) > 1 else ""
     return doc, html_table(cols, rows, links) + plot
@@ -432,7 +445,7 @@ def main():
             for k in ("rmse_50", "rmse_all", "max"):
                 q[k] = 1e3 * p[k] if p.get(k) is not None else None
             rows.append(q)
-            link = href + "#run=" + p["label"] if href else None
+            link = href + run_hash(p["label"]) if href else None
             links.append(link)
             if p.get("status") == "ok" and p.get("ms_median") and p.get("rmse_50"):
                 run = {"label": p["label"], "model": p["model"],

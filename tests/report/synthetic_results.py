@@ -90,7 +90,7 @@ def main():
     V, F = sphere(rings)
     os.makedirs(out, exist_ok=True)
     write_obj(os.path.join(out, "rest_surface.obj"), V, F)
-    dt, steps = 0.001, 100 * (frames - 1)
+    dt, steps = 0.001, 100 * max(frames - 1, 1)
     runs = []
     specs = [("reference_fem", "reference", 1.0)] + [
         ("model%d" % k, "model", 1.0 + 0.15 * (k + 1)) for k in range(models)]
@@ -101,9 +101,10 @@ def main():
         os.makedirs(folder, exist_ok=True)
         pvd = []
         for f in range(frames):
-            X = lifted(V, 0.02 * gain, f / (frames - 1))
+            X = lifted(V, 0.02 * gain, f / (frames - 1) if frames > 1 else 1.0)
             name_ = "surface_%06d.vtp" % (100 * f)
-            write_vtp(os.path.join(folder, name_), X, F)
+            if frames > 1:  # one frame: the final surface alone, as "output": "final" writes
+                write_vtp(os.path.join(folder, name_), X, F)
             pvd.append('<DataSet timestep="%s" group="" part="0" file="%s"/>\n'
                        % (fmt(dt * 100 * f), name_))
         with open(os.path.join(folder, "surfaces.pvd"), "w") as fh:
@@ -115,7 +116,9 @@ def main():
         run = {"model": name, "plugin": name, "label": label, "role": role,
                "params": {"gain": gain} if role == "model" else {}, "status": "ok", "message": "",
                "steps": steps, "step_ms": {"median": 0.05 * (k + 1), "p95": 0.06 * (k + 1)},
-               "final_surface": rel + "/final.obj", "surface_series": rel + "/surfaces.pvd"}
+               "final_surface": rel + "/final.obj"}
+        if frames > 1:
+            run["surface_series"] = rel + "/surfaces.pvd"
         if role == "model":
             e = np.linalg.norm(X - ref_final, axis=1)
             run["error"] = {"reference": "reference_fem", "rmse_all": float(np.sqrt((e ** 2).mean())),

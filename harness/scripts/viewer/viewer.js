@@ -1,7 +1,7 @@
 // deformbench viewer: every run of a results folder side by side under one camera, over the
 // surface series, coloured by the distance to the reference. Data: the JSON in #dbv-data
 // (viewer_data.py describes the encoding). URL hash: frame=K|last (the frame shown), run=A,B
-// (show only these labels, and the reference), play=1.
+// (show only these labels, separated by |, and the reference), play=1.
 /* global THREE */
 (function () {
   'use strict';
@@ -127,7 +127,7 @@
     const refIndex = D.reference;
     let shown = D.runs.map((_, i) => i);
     if (hp.run) {
-      const want = hp.run.split(',');
+      const want = hp.run.split('|');
       const sel = shown.filter((i) => want.includes(D.runs[i].label) || i === refIndex);
       if (sel.length) shown = sel;
     }
@@ -158,7 +158,7 @@
     const camera = new THREE.PerspectiveCamera(30, 1, size / 100, size * 100);
     camera.up.set(0, 0, 1);
     const dir = new THREE.Vector3(0.35, 1.0, 0.55).normalize();
-    camera.position.copy(centre).addScaledVector(dir, size * 2.4);
+    camera.position.copy(centre).addScaledVector(dir, size * 3.2);
     const controls = new THREE.OrbitControls(camera, canvas);
     controls.target.copy(centre);
     controls.screenSpacePanning = true;
@@ -340,6 +340,7 @@
         if (run.grasp_residual_m != null) lines += '<br>grasp residual ' + fmtMm(run.grasp_residual_m);
         if (run.message) lines += '<br>' + esc(run.message.slice(0, 120));
         p.label.innerHTML = lines;
+        p.label.setAttribute('data-frame-max-mm', fmax != null ? (1e3 * fmax).toPrecision(4) : '');
       }
       slider.value = String(frame);
       timeText.textContent = 't = ' + t.toFixed(3) + ' s (frame ' + (frame + 1) + ' of ' + D.times.length +
