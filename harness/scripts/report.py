@@ -39,6 +39,7 @@ except ImportError:
 
 MAX_ORGAN_FIGURES = 12
 MAX_VIEWERS = 400
+VIEWER_LIB = "viewer-three.js"  # three.js + OrbitControls, shared by the runs' viewer.html
 
 
 def esc(x):
@@ -342,6 +343,7 @@ def main():
 
     # Viewers: the folder's own results inline, every results.json below in a viewer.html beside it.
     viewer_head, viewer_section, viewers, viewer_bytes = "", None, {}, 0
+    written_lib = set()
     try:
         import viewer_data
         viewer_data.viewer_assets()
@@ -365,9 +367,18 @@ def main():
                     viewer_section = body_
                     viewers["."] = "#viewer"
                     continue
-                page = viewer_data.standalone(
-                    data, "deformbench viewer: %s (%s)" % (data["scene"], rel))
+                # The runs' viewers share one copy of three.js at the top of the folder.
+                lib = os.path.join(root, VIEWER_LIB)
+                if not os.path.exists(lib) or lib not in written_lib:
+                    with open(lib + ".tmp", "w") as f:
+                        f.write(viewer_data.library_text())
+                    os.replace(lib + ".tmp", lib)
+                    written_lib.add(lib)
+                    viewer_bytes += os.path.getsize(lib)
                 target = os.path.join(os.path.dirname(path), "viewer.html")
+                page = viewer_data.standalone(
+                    data, "deformbench viewer: %s (%s)" % (data["scene"], rel),
+                    os.path.relpath(lib, os.path.dirname(target)))
                 with open(target + ".tmp", "w") as f:
                     f.write(page)
                 os.replace(target + ".tmp", target)
@@ -571,8 +582,8 @@ figcaption { font-weight: bold; margin: 0.4em 0; }
         "" if HAVE_MPL else ", no pictures: matplotlib missing"))
     sub = len(viewers) - (1 if "." in viewers else 0)
     if sub:
-        print("viewers: %d viewer.html beside the results.json below %s (%.2f MB together)"
-              % (sub, root, viewer_bytes / 1e6))
+        print("viewers: %d viewer.html beside the results.json below %s, sharing %s (%.2f MB "
+              "together)" % (sub, root, VIEWER_LIB, viewer_bytes / 1e6))
     return 0
 
 

@@ -153,6 +153,8 @@ def load_folder(results_path):
 def build(doc, rest, faces, runs, budget=BUDGET_BYTES, link_base=""):
     """The viewer's data (a JSON-able dict) from load_folder's output (or synthetic arrays).
     None when no run has a surface."""
+    absent = [{"label": r.get("label", "?"), "status": r.get("status"),
+               "message": (r.get("message") or "")[:200]} for r, fr in runs if not fr]
     runs = [(r, fr) for r, fr in runs if fr]
     if not runs or faces is None:
         return None
@@ -213,6 +215,15 @@ def build(doc, rest, faces, runs, budget=BUDGET_BYTES, link_base=""):
             break
         thin *= 2
 
+    # The parameters that tell runs of the same model apart (shown first, in bold).
+    by_model = {}
+    for entry in out_runs:
+        by_model.setdefault(entry["model"], []).append(entry)
+    for group in by_model.values():
+        keys = set().union(*(e["params"].keys() for e in group))
+        for e in group:
+            e["distinct"] = sorted(k for k in keys if len({json.dumps(g["params"].get(k))
+                                                           for g in group}) > 1)
     v = {
         "format": "deformbench-viewer/1",
         "scene": (doc.get("scene") or {}).get("name", ""),
@@ -227,6 +238,7 @@ def build(doc, rest, faces, runs, budget=BUDGET_BYTES, link_base=""):
         "colour": {"max_m": colour_max, "true_max_m": true_max,
                    "true_max_at": list(where) if where else None},
         "runs": out_runs,
+        "absent": absent,
         "interaction": _interaction(doc, rest[:n] if rest is not None else None),
         "encoded_bytes": total,
     }
@@ -297,24 +309,32 @@ def _interaction(doc, rest):
     return out
 
 
-def page_parts(data):
-    """(head, body) HTML of the viewer with its data; raises OSError when three.js is missing."""
+def library_text():
+    """three.js and its orbit controls in one script (what lib_src points to)."""
     three, orbit = viewer_assets()
+    return three + "\n;\n" + orbit
+
+
+def page_parts(data, lib_src=None):
+    """(head, body) HTML of the viewer with its data; three.js inlined, or loaded from lib_src
+    (a relative URL of library_text() written once beside many viewers). Raises OSError when
+    three.js is missing."""
     with open(os.path.join(VIEWER_DIR, "viewer.js")) as f:
         app = f.read()
     with open(os.path.join(VIEWER_DIR, "viewer.css")) as f:
         css = f.read()
     payload = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
     head = "<style>%s</style>" % css
+    lib = ('<script src="%s"></script>' % html.escape(lib_src) if lib_src else
+           "<script>%s</script>" % library_text())
     body = ('<div id="dbv" class="dbv"></div>'
             '<script type="application/json" id="dbv-data">%s</script>'
-            "<script>%s</script><script>%s</script><script>%s</script>"
-            % (payload, three, orbit, app))
+            "%s<script>%s</script>" % (payload, lib, app))
     return head, body
 
 
-def standalone(data, title):
-    head, body = page_parts(data)
+def standalone(data, title, lib_src=None):
+    head, body = page_parts(data, lib_src)
     return ('<!DOCTYPE html><html><head><meta charset="utf-8"><title>%s</title>%s'
             '<style>body{font-family:sans-serif;margin:0.8em;color:#222}</style></head>'
             "<body><h2>%s</h2>%s</body></html>" % (html.escape(title), head, html.escape(title),

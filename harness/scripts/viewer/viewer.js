@@ -323,12 +323,17 @@
             tl.m.material.wireframe = st.jaw !== 'closed';
           }
         }
-        const params = Object.entries(run.params || {}).map(([k, v]) => k + '=' + v).join(', ');
+        const distinct = run.distinct || [];
+        const fmtP = ([k, v]) => k + '=' + (typeof v === 'number' ? +v.toPrecision(6) : v);
+        const entries = Object.entries(run.params || {});
+        let params = entries.filter(([k]) => distinct.includes(k)).map((kv) => '<b>' + esc(fmtP(kv)) + '</b>').join(', ');
+        const rest = entries.filter(([k]) => !distinct.includes(k)).map(fmtP).join(', ');
+        if (rest) params += (params ? ', ' : '') + esc(rest.length > 110 ? rest.slice(0, 107) + '...' : rest);
         const valid = run.valid === false ? '<span class="bad">invalid' + (run.invalid_reason ? ': ' + esc(run.invalid_reason) : '') + '</span>'
           : run.valid === true ? '<span class="good">valid</span>' : '';
         const st = run.status === 'ok' ? '<span class="good">ok</span>' : '<span class="bad">' + esc(run.status) + '</span>';
         let lines = '<b>' + esc(run.label) + (p.i === refIndex ? ' [reference]' : '') + '</b>';
-        if (params) lines += '<br>' + esc(params);
+        if (params) lines += '<br>' + params;
         lines += '<br>' + st + (valid ? ' &middot; ' + valid : '') + ' &middot; ' +
           (run.step_ms != null ? run.step_ms.toPrecision(3) + ' ms/step' : 'no step time');
         if (p.i !== refIndex) {
@@ -405,7 +410,9 @@
     update();
     if (hp.play === '1') play(true);
     status.textContent = D.runs.length + ' runs, ' + n + ' vertices, ' + D.times.length + ' frames; surfaces ' +
-      (D.encoded_bytes / 1e6).toFixed(2) + ' MB encoded';
+      (D.encoded_bytes / 1e6).toFixed(2) + ' MB encoded' +
+      ((D.absent || []).length ? '. Not drawn (no surface): ' +
+        D.absent.map((a) => a.label + ': ' + a.status + (a.message ? ' (' + a.message + ')' : '')).join('; ') : '');
     document.body.setAttribute('data-viewer-status', 'ready');
     document.body.setAttribute('data-viewer-frame', String(frame));
     const sr = stage.getBoundingClientRect();
