@@ -174,9 +174,15 @@ def organ_figure(results_path):
         ax.view_init(elev=25, azim=-60)
         ax.set_axis_off()
         title = r["label"] + (" [reference]" if r is ref else "")
-        params = ", ".join("%s=%s" % kv for kv in sorted((r.get("params") or {}).items()))
-        if params:
-            title += "\n" + (params if len(params) < 60 else params[:57] + "...")
+        # The parameters that differ between this folder's runs of the same model: two runs
+        # with different parameters never carry the same title.
+        same = [q for q in panels if q.get("model") == r.get("model")]
+        pr = r.get("params") or {}
+        differ = sorted(k for k in pr if len({json.dumps((q.get("params") or {}).get(k))
+                                                 for q in same}) > 1)
+        if differ:
+            params = ", ".join("%s=%s" % (k, pr[k]) for k in differ)
+            title += "\n" + (params if len(params) < 48 else params[:45] + "...")
         if r.get("error") and r["error"].get("rmse_all") is not None:
             title += "\nrmse_all %.3g mm" % (1e3 * r["error"]["rmse_all"])
         if r.get("valid") is False:

@@ -115,7 +115,7 @@
       '<label>colour max (mm) <input class="dbv-max" type="number" min="0" step="any" style="width:7em"></label>' +
       '<button class="dbv-truemax">full range</button></div>' +
       '<div class="dbv-keys">Drag: orbit; right-drag or shift-drag: pan; wheel: zoom. ' +
-      'Red points: grasped surface vertices; dark points: fixed region; line: tool path; sphere: tool.</div>' +
+      'Red points: grasped surface vertices; dark points: fixed surface vertices; boxes: fixed region; red line: tool path; sphere: tool (red: jaws closed).</div>' +
       '<div class="dbv-status">loading...</div><div class="dbv-errors"></div>';
     const status = root.querySelector('.dbv-status');
     const n = D.n;
@@ -158,12 +158,18 @@
     const camera = new THREE.PerspectiveCamera(30, 1, size / 100, size * 100);
     camera.up.set(0, 0, 1);
     const dir = new THREE.Vector3(0.35, 1.0, 0.55).normalize();
-    camera.position.copy(centre).addScaledVector(dir, size * 3.2);
+    camera.position.copy(centre).addScaledVector(dir, size * 2.7);
     const controls = new THREE.OrbitControls(camera, canvas);
     controls.target.copy(centre);
     controls.screenSpacePanning = true;
-    controls.update();
-    controls.saveState();
+    // The home view frames the organ in a panel of the given aspect (width / height).
+    function home(aspect) {
+      const dist = 0.62 * size / Math.tan(camera.fov * Math.PI / 360) / Math.min(1, aspect);
+      camera.position.copy(centre).addScaledVector(dir, dist);
+      controls.target.copy(centre);
+      controls.update();
+      controls.saveState();
+    }
 
     const it = D.interaction || { tools: [], loads: [], boxes: [], fixed_vertices: [], grasped_vertices: [] };
     const panels = shown.map((i) => {
@@ -202,7 +208,7 @@
         const path = new THREE.BufferGeometry().setFromPoints(t.trajectory.map((k) => new THREE.Vector3(k.pos[0], k.pos[1], k.pos[2])));
         scene.add(new THREE.Line(path, new THREE.LineBasicMaterial({ color: 0xc03000 })));
         const m = new THREE.Mesh(new THREE.SphereBufferGeometry(Math.max(t.radius, size / 200), 16, 12),
-          new THREE.MeshBasicMaterial({ color: 0xc03000, wireframe: true }));
+          new THREE.MeshBasicMaterial({ color: 0xc03000, transparent: true, opacity: 0.3, depthWrite: false }));
         scene.add(m);
         return { t, m };
       });
@@ -276,6 +282,7 @@
         p.rect = { x: c * pw, y: r * ph, w: pw - 2, h: ph - 2 };
         p.label.style.left = (p.rect.x + 4) + 'px';
         p.label.style.top = (p.rect.y + 4) + 'px';
+        p.label.style.maxWidth = Math.max(p.rect.w - 16, 60) + 'px';
       });
       renderer.setSize(w, h, false);
       stage.setAttribute('data-panels', panels.map((p) => [p.rect.x, p.rect.y, p.rect.w, p.rect.h].join(',')).join(';'));
@@ -320,15 +327,15 @@
           const st = lerpTool(tl.t, t);
           if (st) {
             tl.m.position.set(st.pos[0], st.pos[1], st.pos[2]);
-            tl.m.material.wireframe = st.jaw !== 'closed';
+            tl.m.material.color.setHex(st.jaw === 'closed' ? 0xc03000 : 0x808080);
           }
         }
         const distinct = run.distinct || [];
         const fmtP = ([k, v]) => k + '=' + (typeof v === 'number' ? +v.toPrecision(6) : v);
         const entries = Object.entries(run.params || {});
         let params = entries.filter(([k]) => distinct.includes(k)).map((kv) => '<b>' + esc(fmtP(kv)) + '</b>').join(', ');
-        const rest = entries.filter(([k]) => !distinct.includes(k)).map(fmtP).join(', ');
-        if (rest) params += (params ? ', ' : '') + esc(rest.length > 110 ? rest.slice(0, 107) + '...' : rest);
+        const others = entries.length - distinct.length;
+        if (others > 0 && !params) params = others + ' parameters (the label names those not at their default)';
         const valid = run.valid === false ? '<span class="bad">invalid' + (run.invalid_reason ? ': ' + esc(run.invalid_reason) : '') + '</span>'
           : run.valid === true ? '<span class="good">valid</span>' : '';
         const st = run.status === 'ok' ? '<span class="good">ok</span>' : '<span class="bad">' + esc(run.status) + '</span>';
@@ -406,6 +413,7 @@
       }
     });
     layout();
+    home(panels[0].rect.w / panels[0].rect.h);
     drawLegend();
     update();
     if (hp.play === '1') play(true);
