@@ -429,6 +429,8 @@
 
   if (!window.THREE || !THREE.OrbitControls) {
     fail('error: three.js did not load');
+  } else if (typeof DecompressionStream === 'undefined') {
+    fail('error: this browser has no DecompressionStream (Chromium 80, Firefox 113, Safari 16.4 or later needed)');
   } else {
     main().catch((e) => fail('error: ' + (e && e.stack || e)));
   }
