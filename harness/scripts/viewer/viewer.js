@@ -417,7 +417,8 @@
     drawLegend();
     update();
     if (hp.play === '1') play(true);
-    status.textContent = D.runs.length + ' runs, ' + n + ' vertices, ' + D.times.length + ' frames; surfaces ' +
+    status.textContent = D.runs.length + ' runs, ' + n + ' vertices, ' +
+      (D.times.length > 1 ? D.times.length + ' frames' : 'the final surfaces only (the scene\'s "output": {"surfaces": "every:N"} writes a series)') + '; surfaces ' +
       (D.encoded_bytes / 1e6).toFixed(2) + ' MB encoded' +
       ((D.absent || []).length ? '. Not drawn (no surface): ' +
         D.absent.map((a) => a.label + ': ' + a.status + (a.message ? ' (' + a.message + ')' : '')).join('; ') : '');
