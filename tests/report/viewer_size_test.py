@@ -5,6 +5,7 @@
 (synthetic, in memory): the viewer page must stay under 30 MB with every frame kept, and the
 decoded positions (this script mirrors viewer.js's decoder) must be within half a quantisation
 step of the originals. A budget too small for the frames must thin them and say so.
+Exit 77 (ctest: skipped) without three.js.
 """
 import os
 import sys
@@ -36,6 +37,11 @@ def decode(run, n, rest):
 
 
 def main():
+    try:
+        viewer_data.viewer_assets()
+    except OSError as e:
+        print("SKIP: %s" % e)
+        return 77
     V, F = sphere(64)
     n, frames, models = len(V), 100, 9
     t = np.linspace(0, 1, frames)
