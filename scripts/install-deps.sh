@@ -10,6 +10,7 @@ PACKAGES=(
   clang libclang-rt-14-dev llvm clang-format
   libopenblas0-serial liblapack3
   python3-matplotlib python3-numpy
+  libjs-three chromium python3-pil  # the report's 3D viewer (three.js) and its browser test
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

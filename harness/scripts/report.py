@@ -7,16 +7,23 @@ Sections (each present when the folder has its data):
   tables          every <table>.json (format deformbench-table/1), and results.json run tables
   sweep           error against run time (sweep.json; the plot is drawn again with matplotlib)
   stability       the stability table summary and one stability map per model
+  viewer          the folder's own results.json: an interactive 3D viewer (three.js, inlined) of
+                  every run side by side with the reference, over the surface series, coloured
+                  by the distance to the reference (viewer_data.py)
   organs          the final deformed organ of each model side by side, coloured by the distance
                   to the reference's final surface (matplotlib 3D render of final.obj)
+Every results.json in a subfolder (the runs of tables, sweep, stability) gets a viewer.html of its
+own beside it, and the rows of those reports link to it. The error-against-run-time plots are
+SVG: hovering a point names the run, clicking it opens the run's viewer.
 Images are PNG embedded as base64, so the file opens anywhere. Without matplotlib the report is
-written without pictures and says so.
+written without pictures and says so; without three.js (libjs-three) without viewers.
 """
 import base64
 import glob
 import html
 import io
 import json
+import math
 import os
 import sys
 
@@ -31,6 +38,8 @@ except ImportError:
     HAVE_MPL = False
 
 MAX_ORGAN_FIGURES = 12
+MAX_VIEWERS = 400
+VIEWER_LIB = "viewer-three.js"  # three.js + OrbitControls, shared by the runs' viewer.html
 
 
 def esc(x):
@@ -49,11 +58,15 @@ def cell(v):
     return str(v)
 
 
-def html_table(columns, rows):
+def html_table(columns, rows, links=None):
+    """links: per row, the href of its run's viewer (or None): a "viewer" column when any."""
+    links = links if links and any(links) else None
     out = ["<table><thead><tr>"]
     out += ["<th>%s</th>" % esc(h) for _, h in columns]
+    if links:
+        out.append("<th>viewer</th>")
     out.append("</tr></thead><tbody>")
-    for r in rows:
+    for i, r in enumerate(rows):
         out.append("<tr>")
         for key, _ in columns:
             v = r.get(key)
@@ -64,6 +77,8 @@ def html_table(columns, rows):
             if len(text) > 160:
                 text = text[:157] + "..."
             out.append("<td%s>%s</td>" % (cls, esc(text)))
+        if links:
+            out.append('<td>%s</td>' % ('<a href="%s">view</a>' % esc(links[i]) if links[i] else ""))
         out.append("</tr>")
     out.append("</tbody></table>")
     return "".join(out)
@@ -115,7 +130,7 @@ def organ_figure(results_path):
         ref_v = np.array(ref_v)
     panels = models + ([ref] if ref is not None else [])
     surfaces = []
-    vmax = 0.0
+    ok_max, true_max, true_at = 0.0, 0.0, ""
     for r in panels:
         v, fcs = read_obj(os.path.join(base, r["final_surface"]))
         v = np.array(v)
@@ -125,23 +140,33 @@ def organ_figure(results_path):
             n = min(len(v), len(ref_v))
             err = np.zeros(len(v))
             err[:n] = np.linalg.norm(v[:n] - ref_v[:n], axis=1) * 1e3
-            vmax = max(vmax, float(np.percentile(err[:n], 99)))
+            m = float(err[:n].max()) if n else 0.0
+            if m > true_max:
+                true_max, true_at = m, r["label"]
+            if r.get("status") == "ok" and r.get("valid", True) is not False:
+                ok_max = max(ok_max, m)
         surfaces.append((r, v, fcs, err))
-    vmax = vmax if vmax > 0 else 1.0
+    # The full range of the valid runs; a run beyond it (invalid, diverged) is drawn in the
+    # over colour, which the bar shows and names.
+    vmax = ok_max if ok_max > 0 else (true_max if true_max > 0 else 1.0)
+    clipped = true_max > vmax * (1 + 1e-9)
     cols = len(surfaces)
     fig = plt.figure(figsize=(3.4 * cols + 1.2, 3.8))
-    cmap = plt.get_cmap("viridis")
+    cmap = plt.get_cmap("viridis").copy()
+    cmap.set_over("magenta")
     lo = np.min([s[1].min(axis=0) for s in surfaces], axis=0)
     hi = np.max([s[1].max(axis=0) for s in surfaces], axis=0)
     centre, half = (lo + hi) / 2, (hi - lo).max() / 2
+    norm = plt.Normalize(0, vmax)
     for i, (r, v, fcs, err) in enumerate(surfaces):
         ax = fig.add_subplot(1, cols, i + 1, projection="3d")
         tris = v[fcs]
         if err is not None:
-            face_err = err[fcs].mean(axis=1)
-            colours = cmap(np.clip(face_err / vmax, 0, 1))
+            # The face colour is that of its largest vertex distance, so nothing is averaged
+            # away and every colour is on the bar.
+            colours = cmap(norm(err[fcs].max(axis=1)))
         else:
-            colours = [(0.85, 0.55, 0.5, 1.0)] * len(fcs)
+            colours = [(0.86, 0.74, 0.64, 1.0)] * len(fcs)
         coll = Poly3DCollection(tris, facecolors=colours, edgecolors="none", linewidths=0)
         ax.add_collection3d(coll)
         for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
@@ -149,24 +174,130 @@ def organ_figure(results_path):
         ax.view_init(elev=25, azim=-60)
         ax.set_axis_off()
         title = r["label"] + (" [reference]" if r is ref else "")
+        # The parameters that differ between this folder's runs of the same model: two runs
+        # with different parameters never carry the same title.
+        same = [q for q in panels if q.get("model") == r.get("model")]
+        pr = r.get("params") or {}
+        differ = sorted(k for k in pr if len({json.dumps((q.get("params") or {}).get(k))
+                                                 for q in same}) > 1)
+        if differ:
+            params = ", ".join("%s=%s" % (k, pr[k]) for k in differ)
+            title += "\n" + (params if len(params) < 48 else params[:45] + "...")
         if r.get("error") and r["error"].get("rmse_all") is not None:
             title += "\nrmse_all %.3g mm" % (1e3 * r["error"]["rmse_all"])
+        if r.get("valid") is False:
+            title += "\nINVALID: %s" % r.get("invalid_reason", "")
         ax.set_title(title, fontsize=8)
     if ref_v is not None:
-        sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, vmax))
-        fig.colorbar(sm, ax=fig.axes, shrink=0.7, label="distance to reference (mm)")
+        sm = plt.cm.ScalarMappable(cmap=cmap, norm=norm)
+        label = "distance to reference (mm), 0 to %.3g" % vmax
+        if clipped:
+            label += "\nclipped: magenta beyond; true max %.3g mm (%s)" % (true_max, true_at)
+        fig.colorbar(sm, ax=fig.axes, shrink=0.7, label=label, extend="max" if clipped else "neither")
     caption = "%s: final surfaces%s" % (
         doc["scene"]["name"],
-        ", coloured by distance to the reference (%s)" % ref["label"] if ref else
+        ", coloured by distance to the reference (%s), range 0 to %.3g mm%s" % (
+            ref["label"], vmax, "; clipped, true maximum %.3g mm (%s)" % (true_max, true_at)
+            if clipped else " (the largest distance)") if ref else
         " (no reference: uniform colour)")
     return fig, caption
 
 
-def results_table(path):
+def run_hash(label):
+    """The URL hash that makes a viewer show one run (and the reference)."""
+    from urllib.parse import quote
+    return "#run=" + quote(label, safe="()=,.")
+
+
+def run_point_text(r, ms, err, err_name):
+    params = ", ".join("%s=%s" % kv for kv in sorted((r.get("params") or {}).items()))
+    return "%s (%s)\n%s\n%s %.4g mm, %.4g ms/step%s" % (
+        r.get("label", "?"), r.get("model", ""), params or "default parameters", err_name,
+        1e3 * err, ms, "" if r.get("valid", True) is not False else
+        "\nINVALID: %s" % r.get("invalid_reason", ""))
+
+
+def svg_scatter(points, xlabel, ylabel, budget_ms=None):
+    """An error-against-time plot as inline SVG, log axes where the data span a decade.
+    points: dicts x, y (> 0), series, text (the hover text), href (or None), ring (bool)."""
+    pts = [p for p in points if p["x"] and p["y"] and p["x"] > 0 and p["y"] > 0]
+    if not pts:
+        return ""
+    W, H, L, R, T, B = 720, 380, 70, 170, 15, 45
+    series = []
+    for p in pts:
+        if p["series"] not in series:
+            series.append(p["series"])
+    palette = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
+               "#7f7f7f", "#bcbd22", "#17becf"]
+
+    def axis(vals, extra=()):
+        lo, hi = min(list(vals) + list(extra)), max(list(vals) + list(extra))
+        log = hi / lo > 10
+        if log:
+            a, b = math.floor(math.log10(lo)), math.ceil(math.log10(hi))
+            f = lambda v: (math.log10(v) - a) / max(b - a, 1e-9)
+            ticks = [10.0 ** k for k in range(a, b + 1)]
+        else:
+            pad = (hi - lo) * 0.1 or hi * 0.1
+            a, b = max(lo - pad, 0), hi + pad
+            f = lambda v: (v - a) / (b - a)
+            ticks = [a + (b - a) * k / 4 for k in range(5)]
+        return f, ticks, log
+
+    fx, xt, xlog = axis([p["x"] for p in pts], [budget_ms] if budget_ms else [])
+    fy, yt, ylog = axis([p["y"] for p in pts])
+    X = lambda v: L + fx(v) * (W - L - R)
+    Y = lambda v: H - B - fy(v) * (H - T - B)
+    o = ['<svg class="scatter" xmlns="http://www.w3.org/2000/svg" width="%d" height="%d" '
+         'font-size="11" font-family="sans-serif">' % (W, H),
+         '<rect x="%d" y="%d" width="%d" height="%d" fill="none" stroke="#888"/>'
+         % (L, T, W - L - R, H - T - B)]
+    for v in xt:
+        o.append('<line x1="%.1f" x2="%.1f" y1="%d" y2="%d" stroke="#eee"/>'
+                 '<text x="%.1f" y="%d" text-anchor="middle">%s</text>'
+                 % (X(v), X(v), T, H - B, X(v), H - B + 14, "%.3g" % v))
+    for v in yt:
+        o.append('<line x1="%d" x2="%d" y1="%.1f" y2="%.1f" stroke="#eee"/>'
+                 '<text x="%d" y="%.1f" text-anchor="end">%s</text>'
+                 % (L, W - R, Y(v), Y(v), L - 4, Y(v) + 4, "%.3g" % v))
+    o.append('<text x="%d" y="%d" text-anchor="middle">%s%s</text>'
+             % ((L + W - R) // 2, H - 8, esc(xlabel), " (log)" if xlog else ""))
+    o.append('<text transform="translate(14,%d) rotate(-90)" text-anchor="middle">%s%s</text>'
+             % ((T + H - B) // 2, esc(ylabel), " (log)" if ylog else ""))
+    if budget_ms:
+        o.append('<line x1="%.1f" x2="%.1f" y1="%d" y2="%d" stroke="red" stroke-dasharray="3,3"/>'
+                 % (X(budget_ms), X(budget_ms), T, H - B))
+    for p in pts:
+        c = palette[series.index(p["series"]) % len(palette)]
+        dot = '<circle cx="%.1f" cy="%.1f" r="5" fill="%s" stroke="%s" stroke-width="%d"%s>' \
+              '<title>%s</title></circle>' % (X(p["x"]), Y(p["y"]), c if p.get("valid", True) else "white",
+                                              "black" if p.get("ring") else c,
+                                              2 if p.get("ring") else 1,
+                                              ' style="cursor:pointer"' if p.get("href") else "",
+                                              esc(p["text"]))
+        o.append('<a href="%s">%s</a>' % (esc(p["href"]), dot) if p.get("href") else dot)
+    for i, name in enumerate(series):
+        o.append('<circle cx="%d" cy="%d" r="5" fill="%s"/><text x="%d" y="%d">%s</text>'
+                 % (W - R + 12, T + 12 + 16 * i, palette[i % len(palette)], W - R + 22,
+                    T + 16 + 16 * i, esc(name[:22])))
+    o.append("</svg>")
+    return "".join(o)
+
+
+def results_table(path, viewer_href=None):
     with open(path) as f:
         doc = json.load(f)
-    rows = []
+    rows, links = [], []
+
+    def href_of(r):
+        # The folder's own viewer is on this page (an anchor); another page filters by run.
+        if not viewer_href:
+            return None
+        return viewer_href if viewer_href.startswith("#") else viewer_href + run_hash(r["label"])
+
     for r in doc["runs"]:
+        links.append(href_of(r))
         e = r.get("error") or {}
         sm = r.get("step_ms") or {}
         rows.append({
@@ -179,13 +310,27 @@ def results_table(path):
             "rmse_50": 1e3 * e["rmse_50"] if e.get("rmse_50") is not None else None,
             "rmse_all": 1e3 * e["rmse_all"] if e.get("rmse_all") is not None else None,
             "loss_ratio": e.get("loss_ratio"),
+            "valid": r.get("valid"),
+            "invalid_reason": r.get("invalid_reason"),
             "message": r.get("message", ""),
         })
     cols = [("label", "run"), ("status", "status"), ("ms", "ms/step"), ("p95", "p95 ms"),
             ("precompute_s", "precompute s"), ("rmse_10", "rmse_10 mm"),
-            ("rmse_50", "rmse_50 mm"), ("rmse_all", "rmse_all mm"), ("loss_ratio", "loss ratio"),
-            ("message", "message")]
-    return doc, html_table(cols, rows)
+            ("rmse_50", "rmse_50 mm"), ("rmse_all", "rmse_all mm"), ("loss_ratio", "loss ratio")]
+    if any(r["valid"] is not None for r in rows):
+        cols += [("valid", "valid"), ("invalid_reason", "why invalid")]
+    cols.append(("message", "message"))
+    pts = []
+    for r in doc["runs"]:
+        e, sm = r.get("error") or {}, r.get("step_ms") or {}
+        if r.get("role") == "reference" or e.get("rmse_all") is None or not sm.get("median"):
+            continue
+        pts.append({"x": sm["median"], "y": 1e3 * e["rmse_all"], "series": r.get("model", "?"),
+                    "text": run_point_text(r, sm["median"], e["rmse_all"], "rmse_all"),
+                    "href": href_of(r),
+                    "valid": r.get("valid", True) is not False})
+    plot = svg_scatter(pts, "ms per step (median)", "rmse_all (mm)") if len(pts) > 1 else ""
+    return doc, html_table(cols, rows, links) + plot
 
 
 def main():
@@ -201,6 +346,57 @@ def main():
     if not HAVE_MPL:
         notes.append("matplotlib is not installed for %s: the report has no pictures."
                      % sys.executable)
+
+    # Viewers: the folder's own results inline, every results.json below in a viewer.html beside it.
+    viewer_head, viewer_section, viewers, viewer_bytes = "", None, {}, 0
+    written_lib = set()
+    try:
+        import viewer_data
+        viewer_data.viewer_assets()
+    except (ImportError, OSError) as e:
+        viewer_data = None
+        notes.append("no 3D viewer: %s" % e)
+    if viewer_data is not None:
+        found = sorted(glob.glob(os.path.join(root, "**", "results.json"), recursive=True))
+        if len(found) > MAX_VIEWERS:
+            notes.append("viewers written for the first %d of %d results folders"
+                         % (MAX_VIEWERS, len(found)))
+        for path in found[:MAX_VIEWERS]:
+            rel = os.path.relpath(os.path.dirname(path), root)
+            try:
+                doc_, rest, faces, runs = viewer_data.load_folder(path)
+                data = viewer_data.build(doc_, rest, faces, runs)
+                if data is None:
+                    continue
+                if rel == ".":
+                    viewer_head, body_ = viewer_data.page_parts(data)
+                    viewer_section = body_
+                    viewers["."] = "#viewer"
+                    continue
+                # The runs' viewers share one copy of three.js at the top of the folder.
+                lib = os.path.join(root, VIEWER_LIB)
+                if not os.path.exists(lib) or lib not in written_lib:
+                    with open(lib + ".tmp", "w") as f:
+                        f.write(viewer_data.library_text())
+                    os.replace(lib + ".tmp", lib)
+                    written_lib.add(lib)
+                    viewer_bytes += os.path.getsize(lib)
+                target = os.path.join(os.path.dirname(path), "viewer.html")
+                page = viewer_data.standalone(
+                    data, "deformbench viewer: %s (%s)" % (data["scene"], rel),
+                    os.path.relpath(lib, os.path.dirname(target)))
+                with open(target + ".tmp", "w") as f:
+                    f.write(page)
+                os.replace(target + ".tmp", target)
+                viewer_bytes += os.path.getsize(target)
+                viewers[rel] = os.path.relpath(target, os.path.dirname(os.path.abspath(out)))
+            except Exception as e:  # a broken results folder must not stop the report
+                notes.append("%s: no viewer (%s: %s)" % (rel, type(e).__name__, e))
+    if viewer_section:
+        sections.append(("viewer", "Viewer", viewer_section))
+
+    def viewer_of(folder):
+        return viewers.get(os.path.normpath(folder)) if folder else None
 
     # Tables (deformbench-table/1) at the top level.
     table_html = []
@@ -226,12 +422,19 @@ def main():
                                                              esc(doc["title"])))
         if doc.get("source"):
             table_html.append("<p>Paper columns: %s</p>" % esc(doc["source"]))
-        table_html.append(html_table(cols, doc["rows"]))
+        links = []
+        for r in doc["rows"]:
+            sc = r.get("scene") if isinstance(r.get("scene"), str) else None
+            case = None
+            if sc and sc.startswith("scenes/") and sc.endswith(".json"):
+                case = os.path.join("runs", sc[len("scenes/"):-len(".json")])
+            links.append(viewer_of(case))
+        table_html.append(html_table(cols, doc["rows"], links))
         if doc.get("notes"):
             table_html.append("<ul>%s</ul>" % "".join("<li>%s</li>" % esc(n) for n in doc["notes"]))
     top_results = os.path.join(root, "results.json")
     if os.path.exists(top_results):
-        doc, t = results_table(top_results)
+        doc, t = results_table(top_results, viewers.get("."))
         table_html.insert(0, '<h3 id="table-results">results: %s</h3>%s'
                           % (esc(doc["scene"]["name"]), t))
     if table_html:
@@ -251,15 +454,31 @@ def main():
                            stdout=subprocess.DEVNULL)
             if os.path.exists(png):
                 parts.append(png_tag(png, "error against run time"))
-        rows = []
+        rows, links, pts = [], [], []
+        runs_folder = os.path.dirname(sweep.get("results", "runs/results.json")) or "."
+        href = viewer_of(runs_folder)
         for p in sweep["points"]:
             q = dict(p)
             for k in ("rmse_50", "rmse_all", "max"):
-                q[k] = 1e3 * p[k] if p[k] is not None else None
+                q[k] = 1e3 * p[k] if p.get(k) is not None else None
             rows.append(q)
+            link = href + run_hash(p["label"]) if href else None
+            links.append(link)
+            if p.get("status") == "ok" and p.get("ms_median") and p.get("rmse_50"):
+                run = {"label": p["label"], "model": p["model"],
+                       "params": {p["param"]: p["value"]} if p.get("param") else {}}
+                pts.append({"x": p["ms_median"], "y": 1e3 * p["rmse_50"], "series": p["model"],
+                            "text": run_point_text(run, p["ms_median"], p["rmse_50"], "rmse_50"),
+                            "href": link, "ring": bool(p.get("pareto"))})
+        plot = svg_scatter(pts, "ms per step (median)", "rmse_50 (mm)",
+                           sweep.get("haptic_budget_ms"))
+        if plot:
+            parts.insert(0, "<p>Hover a point for its run; click it to open the run's viewer "
+                         "(rings: the Pareto front; red line: the haptic budget). The PNG below "
+                         "is the static version.</p>" + plot)
         parts.append(html_table([("label", "point"), ("status", "status"),
                                  ("ms_median", "ms/step"), ("rmse_50", "rmse_50 mm"),
-                                 ("rmse_all", "rmse_all mm"), ("pareto", "Pareto")], rows))
+                                 ("rmse_all", "rmse_all mm"), ("pareto", "Pareto")], rows, links))
         sections.append(("sweep", "Error against run time", "".join(parts)))
 
     # Stability.
@@ -292,8 +511,10 @@ def main():
                 if os.path.exists(png):
                     parts.append('<div class="map">%s</div>' % png_tag(png, "stability map " + m))
         cols = [(c["key"], c["header"]) for c in stab["columns"] if c["key"] != "scene"]
+        links = [viewer_of(os.path.join("runs", str(r.get("model")), str(r.get("case"))))
+                 for r in stab["rows"]]
         parts.append("<details><summary>every case</summary>%s</details>"
-                     % html_table(cols, stab["rows"]))
+                     % html_table(cols, stab["rows"], links))
         sections.append(("stability", "Stability", "".join(parts)))
 
     # Deformed organs: every results.json below the folder that has final surfaces.
@@ -357,13 +578,18 @@ figure { margin: 1.5em 0; border-top: 1px solid #ddd; }
 figcaption { font-weight: bold; margin: 0.4em 0; }
 """
     doc = ("<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>%s</title><style>%s</style>"
-           "</head><body>%s</body></html>" % (esc(title), style, "\n".join(body)))
+           "%s</head><body>%s</body></html>" % (esc(title), style, viewer_head, "\n".join(body)))
     tmp = out + ".tmp"
     with open(tmp, "w") as f:
         f.write(doc)
     os.replace(tmp, out)
-    print("report: %s (%d sections%s)" % (out, len(sections),
-                                          "" if HAVE_MPL else ", no pictures: matplotlib missing"))
+    print("report: %s (%d sections, %.2f MB%s)" % (
+        out, len(sections), os.path.getsize(out) / 1e6,
+        "" if HAVE_MPL else ", no pictures: matplotlib missing"))
+    sub = len(viewers) - (1 if "." in viewers else 0)
+    if sub:
+        print("viewers: %d viewer.html beside the results.json below %s, sharing %s (%.2f MB "
+              "together)" % (sub, root, VIEWER_LIB, viewer_bytes / 1e6))
     return 0
 
 

@@ -113,6 +113,13 @@ std::string sanitizeLabel(const std::string& label) {
 
 void writeRunSurfaces(const fs::path& outDir, const Scene& scene, const Organ& organ,
                       std::vector<RunRecord>& runs) {
+  // The rest surface beside the runs' surfaces: the viewer of `deformbench report` draws the
+  // series as offsets from it.
+  if (scene.surfaces != SurfaceOutput::None && organ.surface.V.rows() > 0) {
+    std::error_code ec;
+    fs::create_directories(outDir, ec);
+    writeObj((outDir / kRestSurfaceFile).string(), organ.surface);
+  }
   std::set<std::string> used;
   for (RunRecord& run : runs) {
     run.finalSurfaceFile.clear();
@@ -278,6 +285,35 @@ json runJson(const RunRecord& run) {
   return j;
 }
 
+json interactionJson(const Scene& scene, const Organ& organ) {
+  const auto vec = [](const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); };
+  json j;
+  json boxes = json::array();
+  for (const Box& b : organ.fixed.boxes) boxes.push_back({vec(b.lo), vec(b.hi)});
+  j["fixed"] = {{"boxes", boxes}, {"surface_vertices", organ.fixed.surfaceVertices}};
+  json tools = json::array();
+  for (const ToolSpec& t : scene.tools) {
+    json path = json::array();
+    for (const KeyFrame& k : t.trajectory)
+      path.push_back({{"t", k.t}, {"pos", vec(k.pos)}, {"jaw", k.jawClosed ? "closed" : "open"}});
+    tools.push_back({{"type", t.type == ToolType::Grasper ? "grasper" : "probe"},
+                     {"radius", t.radius},
+                     {"trajectory", path}});
+  }
+  j["tools"] = tools;
+  json loads = json::array();
+  for (const LoadSpec& l : scene.loads) {
+    json o = {{"type", l.type == LoadType::PointForce ? "point_force" : "pin_head"},
+              {"at", vec(l.at)},
+              {"start", l.start},
+              {"end", finite(l.end)}};
+    if (l.type == LoadType::PointForce) o["force"] = vec(l.force);
+    loads.push_back(o);
+  }
+  j["loads"] = loads;
+  return j;
+}
+
 json resultsJson(const Scene& scene, const Organ& organ, const std::vector<std::string>& organLog,
                  const std::vector<RunRecord>& runs, const MachineInfo& machine) {
   json doc;
@@ -288,6 +324,8 @@ json resultsJson(const Scene& scene, const Organ& organ, const std::vector<std::
                   {"vertices", organ.surface.numVertices()},
                   {"triangles", organ.surface.numFaces()},
                   {"log", organLog}};
+  if (scene.surfaces != SurfaceOutput::None) doc["organ"]["rest_surface"] = kRestSurfaceFile;
+  doc["interaction"] = interactionJson(scene, organ);
   doc["machine"] = {
       {"cpu", machine.cpu}, {"compiler", machine.compiler},   {"build_type", machine.buildType},
       {"git", machine.git}, {"timestamp", machine.timestamp}, {"deformbench", machine.version}};

@@ -594,8 +594,22 @@ TEST_F(TempDir, ReportHasTheSectionsAndPictures) {
                                {"pareto", true}});
   std::ofstream(out / "sweep.json") << sweep.dump();
 
+  // What the viewer draws besides the surfaces: the rest shape and the interaction.
+  EXPECT_TRUE(fs::exists(out / "rest_surface.obj"));
+  const json res = json::parse(readText(out / "results.json"));
+  EXPECT_EQ(res["organ"]["rest_surface"], "rest_surface.obj");
+  ASSERT_EQ(res["interaction"]["tools"].size(), 1u);
+  EXPECT_EQ(res["interaction"]["tools"][0]["trajectory"].size(), 2u);
+  EXPECT_DOUBLE_EQ(res["interaction"]["tools"][0]["radius"].get<double>(), 0.02);
+  EXPECT_EQ(res["interaction"]["fixed"]["boxes"].size(), 1u);
+
   ASSERT_EQ(exitCodeOf(exe + " report " + out.string() + " > /dev/null 2>&1"), 0);
   const std::string html = readText(out / "report.html");
+  if (fs::exists("/usr/share/javascript/three/build/three.min.js")) {
+    EXPECT_NE(html.find("<section id=\"viewer\">"), std::string::npos);
+    EXPECT_NE(html.find("id=\"dbv-data\""), std::string::npos);
+    EXPECT_NE(html.find("<a href=\"#viewer\">view</a>"), std::string::npos) << "rows link to it";
+  }
   EXPECT_NE(html.find("<section id=\"tables\">"), std::string::npos);
   EXPECT_NE(html.find("id=\"table-demo-table\""), std::string::npos);
   EXPECT_NE(html.find("id=\"table-results\""), std::string::npos);

@@ -308,10 +308,12 @@ TEST(Results, WrittenAtomicallyAndParseable) {
   EXPECT_FALSE(r1.contains("final_surface"));
   EXPECT_EQ(back["runs"][2]["role"], "reference");
   EXPECT_FALSE(back["machine"]["timestamp"].get<std::string>().empty());
-  // Nothing but results.json and the run folders: no temporary files left behind.
+  // Nothing but results.json, the rest surface and the run folders: no temporary files left.
+  EXPECT_TRUE(fs::exists(out / kRestSurfaceFile));
   for (const auto& entry : fs::directory_iterator(out)) {
     if (entry.is_regular_file()) {
-      EXPECT_EQ(entry.path().filename(), "results.json");
+      const std::string name = entry.path().filename().string();
+      EXPECT_TRUE(name == "results.json" || name == kRestSurfaceFile) << name;
     }
   }
   fs::remove_all(out);

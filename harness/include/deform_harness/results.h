@@ -28,6 +28,13 @@ std::string sanitizeLabel(const std::string& label);
 void writeRunSurfaces(const std::filesystem::path& outDir, const Scene& scene, const Organ& organ,
                       std::vector<RunRecord>& runs);
 
+/// The organ's rest surface, written beside results.json unless the scene writes no surfaces.
+inline constexpr const char* kRestSurfaceFile = "rest_surface.obj";
+
+/// What the viewer draws besides the surfaces: the fixed region (boxes, surface vertices), the
+/// tools' trajectories and the loads, in metres and seconds (results.json "interaction").
+nlohmann::ordered_json interactionJson(const Scene& scene, const Organ& organ);
+
 /// The results document (keys in the order DESIGN.md shows them).
 nlohmann::ordered_json resultsJson(const Scene& scene, const Organ& organ,
                                    const std::vector<std::string>& organLog,
