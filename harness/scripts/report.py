@@ -171,7 +171,8 @@ def results_table(path):
         sm = r.get("step_ms") or {}
         rows.append({
             "label": r["label"] + (" [ref]" if r.get("role") == "reference" else ""),
-            "status": r["status"],
+            "status": (r["status"] if r.get("valid", True)
+                       else "invalid (%s)" % r.get("invalid_reason", "")),
             "ms": sm.get("median"),
             "p95": sm.get("p95"),
             "precompute_s": r.get("precompute_s"),
@@ -257,6 +258,9 @@ def main():
             for k in ("rmse_50", "rmse_all", "max"):
                 q[k] = 1e3 * p[k] if p[k] is not None else None
             rows.append(q)
+        for r in rows:
+            if r.get("valid") is False:
+                r["status"] = "invalid (%s)" % r.get("invalid_reason", "")
         parts.append(html_table([("label", "point"), ("status", "status"),
                                  ("ms_median", "ms/step"), ("rmse_50", "rmse_50 mm"),
                                  ("rmse_all", "rmse_all mm"), ("pareto", "Pareto")], rows))
