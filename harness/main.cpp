@@ -160,7 +160,8 @@ void printTable(const BenchmarkResult& r) {
   for (const RunRecord& run : r.runs) {
     std::vector<std::string> row;
     row.push_back(run.label + (run.isReference ? " [ref]" : ""));
-    row.push_back(statusName(run.status));
+    row.push_back(run.status == RunStatus::Ok && !run.valid ? std::string("invalid")
+                                                            : std::string(statusName(run.status)));
     const bool timed = run.stepStats.samples > 0;
     row.push_back(timed ? fmt(run.stepStats.median) : "-");
     row.push_back(timed ? fmt(run.stepStats.p95) : "-");
@@ -217,6 +218,29 @@ struct RunArgs {
   std::vector<std::string> pluginDirs;
 };
 
+/// Validity (DESIGN "Metrics") of each run that did not do what the scene asked, and the
+/// reference's estimated discretisation error when a check of it is in the cache.
+void printReferenceCheck(const std::string& sceneFile, const BenchmarkResult& result,
+                         PluginLoader& loader, const std::optional<fs::path>& cacheDir) {
+  for (const RunRecord& run : result.runs)
+    if (run.status == RunStatus::Ok && !run.valid)
+      std::cout << "invalid: " << run.label << ": " << run.invalidReason << "\n";
+  const auto ref = std::find_if(result.runs.begin(), result.runs.end(),
+                                [](const RunRecord& r) { return r.isReference; });
+  if (ref == result.runs.end() || ref->status != RunStatus::Ok) return;
+  if (cacheDir && cacheDir->empty()) return;  // --no-cache: nothing to look up
+  const std::optional<ConvergenceResult> check = cachedReferenceCheck(sceneFile, loader, cacheDir);
+  if (!check) {
+    std::cout << "reference " << ref->label
+              << ": discretisation error not estimated (`deformbench converge " << sceneFile
+              << " --out DIR --of-reference` estimates it, then `run` prints it)\n";
+    return;
+  }
+  std::cout << "reference " << ref->label << ": " << convergenceSummary(*check);
+  const std::string w = convergenceWarning(*check);
+  std::cout << (w.empty() ? "" : "; warning: " + w) << " (cached study)\n";
+}
+
 int cmdRun(const RunArgs& a) {
   PluginLoader loader(searchPath(a.pluginDirs));
   BenchmarkOptions options;
@@ -238,6 +262,7 @@ int cmdRun(const RunArgs& a) {
     for (const auto& line : result.organLog) std::cout << "organ: " << line << "\n";
   std::cout << "\n";
   printTable(result);
+  printReferenceCheck(a.scene, result, loader, options.cacheDir);
   std::cout << "results: " << result.resultsPath.string() << "\n";
   if (!a.strict) return 0;
   // A model that failed (bad input it alone refuses, such as a self-intersecting surface for a
@@ -503,12 +528,18 @@ int cmdBench(const BenchArgs& a) {
   return 0;
 }
 
-int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements) {
+int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements,
+                bool ofReference) {
   PluginLoader loader(searchPath(a.pluginDirs));
   ConvergeOptions o;
   o.outDir = makeOutDir(a.out);
   o.cacheDir = cacheChoice(a);
   o.baseElements = elements;
+  if (ofReference) {
+    if (elements > 0)
+      throw InputError("--of-reference", "", "takes the reference's own elements: drop --elements");
+    o.factors = kReferenceCheckFactors;
+  }
   ConvergenceResult r;
   {
     Progress progress(0, "converge");
@@ -672,6 +703,11 @@ int realMain(int argc, char** argv) {
       ->add_option("--elements", convElements,
                    "coarsest level's elements (default: the reference's own)")
       ->check(CLI::PositiveNumber);
+  bool convOfReference = false;
+  converge->add_flag("--of-reference", convOfReference,
+                     "levels 1/8, 1/2.8 and 1 times the reference's own elements: the estimate "
+                     "is the error of the reference as the scene runs it (cached; `run` then "
+                     "prints it)");
   addCommon(converge, ca, false);
 
   try {
@@ -706,7 +742,7 @@ int realMain(int argc, char** argv) {
   }
   if (*converge) {
     ca.pluginDirs = pluginDirs;
-    return cmdConverge(convScene, ca, convElements);
+    return cmdConverge(convScene, ca, convElements, convOfReference);
   }
   return kExitBadInput;
 }

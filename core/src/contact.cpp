@@ -913,12 +913,12 @@ StepStatus solveWithConstraints(ContactWorld& world, const StepInput& in,
     lastBodies.clear();
     for (int b = 0; b < bodies; ++b) {
       if (nodes[b].empty()) continue;
-      GraspInput g;
+      NodeGrasp g;
       g.tool = -1;
       g.nodes = nodes[b];
       g.targets.resize(static_cast<Eigen::Index>(nodes[b].size()), 3);
       for (size_t k = 0; k < nodes[b].size(); ++k) g.targets.row(k) = targets[b][k].transpose();
-      aug.grasps.push_back(std::move(g));
+      aug.nodeConstraints.push_back(std::move(g));
       lastBodies.push_back(b);
     }
     status = model.solve(aug);

@@ -3,7 +3,9 @@
 #include <deform/interaction.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <map>
 
 namespace deform {
 
@@ -38,8 +40,10 @@ bool jawClosed(const std::vector<KeyFrame>& trajectory, Real t) {
 
 Interaction::Interaction(const Scene& scene, const SurfaceMesh& restSurface)
     : m_scene(scene), m_rest(restSurface), m_attach(scene.tools.size()) {
-  for (const LoadSpec& load : scene.loads)
+  for (const LoadSpec& load : scene.loads) {
     m_loadVertices.push_back(nearestVertex(m_rest.V, load.at));
+    m_loadPatches.push_back(pressurePatch(m_rest, m_loadVertices.back(), load.radius));
+  }
   buildWorlds();
 }
 
@@ -206,7 +210,6 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
   in.dt = dt;
   in.gravity = m_scene.gravity;
   const Real slack = kTimeSlack * dt;
-  const MatX3& nodes = model.nodes();
 
   if (m_dynamics) {
     const auto hand = [&](const std::vector<KeyFrame>& traj, const Vec3& offset, int body) {
@@ -264,7 +267,6 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
 
   for (size_t i = 0; i < m_scene.tools.size(); ++i) {
     const ToolSpec& tool = m_scene.tools[i];
-    const Real r2 = tool.radius * tool.radius;
     if (tool.type == ToolType::Grasper) {
       Attachment& a = m_attach[i];
       const bool closed = jawClosed(tool.trajectory, t + slack);
@@ -272,24 +274,23 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
         a = Attachment{};
         a.active = true;
         a.toolAtClose = m_toolDynBody[i] >= 0 ? m_toolPosBefore[i] : toolAt(i, t);
-        for (Eigen::Index n = 0; n < nodes.rows(); ++n) {
-          if ((nodes.row(n).transpose() - a.toolAtClose).squaredNorm() <= r2)
-            a.nodes.push_back(static_cast<int>(n));
-        }
-        a.restPositions.resize(static_cast<Eigen::Index>(a.nodes.size()), 3);
-        for (size_t k = 0; k < a.nodes.size(); ++k) a.restPositions.row(k) = nodes.row(a.nodes[k]);
-        if (a.nodes.empty() &&
+        a.vertices = graspedSurfaceVertices(m_rest, a.toolAtClose, tool.radius);
+        const MatX3& surface = model.surface();
+        a.closePositions.resize(static_cast<Eigen::Index>(a.vertices.size()), 3);
+        for (size_t k = 0; k < a.vertices.size(); ++k)
+          a.closePositions.row(Eigen::Index(k)) = surface.row(a.vertices[k]);
+        if (a.vertices.empty() &&
             std::find(m_emptyGrasps.begin(), m_emptyGrasps.end(), int(i)) == m_emptyGrasps.end())
           m_emptyGrasps.push_back(static_cast<int>(i));
       } else if (!closed && a.active) {
         a = Attachment{};
       }
-      if (a.active && !a.nodes.empty()) {
+      if (a.active && !a.vertices.empty()) {
         GraspInput g;
         g.tool = static_cast<int>(i);
-        g.nodes = a.nodes;
+        g.vertices = a.vertices;
         const Vec3 shift = toolAt(i, t + dt) - a.toolAtClose;
-        g.targets = a.restPositions.rowwise() + shift.transpose();
+        g.targets = a.closePositions.rowwise() + shift.transpose();
         in.grasps.push_back(std::move(g));
       }
     }
@@ -301,6 +302,8 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
     if (t + slack < load.start || t + slack >= load.end) continue;
     PointLoad p;
     p.surfaceVertex = m_loadVertices[l];
+    p.vertices = m_loadPatches[l].vertices;
+    p.weights = m_loadPatches[l].weights;
     if (load.type == LoadType::PointForce) {
       p.force = load.force;
     } else {
@@ -324,6 +327,123 @@ Vec3 Interaction::focusPoint() const {
   for (const ToolSpec& tool : m_scene.tools)
     if (tool.type == ToolType::Probe) return tool.trajectory.back().pos;
   return boundingBox(m_rest.V).center();
+}
+
+std::vector<Real> Interaction::graspTravel() const {
+  std::vector<Real> out(m_scene.tools.size(), 0.0);
+  for (size_t i = 0; i < m_scene.tools.size(); ++i) {
+    const ToolSpec& tool = m_scene.tools[i];
+    if (tool.type != ToolType::Grasper) continue;
+    const auto& traj = tool.trajectory;
+    Vec3 close = Vec3::Zero();
+    bool was = false;
+    for (const KeyFrame& k : traj) {
+      if (k.jawClosed && !was) close = k.pos;
+      if (k.jawClosed) out[i] = std::max(out[i], (k.pos - close).norm());
+      was = k.jawClosed;
+    }
+  }
+  return out;
+}
+
+std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Vec3& p, Real r) {
+  std::vector<int> out;
+  const Real r2 = r * r;
+  for (Eigen::Index v = 0; v < rest.V.rows(); ++v)
+    if ((rest.V.row(v).transpose() - p).squaredNorm() <= r2) out.push_back(int(v));
+  if (out.empty()) {
+    const int n = nearestVertex(rest.V, p);
+    if (n >= 0) out.push_back(n);
+  }
+  return out;
+}
+
+SurfacePatch pressurePatch(const SurfaceMesh& rest, int c, Real radius) {
+  SurfacePatch patch;
+  patch.radius = radius;
+  const int nv = rest.numVertices();
+  if (c < 0 || c >= nv) return patch;
+  const Vec3 centre = rest.V.row(c).transpose();
+  std::vector<std::vector<int>> faces(static_cast<size_t>(nv)), neighbors(static_cast<size_t>(nv));
+  for (int f = 0; f < rest.numFaces(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = rest.F(f, k), b = rest.F(f, (k + 1) % 3);
+      faces[size_t(a)].push_back(f);
+      neighbors[size_t(a)].push_back(b);
+      neighbors[size_t(b)].push_back(a);
+    }
+  // Vertices reachable from c through edges whose ends lie inside the disc; their triangles.
+  std::vector<char> seen(size_t(nv), 0);
+  std::vector<int> reach = {c};
+  seen[size_t(c)] = 1;
+  for (size_t head = 0; head < reach.size(); ++head)
+    for (int n : neighbors[size_t(reach[head])]) {
+      if (seen[size_t(n)] || (rest.V.row(n).transpose() - centre).norm() >= radius) continue;
+      seen[size_t(n)] = 1;
+      reach.push_back(n);
+    }
+  std::vector<int> tris;
+  for (int v : reach) tris.insert(tris.end(), faces[size_t(v)].begin(), faces[size_t(v)].end());
+  std::sort(tris.begin(), tris.end());
+  tris.erase(std::unique(tris.begin(), tris.end()), tris.end());
+
+  // 6-point degree-4 rule on the triangle (Strang & Fix 1973, table 4.1).
+  constexpr Real qa = 0.445948490915965, wa = 0.223381589678011;
+  constexpr Real qb = 0.091576213509771, wb = 0.109951743655322;
+  const std::array<std::pair<Vec3, Real>, 6> rule = {{{Vec3(qa, qa, 1 - 2 * qa), wa},
+                                                      {Vec3(qa, 1 - 2 * qa, qa), wa},
+                                                      {Vec3(1 - 2 * qa, qa, qa), wa},
+                                                      {Vec3(qb, qb, 1 - 2 * qb), wb},
+                                                      {Vec3(qb, 1 - 2 * qb, qb), wb},
+                                                      {Vec3(1 - 2 * qb, qb, qb), wb}}};
+  constexpr int kSub = 8;  // sub-triangles per edge: k has a kink at rho = R
+  std::map<int, Real> load;
+  Real total = 0;
+  for (int f : tris) {
+    const int i0 = rest.F(f, 0), i1 = rest.F(f, 1), i2 = rest.F(f, 2);
+    const Vec3 X0 = rest.V.row(i0), X1 = rest.V.row(i1), X2 = rest.V.row(i2);
+    const Real subArea = 0.5 * (X1 - X0).cross(X2 - X0).norm() / (kSub * kSub);
+    Vec3 fi = Vec3::Zero();
+    // Upward (i, j), (i+1, j), (i, j+1) and downward (i+1, j), (i+1, j+1), (i, j+1) sub-triangles
+    // of the barycentric grid, in (L1, L2) grid coordinates.
+    for (int i = 0; i < kSub; ++i)
+      for (int j = 0; i + j < kSub; ++j)
+        for (int down = 0; down < 2; ++down) {
+          if (down && i + j + 2 > kSub) continue;
+          const std::array<Eigen::Vector2d, 3> sub =
+              down
+                  ? std::array<Eigen::Vector2d, 3>{Eigen::Vector2d(i + 1, j),
+                                                   Eigen::Vector2d(i + 1, j + 1),
+                                                   Eigen::Vector2d(i, j + 1)}
+                  : std::array<Eigen::Vector2d, 3>{Eigen::Vector2d(i, j), Eigen::Vector2d(i + 1, j),
+                                                   Eigen::Vector2d(i, j + 1)};
+          for (const auto& [l, w] : rule) {
+            const Eigen::Vector2d s = (l(0) * sub[0] + l(1) * sub[1] + l(2) * sub[2]) / kSub;
+            const Vec3 N(1 - s(0) - s(1), s(0), s(1));
+            const Vec3 X = N(0) * X0 + N(1) * X1 + N(2) * X2;
+            const Real rho = (X - centre).norm() / radius;
+            const Real k = std::max<Real>(0, 1 - rho * rho) * w * subArea;
+            fi += k * N;
+            total += k;
+          }
+        }
+    load[i0] += fi(0);
+    load[i1] += fi(1);
+    load[i2] += fi(2);
+  }
+  if (!(total > 0)) {
+    patch.vertices = {c};
+    patch.weights = {1.0};
+    return patch;
+  }
+  patch.vertices.push_back(c);
+  patch.weights.push_back(load[c] / total);
+  for (const auto& [v, f] : load) {
+    if (v == c || f <= 0) continue;
+    patch.vertices.push_back(v);
+    patch.weights.push_back(f / total);
+  }
+  return patch;
 }
 
 std::vector<int> fixedNodeIndices(const MatX3& nodes, const FixedRegion& region,

@@ -396,10 +396,10 @@ LoadSpec parseLoad(const Ctx& c, const json& j, const std::string& path) {
   std::vector<std::string> keys;
   if (type == "point_force") {
     l.type = LoadType::PointForce;
-    keys = {"type", "at", "force", "start", "end"};
+    keys = {"type", "at", "force", "radius", "start", "end"};
   } else if (type == "pin_head") {
     l.type = LoadType::PinHead;
-    keys = {"type", "at", "stiffness", "path", "start", "end"};
+    keys = {"type", "at", "stiffness", "path", "radius", "start", "end"};
   } else {
     c.fail(path + "/type", "expected \"point_force\" or \"pin_head\", got \"" + type + "\"");
   }
@@ -411,6 +411,7 @@ LoadSpec parseLoad(const Ctx& c, const json& j, const std::string& path) {
     l.stiffness = c.positive(r.required("stiffness"), r.child("stiffness"));
     l.path = parseKeyFrames(c, r.required("path"), r.child("path"), false);
   }
+  if (const json* v = r.optional("radius")) l.radius = c.positive(*v, r.child("radius"));
   if (const json* v = r.optional("start")) {
     l.start = c.number(*v, r.child("start"));
     if (l.start < 0) c.fail(r.child("start"), "must be >= 0, got " + num(l.start));
@@ -509,7 +510,12 @@ Scene parseScene(const nlohmann::json& j, const std::string& file) {
       }
     }
   }
-  if (const json* v = r.optional("compare_at")) {
+  if (const json* v = r.optional("compare_at"); v && v->is_string()) {
+    const std::string str = c.string(*v, "/compare_at");
+    if (str != "equilibrium")
+      c.fail("/compare_at", "expected a list of instants or \"equilibrium\", got \"" + str + "\"");
+    s.compareAtEquilibrium = true;
+  } else if (v) {
     c.array(*v, "/compare_at");
     for (size_t i = 0; i < v->size(); ++i) {
       const std::string p = "/compare_at/" + std::to_string(i);

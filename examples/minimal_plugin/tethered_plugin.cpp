@@ -78,8 +78,8 @@ class TetheredModel final : public deform::Model {
       m_x.row(i) = (x + dt * vNew).transpose();
     }
     for (const deform::GraspInput& g : in.grasps) {
-      for (size_t j = 0; j < g.nodes.size(); ++j) {
-        const int n = g.nodes[j];
+      for (size_t j = 0; j < g.vertices.size(); ++j) {
+        const int n = g.vertices[j];
         if (n < 0 || n >= m_x.rows() || m_pinned[n]) continue;
         m_v.row(n) = (g.targets.row(Eigen::Index(j)) - m_x.row(n)) / dt;
         m_x.row(n) = g.targets.row(Eigen::Index(j));

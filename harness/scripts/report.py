@@ -476,6 +476,9 @@ def main():
             parts.insert(0, "<p>Hover a point for its run; click it to open the run's viewer "
                          "(rings: the Pareto front; red line: the haptic budget). The PNG below "
                          "is the static version.</p>" + plot)
+        for r in rows:
+            if r.get("valid") is False:
+                r["status"] = "invalid (%s)" % r.get("invalid_reason", "")
         parts.append(html_table([("label", "point"), ("status", "status"),
                                  ("ms_median", "ms/step"), ("rmse_50", "rmse_50 mm"),
                                  ("rmse_all", "rmse_all mm"), ("pareto", "Pareto")], rows, links))

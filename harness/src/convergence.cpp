@@ -164,35 +164,50 @@ ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loa
   return runConvergence(scene, sceneFile, loader, options, progress);
 }
 
-ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFile,
-                                 PluginLoader& loader, const ConvergeOptions& options,
-                                 Progress* progress) {
-  ojson base = scene;
+namespace {
+
+/// A study's inputs resolved from its scene: the scene with absolute mesh path, parsed, the
+/// reference's element base, the organ, the excluded radius and the cache key (none when the
+/// plugin or the mesh cannot be hashed).
+struct PreparedStudy {
+  ojson base, ref;
+  Scene parsed;
+  long long n = 0;
+  Organ organ;
+  double volume = 0, exclude = 0;
+  std::optional<CacheKey> key;
+};
+
+PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, PluginLoader& loader,
+                           const ConvergeOptions& options) {
+  PreparedStudy p;
+  p.base = scene;
+  ojson& base = p.base;
   if (base.contains("organ") && base["organ"].contains("mesh")) {
     const std::string mesh = base["organ"]["mesh"];
     if (mesh.rfind("phantom:", 0) != 0 && !fs::path(mesh).is_absolute())
       base["organ"]["mesh"] =
           fs::absolute(fs::path(sceneFile).parent_path() / mesh).lexically_normal().string();
   }
-  const Scene parsed = parseScene(nlohmann::json::parse(base.dump()), sceneFile);
-  if (!parsed.reference)
+  p.parsed = parseScene(nlohmann::json::parse(base.dump()), sceneFile);
+  if (!p.parsed.reference)
     throw InputError(sceneFile, "/reference", "the scene has no reference to check");
   if (options.factors.size() != 3 || !(options.factors[0] > 0) ||
       !(options.factors[0] < options.factors[1] && options.factors[1] < options.factors[2]))
     throw InputError(sceneFile, "convergence levels",
                      "need three increasing positive element factors");
-  ojson ref = base["reference"];
+  p.ref = base["reference"];
+  const ojson& ref = p.ref;
   long long n = options.baseElements;
   if (n <= 0 && ref.contains("params") && ref["params"].contains("elements"))
     n = ref["params"]["elements"].get<long long>();
   if (n <= 0) n = 5000;
-  const Organ organ = loadOrgan(parsed);
-  const double volume = std::fabs(signedVolume(organ.surface.V, organ.surface.F));
-  const double exclude = options.excludeRadius >= 0 ? options.excludeRadius
-                                                    : 0.1 * boundingBox(organ.surface.V).diagonal();
-
+  p.n = n;
+  p.organ = loadOrgan(p.parsed);
+  p.volume = std::fabs(signedVolume(p.organ.surface.V, p.organ.surface.F));
+  p.exclude = options.excludeRadius >= 0 ? options.excludeRadius
+                                         : 0.1 * boundingBox(p.organ.surface.V).diagonal();
   // The cache key: everything the levels' answers depend on. The models are not run.
-  std::optional<CacheKey> key;
   const std::string plugin = ref.value("plugin", "");
   try {
     CacheKey k;
@@ -202,16 +217,54 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
     what.erase("name");
     what.erase("description");
     k.add(what.dump());
-    k.add(n).add(exclude);
+    k.add(n).add(p.exclude);
     for (double f : options.factors) k.add(f);
     k.add(sha256File(loader.locate(plugin)));
     const std::string mesh = base["organ"].value("mesh", "");
     if (mesh.rfind("phantom:", 0) != 0) k.add(sha256File(mesh));
-    key = k;
+    p.key = k;
   } catch (const std::exception&) {
     // No plugin file to hash (the levels will report it missing) or an unreadable mesh: the
     // study runs uncached.
   }
+  return p;
+}
+
+}  // namespace
+
+std::optional<ConvergenceResult> cachedReferenceCheck(const std::string& sceneFile,
+                                                      PluginLoader& loader,
+                                                      const std::optional<fs::path>& cacheDir) {
+  try {
+    std::ifstream in(sceneFile);
+    const ojson scene = ojson::parse(in);
+    ConvergeOptions o;
+    o.factors = kReferenceCheckFactors;
+    const PreparedStudy p = prepareStudy(scene, sceneFile, loader, o);
+    if (!p.key) return std::nullopt;
+    Cache cache(cacheDir ? *cacheDir : Cache::defaultDir());
+    const auto hit = cache.get(kCacheKind, *p.key);
+    if (!hit) return std::nullopt;
+    ByteReader r(*hit);
+    ConvergenceResult out = fromJson(ojson::parse(r.string()));
+    out.cached = true;
+    return out;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFile,
+                                 PluginLoader& loader, const ConvergeOptions& options,
+                                 Progress* progress) {
+  PreparedStudy prepared = prepareStudy(scene, sceneFile, loader, options);
+  const ojson& base = prepared.base;
+  const ojson& ref = prepared.ref;
+  const Scene& parsed = prepared.parsed;
+  const long long n = prepared.n;
+  const Organ& organ = prepared.organ;
+  const double volume = prepared.volume, exclude = prepared.exclude;
+  const std::optional<CacheKey>& key = prepared.key;
   const fs::path cacheDir = options.cacheDir ? *options.cacheDir : Cache::defaultDir();
   Cache cache(cacheDir);
   if (key) {

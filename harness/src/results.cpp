@@ -252,6 +252,14 @@ json runJson(const RunRecord& run) {
     j["compared_at"] = at;
   }
   if (!run.emptyGrasps.empty()) j["empty_grasps"] = run.emptyGrasps;
+  if (run.graspResidual >= 0) j["grasp_residual_m"] = finite(run.graspResidual);
+  if (run.settledAt) {
+    j["settled_at_s"] = *run.settledAt;
+  } else if (run.equilibrium) {
+    j["settled_at_s"] = nullptr;
+  }
+  j["valid"] = run.valid;
+  if (!run.valid) j["invalid_reason"] = run.invalidReason;
   if (!run.finalSurfaceFile.empty()) j["final_surface"] = run.finalSurfaceFile;
   if (!run.seriesFile.empty()) j["surface_series"] = run.seriesFile;
   if (!run.graspForceFile.empty()) j["grasp_forces"] = run.graspForceFile;

@@ -89,6 +89,14 @@ RunRecord runFromJson(const json& j) {
     r.error = m;
     r.referenceModel = e.value("reference", "");
   }
+  r.emptyGrasps = j.value("empty_grasps", std::vector<int>());
+  r.graspResidual = valueOr(j, "grasp_residual_m", -1.0);
+  r.equilibrium = j.contains("settled_at_s");
+  if (j.contains("settled_at_s") && j["settled_at_s"].is_number())
+    r.settledAt = j["settled_at_s"].get<double>();
+  // Results written before validity existed: a run is valid unless its status says otherwise.
+  r.valid = j.value("valid", r.status == RunStatus::Ok);
+  r.invalidReason = j.value("invalid_reason", r.valid ? "" : statusName(r.status));
   r.finalSurfaceFile = j.value("final_surface", "");
   r.seriesFile = j.value("surface_series", "");
   r.graspForceFile = j.value("grasp_forces", "");

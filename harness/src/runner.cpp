@@ -58,6 +58,28 @@ std::vector<int> comparedSteps(const Scene& scene, int lastStep) {
   return steps;
 }
 
+namespace {
+
+/// The time after which a scene's interaction no longer changes: the last tool keyframe that
+/// moves the tool or changes its jaws, and the last load start or end inside the run. Settling
+/// is only looked for after it.
+Real interactionSteadyTime(const Scene& scene) {
+  Real t = 0;
+  for (const ToolSpec& tool : scene.tools)
+    for (size_t k = 1; k < tool.trajectory.size(); ++k) {
+      const KeyFrame &a = tool.trajectory[k - 1], &b = tool.trajectory[k];
+      if (a.pos != b.pos || a.jawClosed != b.jawClosed) t = std::max(t, b.t);
+    }
+  for (const LoadSpec& load : scene.loads) {
+    t = std::max(t, load.start);
+    if (load.end < scene.duration) t = std::max(t, load.end);
+    if (!load.path.empty()) t = std::max(t, load.path.back().t);
+  }
+  return t;
+}
+
+}  // namespace
+
 bool solveOnlyAtComparedInstants(const ModelInfo& info, const ParamValues& params) {
   if (!info.has(Capability::QuasiStatic)) return false;
   const auto it = params.all().find("solve");
@@ -170,6 +192,17 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   const int warmup = sparse ? 0 : static_cast<int>(std::floor(options.warmupFraction * n));
   if (every > 0) rec.series.push_back({0, 0.0, model.surface()});
 
+  // Equilibrium comparisons: a dynamic model stops once it settled after the interaction stopped
+  // changing; a quasi-static one is at equilibrium at its (last) solve.
+  const bool equilibrium = scene.compareAtEquilibrium;
+  const Real steadyTime = interactionSteadyTime(scene);
+  int quietSteps = 0;
+  MatX3 previous = model.surface();
+  rec.settledAt.reset();
+  rec.equilibrium = equilibrium;
+  double residual2 = 0;
+  long long residualCount = 0;
+
   for (int k = 0; k < n; ++k) {
     const Real t = k * scene.dt;
     const StepInput in = interaction.prepare(t, scene.dt, model);
@@ -228,14 +261,41 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
     if (k >= warmup) {
       for (const auto& [phase, ms] : model.phaseTimes()) phases[phase].push_back(ms);
     }
+    for (const GraspInput& g : in.grasps) {
+      for (size_t q = 0; q < g.vertices.size(); ++q) {
+        residual2 += (surface.row(g.vertices[q]) - g.targets.row(Eigen::Index(q))).squaredNorm();
+        ++residualCount;
+      }
+    }
     if (options.recordGraspForces && !in.grasps.empty()) {
       const std::vector<Vec3> forces = model.graspForces();
       for (size_t g = 0; g < forces.size() && g < in.grasps.size(); ++g)
         rec.graspForces.push_back({k + 1, in.grasps[g].tool, forces[g]});
     }
-    if (std::binary_search(compareSteps.begin(), compareSteps.end(), k + 1))
-      rec.compared.push_back({k + 1, tEnd, surface});
     if (every > 0 && (k + 1) % every == 0) rec.series.push_back({k + 1, tEnd, surface});
+    if (equilibrium && !sparse) {
+      const Real speed =
+          (surface.topRows(nv) - previous.topRows(nv)).rowwise().norm().maxCoeff() / scene.dt;
+      previous = surface;
+      quietSteps =
+          tEnd > steadyTime + 0.5 * scene.dt && speed < scene.settleSpeed ? quietSteps + 1 : 0;
+      if (quietSteps >= scene.settleSteps) {
+        rec.settledAt = tEnd;
+        rec.compared.push_back({k + 1, tEnd, surface});
+        break;
+      }
+      if (k + 1 == n) rec.compared.push_back({k + 1, tEnd, surface});  // the cap: not settled
+      continue;
+    }
+    if (std::binary_search(compareSteps.begin(), compareSteps.end(), k + 1)) {
+      rec.compared.push_back({k + 1, tEnd, surface});
+      if (equilibrium) rec.settledAt = tEnd;
+    }
+  }
+  rec.graspResidual = residualCount > 0 ? std::sqrt(residual2 / double(residualCount)) : -1.0;
+  {
+    const std::vector<Real> travel = interaction.graspTravel();
+    rec.graspTravel = travel.empty() ? 0.0 : *std::max_element(travel.begin(), travel.end());
   }
 
   rec.stepStats = stepStatistics(rec.stepMs, sparse ? 0.0 : options.warmupFraction);
@@ -253,8 +313,38 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   }
   for (int tool : rec.emptyGrasps) {
     rec.notes.push_back("the grasp of tool " + std::to_string(tool) +
-                        " closed on no model node (nothing within its radius)");
+                        " closed on no surface vertex");
   }
+  if (equilibrium && rec.status == RunStatus::Ok && !rec.settledAt)
+    rec.notes.push_back("did not settle by the end of the run (largest surface speed above " +
+                        std::to_string(scene.settleSpeed) + " m/s)");
+  assessValidity(scene, rec);
+}
+
+void assessValidity(const Scene& scene, RunRecord& rec) {
+  rec.valid = true;
+  rec.invalidReason.clear();
+  const auto invalid = [&](const std::string& why) {
+    if (!rec.valid) return;
+    rec.valid = false;
+    rec.invalidReason = why;
+  };
+  if (rec.status != RunStatus::Ok) invalid(statusName(rec.status));
+  if (!rec.emptyGrasps.empty()) invalid("grasp held nothing");
+  // Scale of the residual test: the tool's travel, at least its jaw radius (a grasp that holds
+  // still is judged against the size of what it holds).
+  Real radius = 0;
+  for (const ToolSpec& t : scene.tools)
+    if (t.type == ToolType::Grasper) radius = std::max(radius, t.radius);
+  const double scale = std::max<double>(rec.graspTravel, radius);
+  if (rec.graspResidual > 0.1 * scale && scale > 0) {
+    std::ostringstream s;
+    s << "grasp residual " << rec.graspResidual * 1e3 << " mm exceeds 10% of the tool's travel ("
+      << 0.1 * scale * 1e3 << " mm)";
+    invalid(s.str());
+  }
+  if (scene.compareAtEquilibrium && rec.status == RunStatus::Ok && !rec.settledAt)
+    invalid("did not settle");
 }
 
 RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene& scene,

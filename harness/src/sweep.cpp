@@ -34,7 +34,7 @@ SweepKnob sweepKnob(const std::string& plugin, bool quick) {
 
 void markPareto(std::vector<SweepPoint>& points) {
   const auto usable = [](const SweepPoint& p) {
-    return p.status == "ok" && std::isfinite(p.msMedian) && std::isfinite(p.rmseNearest);
+    return p.status == "ok" && p.valid && std::isfinite(p.msMedian) && std::isfinite(p.rmseNearest);
   };
   for (SweepPoint& p : points) {
     p.pareto = false;
@@ -150,6 +150,8 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
       s.status = c.error.empty() ? "not run" : "not run: " + c.error;
     } else {
       s.status = statusName(r->status);
+      s.valid = r->valid;
+      s.invalidReason = r->invalidReason;
       if (r->stepStats.samples > 0) {
         s.msMedian = r->stepStats.median;
         s.msP95 = r->stepStats.p95;
@@ -198,6 +200,8 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
                              {"rmse_all", num(p.rmseAll)},
                              {"max", num(p.max)},
                              {"loss_ratio", num(p.lossRatio)},
+                             {"valid", p.valid},
+                             {"invalid_reason", p.invalidReason},
                              {"pareto", p.pareto}});
     const auto f = [](double v) {
       if (!std::isfinite(v)) return std::string();

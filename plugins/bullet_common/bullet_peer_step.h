@@ -35,19 +35,23 @@ struct PeerStepState {
   Real boxHalf = 0;               ///< m, its half side
   std::vector<int> grasped;       ///< sorted nodes kinematic in the last step
   std::vector<int> graspScratch;
-  MatX3 velocity;  ///< #N by 3, m/s (contact only)
-  VecX invMass;    ///< #N, 1/kg (contact only)
-  MatX3 before;    ///< #N by 3, positions before the contact response
+  std::vector<NodeGrasp> nodeGrasps;  ///< this step's grasps on the nodes carrying the vertices
+  MatX3 velocity;                     ///< #N by 3, m/s (contact only)
+  VecX invMass;                       ///< #N, 1/kg (contact only)
+  MatX3 before;                       ///< #N by 3, positions before the contact response
   std::chrono::steady_clock::time_point start;
 };
 
-/// Makes the grasped nodes of `grasps` kinematic (inverse mass 0) and gives released nodes
-/// inverseMass back; records the step's start time. Returns true when the set changed (the
-/// caller refreshes whatever Bullet derives from the inverse masses).
+/// Makes the nodes carrying the grasped surface vertices of `grasps` kinematic (inverse mass 0)
+/// and gives released nodes inverseMass back; records the step's start time. surfaceNode: the
+/// node of each organ surface vertex (empty: the identity). Returns true when the set changed
+/// (the caller refreshes whatever Bullet derives from the inverse masses).
 inline bool beginBulletStep(btSoftBody& b, const std::vector<btScalar>& inverseMass,
-                            const std::vector<GraspInput>& grasps, PeerStepState& s) {
+                            const std::vector<GraspInput>& grasps,
+                            const std::vector<int>& surfaceNode, PeerStepState& s) {
   s.start = std::chrono::steady_clock::now();
-  graspedNodeSet(grasps, s.graspScratch);
+  graspsOnNodes(grasps, surfaceNode, s.nodeGrasps);
+  graspedNodeSet(s.nodeGrasps, s.graspScratch);
   if (s.graspScratch == s.grasped) return false;
   for (int i : s.grasped) b.m_nodes[i].m_im = inverseMass[size_t(i)];
   for (int i : s.graspScratch) b.m_nodes[i].m_im = 0;
@@ -70,7 +74,7 @@ inline StepStatus finishBulletStep(btSoftBody& b, const StepInput& in, Real dt, 
                                    const std::vector<int>* surfaceNode = nullptr,
                                    MatX3* surface = nullptr) {
   using Clock = std::chrono::steady_clock;
-  for (const GraspInput& g : in.grasps)
+  for (const NodeGrasp& g : s.nodeGrasps)
     for (size_t k = 0; k < g.nodes.size(); ++k)
       b.m_nodes[g.nodes[k]].m_x = btVector3(g.targets(k, 0), g.targets(k, 1), g.targets(k, 2));
   copyNodes(b, x);

@@ -283,13 +283,15 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
   w.gravity->m_gravity = g;
   w.world->getWorldInfo().m_gravity = g;
 
-  bullet_peers::beginBulletStep(b, w.inverseMass, in.grasps, m_tail);
-  for (const PointLoad& l : in.loads) {
-    btSoftBody::Node& node = b.m_nodes[m_surfaceNode[size_t(l.surfaceVertex)]];
-    node.m_v += btVector3(l.force.x(), l.force.y(), l.force.z()) * (node.m_im * dt);
-    node.m_vn = node.m_v;
-  }
-  for (const GraspInput& gr : in.grasps)
+  bullet_peers::beginBulletStep(b, w.inverseMass, in.grasps, m_surfaceNode, m_tail);
+  for (const PointLoad& l : in.loads)
+    for (size_t k = 0; k < l.vertices.size(); ++k) {
+      btSoftBody::Node& node = b.m_nodes[m_surfaceNode[size_t(l.vertices[k])]];
+      const Vec3 f = l.weights[k] * l.force;
+      node.m_v += btVector3(f.x(), f.y(), f.z()) * (node.m_im * dt);
+      node.m_vn = node.m_v;
+    }
+  for (const NodeGrasp& gr : m_tail.nodeGrasps)
     for (size_t k = 0; k < gr.nodes.size(); ++k) {
       btSoftBody::Node& node = b.m_nodes[gr.nodes[k]];
       node.m_v = (btVector3(gr.targets(k, 0), gr.targets(k, 1), gr.targets(k, 2)) - node.m_x) / dt;

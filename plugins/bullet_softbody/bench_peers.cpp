@@ -57,14 +57,14 @@ Organ liverOrgan(Real resolution) {
 /// Steps `model` under gravity with a grasp of the nodes within 1.5 cm of the top centre, lifting
 /// them 2 cm over 500 steps and back (triangle wave). Records the median step time.
 void runSteps(benchmark::State& state, Model& model, const std::string& name) {
-  const MatX3 nodes = model.nodes();
+  const MatX3 nodes = model.surface();  // the grasp holds organ surface vertices
   const Box b = boundingBox(nodes);
   const Vec3 top(b.center().x(), b.center().y(), b.hi.z());
   GraspInput grasp;
   for (int n = 0; n < nodes.rows(); ++n)
-    if ((nodes.row(n).transpose() - top).norm() < 0.015) grasp.nodes.push_back(n);
-  MatX3 rest(grasp.nodes.size(), 3);
-  for (size_t k = 0; k < grasp.nodes.size(); ++k) rest.row(k) = nodes.row(grasp.nodes[k]);
+    if ((nodes.row(n).transpose() - top).norm() < 0.015) grasp.vertices.push_back(n);
+  MatX3 rest(grasp.vertices.size(), 3);
+  for (size_t k = 0; k < grasp.vertices.size(); ++k) rest.row(k) = nodes.row(grasp.vertices[k]);
   grasp.targets = rest;
   StepInput in;
   in.dt = 1e-3;
@@ -91,7 +91,7 @@ void runSteps(benchmark::State& state, Model& model, const std::string& name) {
   const double median = times[times.size() / 2];
   state.counters["median_us"] = median;
   state.counters["nodes"] = static_cast<double>(nodes.rows());
-  state.counters["grasped"] = static_cast<double>(grasp.nodes.size());
+  state.counters["grasped"] = static_cast<double>(grasp.vertices.size());
   medians()[name] = median;
   nodeCounts()[name] = static_cast<double>(nodes.rows());
 }

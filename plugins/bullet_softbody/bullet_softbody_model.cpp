@@ -213,17 +213,21 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
   const Real dt = in.dt > 0 ? in.dt : m_dt;
   w.world.getWorldInfo().m_gravity = btVector3(in.gravity.x(), in.gravity.y(), in.gravity.z());
 
-  // Kinematic grasped nodes: inverse mass 0 and the velocity that lands them on the target.
-  if (bullet_peers::beginBulletStep(b, w.inverseMass, in.grasps, m_tail))
+  // Kinematic grasped nodes (the surface vertices are the body's nodes): inverse mass 0 and
+  // the velocity that lands them on the target.
+  if (bullet_peers::beginBulletStep(b, w.inverseMass, in.grasps, {}, m_tail))
     b.updateLinkConstants();  // link c0 = (w_a + w_b) / kLST
-  for (const GraspInput& g : in.grasps)
+  for (const NodeGrasp& g : m_tail.nodeGrasps)
     for (size_t k = 0; k < g.nodes.size(); ++k) {
       btSoftBody::Node& node = b.m_nodes[g.nodes[k]];
       const btVector3 target(g.targets(k, 0), g.targets(k, 1), g.targets(k, 2));
       node.m_v = (target - node.m_x) / dt;
     }
   for (const PointLoad& l : in.loads)
-    b.addForce(btVector3(l.force.x(), l.force.y(), l.force.z()), l.surfaceVertex);
+    for (size_t k = 0; k < l.vertices.size(); ++k) {
+      const Vec3 f = l.weights[k] * l.force;
+      b.addForce(btVector3(f.x(), f.y(), f.z()), l.vertices[k]);
+    }
 
   w.world.stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
   return bullet_peers::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);

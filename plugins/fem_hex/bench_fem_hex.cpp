@@ -7,6 +7,7 @@
 //   bench_fem_hex --benchmark_filter=Scaling
 #include "hex_fem_model.h"
 
+#include <deform/interaction.h>
 #include <deform/phantom.h>
 
 #include <benchmark/benchmark.h>
@@ -59,11 +60,10 @@ void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
     return f;
   });
   GraspInput grasp;
-  for (int n = 0; n < m.nodes().rows(); ++n)
-    if ((m.nodes().row(n) - Eigen::RowVector3d(0, 0, 0.045)).norm() < 0.015)
-      grasp.nodes.push_back(n);
-  MatX3 rest(grasp.nodes.size(), 3);
-  for (size_t k = 0; k < grasp.nodes.size(); ++k) rest.row(k) = m.nodes().row(grasp.nodes[k]);
+  grasp.vertices = graspedSurfaceVertices(organ.surface, Vec3(0, 0, 0.045), 0.015);
+  MatX3 rest(grasp.vertices.size(), 3);
+  for (size_t k = 0; k < grasp.vertices.size(); ++k)
+    rest.row(Eigen::Index(k)) = m.surface().row(grasp.vertices[k]);
   grasp.targets = rest;
   StepInput in;
   in.dt = 1e-3;

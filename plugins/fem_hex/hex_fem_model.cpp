@@ -4,6 +4,8 @@
 
 #include <deform/error.h>
 
+#include <Eigen/QR>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -114,7 +116,7 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   }
 
   m_isGrasped.assign(N, 0);
-  m_graspOwner.assign(N, -1);
+  m_carryCol.assign(N, -1);
   m_grasped.reserve(N);
   m_touched.reserve(E);
   m_elemMark.assign(E, 0);
@@ -386,9 +388,11 @@ void HexFemModel::reset() {
   std::fill(m_R.begin(), m_R.end(), Mat3::Identity());
   for (int n : m_grasped) {
     m_isGrasped[n] = 0;
-    m_graspOwner[n] = -1;
+    m_carryCol[n] = -1;
   }
   m_grasped.clear();
+  m_mapVerts.clear();
+  m_mapOwner.clear();
   for (int e : m_touched) m_elemMark[e] = 0;
   m_touched.clear();
   m_touchedGrasped.clear();
@@ -401,6 +405,97 @@ void HexFemModel::reset() {
     constrainAndFactorize(false);
   }
   evaluateEmbedding(m_embedding, m_x, m_surface);
+}
+
+void HexFemModel::prescribeGrasps(const StepInput& in) {
+  const Real h = m_dt;
+  for (int n : m_grasped) {
+    m_isGrasped[n] = 0;
+    m_carryCol[n] = -1;
+  }
+  m_grasped.clear();
+  // The grasped surface vertices (a vertex held by two grasps belongs to the first).
+  m_graspVerts.clear();
+  m_graspVertOwner.clear();
+  const Eigen::Index numVerts = m_embedding.nodeIds.rows();
+  Eigen::Index rows = 0;
+  for (const GraspInput& g : in.grasps) rows += Eigen::Index(g.vertices.size());
+  m_graspVertTargets.resize(rows, 3);
+  for (int g = 0; g < static_cast<int>(in.grasps.size()); ++g) {
+    const GraspInput& grasp = in.grasps[size_t(g)];
+    for (size_t k = 0; k < grasp.vertices.size(); ++k) {
+      const int v = grasp.vertices[k];
+      if (v < 0 || v >= numVerts || static_cast<Eigen::Index>(k) >= grasp.targets.rows() ||
+          std::find(m_graspVerts.begin(), m_graspVerts.end(), v) != m_graspVerts.end()) {
+        ++m_ignoredGraspNodes;
+        continue;
+      }
+      m_graspVertTargets.row(Eigen::Index(m_graspVerts.size())) =
+          grasp.targets.row(Eigen::Index(k));
+      m_graspVerts.push_back(v);
+      m_graspVertOwner.push_back(g);
+    }
+  }
+  if (m_graspVerts.empty()) {
+    m_mapVerts.clear();
+    m_mapOwner.clear();
+    return;
+  }
+
+  // The carrying set C: free nodes with a non-zero weight in a grasped vertex's row. J_C and its
+  // pseudo-inverse depend only on the grasped set (the embedding is fixed): rebuilt when it
+  // changes, i.e. when a grasp closes or opens.
+  constexpr Real kWeightEps = 1e-12;
+  for (int v : m_graspVerts)
+    for (int a = 0; a < 8; ++a) {
+      const int n = m_embedding.nodeIds(v, a);
+      if (m_embedding.weights(v, a) > kWeightEps && !m_isFixed[n] && !m_isGrasped[n]) {
+        m_isGrasped[n] = 1;
+        m_grasped.push_back(n);
+      }
+    }
+  std::sort(m_grasped.begin(), m_grasped.end());
+  for (size_t c = 0; c < m_grasped.size(); ++c) m_carryCol[m_grasped[c]] = int(c);
+  const Eigen::Index m = Eigen::Index(m_graspVerts.size()), nc = Eigen::Index(m_grasped.size());
+  if (m_graspVerts != m_mapVerts || m_graspVertOwner != m_mapOwner) {
+    m_mapVerts = m_graspVerts;
+    m_mapOwner = m_graspVertOwner;
+    m_Jc.setZero(m, nc);
+    for (Eigen::Index r = 0; r < m; ++r)
+      for (int a = 0; a < 8; ++a) {
+        const int c = m_carryCol[m_embedding.nodeIds(m_graspVerts[size_t(r)], a)];
+        if (c >= 0) m_Jc(r, c) += m_embedding.weights(m_graspVerts[size_t(r)], a);
+      }
+    m_JcPinv = nc > 0 ? MatX(Eigen::CompleteOrthogonalDecomposition<MatX>(m_Jc).pseudoInverse())
+                      : MatX(0, m);
+    m_carryShare.setZero(nc, Eigen::Index(in.grasps.size()));
+    for (Eigen::Index r = 0; r < m; ++r)
+      for (Eigen::Index c = 0; c < nc; ++c)
+        m_carryShare(c, m_graspVertOwner[size_t(r)]) += m_Jc(r, c);
+    for (Eigen::Index c = 0; c < nc; ++c) {
+      const Real sum = m_carryShare.row(c).sum();
+      if (sum > 0) m_carryShare.row(c) /= sum;
+    }
+  }
+  if (nc == 0) return;
+
+  // dq = J_C^+ (t - J q): the grasped points' distance to their targets, from the current nodes.
+  MatX3& gap = m_graspGap;
+  gap.resize(m, 3);
+  for (Eigen::Index r = 0; r < m; ++r) {
+    const int v = m_graspVerts[size_t(r)];
+    Vec3 p = Vec3::Zero();
+    for (int a = 0; a < 8; ++a)
+      p += m_embedding.weights(v, a) * m_x.row(m_embedding.nodeIds(v, a)).transpose();
+    gap.row(r) = m_graspVertTargets.row(r) - p.transpose();
+  }
+  m_graspDq.resize(nc, 3);
+  m_graspDq.noalias() = m_JcPinv * gap;
+  for (Eigen::Index c = 0; c < nc; ++c) {
+    const int n = m_grasped[size_t(c)];
+    m_target.row(n) = m_x.row(n) + m_graspDq.row(c);
+    m_v0.segment<3>(3 * n) = m_graspDq.row(c).transpose() / h;
+  }
 }
 
 StepStatus HexFemModel::step(const StepInput& in) {
@@ -419,31 +514,9 @@ StepStatus HexFemModel::step(const StepInput& in) {
     return step(in);
   }
 
-  // Grasped nodes of this step and their prescribed velocities.
-  for (int n : m_grasped) {
-    m_isGrasped[n] = 0;
-    m_graspOwner[n] = -1;
-  }
-  m_grasped.clear();
   m_vOld = m_v;
   m_v0 = m_v;
-  for (int g = 0; g < static_cast<int>(in.grasps.size()); ++g) {
-    const GraspInput& grasp = in.grasps[g];
-    for (size_t k = 0; k < grasp.nodes.size(); ++k) {
-      const int n = grasp.nodes[k];
-      if (n < 0 || n >= N || m_isFixed[n] || m_isGrasped[n] ||
-          static_cast<Eigen::Index>(k) >= grasp.targets.rows()) {
-        ++m_ignoredGraspNodes;
-        continue;
-      }
-      m_isGrasped[n] = 1;
-      m_graspOwner[n] = g;
-      m_grasped.push_back(n);
-      m_target.row(n) = grasp.targets.row(k);
-      m_v0.segment<3>(3 * n) = (grasp.targets.row(k) - m_x.row(n)).transpose() / h;
-    }
-  }
-  std::sort(m_grasped.begin(), m_grasped.end());
+  prescribeGrasps(in);
   if (m_grasped != m_touchedGrasped) {
     m_touchedGrasped = m_grasped;
     for (int e : m_touched) m_elemMark[e] = 0;
@@ -460,14 +533,23 @@ StepStatus HexFemModel::step(const StepInput& in) {
     std::sort(m_touched.begin(), m_touched.end());
   }
 
-  // External forces: gravity on the lumped masses, point loads by the trilinear weights.
+  // External forces: gravity on the lumped masses, point loads as J^T f: every per-vertex share
+  // of the harness's patch through its vertex's trilinear weights (a load without a spread acts
+  // on its vertex alone).
   for (int n = 0; n < N; ++n) m_fext.segment<3>(3 * n) = m_mass[3 * n] * in.gravity;
+  const Eigen::Index numVerts = m_embedding.nodeIds.rows();
+  auto addVertexForce = [&](int v, const Vec3& f) {
+    if (v < 0 || v >= numVerts) return;
+    for (int a = 0; a < 8; ++a)
+      m_fext.segment<3>(3 * m_embedding.nodeIds(v, a)) += m_embedding.weights(v, a) * f;
+  };
   for (const PointLoad& load : in.loads) {
-    if (load.surfaceVertex < 0 || load.surfaceVertex >= m_embedding.nodeIds.rows()) continue;
-    for (int a = 0; a < 8; ++a) {
-      const int n = m_embedding.nodeIds(load.surfaceVertex, a);
-      m_fext.segment<3>(3 * n) += m_embedding.weights(load.surfaceVertex, a) * load.force;
+    if (load.vertices.empty()) {
+      addVertexForce(load.surfaceVertex, load.force);
+      continue;
     }
+    for (size_t k = 0; k < load.vertices.size() && k < load.weights.size(); ++k)
+      addVertexForce(load.vertices[k], load.weights[k] * load.force);
   }
 
   const bool penalty = in.contact && in.contact->params().method == ContactMethod::Penalty;
@@ -547,7 +629,8 @@ StepStatus HexFemModel::step(const StepInput& in) {
     }
   }
 
-  // Reaction at the grasped nodes: (b - A v+)_G / h, from the elements touching them.
+  // Reaction at the carrying nodes: (b - A v+)_C / h, from the elements touching them, each
+  // node's share to the grasps whose vertices it carries (by their weights on it).
   m_graspForces.assign(in.grasps.size(), Vec3::Zero());
   if (!m_grasped.empty()) {
     m_w = h * x + m_c2 * m_v;
@@ -557,10 +640,14 @@ StepStatus HexFemModel::step(const StepInput& in) {
                               h * m_fext.segment<3>(3 * n);
     }
     applyElements(&m_touched, m_w, 1.0, h, -1.0, m_z);
-    for (int n : m_grasped) m_graspForces[m_graspOwner[n]] += m_z.segment<3>(3 * n) / h;
+    for (int n : m_grasped) {
+      const int c = m_carryCol[n];
+      for (Eigen::Index g = 0; g < m_carryShare.cols(); ++g)
+        m_graspForces[size_t(g)] += m_carryShare(c, g) * m_z.segment<3>(3 * n) / h;
+    }
   }
 
-  // Advance positions; grasped nodes land exactly on their targets.
+  // Advance positions; carrying nodes land exactly on their targets.
   Eigen::Map<VecX>(m_x.data(), 3 * N) += h * m_v;
   for (int n : m_grasped) m_x.row(n) = m_target.row(n);
   if (in.contact && !penalty) {

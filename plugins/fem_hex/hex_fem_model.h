@@ -9,9 +9,20 @@
 // with f(x) = -K (x - X) (linear) or sum_e -R_e K0 (R_e^T x_e - X_e) and K = sum_e R_e K0 R_e^T
 // (corotational, Müller & Gross 2004; Nesme et al. 2005). All hexahedra are equal cubes, so K0
 // and the element mass are computed once. M is lumped: rho h^3 / 8 per node and element.
-// Fixed nodes are eliminated from the unknowns; grasped nodes get the prescribed velocity
-// (target - x) / h, imposed by symmetric elimination (their rows and columns replaced by identity).
-// The reaction of a grasp is the residual of its nodes' rows: f_tissue_on_tool = (b - A v+)_G / h.
+// Fixed nodes are eliminated from the unknowns.
+// Surface mapping (SOFA's Mapping): the organ's surface vertices are embedded trilinearly,
+// x_s = J q (J: the 8 weights of each vertex's hexahedron). A point force reaches the nodes as
+// J^T f (every per-vertex share through its 8 weights). A grasp holds organ surface vertices: the
+// nodes that carry them (every node with a non-zero weight in a grasped vertex's row of J, the
+// carrying set C) are prescribed at x_C + dq, the minimum-norm correction that puts the grasped
+// points on their targets t,
+//     dq = J_C^+ (t - J q)    (J_C^+ = J_C^T (J_C J_C^T)^-1 when J_C has full row rank, else the
+//                              pseudo-inverse: the least-squares fit of more vertices than nodes),
+// so J q+ = t exactly whenever the targets are reachable (they are when they move rigidly: the
+// weights of each vertex sum to 1). Prescribed nodes get the velocity (target - x) / h, imposed by
+// symmetric elimination (their rows and columns replaced by identity). The reaction of a grasp is
+// the residual of its carrying nodes' rows, f_tissue_on_tool = (b - A v+)_C / h, each node's share
+// split between the grasps by their vertices' weights on it.
 #pragma once
 
 #include "cholesky_solver.h"
@@ -73,6 +84,8 @@ class HexFemModel : public Model {
     return Eigen::Map<const MatX3>(m_v.data(), m_x.rows(), 3);
   }
   const CholeskySolver& cholesky() const { return m_chol; }
+  /// The nodes prescribed in the last step: those carrying the grasped surface vertices.
+  const std::vector<int>& graspedNodes() const { return m_grasped; }
   /// CG iterations of the last step (0 outside the pcg solver).
   int lastIterations() const { return m_lastIterations; }
 
@@ -89,6 +102,9 @@ class HexFemModel : public Model {
   void updateRotations();
   void updateInverseDiagonal();
   void filter(VecX& r) const;
+  /// Grasped surface vertices of `in` -> prescribed carrying nodes and their targets (m_grasped,
+  /// m_target, m_v0); rebuilds J_C and its pseudo-inverse when the grasped set changes.
+  void prescribeGrasps(const StepInput& in);
 
   HexFemConfig m_config;
   Real m_dt = 0;
@@ -133,12 +149,21 @@ class HexFemModel : public Model {
 
   // Per-step work (allocated once).
   std::vector<char> m_isGrasped;      // N
-  std::vector<int> m_grasped;         // sorted grasped nodes of this step
-  std::vector<int> m_graspOwner;      // N, grasp index owning a node or -1
+  std::vector<int> m_grasped;         // sorted prescribed (carrying) nodes of this step
+  std::vector<int> m_carryCol;        // N, column of a carrying node in m_Jc or -1
+  std::vector<int> m_graspVerts;      // grasped surface vertices of this step (grasp order)
+  std::vector<int> m_graspVertOwner;  // their grasp index
+  MatX3 m_graspVertTargets;           // their targets
+  std::vector<int> m_mapVerts;        // grasped vertices m_Jc / m_JcPinv were built for
+  std::vector<int> m_mapOwner;        // and their owners
+  MatX m_Jc;                          // #grasped vertices x #carrying nodes: J restricted to C
+  MatX m_JcPinv;                      // its pseudo-inverse
+  MatX m_carryShare;                  // #carrying x #grasps: share of each node's reaction
+  MatX3 m_graspGap, m_graspDq;        // t - J q per grasped vertex; the carrying nodes' dq
   std::vector<int> m_touched;         // elements touching grasped nodes
   std::vector<int> m_touchedGrasped;  // grasp set m_touched was built for
   std::vector<char> m_elemMark;
-  MatX3 m_target;          // N by 3, targets of grasped nodes
+  MatX3 m_target;          // N by 3, targets of prescribed nodes
   mutable MatX m_U, m_KU;  // 24 x E element vectors in, K0 times them out
   VecX m_v0, m_vOld, m_r, m_z, m_p, m_w, m_fext, m_rd, m_zd;
   std::vector<Vec3> m_graspForces;

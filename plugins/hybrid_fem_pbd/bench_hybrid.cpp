@@ -52,9 +52,9 @@ void BM_HybridStep(benchmark::State& state) {
   const Box b = boundingBox(organ.surface.V);
   StepInput in;
   in.dt = 1e-3;
-  in.loads.push_back(
-      {nearestVertex(organ.surface.V, Vec3(b.center().x(), b.center().y(), b.hi.z())),
-       Vec3(0, 0, -2.0)});
+  in.loads.push_back(PointLoad::onVertex(
+      nearestVertex(organ.surface.V, Vec3(b.center().x(), b.center().y(), b.hi.z())),
+      Vec3(0, 0, -2.0)));
   for (int i = 0; i < 50; ++i) m.step(in);  // warm-up (caches the load's K^-1 columns)
   double fem = 0, pbd = 0, load = 0;
   for (auto _ : state) {

@@ -214,6 +214,15 @@ const CoarseAttachment& HybridModel::attachment(int i) {
 
 StepStatus HybridModel::step(const StepInput& in) {
   if (in.contact && !m_inContactStep) return stepWithContact(in);
+  if (!in.nodeConstraints.empty()) {
+    // Contact constraints name fine surface vertices, which are this model's nodes: they act
+    // as grasps (their forces follow the scene's grasps in graspForces()).
+    StepInput merged = in;
+    merged.nodeConstraints.clear();
+    for (const NodeGrasp& c : in.nodeConstraints)
+      merged.grasps.push_back({c.tool, c.nodes, c.targets});
+    return step(merged);
+  }
   const int n = m_surf.numVertices();
   const Real dt = in.dt;
   auto t = Clock::now();
@@ -221,13 +230,19 @@ StepStatus HybridModel::step(const StepInput& in) {
   // 1. Load processing.
   m_nodal.clear();
   m_surfaceForces.clear();
+  // Each share of the harness's pressure patch acts on the fine vertex that takes it and, through
+  // the vertex's attachment to the coarse surface, on the coarse FEM.
   for (const PointLoad& l : in.loads) {
-    if (l.surfaceVertex < 0 || l.surfaceVertex >= n || l.force.isZero()) continue;
-    const CoarseAttachment& a = attachment(l.surfaceVertex);
-    const std::array<Vec3, 3> f = equivalentNodalForces(a, l.force);
-    for (int k = 0; k < a.count; ++k) m_nodal.push_back({a.nodes[k], f[k]});
-    if (m_cfg.surfaceLoad && m_controlOf[l.surfaceVertex] < 0)
-      m_surfaceForces.emplace_back(l.surfaceVertex, l.force);
+    if (l.force.isZero()) continue;
+    for (size_t s = 0; s < l.vertices.size(); ++s) {
+      const int v = l.vertices[s];
+      if (v < 0 || v >= n) continue;
+      const Vec3 share = l.weights[s] * l.force;
+      const CoarseAttachment& a = attachment(v);
+      const std::array<Vec3, 3> f = equivalentNodalForces(a, share);
+      for (int k = 0; k < a.count; ++k) m_nodal.push_back({a.nodes[k], f[k]});
+      if (m_cfg.surfaceLoad && m_controlOf[v] < 0) m_surfaceForces.emplace_back(v, share);
+    }
   }
   m_prescribed.clear();
   m_prescribedGrasp.clear();
@@ -237,10 +252,10 @@ StepStatus HybridModel::step(const StepInput& in) {
   for (size_t gi = 0; gi < in.grasps.size(); ++gi) {
     const GraspInput& g = in.grasps[gi];
     bool anyControl = false;
-    for (int i : g.nodes)
+    for (int i : g.vertices)
       if (i >= 0 && i < n && m_controlOf[i] >= 0) anyControl = true;
-    for (size_t k = 0; k < g.nodes.size(); ++k) {
-      const int i = g.nodes[k];
+    for (size_t k = 0; k < g.vertices.size(); ++k) {
+      const int i = g.vertices[k];
       if (i < 0 || i >= n || static_cast<Eigen::Index>(k) >= g.targets.rows()) continue;
       const Vec3 target = g.targets.row(k).transpose();
       m_graspTargets.emplace_back(i, target);

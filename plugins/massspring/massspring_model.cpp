@@ -295,7 +295,7 @@ StepStatus MassSpringModel::checkDivergence() const {
 
 // Grasped nodes end the step on their targets, moving with the tool's velocity.
 void MassSpringModel::applyConstraints(const StepInput& in, Real h, const MatX3& xOld) {
-  for (const GraspInput& g : in.grasps) {
+  for (const NodeGrasp& g : m_nodeGrasps) {
     for (size_t k = 0; k < g.nodes.size(); ++k) {
       const int i = g.nodes[k];
       m_x.row(i) = g.targets.row(k);
@@ -308,10 +308,14 @@ StepStatus MassSpringModel::step(const StepInput& in) {
   using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
   const Real h = in.dt;
+  // The grasped surface vertices and the load shares on the nodes that carry them (J a
+  // selection: the identity, or a surface vertex -> node table).
+  graspsOnNodes(in.grasps, m_surfaceRows, m_nodeGrasps);
+  loadsOnNodes(in.loads, m_surfaceRows, m_nodeForces);
   for (size_t i = 0; i < m_graspMask.size(); ++i) m_graspMask[i] = 0;
-  for (const GraspInput& g : in.grasps)
+  for (const NodeGrasp& g : m_nodeGrasps)
     for (int i : g.nodes) m_graspMask[i] = 1;
-  for (const GraspInput& g : in.grasps)
+  for (const NodeGrasp& g : m_nodeGrasps)
     for (int i : g.nodes) m_xOld.row(i) = m_x.row(i);
   const bool penalty = in.contact && in.contact->params().method == ContactMethod::Penalty;
   if (in.contact) m_stepStart = m_x;
@@ -326,10 +330,7 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     status = stepImplicit(in, h);
   } else {
     springForces(m_x, m_v, m_f);
-    for (const PointLoad& l : in.loads) {
-      const int node = m_surfaceIdentity ? l.surfaceVertex : m_surfaceRows.at(l.surfaceVertex);
-      m_f.row(node) += l.force.transpose();
-    }
+    for (const auto& [node, force] : m_nodeForces) m_f.row(node) += force.transpose();
     if (penalty) m_f += m_contactForce;
     const auto t1 = Clock::now();
     const int N = static_cast<int>(m_x.rows());
@@ -392,10 +393,7 @@ StepStatus MassSpringModel::stepImplicit(const StepInput& in, Real h) {
   const auto t0 = Clock::now();
   const int N = static_cast<int>(m_x.rows());
   springForces(m_x, m_v, m_f);
-  for (const PointLoad& l : in.loads) {
-    const int node = m_surfaceIdentity ? l.surfaceVertex : m_surfaceRows.at(l.surfaceVertex);
-    m_f.row(node) += l.force.transpose();
-  }
+  for (const auto& [node, force] : m_nodeForces) m_f.row(node) += force.transpose();
   if (in.contact && in.contact->params().method == ContactMethod::Penalty) m_f += m_contactForce;
   const Real alpha = m_config.massDamping;
   for (int i = 0; i < N; ++i)
@@ -437,7 +435,7 @@ StepStatus MassSpringModel::stepImplicit(const StepInput& in, Real h) {
       m_prescribed.segment<3>(3 * i) = -m_v.row(i).transpose();
     }
   }
-  for (const GraspInput& g : in.grasps) {
+  for (const NodeGrasp& g : m_nodeGrasps) {
     for (size_t k = 0; k < g.nodes.size(); ++k) {
       const int i = g.nodes[k];
       for (int c = 0; c < 3; ++c) m_constrainedDof[3 * i + c] = 1;
@@ -494,7 +492,7 @@ void MassSpringModel::computeGraspForces(const StepInput& in) {
   // The springs touching a grasped node, listed again only when the grasped set changes (a grasp
   // holds the same nodes for many steps): the per-step cost is then that of the few springs.
   std::vector<int>& grasped = m_graspedScratch;
-  graspedNodeSet(in.grasps, grasped);
+  graspedNodeSet(m_nodeGrasps, grasped);
   if (grasped != m_graspSpringsFor) {
     m_graspSprings.clear();
     for (size_t k = 0; k < m_springs.size(); ++k)
@@ -512,7 +510,7 @@ void MassSpringModel::computeGraspForces(const StepInput& in) {
     if (m_graspMask[s.b]) m_f.row(s.b) -= fa.transpose();
   }
   for (size_t g = 0; g < in.grasps.size(); ++g)
-    for (int node : in.grasps[g].nodes) m_graspForces[g] += m_f.row(node).transpose();
+    for (int node : m_nodeGrasps[g].nodes) m_graspForces[g] += m_f.row(node).transpose();
 }
 
 Counts MassSpringModel::counts() const {

@@ -77,6 +77,8 @@ class MassSpringModel final : public Model {
 
   bool m_surfaceIdentity = true;
   std::vector<int> m_surfaceRows;
+  std::vector<NodeGrasp> m_nodeGrasps;             // this step's grasps on nodes
+  std::vector<std::pair<int, Vec3>> m_nodeForces;  // this step's load shares on nodes
   MatX3 m_surface;
   MatX3i m_contactF;     // surface triangles as node rows: the collision proxy
   MatX3 m_stepStart;     // positions at the step's start (contact friction)

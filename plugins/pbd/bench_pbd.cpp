@@ -25,9 +25,9 @@ void runPbd(benchmark::State& state, pbd::PbdConfig cfg) {
   in.gravity = Vec3(0, 0, -9.81);
   // A grasp on the top, moving slowly upwards: the realistic case (kinematic nodes).
   GraspInput g;
-  g.nodes = nearestVertices(o.surface.V, Vec3(0, 0, 0.04), 5);
-  g.targets.resize(static_cast<Eigen::Index>(g.nodes.size()), 3);
-  for (size_t k = 0; k < g.nodes.size(); ++k) g.targets.row(k) = o.surface.V.row(g.nodes[k]);
+  g.vertices = nearestVertices(o.surface.V, Vec3(0, 0, 0.04), 5);
+  g.targets.resize(static_cast<Eigen::Index>(g.vertices.size()), 3);
+  for (size_t k = 0; k < g.vertices.size(); ++k) g.targets.row(k) = o.surface.V.row(g.vertices[k]);
   in.grasps.push_back(g);
   for (int s = 0; s < 20; ++s) m.step(in);  // warm-up
   std::map<std::string, double> phaseSum;

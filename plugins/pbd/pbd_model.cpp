@@ -530,9 +530,11 @@ StepStatus PbdModel::step(const StepInput& in) {
   const Real dt = in.dt;
   const int N = static_cast<int>(m_x.rows());
 
-  // Grasped nodes are kinematic this step: inverse mass 0, position = target.
+  // Grasped surface vertices are particles (J a selection): kinematic this step, inverse mass 0,
+  // position = target.
+  graspsOnNodes(in.grasps, m_surfaceRows, m_nodeGrasps);
   std::vector<int>& grasped = m_graspedScratch;
-  graspedNodeSet(in.grasps, grasped);
+  graspedNodeSet(m_nodeGrasps, grasped);
   if (grasped != m_hotGrasped || dt != m_hotDt) {
     for (int i : m_hotGrasped) m_graspMask[i] = 0;
     m_w = m_w0;
@@ -547,15 +549,14 @@ StepStatus PbdModel::step(const StepInput& in) {
 
   // Prediction with gravity and point loads (explicit in the external forces only).
   m_v.rowwise() += dt * in.gravity.transpose();
-  for (const PointLoad& l : in.loads) {
-    const int node = m_surfaceIdentity ? l.surfaceVertex : m_surfaceRows.at(l.surfaceVertex);
-    m_v.row(node) += (dt * m_w[node]) * l.force.transpose();
-  }
+  loadsOnNodes(in.loads, m_surfaceRows, m_nodeForces);
+  for (const auto& [node, force] : m_nodeForces)
+    m_v.row(node) += (dt * m_w[node]) * force.transpose();
   for (int i = 0; i < N; ++i) {
     if (m_w[i] == 0.0) m_v.row(i).setZero();
   }
   m_p = m_x + dt * m_v;
-  for (const GraspInput& g : in.grasps)
+  for (const NodeGrasp& g : m_nodeGrasps)
     for (size_t k = 0; k < g.nodes.size(); ++k) m_p.row(g.nodes[k]) = g.targets.row(k);
   const auto t1 = Clock::now();
 
@@ -670,7 +671,7 @@ void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
     for (int i : m_hotGrasped)
       nodeForce.row(i) += (m_lambdaVolume * invDt2) * volumeGradient(i).transpose();
   for (size_t g = 0; g < in.grasps.size(); ++g)
-    for (int node : in.grasps[g].nodes) m_graspForces[g] += nodeForce.row(node).transpose();
+    for (int node : m_nodeGrasps[g].nodes) m_graspForces[g] += nodeForce.row(node).transpose();
 }
 
 Counts PbdModel::counts() const {

@@ -148,6 +148,8 @@ class PbdModel final : public Model {
   long long m_degenerate = 0;        // skipped projections since init/reset
   long long m_degenerateAtInit = 0;  // hinges dropped at init (degenerate rest triangles)
   std::vector<int> m_graspedScratch;
+  std::vector<NodeGrasp> m_nodeGrasps;             // this step's grasps on particles
+  std::vector<std::pair<int, Vec3>> m_nodeForces;  // this step's load shares on particles
   MatX3 m_nodeForce;
   // Constraints touching a grasped node (rebuilt with the hot data when the grasped set changes).
   std::vector<int> m_graspDist, m_graspBend, m_graspTet;

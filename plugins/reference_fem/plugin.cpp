@@ -27,7 +27,7 @@ std::vector<ParamSpec> referenceFemParams() {
                         "with the scene's dt"),
       ParamSpec::choice("material", "neo_hookean", {"linear", "corotational", "neo_hookean"},
                         "constitutive model"),
-      ParamSpec::integer("element_order", 1, 1, 2,
+      ParamSpec::integer("element_order", 2, 1, 2,
                          "1: 4-node (linear) tets; 2: 10-node (quadratic, straight-sided) tets "
                          "with midside nodes added to the Gmsh mesh"),
       ParamSpec::integer("elements", 20000, 100, 5000000,
@@ -52,9 +52,6 @@ std::vector<ParamSpec> referenceFemParams() {
                       "stiffness-proportional damping (dynamic only; K at the step start)"),
       ParamSpec::real("mesh_timeout", "s", 600.0, 1.0, 86400.0,
                       "wall-clock limit of the Gmsh child process"),
-      ParamSpec::real("load_radius", "m", 0.03, 0.0, 1.0,
-                      "a point force is spread as a paraboloid pressure patch of this radius "
-                      "(at least the loaded vertex's one-ring) around its surface vertex"),
   };
 }
 
@@ -69,7 +66,6 @@ class ReferenceFemModel final : public Model {
     m_options.tolerance = p.real("newton_tolerance");
     m_options.maxIterations = int(p.integer("max_newton_iterations"));
     m_options.maxHalvings = int(p.integer("max_load_halvings"));
-    m_loadRadius = p.real("load_radius");
     m_alpha = p.real("rayleigh_alpha");
     m_beta = p.real("rayleigh_beta");
     m_dt = setup.dt;
@@ -110,8 +106,6 @@ class ReferenceFemModel final : public Model {
     // clipSurfaceByBoxes is a node a hair's breadth from it).
     m_isFixed.assign(size_t(m_system->numNodes()), 0);
     for (int n : m_fixed) m_isFixed[size_t(n)] = 1;
-    m_spreader = std::make_unique<PointLoadSpreader>(*m_system);
-    m_patches.clear();
     reset();
   }
 
@@ -135,23 +129,28 @@ class ReferenceFemModel final : public Model {
     lc.gravity = in.gravity;
     std::vector<char> fixed(size_t(m_system->numNodes()), 0);
     for (int n : m_fixed) fixed[size_t(n)] = 1;
+    // Every organ surface vertex is a node of the tet mesh (J a selection), except vertices
+    // inside a clipped-off fixed box (-1): those are pinned, and the support takes their share.
     for (const GraspInput& g : in.grasps) {
+      for (size_t k = 0; k < g.vertices.size(); ++k) {
+        const int node = m_surfaceNode[size_t(g.vertices[k])];
+        if (node < 0 || fixed[size_t(node)]) continue;
+        lc.prescribedNodes.push_back(node);
+        lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
+        lc.targets.bottomRows(1) = g.targets.row(Eigen::Index(k));
+      }
+    }
+    for (const NodeGrasp& g : in.nodeConstraints)  // contact, on nodes
       for (size_t k = 0; k < g.nodes.size(); ++k) {
         lc.prescribedNodes.push_back(g.nodes[k]);
         lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
         lc.targets.bottomRows(1) = g.targets.row(Eigen::Index(k));
       }
-    }
-    for (const PointLoad& l : in.loads) {
-      if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_surfaceNode.size())) continue;
-      const int node = m_surfaceNode[size_t(l.surfaceVertex)];
-      if (node < 0) continue;  // a vertex inside a fixed box: the support takes the load
-      auto it = m_patches.find(node);
-      if (it == m_patches.end())
-        it = m_patches.emplace(node, m_spreader->patch(node, m_loadRadius)).first;
-      for (size_t k = 0; k < it->second.nodes.size(); ++k)
-        lc.nodeForces.emplace_back(it->second.nodes[k], it->second.weights[k] * l.force);
-    }
+    for (const PointLoad& l : in.loads)
+      for (size_t k = 0; k < l.vertices.size(); ++k) {
+        const int node = m_surfaceNode[size_t(l.vertices[k])];
+        if (node >= 0) lc.nodeForces.emplace_back(node, l.weights[k] * l.force);
+      }
 
     SolveReport rep;
     if (m_solveKind == SolveKind::QuasiStatic) {
@@ -169,6 +168,14 @@ class ReferenceFemModel final : public Model {
 
     m_graspForces.clear();
     for (const GraspInput& g : in.grasps) {
+      Vec3 f = Vec3::Zero();
+      for (int v : g.vertices) {
+        const int n = m_surfaceNode[size_t(v)];
+        if (n >= 0 && !fixed[size_t(n)]) f -= m_solver->lastGradient().segment<3>(3 * n);
+      }
+      m_graspForces.push_back(f);
+    }
+    for (const NodeGrasp& g : in.nodeConstraints) {
       Vec3 f = Vec3::Zero();
       for (int n : g.nodes)
         if (!fixed[size_t(n)]) f -= m_solver->lastGradient().segment<3>(3 * n);
@@ -295,9 +302,6 @@ class ReferenceFemModel final : public Model {
   SolveKind m_solveKind = SolveKind::QuasiStatic;
   SolveOptions m_options;
   Real m_alpha = 0, m_beta = 0, m_dt = 1e-3;
-  Real m_loadRadius = 0.03;
-  std::unique_ptr<PointLoadSpreader> m_spreader;
-  std::map<int, PointLoadPatch> m_patches;  ///< loaded node -> its pressure patch
   std::unique_ptr<FemSystem> m_system;
   std::unique_ptr<EquilibriumSolver> m_solver;
   std::vector<int> m_fixed;

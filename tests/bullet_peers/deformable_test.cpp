@@ -133,15 +133,15 @@ TEST_P(BulletDeformableForces, GraspedNodesFollowTheirTargets) {
     in.grasps[0].targets = start;
     in.grasps[0].targets.col(2).array() += 2e-4 * s;
     ASSERT_EQ(m.step(in), StepStatus::Ok);
-    for (size_t k = 0; k < in.grasps[0].nodes.size(); ++k)
-      ASSERT_EQ(m.nodes().row(in.grasps[0].nodes[k]), in.grasps[0].targets.row(Eigen::Index(k)));
+    for (size_t k = 0; k < in.grasps[0].vertices.size(); ++k)
+      ASSERT_EQ(m.nodes().row(in.grasps[0].vertices[k]), in.grasps[0].targets.row(Eigen::Index(k)));
   }
-  const std::vector<int> near = nearestVertices(t.V, t.V.row(in.grasps[0].nodes[0]), 20);
+  const std::vector<int> near = nearestVertices(t.V, t.V.row(in.grasps[0].vertices[0]), 20);
   Real rise = 0;
   for (int v : near) rise += m.nodes()(v, 2) - t.V(v, 2);
   EXPECT_GT(rise / near.size(), 0.005);
   // Released: the node is dynamic again and no longer held at the target.
-  const int held = in.grasps[0].nodes[0];
+  const int held = in.grasps[0].vertices[0];
   const Real zHeld = m.nodes()(held, 2);
   in.grasps.clear();
   for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
@@ -161,7 +161,7 @@ TEST_P(BulletDeformableForces, PointForceMovesTheLoadedVertexAlongTheForce) {
   l.surfaceVertex =
       nearestVertex(makePhantom("liver", 0.12).V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
   l.force = Vec3(0, 0, 0.5);
-  in.loads.push_back(l);
+  in.loads.push_back(PointLoad::onVertex(l.surfaceVertex, l.force));
   for (int s = 0; s < 50; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
   EXPECT_GT(m.surface()(l.surfaceVertex, 2) - t.V(l.surfaceVertex, 2), 1e-4);
 }

@@ -126,17 +126,17 @@ TEST(BulletSoftBodyModel, GraspedNodesFollowTheirTargetsAndReleaseRestoresMass) 
     in.grasps[0].targets = start;
     in.grasps[0].targets.col(2).array() += 2e-4 * s;  // 0.2 m/s up
     ASSERT_EQ(m.step(in), StepStatus::Ok);
-    for (size_t k = 0; k < in.grasps[0].nodes.size(); ++k)
-      ASSERT_EQ(m.nodes().row(in.grasps[0].nodes[k]), in.grasps[0].targets.row(Eigen::Index(k)));
+    for (size_t k = 0; k < in.grasps[0].vertices.size(); ++k)
+      ASSERT_EQ(m.nodes().row(in.grasps[0].vertices[k]), in.grasps[0].targets.row(Eigen::Index(k)));
   }
   // Neighbours were dragged up with the grasp.
   const std::vector<int> near =
-      nearestVertices(o.surface.V, o.surface.V.row(in.grasps[0].nodes[0]), 20);
+      nearestVertices(o.surface.V, o.surface.V.row(in.grasps[0].vertices[0]), 20);
   Real rise = 0;
   for (int v : near) rise += m.surface()(v, 2) - o.surface.V(v, 2);
   EXPECT_GT(rise / near.size(), 0.005);
   // Released: the node falls under gravity again (its mass is back).
-  const int held = in.grasps[0].nodes[0];
+  const int held = in.grasps[0].vertices[0];
   const Real zHeld = m.nodes()(held, 2);
   in.grasps.clear();
   for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
@@ -153,7 +153,7 @@ TEST(BulletSoftBodyModel, PointForceMovesTheLoadedVertexAlongTheForce) {
   PointLoad l;
   l.surfaceVertex = nearestVertex(o.surface.V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
   l.force = Vec3(0, 0, 0.5);
-  in.loads.push_back(l);
+  in.loads.push_back(PointLoad::onVertex(l.surfaceVertex, l.force));
   for (int s = 0; s < 50; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
   EXPECT_GT(m.surface()(l.surfaceVertex, 2) - o.surface.V(l.surfaceVertex, 2), 1e-4);
 }
@@ -204,7 +204,7 @@ TEST(BulletSoftBodyModel, NanIsReportedAsDivergence) {
   PointLoad l;
   l.surfaceVertex = 0;
   l.force = Vec3(std::nan(""), 0, 0);
-  in.loads.push_back(l);
+  in.loads.push_back(PointLoad::onVertex(l.surfaceVertex, l.force));
   EXPECT_EQ(m.step(in), StepStatus::Diverged);
 }
 

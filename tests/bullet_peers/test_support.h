@@ -26,11 +26,11 @@ inline std::vector<int> bottomSlab(const MatX3& V, Real fraction) {
 inline GraspInput topGrasp(const MatX3& nodes, int k, Real lift) {
   const Box b = boundingBox(nodes);
   GraspInput g;
-  g.nodes = nearestVertices(nodes, Vec3(b.center().x(), b.center().y(), b.hi.z()), k);
-  std::sort(g.nodes.begin(), g.nodes.end());
-  g.targets.resize(Eigen::Index(g.nodes.size()), 3);
-  for (size_t i = 0; i < g.nodes.size(); ++i)
-    g.targets.row(Eigen::Index(i)) = nodes.row(g.nodes[i]) + Vec3(0, 0, lift).transpose();
+  g.vertices = nearestVertices(nodes, Vec3(b.center().x(), b.center().y(), b.hi.z()), k);
+  std::sort(g.vertices.begin(), g.vertices.end());
+  g.targets.resize(Eigen::Index(g.vertices.size()), 3);
+  for (size_t i = 0; i < g.vertices.size(); ++i)
+    g.targets.row(Eigen::Index(i)) = nodes.row(g.vertices[i]) + Vec3(0, 0, lift).transpose();
   return g;
 }
 

@@ -1,6 +1,7 @@
 #include "hex_fem_model.h"
 #include "test_meshes.h"
 
+#include <deform/interaction.h>
 #include <deform/phantom.h>
 
 #include <gtest/gtest.h>
@@ -61,22 +62,42 @@ const std::vector<HexFemConfig> kAllConfigs = {
     config(ElasticModel::Corotational, CorotationalSolver::Pcg),
     config(ElasticModel::Corotational, CorotationalSolver::Refactor)};
 
-std::vector<int> nodesNear(const MatX3& nodes, const Vec3& p, Real r) {
-  std::vector<int> out;
-  for (int n = 0; n < nodes.rows(); ++n)
-    if ((nodes.row(n).transpose() - p).norm() <= r) out.push_back(n);
-  return out;
+/// A grasp of the surface vertices within r of p (as the harness picks them), targets at rest.
+GraspInput surfaceGrasp(const TestModel& m, const SurfaceMesh& rest, const Vec3& p, Real r) {
+  GraspInput grasp;
+  grasp.vertices = graspedSurfaceVertices(rest, p, r);
+  grasp.targets.resize(Eigen::Index(grasp.vertices.size()), 3);
+  for (size_t k = 0; k < grasp.vertices.size(); ++k)
+    grasp.targets.row(Eigen::Index(k)) = m.surface().row(grasp.vertices[k]);
+  return grasp;
+}
+
+/// The harness's spread of a point force at the surface vertex nearest p (1 cm patch).
+PointLoad patchLoad(const SurfaceMesh& rest, const Vec3& p, const Vec3& force) {
+  PointLoad load;
+  load.surfaceVertex = nearestVertex(rest.V, p);
+  load.force = force;
+  const SurfacePatch patch = pressurePatch(rest, load.surfaceVertex, 0.01);
+  load.vertices = patch.vertices;
+  load.weights = patch.weights;
+  return load;
+}
+
+/// A force on one surface vertex (no spread).
+PointLoad vertexLoad(int v, const Vec3& f) {
+  PointLoad load;
+  load.surfaceVertex = v;
+  load.force = f;
+  return load;
 }
 
 /// A lift of the top of the organ by a grasp, with gravity and a side push; returns the surface
 /// after every step.
 std::vector<MatX3> liftTrajectory(TestModel& m, int steps, bool gravity = true) {
   const Vec3 top(0.0, 0.0, 0.045);
-  GraspInput grasp;
-  grasp.nodes = nodesNear(m.nodes(), top, 0.015);
-  EXPECT_FALSE(grasp.nodes.empty());
-  MatX3 rest(grasp.nodes.size(), 3);
-  for (size_t k = 0; k < grasp.nodes.size(); ++k) rest.row(k) = m.nodes().row(grasp.nodes[k]);
+  GraspInput grasp = surfaceGrasp(m, liverLike(), top, 0.015);
+  EXPECT_GE(grasp.vertices.size(), 2u);
+  const MatX3 rest = grasp.targets;
   std::vector<MatX3> out;
   for (int s = 0; s < steps; ++s) {
     StepInput in;
@@ -85,7 +106,7 @@ std::vector<MatX3> liftTrajectory(TestModel& m, int steps, bool gravity = true) 
     if (gravity) in.gravity = Vec3(0, 0, -9.81);
     grasp.targets = rest.rowwise() + Vec3(0.0, 0.3, 1.0).transpose() * (0.02 * (s + 1) / steps);
     in.grasps = {grasp};
-    in.loads = {PointLoad{nearestVertex(m.surface(), Vec3(0.1, 0, 0)), Vec3(-0.5, 0, 0)}};
+    in.loads = {patchLoad(liverLike(), Vec3(0.1, 0, 0), Vec3(-0.5, 0, 0))};
     EXPECT_EQ(m.step(in), StepStatus::Ok);
     out.push_back(m.surface());
   }
@@ -134,18 +155,16 @@ TEST(HexFemModel, RestStaysAtRestWithoutGravity) {
   }
 }
 
-TEST(HexFemModel, GraspedNodesFollowTheirTargetsAndTheTissuePullsBack) {
+TEST(HexFemModel, GraspedSurfacePointsFollowTheirTargetsAndTheTissuePullsBack) {
   for (const HexFemConfig& c : kAllConfigs) {
     TestModel m;
     m.initialize(makeOrgan(liverLike()), c, 1e-3, fixedBelow(2, -0.03));
     ASSERT_GT(m.fixedNodes().size(), 0u);
     const MatX3 rest = m.nodes();
     const Vec3 top(0.0, 0.0, 0.045);
-    GraspInput grasp;
-    grasp.nodes = nodesNear(rest, top, 0.015);
-    ASSERT_GE(grasp.nodes.size(), 2u);
-    MatX3 r0(grasp.nodes.size(), 3);
-    for (size_t k = 0; k < grasp.nodes.size(); ++k) r0.row(k) = rest.row(grasp.nodes[k]);
+    GraspInput grasp = surfaceGrasp(m, liverLike(), top, 0.015);
+    ASSERT_GE(grasp.vertices.size(), 2u);
+    const MatX3 r0 = grasp.targets;
     const Vec3 lift(0, 0, 0.01);
     for (int s = 0; s < 50; ++s) {
       StepInput in;
@@ -153,9 +172,10 @@ TEST(HexFemModel, GraspedNodesFollowTheirTargetsAndTheTissuePullsBack) {
       grasp.targets = r0.rowwise() + lift.transpose() * ((s + 1) / 50.0);
       in.grasps = {grasp};
       ASSERT_EQ(m.step(in), StepStatus::Ok);
-      for (size_t k = 0; k < grasp.nodes.size(); ++k) {
-        EXPECT_EQ(m.nodes().row(grasp.nodes[k]), grasp.targets.row(k));
-      }
+      // The grasped surface points (not grid nodes) are on their targets, through the embedding.
+      for (size_t k = 0; k < grasp.vertices.size(); ++k)
+        EXPECT_LT((m.surface().row(grasp.vertices[k]) - grasp.targets.row(Eigen::Index(k))).norm(),
+                  1e-12);
     }
     // Fixed nodes did not move; the organ is stretched upward, so it pulls the tool down.
     for (int n : m.fixedNodes()) EXPECT_EQ(m.nodes().row(n), rest.row(n));
@@ -169,6 +189,50 @@ TEST(HexFemModel, GraspedNodesFollowTheirTargetsAndTheTissuePullsBack) {
     EXPECT_GT(rise, 0.0);
     EXPECT_LT(rise, 0.01);
   }
+}
+
+// A grasper much smaller than a cell holds a single surface vertex: the nodes of its hexahedron
+// carry it to the target exactly (before the surface mapping, a grasp of grid nodes within the
+// jaw radius held nothing).
+TEST(HexFemModel, SmallGraspHoldsItsSurfaceVertex) {
+  TestModel m;
+  m.initialize(makeOrgan(liverLike()), config(ElasticModel::Corotational), 1e-3,
+               fixedBelow(2, -0.03));
+  GraspInput grasp = surfaceGrasp(m, liverLike(), Vec3(0.02, 0.01, 0.05), 0.002);
+  ASSERT_EQ(grasp.vertices.size(), 1u);
+  const MatX3 r0 = grasp.targets;
+  for (int s = 0; s < 30; ++s) {
+    StepInput in;
+    in.dt = 1e-3;
+    grasp.targets = r0.rowwise() + Vec3(0.0, 0.0, 0.01).transpose() * ((s + 1) / 30.0);
+    in.grasps = {grasp};
+    ASSERT_EQ(m.step(in), StepStatus::Ok);
+    EXPECT_LT((m.surface().row(grasp.vertices[0]) - grasp.targets.row(0)).norm(), 1e-12);
+  }
+  EXPECT_GT(m.graspedNodes().size(), 1u);  // a whole hexahedron's nodes carry the vertex
+  EXPECT_LT(m.graspForces()[0].z(), 0.0);
+}
+
+// A point force spread by the harness over a patch reaches the nodes by J^T: the patch moves along
+// the force, and the nodal forces sum to it (the static response of a pinned organ).
+TEST(HexFemModel, PatchLoadMovesThePatchAlongTheForce) {
+  TestModel m;
+  HexFemConfig c = config(ElasticModel::Linear);
+  m.initialize(makeOrgan(liverLike()), c, 1e-3, fixedBelow(2, -0.03));
+  const PointLoad load = patchLoad(liverLike(), Vec3(0.0, 0.0, 0.05), Vec3(0.3, 0, -1.0));
+  ASSERT_GT(load.vertices.size(), 3u);
+  for (int s = 0; s < 30; ++s) {
+    StepInput in;
+    in.dt = 1e-3;
+    in.loads = {load};
+    ASSERT_EQ(m.step(in), StepStatus::Ok);
+  }
+  Vec3 u = Vec3::Zero();
+  for (size_t k = 0; k < load.vertices.size(); ++k)
+    u += load.weights[k] *
+         (m.surface().row(load.vertices[k]) - liverLike().V.row(load.vertices[k])).transpose();
+  EXPECT_GT(u.dot(load.force.normalized()), 0.9 * u.norm());
+  EXPECT_GT(u.norm(), 1e-5);
 }
 
 TEST(HexFemModel, ResetReproducesTheTrajectoryBitForBit) {
@@ -217,7 +281,7 @@ TEST(HexFemModel, NonFiniteLoadIsReportedAsDivergence) {
   m.initialize(makeOrgan(liverLike()), config(ElasticModel::Corotational), 1e-3, noFixed());
   StepInput in;
   in.dt = 1e-3;
-  in.loads = {PointLoad{0, Vec3(std::nan(""), 0, 0)}};
+  in.loads = {vertexLoad(0, Vec3(std::nan(""), 0, 0))};
   EXPECT_EQ(m.step(in), StepStatus::Diverged);
 }
 
@@ -251,7 +315,7 @@ Real cantileverTipDeflection(int perThickness, ElasticModel model, int steps) {
   std::vector<int> tip;
   for (int v = 0; v < beam.numVertices(); ++v)
     if (beam.V(v, 0) > L - 1e-9) tip.push_back(v);
-  for (int v : tip) in.loads.push_back(PointLoad{v, Vec3(0, 0, -F / tip.size())});
+  for (int v : tip) in.loads.push_back(vertexLoad(v, Vec3(0, 0, -F / tip.size())));
   for (int s = 0; s < steps; ++s) EXPECT_EQ(m.step(in), StepStatus::Ok);
   Real d = 0;
   for (int v : tip) d += m.surface()(v, 2) - beam.V(v, 2);

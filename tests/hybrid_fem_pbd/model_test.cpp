@@ -162,15 +162,15 @@ TEST_F(HybridModelTest, GravitySagsTheOrganAsABodyForce) {
 TEST_F(HybridModelTest, GraspMovesTheGraspedRegion) {
   const int top = topVertex(organ.surface);
   GraspInput g;
-  g.nodes = nearestVertices(organ.surface.V, organ.surface.V.row(top), 6);
-  g.targets = MatX3(g.nodes.size(), 3);
-  for (size_t k = 0; k < g.nodes.size(); ++k)
-    g.targets.row(k) = organ.surface.V.row(g.nodes[k]) + Vec3(0, 0, 0.005).transpose();
+  g.vertices = nearestVertices(organ.surface.V, organ.surface.V.row(top), 6);
+  g.targets = MatX3(g.vertices.size(), 3);
+  for (size_t k = 0; k < g.vertices.size(); ++k)
+    g.targets.row(k) = organ.surface.V.row(g.vertices[k]) + Vec3(0, 0, 0.005).transpose();
   StepInput in = input();
   in.grasps.push_back(g);
   for (int s = 0; s < 50; ++s) ASSERT_EQ(model.step(in), StepStatus::Ok);
-  for (size_t k = 0; k < g.nodes.size(); ++k)
-    EXPECT_LT((model.surface().row(g.nodes[k]) - g.targets.row(k)).norm(), 1e-12);
+  for (size_t k = 0; k < g.vertices.size(); ++k)
+    EXPECT_LT((model.surface().row(g.vertices[k]) - g.targets.row(k)).norm(), 1e-12);
   // A node just outside the grasp is lifted too (through MV and the surface constraints).
   const int outside = nearestVertices(organ.surface.V, organ.surface.V.row(top), 12).back();
   EXPECT_GT(model.surface()(outside, 2) - organ.surface.V(outside, 2), 1e-4);
@@ -276,7 +276,7 @@ std::vector<int> topFace(const SurfaceMesh& s) {
 
 GraspInput graspAt(const SurfaceMesh& s, const std::vector<int>& nodes, const Vec3& shift) {
   GraspInput g;
-  g.nodes = nodes;
+  g.vertices = nodes;
   g.targets = MatX3(nodes.size(), 3);
   for (size_t k = 0; k < nodes.size(); ++k)
     g.targets.row(k) = s.V.row(nodes[k]) + shift.transpose();

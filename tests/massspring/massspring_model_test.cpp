@@ -72,10 +72,10 @@ std::vector<MatX3> scriptedRun(MassSpringModel& m, const Organ& o, int steps, Re
   for (int s = 0; s < steps; ++s) {
     StepInput in = input(dt, Vec3(0, 0, -9.81));
     GraspInput g;
-    g.nodes = {top};
+    g.vertices = {top};
     g.targets = o.surface.V.row(top) + Eigen::RowVector3d(0, 0, 2e-5 * (s + 1));
     in.grasps.push_back(g);
-    in.loads.push_back({side, Vec3(0.5, 0, 0)});
+    in.loads.push_back(PointLoad::onVertex(side, Vec3(0.5, 0, 0)));
     EXPECT_EQ(m.step(in), StepStatus::Ok);
     out.push_back(m.surface());
   }
@@ -106,7 +106,7 @@ TEST(MassSpringModel, GraspedNodeFollowsItsTargetExactly) {
     for (int s = 0; s < 30; ++s) {
       StepInput in = input(2e-4, Vec3(0, 0, -9.81));
       GraspInput g;
-      g.nodes = nodes;
+      g.vertices = nodes;
       g.targets.resize(3, 3);
       for (int k = 0; k < 3; ++k)
         g.targets.row(k) = o.surface.V.row(nodes[k]) + Eigen::RowVector3d(1e-4 * s, 0, 2e-4 * s);
@@ -128,7 +128,7 @@ StepStatus runStiff(Integrator integ, int steps, MatX3* final = nullptr) {
   for (int s = 0; s < steps; ++s) {
     StepInput in = input(1.0 / 30.0, Vec3(0, 0, -9.81));
     GraspInput g;
-    g.nodes = {top};
+    g.vertices = {top};
     g.targets = o.surface.V.row(top) + Eigen::RowVector3d(0, 0, 1e-3 * std::min(s + 1, 10));
     in.grasps.push_back(g);
     const StepStatus st = m.step(in);
@@ -164,7 +164,7 @@ TEST(MassSpringModel, GraspReactionBalancesTheHangingWeight) {
   for (int s = 0; s < 600; ++s) {
     StepInput in = input(5e-3, g);
     GraspInput gi;
-    gi.nodes = held;
+    gi.vertices = held;
     gi.targets.resize(static_cast<Eigen::Index>(held.size()), 3);
     for (size_t k = 0; k < held.size(); ++k) gi.targets.row(k) = o.surface.V.row(held[k]);
     in.grasps.push_back(gi);
@@ -201,7 +201,7 @@ TEST(MassSpringModel, NanIsReportedAsDivergence) {
     MassSpringModel m;
     m.init(o, withIntegrator(integ));
     StepInput in = input(1e-4);
-    in.loads.push_back({0, Vec3(std::numeric_limits<Real>::quiet_NaN(), 0, 0)});
+    in.loads.push_back(PointLoad::onVertex(0, Vec3(std::numeric_limits<Real>::quiet_NaN(), 0, 0)));
     EXPECT_EQ(m.step(in), StepStatus::Diverged);
   }
 }

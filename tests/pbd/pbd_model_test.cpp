@@ -87,10 +87,10 @@ std::vector<MatX3> scriptedRun(PbdModel& m, const Organ& o, int steps) {
   for (int s = 0; s < steps; ++s) {
     StepInput in = input(1e-3, Vec3(0, 0, -9.81));
     GraspInput g;
-    g.nodes = {top};
+    g.vertices = {top};
     g.targets = o.surface.V.row(top) + Eigen::RowVector3d(0, 0, 1e-4 * (s + 1));
     in.grasps.push_back(g);
-    in.loads.push_back({side, Vec3(0.5, 0, 0)});
+    in.loads.push_back(PointLoad::onVertex(side, Vec3(0.5, 0, 0)));
     EXPECT_EQ(m.step(in), StepStatus::Ok);
     out.push_back(m.surface());
   }
@@ -122,7 +122,7 @@ TEST(PbdModel, GraspedNodeFollowsItsTargetExactly) {
     for (int s = 0; s < 40; ++s) {
       StepInput in = input(1e-3, Vec3(0, 0, -9.81));
       GraspInput g;
-      g.nodes = nodes;
+      g.vertices = nodes;
       g.targets.resize(2, 3);
       for (int k = 0; k < 2; ++k)
         g.targets.row(k) = o.surface.V.row(nodes[k]) + Eigen::RowVector3d(2e-4 * s, 0, 5e-4 * s);
@@ -167,7 +167,7 @@ TEST(PbdModel, GraspReactionBalancesTheHangingWeight) {
   for (int s = 0; s < 3000; ++s) {
     StepInput in = input(1e-3, g);
     GraspInput gi;
-    gi.nodes = held;
+    gi.vertices = held;
     gi.targets.resize(static_cast<Eigen::Index>(held.size()), 3);
     for (size_t k = 0; k < held.size(); ++k) gi.targets.row(k) = o.surface.V.row(held[k]);
     in.grasps.push_back(gi);
@@ -206,7 +206,7 @@ TEST(PbdModel, DivergenceIsReportedNotThrown) {
   PbdModel m;
   m.init(o, PbdConfig{});
   StepInput in = input(1e-3);
-  in.loads.push_back({0, Vec3(std::numeric_limits<Real>::quiet_NaN(), 0, 0)});
+  in.loads.push_back(PointLoad::onVertex(0, Vec3(std::numeric_limits<Real>::quiet_NaN(), 0, 0)));
   EXPECT_EQ(m.step(in), StepStatus::Diverged);
 }
 

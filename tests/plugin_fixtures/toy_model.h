@@ -22,8 +22,8 @@ class RigidFollowModel final : public Model {
     Vec3 sum = Vec3::Zero();
     long long n = 0;
     for (const GraspInput& g : in.grasps) {
-      for (size_t j = 0; j < g.nodes.size(); ++j) {
-        sum += (g.targets.row(Eigen::Index(j)) - m_x.row(g.nodes[j])).transpose();
+      for (size_t j = 0; j < g.vertices.size(); ++j) {
+        sum += (g.targets.row(Eigen::Index(j)) - m_x.row(g.vertices[j])).transpose();
         ++n;
       }
     }

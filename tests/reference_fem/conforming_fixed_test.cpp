@@ -73,13 +73,13 @@ Result run(const Organ& organ, bool conform, int order, bool loadInsideBox) {
   top.surfaceVertex =
       nearestVertex(organ.surface.V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
   top.force = Vec3(0.3, 0, 0);
-  in.loads.push_back(top);
+  in.loads.push_back(PointLoad::onVertex(top.surfaceVertex, top.force));
   if (loadInsideBox) {
     PointLoad low;
     low.surfaceVertex =
         nearestVertex(organ.surface.V, Vec3(b.center().x(), b.center().y(), b.lo.z()));
     low.force = Vec3(0, 0, -5);
-    in.loads.push_back(low);
+    in.loads.push_back(PointLoad::onVertex(low.surfaceVertex, low.force));
   }
   EXPECT_EQ(m->step(in), StepStatus::Ok);
   r.nodes = m->nodes();

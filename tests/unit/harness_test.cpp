@@ -155,6 +155,55 @@ TEST(Runner, OkRunRecordsEveryStepAndFollowsTheGrasp) {
   EXPECT_EQ(r.finalFaces, f.organ.surface.F);
 }
 
+TEST(Runner, GraspResidualAndValidity) {
+  const Fixture f;
+  const RunRecord held = runWith(f, [](RigidTestModel&) {});
+  EXPECT_NEAR(held.graspResidual, 0.0, 1e-12) << "the rigid body lands the grasped vertex";
+  EXPECT_NEAR(held.graspTravel, 0.02, 1e-15);
+  EXPECT_TRUE(held.valid) << held.invalidReason;
+  EXPECT_TRUE(held.emptyGrasps.empty());
+  EXPECT_FALSE(held.equilibrium);
+
+  // A model that holds nothing: the grasped vertex stays while the tool lifts 2 cm, an RMS
+  // residual of about half the lift, far above 10% of the travel.
+  const RunRecord loose = runWith(f, [](RigidTestModel& m) { m.ignoreGrasps = true; });
+  ASSERT_EQ(loose.status, RunStatus::Ok);
+  EXPECT_GT(loose.graspResidual, 0.005);
+  EXPECT_FALSE(loose.valid);
+  EXPECT_NE(loose.invalidReason.find("grasp residual"), std::string::npos) << loose.invalidReason;
+
+  const RunRecord diverged = runWith(f, [](RigidTestModel& m) { m.nanAtStep = 7; });
+  EXPECT_FALSE(diverged.valid);
+  EXPECT_EQ(diverged.invalidReason, "diverged");
+}
+
+TEST(Runner, EquilibriumComparisonStopsWhenSettled) {
+  Fixture f;
+  f.scene.compareAt.clear();
+  f.scene.compareAtEquilibrium = true;
+  // The tool stops at t = 0.6; the rigid body stops with it and is settled 20 quiet steps later.
+  const RunRecord r = runWith(f, [](RigidTestModel&) {});
+  ASSERT_EQ(r.status, RunStatus::Ok) << r.message;
+  ASSERT_TRUE(r.settledAt.has_value());
+  EXPECT_NEAR(*r.settledAt, 0.8, 1e-9);
+  EXPECT_EQ(r.steps, 80);
+  ASSERT_EQ(r.compared.size(), 1u);
+  EXPECT_EQ(r.compared[0].step, 80);
+  EXPECT_TRUE(r.valid);
+
+  // A model that keeps moving (1 mm/s, no grasp to hold it) runs to the cap, is compared there
+  // and is invalid.
+  f.scene.tools.clear();
+  const RunRecord drifting = runWith(f, [](RigidTestModel& m) { m.drift = Vec3(1e-5, 0, 0); });
+  ASSERT_EQ(drifting.status, RunStatus::Ok);
+  EXPECT_FALSE(drifting.settledAt.has_value());
+  EXPECT_EQ(drifting.steps, 100);
+  ASSERT_EQ(drifting.compared.size(), 1u);
+  EXPECT_EQ(drifting.compared[0].step, 100);
+  EXPECT_FALSE(drifting.valid);
+  EXPECT_EQ(drifting.invalidReason, "did not settle");
+}
+
 TEST(Runner, NanIsDivergenceAtThatStep) {
   const Fixture f;
   const RunRecord r = runWith(f, [](RigidTestModel& m) { m.nanAtStep = 7; });

@@ -20,7 +20,9 @@ class RigidTestModel : public Model {
   int runawayAtStep = -1;  ///< moves 1000 m at this step
   int reportDivergedAtStep = -1;
   bool throwInInit = false;
-  std::vector<StepInput> inputs;                 ///< every input received
+  bool ignoreGrasps = false;      ///< a model that holds nothing
+  Vec3 drift = Vec3::Zero();      ///< m per step, always (a model that never settles)
+  std::vector<StepInput> inputs;  ///< every input received
   std::vector<StepInput>* recordInto = nullptr;  ///< also appended here when set (outlives runs)
 
   void init(const ModelSetup& setup) override {
@@ -36,12 +38,14 @@ class RigidTestModel : public Model {
     Vec3 shift = Vec3::Zero();
     int n = 0;
     for (const GraspInput& g : in.grasps) {
-      for (size_t k = 0; k < g.nodes.size(); ++k) {
-        shift += g.targets.row(k).transpose() - m_x.row(g.nodes[k]).transpose();
+      if (ignoreGrasps) break;
+      for (size_t k = 0; k < g.vertices.size(); ++k) {
+        shift += g.targets.row(k).transpose() - m_x.row(g.vertices[k]).transpose();
         ++n;
       }
     }
     if (n > 0) m_x.rowwise() += (shift / n).transpose();
+    m_x.rowwise() += drift.transpose();
     if (m_steps == nanAtStep) m_x(0, 0) = std::numeric_limits<Real>::quiet_NaN();
     if (m_steps == runawayAtStep) m_x.rowwise() += Vec3(1000, 0, 0).transpose();
     m_phase["solve"] = 0.5;

@@ -62,60 +62,123 @@ MatX3 lineOfNodes() {
   return n;
 }
 
-TEST(Interaction, GraspAttachesWithinRadiusFollowsAndReleases) {
+/// The four points above as an organ surface (two triangles).
+SurfaceMesh lineSurface(const Vec3& shift = Vec3::Zero()) {
+  SurfaceMesh s;
+  s.V = lineOfNodes().rowwise() + shift.transpose();
+  s.F.resize(2, 3);
+  s.F << 0, 1, 3, 1, 2, 3;
+  return s;
+}
+
+TEST(Interaction, GraspHoldsRestSurfaceVerticesWithinRadiusFollowsAndReleases) {
   const Scene scene = graspScene(0.005);
-  const SurfaceMesh rest = testing::tetSurface();
+  const SurfaceMesh rest = lineSurface();
   Interaction inter(scene, rest);
-  FixedNodesModel model(lineOfNodes());
+  FixedNodesModel model(rest.V);
 
   EXPECT_TRUE(inter.prepare(0.05, 0.01, model).grasps.empty()) << "jaws still open";
 
+  // The set is picked on the REST surface (the same for every model), the targets start from
+  // the model's own surface at the closing: vertex 2 has moved near the tool but is not held,
+  // vertex 0 has sagged 1 mm and its target starts there.
+  model.m_x.row(2) = Vec3(0.001, 0, 0).transpose();
+  model.m_x.row(0) = Vec3(0, 0, -0.001).transpose();
   // Step count 10 at dt 0.01 lands on the closing keyframe, possibly a rounding error below it.
   StepInput in = inter.prepare(10 * 0.01, 0.01, model);
   ASSERT_EQ(in.grasps.size(), 1u);
   EXPECT_EQ(in.grasps[0].tool, 0);
-  EXPECT_EQ(in.grasps[0].nodes, (std::vector<int>{0, 1, 3}));
+  EXPECT_EQ(in.grasps[0].vertices, (std::vector<int>{0, 1, 3}));
   ASSERT_EQ(in.grasps[0].targets.rows(), 3);
   // The tool moves 0.02 m up between t = 0.1 and 0.6: 0.0004 m during the first step.
-  EXPECT_NEAR(in.grasps[0].targets(0, 2), 0.0004, 1e-12);
+  EXPECT_NEAR(in.grasps[0].targets(0, 2), -0.001 + 0.0004, 1e-12);
   EXPECT_NEAR(in.grasps[0].targets(1, 0), 0.004, 1e-15);
 
-  // Attached nodes are kept even when the model's nodes move out of the radius later.
+  // Held vertices stay held when the model's surface moves away later.
   model.m_x.row(1) = Vec3(1, 1, 1).transpose();
   in = inter.prepare(0.35, 0.01, model);
   ASSERT_EQ(in.grasps.size(), 1u);
-  EXPECT_EQ(in.grasps[0].nodes, (std::vector<int>{0, 1, 3}));
+  EXPECT_EQ(in.grasps[0].vertices, (std::vector<int>{0, 1, 3}));
   EXPECT_NEAR(in.grasps[0].targets(1, 2), 0.02 * (0.36 - 0.1) / 0.5, 1e-12)
       << "targets are the positions at closing, translated by the tool";
   EXPECT_NEAR(in.grasps[0].targets(1, 0), 0.004, 1e-15);
 
   EXPECT_TRUE(inter.prepare(0.85, 0.01, model).grasps.empty()) << "released when the jaws open";
   EXPECT_TRUE(inter.emptyGrasps().empty());
+  EXPECT_EQ(inter.graspTravel(), (std::vector<Real>{0.02}));
 }
 
-TEST(Interaction, GraspOnNothingIsReportedAndResetForgets) {
+TEST(Interaction, SmallJawsHoldAtLeastTheNearestVertexAndResetForgets) {
+  // No vertex within 0.1 mm of the closing point (the origin): the nearest one is held, so a
+  // grasp that reaches the surface is never empty.
   const Scene scene = graspScene(0.0001);
-  const SurfaceMesh rest = testing::tetSurface();
+  const SurfaceMesh rest = lineSurface(Vec3(0, 0.0003, 0));
   Interaction inter(scene, rest);
-  MatX3 far(1, 3);
-  far << 1, 1, 1;
-  FixedNodesModel model(far);
-  EXPECT_TRUE(inter.prepare(0.2, 0.01, model).grasps.empty());
-  EXPECT_EQ(inter.emptyGrasps(), (std::vector<int>{0}));
-  inter.reset();
-  EXPECT_TRUE(inter.emptyGrasps().empty());
-
-  // After reset a grasp re-attaches at the next prepare with the model's nodes then.
-  Scene big = graspScene(0.01);
-  Interaction inter2(big, rest);
-  FixedNodesModel m2(lineOfNodes());
-  ASSERT_EQ(inter2.prepare(0.2, 0.01, m2).grasps.size(), 1u);
-  inter2.reset();
-  m2.m_x.row(2) = Vec3(0.001, 0, 0).transpose();
-  m2.m_x.row(0) = Vec3(0.5, 0, 0).transpose();
-  const StepInput in = inter2.prepare(0.3, 0.01, m2);
+  FixedNodesModel model(rest.V);
+  const StepInput in = inter.prepare(0.2, 0.01, model);
   ASSERT_EQ(in.grasps.size(), 1u);
-  EXPECT_EQ(in.grasps[0].nodes, (std::vector<int>{1, 2, 3}));
+  EXPECT_EQ(in.grasps[0].vertices, (std::vector<int>{0}));
+  EXPECT_TRUE(inter.emptyGrasps().empty());
+  EXPECT_EQ(graspedSurfaceVertices(rest, Vec3(0.0049, 0.0003, 0), 0.0012),
+            (std::vector<int>{1, 2}));
+
+  // After reset the grasp attaches again at the next prepare, from the model's surface then.
+  inter.reset();
+  model.m_x.row(0) = Vec3(0.5, 0, 0).transpose();
+  const StepInput again = inter.prepare(0.3, 0.01, model);
+  ASSERT_EQ(again.grasps.size(), 1u);
+  EXPECT_EQ(again.grasps[0].vertices, (std::vector<int>{0}));
+  EXPECT_NEAR(again.grasps[0].targets(0, 0), 0.5, 1e-15);
+}
+
+/// A flat square grid of n x n cells of side h in the z = 0 plane, centred at the origin.
+SurfaceMesh flatGrid(int n, Real h) {
+  SurfaceMesh s;
+  s.V.resize((n + 1) * (n + 1), 3);
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i)
+      s.V.row(j * (n + 1) + i) = Vec3((i - 0.5 * n) * h, (j - 0.5 * n) * h, 0).transpose();
+  s.F.resize(2 * n * n, 3);
+  int f = 0;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const int a = j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+      s.F.row(f++) << a, b, d;
+      s.F.row(f++) << a, d, c;
+    }
+  return s;
+}
+
+TEST(PressurePatch, ConsistentParaboloidMomentsOnAFineGrid) {
+  // On a grid 10x finer than the radius the nodal shares reproduce the paraboloid's moments:
+  // total 1, centroid at the centre, second moment integral rho^2 k / integral k = R^2 / 3
+  // (up to the interpolation error of |x - c|^2, O(h^2)).
+  const Real R = 0.01;
+  const SurfaceMesh grid = flatGrid(40, R / 10);
+  const int c = nearestVertex(grid.V, Vec3::Zero());
+  const SurfacePatch p = pressurePatch(grid, c, R);
+  ASSERT_EQ(p.vertices.front(), c);
+  Real sum = 0, m2 = 0;
+  Vec3 centroid = Vec3::Zero();
+  for (size_t k = 0; k < p.vertices.size(); ++k) {
+    const Vec3 x = grid.V.row(p.vertices[k]).transpose();
+    EXPECT_GT(p.weights[k], 0);
+    EXPECT_LT(x.norm(), R + 0.15 * R) << "support within R plus one cell";
+    sum += p.weights[k];
+    centroid += p.weights[k] * x;
+    m2 += p.weights[k] * x.squaredNorm();
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-12);
+  EXPECT_LT(centroid.norm(), 1e-3 * R);
+  EXPECT_NEAR(m2, R * R / 3, 0.03 * R * R / 3);
+
+  // The same physical patch on a grid twice as coarse: the same second moment within 5%.
+  const SurfaceMesh coarse = flatGrid(20, R / 5);
+  const SurfacePatch q = pressurePatch(coarse, nearestVertex(coarse.V, Vec3::Zero()), R);
+  Real m2c = 0;
+  for (size_t k = 0; k < q.vertices.size(); ++k)
+    m2c += q.weights[k] * coarse.V.row(q.vertices[k]).squaredNorm();
+  EXPECT_NEAR(m2c, m2, 0.05 * m2);
 }
 
 TEST(Interaction, PointForceOnNearestRestVertexWithinItsWindow) {
@@ -136,6 +199,14 @@ TEST(Interaction, PointForceOnNearestRestVertexWithinItsWindow) {
   ASSERT_EQ(in.loads.size(), 1u);
   EXPECT_EQ(in.loads[0].surfaceVertex, 1);
   EXPECT_EQ(in.loads[0].force, Vec3(0, 0, 2));
+  // Spread over the 1 cm patch (the default radius) around vertex 1: on this 10 cm tetrahedron
+  // almost all of it stays on vertex 1, the rest on its neighbours, summing to 1.
+  ASSERT_FALSE(in.loads[0].vertices.empty());
+  EXPECT_EQ(in.loads[0].vertices.front(), 1);
+  Real sum = 0;
+  for (Real w : in.loads[0].weights) sum += w;
+  EXPECT_NEAR(sum, 1.0, 1e-12);
+  EXPECT_GT(in.loads[0].weights.front(), 0.8);
   EXPECT_EQ(inter.prepare(0.49, 0.01, model).loads.size(), 1u);
   EXPECT_TRUE(inter.prepare(0.5, 0.01, model).loads.empty()) << "end is exclusive";
   EXPECT_EQ(inter.focusPoint(), rest.V.row(1).transpose());

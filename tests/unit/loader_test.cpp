@@ -170,7 +170,7 @@ TEST(PluginLoader, LoadedFactoryBuildsAWorkingModel) {
   StepInput in;
   in.dt = 0.01;
   GraspInput g;
-  g.nodes = {7};
+  g.vertices = {7};
   g.targets = organ.surface.V.row(7) + Eigen::RowVector3d(0, 0, 0.02);
   in.grasps.push_back(g);
   ASSERT_EQ(model->step(in), StepStatus::Ok);
@@ -240,7 +240,7 @@ void checkTethered(const ModelInfo& info) {
   model->reset();
   EXPECT_EQ(model->surface(), organ.surface.V);
   GraspInput grasp;
-  grasp.nodes = {3};
+  grasp.vertices = {3};
   grasp.targets = organ.surface.V.row(3) + Eigen::RowVector3d(0.01, 0, 0);
   in.grasps = {grasp};
   model->step(in);

@@ -113,6 +113,23 @@ TEST(Scene, FixedBoxesListAndModelName) {
   EXPECT_EQ(s.models[0].model, "pbd_xpbd");
 }
 
+TEST(Scene, LoadRadiusAndEquilibriumComparison) {
+  json j = minimalScene();
+  j["loads"] = json::parse(R"([{"type": "point_force", "at": [0, 0, 0.05], "force": [0, 0, 1]},
+                               {"type": "point_force", "at": [0, 0, 0.05], "force": [0, 0, 1],
+                                "radius": 0.02}])");
+  Scene s = parseScene(j, "x.json");
+  EXPECT_DOUBLE_EQ(s.loads[0].radius, 0.01) << "the default patch radius";
+  EXPECT_DOUBLE_EQ(s.loads[1].radius, 0.02);
+  EXPECT_FALSE(s.compareAtEquilibrium);
+  j["compare_at"] = "equilibrium";
+  s = parseScene(j, "x.json");
+  EXPECT_TRUE(s.compareAtEquilibrium);
+  EXPECT_TRUE(s.compareAt.empty());
+  EXPECT_DOUBLE_EQ(s.settleSpeed, 1e-4);
+  EXPECT_EQ(s.settleSteps, 20);
+}
+
 TEST(Scene, NumStepsRounds) {
   json j = minimalScene();
   j["dt"] = 0.1;
@@ -248,6 +265,8 @@ TEST(SceneErrors, OutOfRangeValues) {
   expectError(with("/organ/fixed/vertices/1", -1), "/organ/fixed/vertices/1", "must be >= 0");
   expectError(with("/compare_at/1", 1.5), "/compare_at/1", "must be in (0, duration = 1]");
   expectError(with("/compare_at/1", 0.25), "/compare_at/1", "strictly increasing");
+  expectError(with("/compare_at", "settled"), "/compare_at", "or \"equilibrium\"");
+  expectError(with("/loads/0/radius", 0), "/loads/0/radius", "must be > 0");
   expectError(with("/samples/nearest/0", 0), "/samples/nearest/0", "must be >= 1");
   expectError(with("/output/surfaces", "every:0"), "/output/surfaces", "integer N >= 1");
   expectError(with("/output/surfaces", "every:x"), "/output/surfaces", "integer N >= 1");

@@ -34,6 +34,27 @@ Vec3 toolPosition(const std::vector<KeyFrame>& trajectory, Real t);
 /// Jaw state at time t: that of the last keyframe with t_k <= t (open before the first).
 bool jawClosed(const std::vector<KeyFrame>& trajectory, Real t);
 
+/// The organ surface vertices a grasp closing at p with jaw radius r holds: every vertex of
+/// `rest` within r of p (sorted), or the nearest vertex alone when none is.
+std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Vec3& p, Real r);
+
+/// A point force read as a pressure patch of radius R around surface vertex c:
+///     t(x) = F k(|x - x_c|) / integral k dA,   k(rho) = 1 - (rho / R)^2 for rho < R, else 0,
+/// a paraboloid profile (the support and shape of the Hertz pressure under a rigid sphere tip),
+/// turned into consistent nodal forces on the linear surface triangles,
+///     f_i = F integral N_i k dA / integral k dA,
+/// integrated on 8 x 8 sub-triangles per triangle with the 6-point degree-4 rule over the
+/// triangles around the vertices reachable from c through edges that stay inside the disc (so a
+/// thin organ's far side is never loaded). Distances are taken at rest (a dead load with a fixed
+/// distribution); the weights sum to 1. A patch too small for the quadrature to see (R far below
+/// the edge length) puts the whole force on c.
+struct SurfacePatch {
+  std::vector<int> vertices;  ///< the centre first, then ascending
+  std::vector<Real> weights;  ///< sums to 1
+  Real radius = 0;            ///< R, m
+};
+SurfacePatch pressurePatch(const SurfaceMesh& rest, int c, Real radius);
+
 class Interaction {
  public:
   Interaction(const Scene& scene, const SurfaceMesh& restSurface);
@@ -71,15 +92,21 @@ class Interaction {
   /// Point around which rmse_k is measured: the first load's vertex, else the first grasp's
   /// closing point, else the organ's centre.
   Vec3 focusPoint() const;
-  /// Grasps that closed on no node so far (tool indices), for warnings.
+  /// Grasps that closed on no surface vertex so far (tool indices), for warnings.
   const std::vector<int>& emptyGrasps() const { return m_emptyGrasps; }
+  /// The pressure patch of each load, in scene order.
+  const std::vector<SurfacePatch>& loadPatches() const { return m_loadPatches; }
+  /// Tool travel while grasping: for each grasper, the largest distance its position reaches
+  /// from the closing point over its closed phases (m; 0 for other tools). The scale of the
+  /// grasp-residual validity test.
+  std::vector<Real> graspTravel() const;
 
  private:
   struct Attachment {
     bool active = false;
     Vec3 toolAtClose = Vec3::Zero();
-    std::vector<int> nodes;
-    MatX3 restPositions;
+    std::vector<int> vertices;  ///< organ surface vertices held
+    MatX3 closePositions;       ///< the model's surface positions of those at the closing
   };
   void buildWorlds();
   /// Tool position at time t: the ODE body's when the tool has dynamics (its current position;
@@ -89,6 +116,7 @@ class Interaction {
   const Scene& m_scene;
   const SurfaceMesh& m_rest;
   std::vector<int> m_loadVertices;
+  std::vector<SurfacePatch> m_loadPatches;
   std::vector<Attachment> m_attach;
   std::vector<int> m_emptyGrasps;
 

@@ -1,8 +1,13 @@
 // deformbench SDK: the model interface every plugin implements, and the interaction data the
-// harness hands it each step. Interaction is resolved identically for every model by the core
-// (see interaction.h): a grasp attaches the model's own nodes within the grasp radius and gives
-// their target positions each step; a point force names the surface vertex nearest to its point;
-// a fixed region pins every model node inside it.
+// harness hands it each step. Interaction is defined on the organ's surface and resolved
+// identically for every model by the harness (see interaction.h, contract v2):
+//  - a grasp names the organ surface vertices it holds and their target positions each step;
+//  - a point force arrives as per-surface-vertex forces (a traction over a patch, spread with
+//    consistent area weights);
+//  - a fixed region pins every model node inside it.
+// Each model maps these through its own surface mapping (SOFA's Mapping): its surface points are
+// x_s = J q (J: identity, embedding weights, skinning, ...), the grasped points follow their
+// targets through J, and surface forces reach the model's degrees of freedom as J^T f.
 #pragma once
 
 #include <deform/cache.h>
@@ -59,30 +64,88 @@ struct ModelSetup {
   Vec3 gravity;  ///< m/s^2
 };
 
-/// A grasp in force during a step: the model's own nodes attached when the jaws closed, and the
-/// positions (#nodes by 3, m) they must reach at the end of the step (they follow the tool
-/// rigidly). Nodes stay attached until the jaws open.
+/// A grasp in force during a step: the organ surface vertices the harness picked when the jaws
+/// closed (every rest-surface vertex within the jaw radius of the closing point, at least the
+/// nearest one), and the positions (#vertices by 3, m) they must reach at the end of the step:
+/// their positions at the closing, translated with the tool. They stay held until the jaws open.
+/// The model makes its surface points follow these targets through its own surface mapping; the
+/// harness reports how well it did (grasp_residual_m).
 struct GraspInput {
-  int tool = 0;            ///< index of the tool in the scene
-  std::vector<int> nodes;  ///< model node indices
-  MatX3 targets;           ///< #nodes by 3
+  int tool = 0;               ///< index of the tool in the scene
+  std::vector<int> vertices;  ///< organ surface vertex indices, sorted, unique
+  MatX3 targets;              ///< #vertices by 3
 };
 
-/// The nodes held by any of the grasps, sorted and without repeats, written to out (its capacity
-/// is kept, so a model can call this every step without allocating).
-inline void graspedNodeSet(const std::vector<GraspInput>& grasps, std::vector<int>& out) {
+/// The surface vertices held by any of the grasps, sorted and without repeats, written to out
+/// (its capacity is kept, so a model can call this every step without allocating).
+inline void graspedVertexSet(const std::vector<GraspInput>& grasps, std::vector<int>& out) {
   out.clear();
-  for (const GraspInput& g : grasps) out.insert(out.end(), g.nodes.begin(), g.nodes.end());
+  for (const GraspInput& g : grasps) out.insert(out.end(), g.vertices.begin(), g.vertices.end());
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
 }
 
-/// A force on the organ surface: applied at one input-surface vertex, distributed by the model
-/// over its own representation.
+/// A force on the organ surface, as the harness spreads it: the traction of a pressure patch
+/// around `surfaceVertex` (the vertex nearest the load point) turned into consistent nodal
+/// forces on the organ's surface vertices: vertex vertices[k] receives weights[k] * force. The
+/// weights sum to 1 and are the same for every model; a model applies them through J^T.
 struct PointLoad {
-  int surfaceVertex = -1;
-  Vec3 force = Vec3::Zero();  ///< N
+  int surfaceVertex = -1;     ///< centre of the patch
+  Vec3 force = Vec3::Zero();  ///< total force, N
+  std::vector<int> vertices;  ///< organ surface vertices of the patch, the centre first
+  std::vector<Real> weights;  ///< share of `force` per vertex; sums to 1
+
+  /// The whole force on one surface vertex (a patch of one vertex): for tests and benchmarks
+  /// that drive a model without the harness.
+  static PointLoad onVertex(int vertex, const Vec3& force) {
+    return PointLoad{vertex, force, {vertex}, {1.0}};
+  }
 };
+
+/// A grasp in terms of a model's own nodes, for models whose organ surface vertices are among
+/// their nodes (J a selection): node nodes[k] must reach targets.row(k).
+struct NodeGrasp {
+  int tool = 0;
+  std::vector<int> nodes;
+  MatX3 targets;  ///< #nodes by 3
+};
+
+/// The grasps on the nodes that carry the grasped surface vertices. vertexNode: the node of each
+/// organ surface vertex (empty: vertex i is node i). out keeps its capacity between calls.
+inline void graspsOnNodes(const std::vector<GraspInput>& grasps, const std::vector<int>& vertexNode,
+                          std::vector<NodeGrasp>& out) {
+  out.resize(grasps.size());
+  for (size_t g = 0; g < grasps.size(); ++g) {
+    NodeGrasp& n = out[g];
+    n.tool = grasps[g].tool;
+    n.nodes.resize(grasps[g].vertices.size());
+    for (size_t k = 0; k < n.nodes.size(); ++k) {
+      const int v = grasps[g].vertices[k];
+      n.nodes[k] = vertexNode.empty() ? v : vertexNode[size_t(v)];
+    }
+    n.targets = grasps[g].targets;
+  }
+}
+
+/// The nodes held by any of the grasps, sorted and without repeats (capacity of out kept).
+inline void graspedNodeSet(const std::vector<NodeGrasp>& grasps, std::vector<int>& out) {
+  out.clear();
+  for (const NodeGrasp& g : grasps) out.insert(out.end(), g.nodes.begin(), g.nodes.end());
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+}
+
+/// The loads' per-vertex forces on the nodes that carry those vertices (J^T of a selection):
+/// (node, force) pairs appended to out after clearing it. vertexNode as in graspsOnNodes.
+inline void loadsOnNodes(const std::vector<PointLoad>& loads, const std::vector<int>& vertexNode,
+                         std::vector<std::pair<int, Vec3>>& out) {
+  out.clear();
+  for (const PointLoad& l : loads)
+    for (size_t k = 0; k < l.vertices.size(); ++k) {
+      const int v = l.vertices[k];
+      out.emplace_back(vertexNode.empty() ? v : vertexNode[size_t(v)], l.weights[k] * l.force);
+    }
+}
 
 /// Everything that drives one step from time `time` to `time + dt`.
 struct StepInput {
@@ -96,6 +159,10 @@ struct StepInput {
   /// Models with the "contact" capability call resolveContacts() (or query()) on it once their
   /// own solve is done, so that no node ends the step inside an instrument.
   ContactWorld* contact = nullptr;
+  /// Prescribed positions of the model's own nodes, on top of the grasps: what the contact
+  /// drivers of deform/contact.h add when a model solves contact as constraints. graspForces()
+  /// then reports the grasps' forces followed by these, in order. Always empty from the harness.
+  std::vector<NodeGrasp> nodeConstraints;
 };
 
 enum class StepStatus { Ok, Diverged };

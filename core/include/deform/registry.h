@@ -28,7 +28,9 @@
 // existing enumerators keep their values, and a plugin built before it simply never declares it
 // (the harness then reports it unsupported on scenes with rigid objects, as for any capability
 // it lacks). Append new capabilities at the end; never reorder or renumber them.
-#define DEFORM_ABI_VERSION 2
+// 3: interaction on the surface (issue G1): GraspInput holds organ surface vertices, PointLoad
+// carries the harness's per-surface-vertex spread.
+#define DEFORM_ABI_VERSION 3
 
 namespace deform {
 

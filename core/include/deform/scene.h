@@ -59,12 +59,15 @@ enum class LoadType { PointForce, PinHead };
 /// point_force: constant `force` at the surface vertex nearest `at`, between start and end.
 /// pin_head: f = k (x(t) - x0) at the vertex nearest `at`, where x(t) is the keyframed pin
 /// position and x0 = `at` (hybrid paper's experiments).
+/// Either acts as a traction over the surface patch of `radius` around that vertex, spread by
+/// the harness (interaction.h, pressurePatch), the same for every model.
 struct LoadSpec {
   LoadType type = LoadType::PointForce;
   Vec3 at = Vec3::Zero();
   Vec3 force = Vec3::Zero();   ///< N (point_force)
   Real stiffness = 0;          ///< N/m (pin_head)
   std::vector<KeyFrame> path;  ///< pin positions (pin_head)
+  Real radius = 0.01;          ///< m, the pressure patch ("radius", default 1 cm)
   Real start = 0, end = 1e30;  ///< s
 };
 
@@ -103,6 +106,13 @@ struct Scene {
   std::optional<ModelSpec> reference;
   std::vector<int> nearest = {10, 50};
   std::vector<Real> compareAt;  ///< empty: the end of the run
+  /// "compare_at": "equilibrium": each dynamic model runs until it settles (its largest
+  /// surface-vertex speed stays below settleSpeed for settleSteps steps, once the interaction
+  /// has stopped changing; the duration is the cap) and is compared then, against the
+  /// quasi-static reference at the end of the run.
+  bool compareAtEquilibrium = false;
+  Real settleSpeed = 1e-4;  ///< m/s
+  int settleSteps = 20;
   SurfaceOutput surfaces = SurfaceOutput::Final;
   int surfaceEvery = 0;  ///< for SurfaceOutput::Every
 

@@ -65,6 +65,17 @@ struct ConvergeOptions {
   double excludeRadius = -1;  ///< m; < 0: 10% of the organ's bounding-box diagonal
 };
 
+/// The levels of a check of the reference itself: 1/8, 1/2.8 and 1 times its own elements, so
+/// that the finest level is the reference as the scene runs it and the estimate is its error
+/// (what the tables check, and `converge --of-reference`).
+inline const std::vector<double> kReferenceCheckFactors = {1.0 / 8.0, 1.0 / 2.8, 1.0};
+
+/// The cached check of the scene's reference (kReferenceCheckFactors, its own elements), if a
+/// study of exactly that scene and plugin build is in the cache; nothing is run.
+std::optional<ConvergenceResult> cachedReferenceCheck(
+    const std::string& sceneFile, PluginLoader& loader,
+    const std::optional<std::filesystem::path>& cacheDir);
+
 /// Runs the study on the scene file (writes options.outDir/convergence.json and level_k/).
 ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loader,
                                  const ConvergeOptions& options, Progress* progress);

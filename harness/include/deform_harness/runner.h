@@ -68,6 +68,20 @@ struct RunRecord {
   NumericCounters numeric;
   int fixedNodes = 0;  ///< model nodes pinned by the fixed region
   std::vector<int> emptyGrasps;
+  /// RMS distance (m) of the grasped surface points to their targets over every step with a
+  /// grasp in force (at the end of each step); -1 when no grasp was in force.
+  double graspResidual = -1;
+  /// Largest tool travel while grasping (m): the scale of the residual validity test.
+  double graspTravel = 0;
+  /// "compare_at": "equilibrium": when the model settled (s); nullopt when it did not (by the
+  /// cap) or the scene does not ask. Quasi-static models are at equilibrium at every solve.
+  std::optional<double> settledAt;
+  bool equilibrium = false;  ///< the scene compared at equilibrium (settledAt is meaningful)
+  /// Validity (DESIGN "Metrics"): false with a reason when the run did not do what the scene
+  /// asked: its grasp held nothing, its grasp residual exceeds 10% of the tool's travel, it did
+  /// not settle, or it diverged / failed / was unsupported. Set by assessValidity().
+  bool valid = true;
+  std::string invalidReason;
   std::vector<Cache::Event> cacheEvents;
 
   MatX3 finalSurface;                     ///< after the last completed step
@@ -159,6 +173,9 @@ struct BenchmarkOptions {
 /// PluginError; runs nothing.
 std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
                                  const BenchmarkOptions& options);
+
+/// Fills record.valid / invalidReason from its status, grasps, residual and settling.
+void assessValidity(const Scene& scene, RunRecord& record);
 
 /// Errors of every ok model run against the reference run (if there is one and it is ok).
 void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs);

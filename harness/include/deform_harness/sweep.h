@@ -32,10 +32,13 @@ struct SweepPoint {
   double msMedian = NAN, msP95 = NAN;
   double rmseNearest = NAN;  ///< rmse_50 (or the scene's last nearest k), m
   double rmseAll = NAN, max = NAN, lossRatio = NAN;
+  bool valid = true;          ///< the run did what the scene asked (DESIGN "Metrics")
+  std::string invalidReason;  ///< when !valid
   bool pareto = false;
 };
 
-/// Marks the points on the Pareto front of (msMedian, rmseNearest), ok points with an error.
+/// Marks the points on the Pareto front of (msMedian, rmseNearest): ok, valid points with an
+/// error. Invalid points are listed, never ranked.
 void markPareto(std::vector<SweepPoint>& points);
 
 struct SweepOptions {
