@@ -66,9 +66,9 @@ Setup& setup(int coarse, bool guided, const std::string& transfer, const std::st
     s->start.row(Eigen::Index(a)) = S.V.row(s->grasp.vertices[a]);
   s->load.surfaceVertex = nearestVertex(S.V, p + Vec3(0.03, 0, 0));
   s->load.force = Vec3(0, 0, -0.5);
-  const SurfacePatch patch = pressurePatch(S, s->load.surfaceVertex, 0.01);
-  s->load.vertices = patch.vertices;
-  s->load.weights = patch.weights;
+  const SurfacePatch spread = pressurePatch(S, s->load.surfaceVertex, 0.01);
+  s->load.vertices = spread.vertices;
+  s->load.weights = spread.weights;
   return *s;
 }
 
