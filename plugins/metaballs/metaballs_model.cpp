@@ -318,6 +318,13 @@ void MetaballsModel::collectGrasps(const StepInput& in) {
         Wc(r, Eigen::Index(it - m_carry.begin())) += m_skin.weight[slot];
     }
   m_WcPinv = dampedInverse(Wc);
+  // The jaws hold the tissue between them without turning it (the targets translate): the
+  // carrying spheres keep their local rotations of the closing while held, so the skinning
+  // offsets of the grasped vertices stay reachable by centre motions.
+  m_carryRot.resize(m_carry.size() * 9);
+  for (size_t k = 0; k < m_carry.size(); ++k)
+    std::copy_n(m_rot.begin() + 9 * std::ptrdiff_t(m_carry[k]), 9,
+                m_carryRot.begin() + 9 * std::ptrdiff_t(k));
 }
 
 void MetaballsModel::graspCorrection() {
@@ -487,7 +494,13 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   const double tVol = msSince(ts);
 
   ts = Clock::now();
-  if (m_lapFrame == Frame::Rotated || m_skinFrame == Frame::Rotated) computeRotations();
+  if (m_lapFrame == Frame::Rotated || m_skinFrame == Frame::Rotated) {
+    computeRotations();
+    if (!m_graspVerts.empty())
+      for (size_t k = 0; k < m_carry.size(); ++k)
+        std::copy_n(m_carryRot.begin() + 9 * std::ptrdiff_t(k), 9,
+                    m_rot.begin() + 9 * std::ptrdiff_t(m_carry[k]));
+  }
   const double tRot = msSince(ts);
   ts = Clock::now();
   const bool skinRot = m_skinFrame == Frame::Rotated;

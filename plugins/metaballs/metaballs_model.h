@@ -20,8 +20,9 @@
 // the grasp), and after the skinning from the skinned grasped vertices, whose change is then
 // exactly W dc (the radii and rotations of the step kept), so the grasped vertices end on their
 // targets whenever W_C's rows can reach them (they can when the targets move rigidly and the
-// skinning offsets do not change within the jaws; when the grasped region turns or its radii
-// change, the least-squares fit leaves a residual: measured 0.2-0.8 mm on the liver lift).
+// skinning offsets do not change within the jaws: the carrying spheres keep their rotations of
+// the closing while held, as the jaws do not turn the tissue they hold; the radii still change,
+// measured residual 0.1-0.4 mm on the liver lift).
 #pragma once
 
 #include "construction.h"
@@ -131,6 +132,7 @@ class MetaballsModel final : public Model {
   std::vector<int> m_mapVerts;    // the grasped set m_carry / m_WcPinv were built for
   std::vector<int> m_carry;       // carrying spheres (sorted, not fixed)
   MatX m_WcPinv;                  // #carrying x #grasped vertices
+  std::vector<Real> m_carryRot;   // #carrying*9: their rotations when the grasp closed
   MatX3 m_graspGap, m_graspDc;
   Phases m_phases;
   long long m_degenerate = 0;
