@@ -31,14 +31,14 @@ void BM_MetaballsStep(benchmark::State& state) {
   Cache cache(Cache::defaultDir());
   MetaballsModel model;
   model.init(ModelSetup{organ, params, cache, 1e-3, Vec3(0, 0, -9.81)});
-  const MatX3 x0 = model.nodes();
+  const MatX3 x0 = model.surface();
   Eigen::Index top = 0;
   x0.col(2).maxCoeff(&top);
   StepInput in;
   in.dt = 1e-3;
   in.gravity = Vec3(0, 0, -9.81);
   GraspInput g;
-  g.nodes = {int(top)};
+  g.vertices = {int(top)};
   g.targets = x0.row(top);
   in.grasps = {g};
   model.setSimd(state.range(0) != 0);

@@ -3,6 +3,8 @@
 #include <deform/contact.h>
 #include "pbd_constraints.h"
 
+#include <Eigen/SVD>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -12,6 +14,22 @@ namespace deform::metaballs {
 
 namespace {
 using Clock = std::chrono::steady_clock;
+
+/// Damped least-squares inverse of A (m x n): V diag(s / (s^2 + mu)) U^T, mu = kDamping s_max^2.
+/// The grasp's skinning rows can be nearly dependent (spheres seen alike by every grasped
+/// vertex); the plain pseudo-inverse then turns the small changes of the skinning offsets (radii,
+/// rotations) into large sphere motions, which feed back through the rotations. The damping
+/// bounds the gain by 1 / (2 sqrt(mu)) and leaves the well-conditioned directions (a rigid
+/// translation among them) corrected to within a factor mu / s^2 per correction.
+MatX dampedInverse(const MatX& A) {
+  constexpr Real kDamping = 1e-3;
+  if (A.size() == 0) return MatX(A.cols(), A.rows());
+  const Eigen::JacobiSVD<MatX> svd(A, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  const VecX& s = svd.singularValues();
+  const Real mu = kDamping * s(0) * s(0);
+  const VecX gain = s.array() / (s.array().square() + mu).max(1e-300);
+  return svd.matrixV() * gain.asDiagonal() * svd.matrixU().transpose();
+}
 double msSince(Clock::time_point t) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
@@ -197,6 +215,24 @@ void MetaballsModel::init(const ModelSetup& setup) {
   m_rotBatch.resize(n);
   m_frames.assign(size_t(n) * kFrameStride, 0);
   m_contacted.reserve(size_t(n));
+  // Sphere -> the vertices it skins (the transpose of W), for W dc after a grasp correction.
+  m_vertStart.assign(size_t(n) + 1, 0);
+  for (int v = 0; v < m_skin.numVertices; ++v)
+    for (int k = 0; k < m_skin.count[size_t(v)]; ++k)
+      ++m_vertStart[size_t(m_skin.sphere[size_t(v) * size_t(m_skin.slots) + size_t(k)]) + 1];
+  for (int i = 0; i < n; ++i) m_vertStart[size_t(i) + 1] += m_vertStart[size_t(i)];
+  m_vertOf.assign(size_t(m_vertStart[size_t(n)]), 0);
+  m_vertW.assign(m_vertOf.size(), 0);
+  {
+    std::vector<int> at(m_vertStart.begin(), m_vertStart.end() - 1);
+    for (int v = 0; v < m_skin.numVertices; ++v)
+      for (int k = 0; k < m_skin.count[size_t(v)]; ++k) {
+        const size_t slot = size_t(v) * size_t(m_skin.slots) + size_t(k);
+        const int pos = at[size_t(m_skin.sphere[slot])]++;
+        m_vertOf[size_t(pos)] = v;
+        m_vertW[size_t(pos)] = m_skin.weight[slot];
+      }
+  }
   reset();
 }
 
@@ -209,6 +245,8 @@ void MetaballsModel::reset() {
   for (int i = 0; i < n; ++i)
     for (int q = 0; q < 9; ++q) m_rot[size_t(9 * i + q)] = (q % 4 == 0) ? 1.0 : 0.0;
   m_surface = m_restSurface;
+  m_mapVerts.clear();
+  m_carry.clear();
   m_phases = Phases();
   m_degenerate = 0;
 }
@@ -243,36 +281,99 @@ PhaseTimes MetaballsModel::phaseTimes() const {
           {"skinning", m_phases.skinning}};
 }
 
+void MetaballsModel::collectGrasps(const StepInput& in) {
+  m_graspVerts.clear();
+  Eigen::Index rows = 0;
+  for (const GraspInput& g : in.grasps) rows += Eigen::Index(g.vertices.size());
+  m_graspTargets.resize(rows, 3);
+  for (const GraspInput& g : in.grasps)
+    for (size_t k = 0; k < g.vertices.size(); ++k) {
+      const int v = g.vertices[k];
+      if (v < 0 || v >= m_skin.numVertices || Eigen::Index(k) >= g.targets.rows() ||
+          std::find(m_graspVerts.begin(), m_graspVerts.end(), v) != m_graspVerts.end())
+        continue;
+      m_graspTargets.row(Eigen::Index(m_graspVerts.size())) = g.targets.row(Eigen::Index(k));
+      m_graspVerts.push_back(v);
+    }
+  if (m_graspVerts == m_mapVerts) return;
+  // The grasped set changed (a grasp closed or opened): carrying spheres and W_C^+.
+  m_mapVerts = m_graspVerts;
+  m_carry.clear();
+  const int K = m_skin.slots;
+  for (int v : m_graspVerts)
+    for (int k = 0; k < m_skin.count[size_t(v)]; ++k) {
+      const size_t slot = size_t(v) * size_t(K) + size_t(k);
+      if (m_skin.weight[slot] > 0 && !m_fixed[size_t(m_skin.sphere[slot])])
+        m_carry.push_back(m_skin.sphere[slot]);
+    }
+  std::sort(m_carry.begin(), m_carry.end());
+  m_carry.erase(std::unique(m_carry.begin(), m_carry.end()), m_carry.end());
+  const Eigen::Index m = Eigen::Index(m_graspVerts.size()), nc = Eigen::Index(m_carry.size());
+  MatX Wc = MatX::Zero(m, nc);
+  for (Eigen::Index r = 0; r < m; ++r)
+    for (int k = 0; k < m_skin.count[size_t(m_graspVerts[size_t(r)])]; ++k) {
+      const size_t slot = size_t(m_graspVerts[size_t(r)]) * size_t(K) + size_t(k);
+      const auto it = std::lower_bound(m_carry.begin(), m_carry.end(), m_skin.sphere[slot]);
+      if (it != m_carry.end() && *it == m_skin.sphere[slot])
+        Wc(r, Eigen::Index(it - m_carry.begin())) += m_skin.weight[slot];
+    }
+  m_WcPinv = dampedInverse(Wc);
+  // The jaws hold the tissue between them without turning it (the targets translate): the
+  // carrying spheres keep their local rotations of the closing while held, so the skinning
+  // offsets of the grasped vertices stay reachable by centre motions.
+  m_carryRot.resize(m_carry.size() * 9);
+  for (size_t k = 0; k < m_carry.size(); ++k)
+    std::copy_n(m_rot.begin() + 9 * std::ptrdiff_t(m_carry[k]), 9,
+                m_carryRot.begin() + 9 * std::ptrdiff_t(k));
+}
+
+void MetaballsModel::graspCorrection() {
+  const Eigen::Index m = Eigen::Index(m_graspVerts.size());
+  m_graspGap.resize(m, 3);
+  for (Eigen::Index r = 0; r < m; ++r)
+    m_graspGap.row(r) = m_graspTargets.row(r) - m_surface.row(m_graspVerts[size_t(r)]);
+  m_graspDc.resize(Eigen::Index(m_carry.size()), 3);
+  m_graspDc.noalias() = m_WcPinv * m_graspGap;
+}
+
 StepStatus MetaballsModel::step(const StepInput& in) {
   const int n = m_mb.spheres.size();
   const Real dt = in.dt;
   if (!(dt > 0)) return StepStatus::Ok;
   auto t0 = Clock::now();
 
-  // External forces: point loads spread over the loaded vertex's spheres by skinning weight.
+  // External forces: W^T f, every per-vertex share of the harness's patch over the vertex's
+  // spheres by skinning weight (a load without a spread acts on its vertex alone).
   m_f.setZero();
   m_contacted.clear();
   const int K = m_skin.slots;
-  for (const PointLoad& load : in.loads) {
-    if (load.surfaceVertex < 0 || load.surfaceVertex >= m_skin.numVertices) continue;
+  auto addVertexForce = [&](int v, const Vec3& f) {
+    if (v < 0 || v >= m_skin.numVertices) return;
     for (int s = 0; s < K; ++s) {
-      const size_t slot = size_t(load.surfaceVertex) * K + s;
+      const size_t slot = size_t(v) * size_t(K) + size_t(s);
       if (m_skin.weight[slot] <= 0) continue;
-      m_f.row(m_skin.sphere[slot]) += m_skin.weight[slot] * load.force.transpose();
+      m_f.row(m_skin.sphere[slot]) += m_skin.weight[slot] * f.transpose();
       m_contacted.push_back(m_skin.sphere[slot]);
     }
+  };
+  for (const PointLoad& load : in.loads) {
+    if (load.vertices.empty()) addVertexForce(load.surfaceVertex, load.force);
+    for (size_t k = 0; k < load.vertices.size() && k < load.weights.size(); ++k)
+      addVertexForce(load.vertices[k], load.weights[k] * load.force);
   }
-  // Kinematic spheres: fixed ones stay at rest, grasped ones reach their targets.
+  // Kinematic spheres: fixed ones stay at rest; the carrying spheres of the grasped vertices move
+  // by dc_C = W_C^+ (t - v), from the surface at the step's start.
   Real* P = m_p4.data();
   std::copy(m_fixed.begin(), m_fixed.end(), m_kin.begin());
   for (int i : m_fixedList)
     for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x0(i, c);
-  for (const GraspInput& g : in.grasps) {
-    for (size_t k = 0; k < g.nodes.size(); ++k) {
-      const int i = g.nodes[k];
-      if (i < 0 || i >= n || m_fixed[size_t(i)]) continue;
+  collectGrasps(in);
+  if (!m_graspVerts.empty()) {
+    graspCorrection();
+    for (size_t k = 0; k < m_carry.size(); ++k) {
+      const int i = m_carry[k];
       m_kin[size_t(i)] = 1;
-      for (int c = 0; c < 3; ++c) P[4 * i + c] = g.targets(Eigen::Index(k), c);
+      for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x(i, c) + m_graspDc(Eigen::Index(k), c);
       m_contacted.push_back(i);
     }
   }
@@ -393,12 +494,32 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   const double tVol = msSince(ts);
 
   ts = Clock::now();
-  if (m_lapFrame == Frame::Rotated || m_skinFrame == Frame::Rotated) computeRotations();
+  if (m_lapFrame == Frame::Rotated || m_skinFrame == Frame::Rotated) {
+    computeRotations();
+    if (!m_graspVerts.empty())
+      for (size_t k = 0; k < m_carry.size(); ++k)
+        std::copy_n(m_carryRot.begin() + 9 * std::ptrdiff_t(k), 9,
+                    m_rot.begin() + 9 * std::ptrdiff_t(m_carry[k]));
+  }
   const double tRot = msSince(ts);
   ts = Clock::now();
   const bool skinRot = m_skinFrame == Frame::Rotated;
   packSphereFrames(m_x, m_r, skinRot ? m_rot.data() : nullptr, m_frames);
   applySkinningFrames(m_skin, m_frames.data(), skinRot, m_surface, m_simd);
+  if (!m_graspVerts.empty() && !m_carry.empty()) {
+    // The radii and rotations of this step moved the grasped vertices off W dc: correct the
+    // carrying spheres again; with the radii and rotations kept, the skinned surface changes by
+    // exactly W dc (the vertices of those spheres only).
+    graspCorrection();
+    for (size_t k = 0; k < m_carry.size(); ++k) {
+      const int i = m_carry[k];
+      const Eigen::RowVector3d dc = m_graspDc.row(Eigen::Index(k));
+      m_x.row(i) += dc;
+      m_v.row(i) += dc / dt;
+      for (int q = m_vertStart[size_t(i)]; q < m_vertStart[size_t(i) + 1]; ++q)
+        m_surface.row(m_vertOf[size_t(q)]) += m_vertW[size_t(q)] * dc;
+    }
+  }
   // The skinned surface can bulge past the spheres: keep it out of the instruments too (display
   // level, no force: the spheres carried it).
   if (in.contact) projectPointsOut(*in.contact, m_surface);

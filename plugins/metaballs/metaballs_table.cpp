@@ -32,15 +32,15 @@ nlohmann::json metaballsConstructionTable(int steps) {
     const ModelSetup setup{organ, params, cache, dt, Vec3(0, 0, -9.81)};
     model.init(setup);
     const ConstructionReport& rep = model.metaballs().report;
-    // Deformation: grasp the sphere nearest to the top of the organ and lift it 2 cm over the run.
-    const MatX3& x0 = model.nodes();
+    // Deformation: grasp the organ's top surface vertex and lift it 2 cm over the run.
+    const MatX3 x0 = model.surface();
     Eigen::Index top = 0;
     x0.col(2).maxCoeff(&top);
     StepInput in;
     in.dt = dt;
     in.gravity = Vec3(0, 0, -9.81);
     GraspInput g;
-    g.nodes = {int(top)};
+    g.vertices = {int(top)};
     g.targets = x0.row(top);
     in.grasps = {g};
     std::vector<double> ms;

@@ -6,6 +6,7 @@
 #include "surface_decimation.h"
 
 #include <benchmark/benchmark.h>
+#include <deform/interaction.h>
 #include <deform/phantom.h>
 
 #include <map>
@@ -39,7 +40,7 @@ struct Setup {
   ParticleBemModel model;
   GraspInput grasp;
   MatX3 start;
-  int loadVertex = 0;
+  PointLoad load;
 };
 
 Setup& setup(int coarse, bool guided, const std::string& transfer, const std::string& patch) {
@@ -53,15 +54,21 @@ Setup& setup(int coarse, bool guided, const std::string& transfer, const std::st
   s->params.set("guidance", guided);
   s->params.set("points", (long long)(guided ? 300 : coarse));
   s->model.init(ModelSetup{s->organ, s->params, s->cache, 1e-3, Vec3(0, 0, -9.81)});
-  const MatX3& n = s->model.nodes();
-  int top = 0;
-  for (int i = 0; i < n.rows(); ++i)
-    if (n(i, 2) > n(top, 2)) top = i;
-  for (int i = 0; i < n.rows(); ++i)
-    if ((n.row(i) - n.row(top)).norm() < 0.01) s->grasp.nodes.push_back(i);
-  s->start.resize(s->grasp.nodes.size(), 3);
-  for (size_t a = 0; a < s->grasp.nodes.size(); ++a) s->start.row(a) = n.row(s->grasp.nodes[a]);
-  s->loadVertex = nearestVertex(s->organ.surface.V, n.row(top).transpose() + Vec3(0.03, 0, 0));
+  // As the harness defines them: a grasp of the surface vertices within 1 cm of the top, a 0.5 N
+  // force 3 cm beside it spread over the default 1 cm pressure patch.
+  const SurfaceMesh& S = s->organ.surface;
+  Eigen::Index top = 0;
+  S.V.col(2).maxCoeff(&top);
+  const Vec3 p = S.V.row(top).transpose();
+  s->grasp.vertices = graspedSurfaceVertices(S, p, 0.01);
+  s->start.resize(Eigen::Index(s->grasp.vertices.size()), 3);
+  for (size_t a = 0; a < s->grasp.vertices.size(); ++a)
+    s->start.row(Eigen::Index(a)) = S.V.row(s->grasp.vertices[a]);
+  s->load.surfaceVertex = nearestVertex(S.V, p + Vec3(0.03, 0, 0));
+  s->load.force = Vec3(0, 0, -0.5);
+  const SurfacePatch spread = pressurePatch(S, s->load.surfaceVertex, 0.01);
+  s->load.vertices = spread.vertices;
+  s->load.weights = spread.weights;
   return *s;
 }
 
@@ -79,7 +86,7 @@ void stepBenchmark(benchmark::State& state, bool guided, const std::string& tran
     GraspInput g = s.grasp;
     g.targets = s.start.rowwise() + Vec3(0, 0, 1e-5 * (step % 1000)).transpose();
     in.grasps.push_back(std::move(g));
-    in.loads.push_back({s.loadVertex, Vec3(0, 0, -0.5)});
+    in.loads.push_back(s.load);
     benchmark::DoNotOptimize(s.model.step(in));
     for (const auto& [k, v] : s.model.phaseTimes()) phases[k] += v;
     ++step;
@@ -88,7 +95,7 @@ void stepBenchmark(benchmark::State& state, bool guided, const std::string& tran
   const Counts c = s.model.counts();
   state.counters["particles"] = double(c.at("particles"));
   if (guided) state.counters["M_MB"] = double(c.at("deformation_matrix_bytes")) / 1e6;
-  state.counters["grasped"] = double(s.grasp.nodes.size());
+  state.counters["grasped"] = double(s.grasp.vertices.size());
 }
 
 void BM_GuidedStep(benchmark::State& state) {
@@ -96,7 +103,7 @@ void BM_GuidedStep(benchmark::State& state) {
 }
 BENCHMARK(BM_GuidedStep)->Arg(284)->Arg(1144)->Unit(benchmark::kMillisecond);
 
-// The same with the lumped pressure-patch tractions (patch_traction = lumped, the first version).
+// The same with the lumped load tractions (patch_traction = lumped, the first version).
 void BM_GuidedStepLumpedPatch(benchmark::State& state) {
   stepBenchmark(state, true, "gradient", "lumped");
 }

@@ -95,6 +95,31 @@ void interpolateDisplacement(const SurfaceMap& map, const MatX3i& coarseF, const
   }
 }
 
+std::vector<std::pair<int, Real>> transferRow(const SurfaceMap& map, const MatX3i& coarseF,
+                                              const GradientTransfer* g, int v) {
+  std::map<int, Real> row;
+  const int t = map.triangle[size_t(v)];
+  for (int k = 0; k < 3; ++k) row[coarseF(t, k)] += map.bary(v, k);
+  if (g) {
+    // D_c offsets_vc = sum_f w_fc sum_i u_(F(f,i)) (grad N_i(f) . offsets_vc), f around c.
+    for (int k = 0; k < 3; ++k) {
+      const int c = coarseF(t, k);
+      const Vec3 off = g->offsets.block<1, 3>(v, 3 * k).transpose();
+      for (Eigen::Index f = 0; f < coarseF.rows(); ++f)
+        for (int kc = 0; kc < 3; ++kc) {
+          if (coarseF(f, kc) != c || g->cornerWeight(f, kc) == 0) continue;
+          for (int i = 0; i < 3; ++i)
+            row[coarseF(f, i)] +=
+                g->cornerWeight(f, kc) * g->faceGrad.block<1, 3>(f, 3 * i).dot(off.transpose());
+        }
+    }
+  }
+  std::vector<std::pair<int, Real>> out;
+  for (const auto& [node, w] : row)
+    if (w != 0) out.emplace_back(node, w);
+  return out;
+}
+
 void SparseTraction::add(int node, const Vec3& p) {
   for (size_t k = 0; k < nodes.size(); ++k)
     if (nodes[k] == node) {

@@ -119,6 +119,16 @@ void recoverGradients(const GradientTransfer& g, const MatX3i& coarseF, const Ma
 void interpolateDisplacement(const SurfaceMap& map, const MatX3i& coarseF, const MatX3& fineRest,
                              const MatX3& coarseDisp, GradientTransfer& g, MatX3& out);
 
+/// Row v of the transfer's matrix J (fine vertex position = fineRest_v + sum_j J_vj u_j over the
+/// coarse displacements u, the same scalar for x, y and z): the barycentric weights of its closest
+/// coarse triangle, plus with the gradient transfer (g not null) the one-ring terms of the three
+/// corners' recovered gradients, sum over faces f around corner c of
+/// cornerWeight(f, c) (grad N_i(f) . offsets_vc) for each node i of f. Returns (node, J_vj)
+/// pairs sorted by node, zeros dropped. The weights sum to 1 (the gradient terms to 0), so a
+/// rigid translation moves the vertex with it.
+std::vector<std::pair<int, Real>> transferRow(const SurfaceMap& map, const MatX3i& coarseF,
+                                              const GradientTransfer* g, int v);
+
 /// Sparse traction vector: loaded coarse nodes and their tractions (Pa).
 struct SparseTraction {
   std::vector<int> nodes;

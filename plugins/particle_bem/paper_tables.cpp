@@ -6,6 +6,7 @@
 #include "surface_decimation.h"
 
 #include <deform/cache.h>
+#include <deform/interaction.h>
 #include <deform/phantom.h>
 
 #include <algorithm>
@@ -78,14 +79,21 @@ nlohmann::json bemTimingTable(const TableOptions& o) {
     const double precompute =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const int nc = m.surfaceParticles();
-    const int top = topVertex(m.nodes().topRows(nc));
+    // As the harness defines them: a grasp of the surface vertices within 1 cm of the top, a
+    // 0.5 N force 3 cm beside it spread over the default 1 cm pressure patch.
+    const int top = topVertex(organ.surface.V);
     GraspInput g;
-    for (int i = 0; i < nc; ++i)
-      if ((m.nodes().row(i) - m.nodes().row(top)).norm() < 0.01) g.nodes.push_back(i);
-    MatX3 start(g.nodes.size(), 3);
-    for (size_t a = 0; a < g.nodes.size(); ++a) start.row(a) = m.nodes().row(g.nodes[a]);
-    const int loadVertex =
-        nearestVertex(organ.surface.V, m.nodes().row(top).transpose() + Vec3(0.03, 0.0, 0.0));
+    g.vertices = graspedSurfaceVertices(organ.surface, organ.surface.V.row(top).transpose(), 0.01);
+    MatX3 start(Eigen::Index(g.vertices.size()), 3);
+    for (size_t a = 0; a < g.vertices.size(); ++a)
+      start.row(Eigen::Index(a)) = organ.surface.V.row(g.vertices[a]);
+    PointLoad load;
+    load.surfaceVertex =
+        nearestVertex(organ.surface.V, organ.surface.V.row(top).transpose() + Vec3(0.03, 0, 0));
+    load.force = Vec3(0, 0, -0.5);
+    const SurfacePatch patch = pressurePatch(organ.surface, load.surfaceVertex, 0.01);
+    load.vertices = patch.vertices;
+    load.weights = patch.weights;
     std::vector<Real> surf, corr, interp, total;
     for (int s = 0; s < o.steps; ++s) {
       StepInput in;
@@ -94,7 +102,7 @@ nlohmann::json bemTimingTable(const TableOptions& o) {
       in.gravity = Vec3(0, 0, -9.81);
       g.targets = start.rowwise() + Vec3(0, 0, 0.01 * (s + 1) / o.steps).transpose();
       in.grasps.push_back(g);
-      in.loads.push_back({loadVertex, Vec3(0, 0, -0.5)});
+      in.loads.push_back(load);
       const auto a = std::chrono::steady_clock::now();
       m.step(in);
       const auto b = std::chrono::steady_clock::now();
@@ -107,7 +115,8 @@ nlohmann::json bemTimingTable(const TableOptions& o) {
     nlohmann::json row = {{"model", r + 1},
                           {"point_number", nc},
                           {"interior_points", m.counts().at("points")},
-                          {"grasped_nodes", g.nodes.size()},
+                          {"grasped_nodes", m.graspedNodes().size()},
+                          {"grasped_vertices", g.vertices.size()},
                           {"surface_ms", median(surf)},
                           {"correction_ms", median(corr)},
                           {"interpolation_ms", median(interp)},

@@ -6,6 +6,9 @@
 #include "physics_points.h"
 #include "surface_decimation.h"
 
+#include <Eigen/QR>
+#include <Eigen/SVD>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -34,6 +37,18 @@ void nearest8(const MatX3& P, const Vec3& p, std::array<int, 8>& idx, std::array
   }
 }
 
+// Damped least-squares inverse of A (m x n): V diag(s / (s^2 + mu)) U^T, mu = 1e-3 s_max^2. For
+// the pure model's grasp: its skinning also moves with F_j, so the rows of nearly dependent
+// particles would turn small changes of F into large particle motions (as in metaballs).
+MatX dampedInverse(const MatX& A) {
+  if (A.size() == 0) return MatX(A.cols(), A.rows());
+  const Eigen::JacobiSVD<MatX> svd(A, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  const VecX& s = svd.singularValues();
+  const Real mu = 1e-3 * s(0) * s(0);
+  const VecX gain = s.array() / (s.array().square() + mu).max(1e-300);
+  return svd.matrixV() * gain.asDiagonal() * svd.matrixU().transpose();
+}
+
 // Inverse-distance weights, normalised; a coincident point takes all the weight.
 std::array<Real, 8> shepard(const std::array<int, 8>& idx, const std::array<Real, 8>& dist,
                             Real eps) {
@@ -59,15 +74,11 @@ std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
                          "interior physics points (lattice inside the organ)"),
       ParamSpec::integer("coarse_vertices", 600, 12, 20000,
                          "vertices of the coarse BEM surface = surface particles"),
-      ParamSpec::real("load_radius", "m", 0.03, 0.0, 1.0,
-                      "a point force is spread as a paraboloid pressure patch of this radius "
-                      "over the coarse surface (as reference_fem does); 0: on the closest coarse "
-                      "triangle's nodes by barycentric weights"),
       ParamSpec::choice("patch_traction", "consistent", {"consistent", "lumped"},
-                        "how the pressure patch becomes nodal tractions of the linear traction "
-                        "space: consistent = L2 projection (consistent mass matrix, the field's "
-                        "nodal loads kept), lumped = share / lumped nodal area (the first "
-                        "version; spreads the patch wider on coarse elements)"),
+                        "how the harness's per-vertex load forces, mapped to the coarse nodes by "
+                        "J^T, become nodal tractions of the linear traction space: consistent = "
+                        "L2 projection (consistent mass matrix, the nodal loads kept), lumped = "
+                        "force / lumped nodal area (spreads a patch wider on coarse elements)"),
       ParamSpec::real("spring_stiffness", "1/s^2", 2500.0, 1e-3, 1e9,
                       "virtual spring stiffness per unit mass pulling particles to BEM targets"),
       ParamSpec::real("spring_damping", "1/s", 100.0, 0.0, 1e7,
@@ -172,9 +183,7 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
   for (int i : m_fixed)
     if (i < nc) coarseFixed.push_back(i);
 
-  m_loadRadius = p.real("load_radius");
-  m_patchShares.clear();
-  m_patchResponse.clear();
+  m_loadResponses.clear();
   m_patchTraction = p.choiceAs<PatchTraction>(
       "patch_traction",
       {{"consistent", PatchTraction::Consistent}, {"lumped", PatchTraction::Lumped}});
@@ -237,7 +246,7 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
   }
   m_nodalArea = nodalAreas(m_coarse);
   m_patchProjection = PatchProjection();
-  if (m_loadRadius > 0 && m_patchTraction == PatchTraction::Consistent) {
+  if (m_patchTraction == PatchTraction::Consistent) {
     m_patchProjection = PatchProjection(m_coarse);
     if (!m_patchProjection.ok()) ++m_numeric["singular_mass_matrix"];  // lumped fallback
   }
@@ -309,6 +318,9 @@ void ParticleBemModel::reset() {
   m_F.assign(m_rest.rows(), Mat3::Identity());
   m_verletValid = false;
   m_verlet.clear();
+  m_mapVerts.clear();
+  m_carry.clear();
+  m_carryCol.assign(size_t(m_rest.rows()), -1);
 }
 
 Counts ParticleBemModel::counts() const {
@@ -333,14 +345,110 @@ StepStatus ParticleBemModel::step(const StepInput& in) {
   return (m_x.allFinite() && m_surface.allFinite()) ? StepStatus::Ok : StepStatus::Diverged;
 }
 
-void ParticleBemModel::applyGrasps(const StepInput& in) {
+std::vector<std::pair<int, Real>> ParticleBemModel::surfaceRow(int v) const {
+  if (m_guided)
+    return transferRow(m_map, m_coarse.F,
+                       m_transfer == SurfaceTransfer::Gradient ? &m_gradient : nullptr, v);
+  std::vector<std::pair<int, Real>> row;
+  for (int a = 0; a < 8; ++a)
+    if (m_skinNodes[size_t(v)][a] >= 0 && m_skinWeights[size_t(v)][a] != 0)
+      row.emplace_back(m_skinNodes[size_t(v)][a], m_skinWeights[size_t(v)][a]);
+  std::sort(row.begin(), row.end());
+  return row;
+}
+
+void ParticleBemModel::prescribeGrasps(const StepInput& in) {
+  m_graspVerts.clear();
+  Eigen::Index rows = 0;
+  for (const GraspInput& g : in.grasps) rows += Eigen::Index(g.vertices.size());
+  m_graspTargets.resize(rows, 3);
   for (const GraspInput& g : in.grasps)
-    for (size_t a = 0; a < g.nodes.size(); ++a) {
-      const int i = g.nodes[a];
-      if (i < 0 || i >= m_x.rows() || m_fixedMask[i]) continue;
-      m_v.row(i) = (g.targets.row(Eigen::Index(a)) - m_x.row(i)) / in.dt;
-      m_x.row(i) = g.targets.row(Eigen::Index(a));
+    for (size_t k = 0; k < g.vertices.size(); ++k) {
+      const int v = g.vertices[k];
+      if (v < 0 || v >= m_fineRest.rows() || Eigen::Index(k) >= g.targets.rows() ||
+          std::find(m_graspVerts.begin(), m_graspVerts.end(), v) != m_graspVerts.end())
+        continue;
+      m_graspTargets.row(Eigen::Index(m_graspVerts.size())) = g.targets.row(Eigen::Index(k));
+      m_graspVerts.push_back(v);
     }
+  if (m_graspVerts != m_mapVerts) {
+    // The grasped set changed (a grasp closed or opened): the carrying set and J_C^+.
+    m_mapVerts = m_graspVerts;
+    for (int i : m_carry) m_carryCol[size_t(i)] = -1;
+    m_carry.clear();
+    std::vector<std::vector<std::pair<int, Real>>> rowsJ;
+    for (int v : m_graspVerts) {
+      rowsJ.push_back(surfaceRow(v));
+      for (const auto& [node, w] : rowsJ.back())
+        if (!m_fixedMask[size_t(node)]) m_carry.push_back(node);
+    }
+    std::sort(m_carry.begin(), m_carry.end());
+    m_carry.erase(std::unique(m_carry.begin(), m_carry.end()), m_carry.end());
+    for (size_t c = 0; c < m_carry.size(); ++c) m_carryCol[size_t(m_carry[c])] = int(c);
+    MatX Jc = MatX::Zero(Eigen::Index(m_graspVerts.size()), Eigen::Index(m_carry.size()));
+    for (size_t r = 0; r < rowsJ.size(); ++r)
+      for (const auto& [node, w] : rowsJ[r])
+        if (m_carryCol[size_t(node)] >= 0) Jc(Eigen::Index(r), m_carryCol[size_t(node)]) += w;
+    // Guided: the transfer is linear and the targets reachable, the plain pseudo-inverse is
+    // exact; pure: damped (see dampedInverse).
+    m_JcPinv = m_carry.empty() ? MatX(0, Jc.rows())
+               : m_guided ? MatX(Eigen::CompleteOrthogonalDecomposition<MatX>(Jc).pseudoInverse())
+                          : dampedInverse(Jc);
+  }
+  if (m_carry.empty()) return;
+  // dx_C = J_C^+ (t - x_s), from the surface at the step's start.
+  const Eigen::Index m = Eigen::Index(m_graspVerts.size());
+  m_graspGap.resize(m, 3);
+  for (Eigen::Index r = 0; r < m; ++r)
+    m_graspGap.row(r) = m_graspTargets.row(r) - m_surface.row(m_graspVerts[size_t(r)]);
+  m_graspDx.resize(Eigen::Index(m_carry.size()), 3);
+  m_graspDx.noalias() = m_JcPinv * m_graspGap;
+  m_carryTarget.resize(Eigen::Index(m_carry.size()), 3);
+  for (size_t c = 0; c < m_carry.size(); ++c)
+    m_carryTarget.row(Eigen::Index(c)) = m_x.row(m_carry[c]) + m_graspDx.row(Eigen::Index(c));
+}
+
+const MatX& ParticleBemModel::loadResponse(const PointLoad& load) {
+  std::vector<int> verts = load.vertices;
+  std::vector<Real> weights = load.weights;
+  if (verts.empty()) {  // a load without a spread acts on its vertex alone
+    verts = {load.surfaceVertex};
+    weights = {1.0};
+  }
+  weights.resize(verts.size(), 0.0);
+  for (const LoadResponse& r : m_loadResponses)
+    if (r.vertices == verts && r.weights == weights) return r.W;
+  // Nodal shares of a unit force: J^T w.
+  const int nc = m_coarse.numVertices();
+  std::vector<std::pair<int, Real>> shares;
+  {
+    VecX c = VecX::Zero(nc);
+    for (size_t k = 0; k < verts.size(); ++k) {
+      if (verts[k] < 0 || verts[k] >= m_fineRest.rows()) continue;
+      for (const auto& [node, w] : surfaceRow(verts[k])) c[node] += weights[k] * w;
+    }
+    for (int k = 0; k < nc; ++k)
+      if (c[k] != 0) shares.emplace_back(k, c[k]);
+  }
+  VecX q = VecX::Zero(nc);
+  if (m_patchProjection.ok()) {
+    q = m_patchProjection.tractionPerForce(shares);
+  } else {
+    for (const auto& [node, c] : shares) q[node] = c / m_nodalArea[node];
+  }
+  MatX W = MatX::Zero(3 * nc, 3);
+  for (int k = 0; k < nc; ++k)
+    if (q[k] != 0 && !m_fixedMask[size_t(k)]) W.noalias() += q[k] * m_bem.M.middleCols(3 * k, 3);
+  m_loadResponses.push_back({std::move(verts), std::move(weights), std::move(W)});
+  return m_loadResponses.back().W;
+}
+
+void ParticleBemModel::applyGrasps(const StepInput& in) {
+  for (size_t c = 0; c < m_carry.size(); ++c) {
+    const int i = m_carry[c];
+    m_v.row(i) = (m_carryTarget.row(Eigen::Index(c)) - m_x.row(i)) / in.dt;
+    m_x.row(i) = m_carryTarget.row(Eigen::Index(c));
+  }
 }
 
 void ParticleBemModel::resolveParticleContacts(const StepInput& in) {
@@ -354,9 +462,7 @@ void ParticleBemModel::resolveParticleContacts(const StepInput& in) {
     const Real m = (!m_guided && i < m_mass.size()) ? m_mass[i] : share;
     invMass[i] = (m_fixedMask[i] || !(m > 0)) ? 0.0 : 1.0 / m;
   }
-  for (const GraspInput& g : in.grasps)
-    for (int i : g.nodes)
-      if (i >= 0 && i < n) invMass[i] = 0;
+  for (int i : m_carry) invMass[i] = 0;
   VecX radii = VecX::Constant(n, 0.5 * m_spacing);
   if (m_guided) radii.head(m_coarse.numVertices()).setConstant(in.contact->params().thickness);
   resolveContacts(*in.contact, m_x, invMass, in.dt, &m_v, &radii);
@@ -367,44 +473,7 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   const int nc = m_coarse.numVertices();
   m_P.clear();
   m_patchU.setZero(3 * nc);  // displacement of the patch loads (their precomputed responses)
-  for (const PointLoad& l : in.loads) {
-    if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_map.triangle.size())) continue;
-    if (m_loadRadius > 0) {
-      auto it = m_patchShares.find(l.surfaceVertex);
-      if (it == m_patchShares.end()) {
-        const SurfaceMesh rest{m_restCoarse, m_coarse.F};
-        it = m_patchShares
-                 .emplace(l.surfaceVertex,
-                          pressurePatchShares(rest, m_fineRest.row(l.surfaceVertex).transpose(),
-                                              m_loadRadius))
-                 .first;
-      }
-      if (it->second.empty()) {
-        // no sample within R: the closest triangle below
-      } else if (m_patchProjection.ok()) {
-        auto r = m_patchResponse.find(l.surfaceVertex);
-        if (r == m_patchResponse.end()) {
-          const VecX q = m_patchProjection.tractionPerForce(it->second);
-          MatX W = MatX::Zero(3 * nc, 3);
-          for (int k = 0; k < nc; ++k)
-            if (q[k] != 0 && !m_fixedMask[k]) W.noalias() += q[k] * m_bem.M.middleCols(3 * k, 3);
-          r = m_patchResponse.emplace(l.surfaceVertex, std::move(W)).first;
-        }
-        m_patchU.noalias() += r->second * l.force;
-        continue;
-      } else {
-        for (const auto& [node, c] : it->second)
-          if (!m_fixedMask[node]) m_P.add(node, c * l.force / m_nodalArea[node]);
-        continue;
-      }
-    }
-    const int t = m_map.triangle[l.surfaceVertex];
-    for (int k = 0; k < 3; ++k) {
-      const int node = m_coarse.F(t, k);
-      const Real b = m_map.bary(l.surfaceVertex, k);
-      if (b != 0 && !m_fixedMask[node]) m_P.add(node, b * l.force / m_nodalArea[node]);
-    }
-  }
+  for (const PointLoad& l : in.loads) m_patchU.noalias() += loadResponse(l) * l.force;
   if (m_repulsion) {
     // Surface particles closer than the repulsion distance d that were at least 2d apart at
     // rest (mesh neighbours excluded) push each other apart. Candidate pairs come from a Verlet
@@ -455,14 +524,13 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
       graspTargets.push_back(surfaceParticles.row(c.proxy).transpose() + c.depth * c.normal);
     }
   }
-  for (const GraspInput& g : in.grasps)
-    for (size_t a = 0; a < g.nodes.size(); ++a) {
-      const int i = g.nodes[a];
-      if (i < 0 || i >= nc || m_fixedMask[i]) continue;
-      if (std::find(graspNodes.begin(), graspNodes.end(), i) != graspNodes.end()) continue;
-      graspNodes.push_back(i);
-      graspTargets.push_back(g.targets.row(Eigen::Index(a)).transpose());
-    }
+  prescribeGrasps(in);
+  for (size_t c = 0; c < m_carry.size(); ++c) {
+    const int i = m_carry[c];
+    if (std::find(graspNodes.begin(), graspNodes.end(), i) != graspNodes.end()) continue;
+    graspNodes.push_back(i);
+    graspTargets.push_back(m_carryTarget.row(Eigen::Index(c)).transpose());
+  }
   if (!graspNodes.empty()) {
     m_graspRhs.resize(3 * graspNodes.size());
     for (size_t a = 0; a < graspNodes.size(); ++a)
@@ -489,9 +557,7 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
     m_target.row(nc + Eigen::Index(q)) = m_rest.row(nc + Eigen::Index(q)) + u.transpose();
   }
   m_kinematic = m_fixedMask;
-  for (const GraspInput& g : in.grasps)
-    for (int i : g.nodes)
-      if (i >= 0 && i < m_x.rows()) m_kinematic[i] = 1;
+  for (int i : m_carry) m_kinematic[i] = 1;
   springCorrection(m_x, m_v, m_target, m_springK, m_springC, in.dt, m_kinematic);
   applyGrasps(in);
   if (in.contact) resolveParticleContacts(in);
@@ -514,13 +580,20 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
   const auto t0 = Clock::now();
   mlsDeformationGradients(m_mls, m_rest, m_x, m_F);
   mlsForces(m_mls, m_F, m_forces);
-  for (const PointLoad& l : in.loads) {
-    if (l.surfaceVertex < 0 || l.surfaceVertex >= int(m_skinNodes.size())) continue;
+  // Loads: J^T f, every per-vertex share over the vertex's particles by the skinning weights.
+  auto addVertexForce = [&](int v, const Vec3& f) {
+    if (v < 0 || v >= int(m_skinNodes.size())) return;
     for (int a = 0; a < 8; ++a) {
-      const int j = m_skinNodes[l.surfaceVertex][a];
-      if (j >= 0) m_forces.row(j) += m_skinWeights[l.surfaceVertex][a] * l.force.transpose();
+      const int j = m_skinNodes[size_t(v)][a];
+      if (j >= 0) m_forces.row(j) += m_skinWeights[size_t(v)][a] * f.transpose();
     }
+  };
+  for (const PointLoad& l : in.loads) {
+    if (l.vertices.empty()) addVertexForce(l.surfaceVertex, l.force);
+    for (size_t k = 0; k < l.vertices.size() && k < l.weights.size(); ++k)
+      addVertexForce(l.vertices[k], l.weights[k] * l.force);
   }
+  prescribeGrasps(in);
   const auto t1 = Clock::now();
   const Real damp = 1 / (1 + in.dt * m_particleDamping);
   for (Eigen::Index i = 0; i < m_x.rows(); ++i) {
@@ -542,6 +615,24 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
            (m_x.row(j).transpose() + m_F[j] * (m_fineRest.row(v) - m_rest.row(j)).transpose());
     }
     m_surface.row(v) = x.transpose();
+  }
+  if (!m_carry.empty() && !m_graspVerts.empty()) {
+    // F_j changed in the step: correct the carrying particles again; with F kept, the skinned
+    // surface moves by exactly J dx.
+    const Eigen::Index m = Eigen::Index(m_graspVerts.size());
+    for (Eigen::Index r = 0; r < m; ++r)
+      m_graspGap.row(r) = m_graspTargets.row(r) - m_surface.row(m_graspVerts[size_t(r)]);
+    m_graspDx.noalias() = m_JcPinv * m_graspGap;
+    for (size_t c = 0; c < m_carry.size(); ++c) {
+      m_x.row(m_carry[c]) += m_graspDx.row(Eigen::Index(c));
+      m_v.row(m_carry[c]) += m_graspDx.row(Eigen::Index(c)) / in.dt;
+    }
+    for (Eigen::Index v = 0; v < m_fineRest.rows(); ++v)
+      for (int a = 0; a < 8; ++a) {
+        const int j = m_skinNodes[size_t(v)][a];
+        if (j >= 0 && m_carryCol[size_t(j)] >= 0)
+          m_surface.row(v) += m_skinWeights[size_t(v)][a] * m_graspDx.row(m_carryCol[size_t(j)]);
+      }
   }
   if (in.contact) projectPointsOut(*in.contact, m_surface);  // display level, no force
   const auto t3 = Clock::now();

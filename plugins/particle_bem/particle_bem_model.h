@@ -14,6 +14,19 @@
 // interior physics points, moved by MLS point-based elasticity (sph_elasticity.h) with gravity,
 // symplectic Euler; the fine surface is skinned to the particles to first order,
 // x_v = sum_j w_vj (x_j + F_j (X_v - X_j)) / sum_j w_vj over the 8 nearest particles.
+//
+// Surface mapping (SOFA's Mapping), interaction as the harness defines it on the organ surface:
+// the fine surface is x_s = X_s + J u with J the transfer's matrix (guided: transferRow, linear in
+// the coarse displacements; pure: the skinning weights w_vj, with the F_j of the step kept).
+//  - Loads: the harness's per-vertex forces f_v reach the model as J^T f: nodal forces on the
+//    coarse surface, turned into tractions by patch_traction and applied through their
+//    precomputed displacement response (guided); forces on the particles (pure).
+//  - Grasps: the particles carrying the grasped fine vertices (every node with a non-zero entry in
+//    their rows of J, the carrying set C) are prescribed at x_C + J_C^+ (t - x_s) (the
+//    minimum-norm correction, least squares with more vertices than nodes), so the grasped
+//    vertices land on their targets; in the guided model the BEM solve then finds the tractions
+//    that hold C there. The pure model corrects C again after its skinning (F_j changed in the
+//    step), with the surface moved by exactly J dx.
 #pragma once
 
 #include "bem_assembly.h"
@@ -51,6 +64,9 @@ class ParticleBemModel final : public Model {
   int surfaceParticles() const { return m_guided ? m_coarse.numVertices() : 0; }
   const std::vector<int>& fixedNodes() const { return m_fixed; }
   Real particleSpacing() const { return m_spacing; }
+  /// The particles prescribed by the grasps of the last step (those carrying the grasped
+  /// vertices), sorted.
+  const std::vector<int>& graspedNodes() const { return m_carry; }
 
  private:
   void initGuided(const ModelSetup& setup, const SignedDistanceField& sdf, Real volume);
@@ -58,6 +74,13 @@ class ParticleBemModel final : public Model {
   StepStatus stepGuided(const StepInput& in);
   StepStatus stepParticles(const StepInput& in);
   void applyGrasps(const StepInput& in);
+  /// Row v of J (see above): (node, weight) pairs.
+  std::vector<std::pair<int, Real>> surfaceRow(int v) const;
+  /// Grasped fine vertices of `in` -> m_graspVerts / m_graspTargets; rebuilds the carrying set
+  /// and J_C^+ when the grasped set changes; prescribes C at x_C + J_C^+ (t - x_s) (m_carryTarget).
+  void prescribeGrasps(const StepInput& in);
+  /// The displacement response (3N x 3, m/N) of a load's J^T-mapped forces, cached per spread.
+  const MatX& loadResponse(const PointLoad& load);
   /// Contact (deform/contact.h) on every particle, after the correction.
   void resolveParticleContacts(const StepInput& in);
 
@@ -92,16 +115,26 @@ class ParticleBemModel final : public Model {
   MatX3 m_verletRef;
   bool m_verletValid = false;
   SparseTraction m_P;
-  Real m_loadRadius = 0;  ///< m, pressure patch of a point force (0: the closest triangle)
-  /// Fine vertex -> its patch's nodal shares (pressurePatchShares), computed on first use.
-  std::map<int, std::vector<std::pair<int, Real>>> m_patchShares;
   PatchTraction m_patchTraction = PatchTraction::Consistent;
   PatchProjection m_patchProjection;
-  /// Fine vertex -> displacement of the coarse nodes per unit force at it (3N x 3, m/N):
-  /// sum_k q_k M(:, 3k..3k+2) with q the consistent patch tractions (PatchTraction), computed
-  /// on first use, so a step costs one 3N x 3 product per loaded vertex.
-  std::map<int, MatX> m_patchResponse;
+  /// A load's spread (the harness's patch vertices and weights) -> displacement of the coarse
+  /// nodes per unit force (3N x 3, m/N): sum_k q_k M(:, 3k..3k+2) with q the tractions of the
+  /// nodal shares J^T w (PatchTraction), computed on first use, so a step costs one 3N x 3
+  /// product per load.
+  struct LoadResponse {
+    std::vector<int> vertices;
+    std::vector<Real> weights;
+    MatX W;
+  };
+  std::vector<LoadResponse> m_loadResponses;
   VecX m_U, m_patchU, m_graspRhs, m_graspP;
+  // grasps through the surface mapping (rebuilt when the grasped set changes)
+  std::vector<int> m_graspVerts, m_mapVerts;  // grasped fine vertices; the set J_C was built for
+  MatX3 m_graspTargets;
+  std::vector<int> m_carry;     // carrying nodes (coarse particles / particles), sorted
+  std::vector<int> m_carryCol;  // node -> column in m_carry or -1
+  MatX m_JcPinv;                // #carry x #grasped vertices
+  MatX3 m_carryTarget, m_graspGap, m_graspDx;
   GraspSolver m_graspSolver;
   MatX3 m_coarseDisp;
 

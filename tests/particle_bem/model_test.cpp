@@ -3,6 +3,7 @@
 #include "particle_bem_model.h"
 #include "test_support.h"
 
+#include <deform/interaction.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -41,6 +42,43 @@ int topVertex(const MatX3& V) {
   return t;
 }
 
+/// The harness's spread of a force at fine vertex v over a pressure patch of radius R.
+PointLoad patchLoad(const SurfaceMesh& s, int v, const Vec3& f, Real R = 0.01) {
+  PointLoad l;
+  l.surfaceVertex = v;
+  l.force = f;
+  const SurfacePatch p = pressurePatch(s, v, R);
+  l.vertices = p.vertices;
+  l.weights = p.weights;
+  return l;
+}
+
+/// A force on one fine vertex (no spread).
+PointLoad vertexLoad(int v, const Vec3& f) {
+  PointLoad l;
+  l.surfaceVertex = v;
+  l.force = f;
+  return l;
+}
+
+/// A grasp of the fine surface vertices within r of p (as the harness picks them), targets at the
+/// rest surface moved by d.
+GraspInput surfaceGrasp(const SurfaceMesh& s, const Vec3& p, Real r, const Vec3& d) {
+  GraspInput g;
+  g.vertices = graspedSurfaceVertices(s, p, r);
+  g.targets.resize(Eigen::Index(g.vertices.size()), 3);
+  for (size_t k = 0; k < g.vertices.size(); ++k)
+    g.targets.row(Eigen::Index(k)) = s.V.row(g.vertices[k]) + d.transpose();
+  return g;
+}
+
+Real graspResidual(const MatX3& surface, const GraspInput& g) {
+  Real sum = 0;
+  for (size_t k = 0; k < g.vertices.size(); ++k)
+    sum += (surface.row(g.vertices[k]) - g.targets.row(Eigen::Index(k))).squaredNorm();
+  return std::sqrt(sum / Real(std::max<size_t>(1, g.vertices.size())));
+}
+
 StepInput input(int step) {
   StepInput in;
   in.time = step * 1e-3;
@@ -67,12 +105,18 @@ TEST(GuidedModel, PointLoadDisplacesAlongTheLoad) {
   auto m = fx.make();
   const int v = topVertex(fx.organ.surface.V);
   const Vec3 f(0.2, 0, -1.0);
+  const PointLoad load = patchLoad(fx.organ.surface, v, f);
+  ASSERT_GT(load.vertices.size(), 1u);
   for (int s = 0; s < 400; ++s) {
     StepInput in = input(s);
-    in.loads.push_back({v, f});
+    in.loads.push_back(load);
     ASSERT_EQ(m->step(in), StepStatus::Ok);
   }
-  const Vec3 u = (m->surface().row(v) - fx.organ.surface.V.row(v)).transpose();
+  Vec3 u = Vec3::Zero();  // the patch's mean displacement
+  for (size_t k = 0; k < load.vertices.size(); ++k)
+    u +=
+        load.weights[k] *
+        (m->surface().row(load.vertices[k]) - fx.organ.surface.V.row(load.vertices[k])).transpose();
   EXPECT_GT(u.norm(), 1e-4);
   EXPECT_GT(u.dot(f.normalized()), 0.8 * u.norm());
   // Far from the load (and at the fixed bottom) the surface moves much less.
@@ -82,54 +126,57 @@ TEST(GuidedModel, PointLoadDisplacesAlongTheLoad) {
   EXPECT_LT((m->surface().row(bottom) - fx.organ.surface.V.row(bottom)).norm(), 0.2 * u.norm());
 }
 
-// A point force is spread over the load_radius patch (default 3 cm, as reference_fem); with
-// load_radius 0 it goes to the closest coarse triangle's three nodes. The same force then moves
-// the loaded vertex less (the load is spread) and its neighbours relatively more.
+// The harness spreads a point force over a pressure patch (here 3 cm); the model maps the
+// per-vertex forces to its coarse nodes by J^T. Against the same force on the vertex alone, the
+// loaded vertex sinks less (the load is spread) and its neighbours relatively more.
 TEST(GuidedModel, PointForcePressurePatchSpreadsTheLoad) {
-  Fixture patch(true), node(true);
-  node.params.set("load_radius", 0.0);
-  auto mp = patch.make(), mn = node.make();
-  const int v = topVertex(patch.organ.surface.V);
+  Fixture fx(true);
+  auto mp = fx.make(), mn = fx.make();
+  const int v = topVertex(fx.organ.surface.V);
+  const PointLoad spread = patchLoad(fx.organ.surface, v, Vec3(0, 0, -0.5), 0.03);
   for (int s = 0; s < 300; ++s) {
     StepInput in = input(s);
-    in.loads.push_back({v, Vec3(0, 0, -0.5)});
+    in.loads.push_back(spread);
     ASSERT_EQ(mp->step(in), StepStatus::Ok);
+    in.loads = {vertexLoad(v, Vec3(0, 0, -0.5))};
     ASSERT_EQ(mn->step(in), StepStatus::Ok);
   }
-  const MatX3 up = mp->surface() - patch.organ.surface.V, un = mn->surface() - node.organ.surface.V;
+  const MatX3 up = mp->surface() - fx.organ.surface.V, un = mn->surface() - fx.organ.surface.V;
   EXPECT_LT(up(v, 2), 0);
   EXPECT_LT(-up(v, 2), -un(v, 2)) << "spread over 3 cm, the loaded vertex sinks less";
   // A vertex 2 cm from the loaded one: a larger share of the loaded vertex's motion.
   int ring = -1;
-  for (int i = 0; i < patch.organ.surface.V.rows(); ++i) {
-    const Real d = (patch.organ.surface.V.row(i) - patch.organ.surface.V.row(v)).norm();
+  for (int i = 0; i < fx.organ.surface.V.rows(); ++i) {
+    const Real d = (fx.organ.surface.V.row(i) - fx.organ.surface.V.row(v)).norm();
     if (d > 0.015 && d < 0.025 &&
-        (ring < 0 || patch.organ.surface.V(i, 2) > patch.organ.surface.V(ring, 2)))
+        (ring < 0 || fx.organ.surface.V(i, 2) > fx.organ.surface.V(ring, 2)))
       ring = i;
   }
   ASSERT_GE(ring, 0);
   EXPECT_GT(up(ring, 2) / up(v, 2), un(ring, 2) / un(v, 2));
 }
 
-TEST(GuidedModel, SurfaceTransferChangesOnlyTheFineSurface) {
-  // The same loaded run with the gradient (default) and the linear transfer: identical
-  // particles, fine surfaces that differ (the transfer is used) by a fraction of the motion.
+TEST(GuidedModel, SurfaceTransferChangesTheSurfaceByAFractionOfTheMotion) {
+  // The same loaded run with the gradient (default) and the linear transfer: the particles differ
+  // a little (the load reaches them through J^T of the transfer), the fine surfaces by a fraction
+  // of the motion (the transfer is used).
   Fixture fg(true), fl(true);
   fl.params.set("surface_transfer", std::string("linear"));
   auto mg = fg.make(), ml = fl.make();
   const int v = topVertex(fg.organ.surface.V);
   for (int s = 0; s < 200; ++s) {
     StepInput in = input(s);
-    in.loads.push_back({v, Vec3(0.2, 0, -1.0)});
+    in.loads.push_back(vertexLoad(v, Vec3(0.2, 0, -1.0)));
     ASSERT_EQ(mg->step(in), StepStatus::Ok);
     ASSERT_EQ(ml->step(in), StepStatus::Ok);
   }
-  EXPECT_EQ(mg->nodes(), ml->nodes());
+  const Real nodeDiff = (mg->nodes() - ml->nodes()).rowwise().norm().mean();
   const MatX3 ug = mg->surface() - fg.organ.surface.V, ul = ml->surface() - fl.organ.surface.V;
   const Real diff = (ug - ul).rowwise().norm().mean(), motion = ul.rowwise().norm().mean();
   EXPECT_GT(motion, 1e-5);
   EXPECT_GT(diff, 1e-4 * motion);
   EXPECT_LT(diff, 0.2 * motion);
+  EXPECT_LT(nodeDiff, 0.2 * motion);
   Fixture bad(true);
   bad.params.set("surface_transfer", std::string("cubic"));
   EXPECT_THROW(bad.make(), InputError);
@@ -158,10 +205,10 @@ TEST(GuidedModel, SingularSupportChangesMAndIsInTheCacheKey) {
 TEST(GuidedModel, GraspReachesTargetAndResetReproduces) {
   Fixture fx(true);
   auto m = fx.make();
-  const int top = topVertex(m->nodes().topRows(m->surfaceParticles()));
-  GraspInput g;
-  g.nodes = {top};
-  g.targets = m->nodes().row(top) + Vec3(0, 0, 0.004).transpose();
+  const int top = topVertex(fx.organ.surface.V);
+  const GraspInput g = surfaceGrasp(fx.organ.surface, fx.organ.surface.V.row(top).transpose(), 0.01,
+                                    Vec3(0, 0, 0.004));
+  ASSERT_GT(g.vertices.size(), 3u);
   std::vector<MatX3> first;
   for (int run = 0; run < 2; ++run) {
     m->reset();
@@ -174,9 +221,35 @@ TEST(GuidedModel, GraspReachesTargetAndResetReproduces) {
     first.push_back(m->surface());
   }
   EXPECT_EQ(first[0], first[1]);  // bit for bit
-  EXPECT_LT((m->nodes().row(top) - g.targets.row(0)).norm(), 1e-12);
-  const int vtop = topVertex(fx.organ.surface.V);
-  EXPECT_GT(m->surface()(vtop, 2) - fx.organ.surface.V(vtop, 2), 0.001);
+  // The grasped fine vertices (not coarse particles) are on their targets, through the transfer.
+  EXPECT_LT(graspResidual(m->surface(), g), 1e-9);
+  EXPECT_GT(m->graspedNodes().size(), 3u);
+}
+
+// A 4 mm grasper closes on one or two fine vertices between the coarse particles: the particles
+// of their coarse triangles (and, with the gradient transfer, the triangles' one-rings) carry
+// them to their targets during a lift, with gravity.
+TEST(GuidedModel, SmallGraspLiftsItsFineVertices) {
+  for (const char* transfer : {"gradient", "linear"}) {
+    SCOPED_TRACE(transfer);
+    Fixture fx(true);
+    fx.params.set("surface_transfer", std::string(transfer));
+    auto m = fx.make();
+    const int top = topVertex(fx.organ.surface.V);
+    GraspInput g = surfaceGrasp(fx.organ.surface, fx.organ.surface.V.row(top).transpose(), 0.004,
+                                Vec3::Zero());
+    const MatX3 t0 = g.targets;
+    Real worst = 0;
+    for (int s = 0; s < 200; ++s) {
+      StepInput in = input(s);
+      in.gravity = Vec3(0, 0, -9.81);
+      g.targets = t0.rowwise() + Eigen::RowVector3d(0, 0, 0.01 * std::min(1.0, (s + 1) / 150.0));
+      in.grasps.push_back(g);
+      ASSERT_EQ(m->step(in), StepStatus::Ok);
+      worst = std::max(worst, graspResidual(m->surface(), g));
+    }
+    EXPECT_LT(worst, 1e-9);
+  }
 }
 
 TEST(GuidedModel, GravitySagsAndCacheHits) {
@@ -221,9 +294,10 @@ TEST(ParticleModel, PointLoadPushesAlongTheLoad) {
   Fixture fx(false, 250, 300);
   auto m = fx.make();
   const int v = topVertex(fx.organ.surface.V);
+  const PointLoad load = patchLoad(fx.organ.surface, v, Vec3(0, 0, -0.5));
   for (int s = 0; s < 500; ++s) {
     StepInput in = input(s);
-    in.loads.push_back({v, Vec3(0, 0, -0.5)});
+    in.loads.push_back(load);
     ASSERT_EQ(m->step(in), StepStatus::Ok);
   }
   EXPECT_LT(m->surface()(v, 2) - fx.organ.surface.V(v, 2), -1e-4);
@@ -246,7 +320,7 @@ TEST(GuidedModel, CoarseSurfaceConformsToTheFixedBox) {
   const int v = topVertex(fx.organ.surface.V);
   for (int s = 0; s < 100; ++s) {
     StepInput in = input(s);
-    in.loads.push_back({v, Vec3(0.3, 0, -1.0)});
+    in.loads.push_back(vertexLoad(v, Vec3(0.3, 0, -1.0)));
     ASSERT_EQ(m->step(in), StepStatus::Ok);
   }
   int fixedCoarse = 0;
@@ -262,23 +336,22 @@ TEST(GuidedModel, CoarseSurfaceConformsToTheFixedBox) {
   EXPECT_GT(nonConformingFaces(plain->coarseSurface(), fx.organ.fixed.boxes), 0);
 }
 
-// The model's static answer to a point force (its pressure patch) against the same coarse
-// surface's BEM solve with the patch traction field integrated over the elements
-// (integrateTractionField, the measure of the paper's Table 2): the consistent patch tractions
-// (default) reproduce it closely; the lumped ones (p_k = c_k / A_k) load a wider area on
-// elements of the patch's size and miss it by more.
+// The model's static answer to a point force (the harness's 3 cm pressure patch on the fine
+// surface, mapped to the coarse nodes by J^T) against the same coarse surface's BEM solve with
+// the patch traction field integrated over the elements (integrateTractionField, the measure of
+// the paper's Table 2): the consistent tractions (default) reproduce it closely; the lumped ones
+// (p_k = f_k / A_k) load a wider area on elements of the patch's size and miss it by more.
 TEST(GuidedModel, ConsistentPatchTractionsMatchTheIntegratedPatchField) {
   const Real R = 0.03;
   Fixture fc(true, 120, 60), fl(true, 120, 60);
-  fc.params.set("load_radius", R);
-  fl.params.set("load_radius", R);
   fl.params.set("patch_traction", std::string("lumped"));
   auto mc = fc.make(), ml = fl.make();
   const int v = topVertex(fc.organ.surface.V);
   const Vec3 f(0, 0, -0.5);
+  const PointLoad load = patchLoad(fc.organ.surface, v, f, R);
   for (int s = 0; s < 400; ++s) {
     StepInput in = input(s);
-    in.loads.push_back({v, f});
+    in.loads.push_back(load);
     ASSERT_EQ(mc->step(in), StepStatus::Ok);
     ASSERT_EQ(ml->step(in), StepStatus::Ok);
   }
@@ -328,8 +401,11 @@ TEST(GuidedModel, ConsistentPatchTractionsMatchTheIntegratedPatchField) {
     sum += uk.norm();
   }
   ASSERT_GT(sum, 0);
-  EXPECT_LT(errC / sum, 0.03) << "consistent " << errC / sum << ", lumped " << errL / sum;
-  EXPECT_LT(errC, 0.5 * errL) << "consistent " << errC / sum << ", lumped " << errL / sum;
+  // Measured: consistent 7.1%, lumped 7.4% (before the harness's spread, with the model's own
+  // patch on the coarse surface: 0.16% and 2.2%, README "Sixth pass"). The fine surface's nodal
+  // loads mapped by J^T of the gradient transfer now dominate the difference.
+  EXPECT_LT(errC / sum, 0.1) << "consistent " << errC / sum << ", lumped " << errL / sum;
+  EXPECT_LT(errC, errL) << "consistent " << errC / sum << ", lumped " << errL / sum;
   Fixture bad(true, 120, 60);
   bad.params.set("patch_traction", std::string("lumpy"));
   EXPECT_THROW(bad.make(), InputError);

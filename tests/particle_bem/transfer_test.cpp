@@ -150,6 +150,34 @@ TEST(GradientTransfer, BeatsLinearOnACurvedSurfaceAndKeepsTheRestState) {
   EXPECT_LT(eGrad, 0.5 * eLin) << "linear " << eLin << ", gradient " << eGrad;
 }
 
+// transferRow is the transfer's matrix row: J u reproduces interpolateDisplacement for an
+// arbitrary displacement, linear and gradient, and every row sums to 1.
+TEST(TransferRow, IsTheRowOfTheTransferMatrix) {
+  const SurfaceMesh coarse = icosphere(2, 0.05), fine = icosphere(4, 0.05);
+  const SurfaceMap map = mapToSurface(TriangleGrid(coarse.V, coarse.F), fine.V);
+  GradientTransfer gt = makeGradientTransfer(coarse.V, coarse.F, map);
+  const MatX3 u = sample(coarse.V, smooth), zero = MatX3::Zero(fine.numVertices(), 3);
+  MatX3 lin, grad;
+  interpolateDisplacement(map, coarse.F, zero, u, lin);
+  interpolateDisplacement(map, coarse.F, zero, u, gt, grad);
+  int wide = 0;  // gradient rows reaching past their triangle (not at a coarse vertex)
+  for (int v = 0; v < fine.numVertices(); v += 7) {
+    for (const bool gradient : {false, true}) {
+      const auto row = transferRow(map, coarse.F, gradient ? &gt : nullptr, v);
+      Vec3 x = Vec3::Zero();
+      Real sum = 0;
+      for (const auto& [node, w] : row) {
+        x += w * u.row(node).transpose();
+        sum += w;
+      }
+      EXPECT_NEAR(sum, 1.0, 1e-12);
+      EXPECT_LT((x - (gradient ? grad : lin).row(v).transpose()).norm(), 1e-15) << v;
+      if (gradient) wide += row.size() > 3;  // the corners' one-rings
+    }
+  }
+  EXPECT_GT(wide, 0);
+}
+
 // A point force spread as a pressure patch: the shares sum to 1 (the resultant is the force),
 // only nodes whose support meets the patch carry load, on a flat symmetric grid the patch about a
 // vertex is symmetric and its centre carries the largest share, and the shares do not depend on
