@@ -375,7 +375,7 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     // and lose their inward normal velocity; fixed and grasped nodes stay where their
     // constraint put them.
     m_contactInvMass = m_invMass;
-    for (const GraspInput& g : in.grasps)
+    for (const NodeGrasp& g : m_nodeGrasps)
       for (int i : g.nodes) m_contactInvMass[i] = 0;
     resolveSurfaceContacts(*in.contact, m_x, m_contactF, m_contactInvMass, h, &m_v, &m_stepStart);
   }
