@@ -89,7 +89,7 @@ def main():
         ax2.set_xticks([i + 0.5 for i in range(len(others))])
         ax2.set_xticklabels([r["case"] for r in others], fontsize=6, rotation=30, ha="right")
         ax2.set_yticks([])
-        ax2.set_title("extreme cases", fontsize=10)
+        ax2.set_title("other cases", fontsize=10)
         verdicts = any(r.get("verdict") for r in mine)
         legend = VERDICT_COLOURS if verdicts else STATUS_COLOURS
         handles = [Patch(facecolor=c, label=s) for s, c in legend.items()]
