@@ -1,14 +1,17 @@
 // The stiff and extreme sweep, one child process per case (see stability.h).
 #include <deform/cache.h>
 #include <deform/mesh.h>
+#include <deform/mesh_io.h>
 #include <deform/phantom.h>
 #include <deform_harness/child_process.h>
+#include <deform_harness/runner.h>
 #include <deform_harness/stability.h>
 
 #include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
 
 namespace deform::harness {
@@ -41,16 +44,66 @@ ojson stabilityParams(const std::string& plugin, bool quick) {
 
 }  // namespace
 
+double cantileverSag(double young, double poisson, double density, double gravity, double length,
+                     double side) {
+  const double q = density * gravity * side * side, inertia = side * side * side * side / 12;
+  const double shear = young / (2 * (1 + poisson)), kappa = 5.0 / 6.0;
+  return q * std::pow(length, 4) / (8 * young * inertia) +
+         q * length * length / (2 * kappa * shear * side * side);
+}
+
+SurfaceMesh sliverMesh(double resolution) {
+  SurfaceMesh m = makePhantom("liver", resolution);
+  const MatX2i E = uniqueEdges(m.F);
+  const MatX2i EF = edgeFaces(m.F, E);
+  std::vector<char> used(size_t(m.F.rows()), 0);
+  std::vector<Vec3> newV;
+  std::vector<Eigen::Vector3i> faces;
+  int next = m.numVertices();
+  for (Eigen::Index e = 0; e < E.rows(); e += 4) {
+    const int f1 = EF(e, 0), f2 = EF(e, 1);
+    if (f1 < 0 || f2 < 0 || used[size_t(f1)] || used[size_t(f2)]) continue;
+    const int a = E(e, 0), b = E(e, 1), p = next++;
+    newV.push_back(m.V.row(a).transpose() + 0.02 * (m.V.row(b) - m.V.row(a)).transpose());
+    for (int f : {f1, f2}) {
+      used[size_t(f)] = 1;
+      for (int k = 0; k < 3; ++k) {
+        const int x = m.F(f, k), y = m.F(f, (k + 1) % 3), w = m.F(f, (k + 2) % 3);
+        if ((x == a && y == b) || (x == b && y == a)) {  // the directed edge x -> y, apex w
+          faces.emplace_back(x, p, w);
+          faces.emplace_back(p, y, w);
+        }
+      }
+    }
+  }
+  const Eigen::Index nv = m.V.rows(), nf = m.F.rows();
+  MatX3 V(nv + Eigen::Index(newV.size()), 3);
+  V.topRows(nv) = m.V;
+  for (size_t i = 0; i < newV.size(); ++i) V.row(nv + Eigen::Index(i)) = newV[i].transpose();
+  MatX3i F(nf + Eigen::Index(faces.size()) / 2, 3);
+  Eigen::Index row = 0;
+  for (Eigen::Index f = 0; f < nf; ++f)
+    if (!used[size_t(f)]) F.row(row++) = m.F.row(f);
+  for (const auto& t : faces) F.row(row++) = t.transpose();
+  F.conservativeResize(row, 3);
+  m.V = V;
+  m.F = F;
+  return m;
+}
+
 std::vector<StabilityCase> stabilityCases(bool quick) {
   std::vector<StabilityCase> cases;
   const std::vector<double> youngs =
       quick ? std::vector<double>{1e3, 1e5, 1e7} : std::vector<double>{1e3, 1e4, 1e5, 1e6, 1e7};
-  const std::vector<double> dts =
-      quick ? std::vector<double>{1e-3, 1.0 / 30} : std::vector<double>{1e-3, 1e-2, 1.0 / 30};
+  const std::vector<double> dts = quick ? std::vector<double>{1e-3, 1.0 / 30}
+                                        : std::vector<double>{1e-3, 1e-2, 1.0 / 60, 1.0 / 30};
   for (double e : youngs) {
     for (double dt : dts) {
       StabilityCase c;
-      c.id = "E" + g(e) + "_dt" + g(std::round(dt * 1e4) / 1e4);
+      c.id = "E";  // piecewise: GCC 12 warns falsely (-Wrestrict) on "E" + g(e) + ...
+      c.id += g(e);
+      c.id += "_dt";
+      c.id += g(std::round(dt * 1e4) / 1e4);
       c.group = "stiffness_dt";
       c.young = e;
       c.dt = dt;
@@ -77,6 +130,41 @@ std::vector<StabilityCase> stabilityCases(bool quick) {
     c.description = g(f) + " N down at the top (E = 5.5 kPa), gravity";
     cases.push_back(c);
   }
+  for (double e : quick ? std::vector<double>{1e7} : std::vector<double>{1e4, 1e6, 1e7}) {
+    StabilityCase c;
+    c.id = "cantilever_E" + g(e);
+    c.group = "cantilever";
+    c.organ = "beam";
+    c.young = e;
+    c.beamTheory = cantileverSag(e, c.poisson, c.density, 9.81, 0.1, 0.01);
+    c.description = "cantilever 0.1 m, 10 mm square, clamped at x = 0, under gravity, E = " + g(e) +
+                    " Pa (beam theory: tip sag " + g(c.beamTheory) + " m)";
+    cases.push_back(c);
+  }
+  for (double scale : {0.1, 1.0, 10.0}) {
+    StabilityCase c;
+    c.id = "scale_" + g(0.1 * scale) + "m";
+    c.group = "scale";
+    c.scale = scale;
+    c.gravity = false;
+    c.force = scale * scale;
+    c.description = "the cube scaled to " + g(0.1 * scale) + " m, " + g(c.force) +
+                    " N down at the top, density " + g(c.density / (scale * scale)) +
+                    " kg/m^3, no gravity (the same problem in other units: the relative "
+                    "displacement must not change)";
+    cases.push_back(c);
+  }
+  {
+    StabilityCase c;
+    c.id = "slivers";
+    c.group = "slivers";
+    c.organ = "slivers";
+    c.force = 1.0;
+    c.description =
+        "the liver phantom with needle triangles (every fourth edge split at 2%), "
+        "1 N down at the top (E = 5.5 kPa), gravity";
+    cases.push_back(c);
+  }
   std::vector<std::pair<std::string, std::string>> extremes = {
       {"pull", "a grasp at the top pulled three organ-lengths up"},
       {"invert",
@@ -89,6 +177,7 @@ std::vector<StabilityCase> stabilityCases(bool quick) {
     c.id = id;
     c.group = id;
     c.extra = id;
+    c.reference = false;
     c.description = what + std::string(" (E = 5.5 kPa), gravity");
     cases.push_back(c);
   }
@@ -98,25 +187,50 @@ std::vector<StabilityCase> stabilityCases(bool quick) {
 ojson stabilityScene(const StabilityCase& c, const std::string& plugin, const ojson& params,
                      bool quick) {
   const double resolution = quick ? 0.4 : 0.7;
-  const SurfaceMesh s = makePhantom("cube", resolution);
+  SurfaceMesh s;
+  std::string mesh;
+  if (c.organ == "beam") {
+    s = makePhantom("beam");
+    mesh = "phantom:beam";
+  } else if (c.organ == "slivers") {
+    s = sliverMesh(resolution);
+    mesh = "../../meshes/slivers.obj";  // written by runStability beside scenes/
+  } else {
+    s = makePhantom("cube", resolution);
+    mesh = "phantom:cube";
+  }
+  s.V *= c.scale;
   const Box b = boundingBox(s.V);
   const double size = b.size().maxCoeff();
-  const double duration = quick ? 0.2 : 0.5;
+  const double duration = c.duration > 0 ? c.duration : (c.reference ? 1.0 : (quick ? 0.2 : 0.5));
   const Vec3 top =
       s.V.row(nearestVertex(s.V, Vec3(b.center().x(), b.center().y(), b.hi.z()))).transpose();
   const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
+  ojson fixed;
+  if (c.organ == "beam") {  // the root face x = 0
+    fixed = {{"box",
+              {vec(b.lo - m),
+               vec(Vec3(b.lo.x() + 1e-3 * b.size().x(), b.hi.y() + m.y(), b.hi.z() + m.z()))}}};
+  } else {  // the bottom tenth
+    fixed = {{"box",
+              {vec(b.lo - m),
+               vec(Vec3(b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.1 * b.size().z()))}}};
+  }
+  const std::string what = c.organ == "beam" ? "beam phantom, root face fixed"
+                           : c.organ == "slivers"
+                               ? "liver phantom with slivers, bottom tenth fixed"
+                               : "cube phantom (" + g(size) + " m), bottom tenth fixed";
   ojson j;
   j["name"] = "stability-" + c.id;
-  j["description"] = "Stability case " + c.id + ": " + c.description + "; cube phantom (" +
-                     g(size) + " m), bottom tenth fixed.";
-  j["organ"] = {{"mesh", "phantom:cube"},
-                {"resolution", resolution},
-                {"material", {{"young", c.young}, {"poisson", c.poisson}, {"density", 1000}}},
-                {"fixed",
-                 {{"box",
-                   {vec(b.lo - m), vec(Vec3(b.hi.x() + m.x(), b.hi.y() + m.y(),
-                                            b.lo.z() + 0.1 * b.size().z()))}}}}};
-  j["gravity"] = {0, 0, -9.81};
+  j["description"] = "Stability case " + c.id + ": " + c.description + "; " + what + ".";
+  ojson organ = {{"mesh", mesh}};
+  if (c.organ == "cube") organ["resolution"] = resolution;
+  if (c.scale != 1) organ["scale"] = c.scale;
+  organ["material"] = {
+      {"young", c.young}, {"poisson", c.poisson}, {"density", c.density / (c.scale * c.scale)}};
+  organ["fixed"] = fixed;
+  j["organ"] = organ;
+  j["gravity"] = c.gravity ? ojson::array({0, 0, -9.81}) : ojson::array({0, 0, 0});
   j["dt"] = c.dt;
   j["duration"] = std::max(duration, 3 * c.dt);
   if (c.force > 0) {
@@ -189,7 +303,40 @@ StabilityRecord classifyStabilityRun(int waitStatus, bool timedOut, double timeo
   return r;
 }
 
+StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX3* reference,
+                               const MatX3& rest, double threshold) {
+  r.reason.clear();
+  r.errorRatio = r.displacementRatio = -1;
+  if (r.status == "diverged" || r.status == "failed") {
+    r.verdict = r.status;
+    return r;
+  }
+  r.verdict = "unchecked";
+  if (r.status != "stable" || !model || !reference || model->rows() != rest.rows() ||
+      reference->rows() != rest.rows() || rest.rows() == 0)
+    return r;
+  const auto rms = [](const MatX3& d) { return std::sqrt(d.rowwise().squaredNorm().mean()); };
+  const double refRms = rms(*reference - rest);
+  const double err = rms(*model - *reference), moved = rms(*model - rest);
+  if (!(refRms > 0) || !std::isfinite(refRms) || !std::isfinite(err)) return r;
+  r.errorRatio = err / refRms;
+  r.displacementRatio = moved / refRms;
+  if (r.errorRatio <= threshold) {
+    r.verdict = "accurate";
+  } else {
+    r.verdict = "inaccurate";
+    r.reason = r.displacementRatio < 0.1   ? "frozen"
+               : r.displacementRatio > 2.0 ? "too_soft"
+                                           : "wrong_shape";
+  }
+  return r;
+}
+
 namespace {
+
+ojson ratio(double v) {
+  return v < 0 ? ojson(nullptr) : ojson(v);
+}
 
 ojson recordJson(const StabilityRecord& r) {
   return {{"model", r.model},
@@ -198,7 +345,115 @@ ojson recordJson(const StabilityRecord& r) {
           {"status", r.status},
           {"step", r.step < 0 ? ojson(nullptr) : ojson(r.step)},
           {"message", r.message},
-          {"wall_s", r.wallS}};
+          {"wall_s", r.wallS},
+          {"verdict", r.verdict},
+          {"reason", r.reason},
+          {"error_ratio", ratio(r.errorRatio)},
+          {"displacement_ratio", ratio(r.displacementRatio)},
+          {"relative_displacement", ratio(r.relativeDisplacement)},
+          {"tip_sag_m", ratio(r.tipSag)}};
+}
+
+/// The reference of a case: rest and final surface of reference_fem on the case's scene.
+struct CaseReference {
+  bool ok = false;
+  MatX3 rest, final;
+  std::string message;  ///< why there is none
+};
+
+/// Solves the case's reference in this process with the `run` pipeline (reference_fem on the
+/// case scene at dt = 1 ms: the quasi-static answer does not depend on the step), or reads it
+/// from the cache (kind "harness.stability_reference").
+CaseReference solveReference(const StabilityCase& c, PluginLoader& loader,
+                             const StabilityOptions& options, Cache& cache) {
+  CaseReference ref;
+  StabilityCase rc = c;
+  rc.dt = 1e-3;
+  ojson params = stabilityParams("reference_fem", options.quick);
+  if (c.scale != 1) {
+    // The reference spreads a point force over a disc (load_radius): scaled with the organ, so
+    // that the scaled cases stay the same problem.
+    try {
+      for (const ParamSpec& p : loader.load("reference_fem").params)
+        if (p.key == "load_radius")
+          params["load_radius"] = std::get<double>(p.defaultValue) * c.scale;
+    } catch (const std::exception&) {
+      // no reference plugin: runBenchmark below says so
+    }
+  }
+  const ojson scene = stabilityScene(rc, "reference_fem", params, options.quick);
+  const fs::path sceneFile = options.outDir / "reference" / "scenes" / (c.id + ".json");
+  fs::create_directories(sceneFile.parent_path());
+  writeFileAtomic(sceneFile, scene.dump(2) + "\n");
+  CacheKey key;
+  key.add("harness.stability_reference/1").add(scene.dump());
+  if (c.organ == "slivers")
+    key.add(sha256File((options.outDir / "meshes" / "slivers.obj").string()));
+  if (auto hit = cache.get("harness.stability_reference", key)) {
+    try {
+      ByteReader r(*hit);
+      r.matrix(ref.rest);
+      r.matrix(ref.final);
+      ref.ok = r.atEnd() && ref.rest.rows() == ref.final.rows();
+      if (ref.ok) return ref;
+    } catch (const std::exception&) {
+      // unreadable entry: solve again
+    }
+  }
+  try {
+    BenchmarkOptions bo;
+    bo.cacheDir = options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir);
+    bo.outDir = options.outDir / "reference" / "runs" / c.id;
+    fs::create_directories(bo.outDir);
+    const BenchmarkResult res = runBenchmark(sceneFile.string(), loader, bo);
+    if (res.runs.empty()) throw std::runtime_error("no run");
+    const RunRecord& run = res.runs.front();
+    if (run.status != RunStatus::Ok) {
+      ref.message = std::string("reference ") + statusName(run.status) + ": " + run.message;
+      return ref;
+    }
+    ref.rest = res.organ.surface.V;
+    ref.final = run.finalSurface;
+    ref.ok = ref.rest.rows() == ref.final.rows() && ref.rest.rows() > 0;
+    if (!ref.ok) {
+      ref.message = "reference surface has the wrong size";
+      return ref;
+    }
+    ByteWriter w;
+    w.matrix(ref.rest);
+    w.matrix(ref.final);
+    cache.put("harness.stability_reference", key, w.bytes());
+  } catch (const std::exception& e) {
+    ref.message = std::string("reference: ") + e.what();
+  }
+  return ref;
+}
+
+/// The final surface of a finished case run (results.json's first run), or nullopt.
+std::optional<MatX3> finalSurfaceOf(const fs::path& runDir) {
+  try {
+    std::ifstream in(runDir / "results.json");
+    if (!in) return std::nullopt;
+    const ojson doc = ojson::parse(in);
+    const ojson& run = doc.at("runs").at(0);
+    if (!run.contains("final_surface")) return std::nullopt;
+    return readObj((runDir / run.at("final_surface").get<std::string>()).string()).V;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+/// Mean downward displacement of the cantilever's tip face (x at its largest).
+double tipSag(const MatX3& surface, const MatX3& rest) {
+  const double xMax = rest.col(0).maxCoeff();
+  double sum = 0;
+  int n = 0;
+  for (Eigen::Index i = 0; i < rest.rows(); ++i) {
+    if (rest(i, 0) < xMax - 1e-9) continue;
+    sum += rest(i, 2) - surface(i, 2);
+    ++n;
+  }
+  return n ? sum / n : -1;
 }
 
 }  // namespace
@@ -227,6 +482,13 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
   const std::string exe = options.executable.empty() ? selfExecutable() : options.executable;
   fs::create_directories(options.outDir);
 
+  if (std::any_of(cases.begin(), cases.end(),
+                  [](const StabilityCase& c) { return c.organ == "slivers"; })) {
+    fs::create_directories(options.outDir / "meshes");
+    writeObj((options.outDir / "meshes" / "slivers.obj").string(),
+             sliverMesh(options.quick ? 0.4 : 0.7));
+  }
+
   /// A (model, case) to run: its record (status set when there is nothing to run).
   struct Pending {
     StabilityRecord record;
@@ -251,6 +513,13 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
           r.step = j["step"].is_null() ? -1 : j["step"].get<int>();
           r.message = j.value("message", "");
           r.wallS = j.value("wall_s", 0.0);
+          r.verdict = j.value("verdict", "");
+          r.reason = j.value("reason", "");
+          for (auto [key, v] : {std::pair{"error_ratio", &r.errorRatio},
+                                {"displacement_ratio", &r.displacementRatio},
+                                {"relative_displacement", &r.relativeDisplacement},
+                                {"tip_sag_m", &r.tipSag}})
+            *v = j.contains(key) && j[key].is_number() ? j[key].get<double>() : -1.0;
           r.resumed = true;
           records.push_back(r);
           continue;
@@ -340,6 +609,53 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     for (const auto& c : cases)
       if (byKey.count({plugin, c.id})) ordered.push_back(byKey.at({plugin, c.id}));
 
+  std::vector<std::string> referenceFailures;
+  // Verdicts: each case's reference solved once (or read from the cache), then every finished
+  // run compared with it (resumed records keep theirs).
+  std::map<std::string, StabilityCase> caseById;
+  for (const auto& c : cases) caseById[c.id] = c;
+  {
+    std::map<std::string, std::vector<StabilityRecord*>> toJudge;
+    for (auto& r : ordered)
+      if (r.verdict.empty()) toJudge[r.caseId].push_back(&r);
+    int references = 0;
+    for (const auto& [id, recs] : toJudge) {
+      const bool anyStable = std::any_of(
+          recs.begin(), recs.end(), [](const StabilityRecord* r) { return r->status == "stable"; });
+      references += caseById.at(id).reference && anyStable;
+    }
+    if (progress && references > 0) progress->addTotal(references);
+    Cache cache(options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir));
+    for (auto& [id, recs] : toJudge) {
+      const StabilityCase& c = caseById.at(id);
+      const bool anyStable = std::any_of(
+          recs.begin(), recs.end(), [](const StabilityRecord* r) { return r->status == "stable"; });
+      CaseReference ref;
+      if (c.reference && anyStable) {
+        if (progress) progress->start("reference " + id);
+        ref = solveReference(c, loader, options, cache);
+        if (progress) progress->finish("reference " + id, ref.ok ? "ok" : ref.message);
+      }
+      for (StabilityRecord* r : recs) {
+        const fs::path runDir = options.outDir / "runs" / r->model / r->caseId;
+        const std::optional<MatX3> final =
+            r->status == "stable" ? finalSurfaceOf(runDir) : std::nullopt;
+        const MatX3* model = final ? &*final : nullptr;
+        *r = judgeStability(*r, model, ref.ok ? &ref.final : nullptr, ref.rest,
+                            options.accuracyThreshold);
+        if (ref.ok && model && model->rows() == ref.rest.rows()) {
+          const Box box = boundingBox(ref.rest);
+          r->relativeDisplacement =
+              std::sqrt((*model - ref.rest).rowwise().squaredNorm().mean()) / box.size().maxCoeff();
+          if (c.beamTheory > 0) r->tipSag = tipSag(*model, ref.rest);
+        }
+        const fs::path caseFile = options.outDir / "cases" / r->model / (r->caseId + ".json");
+        if (fs::exists(caseFile)) writeFileAtomic(caseFile, recordJson(*r).dump(2) + "\n");
+      }
+      if (c.reference && anyStable && !ref.ok) referenceFailures.push_back(id + ": " + ref.message);
+    }
+  }
+
   Table t;
   t.name = "stability";
   t.title = "every model over stiff, large-step and extreme cases";
@@ -347,15 +663,49 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       "Each case ran in its own process (`deformbench run` on scenes/<model>/<case>.json) "
       "with a " +
           g(timeout) + " s limit; failed = threw, crashed (signal) or timed out.",
-      std::string("Organ: the cube phantom, bottom tenth fixed, gravity; ") +
+      std::string("Organ: the cube phantom, bottom tenth fixed, gravity, unless the case says "
+                  "otherwise (cantilever: the beam phantom, root face fixed; slivers: the liver "
+                  "phantom with needle triangles; scale: no gravity); ") +
           (options.quick ? "--quick case set." : "full case set.")};
-  t.columns = {{"model", "model"},   {"case", "case"},       {"group", "group"},
-               {"young", "E Pa"},    {"poisson", "nu"},      {"dt", "dt s"},
-               {"force", "force N"}, {"status", "status"},   {"step", "step"},
-               {"wall_s", "wall s"}, {"message", "message"}, {"scene", "scene"}};
-  std::map<std::string, StabilityCase> caseById;
-  for (const auto& c : cases) caseById[c.id] = c;
+  t.notes.push_back(
+      "verdict: the final surface against reference_fem's quasi-static answer on the same scene "
+      "(" +
+      std::string(options.quick ? "1500" : "5000") +
+      " target tets, solved once per case, cached): accurate when error_ratio = rmse_all / the "
+      "reference's RMS displacement <= " +
+      g(options.accuracyThreshold) +
+      "; else inaccurate, frozen (moves < 10% of the reference: displacement_ratio < 0.1), "
+      "too_soft (> 2x) or wrong_shape. unchecked: no quasi-static answer (pull, invert, "
+      "flatten), no reference, or unsupported. A model still moving at the end is compared as "
+      "it is.");
+  t.notes.push_back(
+      "poisson group: a model stiffer than the reference there (displacement_ratio well below 1) "
+      "is locking; scale group: the same problem at 1 cm, 10 cm and 1 m (force x s^2, density / "
+      "s^2, no gravity), so relative_displacement (RMS displacement / organ size) must not "
+      "change; cantilever group: tip_sag against beam theory (Euler-Bernoulli + Timoshenko "
+      "shear).");
+  t.columns = {{"model", "model"},
+               {"case", "case"},
+               {"group", "group"},
+               {"young", "E Pa"},
+               {"poisson", "nu"},
+               {"dt", "dt s"},
+               {"force", "force N"},
+               {"status", "status"},
+               {"step", "step"},
+               {"verdict", "verdict"},
+               {"reason", "reason"},
+               {"error_ratio", "error ratio"},
+               {"displacement_ratio", "displacement ratio"},
+               {"relative_displacement", "rel. displacement"},
+               {"tip_sag_m", "tip sag m"},
+               {"beam_theory_m", "beam theory m"},
+               {"wall_s", "wall s"},
+               {"message", "message"},
+               {"scene", "scene"}};
   int crashes = 0;
+  std::map<std::string, std::map<std::string, int>> verdicts;
+  std::map<std::string, std::vector<std::string>> inaccurate;
   for (const auto& r : ordered) {
     const StabilityCase& c = caseById.at(r.caseId);
     ojson row = recordJson(r);
@@ -364,11 +714,26 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     row["dt"] = c.dt;
     row["force"] = c.force;
     row["extra"] = c.extra;
+    row["beam_theory_m"] = c.beamTheory > 0 ? ojson(c.beamTheory) : ojson(nullptr);
     row["scene"] = "scenes/" + r.model + "/" + r.caseId + ".json";
     if (r.message.rfind("killed by signal", 0) == 0) ++crashes;
+    ++verdicts[r.model][r.verdict];
+    if (r.verdict == "inaccurate") inaccurate[r.model].push_back(r.caseId + " " + r.reason);
     t.rows.push_back(row);
   }
   t.notes.push_back("Crashes (killed by a signal): " + std::to_string(crashes) + ".");
+  for (const auto& [model, counts] : verdicts) {
+    std::string line = "Verdicts of " + model + ":";
+    for (const char* v : {"accurate", "inaccurate", "diverged", "failed", "unchecked"})
+      line += std::string(" ") + v + " " + std::to_string(counts.count(v) ? counts.at(v) : 0);
+    if (inaccurate.count(model)) {
+      line += " (inaccurate:";
+      for (const auto& what : inaccurate.at(model)) line += " " + what + ",";
+      line.back() = ')';
+    }
+    t.notes.push_back(line + ".");
+  }
+  for (const auto& f : referenceFailures) t.notes.push_back("No reference for " + f + ".");
   writeTable(t, options.outDir);
   return ordered;
 }

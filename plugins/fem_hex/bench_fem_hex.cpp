@@ -37,7 +37,7 @@ class BenchModel final : public HexFemModel {
 
 void runSteps(benchmark::State& state, long long elements, ElasticModel elastic,
               CorotationalSolver solver, CholeskySolver::Kind kind, bool allOrderings = true,
-              Real tolerance = 1e-4, bool graspedPreconditioner = false) {
+              Real tolerance = 1e-3, bool graspedPreconditioner = false) {
   Organ organ;
   organ.source = "phantom:liver";
   organ.surface = makePhantom("liver");

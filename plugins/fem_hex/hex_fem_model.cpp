@@ -153,6 +153,7 @@ PhaseTimes HexFemModel::phaseTimes() const {
 NumericCounters HexFemModel::numericCounters() const {
   return {{"rotation_not_converged", m_rotationNotConverged},
           {"pcg_not_converged", m_pcgNotConverged},
+          {"pcg_iterations", m_pcgIterations},
           {"ignored_grasp_nodes", m_ignoredGraspNodes},
           {"surface_vertices_outside_grid", m_embedding.outsidePoints}};
 }
@@ -398,7 +399,7 @@ void HexFemModel::reset() {
   m_touchedGrasped.clear();
   m_graspForces.clear();
   m_lastIterations = 0;
-  m_rotationNotConverged = m_pcgNotConverged = m_ignoredGraspNodes = 0;
+  m_rotationNotConverged = m_pcgNotConverged = m_ignoredGraspNodes = m_pcgIterations = 0;
   m_msAssembly = m_msSolve = m_msSurface = 0;
   if (m_numDofs > 0) {
     Eigen::Map<VecX>(m_A.valuePtr(), m_A.nonZeros()) = m_baseValues;
@@ -561,6 +562,12 @@ StepStatus HexFemModel::step(const StepInput& in) {
   const bool corot = m_config.elastic == ElasticModel::Corotational;
   if (corot) updateRotations();
 
+  // The scale of the right-hand side for the CG stopping test: its inertia and load part
+  // M v + h f_ext, filtered, in the D^-1 norm (see below).
+  m_z = m_mass.cwiseProduct(m_vOld) + h * m_fext;
+  filter(m_z);
+  const Real loadScale2 = m_z.cwiseAbs2().cwiseProduct(m_invDiag).sum();
+
   // r = b - A v0 = M (v - c1 v0) + h f_ext - K_R (h x + c2 v0 - h X), filtered.
   Eigen::Map<const VecX> x(m_x.data(), 3 * N);
   m_r = m_mass.cwiseProduct(m_vOld - m_c1 * m_v0) + h * m_fext;
@@ -592,14 +599,17 @@ StepStatus HexFemModel::step(const StepInput& in) {
       m_v += m_z;
     } else if (ok) {
       // CG on the filtered system, preconditioned by the rest (linear) system's Cholesky factor.
-      // Convergence is tested on the residual itself, as a mass-weighted velocity error estimate
-      // sqrt(r^T D^-1 r / total mass) (m/s, D the diagonal of the rest system), before paying for
-      // the next preconditioner solve: a warm start that is good enough costs no solve at all.
-      const Real tol2 = m_config.pcgTolerance * m_config.pcgTolerance * m_totalMass;
+      // Relative stopping test, so it does not depend on units, stiffness or mass:
+      //   r^T D^-1 r <= tol^2 max(b_l^T D^-1 b_l, r0^T D^-1 r0)
+      // with D the diagonal of the rest system, b_l = M v + h f_ext the inertia and load part of
+      // the right-hand side and r0 the warm start's residual. (b_l, not the whole right-hand
+      // side, whose load and elastic parts cancel at equilibrium.) At least one iteration is
+      // always taken: a warm start never passes for a solve.
       auto residual2 = [&] { return m_r.cwiseAbs2().cwiseProduct(m_invDiag).sum(); };
       Real res2 = residual2();
       if (!std::isfinite(res2)) ok = false;
-      bool converged = res2 <= tol2;
+      const Real tol2 = m_config.pcgTolerance * m_config.pcgTolerance * std::max(loadScale2, res2);
+      bool converged = false;
       Real rz = 0;
       for (int it = 0; ok && !converged && it < m_config.pcgMaxIterations; ++it) {
         ok = precondition(m_r, m_z);
@@ -616,6 +626,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
         const Real pq = m_p.dot(m_w);
         if (!(pq > 0) || !std::isfinite(pq)) {
           ok = std::isfinite(pq);
+          converged = res2 == 0;  // nothing to solve (no load, at rest)
           break;
         }
         const Real alpha = rz / pq;
@@ -626,6 +637,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
         converged = res2 <= tol2;
       }
       if (ok && !converged) ++m_pcgNotConverged;
+      m_pcgIterations += m_lastIterations;
     }
   }
 

@@ -51,7 +51,7 @@ struct HexFemConfig {
   CorotationalSolver solver = CorotationalSolver::Pcg;
   Real rayleighMass = 0;       ///< alpha, 1/s
   Real rayleighStiffness = 0;  ///< beta, s
-  Real pcgTolerance = 1e-4;    ///< m/s, on sqrt(r^T D^-1 r / total mass), D = diag(A0)
+  Real pcgTolerance = 1e-3;    ///< relative CG residual (see step()), D^-1 norm, D = diag(A0)
   int pcgMaxIterations = 50;
   PcgPreconditioner pcgPreconditioner = PcgPreconditioner::Rest;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
@@ -170,6 +170,7 @@ class HexFemModel : public Model {
   int m_lastIterations = 0;
   double m_msAssembly = 0, m_msSolve = 0, m_msSurface = 0;
   long long m_rotationNotConverged = 0, m_pcgNotConverged = 0, m_ignoredGraspNodes = 0;
+  long long m_pcgIterations = 0;  // CG iterations over the run
 };
 
 }  // namespace deform::fem_hex

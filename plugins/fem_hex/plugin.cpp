@@ -25,9 +25,11 @@ std::vector<ParamSpec> paramSpecs() {
                       "Rayleigh damping alpha (D = alpha M + beta K)"),
       ParamSpec::real("rayleigh_stiffness", "s", 0.01, 0.0, 10.0,
                       "Rayleigh damping beta (D = alpha M + beta K)"),
-      ParamSpec::real("pcg_tolerance", "m/s", 1e-4, 1e-15, 1.0,
-                      "CG stops when the velocity error estimate sqrt(r^T D^-1 r / total mass) "
-                      "falls below this (r residual, D diagonal of the system matrix)"),
+      ParamSpec::real("pcg_tolerance", "1", 1e-3, 1e-15, 1.0,
+                      "CG stops when sqrt(r^T D^-1 r) falls below this fraction of the "
+                      "right-hand side's scale: max(|M v + h f_ext|, |r0|) in the same norm (r "
+                      "residual, r0 the warm start's, D diagonal of the rest system); at least "
+                      "one iteration per step"),
       ParamSpec::choice("pcg_preconditioner", "rest", {"rest", "rest_grasped"},
                         "rest: Cholesky of the rest system, factored once and applied filtered; "
                         "rest_grasped: refactorised with the grasped nodes eliminated whenever "

@@ -33,6 +33,10 @@ std::vector<ParamSpec> paramSpecs() {
                       "implicit Euler: relative residual of the conjugate gradient solve"),
       ParamSpec::integer("cg_max_iterations", 200, 1, 100000,
                          "implicit Euler: conjugate gradient iteration cap"),
+      ParamSpec::integer("substeps", 0, 0, kMaxSubsteps,
+                         "explicit and symplectic Euler: substeps per time step; 0 = automatic, "
+                         "enough to stay below the estimated stability limit; 1 = none (the "
+                         "papers' experiments, which may diverge)"),
   };
 }
 
@@ -48,6 +52,7 @@ MassSpringConfig configFromParams(const ParamValues& p) {
   c.massDamping = p.real("mass_damping");
   c.cgTolerance = p.real("cg_tolerance");
   c.cgMaxIterations = static_cast<int>(p.integer("cg_max_iterations"));
+  c.substeps = static_cast<int>(p.integer("substeps"));
   return c;
 }
 
@@ -62,6 +67,57 @@ Real triangleArea(const MatX3& V, const MatX3i& F, Eigen::Index f) {
 
 void MassSpringModel::init(const ModelSetup& setup) {
   init(setup.organ, configFromParams(setup.params));
+  m_setupDt = setup.dt;
+}
+
+Real MassSpringModel::stableStep() const {
+  if (m_config.integrator == Integrator::ImplicitEuler)
+    return std::numeric_limits<Real>::infinity();
+  // Block Gershgorin bounds over the free nodes: the largest eigenvalue of M^-1 K is at most
+  // max_i 2 sum_{springs at i} k / m_i (each spring's 3x3 block has norm k), and of M^-1 C at
+  // most max_i 2 sum c / m_i (axial dashpots) plus the mass damping alpha.
+  const int N = static_cast<int>(m_x.rows());
+  std::vector<Real> sumK(N, 0.0), sumC(N, 0.0);
+  Real minRatio = std::numeric_limits<Real>::infinity();  // min c/k over the springs
+  for (const Spring& s : m_springs) {
+    if (m_invMass[s.a] == 0.0 && m_invMass[s.b] == 0.0) continue;
+    sumK[s.a] += s.k;
+    sumK[s.b] += s.k;
+    sumC[s.a] += s.c;
+    sumC[s.b] += s.c;
+    if (s.k > 0) minRatio = std::min(minRatio, s.c / s.k);
+  }
+  Real w2 = 0, gamma = 0;
+  for (int i = 0; i < N; ++i) {
+    if (m_invMass[i] == 0.0) continue;
+    w2 = std::max(w2, 2 * sumK[i] * m_invMass[i]);
+    gamma = std::max(gamma, 2 * sumC[i] * m_invMass[i]);
+  }
+  if (!(w2 > 0)) return std::numeric_limits<Real>::infinity();
+  const Real alpha = m_config.massDamping;
+  gamma += alpha;
+  Real h;
+  if (m_config.integrator == Integrator::SymplecticEuler) {
+    // A mode x'' = -w^2 x - g x' under symplectic Euler is stable for w^2 h^2 + 2 g h < 4.
+    h = (-gamma + std::sqrt(gamma * gamma + 4 * w2)) / w2;
+  } else {
+    // Explicit Euler damps a mode only if h < g / w^2 (undamped modes always grow); with the
+    // dashpots close to stiffness-proportional (c = beta k) that is h < beta + alpha / w^2 for
+    // every mode, and h < 2 / g for the overdamped ones.
+    const Real beta = std::isfinite(minRatio) ? minRatio : 0.0;
+    h = beta + alpha / w2;
+    if (gamma > 0) h = std::min(h, 2 / gamma);
+  }
+  return kStabilitySafety * h;
+}
+
+int MassSpringModel::substepsFor(Real dt) const {
+  if (m_config.integrator == Integrator::ImplicitEuler) return 1;
+  if (m_config.substeps > 0) return m_config.substeps;
+  const Real h = stableStep();
+  if (!(dt > 0) || !(h < dt)) return 1;
+  if (!(h > 0)) return kMaxSubsteps;
+  return static_cast<int>(std::min<Real>(kMaxSubsteps, std::ceil(dt / h)));
 }
 
 void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
@@ -69,6 +125,7 @@ void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
   if (!(mat.young > 0) || !(mat.density > 0))
     throw InputError(organ.source, "organ.material", "massspring needs young > 0, density > 0");
   m_config = config;
+  m_setupDt = 0;
   m_springs.clear();
   m_edgeSprings = m_bendingSprings = 0;
   if (organ.volume) {
@@ -329,45 +386,65 @@ StepStatus MassSpringModel::step(const StepInput& in) {
   if (m_config.integrator == Integrator::ImplicitEuler) {
     status = stepImplicit(in, h);
   } else {
-    springForces(m_x, m_v, m_f);
-    for (const auto& [node, force] : m_nodeForces) m_f.row(node) += force.transpose();
-    if (penalty) m_f += m_contactForce;
+    // Explicit and symplectic Euler: n substeps of h / n (substepsFor), the point loads and
+    // penalty contact forces held over the step, grasped nodes moved linearly to their targets.
+    const int n = substepsFor(h);
+    m_lastSubsteps = n;
+    const Real hs = h / n;
     const auto t1 = Clock::now();
+    double msForces = 0;
     const int N = static_cast<int>(m_x.rows());
     const Real alpha = m_config.massDamping;
     const bool symplectic = m_config.integrator == Integrator::SymplecticEuler;
-    Real* X = m_x.data();
-    Real* V = m_v.data();
-    const Real* Fp = m_f.data();
-    // The divergence check (as checkDivergence()) rides along: grasped nodes end on their
-    // targets, which are finite and inside the box by construction.
-    // |x - c| <= half and |v| <= max are false for NaN and Inf too: one integer flag, no
-    // floating-point reduction.
     const Real c[3] = {m_boxCenter[0], m_boxCenter[1], m_boxCenter[2]};
     const Real half = m_boxHalf, vmax = std::numeric_limits<Real>::max();
     int ok = 1;
-    for (int i = 0; i < N; ++i) {
-      const Real w = m_invMass[i];
-      for (int k = 0; k < 3; ++k) {
-        if (w != 0.0) {  // fixed (or massless) nodes stay at rest
-          // a = f/m + g - alpha v (mass-proportional damping)
-          const Real a = Fp[3 * i + k] * w + in.gravity[k] - alpha * V[3 * i + k];
-          if (symplectic) {
-            V[3 * i + k] += h * a;
-            X[3 * i + k] += h * V[3 * i + k];
-          } else {
-            X[3 * i + k] += h * V[3 * i + k];
-            V[3 * i + k] += h * a;
+    for (int sub = 0; sub < n && ok; ++sub) {
+      const auto tf = Clock::now();
+      springForces(m_x, m_v, m_f);
+      for (const auto& [node, force] : m_nodeForces) m_f.row(node) += force.transpose();
+      if (penalty) m_f += m_contactForce;
+      msForces += std::chrono::duration<double, std::milli>(Clock::now() - tf).count();
+      Real* X = m_x.data();
+      Real* V = m_v.data();
+      const Real* Fp = m_f.data();
+      // The divergence check (as checkDivergence()) rides along: grasped nodes end on their
+      // targets, which are finite and inside the box by construction.
+      // |x - c| <= half and |v| <= max are false for NaN and Inf too: one integer flag, no
+      // floating-point reduction.
+      for (int i = 0; i < N; ++i) {
+        const Real w = m_invMass[i];
+        for (int k = 0; k < 3; ++k) {
+          if (w != 0.0) {  // fixed (or massless) nodes stay at rest
+            // a = f/m + g - alpha v (mass-proportional damping)
+            const Real a = Fp[3 * i + k] * w + in.gravity[k] - alpha * V[3 * i + k];
+            if (symplectic) {
+              V[3 * i + k] += hs * a;
+              X[3 * i + k] += hs * V[3 * i + k];
+            } else {
+              X[3 * i + k] += hs * V[3 * i + k];
+              V[3 * i + k] += hs * a;
+            }
+          }
+          ok &= static_cast<int>(std::abs(X[3 * i + k] - c[k]) <= half) &
+                static_cast<int>(std::abs(V[3 * i + k]) <= vmax);
+        }
+      }
+      if (sub + 1 < n) {
+        const Real t = Real(sub + 1) / n;
+        for (const NodeGrasp& g : m_nodeGrasps) {
+          for (size_t k = 0; k < g.nodes.size(); ++k) {
+            const int i = g.nodes[k];
+            m_v.row(i) = (g.targets.row(k) - m_xOld.row(i)) / h;
+            m_x.row(i) = m_xOld.row(i) + t * (g.targets.row(k) - m_xOld.row(i));
           }
         }
-        ok &= static_cast<int>(std::abs(X[3 * i + k] - c[k]) <= half) &
-              static_cast<int>(std::abs(V[3 * i + k]) <= vmax);
       }
     }
     applyConstraints(in, h, m_xOld);
     const auto t2 = Clock::now();
-    m_phase["forces"] = std::chrono::duration<double, std::milli>(t1 - t0).count();
-    m_phase["integrate"] = std::chrono::duration<double, std::milli>(t2 - t1).count();
+    m_phase["forces"] = std::chrono::duration<double, std::milli>(t1 - t0).count() + msForces;
+    m_phase["integrate"] = std::chrono::duration<double, std::milli>(t2 - t1).count() - msForces;
     status = ok ? StepStatus::Ok : StepStatus::Diverged;
   }
   if (in.contact && !penalty) {
@@ -518,7 +595,8 @@ Counts MassSpringModel::counts() const {
           {"elements", m_elements},
           {"springs", static_cast<long long>(m_springs.size())},
           {"edge_springs", m_edgeSprings},
-          {"bending_springs", m_bendingSprings}};
+          {"bending_springs", m_bendingSprings},
+          {"substeps", m_setupDt > 0 ? substepsFor(m_setupDt) : 1}};
 }
 
 NumericCounters MassSpringModel::numericCounters() const {

@@ -28,7 +28,13 @@ struct MassSpringConfig {
   Real massDamping = 1.0;   ///< 1/s, force -massDamping * m * v on every node
   Real cgTolerance = 1e-6;  ///< relative residual of the implicit solve
   int cgMaxIterations = 200;
+  int substeps = 0;  ///< explicit/symplectic Euler substeps per step; 0 = automatic
 };
+
+/// Upper bound of the substeps parameter (and of the automatic choice).
+constexpr int kMaxSubsteps = 100000;
+/// The automatic substep is this fraction of the estimated stability limit.
+constexpr Real kStabilitySafety = 0.5;
 
 std::vector<ParamSpec> paramSpecs();
 /// Reads validated parameters; throws InputError on an unknown integrator.
@@ -53,6 +59,16 @@ class MassSpringModel final : public Model {
   const VecX& masses() const { return m_mass; }
   const std::vector<Spring>& springs() const { return m_springs; }
   const MatX3& velocities() const { return m_v; }
+
+  /// Explicit/symplectic Euler: the largest step estimated stable (spring stiffness, dashpots
+  /// and mass damping over the node masses, Gershgorin bounds) times kStabilitySafety; +inf for
+  /// implicit Euler or without free springs.
+  Real stableStep() const;
+  /// Substeps a step of dt takes: the substeps parameter, or automatic (ceil(dt / stableStep()),
+  /// at most kMaxSubsteps); 1 for implicit Euler.
+  int substepsFor(Real dt) const;
+  /// Substeps the last explicit/symplectic step took.
+  int lastSubsteps() const { return m_lastSubsteps; }
 
   /// Internal spring forces (elastic + axial damping) at positions x, velocities v: #N by 3, N.
   /// Counts degenerate springs.
@@ -97,6 +113,8 @@ class MassSpringModel final : public Model {
   std::vector<int> m_graspedScratch, m_graspSpringsFor, m_graspSprings;
   Vec3 m_boxCenter = Vec3::Zero();
   Real m_boxHalf = 0;
+  Real m_setupDt = 0;  // the scene's dt given at init (for counts()["substeps"])
+  int m_lastSubsteps = 1;
   long long m_degenerate = 0, m_cgNotConverged = 0, m_cgIterations = 0;
   std::vector<Vec3> m_graspForces;
   PhaseTimes m_phase;

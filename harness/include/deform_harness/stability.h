@@ -8,10 +8,20 @@
 //   diverged     NaN/Inf, left the divergence box, or the model reported divergence (with step)
 //   failed       the model threw, the child died from a signal, or hit the time limit
 //   unsupported  the case needs a capability the model lacks
+// and a verdict beside it: every case with a quasi-static answer (all but pull, invert and
+// flatten) gets a reference (reference_fem on the same scene, solved once per case in this process
+// and kept in the cache), and the model's final surface is compared with it:
+//   accurate     error_ratio = rmse_all / (the reference's RMS displacement) <= the threshold
+//                (20% by default)
+//   inaccurate   above it, with a reason: frozen (the model's RMS displacement is below 10% of the
+//                reference's), too_soft (above twice it) or wrong_shape
+//   diverged, failed   as the status
+//   unchecked    no reference (none for the case, it failed, or it does not move), or unsupported
 // Each finished case is written atomically to DIR/cases/<model>/<case>.json, so --resume skips
 // it. Output: DIR/stability.{md,csv,json} and DIR/stability_<model>.png (plot_stability.py).
 #pragma once
 
+#include <deform/mesh.h>
 #include <deform/plugin_loader.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/progress.h>
@@ -25,12 +35,30 @@ namespace deform::harness {
 
 struct StabilityCase {
   std::string id;     ///< "E1e+06_dt0.0333"
-  std::string group;  ///< "stiffness_dt" (the map), "poisson", "force", "pull", "invert", ...
+  std::string group;  ///< "stiffness_dt" (the map), "poisson", "force", "cantilever", "scale",
+                      ///< "slivers", "pull", "invert", "flatten"
   double young = 5500, poisson = 0.3, dt = 1e-3;
   double force = 0;   ///< N, downward point force at the top (0: none)
   std::string extra;  ///< "pull", "invert", "flatten" or ""
   std::string description;
+  std::string organ = "cube";  ///< "cube" (phantom), "beam" (the cantilever), "slivers"
+  double scale = 1;            ///< lengths x scale, force x scale^2, density / scale^2, no gravity
+  double density = 1000;       ///< kg/m^3 before scaling
+  bool gravity = true;
+  bool reference = true;  ///< has a quasi-static answer: compared with reference_fem
+  double beamTheory = 0;  ///< m, cantilever tip sag by beam theory (0: not a cantilever)
+  double duration = 0;    ///< s; 0: the sweep's default
 };
+
+/// Tip sag of a clamped square cantilever (side t, length L) under its own weight: Euler-Bernoulli
+/// q L^4 / (8 E I) plus Timoshenko shear q L^2 / (2 kappa G A), q = rho g t^2, kappa = 5/6.
+double cantileverSag(double young, double poisson, double density, double gravity, double length,
+                     double side);
+
+/// The organ of the "slivers" case: the liver phantom at the resolution with every fourth edge
+/// split at 2% of its length, so that each split leaves two needle triangles (about 1.1 degrees at
+/// the tip) beside two ordinary ones. Same geometry as the phantom; closed and manifold.
+SurfaceMesh sliverMesh(double resolution);
 
 /// The case set; quick: a subset (the corners of the map and one of each extreme).
 std::vector<StabilityCase> stabilityCases(bool quick);
@@ -46,6 +74,7 @@ struct StabilityOptions {
   std::vector<std::string> pluginDirs;  ///< passed on as --plugin-dir
   std::string cacheDir;                 ///< passed on as --cache-dir ("" = default)
   int jobs = 1;                         ///< children at once
+  double accuracyThreshold = 0.2;       ///< accurate: error_ratio at most this
 };
 
 struct StabilityRecord {
@@ -55,7 +84,20 @@ struct StabilityRecord {
   std::string message;
   double wallS = 0;
   bool resumed = false;  ///< read back from a previous run
+  /// accurate | inaccurate | diverged | failed | unchecked ("" until judged)
+  std::string verdict;
+  std::string reason;                ///< inaccurate: frozen | too_soft | wrong_shape
+  double errorRatio = -1;            ///< rmse_all / reference RMS displacement; < 0: none
+  double displacementRatio = -1;     ///< model / reference RMS displacement; < 0: none
+  double relativeDisplacement = -1;  ///< model RMS displacement / organ size; < 0: none
+  double tipSag = -1;                ///< m, cantilever: mean downward displacement of the tip face
 };
+
+/// The verdict of one finished case. model: its final surface (nullptr if none); reference: the
+/// reference's final surface at the same instant (nullptr: no reference); rest: the rest surface.
+/// Fills verdict, reason, errorRatio and displacementRatio of a copy of r.
+StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX3* reference,
+                               const MatX3& rest, double threshold = 0.2);
 
 /// Runs the sweep; writes every output file. Returns every record (resumed ones included).
 std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityOptions& options,
