@@ -237,6 +237,7 @@ ojson stabilityScene(const StabilityCase& c, const std::string& plugin, const oj
     j["loads"] = ojson::array({{{"type", "point_force"},
                                 {"at", vec(top)},
                                 {"force", {0, 0, -c.force}},
+                                {"radius", 0.01 * c.scale},  // the patch scales with the organ
                                 {"start", 0.0},
                                 {"end", 1e3}}});
   }
@@ -370,17 +371,6 @@ CaseReference solveReference(const StabilityCase& c, PluginLoader& loader,
   StabilityCase rc = c;
   rc.dt = 1e-3;
   ojson params = stabilityParams("reference_fem", options.quick);
-  if (c.scale != 1) {
-    // The reference spreads a point force over a disc (load_radius): scaled with the organ, so
-    // that the scaled cases stay the same problem.
-    try {
-      for (const ParamSpec& p : loader.load("reference_fem").params)
-        if (p.key == "load_radius")
-          params["load_radius"] = std::get<double>(p.defaultValue) * c.scale;
-    } catch (const std::exception&) {
-      // no reference plugin: runBenchmark below says so
-    }
-  }
   const ojson scene = stabilityScene(rc, "reference_fem", params, options.quick);
   const fs::path sceneFile = options.outDir / "reference" / "scenes" / (c.id + ".json");
   fs::create_directories(sceneFile.parent_path());
