@@ -10,6 +10,7 @@ PACKAGES=(
   clang libclang-rt-14-dev llvm clang-format
   libopenblas0-serial liblapack3
   python3-matplotlib python3-numpy
+  openmpi-bin libopenmpi-dev
 )
 missing=()
 for p in "${PACKAGES[@]}"; do
