@@ -9,6 +9,7 @@
 #include <deform_harness/bench.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/convergence.h>
+#include <deform_harness/dispatch.h>
 #include <deform_harness/progress.h>
 #include <deform_harness/results.h>
 #include <deform_harness/runner.h>
@@ -341,6 +342,57 @@ fs::path makeOutDir(const std::string& out) {
   return fs::path(out);
 }
 
+// --jobs, --mpi, --slurm DIR (dispatch.h): where the cases of a long command run.
+struct DispatchArgs {
+  int jobs = 1;
+  bool mpi = false;
+  std::string slurm;
+};
+
+/// The command line as given, for the Slurm collect step (set in main()).
+std::vector<std::string> g_commandLine;
+
+/// The same command for the collect step: no --slurm, with --resume.
+std::vector<std::string> collectCommand() {
+  std::vector<std::string> out = {selfExecutable()};
+  bool resume = false;
+  for (size_t i = 1; i < g_commandLine.size(); ++i) {
+    const std::string& a = g_commandLine[i];
+    if (a == "--slurm") {
+      ++i;
+      continue;
+    }
+    if (a.rfind("--slurm=", 0) == 0) continue;
+    if (a == "--resume") resume = true;
+    out.push_back(a);
+  }
+  if (!resume) out.push_back("--resume");
+  return out;
+}
+
+std::unique_ptr<Dispatcher> makeDispatcher(const DispatchArgs& d) {
+  if (d.mpi)
+    return mpiDispatcher([](const std::string& line) { std::cerr << line << "\n" << std::flush; });
+  if (!d.slurm.empty())
+    return slurmDispatcher(d.slurm, selfExecutable(), collectCommand(), fs::current_path());
+  return localDispatcher(d.jobs);
+}
+
+void addDispatch(CLI::App* cmd, DispatchArgs& d) {
+  auto* jobs = cmd->add_option("--jobs", d.jobs, "cases at once, each its own process (default 1)")
+                   ->check(CLI::PositiveNumber);
+  auto* slurm = cmd->add_option("--slurm", d.slurm,
+                                "write a Slurm job array of the cases and a collect step into "
+                                "this folder (submits nothing; see README)");
+  slurm->excludes(jobs);
+  if (mpiAvailable()) {
+    auto* mpi = cmd->add_flag("--mpi", d.mpi,
+                              "under mpirun: rank 0 hands out the cases to the other ranks");
+    mpi->excludes(jobs);
+    mpi->excludes(slurm);
+  }
+}
+
 /// Runs a plotting script; one line when matplotlib (or Python) is missing. Returns true on
 /// success.
 bool plot(const std::string& script, const std::vector<std::string>& args) {
@@ -365,6 +417,7 @@ struct TablesArgs {
   bool resume = false;
   bool inProcess = false;
   bool noReferenceCheck = false;
+  DispatchArgs dispatch;
 };
 
 int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
@@ -378,6 +431,11 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
   o.referenceCheck = !ta.noReferenceCheck;
   if (ta.resume && ta.inProcess)
     throw InputError("--resume", "", "needs the cases in child processes (drop --in-process)");
+  const bool dispatched = ta.dispatch.jobs > 1 || ta.dispatch.mpi || !ta.dispatch.slurm.empty();
+  if (dispatched && ta.inProcess)
+    throw InputError("--in-process", "", "--jobs, --mpi and --slurm need child processes");
+  const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(ta.dispatch);
+  o.cases.dispatcher = dispatcher.get();
   if (!ta.inProcess) {
     ChildCaseOptions child;
     child.executable = selfExecutable();
@@ -440,7 +498,7 @@ struct StabilityArgs {
   bool resume = false;
   std::vector<std::string> models, cases;
   double timeout = 0;
-  int jobs = 1;
+  DispatchArgs dispatch;
   bool noPlot = false;
 };
 
@@ -453,7 +511,9 @@ int cmdStability(const StabilityArgs& a) {
   o.models = a.models;
   o.cases = a.cases;
   o.timeoutS = a.timeout;
-  o.jobs = a.jobs;
+  o.jobs = a.dispatch.jobs;
+  const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(a.dispatch);
+  o.dispatcher = dispatcher.get();
   o.pluginDirs = a.common.pluginDirs;
   if (a.common.noCache) {
     // The child runs use their own cache; --no-cache keeps them out of the user's.
@@ -646,6 +706,7 @@ int realMain(int argc, char** argv) {
   tables->add_flag("--in-process", ta.inProcess,
                    "run the cases in this process (no time limit, a crash ends the command)");
   addCommon(tables, ta.common, true);
+  addDispatch(tables, ta.dispatch);
 
   std::string sweepScene;
   CommonArgs sa;
@@ -667,8 +728,7 @@ int realMain(int argc, char** argv) {
   stability->add_option("--case", st.cases, "case id to run (repeatable; default: the set)");
   stability->add_option("--timeout", st.timeout, "seconds per case (default 120, 60 with --quick)")
       ->check(CLI::PositiveNumber);
-  stability->add_option("--jobs", st.jobs, "cases at once (default 1: timings stay clean)")
-      ->check(CLI::PositiveNumber);
+  addDispatch(stability, st.dispatch);
   stability->add_flag("--no-plot", st.noPlot, "write the data only");
   addCommon(stability, st.common, true);
 
@@ -710,6 +770,12 @@ int realMain(int argc, char** argv) {
                      "prints it)");
   addCommon(converge, ca, false);
 
+  std::vector<std::string> workTasks;
+  CLI::App* work =
+      app.add_subcommand("work", "run task files written by --slurm (one array task each)");
+  work->group("");  // internal: the Slurm array's command
+  work->add_option("task", workTasks, "task file (JSON)")->required();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -740,6 +806,24 @@ int realMain(int argc, char** argv) {
     ba.common.pluginDirs = pluginDirs;
     return cmdBench(ba);
   }
+  if (*work) {
+    for (const std::string& f : workTasks) {
+      std::ifstream in(f);
+      if (!in) throw InputError(f, "", "cannot read the task file");
+      nlohmann::ordered_json task;
+      try {
+        task = nlohmann::ordered_json::parse(in);
+      } catch (const std::exception& e) {
+        throw InputError(f, "", oneLine(e.what()));
+      }
+      try {
+        executeTask(task);
+      } catch (const std::invalid_argument& e) {
+        throw InputError(f, "kind", e.what());
+      }
+    }
+    return 0;
+  }
   if (*converge) {
     ca.pluginDirs = pluginDirs;
     return cmdConverge(convScene, ca, convElements, convOfReference);
@@ -749,11 +833,43 @@ int realMain(int argc, char** argv) {
 
 }  // namespace
 
+namespace {
+int guardedMain(int argc, char** argv);
+}  // namespace
+
 int main(int argc, char** argv) {
   // Before anything starts threads: timings are single-threaded by contract.
   forceSingleThreadedNumerics();
+  g_commandLine.assign(argv, argv + argc);
+  // --mpi: every rank starts MPI; ranks > 0 serve cases until rank 0 is done (dispatch.h).
+  const bool mpi =
+      std::find(g_commandLine.begin(), g_commandLine.end(), "--mpi") != g_commandLine.end();
+  if (mpi && !mpiAvailable()) {
+    std::cerr << "deformbench: --mpi: this build has no MPI (install libopenmpi-dev and "
+                 "reconfigure)\n";
+    return kExitBadInput;
+  }
+  if (mpi) {
+    const char* lost = std::getenv("DEFORM_MPI_LOST_AFTER");
+    int code = 0;
+    if (!mpiStart(argc, argv, lost ? std::atof(lost) : 30.0, code)) return code;
+  }
+  const int code = guardedMain(argc, argv);
+  if (mpi) {
+    std::cout.flush();
+    mpiStop(code);
+  }
+  return code;
+}
+
+namespace {
+
+int guardedMain(int argc, char** argv) {
   try {
     return realMain(argc, argv);
+  } catch (const PlanWritten& e) {
+    std::cout << e.what() << "\n";
+    return 0;
   } catch (const InputError& e) {
     std::cout.flush();
     std::cerr << "deformbench: " << oneLine(e.what()) << "\n";
@@ -771,3 +887,5 @@ int main(int argc, char** argv) {
     return kExitInternal;
   }
 }
+
+}  // namespace

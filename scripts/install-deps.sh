@@ -11,6 +11,7 @@ PACKAGES=(
   libopenblas0-serial liblapack3
   python3-matplotlib python3-numpy
   libjs-three chromium python3-pil  # the report's 3D viewer (three.js) and its browser test
+  openmpi-bin libopenmpi-dev
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

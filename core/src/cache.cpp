@@ -2,6 +2,7 @@
 #include <deform/error.h>
 #include <fcntl.h>
 #include <openssl/evp.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -352,18 +353,26 @@ std::optional<std::vector<char>> Cache::get(const std::string& kind, const Cache
     return std::nullopt;
   }
   const fs::path path = entryPath(kind, hex);
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) {
+  // Read through one descriptor: what is checked is the file that was opened, even when a
+  // concurrent writer renames a new entry into place meanwhile.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  struct stat st {};
+  if (fd < 0 || ::fstat(fd, &st) != 0) {
+    if (fd >= 0) ::close(fd);
     m_events.push_back({kind, hex, EventKind::Miss});
     return std::nullopt;
   }
   // Payloads can be large (dense BEM matrices): read once, straight into the result buffer.
-  const std::streamoff size = in.tellg();
-  std::vector<char> bytes(size > 0 ? size_t(size) : 0);
-  in.seekg(0);
-  in.read(bytes.data(), std::streamsize(bytes.size()));
-  const bool readOk = size >= 0 && in.gcount() == std::streamsize(bytes.size());
-  in.close();
+  std::vector<char> bytes(st.st_size > 0 ? size_t(st.st_size) : 0);
+  size_t got = 0;
+  while (got < bytes.size()) {
+    const ssize_t n = ::read(fd, bytes.data() + got, bytes.size() - got);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    got += size_t(n);
+  }
+  ::close(fd);
+  const bool readOk = got == bytes.size();
 
   Digest keyDigest{};
   fromHex(hex, keyDigest);
@@ -377,8 +386,10 @@ std::optional<std::vector<char>> Cache::get(const std::string& kind, const Cache
     ok = std::memcmp(bytes.data() + 56, d.data(), 32) == 0;
   }
   if (!ok) {
-    std::error_code ec;
-    fs::remove(path, ec);  // best effort; a concurrent writer may already have replaced it
+    // Remove the bad entry unless a concurrent writer has already renamed a new one into place.
+    struct stat now {};
+    if (::stat(path.c_str(), &now) == 0 && now.st_ino == st.st_ino && now.st_dev == st.st_dev)
+      ::unlink(path.c_str());
     m_events.push_back({kind, hex, EventKind::Corrupt});
     return std::nullopt;
   }

@@ -2,6 +2,7 @@
 #include <deform/cache.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/child_process.h>
+#include <deform_harness/dispatch.h>
 #include <deform_harness/results.h>
 
 #include <algorithm>
@@ -76,97 +77,70 @@ void readCase(CaseResult& c, const ojson& caseDoc) {
   c.result = std::move(b);
 }
 
-/// The case in a child process (see ChildCaseOptions), writing outDir/case.json last.
-void runCaseInChild(CaseResult& c, const ojson& pruned, const fs::path& runScene,
-                    const CaseOptions& options) {
-  const ChildCaseOptions& co = *options.child;
-  const auto start = Clock::now();
-  const auto job = [&](bool noReference, const std::string& log) {
-    ChildJob j;
-    j.argv = {co.executable};
-    j.argv.insert(j.argv.end(), co.pluginArgs.begin(), co.pluginArgs.end());
-    j.argv.insert(j.argv.end(), {"run", runScene.string(), "--out", c.outDir.string()});
-    if (options.cacheDir) {
-      if (options.cacheDir->empty()) {
-        j.argv.push_back("--no-cache");
-      } else {
-        j.argv.insert(j.argv.end(), {"--cache-dir", options.cacheDir->string()});
-      }
-    }
-    if (options.explain) j.argv.push_back("--explain");
-    if (options.run.maxSteps > 0)
-      j.argv.insert(j.argv.end(), {"--steps", std::to_string(options.run.maxSteps)});
-    if (noReference) j.argv.push_back("--no-reference");
-    j.log = c.outDir / log;
-    return j;
-  };
-  const auto failureOf = [&](const ChildOutcome& o, const ChildJob& j) {
-    std::string f = childFailure(o, co.timeoutS, lastLogLine(j.log, 300));
-    if (f.empty() && !fs::exists(c.outDir / "results.json")) f = "exit code 0 without results.json";
-    return f;
-  };
-  const auto forwardExplain = [&](const ChildJob& j) {
-    if (!options.explain) return;
-    std::istringstream lines(readText(j.log));
-    for (std::string line; std::getline(lines, line);)
-      if (line.rfind("explain: ", 0) == 0) options.explain(line.substr(9));
-  };
-
-  ojson caseDoc = {{"format", "deformbench-case/1"}, {"failed_runs", ojson::array()}};
-  fs::remove(c.outDir / "results.json");
-  const ChildJob first = job(false, "log.txt");
-  const std::string failure = failureOf(runChild(first, co.timeoutS), first);
-  forwardExplain(first);
-  caseDoc["child"] = failure.empty() ? "ok" : failure;
-  if (!failure.empty()) {
-    const bool hasReference = pruned.contains("reference");
-    std::string second;
-    if (hasReference) {
-      const ChildJob retry = job(true, "log_no_reference.txt");
-      second = failureOf(runChild(retry, co.timeoutS), retry);
-      forwardExplain(retry);
-      caseDoc["child_no_reference"] = second.empty() ? "ok" : second;
-    }
-    if (hasReference && second.empty()) {
-      caseDoc["failed_runs"].push_back(
-          {{"label", pruned["reference"].value("label", pruned["reference"].value("plugin", ""))},
-           {"plugin", pruned["reference"].value("plugin", "")},
-           {"role", "reference"},
-           {"message", failure + " (with the reference; the models then ran without it)"}});
-    } else {
-      fs::remove(c.outDir / "results.json");
-      for (const auto& m : pruned["models"])
-        caseDoc["failed_runs"].push_back({{"label", m.value("label", m.value("plugin", ""))},
-                                          {"plugin", m.value("plugin", "")},
-                                          {"role", "model"},
-                                          {"message", failure}});
-      if (hasReference)
-        caseDoc["failed_runs"].push_back(
-            {{"label", pruned["reference"].value("label", pruned["reference"].value("plugin", ""))},
-             {"plugin", pruned["reference"].value("plugin", "")},
-             {"role", "reference"},
-             {"message", failure}});
-    }
-  }
-  caseDoc["wall_s"] = std::chrono::duration<double>(Clock::now() - start).count();
-  writeFileAtomic(c.outDir / "case.json", caseDoc.dump(2) + "\n");
-  readCase(c, caseDoc);
+/// Label and plugin of a model or reference entry.
+ojson runEntry(const ojson& m) {
+  return {{"label", m.value("label", m.value("plugin", ""))}, {"plugin", m.value("plugin", "")}};
 }
 
-}  // namespace
+/// The task of a case in a child process (see ChildCaseOptions and dispatch.h).
+ojson caseTask(const ojson& pruned, const fs::path& runScene, const fs::path& outDir,
+               const CaseOptions& options) {
+  const ChildCaseOptions& co = *options.child;
+  std::vector<std::string> argv = {co.executable};
+  argv.insert(argv.end(), co.pluginArgs.begin(), co.pluginArgs.end());
+  argv.insert(argv.end(),
+              {"run", fs::absolute(runScene).string(), "--out", fs::absolute(outDir).string()});
+  if (options.cacheDir) {
+    if (options.cacheDir->empty()) {
+      argv.push_back("--no-cache");
+    } else {
+      argv.insert(argv.end(), {"--cache-dir", fs::absolute(*options.cacheDir).string()});
+    }
+  }
+  if (options.explain) argv.push_back("--explain");
+  if (options.run.maxSteps > 0)
+    argv.insert(argv.end(), {"--steps", std::to_string(options.run.maxSteps)});
+  ojson models = ojson::array();
+  for (const auto& m : pruned["models"]) models.push_back(runEntry(m));
+  return {{"kind", "case"},
+          {"argv", argv},
+          {"out", fs::absolute(outDir).string()},
+          {"timeout_s", co.timeoutS},
+          {"models", models},
+          {"reference", pruned.contains("reference") ? runEntry(pruned["reference"]) : ojson()}};
+}
 
-CaseResult runSceneCase(const ojson& scene, const fs::path& sceneFile, const fs::path& outDir,
-                        PluginLoader& loader, const CaseOptions& options) {
+/// The --explain lines of the case's children (their logs), to the caller's explain.
+void forwardExplain(const CaseResult& c, const ojson& caseDoc, const CaseOptions& options) {
+  if (!options.explain) return;
+  std::vector<std::string> logs = {"log.txt"};
+  if (caseDoc.contains("child_no_reference")) logs.push_back("log_no_reference.txt");
+  for (const std::string& log : logs) {
+    std::istringstream lines(readText(c.outDir / log));
+    for (std::string line; std::getline(lines, line);)
+      if (line.rfind("explain: ", 0) == 0) options.explain(line.substr(9));
+  }
+}
+
+/// A case prepared in the calling thread: either finished (resumed, not runnable) or a task.
+struct Prepared {
   CaseResult c;
-  c.sceneFile = sceneFile;
-  c.outDir = outDir;
-  std::error_code ec;
-  fs::create_directories(sceneFile.parent_path(), ec);
-  writeFileAtomic(sceneFile, scene.dump(2) + "\n");
+  ojson task;  ///< null: c is final
+};
 
-  ojson pruned = scene;
+Prepared prepareCase(const SceneCase& sc, PluginLoader& loader) {
+  Prepared p;
+  CaseResult& c = p.c;
+  const CaseOptions& options = sc.options;
+  c.sceneFile = sc.sceneFile;
+  c.outDir = sc.outDir;
+  std::error_code ec;
+  fs::create_directories(sc.sceneFile.parent_path(), ec);
+  writeFileAtomic(sc.sceneFile, sc.scene.dump(2) + "\n");
+
+  ojson pruned = sc.scene;
   ojson kept = ojson::array();
-  for (const auto& m : scene.value("models", ojson::array())) {
+  for (const auto& m : sc.scene.value("models", ojson::array())) {
     const std::string plugin = m.value("plugin", "");
     const std::string why = pluginProblem(loader, plugin);
     if (why.empty()) {
@@ -176,8 +150,8 @@ CaseResult runSceneCase(const ojson& scene, const fs::path& sceneFile, const fs:
     }
   }
   pruned["models"] = kept;
-  if (scene.contains("reference")) {
-    const std::string plugin = scene["reference"].value("plugin", "");
+  if (sc.scene.contains("reference")) {
+    const std::string plugin = sc.scene["reference"].value("plugin", "");
     const std::string why = pluginProblem(loader, plugin);
     if (!why.empty()) {
       c.missing[plugin] = why;
@@ -186,34 +160,30 @@ CaseResult runSceneCase(const ojson& scene, const fs::path& sceneFile, const fs:
   }
   if (kept.empty()) {
     c.error = "no plugin of this case could be loaded";
-    return c;
+    return p;
   }
-  fs::create_directories(outDir, ec);
-  const fs::path runScene = outDir / "scene.json";
+  fs::create_directories(sc.outDir, ec);
+  const fs::path runScene = sc.outDir / "scene.json";
   const std::string prunedText = pruned.dump(2) + "\n";
-  if (options.child && options.child->resume && fs::exists(outDir / "case.json") &&
+  if (options.child && options.child->resume && fs::exists(sc.outDir / "case.json") &&
       readText(runScene) == prunedText) {
     try {
-      readCase(c, ojson::parse(readText(outDir / "case.json")));
+      readCase(c, ojson::parse(readText(sc.outDir / "case.json")));
       c.resumed = true;
-      return c;
+      return p;
     } catch (const std::exception&) {
       c.result.reset();  // unreadable: run it again
     }
   }
-  fs::remove(outDir / "case.json");
+  fs::remove(sc.outDir / "case.json");
   writeFileAtomic(runScene, prunedText);
   if (options.child) {
-    try {
-      runCaseInChild(c, pruned, runScene, options);
-    } catch (const std::exception& e) {
-      c.error = e.what();
-    }
-    return c;
+    p.task = caseTask(pruned, runScene, sc.outDir, options);
+    return p;
   }
   BenchmarkOptions o;
   o.cacheDir = options.cacheDir;
-  o.outDir = outDir;
+  o.outDir = sc.outDir;
   o.run = options.run;
   o.explain = options.explain;
   o.progress = options.progress;
@@ -226,7 +196,135 @@ CaseResult runSceneCase(const ojson& scene, const fs::path& sceneFile, const fs:
     c.error = e.what();
   }
   c.wallS = std::chrono::duration<double>(Clock::now() - start).count();
-  return c;
+  return p;
+}
+
+void finishCase(CaseResult& c, const ojson& caseDoc, const CaseOptions& options) {
+  try {
+    forwardExplain(c, caseDoc, options);
+    readCase(c, caseDoc);
+  } catch (const std::exception& e) {
+    c.error = e.what();
+  }
+}
+
+}  // namespace
+
+ojson runCaseTask(const ojson& task) {
+  const fs::path outDir = task.at("out").get<std::string>();
+  const double timeoutS = task.at("timeout_s").get<double>();
+  const auto start = Clock::now();
+  const auto job = [&](bool noReference, const std::string& log) {
+    ChildJob j;
+    j.argv = task.at("argv").get<std::vector<std::string>>();
+    if (noReference) j.argv.push_back("--no-reference");
+    j.log = outDir / log;
+    return j;
+  };
+  const auto failureOf = [&](const ChildOutcome& o, const ChildJob& j) {
+    std::string f = childFailure(o, timeoutS, lastLogLine(j.log, 300));
+    if (f.empty() && !fs::exists(outDir / "results.json")) f = "exit code 0 without results.json";
+    return f;
+  };
+  const auto failedEntry = [](const ojson& e, const char* role, const std::string& message) {
+    return ojson{{"label", e.value("label", "")},
+                 {"plugin", e.value("plugin", "")},
+                 {"role", role},
+                 {"message", message}};
+  };
+
+  ojson caseDoc = {{"format", "deformbench-case/1"}, {"failed_runs", ojson::array()}};
+  fs::remove(outDir / "results.json");
+  const ChildJob first = job(false, "log.txt");
+  const std::string failure = failureOf(runChild(first, timeoutS), first);
+  caseDoc["child"] = failure.empty() ? "ok" : failure;
+  if (!failure.empty()) {
+    const ojson& reference = task.at("reference");
+    const bool hasReference = !reference.is_null();
+    std::string second;
+    if (hasReference) {
+      const ChildJob retry = job(true, "log_no_reference.txt");
+      second = failureOf(runChild(retry, timeoutS), retry);
+      caseDoc["child_no_reference"] = second.empty() ? "ok" : second;
+    }
+    if (hasReference && second.empty()) {
+      caseDoc["failed_runs"].push_back(
+          failedEntry(reference, "reference",
+                      failure + " (with the reference; the models then ran without it)"));
+    } else {
+      fs::remove(outDir / "results.json");
+      for (const auto& m : task.at("models"))
+        caseDoc["failed_runs"].push_back(failedEntry(m, "model", failure));
+      if (hasReference)
+        caseDoc["failed_runs"].push_back(failedEntry(reference, "reference", failure));
+    }
+  }
+  caseDoc["wall_s"] = std::chrono::duration<double>(Clock::now() - start).count();
+  writeFileAtomic(outDir / "case.json", caseDoc.dump(2) + "\n");
+  return caseDoc;
+}
+
+ojson lostCaseDoc(const ojson& task, const std::string& message) {
+  ojson caseDoc = {{"format", "deformbench-case/1"}, {"failed_runs", ojson::array()}};
+  caseDoc["child"] = message;
+  for (const auto& m : task.at("models"))
+    caseDoc["failed_runs"].push_back({{"label", m.value("label", "")},
+                                      {"plugin", m.value("plugin", "")},
+                                      {"role", "model"},
+                                      {"message", message}});
+  const ojson& reference = task.at("reference");
+  if (!reference.is_null())
+    caseDoc["failed_runs"].push_back({{"label", reference.value("label", "")},
+                                      {"plugin", reference.value("plugin", "")},
+                                      {"role", "reference"},
+                                      {"message", message}});
+  caseDoc["wall_s"] = 0.0;
+  return caseDoc;
+}
+
+void runSceneCases(const std::vector<SceneCase>& cases, PluginLoader& loader,
+                   Dispatcher* dispatcher, const std::function<void(size_t)>& onStart,
+                   const std::function<void(size_t, CaseResult&&)>& onDone) {
+  std::vector<Prepared> prepared;
+  std::vector<ojson> tasks;
+  std::vector<size_t> taskCase;
+  for (size_t i = 0; i < cases.size(); ++i) {
+    // In-process cases run in prepareCase: announce them first.
+    const bool inProcess = !cases[i].options.child;
+    if (inProcess && onStart) onStart(i);
+    prepared.push_back(prepareCase(cases[i], loader));
+    if (prepared.back().task.is_null()) {
+      if (!inProcess && onStart) onStart(i);
+      if (onDone) onDone(i, std::move(prepared.back().c));
+    } else {
+      tasks.push_back(prepared.back().task);
+      taskCase.push_back(i);
+    }
+  }
+  if (tasks.empty()) return;
+  std::unique_ptr<Dispatcher> serial;
+  if (!dispatcher) {
+    serial = localDispatcher(1);
+    dispatcher = serial.get();
+  }
+  dispatcher->run(
+      tasks,
+      [&](size_t t) {
+        if (onStart) onStart(taskCase[t]);
+      },
+      [&](size_t t, const ojson& caseDoc) {
+        const size_t i = taskCase[t];
+        finishCase(prepared[i].c, caseDoc, cases[i].options);
+        if (onDone) onDone(i, std::move(prepared[i].c));
+      });
+}
+
+CaseResult runSceneCase(const ojson& scene, const fs::path& sceneFile, const fs::path& outDir,
+                        PluginLoader& loader, const CaseOptions& options) {
+  CaseResult out;
+  runSceneCases({SceneCase{scene, sceneFile, outDir, options}}, loader, options.dispatcher, nullptr,
+                [&](size_t, CaseResult&& c) { out = std::move(c); });
+  return out;
 }
 
 ojson numberOrNull(double v) {

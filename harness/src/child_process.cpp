@@ -3,6 +3,7 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -29,23 +30,37 @@ std::string g(double v) {
 }
 
 pid_t spawn(const std::vector<std::string>& argv, const fs::path& log) {
+  // Everything the child needs is built before fork(): another thread of this process may hold
+  // the allocator's lock at that moment, so the child only makes async-signal-safe calls.
+  std::vector<char*> args;
+  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  std::vector<std::string> envText;
+  for (char** e = environ; e && *e; ++e)
+    if (std::strncmp(*e, "DEFORM_PROGRESS=", 16) != 0) envText.emplace_back(*e);
+  envText.emplace_back("DEFORM_PROGRESS=plain");
+  std::vector<char*> env;
+  for (auto& e : envText) env.push_back(e.data());
+  env.push_back(nullptr);
+  const std::string logPath = log.string();
+  const std::string execFailed = "cannot exec " + argv[0] + "\n";
+  const pid_t parent = getpid();
   std::fflush(nullptr);
   const pid_t pid = fork();
   if (pid != 0) return pid;
-  // Child: own process group (so a timeout kills whatever it forked too), output to the log.
+  // Child: own process group (so a timeout kills whatever it forked too), output to the log,
+  // killed when the process (or thread) that started it dies (a lost MPI worker, dispatch.h).
   setpgid(0, 0);
-  const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  prctl(PR_SET_PDEATHSIG, SIGKILL);
+  if (getppid() != parent) _exit(127);
+  const int fd = open(logPath.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   if (fd >= 0) {
     dup2(fd, 1);
     dup2(fd, 2);
     close(fd);
   }
-  std::vector<char*> args;
-  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  setenv("DEFORM_PROGRESS", "plain", 1);
-  execv(args[0], args.data());
-  std::fprintf(stderr, "cannot exec %s: %s\n", args[0], std::strerror(errno));
+  execve(args[0], args.data(), env.data());
+  (void)!write(2, execFailed.data(), execFailed.size());
   _exit(127);
 }
 

@@ -4,6 +4,7 @@
 #include <deform/mesh_io.h>
 #include <deform/phantom.h>
 #include <deform_harness/child_process.h>
+#include <deform_harness/dispatch.h>
 #include <deform_harness/runner.h>
 #include <deform_harness/stability.h>
 
@@ -549,45 +550,57 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     records.push_back(p.record);
   };
 
-  std::vector<ChildJob> jobs;
+  // Each (model, case) is a "child" task (dispatch.h): here with --jobs, on MPI ranks, or in a
+  // Slurm array whose outcome.json files a later --resume reads.
+  std::vector<ojson> tasks;
   std::vector<Pending*> jobCase;
   for (Pending& p : pending) {
     if (!p.record.status.empty()) {  // plugin did not load: nothing to run
       finishCase(p);
       continue;
     }
-    ChildJob job;
-    job.argv = {exe};
-    for (const auto& a : pluginDirArgs(options.pluginDirs)) job.argv.push_back(a);
+    std::vector<std::string> argv = {exe};
+    for (const auto& a : pluginDirArgs(options.pluginDirs)) argv.push_back(a);
     const fs::path scene = options.outDir / "scenes" / p.record.model / (p.record.caseId + ".json");
-    job.argv.insert(job.argv.end(), {"run", scene.string(), "--out", p.dir.string()});
+    argv.insert(argv.end(),
+                {"run", fs::absolute(scene).string(), "--out", fs::absolute(p.dir).string()});
     if (!options.cacheDir.empty())
-      job.argv.insert(job.argv.end(), {"--cache-dir", options.cacheDir});
-    job.log = p.dir / "log.txt";
-    jobs.push_back(job);
+      argv.insert(argv.end(), {"--cache-dir", fs::absolute(options.cacheDir).string()});
+    tasks.push_back({{"kind", "child"},
+                     {"argv", argv},
+                     {"log", fs::absolute(p.dir / "log.txt").string()},
+                     {"timeout_s", timeout},
+                     {"fresh_dir", fs::absolute(p.dir).string()},
+                     {"outcome", fs::absolute(p.dir / "outcome.json").string()},
+                     {"resume", options.resume}});
     jobCase.push_back(&p);
   }
-  runChildren(
-      jobs, options.jobs, timeout,
+  std::unique_ptr<Dispatcher> local;
+  Dispatcher* dispatcher = options.dispatcher;
+  if (!dispatcher) {
+    local = localDispatcher(options.jobs);
+    dispatcher = local.get();
+  }
+  dispatcher->run(
+      tasks,
       [&](size_t i) {
-        fs::remove_all(jobCase[i]->dir);
-        fs::create_directories(jobCase[i]->dir);
         if (progress) progress->start(jobCase[i]->label);
       },
-      [&](size_t i, const ChildOutcome& o) {
+      [&](size_t i, const ojson& o) {
         Pending& p = *jobCase[i];
         StabilityRecord r;
-        if (!o.spawnError.empty()) {
+        const std::string spawnError = o.value("spawn_error", "");
+        if (!spawnError.empty()) {
           r.status = "failed";
-          r.message = o.spawnError;
+          r.message = spawnError;
         } else {
-          r = classifyStabilityRun(o.waitStatus, o.timedOut, timeout, p.dir / "results.json",
-                                   lastLogLine(p.dir / "log.txt", 300));
+          r = classifyStabilityRun(o.value("wait_status", 0), o.value("timed_out", false), timeout,
+                                   p.dir / "results.json", lastLogLine(p.dir / "log.txt", 300));
         }
         p.record.status = r.status;
         p.record.step = r.step;
         p.record.message = r.message;
-        p.record.wallS = o.wallS;
+        p.record.wallS = o.value("wall_s", 0.0);
         finishCase(p);
       });
 

@@ -1078,30 +1078,40 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       if (ids.insert(c.id).second) order.push_back(&c);
   if (progress) progress->addTotal(int(order.size()));
 
+  // The cases go to the dispatcher (options.cases.dispatcher: serial, --jobs, MPI or Slurm);
+  // the results are keyed by case id, so the tables do not depend on the finishing order.
   Results results;
+  std::vector<SceneCase> sceneCases;
   for (const Case* c : order) {
-    if (progress) progress->start(c->id);
     CaseOptions co = options.cases;
     if (c->noCache) co.cacheDir = fs::path();
-    CaseResult r = runSceneCase(c->scene, options.outDir / "scenes" / (c->id + ".json"),
-                                options.outDir / "runs" / c->id, loader, co);
-    std::string summary;
-    if (!r.error.empty()) {
-      summary = "not run (" + r.error + ")";
-    } else {
-      for (const RunRecord& run : r.result->runs) {
-        std::string part = run.label + " " + statusName(run.status);
-        if (run.status == RunStatus::Failed && options.cases.child)
-          part += " (" + run.message + ")";
-        summary += (summary.empty() ? "" : ", ") + part;
-      }
-    }
-    for (const auto& [plugin, why] : r.missing)
-      summary += (summary.empty() ? "" : ", ") + plugin + " missing";
-    if (r.resumed) summary += " (resumed)";
-    if (progress) progress->finish(c->id, summary);
-    results.emplace(c->id, std::move(r));
+    sceneCases.push_back({c->scene, options.outDir / "scenes" / (c->id + ".json"),
+                          options.outDir / "runs" / c->id, co});
   }
+  runSceneCases(
+      sceneCases, loader, options.cases.dispatcher,
+      [&](size_t i) {
+        if (progress) progress->start(order[i]->id);
+      },
+      [&](size_t i, CaseResult&& r) {
+        const Case* c = order[i];
+        std::string summary;
+        if (!r.error.empty()) {
+          summary = "not run (" + r.error + ")";
+        } else {
+          for (const RunRecord& run : r.result->runs) {
+            std::string part = run.label + " " + statusName(run.status);
+            if (run.status == RunStatus::Failed && options.cases.child)
+              part += " (" + run.message + ")";
+            summary += (summary.empty() ? "" : ", ") + part;
+          }
+        }
+        for (const auto& [plugin, why] : r.missing)
+          summary += (summary.empty() ? "" : ", ") + plugin + " missing";
+        if (r.resumed) summary += " (resumed)";
+        if (progress) progress->finish(c->id, summary);
+        results.emplace(c->id, std::move(r));
+      });
 
   // Each distinct reference once (the hybrid tables share theirs).
   std::map<std::string, ReferenceCheck> checks;

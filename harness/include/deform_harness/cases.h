@@ -18,6 +18,8 @@
 
 namespace deform::harness {
 
+class Dispatcher;
+
 /// Running a case in a child process: `deformbench run` on the case's scene with a wall-clock
 /// limit (child_process.h), so a crash or a hang of any run becomes a failed row and the command
 /// goes on. When the child fails (signal, timeout, non-zero exit) and the scene has a reference,
@@ -40,6 +42,8 @@ struct CaseOptions {
   std::function<void(const std::string&)> progress;  ///< the runner's per-run lines (in-process)
   /// Set: run the case in a child process; nullopt: in this process (no time limit).
   std::optional<ChildCaseOptions> child;
+  /// Where the child cases run (dispatch.h): nullptr = here, one at a time. Not owned.
+  Dispatcher* dispatcher = nullptr;
 };
 
 struct CaseResult {
@@ -65,6 +69,29 @@ struct CaseResult {
 CaseResult runSceneCase(const nlohmann::ordered_json& scene, const std::filesystem::path& sceneFile,
                         const std::filesystem::path& outDir, PluginLoader& loader,
                         const CaseOptions& options);
+
+/// A case to run: what runSceneCase takes.
+struct SceneCase {
+  nlohmann::ordered_json scene;
+  std::filesystem::path sceneFile, outDir;
+  CaseOptions options;
+};
+
+/// runSceneCase for many cases: each is prepared here (scene written, plugins checked, an
+/// earlier result resumed), then the child cases go to `dispatcher` (nullptr: here, one at a
+/// time; in-process cases always run here, in order). onStart(i) when case i starts, onDone(i,
+/// result) when it ended, both in the calling thread; a resumed case gets both at once.
+void runSceneCases(const std::vector<SceneCase>& cases, PluginLoader& loader,
+                   Dispatcher* dispatcher, const std::function<void(size_t)>& onStart,
+                   const std::function<void(size_t, CaseResult&&)>& onDone);
+
+/// Executes a case task (dispatch.h, kind "case"): the `deformbench run` child, and when it
+/// fails and the scene has a reference, the models once more without it; writes and returns
+/// the case.json document.
+nlohmann::ordered_json runCaseTask(const nlohmann::ordered_json& task);
+
+/// The case.json document of a case task no worker could finish: every run failed, `message`.
+nlohmann::ordered_json lostCaseDoc(const nlohmann::ordered_json& task, const std::string& message);
 
 /// Why a plugin cannot be loaded ("" when it loads).
 std::string pluginProblem(PluginLoader& loader, const std::string& plugin);

@@ -33,6 +33,8 @@
 
 namespace deform::harness {
 
+class Dispatcher;
+
 struct StabilityCase {
   std::string id;     ///< "E1e+06_dt0.0333"
   std::string group;  ///< "stiffness_dt" (the map), "poisson", "force", "cantilever", "scale",
@@ -73,7 +75,9 @@ struct StabilityOptions {
   std::string executable;               ///< deformbench to exec; "": /proc/self/exe
   std::vector<std::string> pluginDirs;  ///< passed on as --plugin-dir
   std::string cacheDir;                 ///< passed on as --cache-dir ("" = default)
-  int jobs = 1;                         ///< children at once
+  int jobs = 1;                         ///< children at once (when dispatcher is null)
+  /// Where the (model, case) children run (dispatch.h); nullptr: here, `jobs` at once.
+  Dispatcher* dispatcher = nullptr;
   double accuracyThreshold = 0.2;       ///< accurate: error_ratio at most this
 };
 
