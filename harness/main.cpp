@@ -201,6 +201,13 @@ void printTable(const BenchmarkResult& r) {
   printRow(header);
   for (const auto& row : rows) printRow(row);
   for (const RunRecord& run : r.runs) {
+    if (run.error && run.error->excludedGrasped > 0) {
+      std::cout << "rmse_k: the k surface vertices nearest the grasp that no grasp holds ("
+                << run.error->excludedGrasped << " grasped vertices left out)\n";
+      break;
+    }
+  }
+  for (const RunRecord& run : r.runs) {
     if (!run.message.empty()) std::cout << run.label << ": " << run.message << "\n";
     for (const auto& n : run.notes) std::cout << run.label << ": note: " << n << "\n";
   }

@@ -8,6 +8,7 @@
 #  5. run the installed `deformbench conformance --plugin-dir BUILD` on it (must pass),
 #  6. compare it with pbd in the example's scene (run, then report),
 #  7. configure the example against the build tree (-Ddeformbench_DIR=BUILD_DIR).
+cmake_minimum_required(VERSION 3.22)
 foreach(v BUILD_DIR EXAMPLE_DIR WORK_DIR TEST_EXE GENERATOR)
   if(NOT DEFINED ${v})
     message(FATAL_ERROR "install_test.cmake: ${v} not set")
@@ -100,7 +101,7 @@ if(pbd)
     foreach(i RANGE ${last})
       string(JSON l GET "${results}" runs ${i} label)
       string(JSON st GET "${results}" runs ${i} status)
-      if(l STREQUAL label AND st STREQUAL "ok")
+      if("${l}" STREQUAL "${label}" AND "${st}" STREQUAL "ok")
         set(ok TRUE)
       endif()
     endforeach()
