@@ -1,6 +1,7 @@
 // deformbench: the command-line program. Verbs (DESIGN.md "Command line"): plugins, run, phantom,
-// tables, sweep, stability, report, bench, converge. Bad input ends with one line "deformbench:
-// FILE: PLACE: PROBLEM" on stderr and exit code 2; an unexpected internal error exits 3. `run
+// tables, sweep, stability, report, bench, converge, conformance. Bad input ends with one line
+// "deformbench: FILE: PLACE: PROBLEM" on stderr and exit code 2; an unexpected internal error
+// exits 3. `run
 // --strict` exits 1 when a model failed (results.json is still written whole).
 #include <deform/mesh_io.h>
 #include <deform/phantom.h>
@@ -8,6 +9,7 @@
 #include <deform/scene.h>
 #include <deform_harness/bench.h>
 #include <deform_harness/child_process.h>
+#include <deform_harness/conformance.h>
 #include <deform_harness/convergence.h>
 #include <deform_harness/dispatch.h>
 #include <deform_harness/progress.h>
@@ -200,6 +202,13 @@ void printTable(const BenchmarkResult& r) {
   };
   printRow(header);
   for (const auto& row : rows) printRow(row);
+  for (const RunRecord& run : r.runs) {
+    if (run.error && run.error->excludedGrasped > 0) {
+      std::cout << "rmse_k: the k surface vertices nearest the grasp that no grasp holds ("
+                << run.error->excludedGrasped << " grasped vertices left out)\n";
+      break;
+    }
+  }
   for (const RunRecord& run : r.runs) {
     if (!run.message.empty()) std::cout << run.label << ": " << run.message << "\n";
     for (const auto& n : run.notes) std::cout << run.label << ": note: " << n << "\n";
@@ -633,9 +642,76 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
   return 0;
 }
 
+// ------------------------------------------------------------------------------ conformance
+
+struct ConformanceArgs {
+  std::vector<std::string> plugins, models, checks, expectedFailures;
+  std::string scenes;
+  std::string cacheDir;
+  bool noCache = false;
+};
+
+int cmdConformance(const ConformanceArgs& a, const std::vector<std::string>& pluginDirs) {
+  PluginLoader loader(searchPath(pluginDirs));
+  ConformanceOptions o;
+  o.plugins = a.plugins;
+  // With --plugin-dir and no --plugin: the plugins in those folders (an author's own build).
+  if (o.plugins.empty() && !pluginDirs.empty()) {
+    o.plugins = PluginLoader(pluginDirs).discover();
+    if (o.plugins.empty()) {
+      std::string dirs;
+      for (const auto& d : pluginDirs) dirs += (dirs.empty() ? "" : ", ") + d;
+      throw InputError("--plugin-dir", "",
+                       "no plugin (deform_NAME.so) in " + dirs +
+                           " (a plugin is built as deform_NAME.so: deformbench_add_plugin)");
+    }
+  }
+  o.models = a.models;
+  o.checks = a.checks;
+  o.expectedFailures = a.expectedFailures;
+  o.scenesDir = a.scenes.empty() ? defaultConformanceScenesDir() : fs::path(a.scenes);
+  if (!a.scenes.empty() && !fs::is_directory(o.scenesDir))
+    throw InputError(a.scenes, "", "--scenes: not a folder");
+  o.report = [](const CheckResult& r) {
+    std::ostringstream line;
+    line << std::left << std::setw(6) << checkOutcomeName(r.outcome) << std::setw(30)
+         << (r.plugin + (r.model.empty() ? "" : "/" + r.model)) << " " << std::setw(13) << r.check;
+    line << std::right << std::setw(8) << (r.seconds >= 0.05 ? fmt(r.seconds, 2) + " s" : "");
+    if (!r.detail.empty()) line << "  " << oneLine(r.detail);
+    std::cout << line.str() << "\n" << std::flush;
+  };
+  Cache cache(a.noCache            ? fs::path()
+              : a.cacheDir.empty() ? Cache::defaultDir()
+                                   : fs::path(a.cacheDir));
+  const std::vector<CheckResult> results = runConformance(loader, cache, o);
+  int passed = 0, failed = 0, skipped = 0, xfail = 0;
+  for (const CheckResult& r : results) {
+    switch (r.outcome) {
+      case CheckOutcome::Passed:
+        ++passed;
+        break;
+      case CheckOutcome::Skipped:
+        ++skipped;
+        break;
+      case CheckOutcome::ExpectedFailure:
+        ++xfail;
+        break;
+      default:
+        ++failed;
+    }
+  }
+  std::cout << passed << " passed, " << failed << " failed";
+  if (skipped) std::cout << ", " << skipped << " skipped (not applicable)";
+  if (xfail) std::cout << ", " << xfail << " expected failures";
+  std::cout << "\n";
+  return failed ? kExitModelFailed : 0;
+}
+
 int realMain(int argc, char** argv) {
   CLI::App app{"deformbench: compares soft-tissue deformation models on equal terms"};
   app.require_subcommand(1);
+  // Global options (--plugin-dir) are accepted before or after the verb.
+  app.fallthrough();
 
   std::vector<std::string> pluginDirs;
   app.add_option(
@@ -776,6 +852,25 @@ int realMain(int argc, char** argv) {
   work->group("");  // internal: the Slurm array's command
   work->add_option("task", workTasks, "task file (JSON)")->required();
 
+  ConformanceArgs cf;
+  CLI::App* conformance = app.add_subcommand(
+      "conformance",
+      "run the conformance checks on plugins (with --plugin-dir: the plugins in those folders); "
+      "one line per check, exit 0 only when none failed");
+  conformance->add_option("--plugin", cf.plugins, "plugin to check (repeatable; default: all)");
+  conformance->add_option("--model", cf.models, "model to check (repeatable; default: all)");
+  conformance->add_option("--check", cf.checks, "check to run (repeatable; default: all)");
+  conformance->add_option("--expect-fail", cf.expectedFailures,
+                          "PLUGIN/CHECK or PLUGIN/MODEL/CHECK known to fail: reported xfail, "
+                          "and a failure if it passes (repeatable)");
+  conformance->add_option("--scenes", cf.scenes,
+                          "folder of scenes for the 'scenes' check (default: the shipped ones)");
+  {
+    auto* cd = conformance->add_option("--cache-dir", cf.cacheDir, "precomputation cache folder");
+    auto* nc = conformance->add_flag("--no-cache", cf.noCache, "do not read or write the cache");
+    cd->excludes(nc);
+  }
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -789,6 +884,7 @@ int realMain(int argc, char** argv) {
     return cmdRun(ra);
   }
   if (*phantom) return cmdPhantom(phName, phOut, phRes, phList);
+  if (*conformance) return cmdConformance(cf, pluginDirs);
   if (*tables) {
     ta.common.pluginDirs = pluginDirs;
     return cmdTables(tableNamesArg, ta);

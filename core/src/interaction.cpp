@@ -274,7 +274,7 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
         a = Attachment{};
         a.active = true;
         a.toolAtClose = m_toolDynBody[i] >= 0 ? m_toolPosBefore[i] : toolAt(i, t);
-        a.vertices = graspedSurfaceVertices(m_rest, a.toolAtClose, tool.radius);
+        a.vertices = graspedSurfaceVertices(m_rest.V, a.toolAtClose, tool.radius);
         const MatX3& surface = model.surface();
         a.closePositions.resize(static_cast<Eigen::Index>(a.vertices.size()), 3);
         for (size_t k = 0; k < a.vertices.size(); ++k)
@@ -346,13 +346,13 @@ std::vector<Real> Interaction::graspTravel() const {
   return out;
 }
 
-std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Vec3& p, Real r) {
+std::vector<int> graspedSurfaceVertices(const MatX3& rest, const Vec3& p, Real r) {
   std::vector<int> out;
   const Real r2 = r * r;
-  for (Eigen::Index v = 0; v < rest.V.rows(); ++v)
-    if ((rest.V.row(v).transpose() - p).squaredNorm() <= r2) out.push_back(int(v));
+  for (Eigen::Index v = 0; v < rest.rows(); ++v)
+    if ((rest.row(v).transpose() - p).squaredNorm() <= r2) out.push_back(int(v));
   if (out.empty()) {
-    const int n = nearestVertex(rest.V, p);
+    const int n = nearestVertex(rest, p);
     if (n >= 0) out.push_back(n);
   }
   return out;

@@ -143,7 +143,9 @@ std::string PluginLoader::locate(const std::string& pluginName) const {
     }
   }
   throw PluginError(PluginError::Kind::FileNotFound, file,
-                    "plugin '" + pluginName + "' not found in: " + join(m_searchPath, ", "));
+                    "plugin '" + pluginName + "' not found in: " + join(m_searchPath, ", ") +
+                        " (add its folder with --plugin-dir DIR, or list folders in the "
+                        "DEFORM_PLUGIN_PATH environment variable, ':'-separated)");
 }
 
 const std::vector<ModelInfo>& PluginLoader::loadFile(const std::string& path) {

@@ -38,6 +38,38 @@ std::string typeName(const json& j) {
   return j.type_name();
 }
 
+/// Levenshtein distance between two names (insertions, deletions, substitutions, each 1).
+size_t editDistance(const std::string& a, const std::string& b) {
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diag = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+/// "did you mean 'young'? " when one allowed name is near the unknown one: at most 2 edits, or
+/// a third of the name's length for long names; the first of equally near names wins. Else "".
+std::string didYouMean(const std::string& key, const std::vector<std::string>& allowed) {
+  const size_t limit = std::max<size_t>(2, key.size() / 3);
+  size_t best = limit + 1;
+  std::string name;
+  for (const std::string& a : allowed) {
+    const size_t d = editDistance(key, a);
+    if (d < best) {
+      best = d;
+      name = a;
+    }
+  }
+  return name.empty() ? "" : "did you mean '" + name + "'? ";
+}
+
 /// Reads one JSON object, refusing keys that are not in the allowed list, and remembers the path
 /// of every value it hands out so that errors name it.
 class ObjectReader {
@@ -52,7 +84,8 @@ class ObjectReader {
         std::string known;
         for (const auto& a : m_allowed) known += (known.empty() ? "" : ", ") + a;
         throw InputError(m_file, child(key),
-                         "unknown key '" + key + "' (allowed here: " + known + ")");
+                         "unknown key '" + key + "' (" + didYouMean(key, m_allowed) +
+                             "allowed here: " + known + ")");
       }
     }
   }
@@ -645,9 +678,13 @@ ParamValues resolveParams(const std::vector<ParamSpec>& specs, const nlohmann::j
         std::find_if(specs.begin(), specs.end(), [&](const ParamSpec& s) { return s.key == key; });
     if (it == specs.end()) {
       std::string known;
-      for (const auto& s : specs) known += (known.empty() ? "" : ", ") + s.key;
-      c.fail(p, "unknown parameter '" + key + "' (declared: " + (known.empty() ? "none" : known) +
-                    ")");
+      std::vector<std::string> keys;
+      for (const auto& s : specs) {
+        known += (known.empty() ? "" : ", ") + s.key;
+        keys.push_back(s.key);
+      }
+      c.fail(p, "unknown parameter '" + key + "' (" + didYouMean(key, keys) +
+                    "declared: " + (known.empty() ? "none" : known) + ")");
     }
     const ParamSpec& spec = *it;
     const auto checkRange = [&](double x) {

@@ -1,6 +1,7 @@
 // Example out-of-tree deformbench plugin: "tethered", a deliberately simple model that shows the
 // whole plugin interface (declared parameters, capabilities, init/step/reset, counts) without any
-// tissue mechanics to get in the way. It is a toy, not a tissue model: do not compare it.
+// tissue mechanics to get in the way. It is a toy, not a tissue model: its errors in a comparison
+// say nothing about tissue.
 //
 // Each vertex i of the organ surface is a particle of mass m_i = rho * Vol / N (the organ's mass
 // shared equally), tied to its rest position X_i by a zero-length spring of stiffness k and
@@ -42,19 +43,10 @@ class TetheredModel final : public deform::Model {
     m_damping = setup.params.real("damping");
     m_mass = setup.organ.material.density * volume / s.numVertices();
     m_rest = s.V;
+    // The fixed region (boxes, listed surface vertices) resolved against this model's nodes by
+    // the SDK, the same way for every model.
     m_pinned.assign(s.numVertices(), false);
-    for (Eigen::Index i = 0; i < s.V.rows(); ++i) {
-      for (const deform::Box& b : setup.organ.fixed.boxes) {
-        if (b.contains(s.V.row(i).transpose())) m_pinned[i] = true;
-      }
-    }
-    for (int v : setup.organ.fixed.surfaceVertices) {
-      if (v < 0 || v >= s.numVertices()) {
-        throw deform::InputError(setup.organ.source, "organ.fixed.vertices",
-                                 "vertex " + std::to_string(v) + " out of range");
-      }
-      m_pinned[v] = true;
-    }
+    for (int n : deform::fixedNodeIndices(m_rest, setup.organ.fixed, s)) m_pinned[n] = true;
     reset();
   }
 

@@ -1,4 +1,5 @@
 // Error metrics and step-time statistics (see metrics.h for the definitions).
+#include <deform/interaction.h>
 #include <deform/mesh.h>
 #include <deform_harness/metrics.h>
 
@@ -18,6 +19,35 @@ ErrorMetrics computeErrors(const MatX3& model, const MatX3& reference, const Mat
 
 ErrorMetrics computeErrors(const std::vector<MatX3>& model, const std::vector<MatX3>& reference,
                            const MatX3& rest, const Vec3& focus, const std::vector<int>& nearest) {
+  return computeErrors(model, reference, rest, focus, nearest, {});
+}
+
+std::vector<int> graspedSurfaceVertices(const Scene& scene, const MatX3& rest) {
+  std::vector<int> out;
+  for (const ToolSpec& tool : scene.tools) {
+    if (tool.type != ToolType::Grasper) continue;
+    bool closed = false;
+    for (const KeyFrame& k : tool.trajectory) {
+      if (k.jawClosed && !closed) {
+        const std::vector<int> g = deform::graspedSurfaceVertices(rest, k.pos, tool.radius);
+        out.insert(out.end(), g.begin(), g.end());
+      }
+      closed = k.jawClosed;
+    }
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+std::vector<int> rmseExcludedVertices(const Scene& scene, const MatX3& rest) {
+  if (!scene.loads.empty()) return {};
+  return graspedSurfaceVertices(scene, rest);
+}
+
+ErrorMetrics computeErrors(const std::vector<MatX3>& model, const std::vector<MatX3>& reference,
+                           const MatX3& rest, const Vec3& focus, const std::vector<int>& nearest,
+                           const std::vector<int>& excluded) {
   assert(model.size() == reference.size());
   ErrorMetrics m;
   m.instants = static_cast<int>(model.size());
@@ -41,8 +71,20 @@ ErrorMetrics computeErrors(const std::vector<MatX3>& model, const std::vector<Ma
   } else {
     m.lossRatio = sumDist > 0 ? std::numeric_limits<double>::infinity() : 0.0;
   }
+  if (!excluded.empty()) {
+    m.nearestSamples = "nearest_ungrasped";
+    m.excludedGrasped = static_cast<int>(excluded.size());
+  }
   for (int k : nearest) {
-    const std::vector<int> idx = nearestVertices(rest, focus, k);
+    std::vector<int> idx;
+    if (excluded.empty()) {
+      idx = nearestVertices(rest, focus, k);
+    } else {
+      for (int i : nearestVertices(rest, focus, k + static_cast<int>(excluded.size()))) {
+        if (static_cast<int>(idx.size()) == k) break;
+        if (!std::binary_search(excluded.begin(), excluded.end(), i)) idx.push_back(i);
+      }
+    }
     double sq = 0;
     long long n = 0;
     for (size_t s = 0; s < model.size(); ++s) {

@@ -240,6 +240,9 @@ json runJson(const RunRecord& run) {
     json err;
     err["reference"] = run.referenceModel;
     for (const auto& [k, v] : e.rmseNearest) err["rmse_" + std::to_string(k)] = finite(v);
+    // Which vertices rmse_k covers (docs/writing-a-plugin.md, "Metrics").
+    err["rmse_k_samples"] = e.nearestSamples;
+    if (e.excludedGrasped > 0) err["rmse_k_excluded_grasped"] = e.excludedGrasped;
     err["rmse_all"] = finite(e.rmseAll);
     err["max"] = finite(e.max);
     err["loss_ratio"] = finite(e.lossRatio);

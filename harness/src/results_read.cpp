@@ -86,6 +86,8 @@ RunRecord runFromJson(const json& j) {
     m.max = numberOrNaN(e, "max");
     m.lossRatio = numberOrNaN(e, "loss_ratio");
     m.instants = valueOr(e, "instants", 0);
+    m.nearestSamples = e.value("rmse_k_samples", std::string("nearest"));
+    m.excludedGrasped = valueOr(e, "rmse_k_excluded_grasped", 0);
     r.error = m;
     r.referenceModel = e.value("reference", "");
   }

@@ -529,6 +529,7 @@ void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRec
   }
   std::vector<MatX3> refSurfaces;
   for (const auto& s : ref->compared) refSurfaces.push_back(s.positions);
+  const std::vector<int> excluded = rmseExcludedVertices(scene, organ.surface.V);
   for (RunRecord& r : runs) {
     if (r.isReference || r.status != RunStatus::Ok) continue;
     if (r.compared.size() != refSurfaces.size()) {
@@ -537,7 +538,7 @@ void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRec
     }
     std::vector<MatX3> mine;
     for (const auto& s : r.compared) mine.push_back(s.positions);
-    r.error = computeErrors(mine, refSurfaces, organ.surface.V, focus, scene.nearest);
+    r.error = computeErrors(mine, refSurfaces, organ.surface.V, focus, scene.nearest, excluded);
     r.referenceModel = ref->model;
   }
 }

@@ -1,9 +1,14 @@
-# cmake -P script run by CTest (test plugin_sdk_install_export):
-#  1. install the SDK component of BUILD_DIR into WORK_DIR/prefix,
+# cmake -P script run by CTest (test plugin_sdk_install_export), the steps of README "Install" and
+# examples/minimal_plugin/README.md as an author runs them:
+#  1. install BUILD_DIR into WORK_DIR/prefix (cmake --install BUILD --prefix P),
 #  2. configure, build and install examples/minimal_plugin out of tree with find_package(deformbench),
 #  3. load the built deform_tethered.so with this build's loader (InstalledPlugin.LoadsByPath),
 #  4. load it again through the installed core, found only by the relocated-install search path
-#     (InstalledPlugin.FoundInRelocatedInstall).
+#     (InstalledPlugin.FoundInRelocatedInstall),
+#  5. run the installed `deformbench conformance --plugin-dir BUILD` on it (must pass),
+#  6. compare it with pbd in the example's scene (run, then report),
+#  7. configure the example against the build tree (-Ddeformbench_DIR=BUILD_DIR).
+cmake_minimum_required(VERSION 3.22)
 foreach(v BUILD_DIR EXAMPLE_DIR WORK_DIR TEST_EXE GENERATOR)
   if(NOT DEFINED ${v})
     message(FATAL_ERROR "install_test.cmake: ${v} not set")
@@ -22,7 +27,7 @@ set(prefix ${WORK_DIR}/prefix)
 set(build ${WORK_DIR}/build)
 file(REMOVE_RECURSE ${WORK_DIR})
 
-run("installing the SDK" ${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${prefix} --component sdk)
+run("installing deformbench" ${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${prefix})
 file(GLOB_RECURSE config ${prefix}/deformbenchConfig.cmake)
 file(GLOB_RECURSE core ${prefix}/libdeform_core.so)
 if(NOT config OR NOT core)
@@ -72,3 +77,51 @@ run_gtest(InstalledPlugin.LoadsByPath --unset=DEFORM_PLUGIN_PATH DEFORM_INSTALLE
 run_gtest(InstalledPlugin.FoundInRelocatedInstall --unset=DEFORM_PLUGIN_PATH
           LD_LIBRARY_PATH=${libdir} DEFORM_INSTALLED_PREFIX=${prefix}
           DEFORM_INSTALLED_PLUGIN=${installed_plugin})
+
+# 5. The conformance suite on the example, from the installed program.
+set(deformbench ${prefix}/bin/deformbench)
+run("deformbench conformance --plugin-dir ${build}" ${CMAKE_COMMAND} -E env --unset=DEFORM_PLUGIN_PATH
+    ${deformbench} conformance --plugin-dir ${build})
+if(NOT RUN_OUTPUT MATCHES "pass +tethered/tethered +grasp" OR NOT RUN_OUTPUT MATCHES " passed, 0 failed")
+  message(FATAL_ERROR "conformance of the example did not pass:\n${RUN_OUTPUT}")
+endif()
+message(STATUS "deformbench conformance --plugin-dir ${build}: passed")
+
+# 6. The example next to pbd in its scene (no reference and 150 steps: seconds), then the report.
+file(GLOB pbd ${BUILD_DIR}/plugins/deform_pbd.so)
+if(pbd)
+  run("deformbench run compare_with_pbd.json" ${CMAKE_COMMAND} -E env --unset=DEFORM_PLUGIN_PATH
+      ${deformbench} --plugin-dir ${build} run ${EXAMPLE_DIR}/compare_with_pbd.json
+      --out ${WORK_DIR}/compare --no-reference --no-cache --steps 150 --strict)
+  file(READ ${WORK_DIR}/compare/results.json results)
+  foreach(label tethered pbd)
+    string(JSON n LENGTH "${results}" runs)
+    set(ok FALSE)
+    math(EXPR last "${n} - 1")
+    foreach(i RANGE ${last})
+      string(JSON l GET "${results}" runs ${i} label)
+      string(JSON st GET "${results}" runs ${i} status)
+      if("${l}" STREQUAL "${label}" AND "${st}" STREQUAL "ok")
+        set(ok TRUE)
+      endif()
+    endforeach()
+    if(NOT ok)
+      message(FATAL_ERROR "results.json has no ok run '${label}':\n${results}")
+    endif()
+  endforeach()
+  run("deformbench report" ${deformbench} report ${WORK_DIR}/compare)
+  if(NOT EXISTS ${WORK_DIR}/compare/report.html)
+    message(FATAL_ERROR "deformbench report wrote no report.html")
+  endif()
+  message(STATUS "tethered compared with pbd: ${WORK_DIR}/compare/report.html")
+else()
+  message(STATUS "pbd not built: comparison step skipped")
+endif()
+
+# 7. find_package(deformbench) from the build tree.
+run("configuring examples/minimal_plugin against the build tree" ${CMAKE_COMMAND} -S ${EXAMPLE_DIR}
+    -B ${WORK_DIR}/build-tree-example -G ${GENERATOR} ${compiler_arg} -DCMAKE_BUILD_TYPE=Release
+    -Ddeformbench_DIR=${BUILD_DIR} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF)
+run("building examples/minimal_plugin against the build tree" ${CMAKE_COMMAND}
+    --build ${WORK_DIR}/build-tree-example)
+message(STATUS "find_package(deformbench) from the build tree: built")

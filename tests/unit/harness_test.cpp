@@ -300,6 +300,39 @@ TEST(Runner, ErrorsAgainstTheReferenceRun) {
   EXPECT_NEAR(runs[0].error->rmseAll, std::sqrt(0.5) * 0.001, 1e-12);  // half the instants off
 }
 
+TEST(Metrics, GraspSceneRmseKLeavesOutTheGraspedVertices) {
+  // The grasp closes at the tet's apex (vertex 3, within its 5 mm radius): rmse_k is taken over
+  // the vertices nearest the grasp that it does not hold (0, then 1), and results.json says so.
+  const Fixture f;
+  const MatX3& rest = f.organ.surface.V;
+  const std::vector<int> held = rmseExcludedVertices(f.scene, rest);
+  EXPECT_EQ(held, std::vector<int>{3});
+  EXPECT_EQ(graspedSurfaceVertices(rest, Vec3(0.05, 0.05, 0.05), 1e-4).size(), 1u)
+      << "at least the nearest vertex";
+  MatX3 model = rest;
+  model(3, 0) += 0.001;  // error on the held vertex only: out of rmse_k
+  model(0, 0) += 0.002;
+  const Vec3 focus(0, 0, 0.1);
+  const ErrorMetrics e = computeErrors({model}, {rest}, rest, focus, {1, 2}, held);
+  EXPECT_EQ(e.nearestSamples, "nearest_ungrasped");
+  EXPECT_DOUBLE_EQ(e.rmseNearest[0].second, 0.002);
+  EXPECT_DOUBLE_EQ(e.rmseNearest[1].second, std::sqrt(0.5) * 0.002);
+  EXPECT_DOUBLE_EQ(computeErrors(model, rest, rest, focus, {1}).rmseNearest[0].second, 0.001);
+  // A scene with a load measures around the load: nothing is left out.
+  Scene loaded = f.scene;
+  loaded.loads.emplace_back();
+  EXPECT_TRUE(rmseExcludedVertices(loaded, rest).empty());
+
+  std::vector<RunRecord> runs;
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.back().isReference = true;
+  computeRunErrors(f.scene, f.organ, runs);
+  const auto j = runJson(runs[0]);
+  EXPECT_EQ(j["error"]["rmse_k_samples"], "nearest_ungrasped");
+  EXPECT_EQ(j["error"]["rmse_k_excluded_grasped"], 1);
+}
+
 // ---------------------------------------------------------------------------------- results
 
 TEST(Results, SanitizedLabels) {

@@ -119,7 +119,7 @@ TEST(Interaction, SmallJawsHoldAtLeastTheNearestVertexAndResetForgets) {
   ASSERT_EQ(in.grasps.size(), 1u);
   EXPECT_EQ(in.grasps[0].vertices, (std::vector<int>{0}));
   EXPECT_TRUE(inter.emptyGrasps().empty());
-  EXPECT_EQ(graspedSurfaceVertices(rest, Vec3(0.0049, 0.0003, 0), 0.0012),
+  EXPECT_EQ(graspedSurfaceVertices(rest.V, Vec3(0.0049, 0.0003, 0), 0.0012),
             (std::vector<int>{1, 2}));
 
   // After reset the grasp attaches again at the next prepare, from the model's surface then.

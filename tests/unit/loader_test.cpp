@@ -70,6 +70,9 @@ TEST(PluginLoader, FileNotFoundListsTheFoldersSearched) {
   EXPECT_EQ(e.kind(), PluginError::Kind::FileNotFound);
   EXPECT_EQ(e.file(), "deform_no_such_plugin.so");
   EXPECT_TRUE(contains(e.what(), "plugin 'no_such_plugin' not found in: " + kFixtures)) << e.what();
+  // ... and says how to add a folder.
+  EXPECT_TRUE(contains(e.what(), "--plugin-dir")) << e.what();
+  EXPECT_TRUE(contains(e.what(), "DEFORM_PLUGIN_PATH")) << e.what();
 
   PluginLoader two({kFixtures, "/nonexistent/plugins"});
   try {

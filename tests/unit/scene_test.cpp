@@ -144,7 +144,7 @@ TEST(SceneErrors, UnknownKeysAnywhere) {
 
   j = minimalScene();
   j["organ"]["material"] = {{"yuong", 1000}};
-  expectError(j, "/organ/material/yuong", "unknown key 'yuong'");
+  expectError(j, "/organ/material/yuong", "unknown key 'yuong' (did you mean 'young'? allowed");
 
   j = fullScene();
   j["tools"][0]["trajectory"][1]["jaws"] = "open";
@@ -164,7 +164,7 @@ TEST(SceneErrors, UnknownKeysAnywhere) {
 
   j = fullScene();
   j["samples"]["farthest"] = {3};
-  expectError(j, "/samples/farthest", "unknown key 'farthest'");
+  expectError(j, "/samples/farthest", "unknown key 'farthest' (allowed");  // nothing near
 
   j = fullScene();
   j["organ"]["fixed"]["sphere"] = 1;
@@ -386,7 +386,7 @@ TEST(Params, Errors) {
   expectParamError({{"solver", "newton"}}, "/models/0/params/solver",
                    "expected one of \"gauss_seidel\", \"jacobi\"");
   expectParamError({{"iteratons", 3}}, "/models/0/params/iteratons",
-                   "unknown parameter 'iteratons'");
+                   "unknown parameter 'iteratons' (did you mean 'iterations'? declared");
   expectParamError(json::array(), "/models/0/params", "expected an object");
 }
 

@@ -34,9 +34,10 @@ Vec3 toolPosition(const std::vector<KeyFrame>& trajectory, Real t);
 /// Jaw state at time t: that of the last keyframe with t_k <= t (open before the first).
 bool jawClosed(const std::vector<KeyFrame>& trajectory, Real t);
 
-/// The organ surface vertices a grasp closing at p with jaw radius r holds: every vertex of
-/// `rest` within r of p (sorted), or the nearest vertex alone when none is.
-std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Vec3& p, Real r);
+/// The organ surface vertices a grasp closing at p with jaw radius r holds: every rest-surface
+/// vertex (rest: #V by 3) within r of p (sorted), or the nearest vertex alone when none is. The
+/// one definition of the grasped set (the runner, rmse_k's exclusion and conformance use it).
+std::vector<int> graspedSurfaceVertices(const MatX3& rest, const Vec3& p, Real r);
 
 /// A point force read as a pressure patch of radius R around surface vertex c:
 ///     t(x) = F k(|x - x_c|) / integral k dA,   k(rho) = 1 - (rho / R)^2 for rho < R, else 0,

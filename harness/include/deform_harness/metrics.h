@@ -4,14 +4,20 @@
 // With x the model's surface, y the reference's and X the rest surface (each #V by 3, m, the
 // organ's input vertex order), d_i = |x_i - y_i| and u = displacement from rest:
 //   rmse_k     = sqrt( (1/k) sum_{i in N_k} d_i^2 ), N_k = the k rest-surface vertices nearest
-//                the focus point (the first load's vertex, else the first grasp point)
+//                the focus point (the first load's vertex, else the first grasp point). In a
+//                grasp scene (no loads; the focus is a grasp's closing point) N_k leaves out the
+//                grasped vertices (graspedSurfaceVertices()): every model holds those at the
+//                tool, so they would make rmse_k trivially small.
 //   rmse_all   = the same over every vertex, max = max_i d_i
 //   loss_ratio = sum_i |u_ref,i - u_model,i| / sum_i |u_ref,i|   (the particle/BEM paper's
 //                "accuracy loss ratio"; u_ref - u_model = y - x, so the numerator is sum_i d_i)
 // Over several compared instants the sums run over every (instant, vertex) pair.
 #pragma once
 
+#include <deform/scene.h>
 #include <deform/types.h>
+
+#include <string>
 
 #include <utility>
 #include <vector>
@@ -25,7 +31,19 @@ struct ErrorMetrics {
   double lossRatio =
       0;             ///< dimensionless; +inf when the reference does not move but the model does
   int instants = 0;  ///< how many instants were compared
+  /// Which vertices rmse_k covers: "nearest" (the k nearest the focus) or "nearest_ungrasped"
+  /// (the k nearest the focus among those no grasp holds). results.json: error.rmse_k_samples.
+  std::string nearestSamples = "nearest";
+  int excludedGrasped = 0;  ///< vertices left out of rmse_k's candidates (grasped)
 };
+
+/// The surface vertices a grasp holds: deform::graspedSurfaceVertices (interaction.h), the one
+/// definition. The union of those over every closing of every grasper of the scene (a keyframe whose jaws
+/// are closed after open ones, or closed at the first keyframe). Sorted, no repeats.
+std::vector<int> graspedSurfaceVertices(const Scene& scene, const MatX3& rest);
+/// The vertices rmse_k leaves out in this scene: the grasped ones when the scene has no loads
+/// (its focus is a grasp), else none.
+std::vector<int> rmseExcludedVertices(const Scene& scene, const MatX3& rest);
 
 /// Errors at one instant. model, reference, rest: #V by 3 (same V). nearest: the k values.
 ErrorMetrics computeErrors(const MatX3& model, const MatX3& reference, const MatX3& rest,
@@ -34,6 +52,12 @@ ErrorMetrics computeErrors(const MatX3& model, const MatX3& reference, const Mat
 /// Errors pooled over several instants (model[i] and reference[i] at the same instant).
 ErrorMetrics computeErrors(const std::vector<MatX3>& model, const std::vector<MatX3>& reference,
                            const MatX3& rest, const Vec3& focus, const std::vector<int>& nearest);
+
+/// The same, with rmse_k taken over the k vertices nearest the focus that are not in `excluded`
+/// (sorted); nearestSamples says "nearest_ungrasped" when excluded is not empty.
+ErrorMetrics computeErrors(const std::vector<MatX3>& model, const std::vector<MatX3>& reference,
+                           const MatX3& rest, const Vec3& focus, const std::vector<int>& nearest,
+                           const std::vector<int>& excluded);
 
 /// Step-time statistics in ms over the steps after the warm-up (the first warmupFraction of the
 /// steps, rounded down; all steps when that would leave none). p95 is the nearest-rank 95th
