@@ -151,6 +151,8 @@ void HybridModel::init(const Organ& organ, const HybridConfig& config, Cache* ca
 
   const std::vector<int> fixedVolume = fixedNodeIndices(m_mesh.volume.V, organ.fixed, fine);
   m_fem.init(m_mesh.volume, mat, fixedVolume, organ.source);
+  // The surface reads MV at the control nodes only (the coarse surface, MV nodes 0..#Vc-1).
+  m_fem.setOutputNodes(m_mesh.coarseSurface.numVertices());
   m_fixedFine = fixedNodeIndices(fine.V, organ.fixed, fine);
 
   m_surf0 = CuttableSurface::fromMesh(fine.V, fine.V, fine.F);

@@ -99,7 +99,8 @@ class HybridModel final : public Model {
 
   // Introspection for tests and benchmarks.
   const HybridMesh& hybridMesh() const { return m_mesh; }
-  /// Current MV node positions (#nodes by 3).
+  /// Current MV node positions (#nodes by 3): the control nodes (coarse surface, rows
+  /// 0..#Vc-1); interior nodes are not computed per step and stay at rest.
   const MatX3& volumePositions() const { return m_volumeX; }
   /// Coarse vertex of each fine vertex that is (still) a control node, else -1.
   const std::vector<int>& controlOf() const { return m_controlOf; }
