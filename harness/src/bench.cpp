@@ -31,7 +31,7 @@ ojson vec(const Vec3& v) {
 struct BenchCase {
   std::string id, plugin;
   ojson params;
-  std::string scene;  ///< "liver_grasp" | "cube_poke"
+  std::string scene;  ///< "liver_grasp" | "cube_poke" | "liver8k_grasp"
 };
 
 /// The fixed case set: each model on a grasp-and-lift of the ~2.2k-vertex liver and a poke of
@@ -48,10 +48,53 @@ std::vector<BenchCase> benchCases() {
   for (const char* scene : {"liver_grasp", "cube_poke"})
     for (const auto& [plugin, params] : models)
       out.push_back({plugin + "/" + scene, plugin, params, scene});
+  // The default scene's organ (scenes/liver_grasp_lift.json, the 8,122-vertex liver phantom):
+  // the models at their defaults, bending on, and the implicit mass-spring integrators.
+  const std::vector<std::pair<std::string, ojson>> models8k = {
+      {"pbd", ojson::object()},
+      {"pbd", {{"bending", true}}},
+      {"massspring", {{"integrator", "local_global"}}},
+      {"massspring", {{"integrator", "implicit_euler"}}},
+      {"fem_hex", ojson::object()},
+      {"hybrid_fem_pbd", ojson::object()}};
+  for (const auto& [plugin, params] : models8k) {
+    std::string id = plugin;
+    if (params.contains("bending")) id += "_bending";
+    if (params.contains("integrator")) id += "_" + params["integrator"].get<std::string>();
+    out.push_back({id + "/liver8k_grasp", plugin, params, "liver8k_grasp"});
+  }
   return out;
 }
 
+/// The default scene (scenes/liver_grasp_lift.json) with the grasp closed from the first step:
+/// the same phantom, material, support and grasper, lifting at the scene's speed (50 mm/s).
+ojson defaultLiverScene(const BenchCase& c, int steps) {
+  ojson j;
+  j["name"] = "bench-" + c.id;
+  j["description"] = "Timing case " + c.id + " (deformbench bench): the default scene's organ.";
+  j["organ"] = {{"mesh", "phantom:liver"},
+                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
+                {"fixed",
+                 {{"boxes",
+                   {{{-0.11, -0.08, -0.05}, {0.11, -0.035, 0.05}},
+                    {{-0.11, -0.08, -0.05}, {0.11, 0.03, -0.032}}}}}}};
+  j["gravity"] = {0, 0, 0};
+  j["dt"] = 0.001;
+  j["duration"] = steps * 0.001;
+  const Vec3 p(-0.0235, 0.0744, -0.0232);
+  j["tools"] = ojson::array(
+      {{{"type", "grasper"},
+        {"radius", 0.008},
+        {"trajectory",
+         {{{"t", 0.0}, {"pos", vec(p)}, {"jaw", "closed"}},
+          {{"t", steps * 0.001}, {"pos", vec(p + Vec3(0, 0, 0.05 * steps * 0.001))}}}}}});
+  j["models"] = ojson::array({{{"plugin", c.plugin}, {"label", c.plugin}, {"params", c.params}}});
+  j["output"] = {{"surfaces", "none"}};
+  return j;
+}
+
 ojson benchScene(const BenchCase& c, int steps) {
+  if (c.scene == "liver8k_grasp") return defaultLiverScene(c, steps);
   ojson j;
   j["name"] = "bench-" + c.id;
   const bool liver = c.scene == "liver_grasp";

@@ -1,5 +1,6 @@
 #include "batched_projection.h"
 
+#include <deform/isometric_bending.h>
 #include <deform/pbd_kernels.h>
 
 #include <algorithm>
@@ -141,6 +142,65 @@ SurfaceBatches buildSurfaceBatches(const SurfaceConstraints& c, const ActiveCons
   return b;
 }
 
+void addIsometricBending(SurfaceBatches& b, const MatX3& restV) {
+  const size_t n = b.hCos0.size();
+  b.isometric = true;
+  for (int k = 0; k < 4; ++k) {
+    b.isoP[k].resize(n);
+    b.isoK[k].assign(n, 0.0);
+    b.isoWK[k].assign(n, 0.0);
+  }
+  b.isoRest.assign(n, 0.0);
+  b.isoAlphaTilde.assign(n, 0.0);
+  b.isoScale.assign(n, 0.0);
+  b.isoLambda.assign(n, 0.0);
+  for (size_t i = 0; i < n; ++i) {
+    pbd::IsometricHinge h;
+    Vec3 x[4];
+    for (int k = 0; k < 4; ++k) {
+      b.isoP[k][i] = 4 * b.hp[k][i];
+      x[k] = restV.row(b.hp[k][i]).transpose();
+    }
+    if (!pbd::isometricHinge(x, h)) continue;
+    Real denom = 0;
+    for (int k = 0; k < 4; ++k) {
+      b.isoK[k][i] = h.K[k];
+      b.isoWK[k][i] = b.hw[k][i] * h.K[k];
+      denom += b.hw[k][i] * h.K[k] * h.K[k];
+    }
+    b.isoRest[i] = h.rest;
+    b.isoScale[i] = denom > 0 ? b.kBending / denom : 0.0;
+  }
+}
+
+namespace {
+
+long long projectIsometricPass(Real* x4, const SurfaceBatches& b, bool simd) {
+  const pbd::IsometricBatch<Real> v{
+      {b.isoP[0].data(), b.isoP[1].data(), b.isoP[2].data(), b.isoP[3].data()},
+      {b.isoK[0].data(), b.isoK[1].data(), b.isoK[2].data(), b.isoK[3].data()},
+      {b.isoWK[0].data(), b.isoWK[1].data(), b.isoWK[2].data(), b.isoWK[3].data()},
+      b.isoRest.data(),
+      b.isoAlphaTilde.data(),
+      b.isoScale.data(),
+      b.isoLambda.data()};
+  const size_t nhc = b.hColourStart.size() - 1;
+  long long degenerate = 0;
+  for (size_t col = 0; col < nhc; ++col) {
+    const size_t begin = static_cast<size_t>(b.hColourStart[col]);
+    const size_t end = static_cast<size_t>(b.hColourStart[col + 1]);
+    if (b.hLastColourShared && col + 1 == nhc) {
+      for (size_t i = begin; i < end; ++i)
+        degenerate += pbd::projectIsometricColour(x4, v, i, i + 1, simd);
+    } else {
+      degenerate += pbd::projectIsometricColour(x4, v, begin, end, simd);
+    }
+  }
+  return degenerate;
+}
+
+}  // namespace
+
 long long projectSurfaceBatches(Real* x4, const SurfaceBatches& b, int iterations, bool simd) {
   if (b.sColourStart.empty() || b.hColourStart.empty()) return 0;  // never built: nothing active
   static const bool kAvx2 = avx2Supported();
@@ -160,6 +220,10 @@ long long projectSurfaceBatches(Real* x4, const SurfaceBatches& b, int iteration
       for (; i < end; ++i) degenerate += batched::stretchGroup<ScalarLanes>(x4, sv, i);
     }
     if (b.kBending <= 0) continue;
+    if (b.isometric) {
+      degenerate += projectIsometricPass(x4, b, simd);
+      continue;
+    }
     for (size_t col = 0; col < nhc; ++col) {
       size_t i = static_cast<size_t>(b.hColourStart[col]);
       const size_t end = static_cast<size_t>(b.hColourStart[col + 1]);

@@ -33,6 +33,13 @@ struct SurfaceBatches {
   std::vector<int> hColourStart;
   bool sLastColourShared = false, hLastColourShared = false;  ///< colour overflow: sequential
   Real kStretch = 0, kBending = 0;                            ///< per-iteration stiffnesses
+  // Isometric bending (deform/isometric_bending.h), set by addIsometricBending(): the same hinges
+  // in the same order as hp, with the stencil weights of their rest shape; when set, the bending
+  // pass projects these instead of the dihedral angles.
+  bool isometric = false;
+  std::vector<int> isoP[4];  ///< 4 * particle index (row offsets in x4)
+  std::vector<Real> isoK[4], isoWK[4], isoRest, isoAlphaTilde, isoScale;
+  mutable std::vector<Real> isoLambda;  ///< written by the projection (classic PBD: unused)
 
   batched::StretchView stretchView() const;
   batched::BendView bendView() const;
@@ -42,6 +49,11 @@ struct SurfaceBatches {
 /// kBending: classic PBD stiffnesses in [0, 1] for `iterations` sweeps.
 SurfaceBatches buildSurfaceBatches(const SurfaceConstraints& c, const ActiveConstraints& a,
                                    const VecX& w, Real kStretch, Real kBending, int iterations);
+
+/// Switches the bending pass of b to the isometric constraint (classic stiffness b.kBending) on
+/// the same hinges, with stencils from the rest positions restV (#V by 3). A hinge degenerate at
+/// rest gets a zero stencil (it is then never moved).
+void addIsometricBending(SurfaceBatches& b, const MatX3& restV);
 
 /// `iterations` sweeps on the padded positions x4 (#V by 4, row-major, 4th column unused).
 /// simd: use the AVX2 path when the CPU has it. Returns the degenerate projections skipped.

@@ -84,6 +84,16 @@ const MatX& CoarseLinearFem::nodeColumns(int node) {
   return m_columns.emplace(node, std::move(cols)).first->second;
 }
 
+void CoarseLinearFem::setOutputNodes(int count) {
+  m_outputNodes = count < 0 ? -1 : std::min(count, m_numNodes);
+  m_outDofs.clear();
+  if (m_outputNodes >= 0)
+    for (int v = 0; v < m_outputNodes; ++v)
+      for (int a = 0; a < 3; ++a)
+        if (m_dof[3 * v + a] >= 0) m_outDofs.push_back(m_dof[3 * v + a]);
+  m_rowKey.clear();  // rebuild Z (and its output rows) at the next solve
+}
+
 void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& gravity,
                             const std::vector<Prescribed>& prescribed, MatX3& u,
                             std::vector<Vec3>* reactions) {
@@ -145,6 +155,10 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
       }
     // Eigen's pivoting QR must not be run on a 0x0 matrix (it reads past the empty storage).
     if (m > 0) m_S.compute(S);
+    if (m_outputNodes >= 0) {
+      m_Zout.resize(static_cast<Eigen::Index>(m_outDofs.size()), m);
+      for (size_t k = 0; k < m_outDofs.size(); ++k) m_Zout.row(k) = m_Z.row(m_outDofs[k]);
+    }
   }
   if (reactions) reactions->assign(prescribed.size(), Vec3::Zero());
   if (!m_rowAt.empty()) {
@@ -166,7 +180,12 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
         rhs[r++] = p.displacement[a] - cu;
       }
     m_lambda = m_S.solve(rhs);
-    x.noalias() += m_Z * m_lambda;
+    if (m_outputNodes >= 0) {
+      m_zl.noalias() = m_Zout * m_lambda;
+      for (size_t k = 0; k < m_outDofs.size(); ++k) x[m_outDofs[k]] += m_zl[k];
+    } else {
+      x.noalias() += m_Z * m_lambda;
+    }
     if (reactions) {
       r = 0;
       for (size_t e = 0; e < prescribed.size() && r < m_rowAt.size(); ++e)
@@ -180,7 +199,8 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
   }
 
   u.setZero(m_numNodes, 3);
-  for (int v = 0; v < m_numNodes; ++v)
+  const int outNodes = m_outputNodes >= 0 ? m_outputNodes : m_numNodes;
+  for (int v = 0; v < outNodes; ++v)
     for (int a = 0; a < 3; ++a)
       if (m_dof[3 * v + a] >= 0) u(v, a) = x[m_dof[3 * v + a]];
 }

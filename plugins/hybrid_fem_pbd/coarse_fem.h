@@ -65,6 +65,13 @@ class CoarseLinearFem {
              const std::vector<Prescribed>& prescribed, MatX3& u,
              std::vector<Vec3>* reactions = nullptr);
 
+  /// Only nodes [0, count) are read by the caller (the hybrid model reads the control nodes, the
+  /// coarse surface, nodes 0..#Vc-1): solve() then adds the prescribed displacements' response
+  /// Z lambda to those nodes' rows only and leaves the other nodes' rows of u at 0 (not
+  /// computed). Z lambda is the per-step cost of a grasp: #free x #rows, three times the control
+  /// rows on the liver (17k volume nodes, 5.5k on the surface). count < 0: every node (default).
+  void setOutputNodes(int count);
+
   int numNodes() const { return m_numNodes; }
   int numFreeDofs() const { return m_numFree; }
   bool regularised() const { return m_regularised; }
@@ -89,7 +96,10 @@ class CoarseLinearFem {
   Eigen::CompleteOrthogonalDecomposition<MatX> m_S;
   std::vector<int> m_rowAxis;
   std::vector<CoarseAttachment> m_rowAt;
-  VecX m_scratch, m_rhs, m_lambda;
+  VecX m_scratch, m_rhs, m_lambda, m_zl;
+  int m_outputNodes = -1;
+  std::vector<int> m_outDofs;  ///< free dofs of nodes [0, m_outputNodes)
+  MatX m_Zout;                 ///< m_Z's rows at m_outDofs
   std::vector<std::array<Real, 7>> m_keyScratch;
 };
 

@@ -16,7 +16,10 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
                       "stretch constraint stiffness (classic PBD)"),
       ParamSpec::real("bending_stiffness", "1", 0.5, 0.0, 1.0,
-                      "dihedral bending constraint stiffness (classic PBD)"),
+                      "bending constraint stiffness (classic PBD)"),
+      ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
+                        "surface bending constraint: isometric (Bergou et al. 2006, a constant "
+                        "stencil per hinge) or the paper's dihedral angle (Eqs. (10)-(11))"),
       ParamSpec::real("damping", "1/s", 20.0, 0.0, 1e4,
                       "surface velocity damping rate: v <- v exp(-damping dt) each step"),
       ParamSpec::flag("surface_load", true,
@@ -42,6 +45,8 @@ HybridConfig configFromParams(const ParamValues& p) {
   c.iterations = static_cast<int>(p.integer("iterations"));
   c.stretchStiffness = p.real("stretch_stiffness");
   c.bendingStiffness = p.real("bending_stiffness");
+  c.bending = p.choiceAs<HybridBending>("bending_model", {{"isometric", HybridBending::Isometric},
+                                                          {"dihedral", HybridBending::Dihedral}});
   c.damping = p.real("damping");
   c.surfaceLoad = p.flag("surface_load");
   c.simplificationLevels = static_cast<int>(p.integer("simplification_levels"));
@@ -146,6 +151,8 @@ void HybridModel::init(const Organ& organ, const HybridConfig& config, Cache* ca
 
   const std::vector<int> fixedVolume = fixedNodeIndices(m_mesh.volume.V, organ.fixed, fine);
   m_fem.init(m_mesh.volume, mat, fixedVolume, organ.source);
+  // The surface reads MV at the control nodes only (the coarse surface, MV nodes 0..#Vc-1).
+  m_fem.setOutputNodes(m_mesh.coarseSurface.numVertices());
   m_fixedFine = fixedNodeIndices(fine.V, organ.fixed, fine);
 
   m_surf0 = CuttableSurface::fromMesh(fine.V, fine.V, fine.F);
@@ -292,6 +299,7 @@ StepStatus HybridModel::step(const StepInput& in) {
     m_active = activeConstraints(m_constraints, m_w);
     m_batches = buildSurfaceBatches(m_constraints, m_active, m_w, m_cfg.stretchStiffness,
                                     m_cfg.bendingStiffness, m_cfg.iterations);
+    if (m_cfg.bending == HybridBending::Isometric) addIsometricBending(m_batches, m_surf.rest);
     m_activeValid = true;
   }
   const Real damp = std::exp(-m_cfg.damping * dt);

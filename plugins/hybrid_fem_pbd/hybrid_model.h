@@ -41,11 +41,16 @@ enum class SurfaceProjection {
   Batched,        ///< projectSurfaceBatches(), four at a time where the CPU has AVX2
 };
 
+/// The bending constraint of the fine surface: the isometric hinge of deform/isometric_bending.h
+/// (default) or the paper's dihedral angle (Eqs. (10)-(11)).
+enum class HybridBending { Isometric, Dihedral };
+
 /// Resolved parameters (see paramSpecs()).
 struct HybridConfig {
-  int iterations = 10;            ///< Gauss-Seidel sweeps on MS
-  Real stretchStiffness = 1.0;    ///< classic PBD, [0, 1]
-  Real bendingStiffness = 0.5;    ///< classic PBD, [0, 1]
+  int iterations = 10;          ///< Gauss-Seidel sweeps on MS
+  Real stretchStiffness = 1.0;  ///< classic PBD, [0, 1]
+  Real bendingStiffness = 0.5;  ///< classic PBD, [0, 1]
+  HybridBending bending = HybridBending::Isometric;
   Real damping = 20.0;            ///< 1/s: v <- v exp(-damping dt)
   bool surfaceLoad = true;        ///< the force also acts on its fine node in the prediction
   int simplificationLevels = 1;   ///< vertex-cover passes (the paper: 1)
@@ -94,7 +99,8 @@ class HybridModel final : public Model {
 
   // Introspection for tests and benchmarks.
   const HybridMesh& hybridMesh() const { return m_mesh; }
-  /// Current MV node positions (#nodes by 3).
+  /// Current MV node positions (#nodes by 3): the control nodes (coarse surface, rows
+  /// 0..#Vc-1); interior nodes are not computed per step and stay at rest.
   const MatX3& volumePositions() const { return m_volumeX; }
   /// Coarse vertex of each fine vertex that is (still) a control node, else -1.
   const std::vector<int>& controlOf() const { return m_controlOf; }

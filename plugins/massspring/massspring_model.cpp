@@ -18,9 +18,11 @@ namespace deform::massspring {
 std::vector<ParamSpec> paramSpecs() {
   return {
       ParamSpec::choice("integrator", "symplectic_euler",
-                        {"explicit_euler", "symplectic_euler", "implicit_euler"},
+                        {"explicit_euler", "symplectic_euler", "implicit_euler", "local_global"},
                         "time integration: explicit Euler (the papers' baseline), symplectic "
-                        "Euler, or implicit Euler with one Newton step (Baraff & Witkin 1998)"),
+                        "Euler, implicit Euler with one Newton step (Baraff & Witkin 1998), or "
+                        "implicit Euler by local/global iterations with a prefactored matrix "
+                        "(Liu et al. 2013)"),
       ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
                       "surface input: membrane thickness t in the spring rule k = E t sum|T|/L^2"),
       ParamSpec::real("bending_ratio", "1", 0.1, 0.0, 100.0,
@@ -37,6 +39,8 @@ std::vector<ParamSpec> paramSpecs() {
                          "explicit and symplectic Euler: substeps per time step; 0 = automatic, "
                          "enough to stay below the estimated stability limit; 1 = none (the "
                          "papers' experiments, which may diverge)"),
+      ParamSpec::integer("local_global_iterations", 10, 1, 10000,
+                         "local_global: local/global iterations per step"),
   };
 }
 
@@ -45,7 +49,8 @@ MassSpringConfig configFromParams(const ParamValues& p) {
   c.integrator =
       p.choiceAs<Integrator>("integrator", {{"explicit_euler", Integrator::ExplicitEuler},
                                             {"symplectic_euler", Integrator::SymplecticEuler},
-                                            {"implicit_euler", Integrator::ImplicitEuler}});
+                                            {"implicit_euler", Integrator::ImplicitEuler},
+                                            {"local_global", Integrator::LocalGlobal}});
   c.thickness = p.real("thickness");
   c.bendingRatio = p.real("bending_ratio");
   c.dampingRatio = p.real("damping_ratio");
@@ -53,6 +58,7 @@ MassSpringConfig configFromParams(const ParamValues& p) {
   c.cgTolerance = p.real("cg_tolerance");
   c.cgMaxIterations = static_cast<int>(p.integer("cg_max_iterations"));
   c.substeps = static_cast<int>(p.integer("substeps"));
+  c.localGlobalIterations = static_cast<int>(p.integer("local_global_iterations"));
   return c;
 }
 
@@ -156,6 +162,9 @@ void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
   m_boxHalf = 0.5 * tol::kDivergenceBoxFactor * std::max(box.size().maxCoeff(), Real(1e-9));
   m_graspMask.assign(N, 0);
   if (m_config.integrator == Integrator::ImplicitEuler) buildPattern();
+  m_lgAnalysed = false;  // local_global: pattern analysed and factorised at the first step
+  m_lgH = -1;
+  m_lgFactoredFor.clear();
   reset();
 }
 
@@ -383,7 +392,9 @@ StepStatus MassSpringModel::step(const StepInput& in) {
   }
 
   StepStatus status;
-  if (m_config.integrator == Integrator::ImplicitEuler) {
+  if (m_config.integrator == Integrator::LocalGlobal) {
+    status = stepLocalGlobal(in, h);
+  } else if (m_config.integrator == Integrator::ImplicitEuler) {
     status = stepImplicit(in, h);
   } else {
     // Explicit and symplectic Euler: n substeps of h / n (substepsFor), the point loads and
@@ -605,6 +616,7 @@ NumericCounters MassSpringModel::numericCounters() const {
     c["cg_not_converged"] = m_cgNotConverged;
     c["cg_iterations"] = m_cgIterations;
   }
+  if (m_config.integrator == Integrator::LocalGlobal) c["factorisations"] = m_lgFactorisations;
   return c;
 }
 

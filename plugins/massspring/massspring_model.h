@@ -3,7 +3,10 @@
 // edge (between the two opposite vertices), or, for tetrahedral input, the tet nodes with springs
 // on the tet edges. Masses are lumped. Time integration: explicit Euler (the papers' baseline),
 // symplectic Euler, or implicit Euler with one Newton step per time step (Baraff & Witkin 1998,
-// "Large steps in cloth simulation", SIGGRAPH '98, Eqs. (15)-(18)) solved by conjugate gradients.
+// "Large steps in cloth simulation", SIGGRAPH '98, Eqs. (15)-(18)) solved by conjugate gradients,
+// or implicit Euler by local/global alternation with a constant, prefactored system matrix (Liu,
+// Bargteil, O'Brien, Kavan 2013, "Fast simulation of mass-spring systems", ACM TOG 32(6) 214,
+// doi:10.1145/2508363.2508406; massspring_liu.cpp).
 // See README.md for every modelling choice.
 #pragma once
 
@@ -14,11 +17,12 @@
 #include <deform/sparse.h>
 
 #include <array>
+#include <memory>
 #include <vector>
 
 namespace deform::massspring {
 
-enum class Integrator { ExplicitEuler, SymplecticEuler, ImplicitEuler };
+enum class Integrator { ExplicitEuler, SymplecticEuler, ImplicitEuler, LocalGlobal };
 
 struct MassSpringConfig {
   Integrator integrator = Integrator::SymplecticEuler;
@@ -29,6 +33,7 @@ struct MassSpringConfig {
   Real cgTolerance = 1e-6;  ///< relative residual of the implicit solve
   int cgMaxIterations = 200;
   int substeps = 0;  ///< explicit/symplectic Euler substeps per step; 0 = automatic
+  int localGlobalIterations = 10;  ///< local/global iterations per step (Liu et al. 2013)
 };
 
 /// Upper bound of the substeps parameter (and of the automatic choice).
@@ -79,6 +84,9 @@ class MassSpringModel final : public Model {
   void buildTets(const Organ& organ);
   void buildPattern();
   StepStatus stepImplicit(const StepInput& in, Real h);
+  // Liu et al. 2013 (massspring_liu.cpp).
+  StepStatus stepLocalGlobal(const StepInput& in, Real h);
+  void factorLocalGlobal(Real h);
   void applyConstraints(const StepInput& in, Real h, const MatX3& xOld);
   void computeGraspForces(const StepInput& in);
   StepStatus checkDivergence() const;
@@ -108,6 +116,20 @@ class MassSpringModel final : public Model {
   std::vector<std::array<int, 3>> m_nodeSlots;
   VecX m_dv, m_rhs, m_prescribed;
   std::vector<unsigned char> m_constrainedDof;
+
+  // Local/global: A = M + h^2 L over nodes (the same for x, y and z), with the rows and columns of
+  // constrained (fixed, massless, grasped) nodes replaced by the identity; factorised by CHOLMOD
+  // when h or the constrained set changes (the pattern is analysed once).
+  SparseMatrix m_lgA;
+  std::vector<std::array<int, 4>> m_lgSpringSlots;  // (aa, bb, ab, ba) value indices
+  std::vector<int> m_lgDiag;
+  std::unique_ptr<SparseCholesky> m_lgChol;
+  bool m_lgAnalysed = false;
+  Real m_lgH = -1;
+  std::vector<unsigned char> m_lgConstrained, m_lgFactoredFor;
+  MatX m_lgRhs0, m_lgRhs, m_lgX;
+  MatX3 m_lgY;
+  long long m_lgFactorisations = 0;
 
   std::vector<unsigned char> m_graspMask;
   std::vector<int> m_graspedScratch, m_graspSpringsFor, m_graspSprings;

@@ -1,6 +1,7 @@
 // Google Benchmark: one PBD step on a liver-sized closed surface (~2.2k vertices, ~6.6k edges),
 // 10 iterations, under gravity with the bottom pinned. Variants: stretch + volume (the metaballs
-// paper's PBD baseline), + dihedral bending, classic stiffness; the default (float32) solver and,
+// paper's PBD baseline), + isometric bending (the default bending model), + dihedral bending,
+// classic stiffness; the default (float32) solver and,
 // for the first two, the double-precision one.
 #include "pbd_model.h"
 #include "test_meshes.h"
@@ -54,6 +55,12 @@ void BM_PbdStretchVolumeBending(benchmark::State& s) {
   c.bending = true;
   runPbd(s, c);
 }
+void BM_PbdStretchVolumeDihedralBending(benchmark::State& s) {
+  pbd::PbdConfig c;
+  c.bending = true;
+  c.bendingModel = pbd::BendingModel::Dihedral;
+  runPbd(s, c);
+}
 void BM_PbdStretchOnly(benchmark::State& s) {
   pbd::PbdConfig c;
   c.bending = false;
@@ -87,6 +94,7 @@ BENCHMARK(BM_PbdStretchOnlyF64)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_PbdStretchVolumeF64)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_PbdClassicStretchVolume)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_PbdStretchVolumeBending)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_PbdStretchVolumeDihedralBending)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

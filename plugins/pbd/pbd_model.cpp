@@ -28,7 +28,10 @@ std::vector<ParamSpec> paramSpecs() {
                       "classic mode: dihedral bending constraint stiffness"),
       ParamSpec::real("volume_stiffness", "1", 1.0, 0.0, 1.0,
                       "classic mode: volume constraint stiffness (global or per tet)"),
-      ParamSpec::flag("bending", false, "dihedral bending constraints on interior surface edges"),
+      ParamSpec::flag("bending", false, "bending constraints on interior surface edges"),
+      ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
+                        "bending constraint: isometric (Bergou et al. 2006, a constant stencil "
+                        "per hinge) or dihedral angle (Mueller et al. 2007)"),
       ParamSpec::flag("volume", true, "global volume constraint on a closed surface"),
       ParamSpec::flag("volume_every_sweep", false,
                       "project the global volume constraint in every sweep (default: last sweep "
@@ -52,6 +55,9 @@ PbdConfig configFromParams(const ParamValues& p) {
   c.bendingStiffness = p.real("bending_stiffness");
   c.volumeStiffness = p.real("volume_stiffness");
   c.bending = p.flag("bending");
+  c.bendingModel = p.choiceAs<BendingModel>(
+      "bending_model",
+      {{"isometric", BendingModel::Isometric}, {"dihedral", BendingModel::Dihedral}});
   c.volume = p.flag("volume");
   c.volumeEverySweep = p.flag("volume_every_sweep");
   c.thickness = p.real("thickness");
@@ -134,6 +140,7 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
   m_distance.clear();
   m_degenerateAtInit = 0;
   m_dihedral.clear();
+  m_iso.clear();
   m_tet.clear();
   m_hasVolume = false;
 
@@ -154,6 +161,9 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
     return std::array{c.a, c.b};
   });
   orderByColour(m_dihedral, N, [](const DihedralConstraint& c) {
+    return std::array{c.p[0], c.p[1], c.p[2], c.p[3]};
+  });
+  m_isoColours = orderByColour(m_iso, N, [](const IsometricHinge& c) {
     return std::array{c.p[0], c.p[1], c.p[2], c.p[3]};
   });
   orderByColour(m_tet, N, [](const TetVolumeConstraint& c) {
@@ -222,6 +232,7 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
     m_distWaF.resize(m_distance.size());
     m_distWbF.resize(m_distance.size());
   }
+  initIsometric();
   reset();
 }
 
@@ -283,6 +294,19 @@ void PbdModel::buildSurface(const Organ& organ) {
       c.p[1] = S.F(f1, j);
       Vec3 x[4], g[4];
       for (int i = 0; i < 4; ++i) x[i] = S.V.row(c.p[i]);
+      if (m_config.bendingModel == BendingModel::Isometric) {
+        IsometricHinge h;
+        for (int i = 0; i < 4; ++i) h.p[i] = c.p[i];
+        if (!isometricHinge(x, h)) {
+          ++m_degenerateAtInit;
+          continue;
+        }
+        h.compliance = xpbd ? isometricHingeCompliance(mat.young, mat.poisson, m_config.thickness,
+                                                       faceArea[f0] + faceArea[f1])
+                            : 0.0;
+        m_iso.push_back(h);
+        continue;
+      }
       Real theta = 0;
       if (!dihedralAngle(x[0], x[1], x[2], x[3], theta, g)) {
         ++m_degenerateAtInit;
@@ -389,6 +413,7 @@ void PbdModel::refreshHotData(Real dt) {
       m_distWbF[i] = static_cast<float>(m_distWb[i]);
     }
   }
+  refreshIsometricHotData(dt);
   m_hotDt = dt;
 }
 
@@ -468,6 +493,10 @@ void PbdModel::projectAll(Real dt) {
                  : projectDistanceColourPadded(x4, batch, b, e);
   };
   bool packed = false;
+  if (m_f32)
+    std::fill(m_lambdaIsoF.begin(), m_lambdaIsoF.end(), 0.0f);
+  else
+    std::fill(m_lambdaIso.begin(), m_lambdaIso.end(), 0.0);
   for (int it = 0; it < m_config.iterations; ++it) {
     if (!packed) packPositions();
     packed = true;
@@ -479,6 +508,7 @@ void PbdModel::projectAll(Real dt) {
         m_degenerate += project(b, e);
       }
     }
+    if (!m_iso.empty()) projectIsometric();
     const bool volumeNow =
         m_hasVolume && (m_config.volumeEverySweep || it + 1 == m_config.iterations);
     if (!m_dihedral.empty() || !m_tet.empty()) {
@@ -614,6 +644,9 @@ void PbdModel::listGraspConstraints() {
   m_graspDist.clear();
   m_graspBend.clear();
   m_graspTet.clear();
+  m_graspIso.clear();
+  for (size_t i = 0; i < m_iso.size(); ++i)
+    if (touches(m_iso[i].p, 4)) m_graspIso.push_back(static_cast<int>(i));
   for (size_t i = 0; i < m_distance.size(); ++i)
     if (m_graspMask[m_distA[i]] | m_graspMask[m_distB[i]])
       m_graspDist.push_back(static_cast<int>(i));
@@ -667,6 +700,7 @@ void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
     g[0] = -(g[1] + g[2] + g[3]);
     for (int k = 0; k < 4; ++k) add(c.p[k], (m_lambdaTet[i] * invDt2) * g[k]);
   }
+  addIsometricGraspForces(invDt2, nodeForce);
   if (m_hasVolume)
     for (int i : m_hotGrasped)
       nodeForce.row(i) += (m_lambdaVolume * invDt2) * volumeGradient(i).transpose();
@@ -678,10 +712,11 @@ Counts PbdModel::counts() const {
   const long long nVol = m_hasVolume ? 1 : 0;
   return {{"nodes", m_x.rows()},
           {"elements", m_elements},
-          {"constraints",
-           static_cast<long long>(m_distance.size() + m_dihedral.size() + m_tet.size()) + nVol},
+          {"constraints", static_cast<long long>(m_distance.size() + m_dihedral.size() +
+                                                 m_iso.size() + m_tet.size()) +
+                              nVol},
           {"distance_constraints", static_cast<long long>(m_distance.size())},
-          {"bending_constraints", static_cast<long long>(m_dihedral.size())},
+          {"bending_constraints", static_cast<long long>(m_dihedral.size() + m_iso.size())},
           {"volume_constraints", static_cast<long long>(m_tet.size()) + nVol}};
 }
 

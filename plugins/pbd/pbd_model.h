@@ -10,6 +10,7 @@
 
 #include "pbd_constraints.h"
 
+#include <deform/isometric_bending.h>
 #include <deform/model.h>
 #include <deform/params.h>
 
@@ -21,15 +22,19 @@ enum class StiffnessMode { Classic, Xpbd };
 /// Number type of the solver state of the distance and global volume constraints (see README.md,
 /// "Precision"); the interface, the state between steps and the other constraints stay double.
 enum class Precision { Float32, Float64 };
+/// The bending constraint of `bending = true`: the isometric (Bergou et al. 2006) hinge of
+/// deform/isometric_bending.h, or the dihedral angle of deform/pbd_kernels.h.
+enum class BendingModel { Isometric, Dihedral };
 
 /// Resolved parameters (see paramSpecs() for units, ranges and meaning).
 struct PbdConfig {
   int iterations = 10;
   StiffnessMode mode = StiffnessMode::Xpbd;
-  Real stretchStiffness = 1.0;    ///< classic, [0, 1]
-  Real bendingStiffness = 0.1;    ///< classic, [0, 1]
-  Real volumeStiffness = 1.0;     ///< classic, [0, 1]
-  bool bending = false;           ///< dihedral bending constraints (surface input)
+  Real stretchStiffness = 1.0;  ///< classic, [0, 1]
+  Real bendingStiffness = 0.1;  ///< classic, [0, 1]
+  Real volumeStiffness = 1.0;   ///< classic, [0, 1]
+  bool bending = false;         ///< bending constraints on interior edges (surface input)
+  BendingModel bendingModel = BendingModel::Isometric;
   bool volume = true;             ///< global volume constraint (closed surface input)
   bool volumeEverySweep = false;  ///< project the global volume in every sweep, not only the last
   Real thickness = 0.01;          ///< m, shell thickness for XPBD compliances (surface input)
@@ -47,6 +52,7 @@ PbdConfig configFromParams(const ParamValues& params);
 Real surfaceEdgeCompliance(Real young, Real thickness, Real restLength, Real adjacentArea);
 /// Dihedral hinge: alpha = (A1 + A2) / (3 D |e|^2), D = E t^3 / (12 (1 - nu^2))  (1/(N m)).
 Real hingeCompliance(const Material& m, Real thickness, Real edgeLength, Real adjacentArea);
+/// Isometric hinge: alpha = (A1 + A2) / (3 D) (m/N), see deform/isometric_bending.h.
 /// Bulk modulus K = E / (3 (1 - 2 nu)), Pa (infinite for nu = 0.5).
 Real bulkModulus(const Material& m);
 
@@ -69,6 +75,7 @@ class PbdModel final : public Model {
   const VecX& masses() const { return m_mass; }
   const std::vector<DistanceConstraint>& distanceConstraints() const { return m_distance; }
   const std::vector<DihedralConstraint>& dihedralConstraints() const { return m_dihedral; }
+  const std::vector<IsometricHinge>& isometricHinges() const { return m_iso; }
   const std::vector<TetVolumeConstraint>& tetConstraints() const { return m_tet; }
   bool hasVolumeConstraint() const { return m_hasVolume; }
 
@@ -81,6 +88,12 @@ class PbdModel final : public Model {
   void packPositions();
   void unpackPositions();
   void projectVolume(Real dt);
+  // Isometric bending (pbd_isometric.cpp): hot data, the per-sweep projection on the packed
+  // positions, and the multipliers' forces on grasped nodes.
+  void initIsometric();
+  void refreshIsometricHotData(Real dt);
+  void projectIsometric();
+  void addIsometricGraspForces(Real invDt2, MatX3& nodeForce);
   Real lambdaDist(size_t i) const {
     return m_f32 ? static_cast<Real>(m_lambdaDistF[i]) : m_lambdaDist[i];
   }
@@ -107,6 +120,15 @@ class PbdModel final : public Model {
 
   std::vector<DistanceConstraint> m_distance;
   std::vector<DihedralConstraint> m_dihedral;
+  std::vector<IsometricHinge> m_iso;
+  // Isometric hinges in colour order as structure of arrays (double and float forms), like the
+  // distance data: m_isoColours the start of each colour, plus the end.
+  std::vector<size_t> m_isoColours;
+  std::vector<int> m_isoP[4];  // 4 * particle index
+  std::vector<Real> m_isoK[4], m_isoWK[4], m_isoRest, m_isoAlphaTilde, m_isoScale, m_lambdaIso;
+  std::vector<float> m_isoKF[4], m_isoWKF[4], m_isoRestF, m_isoAlphaTildeF, m_isoScaleF,
+      m_lambdaIsoF;
+  std::vector<int> m_graspIso;
   std::vector<TetVolumeConstraint> m_tet;
   bool m_hasVolume = false;
   Real m_restVolume = 0, m_volumeCompliance = 0;

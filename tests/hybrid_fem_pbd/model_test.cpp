@@ -254,6 +254,7 @@ TEST(HybridModelProjection, BatchedFollowsTheReferenceTrajectory) {
   for (int mode = 0; mode < 3; ++mode) {
     HybridConfig cfg;
     cfg.projection = static_cast<SurfaceProjection>(mode);
+    cfg.bending = HybridBending::Dihedral;  // the reference projection is the dihedral one
     HybridModel m;
     m.init(organ, cfg, &testCache());
     for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(input(top, Vec3(0.5, 0, -5.0))), StepStatus::Ok);

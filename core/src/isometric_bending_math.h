@@ -1,0 +1,72 @@
+// Internal: the arithmetic of the batched isometric bending projection
+// (deform/isometric_bending.h), written once over a "lanes" policy L so that the same operations,
+// in the same order, run one hinge at a time (isometric_bending.cpp) and eight floats / four
+// doubles at a time (isometric_bending_avx2.cpp, compiled with -mavx2). Both files are compiled
+// with -ffp-contract=off, so that no multiply-add is fused on one path and not on the other: the
+// two give identical results. Plain pointers and builtin types only (this header is compiled with
+// and without -mavx2, so it includes no library header) and internal linkage throughout.
+#pragma once
+
+#include <cstddef>
+
+namespace deform::pbd::isobatch {
+
+/// The SoA view of IsometricBatch<T> (the same layout, repeated here so that this header
+/// includes nothing).
+template <class T>
+struct View {
+  const int* p[4];
+  const T* K[4];
+  const T* wK[4];
+  const T* rest;
+  const T* alphaTilde;
+  const T* scale;
+  T* lambda;
+};
+
+namespace {  // internal linkage on purpose (see the header comment)
+
+constexpr double kTinyLength2 = 1e-24;  // tol::kDegenerateLength^2, m^2
+
+/// Hinges i .. i + L::kWidth - 1. measure == nullptr: project them, return the number of
+/// degenerate ones; otherwise store |v| (0 where degenerate) to measure[i..] and change nothing.
+template <class L>
+inline int hingeGroup(typename L::T* x4, const View<typename L::T>& b, std::size_t i,
+                      typename L::T* measure) {
+  using V = typename L::V;
+  using T = typename L::T;
+  V x[4], y[4], z[4];
+  for (int k = 0; k < 4; ++k) L::loadRows(x4, b.p[k] + i, x[k], y[k], z[k]);
+  const V K0 = L::load(b.K[0] + i), K1 = L::load(b.K[1] + i), K2 = L::load(b.K[2] + i),
+          K3 = L::load(b.K[3] + i);
+  const V vx = K0 * x[0] + K1 * x[1] + K2 * x[2] + K3 * x[3];
+  const V vy = K0 * y[0] + K1 * y[1] + K2 * y[2] + K3 * y[3];
+  const V vz = K0 * z[0] + K1 * z[1] + K2 * z[2] + K3 * z[3];
+  const V l2 = vx * vx + vy * vy + vz * vz;
+  const V tiny = L::set1(static_cast<T>(kTinyLength2));
+  const auto ok = L::gt(l2, tiny);
+  const V len = L::sqrt(L::max(l2, tiny));
+  if (measure != nullptr) {
+    L::store(measure + i, L::select(ok, len, L::set1(T(0))));
+    return 0;
+  }
+  const V rest = L::load(b.rest + i);
+  V lambda = L::load(b.lambda + i);
+  const V C = len - rest;
+  const V dl = L::select(ok, L::load(b.scale + i) * ((-C) - L::load(b.alphaTilde + i) * lambda),
+                         L::set1(T(0)));
+  lambda = lambda + dl;
+  L::store(b.lambda + i, lambda);
+  // dx_k = w_k dl g_k, g_k = K_k v / |v|.
+  const V s = dl / len;
+  for (int k = 0; k < 4; ++k) {
+    const V c = L::load(b.wK[k] + i) * s;
+    L::addRows(x4, b.p[k] + i, c * vx, c * vy, c * vz);
+  }
+  // Degenerate: |v| = 0 where the rest value asks for a bend (a flat hinge at rest is fine).
+  return L::count(L::band(L::notMask(ok), L::ne(rest, L::set1(T(0)))));
+}
+
+}  // namespace
+
+}  // namespace deform::pbd::isobatch
