@@ -39,7 +39,7 @@ int topVertex(const SurfaceMesh& s) {
 StepInput input(int load = -1, Vec3 force = Vec3::Zero()) {
   StepInput in;
   in.dt = 1e-3;
-  if (load >= 0) in.loads.push_back({load, force});
+  if (load >= 0) in.loads.push_back(PointLoad::onVertex(load, force));
   return in;
 }
 

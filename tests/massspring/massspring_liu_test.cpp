@@ -38,7 +38,7 @@ TEST(MassSpringLocalGlobal, ConvergesToTheImplicitEulerStep) {
   cfg.dampingRatio = 0.0;
   cfg.massDamping = 0.0;
   const Real h = 5e-3;  // large enough for the springs' nonlinearity to matter
-  const PointLoad load{0, Vec3(0.3, 0.1, -2.0)};
+  const PointLoad load = PointLoad::onVertex(0, Vec3(0.3, 0.1, -2.0));
   StepInput in;
   in.dt = h;
   in.loads.push_back(load);
