@@ -307,7 +307,7 @@ TEST(Metrics, GraspSceneRmseKLeavesOutTheGraspedVertices) {
   const MatX3& rest = f.organ.surface.V;
   const std::vector<int> held = rmseExcludedVertices(f.scene, rest);
   EXPECT_EQ(held, std::vector<int>{3});
-  EXPECT_EQ(graspedSurfaceVertices(rest, Vec3(0.05, 0.05, 0.05), 1e-4).size(), 1u)
+  EXPECT_EQ(deform::graspedSurfaceVertices(rest, Vec3(0.05, 0.05, 0.05), 1e-4).size(), 1u)
       << "at least the nearest vertex";
   MatX3 model = rest;
   model(3, 0) += 0.001;  // error on the held vertex only: out of rmse_k

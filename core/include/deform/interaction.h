@@ -38,6 +38,9 @@ bool jawClosed(const std::vector<KeyFrame>& trajectory, Real t);
 /// vertex (rest: #V by 3) within r of p (sorted), or the nearest vertex alone when none is. The
 /// one definition of the grasped set (the runner, rmse_k's exclusion and conformance use it).
 std::vector<int> graspedSurfaceVertices(const MatX3& rest, const Vec3& p, Real r);
+inline std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Vec3& p, Real r) {
+  return graspedSurfaceVertices(rest.V, p, r);
+}
 
 /// A point force read as a pressure patch of radius R around surface vertex c:
 ///     t(x) = F k(|x - x_c|) / integral k dA,   k(rho) = 1 - (rho / R)^2 for rho < R, else 0,
