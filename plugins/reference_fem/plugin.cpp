@@ -27,7 +27,7 @@ std::vector<ParamSpec> referenceFemParams() {
                         "with the scene's dt"),
       ParamSpec::choice("material", "neo_hookean", {"linear", "corotational", "neo_hookean"},
                         "constitutive model"),
-      ParamSpec::integer("element_order", 2, 1, 2,
+      ParamSpec::integer("element_order", 1, 1, 2,
                          "1: 4-node (linear) tets; 2: 10-node (quadratic, straight-sided) tets "
                          "with midside nodes added to the Gmsh mesh"),
       ParamSpec::integer("elements", 20000, 100, 5000000,
