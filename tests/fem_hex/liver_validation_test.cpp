@@ -196,16 +196,23 @@ TEST(FemHexLiverValidation, GraspLiftAgainstReference) {
   }
   EXPECT_TRUE(hex.emptyGrasps.empty()) << "fem_hex's grasp closed on no node";
   // Reaction on the tool: the tissue pulls it down in every model, of the same order (the same
-  // material, a similar grasped patch lifted by the same 25 mm).
+  // material, the same grasped surface lifted by the same 25 mm). Since the grasp is defined on
+  // the surface (issue G1) fem_hex holds the grasped points through its embedding, i.e. every
+  // node of the cells that carry them: at 967 hexahedra (~1 cm cells) a wider, stiffer hold than
+  // the reference's surface nodes, so its reaction is a few times the reference's, and it comes
+  // closer with refinement.
   for (const RunRecord* r : {&hex, &fine, &ref}) ASSERT_FALSE(r->graspForces.empty()) << r->label;
   const Real fRef = ref.graspForces.back().force.z();
+  EXPECT_LT(std::abs(fine.graspForces.back().force.z() - fRef),
+            std::abs(hex.graspForces.back().force.z() - fRef))
+      << "refinement brings the grasp reaction closer to the reference's";
   for (const RunRecord* r : {&hex, &fine}) {
     const Real f = r->graspForces.back().force.z();
     std::printf("%-28s grasp reaction z %.3f N, reference %.3f N (ratio %.2f)\n", r->label.c_str(),
                 f, fRef, f / fRef);
     EXPECT_LT(f, 0.0) << r->label;
     EXPECT_GT(f / fRef, 0.5) << r->label;
-    EXPECT_LT(f / fRef, 2.0) << r->label;
+    EXPECT_LT(f / fRef, 6.0) << r->label;
   }
   EXPECT_LT(fRef, 0.0);
   // At 967 hexahedra fem_hex is better than a model that does not move at all (loss ratio 1),
