@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # Installs the Debian packages deformbench needs, only those missing. Safe to rerun.
+# --tests adds what only the test suite needs (a single-node Slurm for dispatch_slurm_e2e).
 set -euo pipefail
 PACKAGES=(
   build-essential cmake pkg-config git
@@ -13,6 +14,7 @@ PACKAGES=(
   libjs-three chromium python3-pil  # the report's 3D viewer (three.js) and its browser test
   openmpi-bin libopenmpi-dev
 )
+if [[ ${1:-} == --tests ]]; then PACKAGES+=(slurm-wlm munge); fi
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
