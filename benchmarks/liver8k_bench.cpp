@@ -6,8 +6,8 @@
 //   liver8k_bench [--benchmark_filter=...]   (the repetitions' median is the headline)
 // A plugin that is not built is skipped with a message.
 #include <benchmark/benchmark.h>
-#include <deform/interaction.h>
 #include <deform/cache.h>
+#include <deform/interaction.h>
 #include <deform/mesh.h>
 #include <deform/plugin_loader.h>
 #include <deform/scene.h>

@@ -263,8 +263,8 @@ void checkPointForce(const ModelInfo& info, Cache& cache, const ConformanceOptio
     u += patch.weights[k] * (ro.finalSurface.row(pv) - co.organ.surface.V.row(pv)).transpose();
   }
   const Real along = u.dot(Vec3(0.3, 0, 0.5).normalized());
-  require(along > 0.3 * u.norm(), "under an oblique force the loaded patch moved " +
-                                      mm(u.norm()) + ", only " + mm(along) + " along the force");
+  require(along > 0.3 * u.norm(), "under an oblique force the loaded patch moved " + mm(u.norm()) +
+                                      ", only " + mm(along) + " along the force");
   detail = "loaded vertex rose " + mm(dz) + "; patch moved " + mm(along) + " along the force";
 }
 

@@ -32,7 +32,7 @@ struct MassSpringConfig {
   Real massDamping = 1.0;   ///< 1/s, force -massDamping * m * v on every node
   Real cgTolerance = 1e-6;  ///< relative residual of the implicit solve
   int cgMaxIterations = 200;
-  int substeps = 0;  ///< explicit/symplectic Euler substeps per step; 0 = automatic
+  int substeps = 0;                ///< explicit/symplectic Euler substeps per step; 0 = automatic
   int localGlobalIterations = 10;  ///< local/global iterations per step (Liu et al. 2013)
 };
 

@@ -1,7 +1,7 @@
 // The yardstick (issue G1): reference_fem with quadratic tets and every other parameter at its
 // default solves the gravity-loaded cantilever within 2% of beam theory (the tables' references
-// are quadratic; the plugin's default stays linear, see its README). The beam: L 0.1 m, 10 mm square
-// section, E 10 MPa, nu 0.3, rho 1000 kg/m^3, fixed at x = 0 (the built-in "beam" phantom).
+// are quadratic; the plugin's default stays linear, see its README). The beam: L 0.1 m, 10 mm
+// square section, E 10 MPa, nu 0.3, rho 1000 kg/m^3, fixed at x = 0 (the built-in "beam" phantom).
 // Tip sag = Euler-Bernoulli q L^4 / (8 E I) + Timoshenko shear q L^2 / (2 kappa G A), with
 // q = rho g A, I = b h^3 / 12, kappa = 10 (1 + nu) / (12 + 11 nu) (rectangle, Cowper 1966):
 // 1.4715 + 0.0150 = 1.4865 mm (1.4868 mm with kappa = 5/6).

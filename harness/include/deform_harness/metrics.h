@@ -38,8 +38,8 @@ struct ErrorMetrics {
 };
 
 /// The surface vertices a grasp holds: deform::graspedSurfaceVertices (interaction.h), the one
-/// definition. The union of those over every closing of every grasper of the scene (a keyframe whose jaws
-/// are closed after open ones, or closed at the first keyframe). Sorted, no repeats.
+/// definition. The union of those over every closing of every grasper of the scene (a keyframe
+/// whose jaws are closed after open ones, or closed at the first keyframe). Sorted, no repeats.
 std::vector<int> graspedSurfaceVertices(const Scene& scene, const MatX3& rest);
 /// The vertices rmse_k leaves out in this scene: the grasped ones when the scene has no loads
 /// (its focus is a grasp), else none.

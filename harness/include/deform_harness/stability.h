@@ -78,7 +78,7 @@ struct StabilityOptions {
   int jobs = 1;                         ///< children at once (when dispatcher is null)
   /// Where the (model, case) children run (dispatch.h); nullptr: here, `jobs` at once.
   Dispatcher* dispatcher = nullptr;
-  double accuracyThreshold = 0.2;       ///< accurate: error_ratio at most this
+  double accuracyThreshold = 0.2;  ///< accurate: error_ratio at most this
 };
 
 struct StabilityRecord {
