@@ -38,8 +38,12 @@ done
 generator=()
 command -v ninja >/dev/null && [[ ! -f $build/CMakeCache.txt ]] && generator=(-G Ninja)
 launcher=()
-command -v ccache >/dev/null &&
+# ccache keyed on paths relative to the checkout (and not on the build folder, which -g would
+# hash), so that any clone built before on this machine is a cache hit.
+if command -v ccache >/dev/null; then
+  export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$PWD} CCACHE_NOHASHDIR=${CCACHE_NOHASHDIR:-1}
   launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
+fi
 cmake -S . -B "$build" "${generator[@]}" "${launcher[@]}" -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
   -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g" -DDEFORM_SANITIZE=ON \
   -DDEFORM_BUILD_FUZZERS=ON -DDEFORM_BUILD_TESTS=OFF -DDEFORM_BUILD_BENCHMARKS=OFF \
