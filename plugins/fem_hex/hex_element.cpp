@@ -77,6 +77,66 @@ Mat24 hexStiffness(const Vec3& size, Real young, Real poisson) {
   return 0.5 * (K + K.transpose());
 }
 
+namespace {
+
+/// Strain-displacement rows of one column of displacement gradients g = d(phi)/dx for the
+/// component `axis` (engineering shear strains, the order of elasticityMatrix).
+void strainColumn(Eigen::Matrix<Real, 6, 1>& col, const Vec3& g, int axis) {
+  col.setZero();
+  col(axis) = g(axis);
+  // gamma_xy (row 3), gamma_yz (row 4), gamma_zx (row 5) take the other two derivatives.
+  const int shear[3][2] = {{3, 5}, {3, 4}, {5, 4}};  // rows touched by component axis
+  const int along[3][2] = {{1, 2}, {0, 2}, {0, 1}};  // the derivative each row takes
+  for (int k = 0; k < 2; ++k) col(shear[axis][k]) = g(along[axis][k]);
+}
+
+Eigen::Matrix<Real, 6, 6> elasticityMatrix(Real young, Real poisson) {
+  const Eigen::Vector2d lm = lameParameters(young, poisson);
+  Eigen::Matrix<Real, 6, 6> D = Eigen::Matrix<Real, 6, 6>::Zero();
+  D.topLeftCorner<3, 3>().setConstant(lm[0]);
+  D.topLeftCorner<3, 3>().diagonal().array() += 2 * lm[1];
+  D.bottomRightCorner<3, 3>().diagonal().setConstant(lm[1]);
+  return D;
+}
+
+}  // namespace
+
+Mat24 hexStiffnessIncompatible(const Vec3& size, Real young, Real poisson) {
+  const Eigen::Matrix<Real, 6, 6> D = elasticityMatrix(young, poisson);
+  using Mat6x24 = Eigen::Matrix<Real, 6, 24>;
+  using Mat6x9 = Eigen::Matrix<Real, 6, 9>;
+  Mat24 Kuu = Mat24::Zero();
+  Eigen::Matrix<Real, 24, 9> Kua = Eigen::Matrix<Real, 24, 9>::Zero();
+  Eigen::Matrix<Real, 9, 9> Kaa = Eigen::Matrix<Real, 9, 9>::Zero();
+  const Real w = size.prod() / 8.0;  // 2x2x2 Gauss, unit weights, detJ = V / 8
+  for (int gp = 0; gp < 8; ++gp) {
+    const Vec3 xi = kGauss * (2 * hexCorner(gp).cast<Real>() - Vec3::Ones());
+    const Mat38 G = hexShapeGradients(size, xi);
+    Mat6x24 B;
+    Eigen::Matrix<Real, 6, 1> col;
+    for (int a = 0; a < 8; ++a)
+      for (int i = 0; i < 3; ++i) {
+        strainColumn(col, G.col(a), i);
+        B.col(3 * a + i) = col;
+      }
+    // Mode k (1 - xi_k^2): gradient -2 xi_k (2 / size_k) along axis k only.
+    Mat6x9 Ba;
+    for (int k = 0; k < 3; ++k) {
+      Vec3 g = Vec3::Zero();
+      g(k) = -4.0 * xi(k) / size(k);
+      for (int i = 0; i < 3; ++i) {
+        strainColumn(col, g, i);
+        Ba.col(3 * k + i) = col;
+      }
+    }
+    Kuu.noalias() += w * B.transpose() * D * B;
+    Kua.noalias() += w * B.transpose() * D * Ba;
+    Kaa.noalias() += w * Ba.transpose() * D * Ba;
+  }
+  const Mat24 K = Kuu - Kua * Kaa.ldlt().solve(Kua.transpose());
+  return 0.5 * (K + K.transpose());
+}
+
 Real hexStrainEnergy(const Vec3& size, Real young, Real poisson, const Mat38& u) {
   const Eigen::Vector2d lm = lameParameters(young, poisson);
   Real W = 0;

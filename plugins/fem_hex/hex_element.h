@@ -44,6 +44,15 @@ Eigen::Matrix<Real, 8, 1> hexTrilinearWeights(const Vec3& t);
 /// (3 translations, 3 infinitesimal rotations) as its null space.
 Mat24 hexStiffness(const Vec3& size, Real young, Real poisson);
 
+/// Rest stiffness (N/m), 24 x 24, of the hexahedron with Wilson's incompatible modes (Wilson et
+/// al. 1973, "Incompatible displacement models"; Taylor, Beresford & Wilson 1976, "A
+/// non-conforming element for stress analysis", IJNME): the trilinear displacement plus the nine
+/// internal bubble modes (1 - xi^2, 1 - eta^2, 1 - zeta^2 for each component), condensed out
+/// statically, K = Kuu - Kua Kaa^-1 Kau. On a box the modes' gradients integrate to zero, so the
+/// element passes the patch test; it represents pure bending, which the trilinear element
+/// resists with spurious shear (shear locking). Same null space as hexStiffness.
+Mat24 hexStiffnessIncompatible(const Vec3& size, Real young, Real poisson);
+
 /// Strain energy W(u) (J) of displacement u by quadrature of 1/2 eps : sigma (no B matrix:
 /// an independent path for testing K0).
 Real hexStrainEnergy(const Vec3& size, Real young, Real poisson, const Mat38& u);

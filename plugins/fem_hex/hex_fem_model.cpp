@@ -22,6 +22,27 @@ double msSince(Clock::time_point t0) {
 
 }  // namespace
 
+std::vector<Real> cellFillFractions(const SurfaceMesh& surface, const VoxelGrid& voxels,
+                                    const HexGrid& grid, int n) {
+  std::vector<Real> fill(size_t(grid.numHexes()), 1.0);
+  if (n < 1) return fill;
+  // The finer grid stays within ~50M cells (its states and flags are two bytes a cell).
+  while (n > 1 && static_cast<double>(voxels.dims.prod()) * n * n * n > 5e7) --n;
+  const VoxelGrid fine = voxelizeGrid(surface, voxels.origin, voxels.cellSize / n, voxels.dims * n,
+                                      static_cast<long long>(5e7) + 1);
+  for (int e = 0; e < grid.numHexes(); ++e) {
+    const Vec3i c = grid.cells[size_t(e)];
+    if (voxels.at(c) == CellState::Inside) continue;
+    int inside = 0;
+    for (int k = 0; k < n; ++k)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+          inside += fine.centreInside[fine.linearIndex(n * c + Vec3i(i, j, k))];
+    fill[size_t(e)] = std::max(kMinCellFill, Real(inside) / (n * n * n));
+  }
+  return fill;
+}
+
 void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Real dt,
                              const std::function<std::vector<int>(const MatX3&)>& fixedNodesOf) {
   const std::string where = organ.source.empty() ? std::string("<organ>") : organ.source;
@@ -50,15 +71,19 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   }
   m_grid = hexGridFromVoxels(m_voxels);
   m_embedding = embedPoints(m_grid, m_voxels, organ.surface.V);
-  m_K0 = hexStiffness(Vec3::Constant(h), mat.young, mat.poisson);
+  m_K0 = config.element == HexElement::IncompatibleModes
+             ? hexStiffnessIncompatible(Vec3::Constant(h), mat.young, mat.poisson)
+             : hexStiffness(Vec3::Constant(h), mat.young, mat.poisson);
   m_rest = m_grid.nodes;
   const int N = m_grid.numNodes();
   const int E = m_grid.numHexes();
 
+  m_fill = cellFillFractions(organ.surface, m_voxels, m_grid, config.fillSamples);
   m_mass = VecX::Zero(3 * N);
   const Real nodeMass = mat.density * h * h * h / 8.0;
-  for (const auto& hex : m_grid.hexes) {
-    for (int a = 0; a < 8; ++a) m_mass.segment<3>(3 * hex[a]).array() += nodeMass;
+  for (int e = 0; e < E; ++e) {
+    for (int a = 0; a < 8; ++a)
+      m_mass.segment<3>(3 * m_grid.hexes[e][a]).array() += m_fill[e] * nodeMass;
   }
 
   m_fixedList = fixedNodesOf(m_rest);
@@ -224,11 +249,11 @@ void HexFemModel::assembleValues(bool rotated) {
       for (int a = 0; a < 8; ++a) {
         for (int b = 0; b < 8; ++b) {
           Ke.block<3, 3>(3 * a, 3 * b).noalias() =
-              m_c2 * R * m_K0.block<3, 3>(3 * a, 3 * b) * R.transpose();
+              (m_c2 * m_fill[e]) * R * m_K0.block<3, 3>(3 * a, 3 * b) * R.transpose();
         }
       }
     } else {
-      Ke = m_c2 * m_K0;
+      Ke = (m_c2 * m_fill[e]) * m_K0;
     }
     const int* idx = m_valueIndex.data() + static_cast<size_t>(e) * 576;
     for (int i = 0; i < 24; ++i) {
@@ -313,7 +338,7 @@ void HexFemModel::applyElements(const std::vector<int>* elems, const VecX& in, R
         if (b != 0) local.segment<3>(3 * i) -= b * m_rest.row(hex[i]).transpose();
       }
     }
-    f.noalias() = m_K0 * local;
+    f.noalias() = m_fill[e] * (m_K0 * local);
     if (rotated) {
       const Mat3& R = m_R[e];
       for (int i = 0; i < 8; ++i)
@@ -354,11 +379,12 @@ void HexFemModel::applyAllElements(const VecX& in, Real a, Real b, Real scale, V
   for (int e = 0; e < E; ++e) {
     const auto& hex = m_grid.hexes[e];
     const auto f = m_KU.col(e);
+    const Real s = scale * m_fill[e];
     if (rotated) {
-      const Mat3 R = scale * m_R[e];
+      const Mat3 R = s * m_R[e];
       for (int i = 0; i < 8; ++i) out.segment<3>(3 * hex[i]).noalias() += R * f.segment<3>(3 * i);
     } else {
-      for (int i = 0; i < 8; ++i) out.segment<3>(3 * hex[i]) += scale * f.segment<3>(3 * i);
+      for (int i = 0; i < 8; ++i) out.segment<3>(3 * hex[i]) += s * f.segment<3>(3 * i);
     }
   }
 }

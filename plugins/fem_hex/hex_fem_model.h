@@ -44,10 +44,29 @@ enum class CorotationalSolver { Refactor, Pcg };
 /// with the grasped rows and columns eliminated whenever the grasp set changes (RestGrasped).
 enum class PcgPreconditioner { Rest, RestGrasped };
 
+/// The element stiffness: the plain trilinear hexahedron (locks in bending) or the same nodes with
+/// Wilson's condensed incompatible modes (hexStiffnessIncompatible).
+enum class HexElement { Trilinear, IncompatibleModes };
+
+/// Smallest volume fraction of a crossing cell (keeps its nodes' mass and stiffness away from 0).
+constexpr Real kMinCellFill = 0.1;
+
+/// Volume fraction inside `surface` of each hexahedron of `grid` (built from `voxels`): 1 for
+/// inside cells, the fraction of the n^3 sub-cell centres inside for crossing ones (at least
+/// kMinCellFill), by the same winding-number classification on a grid n times finer. n < 1: all 1.
+std::vector<Real> cellFillFractions(const SurfaceMesh& surface, const VoxelGrid& voxels,
+                                    const HexGrid& grid, int n);
+
 struct HexFemConfig {
   long long elements = 967;  ///< target hexahedron count (used when cellSize == 0)
   Real cellSize = 0;         ///< m; 0 = choose from elements
   ElasticModel elastic = ElasticModel::Corotational;
+  HexElement element = HexElement::IncompatibleModes;
+  /// Samples per axis of the volume fraction of the cells the surface crosses: stiffness and mass
+  /// of such a hexahedron are scaled by the fraction of its n^3 sub-cell centres inside the
+  /// surface (at least kMinCellFill), so the grid's overhang adds neither. 0: every cell is full
+  /// (the plain voxel embedding).
+  int fillSamples = 4;
   CorotationalSolver solver = CorotationalSolver::Pcg;
   Real rayleighMass = 0;       ///< alpha, 1/s
   Real rayleighStiffness = 0;  ///< beta, s
@@ -78,6 +97,8 @@ class HexFemModel : public Model {
   const HexGrid& grid() const { return m_grid; }
   const VoxelGrid& voxels() const { return m_voxels; }
   const Mat24& elementStiffness() const { return m_K0; }
+  /// Volume fraction of each hexahedron inside the surface (1 with fillSamples = 0).
+  const std::vector<Real>& cellFill() const { return m_fill; }
   const std::vector<int>& fixedNodes() const { return m_fixedList; }
   /// Node velocities (#N by 3, m/s).
   Eigen::Map<const MatX3> velocities() const {
@@ -113,8 +134,9 @@ class HexFemModel : public Model {
   HexGrid m_grid;
   Embedding m_embedding;
   Mat24 m_K0;
-  VecX m_mass;     // 3N, lumped, per DOF
-  VecX m_invDiag;  // 3N, inverse diagonal of the rest system (1/mass on fixed nodes)
+  std::vector<Real> m_fill;  ///< per hexahedron, scales its K0 and its mass
+  VecX m_mass;               // 3N, lumped, per DOF
+  VecX m_invDiag;            // 3N, inverse diagonal of the rest system (1/mass on fixed nodes)
   MatX3 m_rest;
   std::vector<int> m_fixedList;
   std::vector<char> m_isFixed;   // N

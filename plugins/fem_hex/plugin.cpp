@@ -17,6 +17,13 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::choice("formulation", "corotational", {"corotational", "linear"},
                         "corotational (rotation-invariant, R K0 R^T per element) or linear "
                         "small-strain elasticity"),
+      ParamSpec::choice("element", "incompatible_modes", {"incompatible_modes", "trilinear"},
+                        "element stiffness: incompatible_modes (Wilson's nine internal bending "
+                        "modes, condensed: no shear locking) or the plain trilinear hexahedron"),
+      ParamSpec::integer("fill_samples", 4, 0, 16,
+                         "samples per axis of the volume fraction of the cells the surface "
+                         "crosses; their stiffness and mass are scaled by it (at least 0.1), so "
+                         "the voxel grid's overhang adds neither; 0: every cell counts whole"),
       ParamSpec::choice("corotational_solver", "pcg", {"pcg", "refactor"},
                         "pcg: CG warm-started from the last velocities, preconditioned by the "
                         "prefactored rest system; refactor: assemble and refactorise R K0 R^T "
@@ -49,6 +56,10 @@ HexFemConfig configFromParams(const ParamValues& p) {
   c.cellSize = p.real("cell_size");
   c.elastic = p.choiceAs<ElasticModel>("formulation", {{"corotational", ElasticModel::Corotational},
                                                        {"linear", ElasticModel::Linear}});
+  c.element =
+      p.choiceAs<HexElement>("element", {{"incompatible_modes", HexElement::IncompatibleModes},
+                                         {"trilinear", HexElement::Trilinear}});
+  c.fillSamples = static_cast<int>(p.integer("fill_samples"));
   c.solver = p.choiceAs<CorotationalSolver>(
       "corotational_solver",
       {{"pcg", CorotationalSolver::Pcg}, {"refactor", CorotationalSolver::Refactor}});

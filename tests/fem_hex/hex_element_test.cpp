@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
 
+#include <cstdio>
 #include <random>
 
 namespace deform::fem_hex {
@@ -29,18 +30,20 @@ Mat3 rotation(const Vec3& axis, Real angle) {
 const Real kE = 5500, kNu = 0.3;
 
 TEST(HexElement, UnitCubeStiffnessHasExactlySixRigidModes) {
-  for (Real nu : {0.0, 0.3, 0.45}) {
-    const Mat24 K = hexStiffness(Vec3::Ones(), 1.0, nu);
-    EXPECT_LT((K - K.transpose()).norm(), 1e-14);
-    Eigen::SelfAdjointEigenSolver<Mat24> es(K);
-    const auto& ev = es.eigenvalues();  // ascending
-    const Real top = ev[23];
-    int zeros = 0;
-    for (int i = 0; i < 24; ++i) zeros += std::abs(ev[i]) < 1e-10 * top;
-    EXPECT_EQ(zeros, 6) << "nu=" << nu;
-    EXPECT_GT(ev[6], 1e-3 * top) << "nu=" << nu;
-    EXPECT_GT(ev[0], -1e-10 * top);
-  }
+  for (int incompatible = 0; incompatible < 2; ++incompatible)
+    for (Real nu : {0.0, 0.3, 0.45}) {
+      const Mat24 K = incompatible ? hexStiffnessIncompatible(Vec3::Ones(), 1.0, nu)
+                                   : hexStiffness(Vec3::Ones(), 1.0, nu);
+      EXPECT_LT((K - K.transpose()).norm(), 1e-14);
+      Eigen::SelfAdjointEigenSolver<Mat24> es(K);
+      const auto& ev = es.eigenvalues();  // ascending
+      const Real top = ev[23];
+      int zeros = 0;
+      for (int i = 0; i < 24; ++i) zeros += std::abs(ev[i]) < 1e-10 * top;
+      EXPECT_EQ(zeros, 6) << "nu=" << nu << " incompatible=" << incompatible;
+      EXPECT_GT(ev[6], 1e-3 * top) << "nu=" << nu << " incompatible=" << incompatible;
+      EXPECT_GT(ev[0], -1e-10 * top);
+    }
 }
 
 TEST(HexElement, StiffnessTimesDisplacementEqualsQuadratureForce) {
@@ -150,39 +153,44 @@ TEST(HexElement, PatchTestLinearFieldIsReproducedAtInteriorNodes) {
       for (int i = 0; i < 4; ++i) vox.cells.emplace_back(i, j, k);
   const HexGrid g = hexGridFromVoxels(vox);
   ASSERT_EQ(g.numNodes(), 125);
-  const Mat24 K0 = hexStiffness(Vec3::Constant(vox.cellSize), kE, kNu);
-  const int n = 3 * g.numNodes();
-  MatX K = MatX::Zero(n, n);
-  for (const auto& hex : g.hexes)
-    for (int a = 0; a < 8; ++a)
-      for (int b = 0; b < 8; ++b)
-        K.block<3, 3>(3 * hex[a], 3 * hex[b]) += K0.block<3, 3>(3 * a, 3 * b);
-  const Mat3 A = (Mat3() << 0.01, -0.02, 0.005, 0.03, 0.0, -0.01, 0.002, 0.015, -0.02).finished();
-  const Vec3 c(1e-3, -2e-3, 5e-4);
-  std::vector<int> interior, boundary;
-  const Box bb = boundingBox(g.nodes);
-  for (int v = 0; v < g.numNodes(); ++v) {
-    const Vec3 p = g.nodes.row(v);
-    const bool onBoundary =
-        ((p - bb.lo).cwiseAbs().minCoeff() < 1e-9) || ((p - bb.hi).cwiseAbs().minCoeff() < 1e-9);
-    (onBoundary ? boundary : interior).push_back(v);
-  }
-  ASSERT_EQ(interior.size(), 27u);
-  const int ni = 3 * static_cast<int>(interior.size()), nb = 3 * static_cast<int>(boundary.size());
-  MatX Kii(ni, ni), Kib(ni, nb);
-  VecX ub(nb);
-  for (size_t a = 0; a < interior.size(); ++a) {
-    for (size_t b = 0; b < interior.size(); ++b)
-      Kii.block<3, 3>(3 * a, 3 * b) = K.block<3, 3>(3 * interior[a], 3 * interior[b]);
+  for (int incompatible = 0; incompatible < 2; ++incompatible) {
+    SCOPED_TRACE(incompatible ? "incompatible modes" : "trilinear");
+    const Mat24 K0 = incompatible ? hexStiffnessIncompatible(Vec3::Constant(vox.cellSize), kE, kNu)
+                                  : hexStiffness(Vec3::Constant(vox.cellSize), kE, kNu);
+    const int n = 3 * g.numNodes();
+    MatX K = MatX::Zero(n, n);
+    for (const auto& hex : g.hexes)
+      for (int a = 0; a < 8; ++a)
+        for (int b = 0; b < 8; ++b)
+          K.block<3, 3>(3 * hex[a], 3 * hex[b]) += K0.block<3, 3>(3 * a, 3 * b);
+    const Mat3 A = (Mat3() << 0.01, -0.02, 0.005, 0.03, 0.0, -0.01, 0.002, 0.015, -0.02).finished();
+    const Vec3 c(1e-3, -2e-3, 5e-4);
+    std::vector<int> interior, boundary;
+    const Box bb = boundingBox(g.nodes);
+    for (int v = 0; v < g.numNodes(); ++v) {
+      const Vec3 p = g.nodes.row(v);
+      const bool onBoundary =
+          ((p - bb.lo).cwiseAbs().minCoeff() < 1e-9) || ((p - bb.hi).cwiseAbs().minCoeff() < 1e-9);
+      (onBoundary ? boundary : interior).push_back(v);
+    }
+    ASSERT_EQ(interior.size(), 27u);
+    const int ni = 3 * static_cast<int>(interior.size()),
+              nb = 3 * static_cast<int>(boundary.size());
+    MatX Kii(ni, ni), Kib(ni, nb);
+    VecX ub(nb);
+    for (size_t a = 0; a < interior.size(); ++a) {
+      for (size_t b = 0; b < interior.size(); ++b)
+        Kii.block<3, 3>(3 * a, 3 * b) = K.block<3, 3>(3 * interior[a], 3 * interior[b]);
+      for (size_t b = 0; b < boundary.size(); ++b)
+        Kib.block<3, 3>(3 * a, 3 * b) = K.block<3, 3>(3 * interior[a], 3 * boundary[b]);
+    }
     for (size_t b = 0; b < boundary.size(); ++b)
-      Kib.block<3, 3>(3 * a, 3 * b) = K.block<3, 3>(3 * interior[a], 3 * boundary[b]);
-  }
-  for (size_t b = 0; b < boundary.size(); ++b)
-    ub.segment<3>(3 * b) = A * g.nodes.row(boundary[b]).transpose() + c;
-  const VecX ui = Kii.ldlt().solve(-Kib * ub);
-  for (size_t a = 0; a < interior.size(); ++a) {
-    const Vec3 expected = A * g.nodes.row(interior[a]).transpose() + c;
-    EXPECT_LT((ui.segment<3>(3 * a) - expected).norm(), 1e-12) << "node " << interior[a];
+      ub.segment<3>(3 * b) = A * g.nodes.row(boundary[b]).transpose() + c;
+    const VecX ui = Kii.ldlt().solve(-Kib * ub);
+    for (size_t a = 0; a < interior.size(); ++a) {
+      const Vec3 expected = A * g.nodes.row(interior[a]).transpose() + c;
+      EXPECT_LT((ui.segment<3>(3 * a) - expected).norm(), 1e-12) << "node " << interior[a];
+    }
   }
 }
 
@@ -194,6 +202,31 @@ TEST(HexElement, TrilinearWeightsPartitionUnityAndReproduceCorners) {
     EXPECT_EQ(wa[a], 1.0);
     EXPECT_EQ(wa.sum(), 1.0);
   }
+}
+
+// Pure bending of one element, u_x = kappa x z, u_z = -kappa x^2 / 2 (the element centred at the
+// origin, the beam axis along x, curvature kappa): the exact strain
+// is eps_xx = kappa z, no shear, with energy E I kappa^2 L / 2 for a uniaxial state (nu = 0). The
+// trilinear element adds a spurious shear gamma_xz = kappa x, so it stores more energy (it locks);
+// with the incompatible modes the nodal values of the exact field give exactly the bending energy.
+TEST(HexElement, IncompatibleModesBendWithoutSpuriousShear) {
+  const Vec3 size(0.04, 0.01, 0.01);
+  const Real kappa = 0.5, E = 1e6;
+  Mat38 u;
+  for (int a = 0; a < 8; ++a) {
+    const Vec3 x = (hexCorner(a).cast<Real>() - Vec3::Constant(0.5)).cwiseProduct(size);
+    u.col(a) = Vec3(kappa * x.x() * x.z(), 0, -0.5 * kappa * x.x() * x.x());
+  }
+  const Vec24 uv = Eigen::Map<const Vec24>(u.data());
+  const Real I = size.y() * size.z() * size.z() * size.z() / 12;
+  const Real exact = 0.5 * E * I * kappa * kappa * size.x();
+  const Real trilinear = 0.5 * uv.dot(hexStiffness(size, E, 0.0) * uv);
+  const Real incompatible = 0.5 * uv.dot(hexStiffnessIncompatible(size, E, 0.0) * uv);
+  std::printf("bending energy: exact %.6g J, trilinear %.6g J, incompatible modes %.6g J\n", exact,
+              trilinear, incompatible);
+  EXPECT_NEAR(incompatible, exact, 1e-9 * exact);
+  // The spurious shear energy is (L/t)^2 / 2 = 8 times the bending energy at aspect 4.
+  EXPECT_NEAR(trilinear, 9 * exact, 1e-9 * exact);
 }
 
 }  // namespace
