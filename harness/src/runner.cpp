@@ -318,6 +318,20 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   if (equilibrium && rec.status == RunStatus::Ok && !rec.settledAt)
     rec.notes.push_back("did not settle by the end of the run (largest surface speed above " +
                         std::to_string(scene.settleSpeed) + " m/s)");
+  {
+    const MatX3& rest = organ.surface.V;
+    auto peak = [&](const MatX3& x) {
+      return x.rows() >= rest.rows() && rest.rows() > 0
+                 ? (x.topRows(rest.rows()) - rest).rowwise().norm().maxCoeff()
+                 : Real(0);
+    };
+    rec.peakDisplacement = peak(rec.finalSurface);
+    for (const SurfaceSnapshot& c : rec.compared)
+      rec.peakDisplacement = std::max<double>(rec.peakDisplacement, peak(c.positions));
+    const bool loaded =
+        scene.gravity.squaredNorm() > 0 || !scene.loads.empty() || rec.graspTravel > 0;
+    rec.motionFloor = loaded && rest.rows() > 0 ? 1e-6 * boundingBox(rest).diagonal() : 0.0;
+  }
   assessValidity(scene, rec);
 }
 
@@ -345,6 +359,13 @@ void assessValidity(const Scene& scene, RunRecord& rec) {
   }
   if (scene.compareAtEquilibrium && rec.status == RunStatus::Ok && !rec.settledAt)
     invalid("did not settle");
+  if (rec.status == RunStatus::Ok && rec.peakDisplacement >= 0 &&
+      rec.peakDisplacement < rec.motionFloor) {
+    std::ostringstream s;
+    s << "did not move: largest surface displacement " << rec.peakDisplacement
+      << " m although the scene loads the organ";
+    invalid(s.str());
+  }
 }
 
 RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene& scene,

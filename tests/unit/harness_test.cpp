@@ -177,6 +177,32 @@ TEST(Runner, GraspResidualAndValidity) {
   EXPECT_EQ(diverged.invalidReason, "diverged");
 }
 
+// A frozen solver (status ok, nothing moves) under a load is invalid; the same model in a scene
+// that asks for no motion is not.
+TEST(Runner, AModelThatDoesNotMoveUnderALoadIsInvalid) {
+  Fixture f;
+  f.scene.tools.clear();
+  LoadSpec load;
+  load.at = f.organ.surface.V.row(3).transpose();
+  load.force = Vec3(0, 0, 1);
+  f.scene.loads.push_back(load);
+  const RunRecord frozen = runWith(f, [](RigidTestModel&) {});  // ignores loads: never moves
+  ASSERT_EQ(frozen.status, RunStatus::Ok) << frozen.message;
+  EXPECT_EQ(frozen.peakDisplacement, 0.0);
+  EXPECT_GT(frozen.motionFloor, 0.0);
+  EXPECT_FALSE(frozen.valid);
+  EXPECT_EQ(frozen.invalidReason.rfind("did not move", 0), 0u) << frozen.invalidReason;
+
+  const RunRecord moving = runWith(f, [](RigidTestModel& m) { m.drift = Vec3(0, 0, 1e-6); });
+  EXPECT_NEAR(moving.peakDisplacement, 1e-4, 1e-12);
+  EXPECT_TRUE(moving.valid) << moving.invalidReason;
+
+  f.scene.loads.clear();
+  const RunRecord still = runWith(f, [](RigidTestModel&) {});
+  EXPECT_EQ(still.motionFloor, 0.0);
+  EXPECT_TRUE(still.valid) << still.invalidReason;
+}
+
 TEST(Runner, EquilibriumComparisonStopsWhenSettled) {
   Fixture f;
   f.scene.compareAt.clear();

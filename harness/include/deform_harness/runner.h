@@ -79,9 +79,15 @@ struct RunRecord {
   bool equilibrium = false;  ///< the scene compared at equilibrium (settledAt is meaningful)
   /// Validity (DESIGN "Metrics"): false with a reason when the run did not do what the scene
   /// asked: its grasp held nothing, its grasp residual exceeds 10% of the tool's travel, it did
-  /// not settle, or it diverged / failed / was unsupported. Set by assessValidity().
+  /// not settle, it did not move although the scene loads the organ, or it diverged / failed /
+  /// was unsupported. Set by assessValidity().
   bool valid = true;
   std::string invalidReason;
+  /// Largest surface displacement from rest (m) at the compared instants and the end; -1 when not
+  /// measured. A run whose scene loads the organ (gravity, a load, a moving grasp) and that moves
+  /// less than motionFloor is invalid ("did not move": a frozen solver).
+  double peakDisplacement = -1;
+  double motionFloor = 0;  ///< m, 1e-6 of the organ's bounding-box diagonal; 0: nothing asked
   std::vector<Cache::Event> cacheEvents;
 
   MatX3 finalSurface;                     ///< after the last completed step
