@@ -178,7 +178,21 @@ void MetaballsModel::init(const ModelSetup& setup) {
   }
   m_laplacian = m_laplacian && lapK > 0;
 
+  // The fixed region holds the spheres whose centres it contains and, since it is defined on the
+  // surface as grasps are, the sphere carrying most of each surface vertex inside it: the centres
+  // lie deep in the organ, and a thin fixed slab along the surface contains none of them (the
+  // organ then fell freely under gravity).
   m_fixedList = fixedNodeIndices(m_x0, organ.fixed, organ.surface);
+  for (int v : fixedNodeIndices(organ.surface.V, organ.fixed, organ.surface)) {
+    const size_t base = size_t(v) * size_t(m_skin.slots);
+    int best = -1;
+    for (int k = 0; k < m_skin.count[size_t(v)]; ++k)
+      if (best < 0 || m_skin.weight[base + size_t(k)] > m_skin.weight[base + size_t(best)])
+        best = k;
+    if (best >= 0) m_fixedList.push_back(m_skin.sphere[base + size_t(best)]);
+  }
+  std::sort(m_fixedList.begin(), m_fixedList.end());
+  m_fixedList.erase(std::unique(m_fixedList.begin(), m_fixedList.end()), m_fixedList.end());
   m_fixed.assign(size_t(n), 0);
   for (int i : m_fixedList) m_fixed[size_t(i)] = 1;
 
@@ -536,7 +550,8 @@ Counts MetaballsModel::counts() const {
           {"nodes", s},
           {"links", l},
           {"constraints", l + (m_laplacian ? s : 0)},
-          {"surface_vertices", m_skin.numVertices}};
+          {"surface_vertices", m_skin.numVertices},
+          {"fixed_spheres", static_cast<long long>(m_fixedList.size())}};
 }
 
 NumericCounters MetaballsModel::numericCounters() const {
