@@ -1,7 +1,7 @@
 // fem_hex against reference_fem on the liver phantom under the shipped standard scenes
 // (scenes/liver_grasp_lift.json, scenes/liver_poke.json): issue F3's validation. Both plugins are
 // loaded through the plugin loader and run by the harness's runner, as `deformbench run` does;
-// the errors are the harness's (DESIGN.md "Metrics"). Each test prints its figures.
+// the errors are the harness's (docs/results-format.md, "Metrics"). Each test prints its figures.
 //
 // Changed from the shipped scenes: the reference is quasi-static, so fem_hex is run to
 // equilibrium too, with implicit Euler steps of dt = 50 ms (20 steps; the inertia term M/dt^2 is
