@@ -8,9 +8,9 @@
 // then comparable to the stiffness of the liver's lowest mode only, and every later step is one
 // more linearised Newton step towards the corotational equilibrium) and no mass damping. At the
 // shipped dt = 1 ms and default damping the lowest mode (~0.35 s period) still rings at t = 1 s
-// (README "Validation"). The reference is the scenes' own (elements = 5000, 30k tets).
+// (see its history note). The reference is the scenes' own (elements = 5000, 30k tets).
 //
-// What the bounds rest on (README "Validation"): the lift prescribes a displacement, so under it
+// What the bounds rest on (history note): the lift prescribes a displacement, so under it
 // the displacement field does not depend on the stiffness's scale; the error there comes from
 // the grasp (fem_hex attaches the grid nodes within 8 mm of the tool: 1 node at 967 hexahedra of
 // 11.5 mm, 7 at 4000; the reference every tet node there, 37 surface vertices among them) and from

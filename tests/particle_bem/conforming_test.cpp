@@ -187,7 +187,7 @@ TEST(SingularSupport, ColumnsAreTheCorrectedSupportColumnsAndMeshesAgree) {
   }
   // Both meshes with the singular reaction still agree (a wrong weight or quadrature would
   // part them). Not asserted: that it beats linear reaction elements here -- on these spheres
-  // it does not (1.9% against 1.4%), on the liver it does (README, "Fourth pass").
+  // it does not (1.9% against 1.4%), on the liver it does (history note, "Fourth pass").
   LossRatioCase lc;
   lc.center = Vec3(0, 0, 0.05);
   lc.radius = 0.03;

@@ -185,7 +185,8 @@ TEST(GuidedModel, SurfaceTransferChangesTheSurfaceByAFractionOfTheMotion) {
 TEST(GuidedModel, SingularSupportChangesMAndIsInTheCacheKey) {
   Fixture fl(true), fs(true);
   fl.params.set("singular_support", false);
-  // The singular reaction is the default discretisation (README, "Fifth pass").
+  // The singular reaction is the default discretisation (docs/notes/particle_bem-history.md, "Fifth
+  // pass").
   EXPECT_TRUE(fs.params.flag("singular_support"));
   const std::string dir =
       (std::filesystem::temp_directory_path() / "particle_bem_singular_cache").string();
@@ -402,7 +403,7 @@ TEST(GuidedModel, ConsistentPatchTractionsMatchTheIntegratedPatchField) {
   }
   ASSERT_GT(sum, 0);
   // Measured: consistent 7.1%, lumped 7.4% (before the harness's spread, with the model's own
-  // patch on the coarse surface: 0.16% and 2.2%, README "Sixth pass"). The fine surface's nodal
+  // patch on the coarse surface: 0.16% and 2.2%, history "Sixth pass"). The fine surface's nodal
   // loads mapped by J^T of the gradient transfer now dominate the difference.
   EXPECT_LT(errC / sum, 0.1) << "consistent " << errC / sum << ", lumped " << errL / sum;
   EXPECT_LT(errC, errL) << "consistent " << errC / sum << ", lumped " << errL / sum;

@@ -239,9 +239,10 @@ TEST(PbdModel, ParametersAreReadAndBadChoicesRejected) {
 }
 
 // The single-precision solver follows the double one on a well-conditioned run (with bending:
-// without it the membrane amplifies perturbations of 1e-9 m by ~1e6, see README.md,
-// "Precision"): the float corrections carry ~2^-24 relative rounding per projection, so the two
-// trajectories stay within 1e-3 of the displacement. Both paths are deterministic.
+// without it the membrane amplifies perturbations of 1e-9 m by ~1e6, see
+// docs/notes/pbd-history.md, "Precision"): the float corrections carry ~2^-24 relative rounding per
+// projection, so the two trajectories stay within 1e-3 of the displacement. Both paths are
+// deterministic.
 TEST(PbdModel, Float32TracksFloat64) {
   Organ o = smallOrgan();
   o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.025)});
