@@ -1,10 +1,10 @@
 // Tests of the surface conforming to the fixed region (conformToBoxes, decimateQuadric with
 // regions) and of the clamp with the reaction on the support faces only (SupportColumns).
+#include "../support/meshes.h"
 #include "bem_accuracy.h"
 #include "bem_assembly.h"
 #include "conforming_surface.h"
 #include "surface_decimation.h"
-#include "test_support.h"
 
 #include <gtest/gtest.h>
 

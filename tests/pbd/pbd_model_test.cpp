@@ -2,7 +2,8 @@
 // nodes follow their targets exactly, gravity sags a pinned organ (less when stiffer), the grasp
 // reaction balances the weight of a hanging organ, tet input, and the parameter layer.
 #include "pbd_model.h"
-#include "test_meshes.h"
+#include "../support/grasp.h"
+#include "../support/meshes.h"
 
 #include <gtest/gtest.h>
 
@@ -166,11 +167,7 @@ TEST(PbdModel, GraspReactionBalancesTheHangingWeight) {
   const Vec3 g(0, 0, -9.81);
   for (int s = 0; s < 3000; ++s) {
     StepInput in = input(1e-3, g);
-    GraspInput gi;
-    gi.vertices = held;
-    gi.targets.resize(static_cast<Eigen::Index>(held.size()), 3);
-    for (size_t k = 0; k < held.size(); ++k) gi.targets.row(k) = o.surface.V.row(held[k]);
-    in.grasps.push_back(gi);
+    in.grasps.push_back(testing::graspOf(held, o.surface.V));
     ASSERT_EQ(m.step(in), StepStatus::Ok);
   }
   const std::vector<Vec3> f = m.graspForces();
