@@ -15,11 +15,14 @@
 //   v' = (v + dt (g + f_i/m_i - (k/m_i)(x - X))) / (1 + dt c + dt^2 k/m_i),   x' = x + dt v'
 //
 // Grasped particles follow their targets; pinned particles stay at rest. The model's nodes are
-// the surface vertices themselves (identity mapping), so surface() is nodes().
+// the surface vertices themselves (identity mapping), so surface() is nodes(), and the harness's
+// grasps and loads (given on the surface) act on the nodes directly.
 #include <deform/registry.h>
 
 #include <cmath>
 #include <memory>
+#include <utility>
+#include <vector>
 
 namespace {
 
@@ -52,11 +55,12 @@ class TetheredModel final : public deform::Model {
 
   deform::StepStatus step(const deform::StepInput& in) override {
     const Real dt = in.dt;
+    // The harness spreads each load over a patch of surface vertices (per-vertex shares of its
+    // force); loadsOnNodes maps them to the nodes carrying those vertices (here: the same index).
     MatX3 force = MatX3::Zero(m_x.rows(), 3);
-    for (const deform::PointLoad& l : in.loads) {
-      if (l.surfaceVertex >= 0 && l.surfaceVertex < m_x.rows()) {
-        force.row(l.surfaceVertex) += l.force.transpose();
-      }
+    deform::loadsOnNodes(in.loads, {}, m_loadShares);
+    for (const auto& [n, f] : m_loadShares) {
+      if (n >= 0 && n < m_x.rows()) force.row(n) += f.transpose();
     }
     const Real kOverM = m_stiffness / m_mass;
     const Real denom = 1.0 + dt * m_damping + dt * dt * kOverM;
@@ -96,6 +100,7 @@ class TetheredModel final : public deform::Model {
   Real m_stiffness = 0, m_damping = 0, m_mass = 0;
   MatX3 m_rest, m_x, m_v;
   std::vector<bool> m_pinned;
+  std::vector<std::pair<int, Vec3>> m_loadShares;  // kept between steps: no allocation per step
 };
 
 }  // namespace

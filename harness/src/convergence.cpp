@@ -352,13 +352,13 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
     };
     const auto rmsDiff = [&](const MatX3& a, const MatX3& b) {
       double sum = 0;
-      long long n = 0;
+      long long counted = 0;
       for (Eigen::Index i = 0; i < a.rows(); ++i)
         if (include[size_t(i)]) {
           sum += (a.row(i) - b.row(i)).squaredNorm();
-          ++n;
+          ++counted;
         }
-      return n > 0 ? std::sqrt(sum / double(n)) : NAN;
+      return counted > 0 ? std::sqrt(sum / double(counted)) : NAN;
     };
     richardsonEstimate(out.levels[0].h, out.levels[1].h, out.levels[2].h,
                        maxDiff(displacement[0], displacement[1]),

@@ -6,7 +6,7 @@
 //     implicit, Bullet's CG) at a similar node count.
 // Every model pins the same bottom slab (z below 0.25 of the height), feels gravity and a grasp
 // of the nodes within 1.5 cm of the top centre lifting 2 cm over 0.5 s and back. Each benchmark
-// iteration is one step; the counter median_us is the median step time (DESIGN.md's headline).
+// iteration is one step; the counter median_us is the median step time (the headline).
 // After the runs the program prints the ratios of the medians.
 //
 //   bench_peers                      # all four, then the ratios

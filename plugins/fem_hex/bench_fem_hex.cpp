@@ -1,6 +1,6 @@
 // fem_hex speed: time per implicit step on a liver-sized organ (grasp lifting the top, gravity,
 // lower part pinned), by element count, formulation and solver. Each benchmark iteration is one
-// step; the counters report the median step time (the headline, as in DESIGN.md) and per-phase
+// step; the counters report the median step time (the results' headline) and per-phase
 // means.
 //
 //   bench_fem_hex --benchmark_filter=Liver967

@@ -135,7 +135,7 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
     if (m_chol.info() != Eigen::Success) {
       throw InputError(where, "fem_hex", "CHOLMOD could not analyse the system matrix");
     }
-    // CHOLMOD's auto switch compares this ratio with supernodal_switch (README, "CHOLMOD kind").
+    // CHOLMOD's auto switch compares this ratio with supernodal_switch (history note).
     const cholmod_common& cc = m_chol.cholmod();
     m_flopsPerFactorNonZero = cc.lnz > 0 ? cc.fl / cc.lnz : 0.0;
   }

@@ -82,8 +82,8 @@ SurfaceBatches buildSurfaceBatches(const SurfaceConstraints& c, const ActiveCons
   auto sortColours = [](std::vector<int> ids, const std::vector<int>& start, bool overflow,
                         auto pattern) {
     const size_t sorted = start.size() < 2 ? 0 : start.size() - 1 - (overflow ? 1 : 0);
-    for (size_t c = 0; c < sorted; ++c)
-      std::stable_sort(ids.begin() + start[c], ids.begin() + start[c + 1],
+    for (size_t colour = 0; colour < sorted; ++colour)
+      std::stable_sort(ids.begin() + start[colour], ids.begin() + start[colour + 1],
                        [&](int x, int y) { return pattern(x) < pattern(y); });
     return ids;
   };

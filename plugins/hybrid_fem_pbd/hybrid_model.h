@@ -14,7 +14,7 @@
 //
 // Paper: "A Hybrid Model Method for Accurate Surface Deformation and Incision Based on FEM and
 // PBD", Scientific Programming 2021, article 8343312
-// (/work/shared/papers/hybrid-fem-pbd-incision.md). See README.md.
+// See README.md.
 #pragma once
 
 #include <deform/model.h>

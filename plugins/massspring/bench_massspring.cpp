@@ -1,7 +1,7 @@
 // Google Benchmark: one mass-spring step on a liver-sized closed surface (~2.2k nodes, ~6.6k edge
 // springs, as in the metaballs paper's Table 2 row with 6427 springs), under gravity with a grasp.
 #include "massspring_model.h"
-#include "test_meshes.h"
+#include "support/meshes.h"
 
 #include <benchmark/benchmark.h>
 

@@ -70,8 +70,8 @@ SupportColumns supportColumns(const SurfaceMesh& s, Real young, Real poisson,
 /// The clamp edge's singular reaction. At the edge of a clamped region the reaction traction
 /// grows like s^(-1/2) with the distance s from the edge (the clamped-free half-plane exponent
 /// 1/2 +- i ln(3 - 4 nu) / 2 pi; its real part is used), which linear traction elements of
-/// ~2 cm cannot follow: the coarse solution is then too stiff and converges slowly (README,
-/// "Fourth pass"). On the support faces along the support's boundary curve the reaction is
+/// ~2 cm cannot follow: the coarse solution is then too stiff and converges slowly (history
+/// note, "Fourth pass"). On the support faces along the support's boundary curve the reaction is
 /// therefore represented as p(y) = w(y) sum_j N_j(y) p_j with
 ///   w = lambda_c^(-1/2)      on a face with an edge (a, b) on the curve (c the third vertex,
 ///                            lambda_c its barycentric = the distance from ab over c's),
@@ -163,7 +163,7 @@ VecX fixedFractions(const SurfaceMesh& s, const Box& box, int samples = 16);
 ///    instead of jumping when a node crosses it; columns j of A become H_j + k_j G_j;
 ///  - phi_j = 0: free.
 /// The factor 1 in k_j is a modelling choice: the loss ratio of the liver cases moves by
-/// several percentage points between 0.3 and 3 (README, "Accuracy loss ratio").
+/// several percentage points between 0.3 and 3 (README, "Method").
 /// rhs as for solveBemRhs. Returns nodal displacements (3N, m).
 VecX solveBemPartial(const BemMatrices& bem, const SurfaceMesh& s, const VecX& phi, Real young,
                      const VecX& rhs);

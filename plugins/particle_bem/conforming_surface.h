@@ -3,7 +3,7 @@
 // The support of a BEM model is a set of boxes (the scene's fixed region). On a surface whose
 // elements cross a box's face, "the nodes inside the box" clamp a region that jumps by a whole
 // element whenever a node crosses the face, and the loss ratio of Table 2 (§6) then measures
-// where the coarse and the fine mesh happen to put that edge (README, "Accuracy loss ratio").
+// where the coarse and the fine mesh happen to put that edge (docs/notes/particle_bem-history.md).
 // Here the surface is instead cut along the box faces: every triangle crossed by a face plane
 // x_k = c is split at the crossing points (placed on the plane exactly), so afterwards every
 // triangle lies in one closed cell of the planes: inside the box or outside it. Clamping the

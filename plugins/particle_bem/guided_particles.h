@@ -61,7 +61,7 @@ std::vector<std::pair<int, Real>> pressurePatchShares(const SurfaceMesh& s, cons
 ///        p_k = q_k f  (q: traction per unit force, 1/m^2).
 ///    With ~2 cm elements under a 3 cm patch this is what the BEM right-hand side int U* t
 ///    needs: G p then equals int U* t up to the projection error (0.16% of the displacement on
-///    the harness's 284-vertex liver, against 2.2% for the lumped form; README, "Sixth pass");
+///    the harness's 284-vertex liver, against 2.2% for the lumped form; history "Sixth pass");
 ///  - Lumped: p_k = c_k f / A_k (row-sum lumping of Mass): spreads the patch over every node it
 ///    touches, a wider load on coarse elements than on fine ones.
 enum class PatchTraction { Consistent, Lumped };

@@ -4,7 +4,7 @@
 // classic stiffness; the default (float32) solver and,
 // for the first two, the double-precision one.
 #include "pbd_model.h"
-#include "test_meshes.h"
+#include "support/meshes.h"
 
 #include <benchmark/benchmark.h>
 

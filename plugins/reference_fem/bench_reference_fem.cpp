@@ -65,7 +65,7 @@ BENCHMARK(BM_MeshLiver50k)->Unit(benchmark::kMillisecond)->Iterations(1);
 void BM_QuasiStaticGraspLift(benchmark::State& state) {
   const TetMeshResult& m = mesh50k();
   const MaterialModel model = MaterialModel(state.range(0));
-  Material mat;  // 5500 Pa, 0.3, 1000 kg/m^3 (DESIGN.md default)
+  Material mat;  // 5500 Pa, 0.3, 1000 kg/m^3 (the scene format's default)
   mat.poisson = 0.45;
   FemSystem sys(m.mesh, mat, model);
   const Box box = boundingBox(m.mesh.V);

@@ -1,5 +1,5 @@
 // Simple closed shapes for tests and benchmarks of the reference FEM (no phantom needed):
-// structured Kuhn tet meshes of boxes, their boundary surfaces, and icospheres.
+// structured Kuhn tet meshes of boxes and their boundary surfaces (icospheres: tests/support).
 #pragma once
 
 #include <deform/mesh.h>
@@ -74,43 +74,6 @@ inline SurfaceMesh boundaryFirst(TetMesh& m) {
 inline SurfaceMesh boxSurface(const Vec3& lo, const Vec3& hi, const Vec3i& n) {
   TetMesh m = structuredBoxTets(lo, hi, n);
   return boundaryFirst(m);
-}
-
-/// Icosphere of the given radius: an icosahedron subdivided `levels` times, projected.
-inline SurfaceMesh icosphere(Real radius, int levels, const Vec3& center = Vec3::Zero()) {
-  const Real t = (1.0 + std::sqrt(5.0)) / 2.0;
-  std::vector<Vec3> V = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
-                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
-  std::vector<std::array<int, 3>> F = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
-                                       {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
-                                       {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
-                                       {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
-  for (auto& v : V) v.normalize();
-  for (int l = 0; l < levels; ++l) {
-    std::map<std::pair<int, int>, int> mid;
-    auto midpoint = [&](int a, int b) {
-      auto key = std::minmax(a, b);
-      auto it = mid.find(key);
-      if (it != mid.end()) return it->second;
-      V.push_back((V[a] + V[b]).normalized());
-      return mid[key] = int(V.size()) - 1;
-    };
-    std::vector<std::array<int, 3>> G;
-    for (const auto& f : F) {
-      const int a = midpoint(f[0], f[1]), b = midpoint(f[1], f[2]), c = midpoint(f[2], f[0]);
-      G.push_back({f[0], a, c});
-      G.push_back({f[1], b, a});
-      G.push_back({f[2], c, b});
-      G.push_back({a, b, c});
-    }
-    F = G;
-  }
-  SurfaceMesh s;
-  s.V.resize(V.size(), 3);
-  for (size_t i = 0; i < V.size(); ++i) s.V.row(i) = (center + radius * V[i]).transpose();
-  s.F.resize(F.size(), 3);
-  for (size_t f = 0; f < F.size(); ++f) s.F.row(f) << F[f][0], F[f][1], F[f][2];
-  return s;
 }
 
 }  // namespace deform::reffem

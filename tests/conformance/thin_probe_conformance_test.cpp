@@ -180,9 +180,9 @@ TEST_P(ThinProbeConformance, FrictionDragsTheSurfaceUnderASlidingBoxAndFrictionl
       model->init(ModelSetup{organ, ParamValues::defaults(info.params), conformanceCache(),
                              scene.dt, scene.gravity});
       Interaction inter(scene, organ.surface);
-      for (int k = 0; k < scene.numSteps(); ++k) {
-        const StepInput in = inter.prepare(k * scene.dt, scene.dt, *model);
-        EXPECT_EQ(model->step(in), StepStatus::Ok) << "step " << k;
+      for (int step = 0; step < scene.numSteps(); ++step) {
+        const StepInput in = inter.prepare(step * scene.dt, scene.dt, *model);
+        EXPECT_EQ(model->step(in), StepStatus::Ok) << "step " << step;
         inter.finishStep(in, *model);
       }
       return Vec3(model->surface().row(topV).transpose() - organ.surface.V.row(topV).transpose());

@@ -1,4 +1,5 @@
 #include "hex_element.h"
+#include "../support/finite_difference.h"
 #include "hex_grid.h"
 
 #include <gtest/gtest.h>
@@ -65,18 +66,11 @@ TEST(HexElement, ForceIsMinusEnergyGradientAndStiffnessIsMinusForceJacobian) {
   const Mat38 u = randomMat38(rng, 1e-3);
   const Mat38 f = hexElasticForce(size, kE, kNu, u);
   const Real eps = 1e-7;
-  Mat24 Kfd;
-  for (int i = 0; i < 24; ++i) {
-    Mat38 up = u, um = u;
-    up.data()[i] += eps;
-    um.data()[i] -= eps;
-    const Real dW =
-        (hexStrainEnergy(size, kE, kNu, up) - hexStrainEnergy(size, kE, kNu, um)) / (2 * eps);
-    EXPECT_NEAR(-dW, f.data()[i], 1e-6 * f.norm());
-    const Mat38 df =
-        (hexElasticForce(size, kE, kNu, up) - hexElasticForce(size, kE, kNu, um)) / (2 * eps);
-    Kfd.col(i) = -Eigen::Map<const Vec24>(df.data());
-  }
+  const VecX dW = testing::numericGradient(
+      u, eps, [&](const Mat38& y) { return hexStrainEnergy(size, kE, kNu, y); });
+  for (int i = 0; i < 24; ++i) EXPECT_NEAR(-dW(i), f.data()[i], 1e-6 * f.norm());
+  const MatX Kfd = -testing::centralDifferences(
+      u, eps, [&](const Mat38& y) { return hexElasticForce(size, kE, kNu, y); });
   EXPECT_LT((Kfd - K).norm(), 1e-6 * K.norm());
 }
 
@@ -115,15 +109,7 @@ TEST(HexElement, CorotationalStiffnessMatchesFiniteDifferencesAtARotatedRestStat
   Mat24 RB = Mat24::Zero();
   for (int a = 0; a < 8; ++a) RB.block<3, 3>(3 * a, 3 * a) = Rtrue;
   const Mat24 Kr = RB * K * RB.transpose();
-  const Real eps = 1e-8;
-  Mat24 Kfd;
-  for (int i = 0; i < 24; ++i) {
-    Mat38 xp = x, xm = x;
-    xp.data()[i] += eps;
-    xm.data()[i] -= eps;
-    const Mat38 df = (force(xp) - force(xm)) / (2 * eps);
-    Kfd.col(i) = -Eigen::Map<const Vec24>(df.data());
-  }
+  const MatX Kfd = -testing::centralDifferences(x, 1e-8, force);
   EXPECT_LT((Kfd - Kr).norm(), 1e-5 * Kr.norm());
 }
 

@@ -1,4 +1,5 @@
 #include "hex_fem_model.h"
+#include "../support/grasp.h"
 #include "test_meshes.h"
 
 #include <deform/interaction.h>
@@ -11,6 +12,13 @@ namespace {
 
 using fem_hex_test::boxSurface;
 using fem_hex_test::liverLike;
+using testing::surfaceGrasp;
+using testing::vertexLoad;
+
+/// The harness's spread of a point force at the surface vertex nearest p (1 cm patch).
+PointLoad patchLoad(const SurfaceMesh& rest, const Vec3& p, const Vec3& force) {
+  return testing::patchLoad(rest, nearestVertex(rest.V, p), force);
+}
 
 class TestModel final : public HexFemModel {
  public:
@@ -62,40 +70,11 @@ const std::vector<HexFemConfig> kAllConfigs = {
     config(ElasticModel::Corotational, CorotationalSolver::Pcg),
     config(ElasticModel::Corotational, CorotationalSolver::Refactor)};
 
-/// A grasp of the surface vertices within r of p (as the harness picks them), targets at rest.
-GraspInput surfaceGrasp(const TestModel& m, const SurfaceMesh& rest, const Vec3& p, Real r) {
-  GraspInput grasp;
-  grasp.vertices = graspedSurfaceVertices(rest, p, r);
-  grasp.targets.resize(Eigen::Index(grasp.vertices.size()), 3);
-  for (size_t k = 0; k < grasp.vertices.size(); ++k)
-    grasp.targets.row(Eigen::Index(k)) = m.surface().row(grasp.vertices[k]);
-  return grasp;
-}
-
-/// The harness's spread of a point force at the surface vertex nearest p (1 cm patch).
-PointLoad patchLoad(const SurfaceMesh& rest, const Vec3& p, const Vec3& force) {
-  PointLoad load;
-  load.surfaceVertex = nearestVertex(rest.V, p);
-  load.force = force;
-  const SurfacePatch patch = pressurePatch(rest, load.surfaceVertex, 0.01);
-  load.vertices = patch.vertices;
-  load.weights = patch.weights;
-  return load;
-}
-
-/// A force on one surface vertex (no spread).
-PointLoad vertexLoad(int v, const Vec3& f) {
-  PointLoad load;
-  load.surfaceVertex = v;
-  load.force = f;
-  return load;
-}
-
 /// A lift of the top of the organ by a grasp, with gravity and a side push; returns the surface
 /// after every step.
 std::vector<MatX3> liftTrajectory(TestModel& m, int steps, bool gravity = true) {
   const Vec3 top(0.0, 0.0, 0.045);
-  GraspInput grasp = surfaceGrasp(m, liverLike(), top, 0.015);
+  GraspInput grasp = surfaceGrasp(liverLike(), top, 0.015, m.surface());
   EXPECT_GE(grasp.vertices.size(), 2u);
   const MatX3 rest = grasp.targets;
   std::vector<MatX3> out;
@@ -162,7 +141,7 @@ TEST(HexFemModel, GraspedSurfacePointsFollowTheirTargetsAndTheTissuePullsBack) {
     ASSERT_GT(m.fixedNodes().size(), 0u);
     const MatX3 rest = m.nodes();
     const Vec3 top(0.0, 0.0, 0.045);
-    GraspInput grasp = surfaceGrasp(m, liverLike(), top, 0.015);
+    GraspInput grasp = surfaceGrasp(liverLike(), top, 0.015, m.surface());
     ASSERT_GE(grasp.vertices.size(), 2u);
     const MatX3 r0 = grasp.targets;
     const Vec3 lift(0, 0, 0.01);
@@ -198,7 +177,7 @@ TEST(HexFemModel, SmallGraspHoldsItsSurfaceVertex) {
   TestModel m;
   m.initialize(makeOrgan(liverLike()), config(ElasticModel::Corotational), 1e-3,
                fixedBelow(2, -0.03));
-  GraspInput grasp = surfaceGrasp(m, liverLike(), Vec3(0.02, 0.01, 0.05), 0.002);
+  GraspInput grasp = surfaceGrasp(liverLike(), Vec3(0.02, 0.01, 0.05), 0.002, m.surface());
   ASSERT_EQ(grasp.vertices.size(), 1u);
   const MatX3 r0 = grasp.targets;
   for (int s = 0; s < 30; ++s) {

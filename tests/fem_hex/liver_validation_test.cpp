@@ -1,16 +1,16 @@
 // fem_hex against reference_fem on the liver phantom under the shipped standard scenes
 // (scenes/liver_grasp_lift.json, scenes/liver_poke.json): issue F3's validation. Both plugins are
 // loaded through the plugin loader and run by the harness's runner, as `deformbench run` does;
-// the errors are the harness's (DESIGN.md "Metrics"). Each test prints its figures.
+// the errors are the harness's (docs/results-format.md, "Metrics"). Each test prints its figures.
 //
 // Changed from the shipped scenes: the reference is quasi-static, so fem_hex is run to
 // equilibrium too, with implicit Euler steps of dt = 50 ms (20 steps; the inertia term M/dt^2 is
 // then comparable to the stiffness of the liver's lowest mode only, and every later step is one
 // more linearised Newton step towards the corotational equilibrium) and no mass damping. At the
 // shipped dt = 1 ms and default damping the lowest mode (~0.35 s period) still rings at t = 1 s
-// (README "Validation"). The reference is the scenes' own (elements = 5000, 30k tets).
+// (see its history note). The reference is the scenes' own (elements = 5000, 30k tets).
 //
-// What the bounds rest on (README "Validation"): the lift prescribes a displacement, so under it
+// What the bounds rest on (history note): the lift prescribes a displacement, so under it
 // the displacement field does not depend on the stiffness's scale; the error there comes from
 // the grasp (fem_hex attaches the grid nodes within 8 mm of the tool: 1 node at 967 hexahedra of
 // 11.5 mm, 7 at 4000; the reference every tet node there, 37 surface vertices among them) and from

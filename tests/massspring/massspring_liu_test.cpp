@@ -1,8 +1,8 @@
 // The local/global integrator (Liu et al. 2013, massspring_liu.cpp): its iterations converge to
 // the implicit Euler step (the residual of M (x - x_n - h v_n) / h^2 = f(x) + f_ext vanishes),
 // and it is stable at dt = 1 ms on the default liver phantom under a grasp-and-lift.
+#include "../support/meshes.h"
 #include "massspring_model.h"
-#include "test_meshes.h"
 
 #include <deform/phantom.h>
 

@@ -3,7 +3,8 @@
 // where explicit Euler diverges (reported, not thrown), the grasp reaction balances a hanging
 // organ's weight, tet input, and the parameter layer.
 #include "massspring_model.h"
-#include "test_meshes.h"
+#include "../support/grasp.h"
+#include "../support/meshes.h"
 
 #include <deform/mesh_io.h>
 #include <deform/phantom.h>
@@ -269,11 +270,7 @@ TEST(MassSpringModel, GraspReactionBalancesTheHangingWeight) {
   const Vec3 g(0, 0, -9.81);
   for (int s = 0; s < 600; ++s) {
     StepInput in = input(5e-3, g);
-    GraspInput gi;
-    gi.vertices = held;
-    gi.targets.resize(static_cast<Eigen::Index>(held.size()), 3);
-    for (size_t k = 0; k < held.size(); ++k) gi.targets.row(k) = o.surface.V.row(held[k]);
-    in.grasps.push_back(gi);
+    in.grasps.push_back(testing::graspOf(held, o.surface.V));
     ASSERT_EQ(m.step(in), StepStatus::Ok);
   }
   const std::vector<Vec3> f = m.graspForces();

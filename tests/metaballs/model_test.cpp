@@ -1,6 +1,7 @@
 // The metaballs model: rest, grasp, reset, divergence, and the paper's experiments as measured
 // differences (Fig. 12: shape recovery with vs without the Laplacian constraint; Fig. 13: local
 // volume preservation by eq. 12).
+#include "../support/grasp.h"
 #include "metaballs_model.h"
 #include "test_meshes.h"
 
@@ -37,25 +38,6 @@ struct Rig {
 
 Real rmsToRest(const MatX3& a, const MatX3& b) {
   return std::sqrt((a - b).rowwise().squaredNorm().mean());
-}
-
-/// A grasp of the surface vertices within r of p (as the harness picks them), targets at the
-/// model's current surface.
-GraspInput surfaceGrasp(const MetaballsModel& m, const SurfaceMesh& rest, const Vec3& p, Real r) {
-  GraspInput g;
-  g.vertices = graspedSurfaceVertices(rest, p, r);
-  g.targets.resize(Eigen::Index(g.vertices.size()), 3);
-  for (size_t k = 0; k < g.vertices.size(); ++k)
-    g.targets.row(Eigen::Index(k)) = m.surface().row(g.vertices[k]);
-  return g;
-}
-
-/// RMS distance of the grasped vertices to their targets.
-Real graspResidual(const MetaballsModel& m, const GraspInput& g) {
-  Real sum = 0;
-  for (size_t k = 0; k < g.vertices.size(); ++k)
-    sum += (m.surface().row(g.vertices[k]) - g.targets.row(Eigen::Index(k))).squaredNorm();
-  return std::sqrt(sum / Real(std::max<size_t>(1, g.vertices.size())));
 }
 
 TEST(MetaballsModel, RestStaysAtRestAndSkinningReproducesSurface) {
@@ -159,7 +141,7 @@ TEST(MetaballsModel, SmallGrasperHoldsTheSurfaceItClosesOn) {
   for (Eigen::Index i = 0; i < rig.model.nodes().rows(); ++i)
     within += (rig.model.nodes().row(i).transpose() - p).norm() <= 0.004;
   EXPECT_EQ(within, 0);  // no sphere centre within the jaws
-  GraspInput grasp = surfaceGrasp(rig.model, liver, p, 0.004);
+  GraspInput grasp = testing::surfaceGrasp(liver, p, 0.004, rig.model.surface());
   ASSERT_GE(grasp.vertices.size(), 1u);
   const MatX3 t0 = grasp.targets;
   StepInput in;
@@ -170,7 +152,7 @@ TEST(MetaballsModel, SmallGrasperHoldsTheSurfaceItClosesOn) {
     grasp.targets = t0.rowwise() + Eigen::RowVector3d(0, 0, 0.02 * std::min(1.0, (i + 1) / 150.0));
     in.grasps = {grasp};
     ASSERT_EQ(rig.model.step(in), StepStatus::Ok);
-    worst = std::max(worst, graspResidual(rig.model, grasp));
+    worst = std::max(worst, testing::graspResidual(rig.model.surface(), grasp));
   }
   std::printf("small grasp on the liver: %zu vertices, worst RMS residual %.3g mm\n",
               grasp.vertices.size(), worst * 1e3);

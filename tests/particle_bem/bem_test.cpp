@@ -1,9 +1,9 @@
 // Tests of the BEM kernels: Kelvin solutions, quadrature, assembly, M, the loss ratio.
+#include "../support/meshes.h"
 #include "bem_accuracy.h"
 #include "bem_assembly.h"
 #include "bem_kelvin.h"
 #include "sph_elasticity.h"
-#include "test_support.h"
 
 #include <gtest/gtest.h>
 

@@ -1,10 +1,10 @@
 // Tests of the surface conforming to the fixed region (conformToBoxes, decimateQuadric with
 // regions) and of the clamp with the reaction on the support faces only (SupportColumns).
+#include "../support/meshes.h"
 #include "bem_accuracy.h"
 #include "bem_assembly.h"
 #include "conforming_surface.h"
 #include "surface_decimation.h"
-#include "test_support.h"
 
 #include <gtest/gtest.h>
 
@@ -187,7 +187,7 @@ TEST(SingularSupport, ColumnsAreTheCorrectedSupportColumnsAndMeshesAgree) {
   }
   // Both meshes with the singular reaction still agree (a wrong weight or quadrature would
   // part them). Not asserted: that it beats linear reaction elements here -- on these spheres
-  // it does not (1.9% against 1.4%), on the liver it does (README, "Fourth pass").
+  // it does not (1.9% against 1.4%), on the liver it does (history note, "Fourth pass").
   LossRatioCase lc;
   lc.center = Vec3(0, 0, 0.05);
   lc.radius = 0.03;

@@ -1,11 +1,11 @@
 // Tests of the particle_bem kernels other than the BEM: distance queries, the distance field,
 // spatial hashing, lattice sampling, MLS elasticity, quadric decimation.
+#include "../support/meshes.h"
 #include "distance_field.h"
 #include "physics_points.h"
 #include "spatial_hash.h"
 #include "sph_elasticity.h"
 #include "surface_decimation.h"
-#include "test_support.h"
 #include "triangle_distance.h"
 
 #include <gtest/gtest.h>

@@ -1,7 +1,8 @@
 // Tests of the particle_bem model class (guided and pure particle modes).
+#include "../support/grasp.h"
+#include "../support/meshes.h"
 #include "conforming_surface.h"
 #include "particle_bem_model.h"
-#include "test_support.h"
 
 #include <deform/interaction.h>
 #include <gtest/gtest.h>
@@ -10,6 +11,15 @@
 
 namespace deform::particle_bem {
 namespace {
+
+using testing::graspResidual;
+using testing::patchLoad;
+using testing::vertexLoad;
+
+/// The grasp of the fine surface vertices within r of p, targets at the rest surface moved by d.
+GraspInput surfaceGrasp(const SurfaceMesh& s, const Vec3& p, Real r, const Vec3& d) {
+  return testing::surfaceGrasp(s, p, r, s.V, d);
+}
 
 struct Fixture {
   Organ organ;
@@ -40,43 +50,6 @@ int topVertex(const MatX3& V) {
   for (int i = 0; i < V.rows(); ++i)
     if (V(i, 2) > V(t, 2)) t = i;
   return t;
-}
-
-/// The harness's spread of a force at fine vertex v over a pressure patch of radius R.
-PointLoad patchLoad(const SurfaceMesh& s, int v, const Vec3& f, Real R = 0.01) {
-  PointLoad l;
-  l.surfaceVertex = v;
-  l.force = f;
-  const SurfacePatch p = pressurePatch(s, v, R);
-  l.vertices = p.vertices;
-  l.weights = p.weights;
-  return l;
-}
-
-/// A force on one fine vertex (no spread).
-PointLoad vertexLoad(int v, const Vec3& f) {
-  PointLoad l;
-  l.surfaceVertex = v;
-  l.force = f;
-  return l;
-}
-
-/// A grasp of the fine surface vertices within r of p (as the harness picks them), targets at the
-/// rest surface moved by d.
-GraspInput surfaceGrasp(const SurfaceMesh& s, const Vec3& p, Real r, const Vec3& d) {
-  GraspInput g;
-  g.vertices = graspedSurfaceVertices(s, p, r);
-  g.targets.resize(Eigen::Index(g.vertices.size()), 3);
-  for (size_t k = 0; k < g.vertices.size(); ++k)
-    g.targets.row(Eigen::Index(k)) = s.V.row(g.vertices[k]) + d.transpose();
-  return g;
-}
-
-Real graspResidual(const MatX3& surface, const GraspInput& g) {
-  Real sum = 0;
-  for (size_t k = 0; k < g.vertices.size(); ++k)
-    sum += (surface.row(g.vertices[k]) - g.targets.row(Eigen::Index(k))).squaredNorm();
-  return std::sqrt(sum / Real(std::max<size_t>(1, g.vertices.size())));
 }
 
 StepInput input(int step) {
@@ -185,7 +158,8 @@ TEST(GuidedModel, SurfaceTransferChangesTheSurfaceByAFractionOfTheMotion) {
 TEST(GuidedModel, SingularSupportChangesMAndIsInTheCacheKey) {
   Fixture fl(true), fs(true);
   fl.params.set("singular_support", false);
-  // The singular reaction is the default discretisation (README, "Fifth pass").
+  // The singular reaction is the default discretisation (docs/notes/particle_bem-history.md, "Fifth
+  // pass").
   EXPECT_TRUE(fs.params.flag("singular_support"));
   const std::string dir =
       (std::filesystem::temp_directory_path() / "particle_bem_singular_cache").string();
@@ -402,7 +376,7 @@ TEST(GuidedModel, ConsistentPatchTractionsMatchTheIntegratedPatchField) {
   }
   ASSERT_GT(sum, 0);
   // Measured: consistent 7.1%, lumped 7.4% (before the harness's spread, with the model's own
-  // patch on the coarse surface: 0.16% and 2.2%, README "Sixth pass"). The fine surface's nodal
+  // patch on the coarse surface: 0.16% and 2.2%, history "Sixth pass"). The fine surface's nodal
   // loads mapped by J^T of the gradient transfer now dominate the difference.
   EXPECT_LT(errC / sum, 0.1) << "consistent " << errC / sum << ", lumped " << errL / sum;
   EXPECT_LT(errC, errL) << "consistent " << errC / sum << ", lumped " << errL / sum;

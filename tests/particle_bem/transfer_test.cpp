@@ -1,8 +1,8 @@
 // Tests of the coarse -> fine surface transfer (guided_particles.h): the half-gradient Hermite
 // blend with one-ring recovered gradients against the linear interpolation.
+#include "../support/meshes.h"
 #include "bem_assembly.h"
 #include "guided_particles.h"
-#include "test_support.h"
 #include "triangle_distance.h"
 
 #include <gtest/gtest.h>

@@ -2,8 +2,8 @@
 // mass-weighted corrections sum to zero, nothing moves at rest, degenerate input is refused,
 // XPBD tends to the hard constraint as compliance -> 0, and the classic stiffness correction
 // makes the effective stiffness independent of the iteration count.
+#include "../support/meshes.h"
 #include "pbd_constraints.h"
-#include "test_meshes.h"
 
 #include <gtest/gtest.h>
 

@@ -2,7 +2,8 @@
 // nodes follow their targets exactly, gravity sags a pinned organ (less when stiffer), the grasp
 // reaction balances the weight of a hanging organ, tet input, and the parameter layer.
 #include "pbd_model.h"
-#include "test_meshes.h"
+#include "../support/grasp.h"
+#include "../support/meshes.h"
 
 #include <gtest/gtest.h>
 
@@ -166,11 +167,7 @@ TEST(PbdModel, GraspReactionBalancesTheHangingWeight) {
   const Vec3 g(0, 0, -9.81);
   for (int s = 0; s < 3000; ++s) {
     StepInput in = input(1e-3, g);
-    GraspInput gi;
-    gi.vertices = held;
-    gi.targets.resize(static_cast<Eigen::Index>(held.size()), 3);
-    for (size_t k = 0; k < held.size(); ++k) gi.targets.row(k) = o.surface.V.row(held[k]);
-    in.grasps.push_back(gi);
+    in.grasps.push_back(testing::graspOf(held, o.surface.V));
     ASSERT_EQ(m.step(in), StepStatus::Ok);
   }
   const std::vector<Vec3> f = m.graspForces();
@@ -239,9 +236,10 @@ TEST(PbdModel, ParametersAreReadAndBadChoicesRejected) {
 }
 
 // The single-precision solver follows the double one on a well-conditioned run (with bending:
-// without it the membrane amplifies perturbations of 1e-9 m by ~1e6, see README.md,
-// "Precision"): the float corrections carry ~2^-24 relative rounding per projection, so the two
-// trajectories stay within 1e-3 of the displacement. Both paths are deterministic.
+// without it the membrane amplifies perturbations of 1e-9 m by ~1e6, see
+// docs/notes/pbd-history.md, "Precision"): the float corrections carry ~2^-24 relative rounding per
+// projection, so the two trajectories stay within 1e-3 of the displacement. Both paths are
+// deterministic.
 TEST(PbdModel, Float32TracksFloat64) {
   Organ o = smallOrgan();
   o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.025)});

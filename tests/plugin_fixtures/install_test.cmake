@@ -5,9 +5,10 @@
 #  3. load the built deform_tethered.so with this build's loader (InstalledPlugin.LoadsByPath),
 #  4. load it again through the installed core, found only by the relocated-install search path
 #     (InstalledPlugin.FoundInRelocatedInstall),
-#  5. run the installed `deformbench conformance --plugin-dir BUILD` on it (must pass),
-#  6. compare it with pbd in the example's scene (run, then report),
-#  7. configure the example against the build tree (-Ddeformbench_DIR=BUILD_DIR).
+#  5. compare it with pbd in the example's scene (run, then report),
+#  6. configure the example against the build tree (-Ddeformbench_DIR=BUILD_DIR).
+# The conformance suite on the built example is the test conformance_example, which needs this
+# one (CTest fixture example_plugin: WORK_DIR/prefix/bin/deformbench, WORK_DIR/build).
 cmake_minimum_required(VERSION 3.22)
 foreach(v BUILD_DIR EXAMPLE_DIR WORK_DIR TEST_EXE GENERATOR)
   if(NOT DEFINED ${v})
@@ -78,16 +79,9 @@ run_gtest(InstalledPlugin.FoundInRelocatedInstall --unset=DEFORM_PLUGIN_PATH
           LD_LIBRARY_PATH=${libdir} DEFORM_INSTALLED_PREFIX=${prefix}
           DEFORM_INSTALLED_PLUGIN=${installed_plugin})
 
-# 5. The conformance suite on the example, from the installed program.
 set(deformbench ${prefix}/bin/deformbench)
-run("deformbench conformance --plugin-dir ${build}" ${CMAKE_COMMAND} -E env --unset=DEFORM_PLUGIN_PATH
-    ${deformbench} conformance --plugin-dir ${build})
-if(NOT RUN_OUTPUT MATCHES "pass +tethered/tethered +grasp" OR NOT RUN_OUTPUT MATCHES " passed, 0 failed")
-  message(FATAL_ERROR "conformance of the example did not pass:\n${RUN_OUTPUT}")
-endif()
-message(STATUS "deformbench conformance --plugin-dir ${build}: passed")
 
-# 6. The example next to pbd in its scene (no reference and 150 steps: seconds), then the report.
+# 5. The example next to pbd in its scene (no reference and 150 steps: seconds), then the report.
 file(GLOB pbd ${BUILD_DIR}/plugins/deform_pbd.so)
 if(pbd)
   run("deformbench run compare_with_pbd.json" ${CMAKE_COMMAND} -E env --unset=DEFORM_PLUGIN_PATH
@@ -118,7 +112,7 @@ else()
   message(STATUS "pbd not built: comparison step skipped")
 endif()
 
-# 7. find_package(deformbench) from the build tree.
+# 6. find_package(deformbench) from the build tree.
 run("configuring examples/minimal_plugin against the build tree" ${CMAKE_COMMAND} -S ${EXAMPLE_DIR}
     -B ${WORK_DIR}/build-tree-example -G ${GENERATOR} ${compiler_arg} -DCMAKE_BUILD_TYPE=Release
     -Ddeformbench_DIR=${BUILD_DIR} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF)

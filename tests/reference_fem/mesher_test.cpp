@@ -1,5 +1,6 @@
 // Tet mesher: surface vertices kept with their indices, boundary == input surface, positive
 // tets, sane quality, bad surfaces rejected with InputError (no crash, no hang).
+#include "../support/meshes.h"
 #include "test_shapes.h"
 
 #include <deform/error.h>
@@ -12,6 +13,7 @@
 
 using namespace deform;
 using namespace deform::reffem;
+using deform::testing::icosphere;
 
 namespace {
 
@@ -56,7 +58,7 @@ void checkMesh(const SurfaceMesh& s, const TetMeshResult& r) {
 }  // namespace
 
 TEST(TetMesher, SphereKeepsEverySurfaceVertex) {
-  const SurfaceMesh s = icosphere(0.03, 3);
+  const SurfaceMesh s = icosphere(3, 0.03);
   TetMeshOptions o;
   o.targetElements = 5000;
   o.source = "sphere";
@@ -86,7 +88,7 @@ TEST(TetMesher, RefinedSurfaceKeepsOriginalVerticesAndGeometry) {
 }
 
 TEST(TetMesher, RefineSurfaceEdgesIsClosedAndDeterministic) {
-  const SurfaceMesh s = icosphere(1.0, 1);
+  const SurfaceMesh s = icosphere(1, 1.0);
   const SurfaceMesh a = refineSurfaceEdges(s, 0.2), b = refineSurfaceEdges(s, 0.2);
   EXPECT_EQ(a.V, b.V);
   EXPECT_EQ(a.F, b.F);
@@ -102,7 +104,7 @@ TEST(TetMesher, RefineSurfaceEdgesIsClosedAndDeterministic) {
 }
 
 TEST(TetMesher, OpenSurfaceIsInputErrorNamingTheSource) {
-  SurfaceMesh s = icosphere(0.03, 2);
+  SurfaceMesh s = icosphere(2, 0.03);
   s.F.conservativeResize(s.numFaces() - 1, 3);
   TetMeshOptions o;
   o.source = "open.obj";
@@ -119,7 +121,7 @@ TEST(TetMesher, OpenSurfaceIsInputErrorNamingTheSource) {
 TEST(TetMesher, SelfIntersectingSurfaceIsInputError) {
   // Two spheres overlapping, merged into one vertex/face list: closed and manifold edge-wise,
   // but self-intersecting. Gmsh must fail (or be caught changing the surface), never hang.
-  const SurfaceMesh a = icosphere(0.03, 2), b = icosphere(0.03, 2, Vec3(0.02, 0, 0));
+  const SurfaceMesh a = icosphere(2, 0.03), b = icosphere(2, 0.03, Vec3(0.02, 0, 0));
   SurfaceMesh s;
   s.V.resize(a.numVertices() + b.numVertices(), 3);
   s.V << a.V, b.V;

@@ -2,6 +2,7 @@
 // against finite differences, rigid motions, patch tests (quadratic field with its body force),
 // loads and masses, the cantilever against Euler-Bernoulli + Timoshenko, and Richardson on an
 // organ phantom.
+#include "../support/finite_difference.h"
 #include "convergence.h"
 #include "fem_solver.h"
 #include "quadratic_tet.h"
@@ -18,6 +19,8 @@
 
 using namespace deform;
 using namespace deform::reffem;
+using deform::testing::centralDifferences;
+using deform::testing::numericGradient;
 
 namespace {
 
@@ -164,27 +167,17 @@ TEST(QuadraticTet, ForcesAndStiffnessMatchFiniteDifferences) {
     sys.elasticGradient(x, g);
     ASSERT_TRUE(g.allFinite());
     const Real h = 1e-7;
-    VecX gFd(3 * n);
-    for (int d = 0; d < 3 * n; ++d) {
-      VecX xp = x, xm = x;
-      xp(d) += h;
-      xm(d) -= h;
-      gFd(d) = (sys.elasticEnergy(xp) - sys.elasticEnergy(xm)) / (2 * h);
-    }
+    const VecX gFd = numericGradient(x, h, [&](const VecX& y) { return sys.elasticEnergy(y); });
     EXPECT_LT((g - gFd).norm(), 1e-6 * g.norm()) << materialModelName(model);
     VecX values;
     sys.stiffnessValues(x, values, false);
     const MatX K = dense(sys, values);
     EXPECT_LT((K - K.transpose()).norm(), 1e-10 * K.norm()) << materialModelName(model);
-    MatX KFd(3 * n, 3 * n);
-    for (int d = 0; d < 3 * n; ++d) {
-      VecX xp = x, xm = x, gp, gm;
-      xp(d) += h;
-      xm(d) -= h;
-      sys.elasticGradient(xp, gp);
-      sys.elasticGradient(xm, gm);
-      KFd.col(d) = (gp - gm) / (2 * h);
-    }
+    const MatX KFd = centralDifferences(x, h, [&](const VecX& y) {
+      VecX gy;
+      sys.elasticGradient(y, gy);
+      return gy;
+    });
     EXPECT_LT((K - KFd).norm(), 1e-6 * K.norm()) << materialModelName(model);
     // The projected stiffness is positive semi-definite.
     sys.stiffnessValues(x, values, true);

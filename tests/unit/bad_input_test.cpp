@@ -265,8 +265,8 @@ TEST_P(TextMesh, EmptyInputIsRefused) {
 }
 
 INSTANTIATE_TEST_SUITE_P(EveryTextFormat, TextMesh, ::testing::ValuesIn(textFormats()),
-                         [](const auto& info) {
-                           std::string n = info.param.name;
+                         [](const auto& instance) {
+                           std::string n = instance.param.name;
                            std::replace(n.begin(), n.end(), '.', '_');
                            return n;
                          });

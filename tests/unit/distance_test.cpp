@@ -70,7 +70,7 @@ TEST(Distance, BvhEqualsBruteForceAndSignMatchesWindingNumber) {
 TEST(Distance, SignAtVerticesAndEdgesOfAConvexMesh) {
   // Points just inside/outside along the vertex normals: the closest feature is a vertex, where a
   // face-normal sign test alone can fail.
-  const SurfaceMesh m = metaballs::test::icosphere(1);
+  const SurfaceMesh m = testing::icosphere(1);
   const MeshDistance dist(m);
   for (int i = 0; i < m.numVertices(); ++i) {
     const Vec3 v = m.V.row(i);

@@ -60,8 +60,8 @@ INSTANTIATE_TEST_SUITE_P(SourcesMd, EvalDataClean,
                                            CleanCase{"liver-smooth.obj", 2194, 4384, 0},
                                            CleanCase{"liver.obj", 181, 274, 42},
                                            CleanCase{"tissue_surface.obj", 448, 892, 0}),
-                         [](const auto& info) {
-                           std::string n = info.param.file;
+                         [](const auto& instance) {
+                           std::string n = instance.param.file;
                            for (char& ch : n) {
                              if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
                            }

@@ -70,7 +70,7 @@ TEST_P(FuzzInputs, SeedsAreReadOrRefusedWithInputError) {
 
 INSTANTIATE_TEST_SUITE_P(Targets, FuzzInputs,
                          ::testing::Values("obj", "stl", "off", "ply", "vtk", "msh", "scene"),
-                         [](const auto& info) { return info.param; });
+                         [](const auto& instance) { return instance.param; });
 
 TEST(FuzzEntry, MeshEntryAcceptsAValidTetrahedronAndRefusesATruncatedOne) {
   const std::string tet =

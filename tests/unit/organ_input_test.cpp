@@ -92,7 +92,7 @@ TEST_P(OrganDefect, LoadOrganRefusesNamingTheMeshFile) {
 }
 
 INSTANTIATE_TEST_SUITE_P(EveryDefect, OrganDefect, ::testing::ValuesIn(defectCases()),
-                         [](const auto& info) { return std::string(info.param.name); });
+                         [](const auto& instance) { return std::string(instance.param.name); });
 
 // ---------------------------------------------------------------- grasps against the organ
 

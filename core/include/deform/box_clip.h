@@ -1,7 +1,7 @@
 // deformbench SDK: an organ surface minus a union of axis-aligned boxes, as a closed triangle
 // surface that a volume mesher can fill, so that a tet mesh conforms to a fixed region.
 //
-// Why: a fixed region "pins every model node inside it" (DESIGN.md). A mesh whose elements cross
+// Why: a fixed region "pins every model node inside it" (scene format). A mesh whose elements cross
 // the box faces pins a node set that changes with the mesh, so the Dirichlet boundary moves by
 // O(h) between refinements and a convergence study measures where each mesh puts the clamp edge.
 // The pinned material inside the boxes does not move, so the solid that can deform is the organ

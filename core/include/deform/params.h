@@ -15,7 +15,12 @@
 
 namespace deform {
 
+// GCC's -Wshadow takes the scoped enumerator ParamType::Real for a shadow of the type
+// deform::Real (clang does not); the SDK keeps the name.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wshadow"
 enum class ParamType { Real, Int, Bool, Choice };
+#pragma GCC diagnostic pop
 
 using ParamValue = std::variant<bool, long long, double, std::string>;
 

@@ -1,4 +1,4 @@
-// deformbench SDK: scene files (JSON, SI units; see DESIGN.md "Scene file"). Parsing is strict:
+// deformbench SDK: scene files (JSON, SI units; see docs/scene-format.md). Parsing is strict:
 // an unknown key, a wrong type or an out-of-range value is an InputError naming the file and the
 // JSON path (e.g. "scenes/x.json: /models/0/params/iterations: must be >= 1, got 0").
 #pragma once

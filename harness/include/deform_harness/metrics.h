@@ -1,4 +1,4 @@
-// deformbench harness: error metrics against a reference (DESIGN.md "Metrics") and step-time
+// deformbench harness: error metrics against a reference (docs/results-format.md) and step-time
 // statistics.
 //
 // With x the model's surface, y the reference's and X the rest surface (each #V by 3, m, the

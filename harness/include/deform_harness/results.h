@@ -1,4 +1,4 @@
-// deformbench harness: results.json (DESIGN.md "Results") and the surfaces written beside it.
+// deformbench harness: results.json (docs/results-format.md) and the surfaces written beside it.
 #pragma once
 
 #include <deform_harness/runner.h>
@@ -35,7 +35,7 @@ inline constexpr const char* kRestSurfaceFile = "rest_surface.obj";
 /// tools' trajectories and the loads, in metres and seconds (results.json "interaction").
 nlohmann::ordered_json interactionJson(const Scene& scene, const Organ& organ);
 
-/// The results document (keys in the order DESIGN.md shows them).
+/// The results document (keys in the order docs/results-format.md shows them).
 nlohmann::ordered_json resultsJson(const Scene& scene, const Organ& organ,
                                    const std::vector<std::string>& organLog,
                                    const std::vector<RunRecord>& runs, const MachineInfo& machine);

@@ -116,7 +116,7 @@ struct RunOptions {
   double warmupFraction = 0.05;  ///< steps excluded from the statistics (still simulated)
   bool keepSeries = true;        ///< honour "every:N"
   bool recordGraspForces = true;
-  /// Quasi-static stepping (DESIGN.md "Metrics": a quasi-static reference is solved only at the
+  /// Quasi-static stepping (docs/scene-format.md: a quasi-static reference is solved only at the
   /// compared instants). true: the interaction is prepared every step (so grasps attach when the
   /// jaws close) but model.step() is called only at the steps that end at a compared instant and
   /// at the steps that end just before a grasper's jaws close (so the attachment sees the solved

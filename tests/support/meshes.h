@@ -1,12 +1,81 @@
-// Small meshes generated in code for the pbd and massspring tests and benchmarks (no data files).
+// Test meshes generated in code (no data files, no phantoms), shared by the tests and the
+// benchmarks of several plugins: icospheres and ellipsoids, a liver-sized UV ellipsoid, a flat
+// equilateral sheet and a structured tet box. Tests include it as "../support/meshes.h",
+// the benchmarks as "support/meshes.h" (with tests/ on their include path).
 #pragma once
 
 #include <deform/mesh.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <numbers>
+#include <utility>
+#include <vector>
 
 namespace deform::testing {
+
+/// Icosphere of radius r centred at c: the icosahedron with `levels` 4-way subdivisions, new
+/// vertices projected onto the sphere (12, 42, 162, 642, 2562 vertices). Closed, outward.
+inline SurfaceMesh icosphere(int levels, Real r = 1.0, const Vec3& c = Vec3::Zero()) {
+  const Real t = (1.0 + std::sqrt(5.0)) / 2.0;
+  std::vector<Vec3> v = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                         {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<Vec3i> f = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
+                          {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
+                          {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},
+                          {4, 9, 5},  {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
+  for (Vec3& p : v) p.normalize();
+  for (int l = 0; l < levels; ++l) {
+    std::map<std::pair<int, int>, int> mid;
+    const auto midpoint = [&](int a, int b) {
+      const auto key = std::make_pair(std::min(a, b), std::max(a, b));
+      const auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      v.push_back((v[size_t(a)] + v[size_t(b)]).normalized());
+      mid[key] = int(v.size()) - 1;
+      return int(v.size()) - 1;
+    };
+    std::vector<Vec3i> g;
+    for (const Vec3i& tri : f) {
+      const int a = midpoint(tri[0], tri[1]), b = midpoint(tri[1], tri[2]),
+                e = midpoint(tri[2], tri[0]);
+      g.push_back({tri[0], a, e});
+      g.push_back({tri[1], b, a});
+      g.push_back({tri[2], e, b});
+      g.push_back({a, b, e});
+    }
+    f.swap(g);
+  }
+  SurfaceMesh s;
+  s.V.resize(Eigen::Index(v.size()), 3);
+  for (size_t i = 0; i < v.size(); ++i) s.V.row(Eigen::Index(i)) = (c + r * v[i]).transpose();
+  s.F.resize(Eigen::Index(f.size()), 3);
+  for (size_t i = 0; i < f.size(); ++i) s.F.row(Eigen::Index(i)) = f[i].transpose();
+  return s;
+}
+
+/// Closed 2-manifold check: every undirected edge in exactly two faces, used once per direction.
+/// Returns the number of bad (directed) edges; 0 for a closed, consistently oriented surface.
+inline int badEdges(const SurfaceMesh& s) {
+  std::map<std::pair<int, int>, int> directed;
+  for (int f = 0; f < s.numFaces(); ++f)
+    for (int k = 0; k < 3; ++k) ++directed[{s.F(f, k), s.F(f, (k + 1) % 3)}];
+  int bad = 0;
+  for (const auto& [e, count] : directed) {
+    const auto it = directed.find({e.second, e.first});
+    if (count != 1 || it == directed.end() || it->second != 1) ++bad;
+  }
+  return bad;
+}
+
+/// The unit icosphere scaled by the semi-axes `radii` (m), centred at the origin.
+inline SurfaceMesh ellipsoid(int levels, const Vec3& radii) {
+  SurfaceMesh s = icosphere(levels);
+  for (Eigen::Index i = 0; i < s.V.rows(); ++i)
+    s.V.row(i) = s.V.row(i).cwiseProduct(radii.transpose());
+  return s;
+}
 
 /// Closed UV ellipsoid with semi-axes (ax, by, cz), m: 2 + (rings) * segments vertices, outward
 /// oriented. rings >= 2, segments >= 3.
