@@ -3,7 +3,8 @@
 # the toy fixture plugin (tests/plugin_fixtures), whose runs take milliseconds.
 #   recover     the reference is the toy at gain 0.4: calibration from the default gain 1 finds
 #               it within 0.02, although trials below gain 0.2 diverge (scored, not fatal);
-#               then `run --calibration` uses it and --explain says where gain came from
+#               then `run --calibration` uses it and --explain says where gain came from, and
+#               `sweep --calibration` shows the default and the calibrated point
 #   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0:
 #               one stderr line each and exit 2
 set -euo pipefail
@@ -45,6 +46,16 @@ PY
   grep -q "gain from calibration $work/cal/calibration.json" "$work/run.txt" \
     || { cat "$work/run.txt"; fail "--explain does not say gain came from the calibration"; }
   grep -q "diverge_below from scene" "$work/run.txt" || fail "--explain: diverge_below not from scene"
+  # sweep --calibration: the model at its defaults and calibrated, the latter far closer.
+  "${db[@]}" sweep "$here/toy_reference.json" --out "$work/sweep" --no-cache --no-plot \
+    --calibration "$work/cal/calibration.json" >"$work/sweep.txt" 2>&1 || { cat "$work/sweep.txt"; fail sweep; }
+  python3 - "$work/sweep/sweep.json" <<'PY'
+import json, sys
+p = {q["label"]: q for q in json.load(open(sys.argv[1]))["points"]}
+assert set(p) == {"toy", "toy+cal"}, list(p)
+assert p["toy+cal"]["calibrated"] and not p["toy"]["calibrated"]
+assert p["toy+cal"]["rmse_all"] < 0.05 * p["toy"]["rmse_all"], p
+PY
   ;;
 bad_input)
   check() {  # check NAME EXPECTED_TEXT ARGS...
