@@ -838,7 +838,8 @@ int realMain(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   run->add_option("--calibration", ra.calibrations,
                   "calibration.json of `deformbench calibrate`: its model takes those parameters "
-                  "where the scene writes none (repeatable, one file per model)");
+                  "where the scene writes none (repeatable, one file per model)")
+      ->allow_extra_args(false);
   run->add_flag("--reuse-reference", ra.reuseReference,
                 "read the reference from the cache when an earlier run with this flag solved "
                 "it (calibration trials; no reference timings then)")
@@ -889,9 +890,11 @@ int realMain(int argc, char** argv) {
                    "run the cases in this process (no time limit, a crash ends the command)");
   addCommon(tables, ta.common, true);
   addDispatch(tables, ta.dispatch);
-  tables->add_option("--calibration", ta.calibrations,
-                     "calibration.json: its model runs at its defaults and calibrated in every "
-                     "case, and the table 'calibration' shows both (repeatable)");
+  tables
+      ->add_option("--calibration", ta.calibrations,
+                   "calibration.json: its model runs at its defaults and calibrated in every "
+                   "case, and the table 'calibration' shows both (repeatable)")
+      ->allow_extra_args(false);
 
   std::string sweepScene;
   CommonArgs sa;
@@ -902,9 +905,11 @@ int realMain(int argc, char** argv) {
   sweep->add_option("--out", sa.out, "output folder")->required();
   sweep->add_flag("--no-plot", sweepNoPlot, "write the data only");
   std::vector<std::string> sweepCalibrations;
-  sweep->add_option("--calibration", sweepCalibrations,
-                    "calibration.json: its model is swept at its defaults and calibrated "
-                    "(repeatable)");
+  sweep
+      ->add_option("--calibration", sweepCalibrations,
+                   "calibration.json: its model is swept at its defaults and calibrated "
+                   "(repeatable)")
+      ->allow_extra_args(false);
   sweep->add_flag("--explain", sa.explain, "say what was loaded, built, cached, skipped");
   addCommon(sweep, sa, true);
 
@@ -914,12 +919,14 @@ int realMain(int argc, char** argv) {
   calibrate->add_option("scenes", cal.train, "training scene files (with a reference)")->required();
   calibrate->add_option("--model", cal.model, "plugin to calibrate")->required();
   calibrate->add_option("--out", cal.common.out, "output folder (calibration.json)")->required();
-  calibrate->add_option("--validate", cal.validate, "held-out scene (repeatable)");
+  calibrate->add_option("--validate", cal.validate, "held-out scene (repeatable)")
+      ->allow_extra_args(false);
   calibrate->add_option("--metric", cal.metric, "rmse_all (default), rmse_50 or loss_ratio");
   calibrate->add_option("--budget", cal.budget, "trials at most (default 40)");
   calibrate->add_option("--label", cal.label, "free text kept in calibration.json");
-  calibrate->add_option("--param", cal.params,
-                        "calibrate only this calibratable parameter (repeatable)");
+  calibrate
+      ->add_option("--param", cal.params, "calibrate only this calibratable parameter (repeatable)")
+      ->allow_extra_args(false);
   calibrate
       ->add_option("--timeout", cal.timeout,
                    "seconds per model run, each in its own process "
