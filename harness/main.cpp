@@ -8,6 +8,7 @@
 #include <deform/plugin_loader.h>
 #include <deform/scene.h>
 #include <deform_harness/bench.h>
+#include <deform_harness/calibration.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/conformance.h>
 #include <deform_harness/convergence.h>
@@ -131,6 +132,11 @@ int cmdPlugins(bool asJson, const std::vector<std::string>& pluginDirs) {
                << p["unit"].get<std::string>() << " default " << std::setw(10)
                << valueText(p["default"]) << " " << std::setw(20) << range << " "
                << p["description"].get<std::string>();
+          if (p.contains("calibrate")) {
+            const json& c = p["calibrate"];
+            line << " [calibratable: " << valueText(c["min"]) << " .. " << valueText(c["max"])
+                 << ", " << c["scale"].get<std::string>() << "]";
+          }
           std::cout << line.str() << "\n";
         }
         std::cout << "\n";
@@ -226,7 +232,25 @@ struct RunArgs {
   int steps = -1;
   bool strict = false;
   std::vector<std::string> pluginDirs;
+  std::vector<std::string> calibrations;
+  bool reuseReference = false;
 };
+
+/// The --calibration files, read and checked (InputError names the file); two files for one
+/// model are refused.
+std::vector<CalibrationParams> readCalibrations(const std::vector<std::string>& files) {
+  std::vector<CalibrationParams> out;
+  for (const std::string& f : files) {
+    CalibrationParams c = readCalibrationFile(f);
+    for (const CalibrationParams& o : out)
+      if (o.plugin == c.plugin && o.model == c.model)
+        throw InputError(f, "",
+                         "a second calibration of " + c.plugin + "/" + c.model +
+                             " (first: " + o.file + "); give one file per model");
+    out.push_back(std::move(c));
+  }
+  return out;
+}
 
 /// Validity (DESIGN "Metrics") of each run that did not do what the scene asked, and the
 /// reference's estimated discretisation error when a check of it is in the cache.
@@ -263,6 +287,8 @@ int cmdRun(const RunArgs& a) {
   }
   options.outDir = a.out;
   options.run.maxSteps = a.steps;
+  options.calibrations = readCalibrations(a.calibrations);
+  options.reuseReference = a.reuseReference;
   if (a.explain)
     options.explain = [](const std::string& s) { std::cout << "explain: " << s << "\n"; };
   options.progress = [](const std::string& s) { std::cout << s << "\n" << std::flush; };
@@ -427,6 +453,7 @@ struct TablesArgs {
   bool inProcess = false;
   bool noReferenceCheck = false;
   DispatchArgs dispatch;
+  std::vector<std::string> calibrations;
 };
 
 int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
@@ -438,6 +465,7 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
   o.cases = caseOptions(a);
   o.referenceElements = ta.referenceElements;
   o.referenceCheck = !ta.noReferenceCheck;
+  o.calibrations = readCalibrations(ta.calibrations);
   if (ta.resume && ta.inProcess)
     throw InputError("--resume", "", "needs the cases in child processes (drop --in-process)");
   const bool dispatched = ta.dispatch.jobs > 1 || ta.dispatch.mpi || !ta.dispatch.slurm.empty();
@@ -472,9 +500,11 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
   return 0;
 }
 
-int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot) {
+int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
+             const std::vector<std::string>& calibrations) {
   PluginLoader loader(searchPath(a.pluginDirs));
   SweepOptions o;
+  o.calibrations = readCalibrations(calibrations);
   o.quick = a.quick;
   o.outDir = makeOutDir(a.out);
   o.cases = caseOptions(a);
@@ -499,6 +529,75 @@ int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot) {
   if (!noPlot)
     plot("plot_sweep.py", {(o.outDir / "sweep.json").string(), (o.outDir / "sweep.png").string()});
   std::cout << "sweep: " << (o.outDir / "sweep.json").string() << "\n";
+  return 0;
+}
+
+struct CalibrateArgs {
+  CommonArgs common;
+  std::vector<std::string> train, validate, params;
+  std::string model, metric = "rmse_all", label;
+  int budget = 40;
+  double timeout = 0;
+  DispatchArgs dispatch;
+};
+
+int cmdCalibrate(const CalibrateArgs& a) {
+  PluginLoader loader(searchPath(a.common.pluginDirs));
+  CalibrateOptions o;
+  o.train = a.train;
+  o.validate = a.validate;
+  o.plugin = a.model;
+  o.params = a.params;
+  o.label = a.label;
+  o.budget = a.budget;
+  if (!calibMetricFromName(a.metric, o.metric))
+    throw InputError("--metric", "",
+                     "unknown metric '" + a.metric + "' (rmse_all, rmse_50 or loss_ratio)");
+  if (a.budget < 1) throw InputError("--budget", "", "must be at least 1 (trials)");
+  if (a.model.empty()) throw InputError("--model", "", "name the plugin to calibrate");
+  o.outDir = makeOutDir(a.common.out);
+  o.cases = caseOptions(a.common);
+  if (!a.dispatch.slurm.empty())
+    throw InputError("--slurm", "",
+                     "calibrate chooses its trials as results come: use --jobs "
+                     "or --mpi");
+  const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(a.dispatch);
+  o.cases.dispatcher = dispatcher.get();
+  ChildCaseOptions child;
+  child.executable = selfExecutable();
+  child.pluginArgs = pluginDirArgs(loader.searchPath());
+  child.runArgs = {"--reuse-reference"};
+  if (a.timeout > 0) child.timeoutS = a.timeout;
+  o.cases.child = child;
+  nlohmann::ordered_json doc;
+  {
+    Progress progress(a.budget, "calibrate");
+    doc = runCalibration(loader, o, &progress);
+  }
+  const auto mm = [&](const nlohmann::ordered_json& v) {
+    if (!v.is_number()) return std::string("-");
+    return doc["metric"] == "loss_ratio" ? fmt(v.get<double>(), 4)
+                                         : fmt(1e3 * v.get<double>(), 4) + " mm";
+  };
+  std::cout << "\n"
+            << doc["plugin"].get<std::string>() << " calibrated on " << a.train.size()
+            << " scene(s), " << doc["evaluations"].get<int>() << " trials, "
+            << fmt(doc["wall_s"].get<double>(), 3) << " s; metric "
+            << doc["metric"].get<std::string>() << "\n";
+  for (const auto& [k, v] : doc["params"].items())
+    std::cout << "  " << k << " = " << fmt(v.get<double>(), 5) << " (default "
+              << fmt(doc["defaults"][k].get<double>(), 5) << ")\n";
+  for (const char* set : {"train", "validation"}) {
+    for (const auto& p : doc[set]["per_scene"])
+      std::cout << "  " << std::left << std::setw(11) << set << std::setw(48)
+                << fs::path(p["scene"].get<std::string>()).filename().string() << " before "
+                << std::setw(12) << mm(p["before"]) << " after " << mm(p["after"]) << "\n";
+    if (!doc[set]["per_scene"].empty())
+      std::cout << "  " << std::left << std::setw(11) << set << std::setw(48) << "mean"
+                << " before " << std::setw(12) << mm(doc[set]["before"]) << " after "
+                << mm(doc[set]["after"]) << "\n";
+  }
+  std::cout << "calibration: " << (o.outDir / "calibration.json").string() << "\n";
   return 0;
 }
 
@@ -737,6 +836,14 @@ int realMain(int argc, char** argv) {
   cacheOpt->excludes(noCacheOpt);
   run->add_option("--steps", ra.steps, "stop every run after this many steps (quick tries)")
       ->check(CLI::PositiveNumber);
+  run->add_option("--calibration", ra.calibrations,
+                  "calibration.json of `deformbench calibrate`: its model takes those parameters "
+                  "where the scene writes none (repeatable, one file per model)")
+      ->allow_extra_args(false);
+  run->add_flag("--reuse-reference", ra.reuseReference,
+                "read the reference from the cache when an earlier run with this flag solved "
+                "it (calibration trials; no reference timings then)")
+      ->group("");
   run->add_flag("--strict", ra.strict,
                 "exit 1 when a model failed (one stderr line each; results.json still written)");
 
@@ -783,6 +890,11 @@ int realMain(int argc, char** argv) {
                    "run the cases in this process (no time limit, a crash ends the command)");
   addCommon(tables, ta.common, true);
   addDispatch(tables, ta.dispatch);
+  tables
+      ->add_option("--calibration", ta.calibrations,
+                   "calibration.json: its model runs at its defaults and calibrated in every "
+                   "case, and the table 'calibration' shows both (repeatable)")
+      ->allow_extra_args(false);
 
   std::string sweepScene;
   CommonArgs sa;
@@ -792,8 +904,36 @@ int realMain(int argc, char** argv) {
   sweep->add_option("scene", sweepScene, "scene file with a reference")->required();
   sweep->add_option("--out", sa.out, "output folder")->required();
   sweep->add_flag("--no-plot", sweepNoPlot, "write the data only");
+  std::vector<std::string> sweepCalibrations;
+  sweep
+      ->add_option("--calibration", sweepCalibrations,
+                   "calibration.json: its model is swept at its defaults and calibrated "
+                   "(repeatable)")
+      ->allow_extra_args(false);
   sweep->add_flag("--explain", sa.explain, "say what was loaded, built, cached, skipped");
   addCommon(sweep, sa, true);
+
+  CalibrateArgs cal;
+  CLI::App* calibrate = app.add_subcommand(
+      "calibrate", "fit a model's calibratable parameters to the reference of training scenes");
+  calibrate->add_option("scenes", cal.train, "training scene files (with a reference)")->required();
+  calibrate->add_option("--model", cal.model, "plugin to calibrate")->required();
+  calibrate->add_option("--out", cal.common.out, "output folder (calibration.json)")->required();
+  calibrate->add_option("--validate", cal.validate, "held-out scene (repeatable)")
+      ->allow_extra_args(false);
+  calibrate->add_option("--metric", cal.metric, "rmse_all (default), rmse_50 or loss_ratio");
+  calibrate->add_option("--budget", cal.budget, "trials at most (default 40)");
+  calibrate->add_option("--label", cal.label, "free text kept in calibration.json");
+  calibrate
+      ->add_option("--param", cal.params, "calibrate only this calibratable parameter (repeatable)")
+      ->allow_extra_args(false);
+  calibrate
+      ->add_option("--timeout", cal.timeout,
+                   "seconds per model run, each in its own process "
+                   "(default 900)")
+      ->check(CLI::PositiveNumber);
+  addDispatch(calibrate, cal.dispatch);
+  addCommon(calibrate, cal.common, false);
 
   StabilityArgs st;
   CLI::App* stability = app.add_subcommand(
@@ -891,7 +1031,11 @@ int realMain(int argc, char** argv) {
   }
   if (*sweep) {
     sa.pluginDirs = pluginDirs;
-    return cmdSweep(sweepScene, sa, sweepNoPlot);
+    return cmdSweep(sweepScene, sa, sweepNoPlot, sweepCalibrations);
+  }
+  if (*calibrate) {
+    cal.common.pluginDirs = pluginDirs;
+    return cmdCalibrate(cal);
   }
   if (*stability) {
     st.common.pluginDirs = pluginDirs;

@@ -13,6 +13,7 @@ PACKAGES=(
   python3-matplotlib python3-numpy
   libjs-three chromium python3-pil  # the report's 3D viewer (three.js) and its browser test
   openmpi-bin libopenmpi-dev
+  libnlopt-dev libnlopt-cxx-dev  # deformbench calibrate
 )
 if [[ ${1:-} == --tests ]]; then PACKAGES+=(slurm-wlm munge); fi
 missing=()

@@ -1,6 +1,7 @@
 #include <deform/params.h>
 
 #include <cassert>
+#include <cmath>
 #include <cstdio>
 #include <stdexcept>
 
@@ -89,6 +90,23 @@ std::string formatNonDefault(const ParamValues& values, const std::vector<ParamS
     out += s.key + '=' + formatValue(it->second);
   }
   return out;
+}
+
+}  // namespace deform
+
+namespace deform {
+
+std::string calibrationDeclarationProblem(const ParamSpec& spec) {
+  if (!spec.calibratable) return "";
+  if (spec.type != ParamType::Real) return "only real parameters can be calibratable";
+  if (!(std::isfinite(spec.calibMin) && std::isfinite(spec.calibMax) &&
+        spec.calibMin < spec.calibMax))
+    return "calibration bounds must be finite with min < max";
+  if (spec.calibMin < spec.min || spec.calibMax > spec.max)
+    return "calibration bounds must lie inside the valid range";
+  if (spec.calibScale == ParamScale::Log && spec.calibMin <= 0)
+    return "a log-scale calibration needs bounds > 0";
+  return "";
 }
 
 }  // namespace deform

@@ -201,6 +201,14 @@ const std::vector<ModelInfo>& PluginLoader::loadFile(const std::string& path) {
   if (handle->registry.models().empty()) {
     throw PluginError(Kind::InitFailure, path, "deform_register registered no model");
   }
+  for (const ModelInfo& m : handle->registry.models()) {
+    for (const ParamSpec& p : m.params) {
+      const std::string why = calibrationDeclarationProblem(p);
+      if (!why.empty())
+        throw PluginError(Kind::InitFailure, path,
+                          "model '" + m.name + "' parameter '" + p.key + "': " + why);
+    }
+  }
   m_handles.push_back(std::move(handle));
   return m_handles.back()->registry.models();
 }

@@ -917,6 +917,10 @@ nlohmann::json paramSpecToJson(const ParamSpec& spec) {
   }
   if (spec.type == ParamType::Choice) j["choices"] = spec.choices;
   j["description"] = spec.description;
+  if (spec.calibratable) {
+    j["calibrate"] = {
+        {"min", spec.calibMin}, {"max", spec.calibMax}, {"scale", paramScaleName(spec.calibScale)}};
+  }
   return j;
 }
 

@@ -26,21 +26,24 @@ def main():
               if p["status"] == "ok" and p["ms_median"] is not None and p["rmse_50"] is not None]
     budget = doc.get("haptic_budget_ms", 1.0)
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.2))
+    def series(p):  # a model's default curve, and its calibrated one (sweep --calibration)
+        return p["model"] + (" calibrated" if p.get("calibrated") else "")
     models = []
     for p in doc["points"]:
-        if p["model"] not in models:
-            models.append(p["model"])
+        if series(p) not in models:
+            models.append(series(p))
     cmap = plt.get_cmap("tab10")
     for ax, key, title in ((axes[0], "rmse_50", "rmse_50 (50 vertices nearest the load)"),
                            (axes[1], "rmse_all", "rmse_all (every surface vertex)")):
         for i, m in enumerate(models):
-            pts = sorted([p for p in points if p["model"] == m and p[key] is not None],
+            pts = sorted([p for p in points if series(p) == m and p[key] is not None],
                          key=lambda p: p["ms_median"])
             if not pts:
                 continue
             xs = [p["ms_median"] for p in pts]
             ys = [1e3 * p[key] for p in pts]
-            ax.plot(xs, ys, "-o", color=cmap(i % 10), label=m, markersize=5)
+            ax.plot(xs, ys, "--o" if m.endswith(" calibrated") else "-o", color=cmap(i % 10),
+                    label=m, markersize=5)
             for p, x, y in zip(pts, xs, ys):
                 if p["param"]:
                     v = p["value"]

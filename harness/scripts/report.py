@@ -5,6 +5,8 @@ usage: report.py DIR OUT.html
 
 Sections (each present when the folder has its data):
   tables          every <table>.json (format deformbench-table/1), and results.json run tables
+  calibration     calibration.json of `deformbench calibrate` (here or one per subfolder):
+                  the metric at the defaults and calibrated, training and validation
   sweep           error against run time (sweep.json; the plot is drawn again with matplotlib)
   stability       the stability table summary and one stability map per model
   viewer          the folder's own results.json: an interactive 3D viewer (three.js, inlined) of
@@ -439,6 +441,39 @@ def main():
                           % (esc(doc["scene"]["name"]), t))
     if table_html:
         sections.append(('tables', "Tables", "".join(table_html)))
+
+    # Calibrations (deformbench-calibration/1): the folder's own calibration.json, or one per
+    # model folder below it (scripts/calibration_study.sh), defaults and calibrated side by side.
+    cal_files = sorted(glob.glob(os.path.join(root, "calibration.json")) +
+                       glob.glob(os.path.join(root, "*", "calibration.json")))
+    cal_rows = []
+    for path in cal_files:
+        try:
+            with open(path) as f:
+                c = json.load(f)
+        except (OSError, ValueError):
+            continue
+        if not isinstance(c, dict) or c.get("format") != "deformbench-calibration/1":
+            continue
+        scale = 1.0 if c.get("metric") == "loss_ratio" else 1e3
+        def val(v):
+            return None if v is None else scale * v
+        row = {"model": c.get("plugin", "") + "/" + c.get("model", ""),
+               "metric": c.get("metric", "") + ("" if scale == 1.0 else " (mm)"),
+               "params": ", ".join("%s %.3g (default %.3g)" % (k, v, c.get("defaults", {}).get(k, float("nan")))
+                                   for k, v in c.get("params", {}).items()),
+               "train_before": val(c["train"]["before"]), "train_after": val(c["train"]["after"]),
+               "validation_before": val(c["validation"]["before"]),
+               "validation_after": val(c["validation"]["after"]),
+               "evaluations": c.get("evaluations"), "wall_s": c.get("wall_s")}
+        cal_rows.append(row)
+    if cal_rows:
+        cols = [("model", "model"), ("metric", "metric"), ("params", "calibrated params"),
+                ("train_before", "train default"), ("train_after", "train calibrated"),
+                ("validation_before", "validation default"),
+                ("validation_after", "validation calibrated"), ("evaluations", "trials"),
+                ("wall_s", "wall s")]
+        sections.append(("calibration", "Calibration", html_table(cols, cal_rows)))
 
     # Error against run time.
     sweep_path = os.path.join(root, "sweep.json")

@@ -98,6 +98,7 @@ ojson caseTask(const ojson& pruned, const fs::path& runScene, const fs::path& ou
     }
   }
   if (options.explain) argv.push_back("--explain");
+  argv.insert(argv.end(), co.runArgs.begin(), co.runArgs.end());
   if (options.run.maxSteps > 0)
     argv.insert(argv.end(), {"--steps", std::to_string(options.run.maxSteps)});
   ojson models = ojson::array();

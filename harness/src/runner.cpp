@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <fstream>
 #include <set>
 #include <sstream>
 #include <variant>
@@ -483,8 +484,40 @@ std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
     run.spec = *spec;
     run.isReference = scene.reference && spec == &*scene.reference;
     run.info = &loader.load(spec->plugin, spec->model);
-    run.params =
-        resolveParams(run.info->params, spec->params, scene.file, spec->jsonPath + "/params");
+    nlohmann::json given = spec->params;
+    const CalibrationParams* calibration = nullptr;
+    if (!run.isReference) {
+      for (const CalibrationParams& c : options.calibrations) {
+        if (c.plugin == spec->plugin && c.model == run.info->name) {
+          calibration = &c;
+          break;
+        }
+      }
+    }
+    if (calibration) {
+      nlohmann::json merged = calibration->params;
+      for (const auto& [k, v] : spec->params.items()) merged[k] = v;
+      given = merged;
+    }
+    run.params = resolveParams(run.info->params, given, scene.file, spec->jsonPath + "/params");
+    if (options.explain) {
+      // Where each parameter came from: the scene, a calibration file, or the default.
+      std::string from;
+      for (const ParamSpec& ps : run.info->params) {
+        std::string source = "default";
+        if (spec->params.contains(ps.key)) {
+          source = "scene";
+          if (calibration && calibration->params.contains(ps.key))
+            source += ", over calibration " + calibration->file;
+        } else if (calibration && calibration->params.contains(ps.key)) {
+          source = "calibration " + calibration->file;
+        }
+        if (source == "default") continue;
+        from += (from.empty() ? "" : "; ") + ps.key + " from " + source;
+      }
+      explain("params of " + spec->plugin + "/" + run.info->name + " at " + spec->jsonPath + ": " +
+              (from.empty() ? std::string("all defaults") : from + "; the rest defaults"));
+    }
     if (!spec->label.empty()) {
       run.label = spec->label;
     } else {
@@ -564,6 +597,96 @@ void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRec
   }
 }
 
+namespace {
+
+constexpr const char* kReferenceRunKind = "harness.reference_run";
+
+/// The key of a reference run (BenchmarkOptions::reuseReference).
+CacheKey referenceRunKey(const std::string& sceneFile, const Scene& scene, const Organ& organ,
+                         PluginLoader& loader, const PlannedRun& p, const RunOptions& run) {
+  nlohmann::json doc;
+  {
+    std::ifstream in(sceneFile);
+    doc = nlohmann::json::parse(in);
+  }
+  for (const char* k : {"models", "name", "description", "output"}) doc.erase(k);
+  CacheKey key;
+  key.add("harness.reference_run/1").add(doc.dump());
+  key.add(organ.surface.V).add(organ.surface.F);
+  key.add(sha256File(loader.locate(p.spec.plugin))).add(p.info->name).add(p.info->version);
+  key.add(paramsToJson(p.params).dump());
+  key.add(static_cast<long long>(run.maxSteps < 0 ? scene.numSteps() : run.maxSteps));
+  key.add(run.quasiStaticAtComparedInstants ? (*run.quasiStaticAtComparedInstants ? 1 : 0) : -1);
+  return key;
+}
+
+void storeCachedReference(Cache& cache, const CacheKey& key, const RunRecord& r) {
+  ByteWriter w;
+  w.pod(static_cast<int>(r.steps));
+  w.pod(static_cast<int>(r.plannedSteps));
+  w.pod(static_cast<int>(r.solvedSteps));
+  w.pod(static_cast<int>(r.fixedNodes));
+  w.pod(r.graspResidual);
+  w.pod(r.graspTravel);
+  w.pod(static_cast<int>(r.equilibrium));
+  w.pod(static_cast<int>(r.settledAt.has_value()));
+  w.pod(r.settledAt.value_or(0.0));
+  w.pod(static_cast<int>(r.valid));
+  w.string(r.invalidReason);
+  w.pod(r.dt);
+  w.matrix(r.finalSurface);
+  w.matrix(r.finalFaces);
+  w.pod(static_cast<int>(r.compared.size()));
+  for (const SurfaceSnapshot& s : r.compared) {
+    w.pod(s.step);
+    w.pod(s.time);
+    w.matrix(s.positions);
+  }
+  cache.put(kReferenceRunKind, key, w.bytes());
+}
+
+bool readCachedReference(Cache& cache, const CacheKey& key, RunRecord& r) {
+  const auto hit = cache.get(kReferenceRunKind, key);
+  if (!hit) return false;
+  try {
+    ByteReader b(*hit);
+    r.steps = b.pod<int>();
+    r.plannedSteps = b.pod<int>();
+    r.solvedSteps = b.pod<int>();
+    r.fixedNodes = b.pod<int>();
+    r.graspResidual = b.pod<double>();
+    r.graspTravel = b.pod<double>();
+    r.equilibrium = b.pod<int>() != 0;
+    const bool settled = b.pod<int>() != 0;
+    const double at = b.pod<double>();
+    if (settled) r.settledAt = at;
+    r.valid = b.pod<int>() != 0;
+    r.invalidReason = b.string();
+    r.dt = b.pod<Real>();
+    b.matrix(r.finalSurface);
+    b.matrix(r.finalFaces);
+    const int n = b.pod<int>();
+    for (int i = 0; i < n; ++i) {
+      SurfaceSnapshot s;
+      s.step = b.pod<int>();
+      s.time = b.pod<Real>();
+      b.matrix(s.positions);
+      r.compared.push_back(std::move(s));
+    }
+    if (!b.atEnd()) throw std::runtime_error("trailing bytes");
+  } catch (const std::exception&) {
+    r = RunRecord();
+    return false;  // unreadable: solve again
+  }
+  r.status = RunStatus::Ok;
+  r.notes.push_back(
+      "reference read from the cache (solved by an earlier run of the same reference): no "
+      "timings");
+  return true;
+}
+
+}  // namespace
+
 BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
                              const BenchmarkOptions& options) {
   const auto explain = [&](const std::string& s) {
@@ -596,7 +719,22 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
 
   for (const PlannedRun& p : planned) {
     progress("running " + p.label + " ...");
-    RunRecord rec = runModel(*p.info, p.params, scene, result.organ, cache, options.run);
+    std::optional<CacheKey> refKey;
+    RunRecord rec;
+    bool fromCache = false;
+    if (p.isReference && options.reuseReference && !cacheDir.empty()) {
+      refKey = referenceRunKey(sceneFile, scene, result.organ, loader, p, options.run);
+      fromCache = readCachedReference(cache, *refKey, rec);
+      if (fromCache) {
+        rec.model = p.info->name;
+        rec.params = paramsToJson(p.params);
+        explain("reference " + p.label + " read from the cache " + kReferenceRunKind);
+      }
+    }
+    if (!fromCache) {
+      rec = runModel(*p.info, p.params, scene, result.organ, cache, options.run);
+      if (refKey && rec.status == RunStatus::Ok) storeCachedReference(cache, *refKey, rec);
+    }
     rec.plugin = p.spec.plugin;
     rec.label = p.label;
     rec.jsonPath = p.spec.jsonPath;

@@ -41,7 +41,7 @@ void markPareto(std::vector<SweepPoint>& points) {
     if (!usable(p)) continue;
     bool dominated = false;
     for (const SweepPoint& q : points) {
-      if (&q == &p || !usable(q)) continue;
+      if (&q == &p || !usable(q) || q.calibrated != p.calibrated) continue;
       if (q.msMedian <= p.msMedian && q.rmseNearest <= p.rmseNearest &&
           (q.msMedian < p.msMedian || q.rmseNearest < p.rmseNearest)) {
         dominated = true;
@@ -91,6 +91,7 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   struct Planned {
     std::string model, plugin, label, param;
     json value;
+    bool calibrated = false;
   };
   std::vector<Planned> planned;
   ojson models = ojson::array();
@@ -100,17 +101,31 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     const SweepKnob knob = sweepKnob(plugin, options.quick);
     std::vector<json> values = knob.values;
     if (values.empty()) values.push_back(nullptr);
-    for (const json& v : values) {
-      ojson copy = m;
-      if (!copy.contains("params")) copy["params"] = ojson::object();
-      std::string label = modelName;
-      if (!knob.param.empty()) {
-        copy["params"][knob.param] = ojson::parse(v.dump());
-        label += "[" + knob.param + "=" + valueText(v) + "]";
+    // With a calibration of this model (--calibration), every point once more at the
+    // calibrated parameters (the scene's own values still win): a second curve, "+cal".
+    const CalibrationParams* calibration = nullptr;
+    for (const CalibrationParams& cp : options.calibrations)
+      if (cp.plugin == plugin && cp.model == modelName) calibration = &cp;
+    for (const bool calibrated : {false, true}) {
+      if (calibrated && !calibration) continue;
+      for (const json& v : values) {
+        ojson copy = m;
+        if (!copy.contains("params")) copy["params"] = ojson::object();
+        if (calibrated) {
+          ojson params = ojson::parse(calibration->params.dump());
+          for (const auto& [k, pv] : copy["params"].items()) params[k] = pv;
+          copy["params"] = params;
+        }
+        std::string label = modelName;
+        if (!knob.param.empty()) {
+          copy["params"][knob.param] = ojson::parse(v.dump());
+          label += "[" + knob.param + "=" + valueText(v) + "]";
+        }
+        if (calibrated) label += "+cal";
+        copy["label"] = label;
+        models.push_back(copy);
+        planned.push_back({modelName, plugin, label, knob.param, v, calibrated});
       }
-      copy["label"] = label;
-      models.push_back(copy);
-      planned.push_back({modelName, plugin, label, knob.param, v});
     }
   }
   scene["models"] = models;
@@ -143,6 +158,7 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     s.label = p.label;
     s.param = p.param;
     s.value = p.value;
+    s.calibrated = p.calibrated;
     const RunRecord* r = c.run(p.label);
     if (c.missing.count(p.plugin)) {
       s.status = "missing plugin: " + c.missing.at(p.plugin);
@@ -202,7 +218,8 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
                              {"loss_ratio", num(p.lossRatio)},
                              {"valid", p.valid},
                              {"invalid_reason", p.invalidReason},
-                             {"pareto", p.pareto}});
+                             {"pareto", p.pareto},
+                             {"calibrated", p.calibrated}});
     const auto f = [](double v) {
       if (!std::isfinite(v)) return std::string();
       std::ostringstream s;

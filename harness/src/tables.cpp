@@ -3,6 +3,7 @@
 #include <deform/cache.h>
 #include <deform/mesh.h>
 #include <deform/phantom.h>
+#include <deform_harness/calibration.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/convergence.h>
 #include <deform_harness/tables.h>
@@ -1046,6 +1047,66 @@ std::vector<std::string> tableWarnings(const std::vector<Table>& tables) {
   return out;
 }
 
+namespace {
+
+/// The "calibration" table (--calibration): every case model that a calibration file names, at
+/// its defaults and calibrated (its "+cal" twin, run in the same case), side by side.
+Table calibrationTable(
+    const std::vector<const Case*>& order,
+    const std::map<std::string, std::vector<std::pair<std::string, std::string>>>& twins,
+    const Results& results, const std::vector<CalibrationParams>& calibrations) {
+  Table t;
+  t.name = "calibration";
+  t.title = "Default and calibrated parameters side by side (--calibration)";
+  t.source = "";  // no paper: the same cases at default and calibrated parameters
+  for (const CalibrationParams& c : calibrations)
+    t.notes.push_back(c.plugin + "/" + c.model + ": " + c.file + " " + c.params.dump());
+  t.columns = {{"case", "case"},
+               {"model", "model"},
+               {"rmse_50_default_mm", "rmse_50 default (mm)"},
+               {"rmse_50_calibrated_mm", "rmse_50 calibrated (mm)"},
+               {"rmse_all_default_mm", "rmse_all default (mm)"},
+               {"rmse_all_calibrated_mm", "rmse_all calibrated (mm)"},
+               {"loss_ratio_default", "loss ratio default"},
+               {"loss_ratio_calibrated", "loss ratio calibrated"},
+               {"status", "status"}};
+  const auto metrics = [](const RunRecord* r, const char* suffix, ojson& row) {
+    double r50 = NAN, all = NAN, loss = NAN;
+    if (r && r->error) {
+      for (const auto& [k, v] : r->error->rmseNearest)
+        if (k == 50) r50 = v;
+      all = r->error->rmseAll;
+      loss = r->error->lossRatio;
+    }
+    row[std::string("rmse_50_") + suffix + "_mm"] = numberOrNull(1e3 * r50);
+    row[std::string("rmse_all_") + suffix + "_mm"] = numberOrNull(1e3 * all);
+    row[std::string("loss_ratio_") + suffix] = numberOrNull(loss);
+  };
+  for (const Case* c : order) {
+    const auto it = results.find(c->id);
+    if (it == results.end()) continue;
+    for (const auto& [label, twin] : twins.at(c->id)) {
+      const std::string original = label.empty() ? twin.substr(0, twin.size() - 4) : label;
+      const RunRecord* a = it->second.run(original);
+      const RunRecord* b = it->second.run(twin);
+      ojson row = {{"case", c->id}, {"model", original}};
+      metrics(a, "default", row);
+      metrics(b, "calibrated", row);
+      std::string status;
+      if (!a || !b) status = "not run";
+      if (a && a->status != RunStatus::Ok)
+        status += "default " + std::string(statusName(a->status));
+      if (b && b->status != RunStatus::Ok)
+        status += (status.empty() ? "" : ", ") + std::string("calibrated ") + statusName(b->status);
+      row["status"] = status.empty() ? "ok" : status;
+      t.rows.push_back(row);
+    }
+  }
+  return t;
+}
+
+}  // namespace
+
 std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
                                const TablesOptions& options, Progress* progress) {
   const auto all = tableNames();
@@ -1088,10 +1149,13 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
   // the results are keyed by case id, so the tables do not depend on the finishing order.
   Results results;
   std::vector<SceneCase> sceneCases;
+  std::map<std::string, std::vector<std::pair<std::string, std::string>>> twins;  // --calibration
   for (const Case* c : order) {
     CaseOptions co = options.cases;
     if (c->noCache) co.cacheDir = fs::path();
-    sceneCases.push_back({c->scene, options.outDir / "scenes" / (c->id + ".json"),
+    ojson scene = c->scene;
+    twins[c->id] = addCalibratedTwins(scene, options.calibrations);
+    sceneCases.push_back({scene, options.outDir / "scenes" / (c->id + ".json"),
                           options.outDir / "runs" / c->id, co});
   }
   runSceneCases(
@@ -1167,6 +1231,11 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       }
       t.rows.push_back(inColumnOrder(row, d.columns));
     }
+    writeTable(t, options.outDir);
+    tables.push_back(std::move(t));
+  }
+  if (!options.calibrations.empty()) {
+    Table t = calibrationTable(order, twins, results, options.calibrations);
     writeTable(t, options.outDir);
     tables.push_back(std::move(t));
   }

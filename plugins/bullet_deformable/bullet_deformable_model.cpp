@@ -31,10 +31,12 @@ std::vector<ParamSpec> paramSpecs() {
                          "volume mesh)"),
       ParamSpec::real("damping_alpha", "1/s", 0.01, 0.0, 1e4,
                       "mass-proportional damping alpha M (linear_elasticity only; Bullet's "
-                      "default)"),
+                      "default)")
+          .calibrate(0.0001, 100, ParamScale::Log),
       ParamSpec::real("damping_beta", "s", 0.01, 0.0, 10.0,
                       "stiffness-proportional damping beta K (Bullet's default for "
-                      "linear_elasticity)"),
+                      "linear_elasticity)")
+          .calibrate(0.0001, 1, ParamScale::Log),
       ParamSpec::integer("newton_iterations", 1, 1, 1000,
                          "Newton iterations of Bullet's implicit solver per step (Bullet's "
                          "default 1: linearly implicit)"),

@@ -20,19 +20,24 @@ std::vector<ParamSpec> paramSpecs() {
                         "link stiffness kLST: xpbd = per link from E (one XPBD projection's "
                         "fraction, see README); fixed = link_stiffness for every link"),
       ParamSpec::real("link_stiffness", "1", 0.5, 1e-6, 1.0,
-                      "kLST of every structural link when stiffness_mapping is fixed"),
+                      "kLST of every structural link when stiffness_mapping is fixed")
+          .calibrate(0.001, 1, ParamScale::Log),
       ParamSpec::real("thickness", "m", 0.01, 1e-6, 1.0,
-                      "shell thickness t of the xpbd mapping (alpha = L^2 / (E t A_e))"),
+                      "shell thickness t of the xpbd mapping (alpha = L^2 / (E t A_e))")
+          .calibrate(0.0001, 0.3, ParamScale::Log),
       ParamSpec::flag("bending", false,
                       "add Bullet's bending links between nodes two edges apart "
                       "(generateBendingConstraints(2))"),
-      ParamSpec::real("bending_stiffness", "1", 0.1, 1e-6, 1.0, "kLST of the bending links"),
+      ParamSpec::real("bending_stiffness", "1", 0.1, 1e-6, 1.0, "kLST of the bending links")
+          .calibrate(0.001, 1, ParamScale::Log),
       ParamSpec::flag("volume", true,
                       "Bullet's volume conservation force with kVC = volume_scale K / V0"),
       ParamSpec::real("volume_scale", "1", 1.0, 0.0, 1e6,
-                      "multiplier on the physical volume coefficient K / V0"),
+                      "multiplier on the physical volume coefficient K / V0")
+          .calibrate(0.001, 1000.0, ParamScale::Log),
       ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
-                      "velocity damping rate c: Bullet kDP = 1 - exp(-c dt)"),
+                      "velocity damping rate c: Bullet kDP = 1 - exp(-c dt)")
+          .calibrate(0.01, 1000, ParamScale::Log),
   };
 }
 

@@ -14,14 +14,17 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::integer("iterations", 10, 1, 10000,
                          "Gauss-Seidel sweeps over the surface constraints"),
       ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
-                      "stretch constraint stiffness (classic PBD)"),
+                      "stretch constraint stiffness (classic PBD)")
+          .calibrate(0.01, 1, ParamScale::Log),
       ParamSpec::real("bending_stiffness", "1", 0.5, 0.0, 1.0,
-                      "bending constraint stiffness (classic PBD)"),
+                      "bending constraint stiffness (classic PBD)")
+          .calibrate(0.01, 1, ParamScale::Log),
       ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
                         "surface bending constraint: isometric (Bergou et al. 2006, a constant "
                         "stencil per hinge) or the paper's dihedral angle (Eqs. (10)-(11))"),
       ParamSpec::real("damping", "1/s", 20.0, 0.0, 1e4,
-                      "surface velocity damping rate: v <- v exp(-damping dt) each step"),
+                      "surface velocity damping rate: v <- v exp(-damping dt) each step")
+          .calibrate(0.1, 1000, ParamScale::Log),
       ParamSpec::flag("surface_load", true,
                       "the point force also moves its own fine node in the PBD prediction "
                       "(paper Sec. 6.3) besides loading the coarse FEM"),

@@ -24,13 +24,17 @@ std::vector<ParamSpec> paramSpecs() {
                         "implicit Euler by local/global iterations with a prefactored matrix "
                         "(Liu et al. 2013)"),
       ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
-                      "surface input: membrane thickness t in the spring rule k = E t sum|T|/L^2"),
+                      "surface input: membrane thickness t in the spring rule k = E t sum|T|/L^2")
+          .calibrate(0.0001, 0.3, ParamScale::Log),
       ParamSpec::real("bending_ratio", "1", 0.1, 0.0, 100.0,
-                      "bending spring stiffness relative to the spring on the hinge edge"),
+                      "bending spring stiffness relative to the spring on the hinge edge")
+          .calibrate(0.001, 10, ParamScale::Log),
       ParamSpec::real("damping_ratio", "1", 0.1, 0.0, 100.0,
-                      "damping ratio of each spring's axial dashpot, c = 2 zeta sqrt(k mu)"),
+                      "damping ratio of each spring's axial dashpot, c = 2 zeta sqrt(k mu)")
+          .calibrate(0.001, 10, ParamScale::Log),
       ParamSpec::real("mass_damping", "1/s", 1.0, 0.0, 1e4,
-                      "mass-proportional damping: force -mass_damping * m * v on every node"),
+                      "mass-proportional damping: force -mass_damping * m * v on every node")
+          .calibrate(0.01, 1000, ParamScale::Log),
       ParamSpec::real("cg_tolerance", "1", 1e-6, 1e-14, 1.0,
                       "implicit Euler: relative residual of the conjugate gradient solve"),
       ParamSpec::integer("cg_max_iterations", 200, 1, 100000,

@@ -53,10 +53,12 @@ std::vector<ParamSpec> metaballsParams() {
       ParamSpec::integer("iterations", 10, 1, 1000, "PBD solver iterations per step"),
       ParamSpec::choice("stiffness_mode", "xpbd", {"xpbd", "classic"},
                         "xpbd: compliance from Young's modulus; classic: stiffness coefficient"),
-      ParamSpec::real("stiffness", "1", 1.0, 0.0, 1.0, "classic PBD stretching stiffness"),
+      ParamSpec::real("stiffness", "1", 1.0, 0.0, 1.0, "classic PBD stretching stiffness")
+          .calibrate(0.01, 1, ParamScale::Log),
       ParamSpec::flag("laplacian", true, "Laplacian coordinate constraints (eqs. 9-11)"),
       ParamSpec::real("laplacian_stiffness", "1", 0.5, 0.0, 1.0,
-                      "classic: coefficient; xpbd: fraction of E r_m used as stiffness (N/m)"),
+                      "classic: coefficient; xpbd: fraction of E r_m used as stiffness (N/m)")
+          .calibrate(0.01, 1, ParamScale::Log),
       ParamSpec::choice("laplacian_frame", "rotated", {"rotated", "fixed"},
                         "rotated: L_m follows the local rotation; fixed: the paper's world frame"),
       ParamSpec::flag("volume_preservation", true, "local volume preservation by radii (eq. 12)"),
@@ -65,7 +67,8 @@ std::vector<ParamSpec> metaballsParams() {
       ParamSpec::real("skin_threshold", "1", 0.2, 1e-6, 1.0,
                       "T: a sphere is attached when f(d, r) >= T (eq. 13, c = 1)"),
       ParamSpec::integer("skin_max_spheres", 6, 1, 16, "most attached spheres per vertex"),
-      ParamSpec::real("damping", "1/s", 5.0, 0.0, 1000.0, "velocity damping rate"),
+      ParamSpec::real("damping", "1/s", 5.0, 0.0, 1000.0, "velocity damping rate")
+          .calibrate(0.1, 1000, ParamScale::Log),
   };
 }
 

@@ -80,11 +80,14 @@ std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
                         "L2 projection (consistent mass matrix, the nodal loads kept), lumped = "
                         "force / lumped nodal area (spreads a patch wider on coarse elements)"),
       ParamSpec::real("spring_stiffness", "1/s^2", 2500.0, 1e-3, 1e9,
-                      "virtual spring stiffness per unit mass pulling particles to BEM targets"),
+                      "virtual spring stiffness per unit mass pulling particles to BEM targets")
+          .calibrate(1, 10000000.0, ParamScale::Log),
       ParamSpec::real("spring_damping", "1/s", 100.0, 0.0, 1e7,
-                      "virtual spring damping per unit mass (viscosity / creep)"),
+                      "virtual spring damping per unit mass (viscosity / creep)")
+          .calibrate(0.1, 100000.0, ParamScale::Log),
       ParamSpec::real("particle_damping", "1/s", 2.0, 0.0, 1e6,
-                      "mass-proportional damping of the pure particle model"),
+                      "mass-proportional damping of the pure particle model")
+          .calibrate(0.01, 10000.0, ParamScale::Log),
       ParamSpec::real("kernel_radius", "1", 2.0, 1.2, 4.0,
                       "MLS kernel support h in lattice spacings (pure particle model)"),
       ParamSpec::flag("repulsion", true,

@@ -23,11 +23,14 @@ std::vector<ParamSpec> paramSpecs() {
                         "classic: [0,1] stiffness with k' = 1-(1-k)^(1/n); xpbd: compliances "
                         "from E, nu, thickness"),
       ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
-                      "classic mode: distance constraint stiffness"),
+                      "classic mode: distance constraint stiffness")
+          .calibrate(0.01, 1, ParamScale::Log),
       ParamSpec::real("bending_stiffness", "1", 0.1, 0.0, 1.0,
-                      "classic mode: dihedral bending constraint stiffness"),
+                      "classic mode: dihedral bending constraint stiffness")
+          .calibrate(0.001, 1, ParamScale::Log),
       ParamSpec::real("volume_stiffness", "1", 1.0, 0.0, 1.0,
-                      "classic mode: volume constraint stiffness (global or per tet)"),
+                      "classic mode: volume constraint stiffness (global or per tet)")
+          .calibrate(0.01, 1, ParamScale::Log),
       ParamSpec::flag("bending", false, "bending constraints on interior surface edges"),
       ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
                         "bending constraint: isometric (Bergou et al. 2006, a constant stencil "
@@ -37,9 +40,11 @@ std::vector<ParamSpec> paramSpecs() {
                       "project the global volume constraint in every sweep (default: last sweep "
                       "only; it costs a pass over all triangles)"),
       ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
-                      "xpbd mode, surface input: shell thickness for stretch/bending compliance"),
+                      "xpbd mode, surface input: shell thickness for stretch/bending compliance")
+          .calibrate(0.0001, 0.3, ParamScale::Log),
       ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
-                      "velocity damping rate: v <- v exp(-damping dt) each step"),
+                      "velocity damping rate: v <- v exp(-damping dt) each step")
+          .calibrate(0.01, 1000, ParamScale::Log),
       ParamSpec::choice("precision", "float32", {"float32", "float64"},
                         "number type of the distance and global volume projections (positions "
                         "relative to the organ's centre); state between steps stays double"),

@@ -6,6 +6,7 @@
 
 #include <deform/registry.h>
 
+#include <limits>
 #include <memory>
 #include <string>
 
@@ -16,6 +17,7 @@ class RigidFollowModel final : public Model {
   void init(const ModelSetup& setup) override {
     m_rest = setup.organ.surface.V;
     m_gain = setup.params.real("gain");
+    m_divergeBelow = setup.params.real("diverge_below");
     reset();
   }
   StepStatus step(const StepInput& in) override {
@@ -28,6 +30,8 @@ class RigidFollowModel final : public Model {
       }
     }
     if (n > 0) m_x.rowwise() += (m_gain * sum / Real(n)).transpose();
+    // A stand-in for an unstable parameter region (calibration tests): NaN positions.
+    if (m_gain < m_divergeBelow) m_x(0, 0) = std::numeric_limits<Real>::quiet_NaN();
     return StepStatus::Ok;
   }
   const MatX3& nodes() const override { return m_x; }
@@ -38,6 +42,7 @@ class RigidFollowModel final : public Model {
  private:
   MatX3 m_rest, m_x;
   Real m_gain = 1;
+  Real m_divergeBelow = 0;
 };
 
 inline ModelInfo toyInfo(const std::string& name) {
@@ -47,9 +52,13 @@ inline ModelInfo toyInfo(const std::string& name) {
   info.citation = "none";
   info.version = "0.1";
   info.capabilities = {Capability::Grasp};
-  info.params = {ParamSpec::real("gain", "1", 1.0, 0.0, 1.0, "fraction of the grasp motion"),
-                 ParamSpec::integer("iterations", 20, 1, 1000, "unused"),
-                 ParamSpec::choice("mode", "rigid", {"rigid", "none"}, "unused")};
+  ParamSpec gain = ParamSpec::real("gain", "1", 1.0, 0.0, 1.0, "fraction of the grasp motion");
+  // "toy" has a calibratable parameter (calibration tests), the others none.
+  if (name == "toy") gain = gain.calibrate(0.05, 1.0, ParamScale::Linear);
+  info.params = {gain, ParamSpec::integer("iterations", 20, 1, 1000, "unused"),
+                 ParamSpec::choice("mode", "rigid", {"rigid", "none"}, "unused"),
+                 ParamSpec::real("diverge_below", "1", 0.0, 0.0, 1.0,
+                                 "NaN positions when gain is below this (calibration tests)")};
   info.create = [] { return std::make_unique<RigidFollowModel>(); };
   return info;
 }

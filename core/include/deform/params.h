@@ -22,6 +22,15 @@ namespace deform {
 enum class ParamType { Real, Int, Bool, Choice };
 #pragma GCC diagnostic pop
 
+/// How a calibrating optimiser moves a parameter between its bounds: Linear in the value, Log in
+/// its logarithm (for stiffnesses and compliances spanning decades; bounds must then be > 0).
+enum class ParamScale { Linear, Log };
+
+/// "linear" | "log" (as `deformbench plugins` and calibration.json print it).
+inline const char* paramScaleName(ParamScale s) {
+  return s == ParamScale::Log ? "log" : "linear";
+}
+
 using ParamValue = std::variant<bool, long long, double, std::string>;
 
 struct ParamSpec {
@@ -33,6 +42,24 @@ struct ParamSpec {
   double max = std::numeric_limits<double>::infinity();   ///< inclusive, Real and Int
   std::vector<std::string> choices;                       ///< Choice only
   std::string description;
+  /// Calibratable (issue G2): the parameter stands in for material behaviour the model cannot
+  /// take from (E, nu, rho) exactly, so `deformbench calibrate` may fit it to a reference within
+  /// [calibMin, calibMax] (inside [min, max]) in calibScale. Real parameters only; the organ's E,
+  /// nu and rho themselves are never calibratable. Appended in ABI 4.
+  bool calibratable = false;
+  double calibMin = 0, calibMax = 0;
+  ParamScale calibScale = ParamScale::Linear;
+
+  /// This declaration, marked calibratable between lo and hi in the given scale. Usage:
+  ///   ParamSpec::real("stiffness", "1", 1, 0, 1, "...").calibrate(0.01, 1, ParamScale::Log)
+  ParamSpec calibrate(double lo, double hi, ParamScale scale) const {
+    ParamSpec p = *this;
+    p.calibratable = true;
+    p.calibMin = lo;
+    p.calibMax = hi;
+    p.calibScale = scale;
+    return p;
+  }
 
   static ParamSpec real(std::string key, std::string unit, double def, double lo, double hi,
                         std::string description) {
@@ -53,6 +80,11 @@ struct ParamSpec {
             std::move(description)};
   }
 };
+
+/// Why a declaration's calibration fields are inconsistent ("" when they are fine, or when it is
+/// not calibratable): only Real parameters, calibMin < calibMax inside [min, max], and bounds > 0
+/// on a log scale. The plugin loader refuses a plugin with such a declaration.
+std::string calibrationDeclarationProblem(const ParamSpec& spec);
 
 /// Resolved parameter values: every declared key present (scene value or default), already
 /// validated. Accessors assert on a key that was not declared (a programmer error).

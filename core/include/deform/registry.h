@@ -30,7 +30,9 @@
 // it lacks). Append new capabilities at the end; never reorder or renumber them.
 // 3: interaction on the surface (issue G1): GraspInput holds organ surface vertices, PointLoad
 // carries the harness's per-surface-vertex spread.
-#define DEFORM_ABI_VERSION 3
+// 4: ParamSpec gains the calibration fields (calibratable, bounds, scale; issue G2), appended
+// after the existing ones: plugin sources compile unchanged, binaries must be rebuilt.
+#define DEFORM_ABI_VERSION 4
 
 namespace deform {
 

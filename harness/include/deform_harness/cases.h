@@ -32,6 +32,8 @@ struct ChildCaseOptions {
   /// Reuse a case finished by an earlier command in the same outDir (its outDir/case.json exists
   /// and the scene it ran is unchanged) instead of running it again.
   bool resume = false;
+  /// More arguments of the `deformbench run` child (calibration: --reuse-reference).
+  std::vector<std::string> runArgs;
 };
 
 struct CaseOptions {

@@ -164,6 +164,14 @@ struct PlannedRun {
   bool isReference = false;
 };
 
+/// The calibrated parameters of one model (DIR/calibration.json of `deformbench calibrate`).
+struct CalibrationParams {
+  std::string file;    ///< where they came from (--explain)
+  std::string plugin;  ///< plugin name as in scenes
+  std::string model;   ///< model name within the plugin
+  nlohmann::json params = nlohmann::json::object();
+};
+
 struct BenchmarkOptions {
   std::vector<std::string> only;  ///< run only models whose label, model or plugin matches
   bool noReference = false;
@@ -173,6 +181,16 @@ struct BenchmarkOptions {
   RunOptions run;
   std::function<void(const std::string&)> explain;   ///< --explain lines (may be empty)
   std::function<void(const std::string&)> progress;  ///< one line per run started/finished
+  /// Reference run cache (calibration trials, issue G2): the reference's compared and final
+  /// surfaces are read from the cache (kind "harness.reference_run") when an earlier run with
+  /// this option solved the same reference, and stored there after a solve. The key is the
+  /// scene without its models, name, description and output, the organ, the reference's plugin
+  /// file (SHA-256), model and resolved parameters, and the step limit. A reference read back has
+  /// no timings (a note says so). Off by default: the tables and sweeps time their references.
+  bool reuseReference = false;
+  /// Calibrations whose parameters a model (same plugin and model) takes where the scene writes
+  /// none; the first file naming a model wins.
+  std::vector<CalibrationParams> calibrations;
 };
 
 /// Loads the plugins the scene names and resolves every run's parameters. Throws InputError or

@@ -35,16 +35,20 @@ struct SweepPoint {
   bool valid = true;          ///< the run did what the scene asked (DESIGN "Metrics")
   std::string invalidReason;  ///< when !valid
   bool pareto = false;
+  bool calibrated = false;  ///< run at a --calibration file's parameters (its own front)
 };
 
 /// Marks the points on the Pareto front of (msMedian, rmseNearest): ok, valid points with an
-/// error. Invalid points are listed, never ranked.
+/// error. Invalid points are listed, never ranked. Calibrated and default points form separate
+/// fronts.
 void markPareto(std::vector<SweepPoint>& points);
 
 struct SweepOptions {
   bool quick = false;
   std::filesystem::path outDir;
   CaseOptions cases;
+  /// --calibration: each calibrated model is swept twice, at its defaults and calibrated.
+  std::vector<CalibrationParams> calibrations;
 };
 
 /// Runs the sweep of a scene; writes sweep.json and sweep.csv (and the scene it ran into

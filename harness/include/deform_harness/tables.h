@@ -46,6 +46,9 @@ struct TablesOptions {
   /// Run the convergence study of each distinct reference (convergence.h) and put its estimate
   /// in the table's notes, with a warning line when it is not converged to 1% of the peak.
   bool referenceCheck = true;
+  /// --calibration: every case model a calibration names runs twice in its case, at its
+  /// defaults and calibrated ("+cal"), and a further table "calibration" shows both.
+  std::vector<CalibrationParams> calibrations;
 };
 
 /// Names of the six tables, in DESIGN.md's order.

@@ -1,0 +1,600 @@
+// Calibrating a model's calibratable parameters to the reference (see calibration.h).
+#include <deform/scene.h>
+#include <deform_harness/calibration.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <map>
+#include <nlopt.hpp>
+#include <sstream>
+
+namespace deform::harness {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using ojson = nlohmann::ordered_json;
+using Clock = std::chrono::steady_clock;
+
+// ------------------------------------------------------------------------ the optimiser layer
+
+double CalibDimension::value(double u) const {
+  u = std::clamp(u, 0.0, 1.0);
+  if (log) return std::exp(std::log(lo) + u * (std::log(hi) - std::log(lo)));
+  return lo + u * (hi - lo);
+}
+
+double CalibDimension::unit(double v) const {
+  double u = log ? (std::log(std::max(v, lo)) - std::log(lo)) / (std::log(hi) - std::log(lo))
+                 : (v - lo) / (hi - lo);
+  if (!std::isfinite(u)) u = 0;
+  return std::clamp(u, 0.0, 1.0);
+}
+
+std::vector<double> haltonPoint(long long i, int n) {
+  static const int primes[] = {2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53};
+  std::vector<double> x(static_cast<size_t>(n), 0.5);
+  for (int d = 0; d < n && d < 16; ++d) {
+    const int b = primes[d];
+    double f = 1, r = 0;
+    for (long long k = i; k > 0; k /= b) {
+      f /= b;
+      r += f * double(k % b);
+    }
+    x[size_t(d)] = r;
+  }
+  return x;
+}
+
+OptimiserResult minimiseInBox(
+    const std::vector<CalibDimension>& dims, const std::vector<double>& start,
+    const BatchObjective& objective, const OptimiserOptions& options,
+    const std::function<void(const std::vector<double>&, double)>& onTrial) {
+  const int n = int(dims.size());
+  OptimiserResult out;
+  std::map<std::vector<double>, double> seen;  // unit point -> objective
+  std::vector<double> bestU;
+  double bestF = INFINITY;
+  const auto toValues = [&](const std::vector<double>& u) {
+    std::vector<double> v(static_cast<size_t>(n));
+    for (int d = 0; d < n; ++d) v[size_t(d)] = dims[size_t(d)].value(u[size_t(d)]);
+    return v;
+  };
+  // Evaluates the unit points not seen yet as one batch (at most the budget left).
+  const auto evaluate = [&](const std::vector<std::vector<double>>& us) {
+    std::vector<std::vector<double>> fresh, values;
+    for (const auto& u : us) {
+      if (seen.count(u) || std::find(fresh.begin(), fresh.end(), u) != fresh.end()) continue;
+      if (out.evaluations + int(fresh.size()) >= options.budget) break;
+      fresh.push_back(u);
+      values.push_back(toValues(u));
+    }
+    if (fresh.empty()) return;
+    const std::vector<double> f = objective(values);
+    for (size_t i = 0; i < fresh.size(); ++i) {
+      const double fi = i < f.size() && std::isfinite(f[i]) ? f[i] : INFINITY;
+      seen[fresh[i]] = fi;
+      ++out.evaluations;
+      if (fi < bestF) {
+        bestF = fi;
+        bestU = fresh[i];
+      }
+      if (onTrial) onTrial(values[i], fi);
+    }
+  };
+
+  std::vector<double> u0(static_cast<size_t>(n));
+  for (int d = 0; d < n; ++d)
+    u0[size_t(d)] =
+        dims[size_t(d)].unit(d < int(start.size()) ? start[size_t(d)] : dims[size_t(d)].lo);
+  evaluate({u0});
+
+  // Global stage: Halton points, one batch.
+  int g = options.globalPoints;
+  if (g < 0) g = std::min(std::max(2, 4 * n + 2), std::max(0, (options.budget - 1) * 2 / 5));
+  g = std::min(g, std::max(0, options.budget - out.evaluations));
+  std::vector<std::vector<double>> batch;
+  for (int i = 1; i <= g; ++i) batch.push_back(haltonPoint(i, n));
+  evaluate(batch);
+  out.globalPoints = g;
+
+  // Local stage: BOBYQA (NLopt needs n >= 2 for it) or COBYLA from the best point.
+  if (out.evaluations < options.budget && !bestU.empty()) {
+    const nlopt::algorithm alg = n >= 2 ? nlopt::LN_BOBYQA : nlopt::LN_COBYLA;
+    out.localMethod = n >= 2 ? "bobyqa" : "cobyla";
+    nlopt::srand(19);  // NLopt's own random numbers (unused by these methods): fixed anyway
+    nlopt::opt opt(alg, unsigned(n));
+    opt.set_lower_bounds(std::vector<double>(size_t(n), 0.0));
+    opt.set_upper_bounds(std::vector<double>(size_t(n), 1.0));
+    // The first step: about the spacing of the global points, never beyond the box.
+    const double spacing = 0.5 / std::pow(double(std::max(g, 1)), 1.0 / n);
+    std::vector<double> step(static_cast<size_t>(n));
+    for (int d = 0; d < n; ++d) {
+      const double room = std::max(bestU[size_t(d)], 1.0 - bestU[size_t(d)]);
+      step[size_t(d)] = std::min(std::max(spacing, 0.02), room);
+    }
+    opt.set_initial_step(step);
+    opt.set_xtol_abs(options.xtol);
+    // Repeated points (NLopt may ask for one twice) cost nothing: allow a few more calls.
+    opt.set_maxeval(4 * (options.budget - out.evaluations) + 10);
+    struct Ctx {
+      std::function<double(const std::vector<double>&)> f;
+    } ctx;
+    ctx.f = [&](const std::vector<double>& u) {
+      std::vector<double> c(u.size());
+      for (size_t i = 0; i < u.size(); ++i) c[i] = std::clamp(u[i], 0.0, 1.0);
+      if (!seen.count(c)) {
+        if (out.evaluations >= options.budget) throw nlopt::forced_stop();
+        evaluate({c});
+      }
+      const double f = seen.count(c) ? seen[c] : INFINITY;
+      return std::isfinite(f) ? f : 1e300;
+    };
+    opt.set_min_objective([](const std::vector<double>& x, std::vector<double>&,
+                             void* data) { return static_cast<Ctx*>(data)->f(x); },
+                          &ctx);
+    std::vector<double> x = bestU;
+    double fx = 0;
+    try {
+      opt.optimize(x, fx);
+    } catch (const nlopt::forced_stop&) {
+      // budget spent
+    } catch (const std::runtime_error&) {
+      // NLopt gave up (roundoff, invalid step): the best trial so far stands
+    }
+  }
+  out.best = bestU.empty() ? toValues(u0) : toValues(bestU);
+  out.bestValue = bestF;
+  return out;
+}
+
+// ------------------------------------------------------------------------ metrics and files
+
+bool calibMetricFromName(const std::string& name, CalibMetric& out) {
+  if (name == "rmse_all") {
+    out = CalibMetric::RmseAll;
+  } else if (name == "rmse_50") {
+    out = CalibMetric::Rmse50;
+  } else if (name == "loss_ratio") {
+    out = CalibMetric::LossRatio;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+const char* calibMetricName(CalibMetric m) {
+  switch (m) {
+    case CalibMetric::RmseAll:
+      return "rmse_all";
+    case CalibMetric::Rmse50:
+      return "rmse_50";
+    case CalibMetric::LossRatio:
+      return "loss_ratio";
+  }
+  return "?";
+}
+
+CalibrationParams readCalibrationFile(const std::string& file) {
+  std::ifstream in(file);
+  if (!in) throw InputError(file, "", "cannot read the calibration file");
+  json doc;
+  try {
+    doc = json::parse(in);
+  } catch (const std::exception& e) {
+    throw InputError(file, "", "not JSON: " + std::string(e.what()));
+  }
+  if (!doc.is_object() || doc.value("format", "") != "deformbench-calibration/1")
+    throw InputError(file, "/format", "not a calibration file (format deformbench-calibration/1)");
+  CalibrationParams c;
+  c.file = file;
+  if (!doc.contains("plugin") || !doc["plugin"].is_string() || !doc.contains("model") ||
+      !doc["model"].is_string())
+    throw InputError(file, "/plugin", "\"plugin\" and \"model\" must be strings");
+  c.plugin = doc["plugin"].get<std::string>();
+  c.model = doc["model"].get<std::string>();
+  if (!doc.contains("params") || !doc["params"].is_object())
+    throw InputError(file, "/params", "\"params\" must be an object");
+  c.params = doc["params"];
+  return c;
+}
+
+std::vector<std::pair<std::string, std::string>> addCalibratedTwins(
+    ojson& scene, const std::vector<CalibrationParams>& calibrations) {
+  std::vector<std::pair<std::string, std::string>> added;
+  if (!scene.contains("models") || !scene["models"].is_array()) return added;
+  ojson models = scene["models"];
+  ojson out = ojson::array();
+  for (const ojson& m : models) {
+    out.push_back(m);
+    const std::string plugin = m.value("plugin", "");
+    const std::string model = m.value("model", plugin);
+    for (const CalibrationParams& c : calibrations) {
+      if (c.plugin != plugin || c.model != model) continue;
+      ojson twin = m;
+      const std::string label = m.value("label", "");
+      twin["label"] = (label.empty() ? model : label) + "+cal";
+      ojson params = ojson::object();
+      // json -> ordered_json through text (no implicit conversion between the two types).
+      for (const auto& [k, v] : c.params.items()) params[k] = ojson::parse(v.dump());
+      const ojson written = m.value("params", ojson::object());
+      for (const auto& [k, v] : written.items()) params[k] = v;
+      twin["params"] = params;
+      added.emplace_back(label, twin["label"].get<std::string>());
+      out.push_back(twin);
+      break;
+    }
+  }
+  scene["models"] = out;
+  return added;
+}
+
+// ------------------------------------------------------------------------ the command
+
+namespace {
+
+struct SceneInfo {
+  std::string file;
+  std::string stem;                     ///< unique within the calibration
+  ojson doc;                            ///< the scene as written
+  ojson modelParams = ojson::object();  ///< the scene's params for the model, when it names it
+  bool hasModel = false;
+};
+
+SceneInfo loadScene(const std::string& file, const std::string& plugin, const std::string& model,
+                    CalibMetric metric) {
+  SceneInfo s;
+  s.file = file;
+  const Scene parsed = parseSceneFile(file);  // validates (throws InputError)
+  if (!parsed.reference)
+    throw InputError(file, "/reference",
+                     "calibration needs a reference in every scene; add \"reference\": "
+                     "{\"plugin\": \"reference_fem\", \"params\": {}}");
+  if (metric == CalibMetric::Rmse50 &&
+      std::find(parsed.nearest.begin(), parsed.nearest.end(), 50) == parsed.nearest.end())
+    throw InputError(file, "/samples/nearest", "--metric rmse_50 needs 50 among the nearest");
+  std::ifstream in(file);
+  s.doc = ojson::parse(in);
+  for (const ojson& m : s.doc.value("models", ojson::array())) {
+    if (m.value("plugin", "") == plugin && m.value("model", plugin) == model) {
+      s.modelParams = m.value("params", ojson::object());
+      s.hasModel = true;
+      break;
+    }
+  }
+  // Paths inside the scene (a mesh file) are relative to the scene's folder: make them absolute
+  // so the trial scenes written elsewhere still find them.
+  if (s.doc.contains("organ") && s.doc["organ"].contains("mesh")) {
+    const std::string mesh = s.doc["organ"]["mesh"].get<std::string>();
+    if (mesh.rfind("phantom:", 0) != 0 && !fs::path(mesh).is_absolute())
+      s.doc["organ"]["mesh"] = fs::absolute(fs::path(file).parent_path() / mesh).string();
+  }
+  return s;
+}
+
+double metricOf(const ErrorMetrics& e, CalibMetric m) {
+  switch (m) {
+    case CalibMetric::RmseAll:
+      return e.rmseAll;
+    case CalibMetric::Rmse50:
+      for (const auto& [k, v] : e.rmseNearest)
+        if (k == 50) return v;
+      return NAN;
+    case CalibMetric::LossRatio:
+      return e.lossRatio;
+  }
+  return NAN;
+}
+
+std::string fmtValue(double v) {
+  std::ostringstream s;
+  s << std::setprecision(4) << v;
+  return s.str();
+}
+
+/// One model run of a trial: its metric (NaN: failed) and why it failed.
+struct RunOutcome {
+  double value = NAN;
+  std::string status;  ///< "ok", "diverged", "failed: ...", ...
+};
+
+class Calibrator {
+ public:
+  Calibrator(PluginLoader& loader, const CalibrateOptions& o, const ModelInfo& info,
+             std::vector<CalibDimension> dims, std::vector<SceneInfo> train,
+             std::vector<SceneInfo> validate)
+      : m_loader(loader),
+        m_o(o),
+        m_info(info),
+        m_dims(std::move(dims)),
+        m_train(std::move(train)),
+        m_validate(std::move(validate)) {}
+
+  /// Runs (point, scene) pairs; values[point][scene].
+  std::vector<std::vector<RunOutcome>> runBatch(const std::vector<ojson>& paramSets,
+                                                const std::vector<SceneInfo>& scenes,
+                                                const std::string& group) {
+    std::vector<SceneCase> cases;
+    for (size_t p = 0; p < paramSets.size(); ++p) {
+      const std::string tag = group == "trials" ? std::to_string(m_trialDirs + int(p)) : group;
+      for (const SceneInfo& s : scenes) {
+        SceneCase c;
+        c.scene = s.doc;
+        ojson entry = {{"plugin", m_o.plugin}};
+        if (m_info.name != m_o.plugin) entry["model"] = m_info.name;
+        entry["label"] = "calibrated";
+        ojson params = s.modelParams;
+        for (const auto& [k, v] : paramSets[p].items()) params[k] = v;
+        entry["params"] = params;
+        c.scene["models"] = ojson::array({entry});
+        c.scene["output"] = {{"surfaces", "none"}};
+        const fs::path dir = m_o.outDir / (group == "trials" ? "trials" : "runs") / tag / s.stem;
+        c.sceneFile = dir / "scene.json";
+        c.outDir = dir;
+        c.options = m_o.cases;
+        cases.push_back(std::move(c));
+      }
+    }
+    if (group == "trials") m_trialDirs += int(paramSets.size());
+    std::vector<std::vector<RunOutcome>> out(paramSets.size(),
+                                             std::vector<RunOutcome>(scenes.size()));
+    runSceneCases(
+        cases, m_loader, m_o.cases.dispatcher, [](size_t) {},
+        [&](size_t i, CaseResult&& c) {
+          RunOutcome& r = out[i / scenes.size()][i % scenes.size()];
+          const RunRecord* run = c.run("calibrated");
+          if (!c.error.empty()) {
+            r.status = "failed: " + c.error;
+          } else if (!run) {
+            r.status = "failed: no run";
+          } else if (run->status != RunStatus::Ok) {
+            r.status = std::string(statusName(run->status)) +
+                       (run->message.empty() ? "" : ": " + run->message);
+          } else if (!run->error) {
+            r.status = "no error" + (run->notes.empty() ? "" : ": " + run->notes.back());
+          } else {
+            r.value = metricOf(*run->error, m_o.metric);
+            r.status = std::isfinite(r.value) ? "ok" : "no metric";
+          }
+        });
+    return out;
+  }
+
+  ojson pointParams(const std::vector<double>& values) const {
+    ojson p = ojson::object();
+    for (size_t d = 0; d < m_dims.size(); ++d) p[m_dims[d].key] = values[d];
+    return p;
+  }
+
+  /// The scored value of a run: its metric, or the scene's worst when it failed (and never
+  /// above the worst, so a failure never beats a run).
+  double scored(const RunOutcome& r, size_t scene) const {
+    const double worst = m_worst[scene];
+    return std::isfinite(r.value) ? std::min(r.value, worst) : worst;
+  }
+
+  ojson run(Progress* progress) {
+    const auto start = Clock::now();
+    const auto elapsed = [&] {
+      return std::chrono::duration<double>(Clock::now() - start).count();
+    };
+    std::ofstream trials(m_o.outDir / "trials.csv");
+    trials << "trial";
+    for (const auto& d : m_dims) trials << "," << d.key;
+    for (const auto& s : m_train) trials << "," << s.stem;
+    trials << ",objective,status\n";
+
+    // Trial 0: the defaults (the scene's own values where it writes them). It solves and caches
+    // each scene's reference, and sets the worst values failures score.
+    const std::vector<std::vector<RunOutcome>> before =
+        runBatch({ojson::object()}, m_train, "trials");
+    m_worst.assign(m_train.size(), 0);
+    const double fallback = m_o.metric == CalibMetric::LossRatio ? 100.0 : 1.0;
+    for (size_t s = 0; s < m_train.size(); ++s)
+      m_worst[s] = std::isfinite(before[0][s].value) ? 10 * before[0][s].value : fallback;
+    std::vector<double> defaults;
+    for (const CalibDimension& d : m_dims) {
+      double v = d.lo;
+      const ParamSpec* ps = m_info.param(d.key);
+      if (ps) v = std::get<double>(ps->defaultValue);
+      // A training scene that writes the value starts there instead.
+      if (m_train[0].modelParams.contains(d.key) && m_train[0].modelParams[d.key].is_number())
+        v = m_train[0].modelParams[d.key].get<double>();
+      defaults.push_back(v);
+    }
+    int trialNo = 0;
+    double best = INFINITY;
+    int failedRuns = 0;
+    const auto record = [&](const std::vector<double>& values,
+                            const std::vector<RunOutcome>& runs) {
+      double sum = 0;
+      std::string status = "ok";
+      for (size_t s = 0; s < runs.size(); ++s) {
+        sum += scored(runs[s], s);
+        if (!std::isfinite(runs[s].value)) {
+          ++failedRuns;
+          status = m_train[s].stem + ": " + runs[s].status;
+        }
+      }
+      const double f = sum / double(runs.size());
+      m_history[values] = runs;
+      trials << trialNo;
+      for (double v : values) trials << "," << std::setprecision(8) << v;
+      for (const RunOutcome& r : runs)
+        trials << "," << (std::isfinite(r.value) ? fmtValue(r.value) : std::string(""));
+      std::string st = status;
+      std::replace(st.begin(), st.end(), ',', ';');
+      std::replace(st.begin(), st.end(), '\n', ' ');
+      trials << "," << std::setprecision(8) << f << "," << st << "\n" << std::flush;
+      best = std::min(best, f);
+      ++trialNo;
+      if (progress) {
+        progress->finish("trial " + std::to_string(trialNo - 1) + ": " + fmtValue(f) +
+                             ", best so far " + fmtValue(best) + " (" +
+                             calibMetricName(m_o.metric) + ")",
+                         status == "ok" ? "ok" : "scored worst");
+      }
+      return f;
+    };
+    // The start trial is recorded by the optimiser's first evaluation: reuse the runs above
+    // when its values are the defaults (always, except when a default lies outside the box).
+    bool startPending = true;
+    std::vector<double> startValues;
+    for (size_t d = 0; d < m_dims.size(); ++d)
+      startValues.push_back(m_dims[d].value(m_dims[d].unit(defaults[d])));
+    bool defaultsInBox = true;
+    for (size_t d = 0; d < m_dims.size(); ++d)
+      if (std::fabs(startValues[d] - defaults[d]) > 1e-9 * std::fabs(defaults[d]))
+        defaultsInBox = false;
+
+    const BatchObjective objective = [&](const std::vector<std::vector<double>>& points) {
+      std::vector<double> f(points.size(), INFINITY);
+      std::vector<ojson> sets;
+      std::vector<size_t> idx;
+      for (size_t i = 0; i < points.size(); ++i) {
+        if (startPending && defaultsInBox && i == 0) {
+          f[0] = record(points[0], before[0]);
+          continue;
+        }
+        sets.push_back(pointParams(points[i]));
+        idx.push_back(i);
+      }
+      startPending = false;
+      if (!sets.empty()) {
+        const auto runs = runBatch(sets, m_train, "trials");
+        for (size_t j = 0; j < idx.size(); ++j) f[idx[j]] = record(points[idx[j]], runs[j]);
+      }
+      return f;
+    };
+    OptimiserOptions oo;
+    oo.budget = m_o.budget;
+    const OptimiserResult res = minimiseInBox(m_dims, defaults, objective, oo);
+    const ojson calibrated = pointParams(res.best);
+
+    // Validation (and the per-scene values of the best trial): defaults and calibrated.
+    const auto summary = [&](const std::vector<SceneInfo>& scenes, const std::vector<RunOutcome>& b,
+                             const std::vector<RunOutcome>& a) {
+      ojson per = ojson::array();
+      double sb = 0, sa = 0;
+      bool okB = true, okA = true;
+      for (size_t s = 0; s < scenes.size(); ++s) {
+        per.push_back({{"scene", scenes[s].file},
+                       {"before", numberOrNull(b[s].value)},
+                       {"after", numberOrNull(a[s].value)},
+                       {"status_before", b[s].status},
+                       {"status_after", a[s].status}});
+        sb += b[s].value;
+        sa += a[s].value;
+        okB = okB && std::isfinite(b[s].value);
+        okA = okA && std::isfinite(a[s].value);
+      }
+      const double n = double(std::max<size_t>(1, scenes.size()));
+      return ojson{{"before", okB && !scenes.empty() ? numberOrNull(sb / n) : ojson(nullptr)},
+                   {"after", okA && !scenes.empty() ? numberOrNull(sa / n) : ojson(nullptr)},
+                   {"per_scene", per}};
+    };
+    const auto known = m_history.find(res.best);
+    const auto after = known != m_history.end()
+                           ? known->second
+                           : runBatch({calibrated}, m_train, "train_calibrated")[0];
+    ojson validation =
+        ojson{{"before", nullptr}, {"after", nullptr}, {"per_scene", ojson::array()}};
+    if (!m_validate.empty()) {
+      const auto vb = runBatch({ojson::object()}, m_validate, "validation_defaults")[0];
+      const auto va = runBatch({calibrated}, m_validate, "validation_calibrated")[0];
+      validation = summary(m_validate, vb, va);
+    }
+
+    ojson doc;
+    doc["format"] = "deformbench-calibration/1";
+    doc["model"] = m_info.name;
+    doc["plugin"] = m_o.plugin;
+    doc["metric"] = calibMetricName(m_o.metric);
+    if (!m_o.label.empty()) doc["label"] = m_o.label;
+    doc["params"] = calibrated;
+    ojson defaultsJson = ojson::object();
+    ojson space = ojson::object();
+    for (size_t d = 0; d < m_dims.size(); ++d) {
+      defaultsJson[m_dims[d].key] = defaults[d];
+      space[m_dims[d].key] = {{"min", m_dims[d].lo},
+                              {"max", m_dims[d].hi},
+                              {"scale", m_dims[d].log ? "log" : "linear"}};
+    }
+    doc["defaults"] = defaultsJson;
+    doc["space"] = space;
+    doc["train"] = summary(m_train, before[0], after);
+    doc["validation"] = validation;
+    doc["objective"] = numberOrNull(res.bestValue);
+    doc["evaluations"] = res.evaluations;
+    doc["model_runs"] = res.evaluations * int(m_train.size());
+    doc["failed_runs"] = failedRuns;
+    doc["budget"] = m_o.budget;
+    doc["optimiser"] = {
+        {"global", "halton"},
+        {"global_points", res.globalPoints},
+        {"local", res.localMethod.empty() ? ojson(nullptr) : ojson(res.localMethod)}};
+    doc["wall_s"] = elapsed();
+    writeFileAtomic(m_o.outDir / "calibration.json", doc.dump(2) + "\n");
+    return doc;
+  }
+
+ private:
+  PluginLoader& m_loader;
+  const CalibrateOptions& m_o;
+  const ModelInfo& m_info;
+  std::vector<CalibDimension> m_dims;
+  std::vector<SceneInfo> m_train, m_validate;
+  std::vector<double> m_worst;
+  std::map<std::vector<double>, std::vector<RunOutcome>> m_history;  ///< values -> runs
+  int m_trialDirs = 0;
+};
+
+}  // namespace
+
+ojson runCalibration(PluginLoader& loader, const CalibrateOptions& o, Progress* progress) {
+  if (o.budget < 1) throw InputError("--budget", "", "must be at least 1 (trials)");
+  if (o.train.empty()) throw InputError("calibrate", "", "name at least one training scene");
+  if (!o.cases.child)
+    throw std::logic_error("runCalibration: trials run in child processes (cases.child)");
+  const std::string why = pluginProblem(loader, o.plugin);
+  if (!why.empty()) throw InputError("--model", "", "plugin '" + o.plugin + "': " + why);
+  const ModelInfo& info = loader.load(o.plugin, o.model);
+  std::vector<CalibDimension> dims;
+  for (const ParamSpec& p : info.params) {
+    if (!p.calibratable) continue;
+    if (!o.params.empty() && std::find(o.params.begin(), o.params.end(), p.key) == o.params.end())
+      continue;
+    dims.push_back({p.key, p.calibMin, p.calibMax, p.calibScale == ParamScale::Log});
+  }
+  if (dims.empty() && o.params.empty())
+    throw InputError("--model", "",
+                     "model '" + info.name + "' of plugin '" + o.plugin +
+                         "' declares no calibratable parameter");
+  for (const std::string& k : o.params) {
+    const ParamSpec* p = info.param(k);
+    if (!p || !p->calibratable)
+      throw InputError("--param", "",
+                       "'" + k + "' is not a calibratable parameter of " + info.name +
+                           " (see deformbench plugins)");
+  }
+  std::vector<SceneInfo> train, validate;
+  std::map<std::string, int> stems;
+  const auto load = [&](const std::string& f) {
+    SceneInfo s = loadScene(f, o.plugin, info.name, o.metric);
+    std::string stem = fs::path(f).stem().string();
+    if (stems[stem]++) stem += "_" + std::to_string(stems[stem]);
+    s.stem = stem;
+    return s;
+  };
+  for (const std::string& f : o.train) train.push_back(load(f));
+  for (const std::string& f : o.validate) validate.push_back(load(f));
+  std::error_code ec;
+  fs::create_directories(o.outDir, ec);
+  if (ec) throw InputError(o.outDir.string(), "", "cannot create the output folder");
+  Calibrator c(loader, o, info, std::move(dims), std::move(train), std::move(validate));
+  return c.run(progress);
+}
+
+}  // namespace deform::harness

@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# calibrate_test.sh MODE DEFORMBENCH FIXTURE_PLUGIN_DIR WORK: one `deformbench calibrate` test on
+# the toy fixture plugin (tests/plugin_fixtures), whose runs take milliseconds.
+#   recover     the reference is the toy at gain 0.4: calibration from the default gain 1 finds
+#               it within 0.02, although trials below gain 0.2 diverge (scored, not fatal);
+#               then `run --calibration` uses it and --explain says where gain came from, and
+#               `sweep --calibration` shows the default and the calibrated point
+#   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0:
+#               one stderr line each and exit 2
+set -euo pipefail
+mode=$1 exe=$(readlink -f "$2") plugins=$3 work=$4
+here=$(cd "$(dirname "$0")" && pwd)
+rm -rf "$work"
+mkdir -p "$work"
+db=("$exe" --plugin-dir "$plugins")
+fail() { echo "FAIL: $*" >&2; exit 1; }
+
+case $mode in
+recover)
+  "${db[@]}" calibrate "$here/toy_reference.json" --model toy --out "$work/cal" --budget 16 \
+    --validate "$here/toy_reference.json" --cache-dir "$work/cache" --jobs 2 >"$work/out.txt" 2>"$work/err.txt" \
+    || { cat "$work/out.txt" "$work/err.txt"; fail "calibrate exited $?"; }
+  python3 - "$work/cal" <<'PY'
+import json, sys, csv, os
+d = sys.argv[1]
+c = json.load(open(os.path.join(d, "calibration.json")))
+assert c["format"] == "deformbench-calibration/1", c["format"]
+assert c["plugin"] == "toy" and c["model"] == "toy" and c["metric"] == "rmse_all"
+gain = c["params"]["gain"]
+assert abs(gain - 0.4) < 0.02, f"gain {gain}, expected 0.4"
+assert c["train"]["before"] > 1e-4, c["train"]  # gain 1 is far from 0.4
+assert c["train"]["after"] < 0.05 * c["train"]["before"], c["train"]
+assert c["validation"]["after"] < 0.05 * c["validation"]["before"], c["validation"]
+assert 1 <= c["evaluations"] <= 16 and c["wall_s"] > 0
+rows = list(csv.DictReader(open(os.path.join(d, "trials.csv"))))
+assert len(rows) == c["evaluations"], (len(rows), c["evaluations"])
+diverged = [r for r in rows if "diverged" in r["status"]]
+assert diverged, "no trial diverged (expected some below gain 0.2)"
+assert c["failed_runs"] == len(diverged)
+worst = max(float(r["objective"]) for r in rows)
+assert all(float(r["objective"]) == worst for r in diverged), "a diverged trial not scored worst"
+print("gain", gain, "trials", len(rows), "diverged", len(diverged))
+PY
+  "${db[@]}" run "$here/toy_reference.json" --out "$work/run" --no-cache --explain \
+    --calibration "$work/cal/calibration.json" >"$work/run.txt" 2>&1 || { cat "$work/run.txt"; fail run; }
+  grep -q "gain from calibration $work/cal/calibration.json" "$work/run.txt" \
+    || { cat "$work/run.txt"; fail "--explain does not say gain came from the calibration"; }
+  grep -q "diverge_below from scene" "$work/run.txt" || fail "--explain: diverge_below not from scene"
+  # sweep --calibration: the model at its defaults and calibrated, the latter far closer.
+  "${db[@]}" sweep "$here/toy_reference.json" --out "$work/sweep" --no-cache --no-plot \
+    --calibration "$work/cal/calibration.json" >"$work/sweep.txt" 2>&1 || { cat "$work/sweep.txt"; fail sweep; }
+  python3 - "$work/sweep/sweep.json" <<'PY'
+import json, sys
+p = {q["label"]: q for q in json.load(open(sys.argv[1]))["points"]}
+assert set(p) == {"toy", "toy+cal"}, list(p)
+assert p["toy+cal"]["calibrated"] and not p["toy"]["calibrated"]
+assert p["toy+cal"]["rmse_all"] < 0.05 * p["toy"]["rmse_all"], p
+PY
+  ;;
+bad_input)
+  check() {  # check NAME EXPECTED_TEXT ARGS...
+    local name=$1 text=$2
+    shift 2
+    set +e
+    "${db[@]}" calibrate "$@" >"$work/$name.out" 2>"$work/$name.err"
+    local code=$?
+    set -e
+    [[ $code == 2 ]] || fail "$name: exit $code, expected 2"
+    [[ $(wc -l <"$work/$name.err") == 1 ]] || { cat "$work/$name.err"; fail "$name: not one line"; }
+    grep -qF -- "$text" "$work/$name.err" || { cat "$work/$name.err"; fail "$name: no '$text'"; }
+  }
+  check unknown_model "no_such_plugin" "$here/toy_reference.json" --model no_such_plugin --out "$work/x"
+  check no_calibratable "declares no calibratable parameter" "$here/toy_reference.json" \
+    --model prefixed --out "$work/x"
+  check no_reference "needs a reference" "$here/toy_no_reference.json" --model toy --out "$work/x"
+  check budget "--budget" "$here/toy_reference.json" --model toy --out "$work/x" --budget 0
+  check metric "unknown metric" "$here/toy_reference.json" --model toy --out "$work/x" --metric max
+  ;;
+*) fail "unknown mode $mode" ;;
+esac
+echo "ok: $mode"

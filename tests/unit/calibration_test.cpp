@@ -1,0 +1,149 @@
+// The calibration's optimiser layer (calibration.h) on cheap synthetic objectives, the
+// calibration declarations of ParamSpec, and the calibration file / twin helpers. The end-to-end
+// runs of `deformbench calibrate` are in tests/calibration.
+#include <deform_harness/calibration.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+using namespace deform;
+using namespace deform::harness;
+
+namespace {
+
+TEST(Calibration, DimensionScalesRoundTrip) {
+  const CalibDimension lin{"a", 2, 6, false}, lg{"b", 1e-3, 10, true};
+  EXPECT_DOUBLE_EQ(lin.value(0.5), 4);
+  EXPECT_NEAR(lg.value(0.5), 0.1, 1e-12);  // the geometric middle
+  EXPECT_NEAR(lg.unit(0.1), 0.5, 1e-12);
+  EXPECT_DOUBLE_EQ(lin.unit(100), 1);  // clamped into the box
+  EXPECT_DOUBLE_EQ(lg.unit(0), 0);
+}
+
+TEST(Calibration, HaltonPointsFillTheBox) {
+  EXPECT_EQ(haltonPoint(1, 2), (std::vector<double>{0.5, 1.0 / 3}));
+  EXPECT_EQ(haltonPoint(2, 2), (std::vector<double>{0.25, 2.0 / 3}));
+  for (int i = 1; i < 50; ++i)
+    for (double x : haltonPoint(i, 3)) {
+      EXPECT_GT(x, 0);
+      EXPECT_LT(x, 1);
+    }
+}
+
+// A smooth bowl in the declared scales with its minimum at known parameter values.
+double bowl(const std::vector<double>& v) {
+  return std::pow(std::log10(v[0] / 3e-3), 2) + 4 * std::pow(v[1] - 0.7, 2);
+}
+
+TEST(Calibration, RecoversTheMinimumWithinTheBudget) {
+  const std::vector<CalibDimension> dims = {{"thickness", 1e-4, 0.3, true}, {"ratio", 0, 1, false}};
+  int calls = 0;
+  const BatchObjective f = [&](const std::vector<std::vector<double>>& pts) {
+    std::vector<double> out;
+    for (const auto& p : pts) out.push_back(bowl(p));
+    calls += int(pts.size());
+    return out;
+  };
+  OptimiserOptions o;
+  o.budget = 60;
+  const OptimiserResult r = minimiseInBox(dims, {0.01, 0.1}, f, o);
+  EXPECT_LE(calls, 60);
+  EXPECT_EQ(r.evaluations, calls);
+  EXPECT_EQ(r.localMethod, "bobyqa");
+  EXPECT_NEAR(std::log10(r.best[0] / 3e-3), 0, 0.02);
+  EXPECT_NEAR(r.best[1], 0.7, 0.01);
+  // Deterministic: the same search again gives the same answer.
+  const OptimiserResult again = minimiseInBox(dims, {0.01, 0.1}, f, o);
+  EXPECT_EQ(again.best, r.best);
+  EXPECT_EQ(again.evaluations, r.evaluations);
+}
+
+TEST(Calibration, FailedTrialsAreScoredAndTheSearchGoesOn) {
+  // Above 0.5 the "model" diverges: the objective returns the worst value, NaN or infinity.
+  const std::vector<CalibDimension> dims = {{"gain", 0.05, 1, false}};
+  int failed = 0;
+  const BatchObjective f = [&](const std::vector<std::vector<double>>& pts) {
+    std::vector<double> out;
+    for (const auto& p : pts) {
+      if (p[0] > 0.5) {
+        ++failed;
+        out.push_back(failed % 2 ? NAN : INFINITY);
+      } else {
+        out.push_back(std::pow(p[0] - 0.3, 2));
+      }
+    }
+    return out;
+  };
+  OptimiserOptions o;
+  o.budget = 30;
+  std::vector<double> seen;
+  const OptimiserResult r = minimiseInBox(
+      dims, {0.9}, f, o, [&](const std::vector<double>&, double v) { seen.push_back(v); });
+  EXPECT_GT(failed, 0);
+  EXPECT_EQ(r.localMethod, "cobyla");
+  EXPECT_FALSE(std::isfinite(seen.front()));  // the start diverged
+  EXPECT_NEAR(r.best[0], 0.3, 0.01);
+}
+
+TEST(Calibration, BudgetOfOneIsTheStartAlone) {
+  const std::vector<CalibDimension> dims = {{"a", 0, 1, false}, {"b", 0, 1, false}};
+  int calls = 0;
+  const BatchObjective f = [&](const std::vector<std::vector<double>>& pts) {
+    calls += int(pts.size());
+    return std::vector<double>(pts.size(), 1.0);
+  };
+  OptimiserOptions o;
+  o.budget = 1;
+  const OptimiserResult r = minimiseInBox(dims, {0.2, 0.4}, f, o);
+  EXPECT_EQ(calls, 1);
+  EXPECT_EQ(r.evaluations, 1);
+  EXPECT_NEAR(r.best[0], 0.2, 1e-12);
+}
+
+TEST(Calibration, DeclarationProblems) {
+  const ParamSpec ok = ParamSpec::real("k", "1", 0.5, 0, 1, "").calibrate(0.01, 1, ParamScale::Log);
+  EXPECT_EQ(calibrationDeclarationProblem(ok), "");
+  EXPECT_TRUE(ok.calibratable);
+  EXPECT_NE(calibrationDeclarationProblem(
+                ParamSpec::real("k", "1", 0.5, 0, 1, "").calibrate(0, 1, ParamScale::Log)),
+            "");
+  EXPECT_NE(calibrationDeclarationProblem(
+                ParamSpec::real("k", "1", 0.5, 0, 1, "").calibrate(0.1, 2, ParamScale::Linear)),
+            "");
+  EXPECT_NE(calibrationDeclarationProblem(
+                ParamSpec::integer("n", 5, 1, 10, "").calibrate(1, 10, ParamScale::Linear)),
+            "");
+  EXPECT_EQ(calibrationDeclarationProblem(ParamSpec::real("k", "1", 0.5, 0, 1, "")), "");
+}
+
+TEST(Calibration, CalibrationFileAndTwins) {
+  const auto dir = std::filesystem::temp_directory_path() / "deform_calibration_test";
+  std::filesystem::create_directories(dir);
+  const auto file = (dir / "calibration.json").string();
+  {
+    std::ofstream(file) << R"({"format": "deformbench-calibration/1", "model": "pbd",
+      "plugin": "pbd", "metric": "rmse_all", "params": {"thickness": 0.004, "damping": 12}})";
+  }
+  const CalibrationParams c = readCalibrationFile(file);
+  EXPECT_EQ(c.plugin, "pbd");
+  EXPECT_EQ(c.params["damping"], 12);
+  { std::ofstream(file) << R"({"format": "deformbench-table/1"})"; }
+  EXPECT_THROW(readCalibrationFile(file), InputError);
+
+  nlohmann::ordered_json scene = {
+      {"models",
+       {{{"plugin", "pbd"}, {"label", "pbd"}, {"params", {{"damping", 3}}}},
+        {{"plugin", "massspring"}, {"params", nlohmann::ordered_json::object()}}}}};
+  const auto added = addCalibratedTwins(scene, {c});
+  ASSERT_EQ(added.size(), 1u);
+  EXPECT_EQ(added[0].second, "pbd+cal");
+  ASSERT_EQ(scene["models"].size(), 3u);
+  EXPECT_EQ(scene["models"][1]["label"], "pbd+cal");
+  EXPECT_EQ(scene["models"][1]["params"]["thickness"], 0.004);
+  EXPECT_EQ(scene["models"][1]["params"]["damping"], 3);  // the scene's value wins
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
