@@ -1,7 +1,7 @@
 // The paper's static accuracy measure as the harness table bem-accuracy computes it
-// (paper_tables.h, bemStaticAccuracy): R = sum|u^o - u^imp| / sum|u^o| over the fine vertices
+// (static_accuracy.h, bemStaticAccuracy): R = sum|u^o - u^imp| / sum|u^o| over the fine vertices
 // (Zhu, Gu & Zhou 2010, Table 2). Small icospheres so the whole file runs in seconds.
-#include "paper_tables.h"
+#include "static_accuracy.h"
 #include "test_support.h"
 
 #include <gtest/gtest.h>
