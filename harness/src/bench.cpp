@@ -34,35 +34,44 @@ struct BenchCase {
   std::string scene;  ///< "liver_grasp" | "cube_poke" | "liver8k_grasp"
 };
 
-/// The fixed case set: each model on a grasp-and-lift of the ~2.2k-vertex liver and a poke of
-/// the cube, at the parameters the shipped scenes use.
-std::vector<BenchCase> benchCases() {
-  std::vector<BenchCase> out;
-  const std::vector<std::pair<std::string, ojson>> models = {
-      {"pbd", ojson::object()},
-      {"massspring", {{"integrator", "implicit_euler"}}},
-      {"fem_hex", ojson::object()},
-      {"metaballs", {{"spheres", 300}}},
-      {"particle_bem", {{"coarse_vertices", 300}}},
-      {"hybrid_fem_pbd", ojson::object()}};
-  for (const char* scene : {"liver_grasp", "cube_poke"})
-    for (const auto& [plugin, params] : models)
-      out.push_back({plugin + "/" + scene, plugin, params, scene});
-  // The default scene's organ (scenes/liver_grasp_lift.json, the 8,122-vertex liver phantom):
-  // the models at their defaults, bending on, and the implicit mass-spring integrators.
-  const std::vector<std::pair<std::string, ojson>> models8k = {
-      {"pbd", ojson::object()},
-      {"pbd", {{"bending", true}}},
-      {"massspring", {{"integrator", "local_global"}}},
-      {"massspring", {{"integrator", "implicit_euler"}}},
-      {"fem_hex", ojson::object()},
-      {"hybrid_fem_pbd", ojson::object()}};
-  for (const auto& [plugin, params] : models8k) {
-    std::string id = plugin;
-    if (params.contains("bending")) id += "_bending";
-    if (params.contains("integrator")) id += "_" + params["integrator"].get<std::string>();
-    out.push_back({id + "/liver8k_grasp", plugin, params, "liver8k_grasp"});
+/// A parameter set as scene JSON.
+ojson paramsJson(const ModelInfo::ParamSet& set) {
+  ojson j = ojson::object();
+  for (const auto& [k, v] : set) j[k] = std::visit([](const auto& x) { return ojson(x); }, v);
+  return j;
+}
+
+/// The fixed case set: every plugin found that declares bench presets (ModelInfo::presets), on a
+/// grasp-and-lift of the ~2.2k-vertex liver and a poke of the cube at its "bench" parameters,
+/// and on the default scene's organ (scenes/liver_grasp_lift.json, the 8,122-vertex liver
+/// phantom) at its "bench_8k" ones. A case's id is the plugin, its parameters (a true flag by
+/// its name, other values by their value) and the scene: "pbd_bending/liver8k_grasp".
+std::vector<BenchCase> benchCases(PluginLoader& loader) {
+  std::vector<std::pair<std::string, const ModelInfo*>> plugins;
+  for (const std::string& name : loader.discover()) {
+    try {
+      plugins.emplace_back(name, &loader.load(name));
+    } catch (const std::exception&) {
+      // a plugin that does not load has no presets to run
+    }
   }
+  const auto presets = [](const ModelInfo& info, const char* name) {
+    const auto it = info.presets.find(name);
+    return it == info.presets.end() ? std::vector<ModelInfo::ParamSet>{} : it->second;
+  };
+  std::vector<BenchCase> out;
+  for (const char* scene : {"liver_grasp", "cube_poke"})
+    for (const auto& [plugin, info] : plugins)
+      for (const ModelInfo::ParamSet& set : presets(*info, "bench"))
+        out.push_back({plugin + "/" + scene, plugin, paramsJson(set), scene});
+  for (const auto& [plugin, info] : plugins)
+    for (const ModelInfo::ParamSet& set : presets(*info, "bench_8k")) {
+      const ojson params = paramsJson(set);
+      std::string id = plugin;
+      for (const auto& [k, v] : params.items())
+        id += "_" + (v.is_boolean() ? k : v.is_string() ? v.get<std::string>() : v.dump());
+      out.push_back({id + "/liver8k_grasp", plugin, params, "liver8k_grasp"});
+    }
   return out;
 }
 
@@ -143,7 +152,7 @@ double medianOf(std::vector<double> v) {
 
 ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* progress) {
   std::vector<BenchCase> cases;
-  for (const BenchCase& c : benchCases()) {
+  for (const BenchCase& c : benchCases(loader)) {
     if (!options.only.empty() &&
         std::find(options.only.begin(), options.only.end(), c.id) == options.only.end() &&
         std::find(options.only.begin(), options.only.end(), c.plugin) == options.only.end())

@@ -32,15 +32,38 @@ ojson vec(const Vec3& v) {
   return ojson::array({v.x(), v.y(), v.z()});
 }
 
-/// Parameters the sweep gives a plugin instead of its defaults (data): the reference FEM at a
-/// modest element count, and smaller precomputations with --quick so a case stays in seconds.
-ojson stabilityParams(const std::string& plugin, bool quick) {
-  if (plugin == "reference_fem") return {{"elements", quick ? 1500 : 5000}};
-  if (!quick) return ojson::object();
-  if (plugin == "particle_bem") return {{"coarse_vertices", 200}, {"points", 150}};
-  if (plugin == "metaballs") return {{"spheres", 150}};
-  if (plugin == "fem_hex") return {{"elements", 300}};
-  return ojson::object();
+/// The first parameter set of a plugin's preset `name` (ModelInfo::presets) as scene JSON, or
+/// nullopt when the plugin does not load or has no such preset.
+std::optional<ojson> presetParams(PluginLoader& loader, const std::string& plugin,
+                                  const std::string& name) {
+  try {
+    const ModelInfo& info = loader.load(plugin);
+    const auto it = info.presets.find(name);
+    if (it == info.presets.end() || it->second.empty()) return std::nullopt;
+    ojson j = ojson::object();
+    for (const auto& [k, v] : it->second.front())
+      j[k] = std::visit([](const auto& x) { return ojson(x); }, v);
+    return j;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+/// Parameters the sweep gives a plugin instead of its defaults: its "stability" preset (with
+/// --quick "stability_quick", smaller precomputations so that a case stays in seconds).
+ojson stabilityParams(PluginLoader& loader, const std::string& plugin, bool quick) {
+  return presetParams(loader, plugin, quick ? "stability_quick" : "stability")
+      .value_or(ojson::object());
+}
+
+/// The sweep's reference: the first plugin found that declares a "stability_reference" preset,
+/// with those parameters ("stability_reference_quick" with --quick); empty name when none does.
+std::pair<std::string, ojson> stabilityReference(PluginLoader& loader, bool quick) {
+  for (const std::string& plugin : loader.discover())
+    if (auto params = presetParams(loader, plugin,
+                                   quick ? "stability_reference_quick" : "stability_reference"))
+      return {plugin, *params};
+  return {"", ojson::object()};
 }
 
 }  // namespace
@@ -371,8 +394,12 @@ CaseReference solveReference(const StabilityCase& c, PluginLoader& loader,
   CaseReference ref;
   StabilityCase rc = c;
   rc.dt = 1e-3;
-  ojson params = stabilityParams("reference_fem", options.quick);
-  const ojson scene = stabilityScene(rc, "reference_fem", params, options.quick);
+  const auto [plugin, params] = stabilityReference(loader, options.quick);
+  if (plugin.empty()) {
+    ref.message = "reference: no plugin declares itself the stability reference";
+    return ref;
+  }
+  const ojson scene = stabilityScene(rc, plugin, params, options.quick);
   const fs::path sceneFile = options.outDir / "reference" / "scenes" / (c.id + ".json");
   fs::create_directories(sceneFile.parent_path());
   writeFileAtomic(sceneFile, scene.dump(2) + "\n");
@@ -533,7 +560,8 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       fs::create_directories(sceneFile.parent_path());
       writeFileAtomic(
           sceneFile,
-          stabilityScene(c, plugin, stabilityParams(plugin, options.quick), options.quick).dump(2) +
+          stabilityScene(c, plugin, stabilityParams(loader, plugin, options.quick), options.quick)
+                  .dump(2) +
               "\n");
       pending.push_back(p);
     }

@@ -13,23 +13,12 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 using ojson = nlohmann::ordered_json;
 
-SweepKnob sweepKnob(const std::string& plugin, bool quick) {
-  // The knob that trades accuracy for time in each method, with values spanning the useful
-  // range (data: the harness does not know the plugins beyond their parameter names).
-  static const std::map<std::string, std::pair<SweepKnob, SweepKnob>> knobs = {
-      {"pbd", {{"iterations", {1, 2, 5, 10, 20, 50}}, {"iterations", {2, 10, 40}}}},
-      {"hybrid_fem_pbd", {{"iterations", {2, 5, 10, 20, 40}}, {"iterations", {2, 10, 40}}}},
-      {"massspring",
-       {{"integrator", {"explicit_euler", "symplectic_euler", "implicit_euler"}},
-        {"integrator", {"symplectic_euler", "implicit_euler"}}}},
-      {"fem_hex", {{"elements", {100, 300, 967, 2500}}, {"elements", {100, 500}}}},
-      {"metaballs", {{"spheres", {100, 250, 500, 900}}, {"spheres", {100, 300}}}},
-      {"particle_bem",
-       {{"coarse_vertices", {150, 300, 600, 1200}}, {"coarse_vertices", {150, 400}}}},
-  };
-  const auto it = knobs.find(plugin);
-  if (it == knobs.end()) return {};
-  return quick ? it->second.second : it->second.first;
+SweepKnob sweepKnob(const ModelInfo& info, bool quick) {
+  SweepKnob k;
+  k.param = info.knob.param;
+  for (const ParamValue& v : quick ? info.knob.quickValues : info.knob.values)
+    k.values.push_back(std::visit([](const auto& x) { return json(x); }, v));
+  return k;
 }
 
 void markPareto(std::vector<SweepPoint>& points) {
@@ -98,7 +87,12 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   for (const auto& m : scene["models"]) {
     const std::string plugin = m.value("plugin", "");
     const std::string modelName = m.value("model", plugin);
-    const SweepKnob knob = sweepKnob(plugin, options.quick);
+    // The knob the plugin declares; none when it does not load (the run then reports why).
+    SweepKnob knob;
+    try {
+      knob = sweepKnob(loader.load(plugin, m.value("model", "")), options.quick);
+    } catch (const std::exception&) {
+    }
     std::vector<json> values = knob.values;
     if (values.empty()) values.push_back(nullptr);
     // With a calibration of this model (--calibration), every point once more at the

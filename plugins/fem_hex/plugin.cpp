@@ -111,5 +111,10 @@ DEFORM_PLUGIN(registry) {
                        Capability::Contact, Capability::ContactReaction};
   info.params = deform::fem_hex::paramSpecs();
   info.create = [] { return std::make_unique<deform::fem_hex::FemHexModel>(); };
+  // What the harness's sweep, bench and stability run it with (registry.h).
+  info.knob = {"elements", {100LL, 300LL, 967LL, 2500LL}, {100LL, 500LL}};
+  info.presets["bench"] = {{}};
+  info.presets["bench_8k"] = {{}};
+  info.presets["stability_quick"] = {{{"elements", 300LL}}};
   registry.add(std::move(info));
 }

@@ -128,37 +128,7 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
   }
   if (key != m_rowKey) {
     m_rowKey = key;
-    m_rowAt.clear();
-    m_rowAxis.clear();
-    for (const Prescribed& p : prescribed)
-      for (int a = 0; a < 3; ++a) {
-        bool anyFree = false;
-        for (int i = 0; i < p.at.count; ++i) anyFree |= m_dof[3 * p.at.nodes[i] + a] >= 0;
-        if (!anyFree) continue;  // a pinned node stays pinned
-        m_rowAt.push_back(p.at);
-        m_rowAxis.push_back(a);
-      }
-    const int m = static_cast<int>(m_rowAt.size());
-    m_Z.setZero(m_numFree, m);
-    for (int r = 0; r < m; ++r)
-      for (int i = 0; i < m_rowAt[r].count; ++i)
-        m_Z.col(r) += m_rowAt[r].weights[i] * nodeColumns(m_rowAt[r].nodes[i]).col(m_rowAxis[r]);
-    MatX S(m, m);
-    for (int r = 0; r < m; ++r)
-      for (int c = 0; c < m; ++c) {
-        Real v = 0;
-        for (int i = 0; i < m_rowAt[r].count; ++i) {
-          const int d = m_dof[3 * m_rowAt[r].nodes[i] + m_rowAxis[r]];
-          if (d >= 0) v += m_rowAt[r].weights[i] * m_Z(d, c);
-        }
-        S(r, c) = v;
-      }
-    // Eigen's pivoting QR must not be run on a 0x0 matrix (it reads past the empty storage).
-    if (m > 0) m_S.compute(S);
-    if (m_outputNodes >= 0) {
-      m_Zout.resize(static_cast<Eigen::Index>(m_outDofs.size()), m);
-      for (size_t k = 0; k < m_outDofs.size(); ++k) m_Zout.row(k) = m_Z.row(m_outDofs[k]);
-    }
+    buildPrescribedRows(prescribed);
   }
   if (reactions) reactions->assign(prescribed.size(), Vec3::Zero());
   if (!m_rowAt.empty()) {
@@ -203,6 +173,40 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
   for (int v = 0; v < outNodes; ++v)
     for (int a = 0; a < 3; ++a)
       if (m_dof[3 * v + a] >= 0) u(v, a) = x[m_dof[3 * v + a]];
+}
+
+void CoarseLinearFem::buildPrescribedRows(const std::vector<Prescribed>& prescribed) {
+  m_rowAt.clear();
+  m_rowAxis.clear();
+  for (const Prescribed& p : prescribed)
+    for (int a = 0; a < 3; ++a) {
+      bool anyFree = false;
+      for (int i = 0; i < p.at.count; ++i) anyFree |= m_dof[3 * p.at.nodes[i] + a] >= 0;
+      if (!anyFree) continue;  // a pinned node stays pinned
+      m_rowAt.push_back(p.at);
+      m_rowAxis.push_back(a);
+    }
+  const int m = static_cast<int>(m_rowAt.size());
+  m_Z.setZero(m_numFree, m);
+  for (int r = 0; r < m; ++r)
+    for (int i = 0; i < m_rowAt[r].count; ++i)
+      m_Z.col(r) += m_rowAt[r].weights[i] * nodeColumns(m_rowAt[r].nodes[i]).col(m_rowAxis[r]);
+  MatX S(m, m);
+  for (int r = 0; r < m; ++r)
+    for (int c = 0; c < m; ++c) {
+      Real v = 0;
+      for (int i = 0; i < m_rowAt[r].count; ++i) {
+        const int d = m_dof[3 * m_rowAt[r].nodes[i] + m_rowAxis[r]];
+        if (d >= 0) v += m_rowAt[r].weights[i] * m_Z(d, c);
+      }
+      S(r, c) = v;
+    }
+  // Eigen's pivoting QR must not be run on a 0x0 matrix (it reads past the empty storage).
+  if (m > 0) m_S.compute(S);
+  if (m_outputNodes >= 0) {
+    m_Zout.resize(static_cast<Eigen::Index>(m_outDofs.size()), m);
+    for (size_t k = 0; k < m_outDofs.size(); ++k) m_Zout.row(k) = m_Z.row(m_outDofs[k]);
+  }
 }
 
 }  // namespace deform::hybrid

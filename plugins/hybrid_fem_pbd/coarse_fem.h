@@ -80,6 +80,9 @@ class CoarseLinearFem {
 
  private:
   const MatX& nodeColumns(int node);  ///< K^-1 restricted to node's free dofs (#free by 3)
+  /// The constraint rows of `prescribed` (one per entry and free axis), Z = K^-1 C^T and the
+  /// factorised S = C Z (and Z's output rows).
+  void buildPrescribedRows(const std::vector<Prescribed>& prescribed);
   int m_numNodes = 0, m_numFree = 0;
   std::vector<int> m_dof;  ///< node * 3 + axis -> free dof or -1
   SparseMatrix m_K;

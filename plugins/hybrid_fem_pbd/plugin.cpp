@@ -18,5 +18,9 @@ DEFORM_PLUGIN(registry) {
                        C::Cut,   C::NeedsPrecompute, C::Contact};
   info.params = deform::hybrid::paramSpecs();
   info.create = [] { return std::make_unique<deform::hybrid::HybridModel>(); };
+  // What the harness's sweep, bench and stability run it with (registry.h).
+  info.knob = {"iterations", {2LL, 5LL, 10LL, 20LL, 40LL}, {2LL, 10LL, 40LL}};
+  info.presets["bench"] = {{}};
+  info.presets["bench_8k"] = {{}};
   registry.add(std::move(info));
 }

@@ -19,5 +19,13 @@ DEFORM_PLUGIN(registry) {
                        C::TetInput, C::Contact,    C::ContactReaction};
   info.params = deform::massspring::paramSpecs();
   info.create = [] { return std::make_unique<deform::massspring::MassSpringModel>(); };
+  // What the harness's sweep, bench and stability run it with (registry.h).
+  info.knob = {"integrator",
+               {std::string("explicit_euler"), std::string("symplectic_euler"),
+                std::string("implicit_euler")},
+               {std::string("symplectic_euler"), std::string("implicit_euler")}};
+  info.presets["bench"] = {{{"integrator", std::string("implicit_euler")}}};
+  info.presets["bench_8k"] = {{{"integrator", std::string("local_global")}},
+                              {{"integrator", std::string("implicit_euler")}}};
   registry.add(std::move(info));
 }

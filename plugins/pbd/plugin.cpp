@@ -19,5 +19,9 @@ DEFORM_PLUGIN(registry) {
                        C::TetInput, C::Contact,    C::ContactReaction};
   info.params = deform::pbd::paramSpecs();
   info.create = [] { return std::make_unique<deform::pbd::PbdModel>(); };
+  // What the harness's sweep, bench and stability run it with (registry.h).
+  info.knob = {"iterations", {1LL, 2LL, 5LL, 10LL, 20LL, 50LL}, {2LL, 10LL, 40LL}};
+  info.presets["bench"] = {{}};
+  info.presets["bench_8k"] = {{}, {{"bending", true}}};
   registry.add(std::move(info));
 }

@@ -656,14 +656,33 @@ int EquilibriumSolver::preconditionedCg(const VecX& b, Real tolerance, int maxIt
   return -1;
 }
 
-SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX& fStartIn,
-                                     const InertiaTerms* in, const SolveOptions& opt) {
-  const auto start = Clock::now();
-  SolveReport rep;
-  m_report = &rep;
-  const int n = m_sys.numNodes(), ndof = 3 * n;
-  // Constrained nodes and their final targets; fixed wins over prescribed.
-  VecX target = x;
+/// The state of one solve(): its options and report, the constrained dofs, and the buffers and
+/// iterate of the current load step's Newton iterations.
+struct EquilibriumSolver::Newton {
+  const InertiaTerms* in = nullptr;
+  const SolveOptions& opt;
+  SolveReport& rep;
+  const std::vector<int>& cdofs;
+  int ndof = 0, nf = 0;
+  Real floorForce = 0;
+  bool refactor = false;  ///< CG was slow: factorise the next tangent afresh
+  VecX g, gTrial, rhs, dxFree, step;
+  // The load step's Newton iterations.
+  VecX dc;                ///< remaining increments of the constrained dofs
+  bool lift = false;      ///< dc is not yet applied
+  int damped = 0;         ///< iterations whose line search cut the Newton step
+  Real prevResidual = 0;  ///< of the previous iteration (the forcing term)
+  Real phiCur = 0;        ///< objective at the iterate
+  bool haveG = false;     ///< g and phiCur already hold the iterate's values
+  Real phiNext = 0;       ///< objective at the accepted full step (with gTrial)
+
+  Newton(const InertiaTerms* inertia, const SolveOptions& options, SolveReport& report,
+         const std::vector<int>& constrained)
+      : in(inertia), opt(options), rep(report), cdofs(constrained) {}
+};
+
+std::vector<int> EquilibriumSolver::constrainedDofs(const LoadCase& loads, VecX& target) const {
+  const int n = m_sys.numNodes();
   std::vector<char> isFixed(size_t(n), 0);
   std::vector<int> cdofs;
   const MatX3& restV = m_sys.rest().V;
@@ -684,6 +703,28 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
   }
   std::sort(cdofs.begin(), cdofs.end());
   cdofs.erase(std::unique(cdofs.begin(), cdofs.end()), cdofs.end());
+  return cdofs;
+}
+
+Real EquilibriumSolver::residual(Newton& s, const VecX& grad, const VecX& f) const {
+  Real rf = 0, rc = 0;
+  for (int d = 0; d < s.ndof; ++d) {
+    const Real v = grad(d) * grad(d);
+    (m_freeIndex[size_t(d)] >= 0 ? rf : rc) += v;
+  }
+  s.rep.forceScale = std::max({f.norm(), std::sqrt(rc), s.floorForce});
+  return std::sqrt(rf);
+}
+
+SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX& fStartIn,
+                                     const InertiaTerms* in, const SolveOptions& opt) {
+  const auto start = Clock::now();
+  SolveReport rep;
+  m_report = &rep;
+  const int ndof = 3 * m_sys.numNodes();
+  // Constrained nodes and their final targets; fixed wins over prescribed.
+  VecX target = x;
+  const std::vector<int> cdofs = constrainedDofs(loads, target);
   {
     ScopedTimer timer(rep.analyzeSeconds);  // ordering, K_ff pattern, slots, symbolic factor
     prepareConstraints(cdofs);
@@ -692,197 +733,211 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
   const VecX fEnd = m_sys.externalForce(loads);
   const VecX fStart = fStartIn.size() == ndof ? fStartIn : VecX::Zero(ndof);
   const VecX xStart = x;
-  const Box box = boundingBox(restV);
+  const Box box = boundingBox(m_sys.rest().V);
+  Newton s(in, opt, rep, cdofs);
+  s.ndof = ndof;
+  s.nf = m_Kff.rows();
   // Force floor for unloaded problems: 1e-6 of the force that strains the organ's bounding
   // cross-section by 100%, far above the round-off of internal forces at rest.
-  const Real floorForce =
+  s.floorForce =
       1e-6 * m_sys.material().young * std::max<Real>(box.diagonal() * box.diagonal(), 1e-300);
-  const int nf = m_Kff.rows();
   m_haveFactor = false;  // each solve starts from a factorisation of its own first tangent
-  bool refactor = false;
-  VecX g, gTrial, rhs(nf), dxFree(nf), step(ndof);
+  s.rhs.resize(s.nf);
+  s.dxFree.resize(s.nf);
+  s.step.resize(ndof);
 
-  auto residual = [&](const VecX& grad, const VecX& f) {
-    Real rf = 0, rc = 0;
-    for (int d = 0; d < ndof; ++d) {
-      const Real v = grad(d) * grad(d);
-      (m_freeIndex[size_t(d)] >= 0 ? rf : rc) += v;
-    }
-    rep.forceScale = std::max({f.norm(), std::sqrt(rc), floorForce});
-    return std::sqrt(rf);
-  };
-
-  // One load step: from x (converged at the previous level) to forces f and targets tgt.
-  auto loadStep = [&](VecX& xs, const VecX& f, const VecX& tgt) -> bool {
-    VecX dc = VecX::Zero(ndof);
-    bool lift = false;
-    for (int d : cdofs) {
-      dc(d) = tgt(d) - xs(d);
-      lift |= dc(d) != 0;
-    }
-    int damped = 0;  // iterations whose line search cut the Newton step
-    Real prevResidual = 0;
-    Real phiCur = 0;     // objective at xs
-    bool haveG = false;  // g and phiCur already hold xs's values (from the line search)
-    for (int it = 0; it <= opt.maxIterations; ++it) {
-      if (!haveG) phiCur = objectiveGradient(xs, f, in, g);
-      haveG = false;
-      rep.residual = residual(g, f);
-      if (!lift && rep.residual <= opt.tolerance * rep.forceScale) return true;
-      if (it == opt.maxIterations || nf == 0) {
-        if (nf == 0) {
-          xs += dc;
-          objectiveGradient(xs, f, in, g);
-          rep.residual = residual(g, f);
-          return std::isfinite(rep.residual);
-        }
-        return false;
-      }
-      assembleFree(xs, in, false);  // the exact tangent: CG's operator
-      ++rep.newtonIterations;
-      for (int d = 0; d < ndof; ++d)
-        if (m_freeIndex[size_t(d)] >= 0) rhs(m_freeIndex[size_t(d)]) = -g(d);
-      if (lift) subtractLiftForce(xs, in, dc, rhs);
-      // Inexact Newton: K dx = rhs is solved by conjugate gradients preconditioned with an
-      // earlier factorisation, to the relative accuracy eta (Eisenstat & Walker's choice 2,
-      // capped at 0.1, never finer than the final tolerance needs); the tangent is factorised
-      // afresh only when CG is slow or meets a direction of non-positive curvature.
-      {
-        Real eta = lift ? kLiftForcing : kMaxForcing;
-        if (prevResidual > 0 && !lift)
-          eta = std::min(kMaxForcing, 0.9 * std::pow(rep.residual / prevResidual, 2));
-        prevResidual = rep.residual;
-        const Real rhsNorm = rhs.norm();
-        eta = std::max(eta, 0.1 * opt.tolerance * rep.forceScale / std::max(rhsNorm, 1e-300));
-        int its = -1;
-        if (m_haveFactor && !refactor) its = preconditionedCg(rhs, eta * rhsNorm, kMaxCg, dxFree);
-        refactor = its > kRefactorCg;
-        if (its < 0) {
-          // Measured on the liver lift: when the tangent is indefinite (CG met non-positive
-          // curvature), a fresh factorisation of its projection both gives a better step than
-          // CG on the projection with the old factor (which took 28 instead of 10 iterations)
-          // and serves as the preconditioner of the following iterations.
-          if (!factorize(xs, in, its == -2, rep.spdFallbacks)) return false;
-          ScopedTimer timer(rep.solveSeconds);
-          dxFree = m_chol->solve(rhs);
-        }
-      }
-      if (!dxFree.allFinite()) return false;
-      step.setZero();
-      for (int d = 0; d < ndof; ++d)
-        if (m_freeIndex[size_t(d)] >= 0) step(d) = dxFree(m_freeIndex[size_t(d)]);
-      if (lift) {
-        // Constrained nodes move to their targets with the linearised response of the free
-        // nodes. When that predicted state is inadmissible (inverted elements), the whole step,
-        // Dirichlet increment included, is shortened and the rest of the increment is applied in
-        // the next iteration, from a state whose tangent has seen part of the motion.
-        step += dc;
-        Real alpha = 1;
-        Real phiLift = objective(xs + step, f, in);
-        for (int ls = 0; ls < 20 && !std::isfinite(phiLift); ++ls) {
-          alpha *= 0.5;
-          phiLift = objective(xs + alpha * step, f, in);
-        }
-        if (!std::isfinite(phiLift)) return false;
-        xs += alpha * step;
-        dc *= 1 - alpha;
-        lift = alpha < 1;
-        continue;
-      }
-      const Real phi0 = phiCur;
-      const Real slope = g.dot(step);
-      if (!(slope < 0)) return false;
-      if (-slope <= 1e-13 * std::abs(phi0)) {
-        // The predicted decrease of Pi is below its round-off: Armijo cannot judge the step.
-        // Take the full Newton step; if it no longer halves the residual, the residual has
-        // reached its round-off floor and the state is accepted as converged.
-        const VecX xt = xs + step;
-        const Real phiT = objectiveGradient(xt, f, in, gTrial);
-        if (!std::isfinite(phiT)) return false;
-        const Real before = rep.residual, after = residual(gTrial, f);
-        xs = xt;
-        if (!(after < 0.5 * before)) {
-          rep.residual = after;
-          return after <= 1e3 * opt.tolerance * rep.forceScale;
-        }
-        g.swap(gTrial);
-        phiCur = phiT;
-        haveG = true;
-        continue;
-      }
-      Real alpha = 1;
-      bool accepted = false;
-      Real phiNext = 0;
-      for (int ls = 0; ls < 30; ++ls, alpha *= 0.5) {
-        // The full step is usually accepted: its gradient is computed with the energy and
-        // serves the next iteration.
-        const Real phi = ls == 0 ? objectiveGradient(xs + step, f, in, gTrial)
-                                 : objective(xs + alpha * step, f, in);
-        // Armijo, or for the full step the approximate Wolfe condition of Hager & Zhang ("A new
-        // conjugate gradient method with guaranteed descent and an efficient line search",
-        // SIAM J. Optim. 16(1) 2005, eq. 4.2): near the solution the decrease of Pi drops to
-        // the round-off of its sum, and the derivative along the step, g(x + s) . s <=
-        // (2 delta - 1) g(x) . s, judges it where Pi's values cannot.
-        if (phi <= phi0 + kArmijo * alpha * slope ||
-            (ls == 0 && phi <= phi0 + kObjectiveNoise * std::abs(phi0) &&
-             gTrial.dot(step) <= (2 * kArmijo - 1) * slope)) {
-          accepted = true;
-          phiNext = phi;
-          break;
-        }
-      }
-      if (!accepted) {
-        // Near the solution Pi changes below round-off: accept a full step that lowers the
-        // residual.
-        const VecX xt = xs + step;
-        const Real phi1 = objectiveGradient(xt, f, in, gTrial);
-        if (!std::isfinite(phi1)) return false;
-        // Only a round-off-level rise of Pi qualifies; otherwise the direction is poor.
-        if (phi1 - phi0 > 1e-10 * std::max(std::abs(phi0), rep.forceScale * 1e-3)) return false;
-        if (!(residual(gTrial, f) < rep.residual)) return false;
-        alpha = 1;
-        phiNext = phi1;
-      }
-      // A load step that keeps needing damped steps is too large for Newton's region of fast
-      // convergence: give up early so it is halved, instead of grinding to maxIterations.
-      if (alpha < 1 && ++damped > kMaxDampedIterations) return false;
-      xs += alpha * step;
-      if (alpha == 1) {
-        g.swap(gTrial);
-        phiCur = phiNext;
-        haveG = true;
-      }
-    }
-    return false;
-  };
-
-  Real s = 0, ds = 1;
+  // Load stepping: the forces and the constrained dofs' targets ramp from the start (s = 0) to
+  // the end (s = 1); a failed increment is halved, a converged one doubles the next.
+  Real t = 0, dt = 1;
   const Real minStep = std::ldexp(1.0, -opt.maxHalvings);
-  while (s < 1) {
-    const Real sn = std::min<Real>(1, s + ds);
-    const VecX f = fStart + sn * (fEnd - fStart);
+  while (t < 1) {
+    const Real tn = std::min<Real>(1, t + dt);
+    const VecX f = fStart + tn * (fEnd - fStart);
     VecX tgt = x;
-    for (int d : cdofs) tgt(d) = xStart(d) + sn * (target(d) - xStart(d));
+    for (int d : cdofs) tgt(d) = xStart(d) + tn * (target(d) - xStart(d));
     VecX xs = x;
-    if (loadStep(xs, f, tgt)) {
+    if (loadStep(s, xs, f, tgt)) {
       x = xs;
-      s = sn;
+      t = tn;
       ++rep.loadSteps;
-      ds = std::min<Real>(2 * ds, 1);
+      dt = std::min<Real>(2 * dt, 1);
     } else {
       ++rep.failedLoadSteps;
-      ds = 0.5 * (sn - s);  // half of the increment that failed (not of a doubled one)
-      if (ds < minStep) break;
+      dt = 0.5 * (tn - t);  // half of the increment that failed (not of a doubled one)
+      if (dt < minStep) break;
     }
   }
-  rep.converged = s >= 1;
-  objectiveGradient(x, fStart + s * (fEnd - fStart), in, m_gradient);
-  rep.residual = residual(m_gradient, fEnd);
+  rep.converged = t >= 1;
+  objectiveGradient(x, fStart + t * (fEnd - fStart), in, m_gradient);
+  rep.residual = residual(s, m_gradient, fEnd);
   rep.factorNonZeros = m_factorNonZeros;
   rep.factorFlops = m_factorFlops;
   rep.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   m_report = nullptr;
   return rep;
+}
+
+bool EquilibriumSolver::loadStep(Newton& s, VecX& xs, const VecX& f, const VecX& tgt) {
+  s.dc = VecX::Zero(s.ndof);
+  s.lift = false;
+  for (int d : s.cdofs) {
+    s.dc(d) = tgt(d) - xs(d);
+    s.lift |= s.dc(d) != 0;
+  }
+  s.damped = 0;
+  s.prevResidual = 0;
+  s.phiCur = 0;
+  s.haveG = false;
+  SolveReport& rep = s.rep;
+  for (int it = 0; it <= s.opt.maxIterations; ++it) {
+    if (!s.haveG) s.phiCur = objectiveGradient(xs, f, s.in, s.g);
+    s.haveG = false;
+    rep.residual = residual(s, s.g, f);
+    if (!s.lift && rep.residual <= s.opt.tolerance * rep.forceScale) return true;
+    if (it == s.opt.maxIterations || s.nf == 0) {
+      if (s.nf == 0) {
+        xs += s.dc;
+        objectiveGradient(xs, f, s.in, s.g);
+        rep.residual = residual(s, s.g, f);
+        return std::isfinite(rep.residual);
+      }
+      return false;
+    }
+    if (!newtonDirection(s, xs)) return false;
+    const NewtonOutcome next = s.lift ? liftStep(s, xs, f) : lineSearchStep(s, xs, f);
+    if (next != NewtonOutcome::Continue) return next == NewtonOutcome::Converged;
+  }
+  return false;
+}
+
+bool EquilibriumSolver::newtonDirection(Newton& s, const VecX& xs) {
+  SolveReport& rep = s.rep;
+  assembleFree(xs, s.in, false);  // the exact tangent: CG's operator
+  ++rep.newtonIterations;
+  for (int d = 0; d < s.ndof; ++d)
+    if (m_freeIndex[size_t(d)] >= 0) s.rhs(m_freeIndex[size_t(d)]) = -s.g(d);
+  if (s.lift) subtractLiftForce(xs, s.in, s.dc, s.rhs);
+  // Inexact Newton: K dx = rhs is solved by conjugate gradients preconditioned with an earlier
+  // factorisation, to the relative accuracy eta (Eisenstat & Walker's choice 2, capped at 0.1,
+  // never finer than the final tolerance needs); the tangent is factorised afresh only when CG
+  // is slow or meets a direction of non-positive curvature.
+  Real eta = s.lift ? kLiftForcing : kMaxForcing;
+  if (s.prevResidual > 0 && !s.lift)
+    eta = std::min(kMaxForcing, 0.9 * std::pow(rep.residual / s.prevResidual, 2));
+  s.prevResidual = rep.residual;
+  const Real rhsNorm = s.rhs.norm();
+  eta = std::max(eta, 0.1 * s.opt.tolerance * rep.forceScale / std::max(rhsNorm, 1e-300));
+  int its = -1;
+  if (m_haveFactor && !s.refactor) its = preconditionedCg(s.rhs, eta * rhsNorm, kMaxCg, s.dxFree);
+  s.refactor = its > kRefactorCg;
+  if (its < 0) {
+    // Measured on the liver lift: when the tangent is indefinite (CG met non-positive
+    // curvature), a fresh factorisation of its projection both gives a better step than CG on
+    // the projection with the old factor (which took 28 instead of 10 iterations) and serves as
+    // the preconditioner of the following iterations.
+    if (!factorize(xs, s.in, its == -2, rep.spdFallbacks)) return false;
+    ScopedTimer timer(rep.solveSeconds);
+    s.dxFree = m_chol->solve(s.rhs);
+  }
+  if (!s.dxFree.allFinite()) return false;
+  s.step.setZero();
+  for (int d = 0; d < s.ndof; ++d)
+    if (m_freeIndex[size_t(d)] >= 0) s.step(d) = s.dxFree(m_freeIndex[size_t(d)]);
+  return true;
+}
+
+EquilibriumSolver::NewtonOutcome EquilibriumSolver::liftStep(Newton& s, VecX& xs, const VecX& f) {
+  // Constrained nodes move to their targets with the linearised response of the free nodes.
+  // When that predicted state is inadmissible (inverted elements), the whole step, Dirichlet
+  // increment included, is shortened and the rest of the increment is applied in the next
+  // iteration, from a state whose tangent has seen part of the motion.
+  s.step += s.dc;
+  Real alpha = 1;
+  Real phiLift = objective(xs + s.step, f, s.in);
+  for (int ls = 0; ls < 20 && !std::isfinite(phiLift); ++ls) {
+    alpha *= 0.5;
+    phiLift = objective(xs + alpha * s.step, f, s.in);
+  }
+  if (!std::isfinite(phiLift)) return NewtonOutcome::Failed;
+  xs += alpha * s.step;
+  s.dc *= 1 - alpha;
+  s.lift = alpha < 1;
+  return NewtonOutcome::Continue;
+}
+
+EquilibriumSolver::NewtonOutcome EquilibriumSolver::lineSearchStep(Newton& s, VecX& xs,
+                                                                   const VecX& f) {
+  const Real phi0 = s.phiCur;
+  const Real slope = s.g.dot(s.step);
+  if (!(slope < 0)) return NewtonOutcome::Failed;
+  if (-slope <= 1e-13 * std::abs(phi0)) return roundOffStep(s, xs, f);
+  Real alpha = 1;
+  if (!armijo(s, xs, f, phi0, slope, alpha)) {
+    // Near the solution Pi changes below round-off: accept a full step that lowers the
+    // residual.
+    const VecX xt = xs + s.step;
+    const Real phi1 = objectiveGradient(xt, f, s.in, s.gTrial);
+    if (!std::isfinite(phi1)) return NewtonOutcome::Failed;
+    // Only a round-off-level rise of Pi qualifies; otherwise the direction is poor.
+    if (phi1 - phi0 > 1e-10 * std::max(std::abs(phi0), s.rep.forceScale * 1e-3))
+      return NewtonOutcome::Failed;
+    if (!(residual(s, s.gTrial, f) < s.rep.residual)) return NewtonOutcome::Failed;
+    alpha = 1;
+    s.phiNext = phi1;
+  }
+  // A load step that keeps needing damped steps is too large for Newton's region of fast
+  // convergence: give up early so it is halved, instead of grinding to maxIterations.
+  if (alpha < 1 && ++s.damped > kMaxDampedIterations) return NewtonOutcome::Failed;
+  xs += alpha * s.step;
+  if (alpha == 1) {
+    s.g.swap(s.gTrial);
+    s.phiCur = s.phiNext;
+    s.haveG = true;
+  }
+  return NewtonOutcome::Continue;
+}
+
+bool EquilibriumSolver::armijo(Newton& s, const VecX& xs, const VecX& f, Real phi0, Real slope,
+                               Real& alpha) {
+  for (int ls = 0; ls < 30; ++ls, alpha *= 0.5) {
+    // The full step is usually accepted: its gradient is computed with the energy and serves
+    // the next iteration.
+    const Real phi = ls == 0 ? objectiveGradient(xs + s.step, f, s.in, s.gTrial)
+                             : objective(xs + alpha * s.step, f, s.in);
+    // Armijo, or for the full step the approximate Wolfe condition of Hager & Zhang ("A new
+    // conjugate gradient method with guaranteed descent and an efficient line search", SIAM J.
+    // Optim. 16(1) 2005, eq. 4.2): near the solution the decrease of Pi drops to the round-off
+    // of its sum, and the derivative along the step, g(x + s) . s <= (2 delta - 1) g(x) . s,
+    // judges it where Pi's values cannot.
+    if (phi <= phi0 + kArmijo * alpha * slope ||
+        (ls == 0 && phi <= phi0 + kObjectiveNoise * std::abs(phi0) &&
+         s.gTrial.dot(s.step) <= (2 * kArmijo - 1) * slope)) {
+      s.phiNext = phi;
+      return true;
+    }
+  }
+  return false;
+}
+
+EquilibriumSolver::NewtonOutcome EquilibriumSolver::roundOffStep(Newton& s, VecX& xs,
+                                                                 const VecX& f) {
+  // The predicted decrease of Pi is below its round-off: Armijo cannot judge the step. Take the
+  // full Newton step; if it no longer halves the residual, the residual has reached its
+  // round-off floor and the state is accepted as converged.
+  const VecX xt = xs + s.step;
+  const Real phiT = objectiveGradient(xt, f, s.in, s.gTrial);
+  if (!std::isfinite(phiT)) return NewtonOutcome::Failed;
+  const Real before = s.rep.residual, after = residual(s, s.gTrial, f);
+  xs = xt;
+  if (!(after < 0.5 * before)) {
+    s.rep.residual = after;
+    return after <= 1e3 * s.opt.tolerance * s.rep.forceScale ? NewtonOutcome::Converged
+                                                             : NewtonOutcome::Failed;
+  }
+  s.g.swap(s.gTrial);
+  s.phiCur = phiT;
+  s.haveG = true;
+  return NewtonOutcome::Continue;
 }
 
 SolveReport EquilibriumSolver::solveStatic(const LoadCase& loads, VecX& x, const VecX& fStart,

@@ -226,6 +226,28 @@ class EquilibriumSolver {
  private:
   SolveReport solve(const LoadCase& loads, VecX& x, const VecX& fStart, const InertiaTerms* inertia,
                     const SolveOptions& options);
+  // The pieces of solve() (fem_solver.cpp): the constrained dofs, load stepping, and in each
+  // load step Newton iterations (an inexact Newton direction, then the Dirichlet lift or a
+  // line search).
+  struct Newton;  ///< one solve's state
+  enum class NewtonOutcome { Continue, Converged, Failed };
+  /// The sorted constrained dofs of `loads`, their final positions written into target (fixed
+  /// wins over prescribed).
+  std::vector<int> constrainedDofs(const LoadCase& loads, VecX& target) const;
+  /// |free part of grad|; sets the report's force scale (|f|, |constrained part|, the floor).
+  Real residual(Newton& s, const VecX& grad, const VecX& f) const;
+  /// One load step: from xs (converged at the previous level) to forces f and targets tgt.
+  bool loadStep(Newton& s, VecX& xs, const VecX& f, const VecX& tgt);
+  /// The Newton step at xs into s.step (CG with the old factor, or a fresh factorisation).
+  bool newtonDirection(Newton& s, const VecX& xs);
+  /// Applies the step with the constrained dofs' remaining increment, shortened while the
+  /// state is inadmissible.
+  NewtonOutcome liftStep(Newton& s, VecX& xs, const VecX& f);
+  /// Backtracking (Armijo / approximate Wolfe) line search along s.step, and its fallbacks.
+  NewtonOutcome lineSearchStep(Newton& s, VecX& xs, const VecX& f);
+  bool armijo(Newton& s, const VecX& xs, const VecX& f, Real phi0, Real slope, Real& alpha);
+  /// The full step when the predicted decrease is below the objective's round-off.
+  NewtonOutcome roundOffStep(Newton& s, VecX& xs, const VecX& f);
   void prepareConstraints(const std::vector<int>& constrainedDofs);
   Real objective(const VecX& x, const VecX& f, const InertiaTerms* in) const;
   /// Gradient into g; returns the objective (as objective()) from the same element pass.

@@ -338,5 +338,10 @@ DEFORM_PLUGIN(registry) {
       Capability::QuasiStatic,   Capability::Contact,         Capability::ContactReaction};
   info.params = reffem::referenceFemParams();
   info.create = [] { return std::make_unique<reffem::ReferenceFemModel>(); };
+  // What the harness's sweep, bench and stability run it with (registry.h).
+  info.presets["stability"] = {{{"elements", 5000LL}}};
+  info.presets["stability_quick"] = {{{"elements", 1500LL}}};
+  info.presets["stability_reference"] = {{{"elements", 5000LL}}};
+  info.presets["stability_reference_quick"] = {{{"elements", 1500LL}}};
   registry.add(std::move(info));
 }

@@ -30,9 +30,9 @@ file(REMOVE_RECURSE ${WORK_DIR})
 
 run("installing deformbench" ${CMAKE_COMMAND} --install ${BUILD_DIR} --prefix ${prefix})
 file(GLOB_RECURSE config ${prefix}/deformbenchConfig.cmake)
-file(GLOB_RECURSE core ${prefix}/libdeform_core.so)
+file(GLOB_RECURSE core ${prefix}/libdeform_sdk.so)
 if(NOT config OR NOT core)
-  message(FATAL_ERROR "the install lacks deformbenchConfig.cmake or libdeform_core.so")
+  message(FATAL_ERROR "the install lacks deformbenchConfig.cmake or libdeform_sdk.so")
 endif()
 get_filename_component(libdir ${core} DIRECTORY)
 get_filename_component(config_dir ${config} DIRECTORY)
@@ -73,7 +73,7 @@ function(run_gtest name)
 endfunction()
 
 run_gtest(InstalledPlugin.LoadsByPath --unset=DEFORM_PLUGIN_PATH DEFORM_INSTALLED_PLUGIN=${plugin})
-# LD_LIBRARY_PATH outranks the test program's RUNPATH, so it runs on the installed libdeform_core,
+# LD_LIBRARY_PATH outranks the test program's RUNPATH, so it runs on the installed core libraries,
 # whose own location must lead the loader to PREFIX/lib/deformbench/plugins.
 run_gtest(InstalledPlugin.FoundInRelocatedInstall --unset=DEFORM_PLUGIN_PATH
           LD_LIBRARY_PATH=${libdir} DEFORM_INSTALLED_PREFIX=${prefix}

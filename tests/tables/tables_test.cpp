@@ -126,7 +126,7 @@ TEST_F(TempDir, BemAccuracyStaticMeasureFromTheOverrideFileOrSaysWhyBlank) {
   EXPECT_NE(doc["rows"][0]["note"].get<std::string>().find("static measure not computed"),
             std::string::npos)
       << doc["rows"][0].dump();
-  // The file `bem_tables accuracy --out` writes overrides the computation.
+  // A file of static rows in the output folder overrides the computation.
   {
     std::ofstream f(o.outDir / "bem-accuracy-static.json");
     f << R"([{"name": "bem-accuracy", "rows": [{"coarse_vertices": 284, "fine_vertices": 256,
@@ -678,9 +678,13 @@ TEST(Sweep, ParetoFrontAndKnobs) {
   EXPECT_TRUE(pts[1].pareto);
   EXPECT_FALSE(pts[2].pareto);
   EXPECT_FALSE(pts[3].pareto);
-  EXPECT_EQ(sweepKnob("pbd", false).param, "iterations");
-  EXPECT_EQ(sweepKnob("massspring", false).param, "integrator");
-  EXPECT_TRUE(sweepKnob("unknown_plugin", false).param.empty());
+  // The knob is the one the model declares (ModelInfo::knob), values as JSON of their type.
+  ModelInfo info;
+  info.knob = {"integrator", {std::string("explicit_euler"), 2LL}, {0.5}};
+  EXPECT_EQ(sweepKnob(info, false).param, "integrator");
+  EXPECT_EQ(sweepKnob(info, false).values, (std::vector<nlohmann::json>{"explicit_euler", 2}));
+  EXPECT_TRUE(sweepKnob(info, true).values.at(0).is_number_float());
+  EXPECT_TRUE(sweepKnob(ModelInfo{}, false).param.empty());
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 // (harness/scripts/plot_sweep.py) is DIR/sweep.png.
 #pragma once
 
+#include <deform/registry.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/progress.h>
 
@@ -22,8 +23,9 @@ struct SweepKnob {
   std::vector<nlohmann::json> values;
 };
 
-/// The knob of a plugin ("" param when it has none). quick: two or three values.
-SweepKnob sweepKnob(const std::string& plugin, bool quick);
+/// The knob a model declares (ModelInfo::knob; "" param when it has none). quick: its quick
+/// values.
+SweepKnob sweepKnob(const ModelInfo& info, bool quick);
 
 struct SweepPoint {
   std::string model, plugin, label, param;

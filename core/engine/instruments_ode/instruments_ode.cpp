@@ -1,21 +1,44 @@
-// Rigid instrument dynamics with ODE: virtually coupled tools, hinged grasper jaws, free objects.
+// Instrument dynamics with ODE (instruments_backend.h): virtually coupled tools, hinged grasper
+// jaws, free objects. Its own shared object, loaded by InstrumentWorld on first use.
+#include "instruments_backend.h"
+
 #include <deform/error.h>
-#include <deform/instruments.h>
 
 #include <cmath>
+#include <memory>
+#include <vector>
 
-#ifdef DEFORM_HAVE_ODE
 #include <ode/ode.h>
-#endif
 
 namespace deform {
 
-Vec3 couplingForce(const CouplingParams& p, const Vec3& xHand, const Vec3& vHand, const Vec3& x,
-                   const Vec3& v) {
-  return p.stiffness * (xHand - x) + p.damping * (vHand - v);
-}
+class OdeInstrumentWorld final : public InstrumentBackend {
+ public:
+  explicit OdeInstrumentWorld(const Vec3& gravity);
+  ~OdeInstrumentWorld() override;
+  int addBody(Real mass, const Mat3& inertia, const Vec3& pos, bool gravity, bool coupled,
+              const CouplingParams& coupling, bool holdOrientation) override;
+  int addGrasper(Real mass, Real shaftLength, Real jawLength, const Vec3& pos,
+                 const CouplingParams& coupling) override;
+  void setShape(int body, const RigidShape& shape) override;
+  void setFriction(Real mu) override;
+  int lastContacts() const override;
+  void setJaws(int grasper, bool closed) override;
+  Real jawAngle(int grasper) const override;
+  void setHand(int body, const Vec3& pos, const Vec3& vel) override;
+  void addForce(int body, const Vec3& force, const Vec3& at) override;
+  void addTorque(int body, const Vec3& torque) override;
+  void step(Real dt) override;
+  Vec3 position(int body) const override;
+  Mat3 rotation(int body) const override;
+  Vec3 velocity(int body) const override;
+  Vec3 couplingForce(int body) const override;
+  int numBodies() const override;
 
-#ifdef DEFORM_HAVE_ODE
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> m_impl;
+};
 
 namespace {
 
@@ -33,7 +56,7 @@ constexpr int kMaxContactsPerPair = 8;
 
 }  // namespace
 
-struct InstrumentWorld::Impl {
+struct OdeInstrumentWorld::Impl {
   dWorldID world = nullptr;
   struct Body {
     dBodyID id = nullptr;
@@ -116,11 +139,13 @@ struct InstrumentWorld::Impl {
   }
 };
 
-InstrumentWorld::InstrumentWorld(const Vec3& gravity) : m_impl(std::make_unique<Impl>(gravity)) {}
-InstrumentWorld::~InstrumentWorld() = default;
+OdeInstrumentWorld::OdeInstrumentWorld(const Vec3& gravity)
+    : m_impl(std::make_unique<Impl>(gravity)) {}
+OdeInstrumentWorld::~OdeInstrumentWorld() = default;
 
-int InstrumentWorld::addBody(Real mass, const Mat3& I, const Vec3& pos, bool gravity, bool coupled,
-                             const CouplingParams& coupling, bool holdOrientation) {
+int OdeInstrumentWorld::addBody(Real mass, const Mat3& I, const Vec3& pos, bool gravity,
+                                bool coupled, const CouplingParams& coupling,
+                                bool holdOrientation) {
   Impl::Body b;
   b.id = dBodyCreate(m_impl->world);
   dMass m;
@@ -138,8 +163,8 @@ int InstrumentWorld::addBody(Real mass, const Mat3& I, const Vec3& pos, bool gra
   return numBodies() - 1;
 }
 
-int InstrumentWorld::addGrasper(Real mass, Real shaftLength, Real jawLength, const Vec3& pos,
-                                const CouplingParams& coupling) {
+int OdeInstrumentWorld::addGrasper(Real mass, Real shaftLength, Real jawLength, const Vec3& pos,
+                                   const CouplingParams& coupling) {
   // Shaft: a thin rod along z whose lower end (the jaws' hinge) is at pos; its body origin is
   // its centre of mass, half a length above.
   const Real L = std::max(shaftLength, Real(1e-3));
@@ -179,43 +204,43 @@ int InstrumentWorld::addGrasper(Real mass, Real shaftLength, Real jawLength, con
   return shaft;
 }
 
-void InstrumentWorld::setShape(int body, const RigidShape& shape) {
+void OdeInstrumentWorld::setShape(int body, const RigidShape& shape) {
   for (const ShapePrimitive& p : shape.parts)
     m_impl->addGeom(m_impl->bodies.at(body).id, p, kShapeCategory);
 }
 
-void InstrumentWorld::setFriction(Real mu) {
+void OdeInstrumentWorld::setFriction(Real mu) {
   m_impl->mu = mu;
 }
 
-int InstrumentWorld::lastContacts() const {
+int OdeInstrumentWorld::lastContacts() const {
   return m_impl->lastContacts;
 }
 
-void InstrumentWorld::setJaws(int grasper, bool closed) {
+void OdeInstrumentWorld::setJaws(int grasper, bool closed) {
   m_impl->bodies.at(grasper).jawsClosed = closed;
 }
 
-Real InstrumentWorld::jawAngle(int grasper) const {
+Real OdeInstrumentWorld::jawAngle(int grasper) const {
   const Impl::Body& b = m_impl->bodies.at(grasper);
   return b.jaw[0] ? dJointGetHingeAngle(b.jaw[0]) : 0.0;
 }
 
-void InstrumentWorld::setHand(int body, const Vec3& pos, const Vec3& vel) {
+void OdeInstrumentWorld::setHand(int body, const Vec3& pos, const Vec3& vel) {
   Impl::Body& b = m_impl->bodies.at(body);
   b.handPos = pos;
   b.handVel = vel;
 }
 
-void InstrumentWorld::addForce(int body, const Vec3& f, const Vec3& at) {
+void OdeInstrumentWorld::addForce(int body, const Vec3& f, const Vec3& at) {
   dBodyAddForceAtPos(m_impl->bodies.at(body).id, f.x(), f.y(), f.z(), at.x(), at.y(), at.z());
 }
 
-void InstrumentWorld::addTorque(int body, const Vec3& t) {
+void OdeInstrumentWorld::addTorque(int body, const Vec3& t) {
   dBodyAddTorque(m_impl->bodies.at(body).id, t.x(), t.y(), t.z());
 }
 
-void InstrumentWorld::step(Real dt) {
+void OdeInstrumentWorld::step(Real dt) {
   for (Impl::Body& b : m_impl->bodies) {
     for (dJointID h : b.jaw) {
       if (!h) continue;
@@ -224,7 +249,8 @@ void InstrumentWorld::step(Real dt) {
     }
     if (!b.coupled) continue;
     const Vec3 x = vec(dBodyGetPosition(b.id)), v = vec(dBodyGetLinearVel(b.id));
-    b.lastCoupling = deform::couplingForce(b.coupling, b.handPos, b.handVel, x, v);
+    // F_c = k (x_hand - x) + c (v_hand - v) (couplingForce(), instruments.h)
+    b.lastCoupling = b.coupling.stiffness * (b.handPos - x) + b.coupling.damping * (b.handVel - v);
     dBodyAddForce(b.id, b.lastCoupling.x(), b.lastCoupling.y(), b.lastCoupling.z());
   }
   m_impl->lastContacts = 0;
@@ -240,11 +266,11 @@ void InstrumentWorld::step(Real dt) {
   }
 }
 
-Vec3 InstrumentWorld::position(int body) const {
+Vec3 OdeInstrumentWorld::position(int body) const {
   return vec(dBodyGetPosition(m_impl->bodies.at(body).id));
 }
 
-Mat3 InstrumentWorld::rotation(int body) const {
+Mat3 OdeInstrumentWorld::rotation(int body) const {
   const dReal* R = dBodyGetRotation(m_impl->bodies.at(body).id);  // 3 x 4, row-major
   Mat3 M;
   for (int i = 0; i < 3; ++i)
@@ -252,61 +278,21 @@ Mat3 InstrumentWorld::rotation(int body) const {
   return M;
 }
 
-Vec3 InstrumentWorld::velocity(int body) const {
+Vec3 OdeInstrumentWorld::velocity(int body) const {
   return vec(dBodyGetLinearVel(m_impl->bodies.at(body).id));
 }
 
-Vec3 InstrumentWorld::couplingForce(int body) const {
+Vec3 OdeInstrumentWorld::couplingForce(int body) const {
   return m_impl->bodies.at(body).lastCoupling;
 }
 
-int InstrumentWorld::numBodies() const {
+int OdeInstrumentWorld::numBodies() const {
   return static_cast<int>(m_impl->bodies.size());
 }
 
-#else  // no ODE in this build
-
-struct InstrumentWorld::Impl {};
-InstrumentWorld::InstrumentWorld(const Vec3&) {
-  throw UnsupportedError("instrument dynamics need ODE (libode-dev), which this build lacks");
-}
-InstrumentWorld::~InstrumentWorld() = default;
-int InstrumentWorld::addBody(Real, const Mat3&, const Vec3&, bool, bool, const CouplingParams&,
-                             bool) {
-  return -1;
-}
-int InstrumentWorld::addGrasper(Real, Real, Real, const Vec3&, const CouplingParams&) {
-  return -1;
-}
-void InstrumentWorld::setShape(int, const RigidShape&) {}
-void InstrumentWorld::setFriction(Real) {}
-int InstrumentWorld::lastContacts() const {
-  return 0;
-}
-void InstrumentWorld::setJaws(int, bool) {}
-Real InstrumentWorld::jawAngle(int) const {
-  return 0;
-}
-void InstrumentWorld::setHand(int, const Vec3&, const Vec3&) {}
-void InstrumentWorld::addForce(int, const Vec3&, const Vec3&) {}
-void InstrumentWorld::addTorque(int, const Vec3&) {}
-void InstrumentWorld::step(Real) {}
-Vec3 InstrumentWorld::position(int) const {
-  return Vec3::Zero();
-}
-Mat3 InstrumentWorld::rotation(int) const {
-  return Mat3::Identity();
-}
-Vec3 InstrumentWorld::velocity(int) const {
-  return Vec3::Zero();
-}
-Vec3 InstrumentWorld::couplingForce(int) const {
-  return Vec3::Zero();
-}
-int InstrumentWorld::numBodies() const {
-  return 0;
-}
-
-#endif
-
 }  // namespace deform
+
+extern "C" __attribute__((visibility("default"))) deform::InstrumentBackend*
+deform_instrument_backend(const deform::Vec3& gravity) {
+  return new deform::OdeInstrumentWorld(gravity);
+}

@@ -6,18 +6,18 @@
 // Use the DEFORM_PLUGIN macro below to define both. Registration is explicit, in one place; no
 // static self-registration.
 //
-// A plugin may export further, optional C symbols for a table that needs more than a model run;
-// the harness looks them up with dlsym and does without them when absent (blank columns and a
-// note). The one in use: particle_bem's
-//   extern "C" const char* deform_particle_bem_static_accuracy(const char* requestJson);
-// (the BEM loss ratio of the paper's Table 2 without a model run; request and reply are JSON,
-// the reply string is owned by the plugin: see plugins/particle_bem/README.md).
+// Besides the model itself, a registration may declare what the harness's fixed case sets need
+// to know about it (ModelInfo::knob, ::presets) and measures that need more than a model run
+// (ModelInfo::measures), so that the harness never names a plugin in code.
 #pragma once
 
 #include <deform/model.h>
 #include <deform/params.h>
 
+#include <nlohmann/json.hpp>
+
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -31,7 +31,8 @@
 // 3: interaction on the surface (issue G1): GraspInput holds organ surface vertices, PointLoad
 // carries the harness's per-surface-vertex spread.
 // 4: ParamSpec gains the calibration fields (calibratable, bounds, scale; issue G2), appended
-// after the existing ones: plugin sources compile unchanged, binaries must be rebuilt.
+// after the existing ones, and ModelInfo gains knob, presets and measures (issue G6): plugin
+// sources compile unchanged, binaries must be rebuilt.
 #define DEFORM_ABI_VERSION 4
 
 namespace deform {
@@ -66,6 +67,28 @@ struct ModelInfo {
   std::vector<Capability> capabilities;
   std::vector<ParamSpec> params;
   std::function<std::unique_ptr<Model>()> create;
+
+  /// The parameter that trades accuracy for run time, and the values `deformbench sweep` runs
+  /// (quickValues with --quick). An empty param: the model has none and runs once.
+  struct Knob {
+    std::string param;
+    std::vector<ParamValue> values, quickValues;
+  };
+  Knob knob;
+  /// Parameter sets the harness's fixed case sets run the model with, by name; each is a list
+  /// (one run per set). Absent: the set does not include the model (bench) or uses the
+  /// defaults (stability). Names in use:
+  ///   "bench"                 deformbench bench: the ~2.2k-vertex liver grasp and the cube poke
+  ///   "bench_8k"              deformbench bench: the 8k-vertex liver of the default scene
+  ///   "stability", "stability_quick"  deformbench stability (without and with --quick)
+  ///   "stability_reference", "stability_reference_quick"  the model is the stability sweep's
+  ///                           reference, with these parameters
+  using ParamSet = std::map<std::string, ParamValue>;
+  std::map<std::string, std::vector<ParamSet>> presets;
+  /// Optional measures that need more than a model run (a table column from the method's own
+  /// numerics, without a scene), by name: request and reply are JSON documents the measure
+  /// documents; bad requests throw InputError. Example: particle_bem's "static_accuracy".
+  std::map<std::string, std::function<nlohmann::json(const nlohmann::json& request)>> measures;
 
   bool has(Capability c) const;
   const ParamSpec* param(const std::string& key) const;

@@ -23,7 +23,7 @@ std::string join(const std::vector<std::string>& parts, const char* sep) {
   return s;
 }
 
-// Used only for its address: dladdr() on it tells where libdeform_core.so itself lives.
+// Used only for its address: dladdr() on it tells where libdeform_engine.so itself lives.
 void coreAnchor() {}
 
 fs::path coreLibraryDir() {
@@ -61,8 +61,11 @@ std::string pluginNameOf(const std::string& file) {
       break;
     }
   }
-  // libdeform_core.so is the SDK library, never a plugin.
-  return stem == "core" ? std::string() : stem;
+  // The core's own libraries and back ends (core/CMakeLists.txt) are never plugins.
+  for (const char* core : {"core", "sdk", "geometry", "kernels", "engine", "gmsh", "contact_bullet",
+                           "instruments_ode"})
+    if (stem == core) return std::string();
+  return stem;
 }
 
 }  // namespace
@@ -108,7 +111,7 @@ std::vector<std::string> PluginLoader::defaultSearchPath() {
   dirs.emplace_back(DEFORM_INSTALL_PLUGIN_DIR);
 #endif
   // Relocated installs: PREFIX/bin/deformbench next to PREFIX/lib/deformbench/plugins, and the
-  // plugin folder beside wherever libdeform_core.so was actually loaded from.
+  // plugin folder beside wherever libdeform_engine.so was actually loaded from.
   if (const fs::path exe = executableDir(); !exe.empty()) {
     dirs.push_back((exe / ".." / "lib" / "deformbench" / "plugins").lexically_normal().string());
   }

@@ -1,0 +1,280 @@
+// The table system (tables.h): the six tables' definitions (one file each in this folder, on the
+// TableDef seam of table_kit.h) run as one set of cases, their references checked, written.
+#include "table_kit.h"
+
+#include <deform_harness/calibration.h>
+#include <deform_harness/child_process.h>
+#include <deform_harness/convergence.h>
+
+#include <algorithm>
+#include <map>
+#include <set>
+
+namespace deform::harness {
+
+using namespace tables;
+
+namespace {
+
+/// What a table says about one of its references: a note, and a warning when the reference is
+/// not shown converged to 1% of the peak displacement.
+struct ReferenceCheck {
+  std::string note, warning;
+};
+
+/// The convergence study of case c's reference (convergence.h) at three levels, the finest being
+/// the reference the table used (same params, same target count: the same mesh and answer), so
+/// the estimate is the error of the figures in the table.
+ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& loader,
+                              const TablesOptions& o, Progress* progress) {
+  ReferenceCheck out;
+  const std::string what = "reference (" + c.id + ")";
+  const ojson& ref = c.scene["reference"];
+  const std::string plugin = ref.value("plugin", "");
+  const RunRecord* run = r.run(ref.value("label", plugin));
+  if (!run || run->status != RunStatus::Ok) {
+    out.note = what + ": convergence not checked: " + statusOf(r, plugin, run);
+    return out;
+  }
+  const ojson& params = ref["params"];
+  ConvergeOptions co;
+  co.baseElements = params.value("elements", 0LL);
+  co.factors = kReferenceCheckFactors;
+  co.outDir = o.outDir / "convergence" / c.id;
+  co.cacheDir = o.cases.cacheDir;
+  const fs::path sceneFile = o.outDir / "scenes" / (c.id + ".json");
+  if (progress) progress->start("reference check " + c.id);
+  ConvergenceResult res;
+  try {
+    res = runConvergence(c.scene, sceneFile.string(), loader, co, nullptr);
+  } catch (const std::exception& e) {
+    res.message = e.what();
+  }
+  std::string elements = "? tets";
+  if (run->counts.count("elements"))
+    elements = std::to_string(run->counts.at("elements")) + " tets";
+  out.note = what + ": " + plugin + " P" + std::to_string(params.value("element_order", 1)) + " " +
+             params.value("material", std::string("neo_hookean")) + ", " + elements + ", " +
+             convergenceSummary(res) + "; study in " +
+             relativeTo(co.outDir / "convergence.json", o.outDir) + ".";
+  const std::string w = convergenceWarning(res);
+  if (!w.empty()) out.warning = "warning: " + what + ": " + w + ".";
+  if (progress)
+    progress->finish("reference check " + c.id,
+                     (w.empty() ? std::string("converged") : std::string("not shown converged")) +
+                         (res.cached ? " (cached)" : ""));
+  return out;
+}
+
+}  // namespace
+
+std::vector<std::string> tableNames() {
+  return {"metaballs-construction", "method-comparison", "bem-timing",
+          "bem-accuracy",           "hybrid-accuracy",   "hybrid-timing"};
+}
+
+std::vector<std::string> tableWarnings(const std::vector<Table>& tables) {
+  std::vector<std::string> out;
+  std::set<std::string> seen;
+  for (const Table& t : tables)
+    for (const std::string& n : t.notes)
+      if (n.rfind("warning: ", 0) == 0 && seen.insert(n).second) out.push_back(n);
+  return out;
+}
+
+namespace {
+
+/// The "calibration" table (--calibration): every case model that a calibration file names, at
+/// its defaults and calibrated (its "+cal" twin, run in the same case), side by side.
+Table calibrationTable(
+    const std::vector<const Case*>& order,
+    const std::map<std::string, std::vector<std::pair<std::string, std::string>>>& twins,
+    const Results& results, const std::vector<CalibrationParams>& calibrations) {
+  Table t;
+  t.name = "calibration";
+  t.title = "Default and calibrated parameters side by side (--calibration)";
+  t.source = "";  // no paper: the same cases at default and calibrated parameters
+  for (const CalibrationParams& c : calibrations)
+    t.notes.push_back(c.plugin + "/" + c.model + ": " + c.file + " " + c.params.dump());
+  t.columns = {{"case", "case"},
+               {"model", "model"},
+               {"rmse_50_default_mm", "rmse_50 default (mm)"},
+               {"rmse_50_calibrated_mm", "rmse_50 calibrated (mm)"},
+               {"rmse_all_default_mm", "rmse_all default (mm)"},
+               {"rmse_all_calibrated_mm", "rmse_all calibrated (mm)"},
+               {"loss_ratio_default", "loss ratio default"},
+               {"loss_ratio_calibrated", "loss ratio calibrated"},
+               {"status", "status"}};
+  const auto metrics = [](const RunRecord* r, const char* suffix, ojson& row) {
+    double r50 = NAN, all = NAN, loss = NAN;
+    if (r && r->error) {
+      for (const auto& [k, v] : r->error->rmseNearest)
+        if (k == 50) r50 = v;
+      all = r->error->rmseAll;
+      loss = r->error->lossRatio;
+    }
+    row[std::string("rmse_50_") + suffix + "_mm"] = numberOrNull(1e3 * r50);
+    row[std::string("rmse_all_") + suffix + "_mm"] = numberOrNull(1e3 * all);
+    row[std::string("loss_ratio_") + suffix] = numberOrNull(loss);
+  };
+  for (const Case* c : order) {
+    const auto it = results.find(c->id);
+    if (it == results.end()) continue;
+    for (const auto& [label, twin] : twins.at(c->id)) {
+      const std::string original = label.empty() ? twin.substr(0, twin.size() - 4) : label;
+      const RunRecord* a = it->second.run(original);
+      const RunRecord* b = it->second.run(twin);
+      ojson row = {{"case", c->id}, {"model", original}};
+      metrics(a, "default", row);
+      metrics(b, "calibrated", row);
+      std::string status;
+      if (!a || !b) status = "not run";
+      if (a && a->status != RunStatus::Ok)
+        status += "default " + std::string(statusName(a->status));
+      if (b && b->status != RunStatus::Ok)
+        status += (status.empty() ? "" : ", ") + std::string("calibrated ") + statusName(b->status);
+      row["status"] = status.empty() ? "ok" : status;
+      t.rows.push_back(row);
+    }
+  }
+  return t;
+}
+
+}  // namespace
+
+std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
+                               const TablesOptions& options, Progress* progress) {
+  const auto all = tableNames();
+  std::vector<std::string> wanted;
+  for (const std::string& n : names) {
+    if (n == "all") {
+      wanted.insert(wanted.end(), all.begin(), all.end());
+    } else if (std::find(all.begin(), all.end(), n) == all.end()) {
+      std::string list;
+      for (const auto& t : all) list += (list.empty() ? "" : ", ") + t;
+      throw InputError("tables", n, "unknown table (known: " + list + ", all)");
+    } else {
+      wanted.push_back(n);
+    }
+  }
+  const long long refElements =
+      options.referenceElements > 0
+          ? options.referenceElements
+          : (options.quick ? kQuickReferenceElements : kReferenceElements);
+  const std::map<std::string, std::function<TableDef()>> make = {
+      {"metaballs-construction", [&] { return metaballsConstruction(options); }},
+      {"method-comparison", [&] { return methodComparison(options, refElements); }},
+      {"bem-timing", [&] { return bemTiming(options); }},
+      {"bem-accuracy", [&] { return bemAccuracy(options, loader, progress); }},
+      {"hybrid-accuracy", [&] { return hybridTable(options, refElements, false); }},
+      {"hybrid-timing", [&] { return hybridTable(options, refElements, true); }}};
+  std::vector<TableDef> defs;
+  std::set<std::string> seen;
+  for (const std::string& n : wanted)
+    if (seen.insert(n).second) defs.push_back(make.at(n)());
+  // Every case once, in table order (hybrid-accuracy and hybrid-timing share theirs).
+  std::vector<const Case*> order;
+  std::set<std::string> ids;
+  for (const TableDef& d : defs)
+    for (const Case& c : d.cases)
+      if (ids.insert(c.id).second) order.push_back(&c);
+  if (progress) progress->addTotal(int(order.size()));
+
+  // The cases go to the dispatcher (options.cases.dispatcher: serial, --jobs, MPI or Slurm);
+  // the results are keyed by case id, so the tables do not depend on the finishing order.
+  Results results;
+  std::vector<SceneCase> sceneCases;
+  std::map<std::string, std::vector<std::pair<std::string, std::string>>> twins;  // --calibration
+  for (const Case* c : order) {
+    CaseOptions co = options.cases;
+    if (c->noCache) co.cacheDir = fs::path();
+    ojson scene = c->scene;
+    twins[c->id] = addCalibratedTwins(scene, options.calibrations);
+    sceneCases.push_back({scene, options.outDir / "scenes" / (c->id + ".json"),
+                          options.outDir / "runs" / c->id, co});
+  }
+  runSceneCases(
+      sceneCases, loader, options.cases.dispatcher,
+      [&](size_t i) {
+        if (progress) progress->start(order[i]->id);
+      },
+      [&](size_t i, CaseResult&& r) {
+        const Case* c = order[i];
+        std::string summary;
+        if (!r.error.empty()) {
+          summary = "not run (" + r.error + ")";
+        } else {
+          for (const RunRecord& run : r.result->runs) {
+            std::string part = run.label + " " + statusName(run.status);
+            if (run.status == RunStatus::Failed && options.cases.child)
+              part += " (" + run.message + ")";
+            summary += (summary.empty() ? "" : ", ") + part;
+          }
+        }
+        for (const auto& [plugin, why] : r.missing)
+          summary += (summary.empty() ? "" : ", ") + plugin + " missing";
+        if (r.resumed) summary += " (resumed)";
+        if (progress) progress->finish(c->id, summary);
+        results.emplace(c->id, std::move(r));
+      });
+
+  // Each distinct reference once (the hybrid tables share theirs).
+  std::map<std::string, ReferenceCheck> checks;
+  if (options.referenceCheck) {
+    std::vector<const Case*> toCheck;
+    for (const TableDef& d : defs)
+      for (const std::string& id : d.checks)
+        if (!checks.count(id) && results.count(id)) {
+          checks[id] = {};
+          for (const Case* c : order)
+            if (c->id == id) toCheck.push_back(c);
+        }
+    if (progress) progress->addTotal(int(toCheck.size()));
+    for (const Case* c : toCheck)
+      checks[c->id] = checkReference(*c, results.at(c->id), loader, options, progress);
+  }
+
+  std::vector<Table> tables;
+  for (const TableDef& d : defs) {
+    Table t;
+    t.name = d.name;
+    t.title = d.title;
+    t.source = d.source;
+    t.notes = d.notes;
+    if (!d.checks.empty() && !options.referenceCheck)
+      t.notes.push_back("reference: convergence not checked (--no-reference-check).");
+    for (const std::string& id : d.checks) {
+      if (!checks.count(id)) continue;
+      t.notes.push_back(checks.at(id).note);
+      if (!checks.at(id).warning.empty()) t.notes.push_back(checks.at(id).warning);
+    }
+    t.columns = d.columns;
+    for (ojson row : d.rows(results, options.outDir)) {
+      // A row whose reference is not shown converged to 1% is flagged in its status, not only
+      // noted under the table: the row of the checked case, and the rows sharing its reference
+      // set-up (the hybrid tables check one case per phantom).
+      for (const std::string& id : d.checks) {
+        if (!checks.count(id) || checks.at(id).warning.empty() || !row.contains("status")) continue;
+        const std::string scene = row.value("scene", "");
+        const std::string phantom = row.value("phantom", "");
+        const bool covered = scene == "scenes/" + id + ".json" ||
+                             (!phantom.empty() && id.rfind("hybrid/" + phantom + "_", 0) == 0);
+        if (!covered) continue;
+        std::string status = row["status"].is_string() ? row["status"].get<std::string>() : "";
+        appendTo(status, "reference not shown converged to 1% (see the notes)");
+        row["status"] = status;
+      }
+      t.rows.push_back(inColumnOrder(row, d.columns));
+    }
+    writeTable(t, options.outDir);
+    tables.push_back(std::move(t));
+  }
+  if (!options.calibrations.empty()) {
+    Table t = calibrationTable(order, twins, results, options.calibrations);
+    writeTable(t, options.outDir);
+    tables.push_back(std::move(t));
+  }
+  return tables;
+}
+
+}  // namespace deform::harness
