@@ -77,7 +77,7 @@ cmake -S . -B "$build" "${generator[@]}" "${compilers[@]}" "${launcher[@]}" "${w
   -DDEFORM_BUILD_TESTS=ON -DDEFORM_BUILD_BENCHMARKS=OFF >/dev/null
 
 # The plugins are MODULE libraries named deform_<plugin>; the test programs load them.
-targets=(deform_core deformbench)
+targets=(deform_engine deformbench)  # deform_core is an INTERFACE target (no rule of its own)
 tests=(deform_unit_tests deform_conformance_tests)
 [[ $quick -eq 1 ]] && tests=(deform_unit_tests)
 built_plugins=()
