@@ -1,8 +1,8 @@
 // The paper's static accuracy measure as the harness table bem-accuracy computes it
 // (static_accuracy.h, bemStaticAccuracy): R = sum|u^o - u^imp| / sum|u^o| over the fine vertices
 // (Zhu, Gu & Zhou 2010, Table 2). Small icospheres so the whole file runs in seconds.
-#include "../support/meshes.h"
 #include "static_accuracy.h"
+#include "../support/meshes.h"
 
 #include <gtest/gtest.h>
 
