@@ -331,8 +331,12 @@ void checkScenes(const ModelInfo& info, Cache& cache, const ConformanceOptions& 
     RunOptions ro;
     ro.maxSteps = static_cast<int>(std::lround(kSceneCheckSeconds / run.dt));
     // The scene's own parameters for this model when it lists it (a scene may need them, e.g.
-    // an implicit integrator), else the defaults.
+    // an implicit integrator), else the model's "conformance" preset (a smaller precomputation,
+    // e.g. bullet_deformable's tets), else the defaults.
     ParamValues params = ParamValues::defaults(info.params);
+    if (const auto it = info.presets.find("conformance");
+        it != info.presets.end() && !it->second.empty())
+      for (const auto& [key, value] : it->second.front()) params.set(key, value);
     for (const ModelSpec& spec : scene.models) {
       if (spec.model == info.name)
         params = resolveParams(info.params, spec.params, scene.file, spec.jsonPath + "/params");
