@@ -1,6 +1,6 @@
 // Contact queries through Bullet on the liver phantom with a probe (5 mm tip, 8 mm shaft) pressed
 // 4 mm into its top: vertex spheres (ContactWorld::query) against surface triangles
-// (queryTriangles, pooled btTriangleShapes), and one resolveSurfaceContacts() call.
+// (queryTriangles, pooled btTriangleShapes), and one respondToContact() projection on the surface.
 #include <benchmark/benchmark.h>
 #include <deform/contact.h>
 #include <deform/mesh.h>
@@ -43,7 +43,11 @@ void BM_ResolveSurfaceContacts(benchmark::State& state) {
   const VecX invMass = VecX::Constant(s.liver.numVertices(), 1000.0);
   for (auto _ : state) {
     MatX3 x = s.liver.V;
-    benchmark::DoNotOptimize(resolveSurfaceContacts(s.world, x, s.liver.F, invMass, 1e-3));
+    ContactProxy proxy;
+    proxy.nodes = &x;
+    proxy.invMass = &invMass;
+    proxy.faces = &s.liver.F;
+    benchmark::DoNotOptimize(respondToContact(s.world, proxy, ContactResponse::Project, 1e-3));
   }
 }
 BENCHMARK(BM_ResolveSurfaceContacts)->Unit(benchmark::kMicrosecond);

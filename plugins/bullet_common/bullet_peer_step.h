@@ -8,7 +8,7 @@
 // After the step (finishBulletStep):
 //   1. grasped nodes are put exactly on their targets;
 //   2. contact with the scene's rigid instruments (StepInput::contact) by the SDK's shared
-//      response, the same for every model (deform/contact.h, resolveContacts()): each node is a
+//      response, the same for every model (deform/contact.h, respondToContact()): each node is a
 //      sphere of the contact thickness; a penetrating node i with inverse mass w_i > 0 moves out,
 //        x_i += d n,   v_i -= min(v_i . n, 0) n
 //      (Mueller et al. 2007, "Position based dynamics", Sec. 3.5, Eq. (9)-(10), static collider,
@@ -90,7 +90,11 @@ inline StepStatus finishBulletStep(btSoftBody& b, const StepInput& in, Real dt, 
       s.invMass[i] = node.m_im;  // 0 for fixed and grasped nodes: they stay
     }
     s.before = x;
-    const ContactResolution r = resolveContacts(*in.contact, x, s.invMass, dt, &s.velocity);
+    ContactProxy proxy;
+    proxy.nodes = &x;
+    proxy.invMass = &s.invMass;
+    proxy.velocity = s.velocity.data();
+    const ContactResolution r = respondToContact(*in.contact, proxy, ContactResponse::Project, dt);
     if (r.contacts > 0) {
       // Only moved nodes are written back: Bullet's state of every other node stays bit for bit.
       for (int i = 0; i < n; ++i) {

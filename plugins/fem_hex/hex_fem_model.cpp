@@ -581,8 +581,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
 
   const bool penalty = in.contact && in.contact->params().method == ContactMethod::Penalty;
   if (penalty)
-    addEmbeddedPenaltyContactForces(*in.contact, m_x, m_embedding.nodeIds, m_embedding.weights,
-                                    m_surfaceF, m_v.data(), h, m_fext.data());
+    respondToContact(*in.contact, contactProxy(), ContactResponse::Penalty, h, m_fext.data());
   if (in.contact) m_stepStart = m_x;
 
   const bool corot = m_config.elastic == ElasticModel::Corotational;
@@ -695,8 +694,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
     for (int n = 0; n < N; ++n)
       m_contactInvMass[n] =
           (m_isFixed[n] || m_isGrasped[n] || !(m_mass[3 * n] > 0)) ? 0.0 : 1.0 / m_mass[3 * n];
-    resolveEmbeddedSurfaceContacts(*in.contact, m_x, m_embedding.nodeIds, m_embedding.weights,
-                                   m_surfaceF, m_contactInvMass, h, m_v.data(), &m_stepStart);
+    respondToContact(*in.contact, contactProxy(), ContactResponse::Project, h);
   }
   m_msSolve = msSince(t1);
 

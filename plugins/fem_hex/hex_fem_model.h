@@ -29,6 +29,7 @@
 #include "hex_element.h"
 #include "hex_grid.h"
 
+#include <deform/contact.h>
 #include <deform/model.h>
 
 #include <functional>
@@ -168,6 +169,19 @@ class HexFemModel : public Model {
   MatX3 m_surface;
   MatX3i m_surfaceF;  // the organ's triangles over m_surface: the collision proxy
   MatX3 m_stepStart;  // nodes at the step's start (contact friction)
+
+  /// The collision proxy: the organ's triangles, embedded in the grid nodes by the trilinear
+  /// weights (deform/contact.h).
+  ContactProxy contactProxy() {
+    ContactProxy p;
+    p.nodes = &m_x;
+    p.invMass = &m_contactInvMass;
+    p.velocity = m_v.data();
+    p.atStepStart = &m_stepStart;
+    p.faces = &m_surfaceF;
+    p.embedding = embeddingOf(m_embedding.nodeIds, m_embedding.weights);
+    return p;
+  }
 
   // Per-step work (allocated once).
   std::vector<char> m_isGrasped;      // N

@@ -14,24 +14,33 @@ namespace deform::hybrid {
 StepStatus HybridModel::stepWithContact(const StepInput& in) {
   const MatX3 x0 = m_surf.x, v0 = m_v;
   m_inContactStep = true;
-  const ContactModelHooks hooks{[&](const StepInput& x) {
-                                  m_surf.x = x0;
-                                  m_v = v0;
-                                  return step(x);
-                                },
-                                [this]() -> const MatX3& { return m_surf.x; },
-                                {}};
+  ContactProxy proxy;
+  proxy.nodes = &m_surf.x;
+  ContactConstraintSolver solver;
+  solver.solve = [&](const StepInput& x) {
+    m_surf.x = x0;
+    m_v = v0;
+    return step(x);
+  };
+  solver.immovable = m_fixedFine;
+  solver.maxRounds = 3;
   StepStatus status = StepStatus::Ok;
   try {
-    status = solveWithContactConstraints(*in.contact, in, hooks, m_fixedFine, 3);
+    status = solveWithContactConstraints(*in.contact, proxy, in, solver);
   } catch (...) {
     m_inContactStep = false;
     throw;
   }
   m_inContactStep = false;
   if (status != StepStatus::Ok) return status;
-  if (m_w.size() == m_surf.x.rows())
-    resolveSurfaceContacts(*in.contact, m_surf.x, m_surf.faces(), m_w, in.dt, &m_v, &x0);
+  if (m_w.size() == m_surf.x.rows()) {
+    const MatX3i& faces = m_surf.faces();
+    proxy.invMass = &m_w;
+    proxy.velocity = m_v.data();
+    proxy.atStepStart = &x0;
+    proxy.faces = &faces;
+    respondToContact(*in.contact, proxy, ContactResponse::Project, in.dt);
+  }
   return m_surf.x.allFinite() ? StepStatus::Ok : StepStatus::Diverged;
 }
 

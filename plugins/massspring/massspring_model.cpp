@@ -392,7 +392,11 @@ StepStatus MassSpringModel::step(const StepInput& in) {
   if (penalty) {
     // Penalty contact: a force on the surface triangles for this step (explicit in the contact).
     m_contactForce.setZero(m_x.rows(), 3);
-    addPenaltyContactForces(*in.contact, m_x, m_contactF, &m_v, h, m_contactForce);
+    ContactProxy proxy;
+    proxy.nodes = &m_x;
+    proxy.velocity = m_v.data();
+    proxy.faces = &m_contactF;
+    respondToContact(*in.contact, proxy, ContactResponse::Penalty, h, m_contactForce.data());
   }
 
   StepStatus status;
@@ -469,7 +473,13 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     m_contactInvMass = m_invMass;
     for (const NodeGrasp& g : m_nodeGrasps)
       for (int i : g.nodes) m_contactInvMass[i] = 0;
-    resolveSurfaceContacts(*in.contact, m_x, m_contactF, m_contactInvMass, h, &m_v, &m_stepStart);
+    ContactProxy proxy;
+    proxy.nodes = &m_x;
+    proxy.invMass = &m_contactInvMass;
+    proxy.velocity = m_v.data();
+    proxy.atStepStart = &m_stepStart;
+    proxy.faces = &m_contactF;
+    respondToContact(*in.contact, proxy, ContactResponse::Project, h);
   }
   if (!m_surfaceIdentity)
     for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);

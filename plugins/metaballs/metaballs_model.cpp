@@ -463,7 +463,11 @@ StepStatus MetaballsModel::step(const StepInput& in) {
     for (int i = 0; i < n; ++i)
       for (int c = 0; c < 3; ++c) m_p(i, c) = P[4 * i + c];
     const VecX w = Eigen::Map<const VecX>(m_wEff.data(), n);
-    resolveContacts(*in.contact, m_p, w, dt, nullptr, &m_r);
+    ContactProxy proxy;
+    proxy.nodes = &m_p;
+    proxy.invMass = &w;
+    proxy.radii = &m_r;
+    respondToContact(*in.contact, proxy, ContactResponse::Project, dt);
     for (int i = 0; i < n; ++i)
       for (int c = 0; c < 3; ++c) P[4 * i + c] = m_p(i, c);
   }
@@ -539,7 +543,11 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   }
   // The skinned surface can bulge past the spheres: keep it out of the instruments too (display
   // level, no force: the spheres carried it).
-  if (in.contact) projectPointsOut(*in.contact, m_surface);
+  if (in.contact) {
+    ContactProxy surface;
+    surface.nodes = &m_surface;
+    respondToContact(*in.contact, surface, ContactResponse::Display, dt);
+  }
   const double tSkin = msSince(ts);
 
   m_phases = {tStretch, tLap, tVol, tRot, tSkin};

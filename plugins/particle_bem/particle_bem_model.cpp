@@ -468,7 +468,18 @@ void ParticleBemModel::resolveParticleContacts(const StepInput& in) {
   for (int i : m_carry) invMass[i] = 0;
   VecX radii = VecX::Constant(n, 0.5 * m_spacing);
   if (m_guided) radii.head(m_coarse.numVertices()).setConstant(in.contact->params().thickness);
-  resolveContacts(*in.contact, m_x, invMass, in.dt, &m_v, &radii);
+  ContactProxy proxy;
+  proxy.nodes = &m_x;
+  proxy.invMass = &invMass;
+  proxy.velocity = m_v.data();
+  proxy.radii = &radii;
+  respondToContact(*in.contact, proxy, ContactResponse::Project, in.dt);
+}
+
+void ParticleBemModel::projectSurfaceOut(const StepInput& in) {
+  ContactProxy surface;
+  surface.nodes = &m_surface;
+  respondToContact(*in.contact, surface, ContactResponse::Display, in.dt);
 }
 
 StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
@@ -571,7 +582,7 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
     interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_gradient, m_surface);
   else
     interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_surface);
-  if (in.contact) projectPointsOut(*in.contact, m_surface);  // display level, no force
+  if (in.contact) projectSurfaceOut(in);
   const auto t3 = Clock::now();
   m_times["surface"] = ms(t0, t1);
   m_times["correction"] = ms(t1, t2);
@@ -637,7 +648,7 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
           m_surface.row(v) += m_skinWeights[size_t(v)][a] * m_graspDx.row(m_carryCol[size_t(j)]);
       }
   }
-  if (in.contact) projectPointsOut(*in.contact, m_surface);  // display level, no force
+  if (in.contact) projectSurfaceOut(in);
   const auto t3 = Clock::now();
   m_times["forces"] = ms(t0, t1);
   m_times["integration"] = ms(t1, t2);

@@ -83,6 +83,8 @@ class ParticleBemModel final : public Model {
   const MatX& loadResponse(const PointLoad& load);
   /// Contact (deform/contact.h) on every particle, after the correction.
   void resolveParticleContacts(const StepInput& in);
+  /// Display level: the surface follows particles already out of the instruments (no force).
+  void projectSurfaceOut(const StepInput& in);
 
   bool m_guided = true;
   std::string m_source;

@@ -606,7 +606,14 @@ StepStatus PbdModel::step(const StepInput& in) {
   // Contact last, on the surface triangles, so that no surface point ends the step inside an
   // instrument; the correction (friction included, measured from the step's start m_x) enters
   // the velocity like any other projection (w = 0 for fixed and grasped nodes).
-  if (in.contact) resolveSurfaceContacts(*in.contact, m_p, m_contactF, m_w, dt, nullptr, &m_x);
+  if (in.contact) {
+    ContactProxy proxy;
+    proxy.nodes = &m_p;
+    proxy.invMass = &m_w;
+    proxy.atStepStart = &m_x;
+    proxy.faces = &m_contactF;
+    respondToContact(*in.contact, proxy, ContactResponse::Project, dt);
+  }
   const auto t2 = Clock::now();
 
   // Velocity update with damping, and the divergence check (NaN/Inf or leaving the box).

@@ -114,12 +114,18 @@ class ReferenceFemModel final : public Model {
     // Contact as prescribed positions (Dirichlet) on the penetrating nodes. Quasi-static: along
     // the instruments' path since the last solve in sub-steps of half their thinnest radius, the
     // active set grown over up to 4 solves each; a dynamic step cannot be re-solved: 1 solve.
-    const ContactModelHooks hooks{[this](const StepInput& x) { return solveOnce(x); },
-                                  [this]() -> const MatX3& { return m_nodes; },
-                                  [this] { return m_graspForces; }};
-    if (m_solveKind == SolveKind::QuasiStatic)
-      return solveSurfaceAlongInstrumentPath(*in.contact, in, hooks, m_contactF, m_fixed, 4, 0.2);
-    return solveWithSurfaceContactConstraints(*in.contact, in, hooks, m_contactF, m_fixed, 1);
+    ContactProxy proxy;
+    proxy.nodes = &m_nodes;
+    proxy.faces = &m_contactF;
+    ContactConstraintSolver solver;
+    solver.solve = [this](const StepInput& x) { return solveOnce(x); };
+    solver.graspForces = [this] { return m_graspForces; };
+    solver.immovable = m_fixed;
+    const bool quasiStatic = m_solveKind == SolveKind::QuasiStatic;
+    solver.maxRounds = quasiStatic ? 4 : 1;
+    solver.followInstrumentPath = quasiStatic;
+    solver.maxStepFraction = 0.2;
+    return solveWithContactConstraints(*in.contact, proxy, in, solver);
   }
 
   StepStatus solveOnce(const StepInput& in) {

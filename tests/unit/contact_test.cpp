@@ -99,7 +99,11 @@ TEST(ResolveContacts, PushesNodesOutAndTheToolFeelsTheOppositeImpulse) {
   MatX3 v = MatX3::Zero(5, 3);
   v.row(0) << 0, 0, 0.3;  // moving into the tool
   const Real dt = 1e-3;
-  const ContactResolution r = resolveContacts(w, x, invMass, dt, &v);
+  ContactProxy proxy;
+  proxy.nodes = &x;
+  proxy.invMass = &invMass;
+  proxy.velocity = v.data();
+  const ContactResolution r = respondToContact(w, proxy, ContactResponse::Project, dt);
   EXPECT_EQ(r.contacts, 4);
   for (int i = 0; i < 4; ++i) {
     EXPECT_GE(probeDistance(x.row(i).transpose(), c, 0.01, 0.05, 0.01), -1e-9) << "node " << i;
@@ -132,7 +136,10 @@ TEST(ResolveContacts, NodesAgainstALightBodyShareTheDepthAndDoNotOverpushIt) {
       0.0005, 0, 0, -0.0005, 0.0003, 0;
   const MatX3 before = x;
   const VecX invMass = VecX::Constant(3, 1.0 / nodeMass);
-  resolveContacts(w, x, invMass, dt);
+  ContactProxy proxy;
+  proxy.nodes = &x;
+  proxy.invMass = &invMass;
+  respondToContact(w, proxy, ContactResponse::Project, dt);
   // The body moves up by w_b F dt^2 in its next step; the deepest node, directly below it, must
   // end out of the body at that position (within the contact skin), and the body must not move
   // more than the penetration of the deepest node (0.5 mm + thickness).
@@ -165,7 +172,11 @@ TEST(ResolveEmbeddedContacts, MovesTheEmbeddedPointsOutThroughTheirNodes) {
                 (n.z() ? pts[s].z() : 1 - pts[s].z());
     }
   const VecX invMass = VecX::Ones(8);
-  resolveEmbeddedContacts(w, nodes, ids, W, invMass, 1e-3);
+  ContactProxy proxy;
+  proxy.nodes = &nodes;
+  proxy.invMass = &invMass;
+  proxy.embedding = embeddingOf(ids, W);
+  respondToContact(w, proxy, ContactResponse::Project, 1e-3);
   for (int s = 0; s < 2; ++s) {
     Vec3 p = Vec3::Zero();
     for (int i = 0; i < 8; ++i) p += W(s, i) * nodes.row(i).transpose();

@@ -36,6 +36,26 @@ Real patchDistance(const Patch& p, const Vec3& c) {
   return d;
 }
 
+/// The projection response on a surface proxy that is its own nodes.
+ContactResolution projectSurface(ContactWorld& w, MatX3& V, const MatX3i& F, const VecX& invMass,
+                                 Real dt, const MatX3* atStepStart = nullptr) {
+  ContactProxy proxy;
+  proxy.nodes = &V;
+  proxy.invMass = &invMass;
+  proxy.faces = &F;
+  proxy.atStepStart = atStepStart;
+  return respondToContact(w, proxy, ContactResponse::Project, dt);
+}
+
+/// The penalty response on the same proxy, over a step of 1 ms.
+ContactResolution penaltyForces(ContactWorld& w, MatX3 V, const MatX3i& F, MatX3* v, MatX3& f) {
+  ContactProxy proxy;
+  proxy.nodes = &V;
+  proxy.velocity = v ? v->data() : nullptr;
+  proxy.faces = &F;
+  return respondToContact(w, proxy, ContactResponse::Penalty, 1e-3, f.data());
+}
+
 TEST(TriangleContact, AThinTipInTheMiddleOfATriangleIsFoundWhereVerticesMissIt) {
   ContactParams params;
   params.thickness = 1e-4;
@@ -98,7 +118,7 @@ TEST(ResolveSurfaceContacts, AThinTipLeavesNoTrianglePointInsideAndFeelsTheImpul
   const MatX3 before = p.V;
   const VecX invMass = VecX::Constant(4, 1.0 / 0.002);  // 2 g vertices
   const Real dt = 1e-3;
-  const ContactResolution res = resolveSurfaceContacts(w, p.V, p.F, invMass, dt);
+  const ContactResolution res = projectSurface(w, p.V, p.F, invMass, dt);
   EXPECT_EQ(res.contacts, 1);
   EXPECT_NEAR(res.maxDepth, 9e-4, 1e-8);
   // Vertex-sphere contact would have left the patch untouched.
@@ -136,7 +156,7 @@ TEST(ResolveSurfaceContacts, ALightBodySharesTheCorrectionInProportionToInverseM
     EXPECT_EQ(w.inverseMass(b), bodyMass > 0 ? 1.0 / bodyMass : 0.0);
     Patch p = squarePatch(0.01);
     const MatX3 before = p.V;
-    resolveSurfaceContacts(w, p.V, p.F, invMass, dt);
+    projectSurface(w, p.V, p.F, invMass, dt);
     const Real depth = 9e-4;
     const Real share = bodyMass > 0 ? W / (W + 1.0 / bodyMass) : 1.0;
     // The contact point (bary 0.4, 0.4, 0.2 of vertices 0, 1, 2) moved down by share * depth
@@ -181,7 +201,13 @@ TEST(ResolveSurfaceContacts, EmbeddedTrianglesMoveTheirNodesAndRemoveTheInwardVe
   invMass[7] = 0;  // an immovable node
   VecX vel = VecX::Zero(24);
   for (int n = 0; n < 8; ++n) vel[3 * n + 2] = 0.1;  // moving up, into the tool
-  resolveEmbeddedSurfaceContacts(w, nodes, ids, wts, p0.F, invMass, 1e-3, vel.data());
+  ContactProxy proxy;
+  proxy.nodes = &nodes;
+  proxy.invMass = &invMass;
+  proxy.velocity = vel.data();
+  proxy.faces = &p0.F;
+  proxy.embedding = embeddingOf(ids, wts);
+  respondToContact(w, proxy, ContactResponse::Project, 1e-3);
   Patch surf;
   surf.F = p0.F;
   surf.V = 0.5 * (nodes.topRows(4) + nodes.bottomRows(4));
@@ -220,7 +246,7 @@ TEST(PenaltyContact, TheForceIsPressureStiffnessTimesAreaTimesDepthSpreadByBaryc
   w.setPose(b, Vec3(0.006, 0.002, r - 4e-4));
   const Patch p = squarePatch(0.01);
   MatX3 f = MatX3::Zero(4, 3);
-  const ContactResolution res = addPenaltyContactForces(w, p.V, p.F, nullptr, 1e-3, f);
+  const ContactResolution res = penaltyForces(w, p.V, p.F, nullptr, f);
   EXPECT_EQ(res.contacts, 1);
   const Real area = 0.5 * 0.01 * 0.01, depth = 4e-4 + 1e-4;
   const Real fn = params.stiffness * area * depth;
@@ -237,7 +263,7 @@ TEST(PenaltyContact, TheForceIsPressureStiffnessTimesAreaTimesDepthSpreadByBaryc
   MatX3 v = MatX3::Zero(4, 3);
   v.col(2).setConstant(0.1);
   MatX3 f2 = MatX3::Zero(4, 3);
-  addPenaltyContactForces(w2, p.V, p.F, &v, 1e-3, f2);
+  penaltyForces(w2, p.V, p.F, &v, f2);
   EXPECT_NEAR(-f2.col(2).sum(), fn + 500 * area * 0.1, 1e-9 * fn);
 }
 
@@ -253,7 +279,7 @@ TEST(ContactFriction, StaticFrictionDragsTheTouchedPointAlongAndFrictionlessDoes
     w.setPose(b, Vec3(0.0045, 0.002, 0.003 - 3e-4));
     Patch p = squarePatch(0.01);
     const MatX3 x0 = p.V;
-    resolveSurfaceContacts(w, p.V, p.F, VecX::Constant(4, 1000.0), 1e-3, nullptr, &x0);
+    projectSurface(w, p.V, p.F, VecX::Constant(4, 1000.0), 1e-3, &x0);
     *reaction = w.reactionForce(b);
     return p.V;
   };
@@ -306,6 +332,57 @@ TEST(ContactScene, MethodStiffnessDampingAndFrictionAreParsedStrictly) {
   fails({{"method", "penalty"}, {"stiffness", -1}}, "/contact/stiffness");
   fails({{"method", "penalty"}, {"damping", -1}}, "/contact/damping");
   fails({{"friction", -0.1}}, "/contact/friction");
+}
+
+TEST(ContactProxy, AProxyThatDoesNotDescribeWhatTheResponseNeedsIsRefusedInOneLine) {
+  ContactWorld w;
+  w.setPose(w.addBody(probeShape(0.002, 0.0, 0.0, Vec3::UnitZ())), Vec3(0.005, 0.005, 0.0));
+  Patch p = squarePatch(0.01);
+  const VecX invMass = VecX::Constant(3, 1.0);  // one short
+  const auto message = [&](ContactProxy proxy, ContactResponse r, Real* force) {
+    try {
+      respondToContact(w, proxy, r, 1e-3, force);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  ContactProxy proxy;
+  EXPECT_NE(message(proxy, ContactResponse::Project, nullptr).find("proxy.nodes"),
+            std::string::npos);
+  proxy.nodes = &p.V;
+  proxy.invMass = &invMass;
+  EXPECT_NE(message(proxy, ContactResponse::Project, nullptr).find("proxy.invMass"),
+            std::string::npos);
+  EXPECT_NE(message(proxy, ContactResponse::Penalty, nullptr).find("proxy.faces"),
+            std::string::npos);
+  proxy.faces = &p.F;
+  EXPECT_NE(message(proxy, ContactResponse::Penalty, nullptr).find("force array"),
+            std::string::npos);
+  const VecX radii = VecX::Constant(4, 1e-3);
+  proxy.radii = &radii;
+  EXPECT_NE(message(proxy, ContactResponse::Project, nullptr).find("proxy.radii"),
+            std::string::npos);
+  // Nothing was moved by a refused call.
+  EXPECT_EQ(p.V, squarePatch(0.01).V);
+}
+
+TEST(ContactProxy, DisplayProjectionMovesPointsOutWithoutReaction) {
+  ContactWorld w;
+  const int b = w.addBody(probeShape(0.002, 0.0, 0.0, Vec3::UnitZ()));
+  w.setPose(b, Vec3(0.0, 0.0, 0.0015));
+  MatX3 points(2, 3);
+  points << 0, 0, 0,  //
+      0.01, 0, 0;
+  ContactProxy proxy;
+  proxy.nodes = &points;
+  const ContactResolution r = respondToContact(w, proxy, ContactResponse::Display, 1e-3);
+  EXPECT_EQ(r.contacts, 1);
+  EXPECT_NEAR(r.maxDepth, 0.0005 + w.params().thickness, 1e-9);
+  EXPECT_NEAR((points.row(0).transpose() - Vec3(0, 0, 0.0015)).norm(), 0.002 + w.params().thickness,
+              1e-9);
+  EXPECT_EQ(points(1, 0), 0.01);
+  EXPECT_EQ(w.reactionForce(b), Vec3::Zero());
 }
 
 }  // namespace

@@ -1,12 +1,15 @@
-// The contact responses every model shares (contact.h): projection of proxies, embedded and
-// surface contacts, penalty forces, and the prescribed-position drivers. The world itself is in
-// contact_world.cpp.
+// The contact responses every model shares (contact.h): the proxy description's two entry points,
+// respondToContact() (projection of spheres, embedded spheres and surfaces, penalty forces,
+// display-level projection) and solveWithContactConstraints() (prescribed positions). The world
+// itself is in contact_world.cpp.
 #include <deform/contact.h>
 #include <deform/error.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 namespace deform {
 
@@ -60,10 +63,10 @@ class BodyExchange {
   std::vector<Vec3> m_moved;
 };
 
-}  // namespace
-
-ContactResolution resolveContacts(ContactWorld& world, MatX3& x, const VecX& invMass, Real dt,
-                                  MatX3* v, const VecX* radii) {
+/// Proxy spheres that are the nodes themselves (ContactResponse::Project without faces or
+/// embedding). vel: 3 #N node-major or nullptr.
+ContactResolution projectSpheres(ContactWorld& world, MatX3& x, const VecX& invMass, Real dt,
+                                 Real* vel, const VecX* radii) {
   ContactResolution res;
   BodyExchange bodies(world);
   const int passes = std::max(world.params().passes, 1);
@@ -81,10 +84,11 @@ ContactResolution resolveContacts(ContactWorld& world, MatX3& x, const VecX& inv
       const Vec3 dx = share * depth * c.normal;
       x.row(c.proxy) += dx.transpose();
       Vec3 impulsePerMass = dx / dt;
-      if (v) {
-        const Real vn = v->row(c.proxy).dot(c.normal);
+      if (vel) {
+        Eigen::Map<Vec3> v(vel + 3 * c.proxy);
+        const Real vn = v.dot(c.normal);
         if (vn < 0) {
-          v->row(c.proxy) -= (share * vn * c.normal).transpose();
+          v -= share * vn * c.normal;
           impulsePerMass -= share * vn * c.normal;
         }
       }
@@ -96,10 +100,13 @@ ContactResolution resolveContacts(ContactWorld& world, MatX3& x, const VecX& inv
   return res;
 }
 
-ContactResolution resolveEmbeddedContacts(ContactWorld& world, MatX3& nodes,
-                                          const Eigen::Ref<const EmbeddingIds>& ids,
-                                          const Eigen::Ref<const EmbeddingWeights>& weights,
-                                          const VecX& invMass, Real dt, Real* nodeVelocity) {
+/// Proxy spheres (of the contact thickness) embedded in the nodes: each correction d n is spread
+/// over the point's movable nodes as dx_a = W(s,a) d n / sum_b W(s,b)^2, Gauss-Seidel over the
+/// contacts for up to 4 x passes passes.
+ContactResolution projectEmbeddedSpheres(ContactWorld& world, MatX3& nodes,
+                                         const Eigen::Ref<const EmbeddingIds>& ids,
+                                         const Eigen::Ref<const EmbeddingWeights>& weights,
+                                         const VecX& invMass, Real dt, Real* nodeVelocity) {
   ContactResolution res;
   const Eigen::Index S = ids.rows(), K = ids.cols();
   MatX3 points(S, 3);
@@ -157,8 +164,6 @@ ContactResolution resolveEmbeddedContacts(ContactWorld& world, MatX3& nodes,
   }
   return res;
 }
-
-namespace {
 
 /// Below this barycentric share of movable nodes a triangle contact is left to its other
 /// triangles (and the fixed or grasped nodes that hold it).
@@ -343,128 +348,210 @@ ContactResolution penaltyTriangleForces(ContactWorld& world, const MatX3& x, con
   return res;
 }
 
+/// Display-level projection: each point inside an instrument goes onto its surface plus the
+/// thickness, with no reaction.
+ContactResolution projectPointsOut(ContactWorld& world, MatX3& points) {
+  ContactResolution res;
+  const std::vector<Contact> contacts = world.query(points);
+  res.contacts = static_cast<int>(contacts.size());
+  for (const Contact& c : contacts) {
+    res.maxDepth = std::max(res.maxDepth, c.depth);
+    points.row(c.proxy) += (c.depth * c.normal).transpose();
+  }
+  return res;
+}
+
+const char* responseName(ContactResponse r) {
+  switch (r) {
+    case ContactResponse::Project:
+      return "Project";
+    case ContactResponse::Penalty:
+      return "Penalty";
+    case ContactResponse::Display:
+      return "Display";
+  }
+  return "?";
+}
+
+/// A plugin's proxy that does not describe what its response needs is a programmer error; it is
+/// reported in one line naming the field rather than read out of bounds.
+void checkProxy(const ContactProxy& p, ContactResponse r, Real dt, const Real* force) {
+  const auto fail = [r](const std::string& what) {
+    throw std::invalid_argument(std::string("respondToContact(") + responseName(r) + "): " + what);
+  };
+  if (!p.nodes) fail("proxy.nodes is null");
+  const Eigen::Index n = p.nodes->rows();
+  const ContactEmbedding& e = p.embedding;
+  if (e.points > 0 && (!e.ids || !e.weights || e.perPoint < 1))
+    fail("proxy.embedding has points but no ids, weights or columns");
+  const Eigen::Index points = e.points > 0 ? e.points : n;
+  if (p.radii && (p.faces || e.points > 0 || p.radii->size() != points))
+    fail("proxy.radii are for sphere proxies that are the nodes, one per node");
+  if (p.atStepStart && p.atStepStart->rows() != n) fail("proxy.atStepStart has not #nodes rows");
+  if (r == ContactResponse::Display) {
+    if (e.points > 0) fail("display-level projection moves points, not embedded nodes");
+    return;
+  }
+  if (!(dt > 0)) fail("dt must be positive");
+  if (r == ContactResponse::Penalty) {
+    if (!p.faces) fail("penalty forces act on surface triangles: proxy.faces is null");
+    if (!force) fail("penalty forces need a force array");
+    return;
+  }
+  if (!p.invMass || p.invMass->size() != n) fail("proxy.invMass must hold one value per node");
+}
+
 }  // namespace
 
-ContactResolution resolveSurfaceContacts(ContactWorld& world, MatX3& x, const MatX3i& F,
-                                         const VecX& invMass, Real dt, MatX3* v, const MatX3* x0) {
-  return resolveTriangleContacts(world, x, SurfaceMap{}, F, invMass, dt, v ? v->data() : nullptr,
-                                 x0);
-}
-
-ContactResolution resolveEmbeddedSurfaceContacts(ContactWorld& world, MatX3& nodes,
-                                                 const Eigen::Ref<const EmbeddingIds>& ids,
-                                                 const Eigen::Ref<const EmbeddingWeights>& weights,
-                                                 const MatX3i& F, const VecX& invMass, Real dt,
-                                                 Real* nodeVelocity, const MatX3* nodes0) {
-  return resolveTriangleContacts(world, nodes, SurfaceMap{&ids, &weights}, F, invMass, dt,
-                                 nodeVelocity, nodes0);
-}
-
-ContactResolution addPenaltyContactForces(ContactWorld& world, const MatX3& x, const MatX3i& F,
-                                          const MatX3* v, Real dt, MatX3& force) {
-  return penaltyTriangleForces(world, x, SurfaceMap{}, F, v ? v->data() : nullptr, dt,
-                               force.data());
-}
-
-ContactResolution addEmbeddedPenaltyContactForces(ContactWorld& world, const MatX3& nodes,
-                                                  const Eigen::Ref<const EmbeddingIds>& ids,
-                                                  const Eigen::Ref<const EmbeddingWeights>& weights,
-                                                  const MatX3i& F, const Real* nodeVelocity,
-                                                  Real dt, Real* nodeForce) {
-  return penaltyTriangleForces(world, nodes, SurfaceMap{&ids, &weights}, F, nodeVelocity, dt,
-                               nodeForce);
+ContactResolution respondToContact(ContactWorld& world, const ContactProxy& proxy,
+                                   ContactResponse response, Real dt, Real* force) {
+  checkProxy(proxy, response, dt, force);
+  const ContactEmbedding& e = proxy.embedding;
+  const bool embedded = e.points > 0;
+  const Eigen::Map<const EmbeddingIds> idsMap(e.ids, e.points, e.perPoint);
+  const Eigen::Map<const EmbeddingWeights> weightsMap(e.weights, e.points, e.perPoint);
+  const Eigen::Ref<const EmbeddingIds> ids(idsMap);
+  const Eigen::Ref<const EmbeddingWeights> weights(weightsMap);
+  const SurfaceMap map = embedded ? SurfaceMap{&ids, &weights} : SurfaceMap{};
+  MatX3& x = *proxy.nodes;
+  switch (response) {
+    case ContactResponse::Display:
+      return projectPointsOut(world, x);
+    case ContactResponse::Penalty:
+      return penaltyTriangleForces(world, x, map, *proxy.faces, proxy.velocity, dt, force);
+    case ContactResponse::Project:
+      break;
+  }
+  if (proxy.faces)
+    return resolveTriangleContacts(world, x, map, *proxy.faces, *proxy.invMass, dt, proxy.velocity,
+                                   proxy.atStepStart);
+  if (embedded)
+    return projectEmbeddedSpheres(world, x, ids, weights, *proxy.invMass, dt, proxy.velocity);
+  return projectSpheres(world, x, *proxy.invMass, dt, proxy.velocity, proxy.radii);
 }
 
 const char* contactMethodName(ContactMethod m) {
   return m == ContactMethod::Penalty ? "penalty" : "projection";
 }
 
-int projectPointsOut(ContactWorld& world, MatX3& points) {
-  const std::vector<Contact> contacts = world.query(points);
-  for (const Contact& c : contacts) points.row(c.proxy) += (c.depth * c.normal).transpose();
-  return static_cast<int>(contacts.size());
-}
-
 namespace {
 
-StepStatus solveWithConstraints(ContactWorld& world, const StepInput& in,
-                                const ContactModelHooks& model, const MatX3i* faces,
-                                const std::vector<int>& immovable, int maxRounds) {
-  const int bodies = world.numBodies();
-  std::vector<std::vector<int>> nodes(bodies);
-  std::vector<std::vector<Vec3>> targets(bodies);
-  std::vector<int> owner;  // body of each constrained node, -1 if free
-  std::vector<int> lastBodies;
-  StepStatus status = StepStatus::Ok;
-  for (int round = 0; round < std::max(maxRounds, 1); ++round) {
-    const MatX3& x = model.nodes();
-    owner.resize(static_cast<size_t>(x.rows()), -1);
-    bool added = false;
-    // Nodes within twice the thickness count as touching and stay prescribed where they are (a
-    // node set exactly on the skin would otherwise be free in the next step, be pulled back in
-    // by the tissue and slide off the instrument); deeper ones go onto the skin.
+/// The prescribed positions one solveWithContactConstraints() step has collected so far: per
+/// instrument, the nodes it holds and their targets. A node once held stays with its target.
+class HeldNodes {
+ public:
+  HeldNodes(const ContactWorld& world, const std::vector<int>& immovable)
+      : m_immovable(immovable),
+        m_nodes(size_t(world.numBodies())),
+        m_targets(size_t(world.numBodies())) {}
+
+  bool free(int node) const {
+    return m_owner[size_t(node)] < 0 &&
+           !std::binary_search(m_immovable.begin(), m_immovable.end(), node);
+  }
+  void hold(int node, int body, const Vec3& target) {
+    m_owner[size_t(node)] = body;
+    m_nodes[size_t(body)].push_back(node);
+    m_targets[size_t(body)].push_back(target);
+  }
+  void resize(Eigen::Index nodes) { m_owner.resize(size_t(nodes), -1); }
+
+  /// Nodes within twice the thickness count as touching and stay prescribed where they are (a
+  /// node set exactly on the skin would otherwise be free in the next step, be pulled back in by
+  /// the tissue and slide off the instrument); deeper ones go onto the skin. True when a node
+  /// deeper than the thickness was added.
+  bool addPenetratingNodes(ContactWorld& world, const MatX3& x) {
     const Real t = world.params().thickness;
     const VecX radii = VecX::Constant(x.rows(), 2 * t);
+    bool added = false;
     for (const Contact& c : world.query(x, &radii)) {
-      if (owner[c.proxy] >= 0 || std::binary_search(immovable.begin(), immovable.end(), c.proxy))
-        continue;
-      owner[c.proxy] = c.body;
-      nodes[c.body].push_back(c.proxy);
-      targets[c.body].push_back(x.row(c.proxy).transpose() +
-                                std::max(c.depth - t, Real(0)) * c.normal);
+      if (!free(c.proxy)) continue;
+      hold(c.proxy, c.body, x.row(c.proxy).transpose() + std::max(c.depth - t, Real(0)) * c.normal);
       added = c.depth > t || added;
     }
-    if (faces) {
-      for (const TriangleContact& c : world.queryTriangles(x, *faces)) {
-        // Spread d n over the triangle's free, movable vertices (minimum norm).
-        Real sum2 = 0;
-        const auto free = [&](int a) {
-          const int v = (*faces)(c.triangle, a);
-          return owner[v] < 0 && !std::binary_search(immovable.begin(), immovable.end(), v);
-        };
-        Real share = 0;
-        for (int a = 0; a < 3; ++a)
-          if (free(a)) {
-            sum2 += c.bary[a] * c.bary[a];
-            share += c.bary[a];
-          }
-        if (!(sum2 > 0) || share < kMinMovableShare) continue;
-        for (int a = 0; a < 3; ++a) {
-          if (!free(a)) continue;
-          const int v = (*faces)(c.triangle, a);
-          owner[v] = c.body;
-          nodes[c.body].push_back(v);
-          targets[c.body].push_back(x.row(v).transpose() + (c.bary[a] * c.depth / sum2) * c.normal);
+    return added;
+  }
+
+  /// Every triangle within the thickness prescribes its free, movable vertices: the smallest
+  /// motion that moves its deepest point by d n. True when a triangle inside an instrument (depth
+  /// over the thickness) added vertices.
+  bool addTriangleVertices(ContactWorld& world, const MatX3& x, const MatX3i& faces) {
+    const Real t = world.params().thickness;
+    bool added = false;
+    for (const TriangleContact& c : world.queryTriangles(x, faces)) {
+      Real sum2 = 0, share = 0;
+      for (int a = 0; a < 3; ++a)
+        if (free(faces(c.triangle, a))) {
+          sum2 += c.bary[a] * c.bary[a];
+          share += c.bary[a];
         }
-        added = c.depth > t || added;  // the triangle is inside the instrument itself
+      if (!(sum2 > 0) || share < kMinMovableShare) continue;
+      for (int a = 0; a < 3; ++a) {
+        const int v = faces(c.triangle, a);
+        if (!free(v)) continue;
+        hold(v, c.body, x.row(v).transpose() + (c.bary[a] * c.depth / sum2) * c.normal);
       }
-      // A vertex moved along the normal at the triangle's deepest point can still be inside a
-      // curved instrument: its target goes onto the skin like a penetrating node's.
-      for (int b = 0; b < bodies; ++b) {
-        if (targets[b].empty()) continue;
-        MatX3 at(static_cast<Eigen::Index>(targets[b].size()), 3);
-        for (size_t k = 0; k < targets[b].size(); ++k) at.row(k) = targets[b][k].transpose();
-        for (const Contact& c : world.query(at)) targets[b][c.proxy] += c.depth * c.normal;
-      }
+      added = c.depth > t || added;
     }
-    if (!added && round > 0) break;
+    return added;
+  }
+
+  /// A vertex moved along the normal at a triangle's deepest point can still be inside a curved
+  /// instrument: its target goes onto the skin like a penetrating node's.
+  void pushTargetsOut(ContactWorld& world) {
+    for (std::vector<Vec3>& targets : m_targets) {
+      if (targets.empty()) continue;
+      MatX3 at(static_cast<Eigen::Index>(targets.size()), 3);
+      for (size_t k = 0; k < targets.size(); ++k) at.row(Eigen::Index(k)) = targets[k].transpose();
+      for (const Contact& c : world.query(at)) targets[size_t(c.proxy)] += c.depth * c.normal;
+    }
+  }
+
+  /// `in` with one NodeGrasp per instrument that holds nodes appended; `bodies` gets their order.
+  StepInput constrained(const StepInput& in, std::vector<int>& bodies) const {
     StepInput aug = in;
-    lastBodies.clear();
-    for (int b = 0; b < bodies; ++b) {
-      if (nodes[b].empty()) continue;
+    bodies.clear();
+    for (size_t b = 0; b < m_nodes.size(); ++b) {
+      if (m_nodes[b].empty()) continue;
       NodeGrasp g;
       g.tool = -1;
-      g.nodes = nodes[b];
-      g.targets.resize(static_cast<Eigen::Index>(nodes[b].size()), 3);
-      for (size_t k = 0; k < nodes[b].size(); ++k) g.targets.row(k) = targets[b][k].transpose();
+      g.nodes = m_nodes[b];
+      g.targets.resize(static_cast<Eigen::Index>(m_nodes[b].size()), 3);
+      for (size_t k = 0; k < m_nodes[b].size(); ++k)
+        g.targets.row(Eigen::Index(k)) = m_targets[b][k].transpose();
       aug.nodeConstraints.push_back(std::move(g));
-      lastBodies.push_back(b);
+      bodies.push_back(int(b));
     }
-    status = model.solve(aug);
+    return aug;
+  }
+
+ private:
+  const std::vector<int>& m_immovable;
+  std::vector<int> m_owner;  // body holding each node, -1 if free
+  std::vector<std::vector<int>> m_nodes;
+  std::vector<std::vector<Vec3>> m_targets;
+};
+
+/// The rounds of detection and solve at the instruments' current poses.
+StepStatus solveWithConstraints(ContactWorld& world, const ContactProxy& proxy, const StepInput& in,
+                                const ContactConstraintSolver& solver) {
+  HeldNodes held(world, solver.immovable);
+  std::vector<int> lastBodies;
+  StepStatus status = StepStatus::Ok;
+  for (int round = 0; round < std::max(solver.maxRounds, 1); ++round) {
+    const MatX3& x = *proxy.nodes;
+    held.resize(x.rows());
+    bool added = held.addPenetratingNodes(world, x);
+    if (proxy.faces) {
+      added = held.addTriangleVertices(world, x, *proxy.faces) || added;
+      held.pushTargetsOut(world);
+    }
+    if (!added && round > 0) break;
+    status = solver.solve(held.constrained(in, lastBodies));
     if (status != StepStatus::Ok) return status;
   }
-  if (model.graspForces) {
-    const std::vector<Vec3> f = model.graspForces();
+  if (solver.graspForces) {
+    const std::vector<Vec3> f = solver.graspForces();
     for (size_t k = 0; k < lastBodies.size(); ++k) {
       const size_t idx = in.grasps.size() + k;
       if (idx < f.size()) world.addReaction(lastBodies[k], f[idx], world.position(lastBodies[k]));
@@ -473,10 +560,9 @@ StepStatus solveWithConstraints(ContactWorld& world, const StepInput& in,
   return status;
 }
 
-StepStatus alongInstrumentPath(ContactWorld& world, const StepInput& in,
-                               const ContactModelHooks& model, const MatX3i* faces,
-                               const std::vector<int>& immovable, int maxRounds,
-                               Real maxStepFraction) {
+/// solveWithConstraints() in sub-steps along the instruments' path since the settled poses.
+StepStatus alongInstrumentPath(ContactWorld& world, const ContactProxy& proxy, const StepInput& in,
+                               const ContactConstraintSolver& solver) {
   const int nb = world.numBodies();
   std::vector<Vec3> from(nb), to(nb);
   std::vector<Mat3> rot(nb);
@@ -485,7 +571,7 @@ StepStatus alongInstrumentPath(ContactWorld& world, const StepInput& in,
     from[b] = world.settledPosition(b);
     to[b] = world.position(b);
     rot[b] = world.rotation(b);
-    const Real len = maxStepFraction * world.thinnestRadius(b);
+    const Real len = solver.maxStepFraction * world.thinnestRadius(b);
     if (len > 0 && std::isfinite(len))
       steps = std::max(steps, static_cast<int>(std::ceil((to[b] - from[b]).norm() / len)));
   }
@@ -495,7 +581,7 @@ StepStatus alongInstrumentPath(ContactWorld& world, const StepInput& in,
     const Real a = Real(s) / steps;
     for (int b = 0; b < nb; ++b) world.setPose(b, (1 - a) * from[b] + a * to[b], rot[b]);
     world.clearReactions();
-    status = solveWithConstraints(world, in, model, faces, immovable, maxRounds);
+    status = solveWithConstraints(world, proxy, in, solver);
     if (status != StepStatus::Ok) break;
   }
   for (int b = 0; b < nb; ++b) world.setPose(b, to[b], rot[b]);
@@ -505,30 +591,17 @@ StepStatus alongInstrumentPath(ContactWorld& world, const StepInput& in,
 
 }  // namespace
 
-StepStatus solveWithContactConstraints(ContactWorld& world, const StepInput& in,
-                                       const ContactModelHooks& model,
-                                       const std::vector<int>& immovable, int maxRounds) {
-  return solveWithConstraints(world, in, model, nullptr, immovable, maxRounds);
-}
-
-StepStatus solveWithSurfaceContactConstraints(ContactWorld& world, const StepInput& in,
-                                              const ContactModelHooks& model, const MatX3i& faces,
-                                              const std::vector<int>& immovable, int maxRounds) {
-  return solveWithConstraints(world, in, model, &faces, immovable, maxRounds);
-}
-
-StepStatus solveAlongInstrumentPath(ContactWorld& world, const StepInput& in,
-                                    const ContactModelHooks& model,
-                                    const std::vector<int>& immovable, int maxRounds,
-                                    Real maxStepFraction) {
-  return alongInstrumentPath(world, in, model, nullptr, immovable, maxRounds, maxStepFraction);
-}
-
-StepStatus solveSurfaceAlongInstrumentPath(ContactWorld& world, const StepInput& in,
-                                           const ContactModelHooks& model, const MatX3i& faces,
-                                           const std::vector<int>& immovable, int maxRounds,
-                                           Real maxStepFraction) {
-  return alongInstrumentPath(world, in, model, &faces, immovable, maxRounds, maxStepFraction);
+StepStatus solveWithContactConstraints(ContactWorld& world, const ContactProxy& proxy,
+                                       const StepInput& in, const ContactConstraintSolver& solver) {
+  if (!proxy.nodes || !solver.solve)
+    throw std::invalid_argument("solveWithContactConstraints: proxy.nodes or solver.solve is null");
+  if (proxy.embedding.points > 0 || proxy.radii)
+    throw std::invalid_argument(
+        "solveWithContactConstraints: the proxy's points must be its nodes (no embedding, radii)");
+  if (!std::is_sorted(solver.immovable.begin(), solver.immovable.end()))
+    throw std::invalid_argument("solveWithContactConstraints: solver.immovable must be sorted");
+  return solver.followInstrumentPath ? alongInstrumentPath(world, proxy, in, solver)
+                                     : solveWithConstraints(world, proxy, in, solver);
 }
 
 }  // namespace deform

@@ -11,8 +11,11 @@
 //
 //   a proxy sphere (c, r) penetrates instrument B when  phi_B(c) < r,  d = r - phi_B(c),
 //
-// phi_B the signed distance to B's surface (negative inside). The shared helper projectContacts()
-// resolves them the same way for every model: c <- c + d n (the non-penetration projection of
+// phi_B the signed distance to B's surface (negative inside). A model describes its proxy once
+// (ContactProxy: nodes, masses, shape, embedding) and picks how it answers: respondToContact()
+// after its own solve (projection, penalty forces, or display-level projection), or
+// solveWithContactConstraints() for models that solve for positions. Projection resolves
+// contacts the same way for every model: c <- c + d n (the non-penetration projection of
 // Mueller et al. 2007, "Position based dynamics", Sec. 3.5, Eq. (9)-(10) for a static collider),
 // and, for models with a velocity state, the inward normal velocity is removed (an inelastic
 // contact). The impulse the tissue received, m (dx / dt + dv), divided by dt, is the force on the
@@ -32,7 +35,7 @@ namespace deform {
 /// How force-based models answer contact (scene key "contact.method").
 ///  - Projection: positions are projected out of the instruments (every model; the default).
 ///  - Penalty: force-based models (massspring, fem_hex dynamic) receive a penalty force on their
-///    surface triangles instead, f = A (k_A d - c_A min(v_n, 0)) n (see addPenaltyContactForces);
+///    surface triangles instead, f = A (k_A d - c_A min(v_n, 0)) n (see ContactResponse::Penalty);
 ///    other models keep the projection.
 enum class ContactMethod { Projection, Penalty };
 
@@ -41,7 +44,7 @@ struct ContactParams {
   /// m: radius of the sphere around each node that is kept out of the instruments (the contact
   /// skin); models whose proxy is already a sphere set use their own radii instead.
   Real thickness = 1e-4;
-  /// Projection passes per resolveContacts() call: a node pushed out of one part of an
+  /// Projection passes per respondToContact() call: a node pushed out of one part of an
   /// instrument into another is fixed by the next pass.
   int passes = 2;
   ContactMethod method = ContactMethod::Projection;
@@ -52,7 +55,8 @@ struct ContactParams {
   /// Pa s/m (N s/m^3), penalty only: pressure per unit approach speed, c_A A max(-v_n, 0).
   Real damping = 1e3;
   /// Coulomb friction coefficient mu (static = kinetic) of the projection response of
-  /// resolveSurfaceContacts() (0: frictionless, the behaviour before it existed).
+  /// ContactResponse::Project on a surface proxy (0: frictionless, the behaviour before it
+  /// existed).
   Real friction = 0;
 };
 
@@ -175,148 +179,113 @@ class ContactWorld {
   long long m_pairsTested = 0, m_contactsFound = 0;
 };
 
-/// What one resolveContacts() call did.
-struct ContactResolution {
-  int contacts = 0;   ///< proxies found penetrating in the first pass
-  Real maxDepth = 0;  ///< m, deepest penetration found in the first pass
-};
-
-/// The shared contact response for every model whose proxy is its own nodes (or spheres it moves
-/// like nodes): each penetrating proxy i with 0 < invMass[i] is moved out, x_i += d n; when v is
-/// given its inward normal velocity is removed (v_i -= min(v_i . n, 0) n) and its position change
-/// is not added to v (a model that derives v from positions, like PBD, passes v = nullptr). The
-/// opposite of m_i (dx_i / dt + dv_i) / dt is added to the instrument's reaction. Repeats for
-/// world.params().passes passes. x: #P by 3 (m); invMass: #P (1/kg, 0 = immovable); radii as in
-/// ContactWorld::query(); v: #P by 3 (m/s) or nullptr.
-ContactResolution resolveContacts(ContactWorld& world, MatX3& x, const VecX& invMass, Real dt,
-                                  MatX3* v = nullptr, const VecX* radii = nullptr);
-
-/// Display-level projection of points the model derives from its proxy (a skinned or
-/// interpolated surface): each point inside an instrument is moved onto its surface (plus the
-/// contact thickness). No reaction: the proxy's contact already carried the force. Returns the
-/// number of points moved.
-int projectPointsOut(ContactWorld& world, MatX3& points);
-
-/// Contact as prescribed positions, for models whose solver honours GraspInput as Dirichlet
-/// conditions (quasi-static and coupled solvers): each round calls solve(in') with in' = in plus
-/// one GraspInput per instrument (tool = -1) holding the nodes that penetrate it, with targets
-/// pushed out onto its surface (plus the thickness; nodes touching it, within twice the
-/// thickness, are held where they are). Round 0 tests the nodes at the step's start, each later
-/// round the nodes the previous solve produced; a node once in the set stays (its target kept) and
-/// only new penetrations are added; rounds stop when none is added or after maxRounds. The appended
-/// inputs' graspForces() (the tissue's force on them) become the instruments' reaction. Nodes in
-/// `immovable` (sorted) are never added. Returns the last solve's status.
-struct ContactModelHooks {
-  std::function<StepStatus(const StepInput&)> solve;
-  std::function<const MatX3&()> nodes;
-  std::function<std::vector<Vec3>()> graspForces;  ///< may be empty: no reaction reported
-};
-StepStatus solveWithContactConstraints(ContactWorld& world, const StepInput& in,
-                                       const ContactModelHooks& model,
-                                       const std::vector<int>& immovable, int maxRounds);
-
-/// The same for quasi-static models, whose solves can be far apart along the instruments' path:
-/// the motion since the last settled poses is split into sub-steps of at most maxStepFraction of
-/// each instrument's thinnest radius, so that no node is swallowed whole between two solves (a
-/// node deeper than the radius would be pushed out of the wrong side); each sub-step runs
-/// solveWithContactConstraints() with the instruments there. The reaction is that of the last
-/// sub-step; the poses are settled at the end.
-StepStatus solveAlongInstrumentPath(ContactWorld& world, const StepInput& in,
-                                    const ContactModelHooks& model,
-                                    const std::vector<int>& immovable, int maxRounds,
-                                    Real maxStepFraction = 0.5);
-
-/// The same two with the model's surface triangles as proxy too (issue F8): faces is #F by 3 rows
-/// of model.nodes(). Besides the penetrating nodes, every triangle within the thickness of an
-/// instrument (ContactWorld::queryTriangles(), which finds a tool thinner than the vertex
-/// spacing) prescribes its not yet prescribed, movable vertices: x_a + b_a d n / sum_b b_b^2
-/// (the smallest motion of the vertices that moves the triangle's deepest point by d n).
-StepStatus solveWithSurfaceContactConstraints(ContactWorld& world, const StepInput& in,
-                                              const ContactModelHooks& model, const MatX3i& faces,
-                                              const std::vector<int>& immovable, int maxRounds);
-StepStatus solveSurfaceAlongInstrumentPath(ContactWorld& world, const StepInput& in,
-                                           const ContactModelHooks& model, const MatX3i& faces,
-                                           const std::vector<int>& immovable, int maxRounds,
-                                           Real maxStepFraction = 0.5);
-
 /// Row-major index and weight tables of an embedding (#S by K).
 using EmbeddingIds = Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using EmbeddingWeights = Eigen::Matrix<Real, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
-/// The same response for models whose collision proxy (their surface) is embedded in their nodes:
-/// surface point s = sum_k W(s,k) x_{I(s,k)}. Each penetrating point's correction d n is spread
-/// over its movable nodes as dx_a = W(s,a) d n / sum_b W(s,b)^2 (the smallest node motion that
-/// moves the point by d n), one contact after the other with the depth updated to the motion so
-/// far (Gauss-Seidel), for up to 4 x passes passes. Moved nodes lose their inward normal velocity
-/// when nodeVelocity (3 #N, node-major, m/s) is given. Reaction as in resolveContacts(). Proxy
-/// spheres have the contact thickness as radius.
-ContactResolution resolveEmbeddedContacts(ContactWorld& world, MatX3& nodes,
-                                          const Eigen::Ref<const EmbeddingIds>& ids,
-                                          const Eigen::Ref<const EmbeddingWeights>& weights,
-                                          const VecX& invMass, Real dt,
-                                          Real* nodeVelocity = nullptr);
+/// Proxy points embedded in a model's nodes: point s = sum_k W(s,k) x_{I(s,k)}, K weights per
+/// point (fem_hex's trilinear cells). Views the caller's row-major tables; build it with
+/// embeddingOf().
+struct ContactEmbedding {
+  const int* ids = nullptr;       ///< #S by K, row-major
+  const Real* weights = nullptr;  ///< #S by K, row-major
+  Eigen::Index points = 0;        ///< S
+  Eigen::Index perPoint = 0;      ///< K
+};
 
-/// The response on surface triangles, for models whose collision proxy is their surface
-/// (issue F8: "the surface triangles"): each triangle within the thickness of an instrument is
-/// pushed out at its deepest point p = sum_a b_a x_a (b its barycentric weights) by d n, the
-/// correction spread over its movable vertices as the smallest mass-weighted motion that moves
-/// p by d n (the PBD distribution of Mueller et al. 2007, Eq. (8), for the constraint
-/// C = n . (p - p0) - d with grad_{x_a} C = b_a n):
-///
-///   dx_a = w_a b_a d n / sum_b w_b b_b^2,   w the inverse masses,
-///
-/// contact after contact with the depth updated to the motion so far (Gauss-Seidel), for up to
-/// 4 x passes passes. A contact whose movable vertices hold less than a quarter of the
-/// barycentric weight is skipped (fixed or grasped vertices hold that point; the minimum-norm
-/// motion of a vertex of weight b grows like d / b). Points closer than the thickness include the
-/// vertices, so this replaces
-/// resolveContacts() on the surface vertices. With v, p's inward normal velocity is removed the
-/// same way (v_p . n -> 0) and dx is not added to v. With x0 (the positions at the step's start)
-/// and contact.friction mu > 0, Coulomb friction as positions (Macklin et al. 2014, "Unified
-/// particle physics for real-time applications", Sec. 6.1, Eq. (24)-(25)): the tangential
-/// motion of p relative to the instrument over the step, dt_p = [(p - p(x0)) -
-/// bodyDisplacement(p)]_tangent, is undone when |dt_p| < mu d (static), else shortened by
-/// mu d (kinetic); with v the same share of p's tangential velocity relative to the
-/// instrument is removed. The reaction on
-/// the instrument is minus the impulse given to the vertices, normal and tangential parts:
-/// -sum_a m_a (dx_a / dt + dv_a) / dt at p. x: #N by 3 (m); F: #F by 3 rows of x; invMass: #N
-/// (1/kg, 0 = immovable); v: #N by 3 (m/s) or nullptr; x0: #N by 3 (m) or nullptr (no friction).
-ContactResolution resolveSurfaceContacts(ContactWorld& world, MatX3& x, const MatX3i& F,
-                                         const VecX& invMass, Real dt, MatX3* v = nullptr,
-                                         const MatX3* x0 = nullptr);
+/// A ContactEmbedding viewing two row-major Eigen tables of the same shape (kept alive by the
+/// caller while the proxy is used).
+template <class Ids, class Weights>
+ContactEmbedding embeddingOf(const Eigen::DenseBase<Ids>& ids,
+                             const Eigen::DenseBase<Weights>& weights) {
+  static_assert(Ids::IsRowMajor && Weights::IsRowMajor, "embedding tables must be row-major");
+  return {ids.derived().data(), weights.derived().data(), ids.rows(), ids.cols()};
+}
 
-/// The same for a surface embedded in the nodes (fem_hex): surface vertex s = sum_k W(s,k)
-/// x_{I(s,k)} (ids, weights as in resolveEmbeddedContacts()); F: #F by 3 rows of the embedded
-/// surface. A triangle's deepest point is sum_a b_a sum_k W(a,k) x_{I(a,k)}, its correction
-/// spread over those nodes by the same minimum-norm rule. nodeVelocity: 3 #N (node-major, m/s)
-/// or nullptr; nodes0: the nodes at the step's start (friction) or nullptr.
-ContactResolution resolveEmbeddedSurfaceContacts(ContactWorld& world, MatX3& nodes,
-                                                 const Eigen::Ref<const EmbeddingIds>& ids,
-                                                 const Eigen::Ref<const EmbeddingWeights>& weights,
-                                                 const MatX3i& F, const VecX& invMass, Real dt,
-                                                 Real* nodeVelocity = nullptr,
-                                                 const MatX3* nodes0 = nullptr);
-
-/// Penalty contact (contact.method = penalty) for force-based models: every surface triangle
-/// within the thickness of an instrument receives, at its deepest point p, the force
+/// A model's collision proxy: the points kept out of the instruments, and how they hang on the
+/// nodes a contact response moves. One description for every model:
 ///
-///   f = max(0, A (k_A d - c_A min(v_n, 0))) n,   v_n = (v_p - bodyDisplacement(p) / dt) . n,
+///  - shape: with `faces`, the proxy is a surface (triangles over the points, each kept the
+///    contact thickness away from the instruments; finds a tool thinner than the point spacing);
+///    without, the points are spheres of `radii` (or of the contact thickness);
+///  - mapping: the points are the nodes themselves, or embedded in them (`embedding`), forces
+///    going back through the transposed weights.
 ///
-/// A the triangle's area, k_A = contact.stiffness (Pa/m), c_A = contact.damping (Pa s/m),
-/// distributed to the vertices as f_a = b_a f (the consistent load of a point force); -f is the
-/// instrument's reaction. The model adds `force` (N, #N by 3, accumulated into) to its external
-/// forces for the coming step. v: #N by 3 (m/s) or nullptr (no damping). Explicit: stable while
-/// k_A A dt^2 / m stays below about 1 (m the vertex mass).
-ContactResolution addPenaltyContactForces(ContactWorld& world, const MatX3& x, const MatX3i& F,
-                                          const MatX3* v, Real dt, MatX3& force);
+/// Every pointer views the model's own storage for the duration of the call.
+struct ContactProxy {
+  MatX3* nodes = nullptr;              ///< #N by 3 (m): the positions the response moves; required
+  const VecX* invMass = nullptr;       ///< #N (1/kg, 0 = immovable); required to move nodes
+  Real* velocity = nullptr;            ///< 3 #N node-major (m/s), or nullptr (no velocity state)
+  const MatX3* atStepStart = nullptr;  ///< nodes at the step's start (friction), or nullptr
+  const MatX3i* faces = nullptr;       ///< #F by 3 rows of the points: the surface shape
+  const VecX* radii = nullptr;         ///< #P sphere radii (m), spheres only; nullptr: thickness
+  ContactEmbedding embedding;          ///< empty (points == 0): the points are the nodes
+};
 
-/// The same on an embedded surface: f_a is spread to the nodes as W(a,k) f_a. nodeVelocity,
-/// nodeForce: 3 #N, node-major (nodeVelocity may be nullptr).
-ContactResolution addEmbeddedPenaltyContactForces(ContactWorld& world, const MatX3& nodes,
-                                                  const Eigen::Ref<const EmbeddingIds>& ids,
-                                                  const Eigen::Ref<const EmbeddingWeights>& weights,
-                                                  const MatX3i& F, const Real* nodeVelocity,
-                                                  Real dt, Real* nodeForce);
+/// How a model answers contact after its own solve (respondToContact()).
+///  - Project: the penetrating points are moved out by the smallest (mass-weighted) motion of
+///    their movable nodes, one contact after the other (Gauss-Seidel, contact.passes passes);
+///    with a velocity the inward normal velocity is removed, with atStepStart and a friction
+///    coefficient Coulomb friction acts as positions; the impulse given to the tissue, reversed,
+///    is the instruments' reaction. Mueller et al. 2007, "Position based dynamics", Sec. 3.5,
+///    Eq. (8)-(10); friction Macklin et al. 2014, Eq. (24)-(25).
+///  - Penalty: every surface triangle within the thickness receives the force
+///    f = max(0, A (k_A d - c_A min(v_n, 0))) n at its deepest point, added to `force` (3 #N
+///    node-major, N) through the barycentric and embedding weights; -f is the reaction. A the
+///    triangle's area, k_A = contact.stiffness, c_A = contact.damping, v_n the point's normal
+///    speed relative to the instrument. Needs `faces`. Explicit: stable while k_A A dt^2 / m
+///    stays below about 1 (m the vertex mass).
+///  - Display: points the model derives from a proxy already in contact (a skinned or
+///    interpolated surface) are moved onto the instruments' surface plus the thickness, with no
+///    reaction and no velocity. Needs neither masses nor faces; no embedding.
+enum class ContactResponse { Project, Penalty, Display };
+
+/// What one respondToContact() call did.
+struct ContactResolution {
+  int contacts = 0;   ///< proxies (points or triangles) in contact in the first pass
+  Real maxDepth = 0;  ///< m, deepest penetration found in the first pass
+};
+
+/// Keeps `proxy` out of the world's instruments by `response` over a step of dt (s). force: 3 #N
+/// node-major (N), accumulated into, for Penalty only. Throws deform::Error naming the
+/// inconsistent field when the proxy does not describe what the response needs.
+ContactResolution respondToContact(ContactWorld& world, const ContactProxy& proxy,
+                                   ContactResponse response, Real dt, Real* force = nullptr);
+
+/// How a model that solves for its positions (quasi-static or coupled solvers, whose step honours
+/// StepInput::nodeConstraints as Dirichlet conditions) answers contact: as prescribed positions.
+struct ContactConstraintSolver {
+  /// Solves the step with the given input (the model's own step body); the proxy's nodes hold
+  /// the result.
+  std::function<StepStatus(const StepInput&)> solve;
+  /// The forces the model's grasps and node constraints exert, as graspForces(); may be empty
+  /// (no reaction reported).
+  std::function<std::vector<Vec3>()> graspForces;
+  /// Nodes never held (sorted): the model's fixed nodes.
+  std::vector<int> immovable;
+  /// Rounds of detection and solve; stops earlier when a round adds no penetration.
+  int maxRounds = 1;
+  /// Quasi-static models, whose solves can be far apart along the instruments' path: the motion
+  /// since the last settled poses is split into sub-steps of at most maxStepFraction of each
+  /// instrument's thinnest radius, so that no node is swallowed whole between two solves (a node
+  /// deeper than the radius would be pushed out of the wrong side); the poses are settled at the
+  /// end and the reaction is that of the last sub-step.
+  bool followInstrumentPath = false;
+  Real maxStepFraction = 0.5;
+};
+
+/// Contact as prescribed positions: each round calls solver.solve(in') with in' = in plus one
+/// NodeGrasp per instrument (tool = -1) in nodeConstraints, holding the proxy nodes that
+/// penetrate it (with `faces`, also the free movable vertices of every triangle within the
+/// thickness: x_a + b_a d n / sum_b b_b^2), their targets pushed out onto its surface plus the
+/// thickness (nodes touching it, within twice the thickness, are held where they are). Round 0
+/// tests the nodes at the step's start, each later round those of the previous solve; a node
+/// once held stays (its target kept) and only new penetrations are added. The appended
+/// constraints' graspForces() become the instruments' reaction. solver.immovable are never
+/// held. The proxy's points are its nodes (no embedding, no radii; invMass and velocity unused).
+/// Returns the last solve's status.
+StepStatus solveWithContactConstraints(ContactWorld& world, const ContactProxy& proxy,
+                                       const StepInput& in, const ContactConstraintSolver& solver);
 
 /// "projection" or "penalty" (the scene's spelling).
 const char* contactMethodName(ContactMethod m);

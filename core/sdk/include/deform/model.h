@@ -156,8 +156,8 @@ struct StepInput {
   std::vector<PointLoad> loads;
   /// Rigid instruments to keep the model's collision proxy out of (deform/contact.h), at their
   /// poses for the end of the step; nullptr when the scene has none (no Bullet world exists).
-  /// Models with the "contact" capability call resolveContacts() (or query()) on it once their
-  /// own solve is done, so that no node ends the step inside an instrument.
+  /// Models with the "contact" capability describe their proxy and call respondToContact() (or
+  /// solveWithContactConstraints()) with it, so that no node ends the step inside an instrument.
   ContactWorld* contact = nullptr;
   /// Prescribed positions of the model's own nodes, on top of the grasps: what the contact
   /// drivers of deform/contact.h add when a model solves contact as constraints. graspForces()

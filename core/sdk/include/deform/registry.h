@@ -33,7 +33,10 @@
 // 4: ParamSpec gains the calibration fields (calibratable, bounds, scale; issue G2), appended
 // after the existing ones, and ModelInfo gains knob, presets and measures (issue G6): plugin
 // sources compile unchanged, binaries must be rebuilt.
-#define DEFORM_ABI_VERSION 4
+// 5: the contact responses of deform/contact.h become one proxy description (ContactProxy) and
+// two calls, respondToContact() and solveWithContactConstraints(), in place of ten functions
+// (issue G6): plugins with the contact capability port their calls.
+#define DEFORM_ABI_VERSION 5
 
 namespace deform {
 
