@@ -233,6 +233,41 @@ struct Stencil {
   }
 };
 
+/// Coulomb friction as positions at a triangle contact point p (Macklin et al. 2014, "Unified
+/// particle physics for real-time applications", Eq. (24)-(25)): p's tangential motion relative
+/// to the instrument over the step is undone when shorter than muDepth (static), otherwise
+/// shortened by muDepth (kinetic); with a velocity state the same share of p's tangential velocity
+/// relative to the instrument is removed. Moves p (pNow) with the nodes and adds the impulse given
+/// to the nodes (N s) to `impulse`.
+void frictionCorrection(const ContactWorld& world, const Stencil& st, const TriangleContact& c,
+                        const VecX& invMass, Real W, Real muDepth, Real dt, MatX3& x, Real* vel,
+                        const MatX3& x0, Vec3& pNow, Vec3& impulse) {
+  const Vec3 rel = (pNow - st.apply(x0.data())) - world.bodyDisplacement(c.body, pNow);
+  const Vec3 tang = rel - rel.dot(c.normal) * c.normal;
+  const Real len = tang.norm();
+  if (!(len > 0)) return;
+  const Real keep = len < muDepth ? 1 : muDepth / len;  // static: all of it
+  const Vec3 undo = -keep * tang;
+  Vec3 dvp = Vec3::Zero();
+  if (vel) {
+    const Vec3 vr = st.apply(vel) - world.bodyDisplacement(c.body, pNow) / dt;
+    dvp = -keep * (vr - vr.dot(c.normal) * c.normal);
+  }
+  for (const auto& [n, cw] : st.terms) {
+    const Real w = invMass[n];
+    if (!(w > 0)) continue;
+    const Vec3 dx = (w * cw / W) * undo;
+    x.row(n) += dx.transpose();
+    Vec3 dv = Vec3::Zero();
+    if (vel) {
+      dv = (w * cw / W) * dvp;
+      Eigen::Map<Vec3>(vel + 3 * n) += dv;
+    }
+    impulse += (dx / dt + dv) / w;
+  }
+  pNow += undo;
+}
+
 ContactResolution resolveTriangleContacts(ContactWorld& world, MatX3& x, const SurfaceMap& map,
                                           const MatX3i& F, const VecX& invMass, Real dt, Real* vel,
                                           const MatX3* x0) {
@@ -284,36 +319,8 @@ ContactResolution resolveTriangleContacts(ContactWorld& world, MatX3& x, const S
         impulse += (dx / dt + dv) / w;
       }
       pNow += depth * c.normal;
-      if (friction) {
-        // Macklin et al. 2014, Eq. (24)-(25): tangential motion relative to the instrument.
-        const Vec3 rel = (pNow - st.apply(x0->data())) - world.bodyDisplacement(c.body, pNow);
-        const Vec3 tang = rel - rel.dot(c.normal) * c.normal;
-        const Real len = tang.norm();
-        if (len > 0) {
-          const Real keep = len < mu * depth ? 1 : mu * depth / len;  // static: all of it
-          const Vec3 undo = -keep * tang;
-          // With a velocity state, the same share of p's tangential velocity relative to the
-          // instrument is removed (as the inward normal velocity is above).
-          Vec3 dvp = Vec3::Zero();
-          if (vel) {
-            const Vec3 vr = st.apply(vel) - world.bodyDisplacement(c.body, pNow) / dt;
-            dvp = -keep * (vr - vr.dot(c.normal) * c.normal);
-          }
-          for (const auto& [n, cw] : st.terms) {
-            const Real w = invMass[n];
-            if (!(w > 0)) continue;
-            const Vec3 dx = (w * cw / W) * undo;
-            x.row(n) += dx.transpose();
-            Vec3 dv = Vec3::Zero();
-            if (vel) {
-              dv = (w * cw / W) * dvp;
-              Eigen::Map<Vec3>(vel + 3 * n) += dv;
-            }
-            impulse += (dx / dt + dv) / w;
-          }
-          pNow += undo;
-        }
-      }
+      if (friction)
+        frictionCorrection(world, st, c, invMass, W, mu * depth, dt, x, vel, *x0, pNow, impulse);
       bodies.push(c.body, impulse, dt);
       world.addReaction(c.body, -impulse / dt, pNow);
     }
