@@ -20,7 +20,7 @@
 namespace deform::metaballs {
 
 /// Bumped whenever any stage's result can change for the same inputs.
-inline constexpr const char* kConstructionVersion = "metaballs-construction/2";
+inline constexpr const char* kConstructionVersion = "metaballs-construction/3";
 
 struct ConstructionParams {
   int targetSpheres = 900;        ///< stage 1 selection budget (liver: ~580 after merging)
@@ -73,7 +73,9 @@ struct Metaballs {
   ConstructionReport report;
 };
 
-/// Runs stages 1-6 on a closed, outward-oriented surface (m). Deterministic.
+/// Runs stages 1-6 on a closed, outward-oriented surface (m). Deterministic, and the same for the
+/// same shape in any units and at any place (the stages run on the surface centred, divided by its
+/// longest side and rounded to 2^-32 of it; the spheres are mapped back).
 Metaballs constructMetaballs(const SurfaceMesh& surface, const ConstructionParams& p);
 
 /// Cache key: surface, every construction parameter and kConstructionVersion.

@@ -9,6 +9,7 @@
 #include "voxel_grid.h"
 
 #include <deform/error.h>
+#include <deform/phantom.h>
 #include <gtest/gtest.h>
 
 namespace deform::metaballs {
@@ -194,6 +195,31 @@ TEST(MetaballsConstruction, DeterministicAndSerialisable) {
   std::vector<char> bytes = serialiseMetaballs(mb);
   bytes.resize(bytes.size() / 2);
   EXPECT_THROW(deserialiseMetaballs(bytes), std::runtime_error);
+}
+
+// The same shape in other units or at another place grows the same spheres. The cube phantom is
+// the hard case: on its regular mesh many of the stages' comparisons are exact ties, which
+// round-off of the coordinates in metres settled differently at 1 cm and 1 m (issue #20).
+TEST(MetaballsConstruction, SameSpheresInAnyUnitsAndPlace) {
+  const SurfaceMesh cube = makePhantom("cube", 0.4);
+  ConstructionParams p;
+  p.targetSpheres = 150;
+  p.voxelResolution = 24;
+  const Metaballs base = constructMetaballs(cube, p);
+  const std::pair<Real, Vec3> frames[] = {
+      {0.1, Vec3::Zero()}, {10.0, Vec3::Zero()}, {1.0, Vec3(0.3, -0.2, 0.7)}};
+  for (const auto& [scale, shift] : frames) {
+    SurfaceMesh m = cube;
+    m.V = (cube.V * scale).rowwise() + shift.transpose();
+    const Metaballs mb = constructMetaballs(m, p);
+    ASSERT_EQ(mb.spheres.size(), base.spheres.size()) << scale;
+    EXPECT_TRUE(mb.topology.links == base.topology.links) << scale;
+    const MatX3 expected = (base.spheres.centers * scale).rowwise() + shift.transpose();
+    EXPECT_LE((mb.spheres.centers - expected).cwiseAbs().maxCoeff(), 1e-12 * scale) << scale;
+    EXPECT_LE((mb.spheres.radii - base.spheres.radii * scale).cwiseAbs().maxCoeff(), 1e-12 * scale)
+        << scale;
+    EXPECT_EQ(mb.report.medialCandidates, base.report.medialCandidates) << scale;
+  }
 }
 
 }  // namespace
