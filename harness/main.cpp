@@ -234,6 +234,7 @@ struct RunArgs {
   std::vector<std::string> pluginDirs;
   std::vector<std::string> calibrations;
   bool reuseReference = false;
+  bool writeCompared = false;
 };
 
 /// The --calibration files, read and checked (InputError names the file); two files for one
@@ -289,6 +290,7 @@ int cmdRun(const RunArgs& a) {
   options.run.maxSteps = a.steps;
   options.calibrations = readCalibrations(a.calibrations);
   options.reuseReference = a.reuseReference;
+  options.writeComparedSurface = a.writeCompared;
   if (a.explain)
     options.explain = [](const std::string& s) { std::cout << "explain: " << s << "\n"; };
   options.progress = [](const std::string& s) { std::cout << s << "\n" << std::flush; };
@@ -500,14 +502,53 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
   return 0;
 }
 
+/// sweep and converge: their cases run in this process unless a dispatch option, --resume or
+/// --timeout is given; then each is a `deformbench run` child handed to the dispatcher.
+struct ChildArgs {
+  bool given = false;  ///< --jobs, --mpi, --slurm, --resume or --timeout on the command line
+  bool resume = false;
+  double timeout = 0;
+  DispatchArgs dispatch;
+};
+
+void addChildArgs(CLI::App* cmd, ChildArgs& c, const std::string& what) {
+  cmd->add_option("--timeout", c.timeout,
+                  "seconds per " + what + ", each in its own process (implies child processes)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_flag("--resume", c.resume,
+                "reuse the " + what + "s already finished in --out (implies child processes)");
+  addDispatch(cmd, c.dispatch);
+}
+
+bool childArgsGiven(CLI::App* cmd) {
+  for (const char* o : {"--jobs", "--mpi", "--slurm", "--resume", "--timeout"})
+    if (cmd->get_option_no_throw(o) && cmd->count(o) > 0) return true;
+  return false;
+}
+
+/// The child-process options (nullopt: in this process) and the dispatcher of sweep / converge.
+std::optional<ChildCaseOptions> childOptions(const ChildArgs& c, PluginLoader& loader,
+                                             double defaultTimeoutS) {
+  if (!c.given) return std::nullopt;
+  ChildCaseOptions child;
+  child.executable = selfExecutable();
+  child.pluginArgs = pluginDirArgs(loader.searchPath());
+  child.timeoutS = c.timeout > 0 ? c.timeout : defaultTimeoutS;
+  child.resume = c.resume;
+  return child;
+}
+
 int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
-             const std::vector<std::string>& calibrations) {
+             const std::vector<std::string>& calibrations, const ChildArgs& ch) {
   PluginLoader loader(searchPath(a.pluginDirs));
   SweepOptions o;
   o.calibrations = readCalibrations(calibrations);
   o.quick = a.quick;
   o.outDir = makeOutDir(a.out);
   o.cases = caseOptions(a);
+  const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(ch.dispatch);
+  o.cases.dispatcher = dispatcher.get();
+  o.cases.child = childOptions(ch, loader, 900);
   std::vector<SweepPoint> points;
   {
     Progress progress(0, "sweep");
@@ -696,13 +737,16 @@ int cmdBench(const BenchArgs& a) {
   return 0;
 }
 
-int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements,
-                bool ofReference) {
+int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements, bool ofReference,
+                const ChildArgs& ch) {
   PluginLoader loader(searchPath(a.pluginDirs));
   ConvergeOptions o;
   o.outDir = makeOutDir(a.out);
   o.cacheDir = cacheChoice(a);
   o.baseElements = elements;
+  const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(ch.dispatch);
+  o.dispatcher = dispatcher.get();
+  o.child = childOptions(ch, loader, 86400);
   if (ofReference) {
     if (elements > 0)
       throw InputError("--of-reference", "", "takes the reference's own elements: drop --elements");
@@ -844,6 +888,9 @@ int realMain(int argc, char** argv) {
                 "read the reference from the cache when an earlier run with this flag solved "
                 "it (calibration trials; no reference timings then)")
       ->group("");
+  run->add_flag("--write-compared", ra.writeCompared,
+                "also write each run's surface at its last compared instant (converge's levels)")
+      ->group("");
   run->add_flag("--strict", ra.strict,
                 "exit 1 when a model failed (one stderr line each; results.json still written)");
 
@@ -912,6 +959,8 @@ int realMain(int argc, char** argv) {
       ->allow_extra_args(false);
   sweep->add_flag("--explain", sa.explain, "say what was loaded, built, cached, skipped");
   addCommon(sweep, sa, true);
+  ChildArgs sweepChild;
+  addChildArgs(sweep, sweepChild, "point");
 
   CalibrateArgs cal;
   CLI::App* calibrate = app.add_subcommand(
@@ -985,6 +1034,8 @@ int realMain(int argc, char** argv) {
                      "is the error of the reference as the scene runs it (cached; `run` then "
                      "prints it)");
   addCommon(converge, ca, false);
+  ChildArgs convChild;
+  addChildArgs(converge, convChild, "level");
 
   std::vector<std::string> workTasks;
   CLI::App* work =
@@ -1031,7 +1082,8 @@ int realMain(int argc, char** argv) {
   }
   if (*sweep) {
     sa.pluginDirs = pluginDirs;
-    return cmdSweep(sweepScene, sa, sweepNoPlot, sweepCalibrations);
+    sweepChild.given = childArgsGiven(sweep);
+    return cmdSweep(sweepScene, sa, sweepNoPlot, sweepCalibrations, sweepChild);
   }
   if (*calibrate) {
     cal.common.pluginDirs = pluginDirs;
@@ -1066,7 +1118,8 @@ int realMain(int argc, char** argv) {
   }
   if (*converge) {
     ca.pluginDirs = pluginDirs;
-    return cmdConverge(convScene, ca, convElements, convOfReference);
+    convChild.given = childArgsGiven(converge);
+    return cmdConverge(convScene, ca, convElements, convOfReference, convChild);
   }
   return kExitBadInput;
 }

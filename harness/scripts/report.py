@@ -497,7 +497,9 @@ def main():
             for k in ("rmse_50", "rmse_all", "max"):
                 q[k] = 1e3 * p[k] if p.get(k) is not None else None
             rows.append(q)
-            link = href + run_hash(p["label"]) if href else None
+            # A sweep run in child processes has one results.json per point.
+            own = viewer_of(os.path.dirname(p["results"])) if p.get("results") else None
+            link = (own or href) + run_hash(p["label"]) if (own or href) else None
             links.append(link)
             if p.get("status") == "ok" and p.get("ms_median") and p.get("rmse_50"):
                 run = {"label": p["label"], "model": p["model"],

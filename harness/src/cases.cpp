@@ -103,12 +103,15 @@ ojson caseTask(const ojson& pruned, const fs::path& runScene, const fs::path& ou
     argv.insert(argv.end(), {"--steps", std::to_string(options.run.maxSteps)});
   ojson models = ojson::array();
   for (const auto& m : pruned["models"]) models.push_back(runEntry(m));
-  return {{"kind", "case"},
-          {"argv", argv},
-          {"out", fs::absolute(outDir).string()},
-          {"timeout_s", co.timeoutS},
-          {"models", models},
-          {"reference", pruned.contains("reference") ? runEntry(pruned["reference"]) : ojson()}};
+  ojson task = {
+      {"kind", "case"},
+      {"argv", argv},
+      {"out", fs::absolute(outDir).string()},
+      {"timeout_s", co.timeoutS},
+      {"models", models},
+      {"reference", pruned.contains("reference") ? runEntry(pruned["reference"]) : ojson()}};
+  if (options.stage != 0) task["stage"] = options.stage;
+  return task;
 }
 
 /// The --explain lines of the case's children (their logs), to the caller's explain.

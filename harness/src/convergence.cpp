@@ -303,6 +303,9 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
   std::vector<MatX3> displacement;
   const std::vector<double>& factors = options.factors;
   if (progress) progress->addTotal(int(factors.size()));
+  // The level scenes: the reference plugin alone, as a model, at the level's elements.
+  std::vector<SceneCase> cases;
+  std::vector<std::string> ids;
   for (size_t k = 0; k < factors.size(); ++k) {
     ConvergenceLevelResult level;
     level.targetElements = static_cast<long long>(std::llround(factors[k] * double(n)));
@@ -315,14 +318,29 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
     j["models"].push_back(r);
     j.erase("reference");
     const std::string id = "level_" + std::to_string(k);
-    if (progress) progress->start(id + " (" + std::to_string(level.targetElements) + " elements)");
-    CaseOptions co;
-    co.cacheDir = options.cacheDir;
-    const auto t0 = std::chrono::steady_clock::now();
-    const CaseResult c =
-        runSceneCase(j, options.outDir / (id + ".json"), options.outDir / id, loader, co);
-    level.solveS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    const RunRecord* run = c.run(r["label"]);
+    SceneCase c;
+    c.scene = j;
+    c.sceneFile = options.outDir / (id + ".json");
+    c.outDir = options.outDir / id;
+    c.options.cacheDir = options.cacheDir;
+    if (options.child) {
+      c.options.child = options.child;
+      c.options.child->runArgs.push_back("--write-compared");
+    }
+    cases.push_back(std::move(c));
+    ids.push_back(id);
+    out.levels.push_back(level);
+  }
+  const auto started = [&](size_t k) {
+    if (progress)
+      progress->start(ids[k] + " (" + std::to_string(out.levels[k].targetElements) + " elements)");
+  };
+  // A level's outcome: its status, elements and surface at the last compared instant.
+  std::vector<std::optional<MatX3>> surfaces(factors.size());
+  const auto finished = [&](size_t k, const CaseResult& c, double wallS) {
+    ConvergenceLevelResult& level = out.levels[k];
+    level.solveS = wallS;
+    const RunRecord* run = c.run(ids[k]);
     if (!c.missing.empty()) {
       level.status = "missing plugin: " + c.missing.begin()->second;
     } else if (!run) {
@@ -331,15 +349,35 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
       level.status = statusName(run->status);
       if (run->counts.count("elements")) level.elements = run->counts.at("elements");
     }
-    if (run && run->status == RunStatus::Ok && !run->compared.empty() && level.elements > 0) {
-      const MatX3 u =
-          run->compared.back().positions.topRows(organ.surface.numVertices()) - organ.surface.V;
-      displacement.push_back(u);
-      level.h = std::cbrt(volume / double(level.elements));
-      level.peakDisplacement = u.rowwise().norm().maxCoeff();
+    if (run && run->status == RunStatus::Ok && level.elements > 0) {
+      MatX3 x;
+      if (!run->compared.empty()) {
+        surfaces[k] = run->compared.back().positions;
+      } else if (options.child && readComparedSurface(comparedSurfaceFile(c.outDir, ids[k]), x)) {
+        surfaces[k] = std::move(x);
+      }
     }
-    if (progress) progress->finish(id, level.status);
-    out.levels.push_back(level);
+    if (progress) progress->finish(ids[k], level.status);
+  };
+  if (options.child) {
+    runSceneCases(cases, loader, options.dispatcher, started,
+                  [&](size_t k, CaseResult&& c) { finished(k, c, c.wallS); });
+  } else {
+    for (size_t k = 0; k < cases.size(); ++k) {
+      started(k);
+      const auto t0 = std::chrono::steady_clock::now();
+      const CaseResult c = runSceneCase(cases[k].scene, cases[k].sceneFile, cases[k].outDir, loader,
+                                        cases[k].options);
+      finished(k, c, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+  }
+  for (size_t k = 0; k < factors.size(); ++k) {
+    ConvergenceLevelResult& level = out.levels[k];
+    if (!surfaces[k] || surfaces[k]->rows() < organ.surface.numVertices()) continue;
+    const MatX3 u = surfaces[k]->topRows(organ.surface.numVertices()) - organ.surface.V;
+    displacement.push_back(u);
+    level.h = std::cbrt(volume / double(level.elements));
+    level.peakDisplacement = u.rowwise().norm().maxCoeff();
   }
   if (displacement.size() != 3) {
     out.message = "no estimate: not every level ran to its compared instant";

@@ -87,6 +87,15 @@ ojson resumedTaskResult(const ojson& task) {
   return nullptr;
 }
 
+std::vector<std::vector<size_t>> byStage(const std::vector<ojson>& tasks,
+                                         const std::vector<size_t>& todo) {
+  std::map<int, std::vector<size_t>> stages;
+  for (size_t i : todo) stages[tasks[i].value("stage", 0)].push_back(i);
+  std::vector<std::vector<size_t>> out;
+  for (auto& [stage, ids] : stages) out.push_back(std::move(ids));
+  return out;
+}
+
 namespace {
 
 ojson executeCaught(const ojson& task) {
@@ -113,6 +122,14 @@ class LocalDispatcher : public Dispatcher {
         onDone(i, r);
       }
     }
+    for (const std::vector<size_t>& stage : byStage(tasks, todo))
+      runStage(tasks, stage, onStart, onDone);
+  }
+
+ private:
+  void runStage(const std::vector<ojson>& tasks, const std::vector<size_t>& todo,
+                const std::function<void(size_t)>& onStart,
+                const std::function<void(size_t, const ojson&)>& onDone) {
     if (m_jobs == 1) {
       for (size_t i : todo) {
         if (onStart) onStart(i);
@@ -151,7 +168,6 @@ class LocalDispatcher : public Dispatcher {
     }
   }
 
- private:
   int m_jobs;
 };
 
@@ -181,20 +197,36 @@ class SlurmDispatcher : public Dispatcher {
     if (!fs::is_directory(m_dir / "tasks"))
       throw InputError(m_dir.string(), "", "cannot create the Slurm folder");
     for (const auto& e : fs::directory_iterator(m_dir / "tasks")) fs::remove(e.path());
-    for (size_t k = 0; k < todo.size(); ++k)
-      writeFileAtomic(m_dir / "tasks" / (std::to_string(k) + ".json"),
-                      tasks[todo[k]].dump(2) + "\n");
-
-    std::ostringstream job;
-    job << "#!/bin/bash\n"
-        << "# deformbench: one array task per case; each runs the case's child process(es).\n"
-        << "#SBATCH --job-name=deformbench-cases\n"
-        << "#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=1\n"
-        << "#SBATCH --output=" << (m_dir / "logs" / "task_%a.out").string() << "\n";
-    if (!todo.empty()) job << "#SBATCH --array=0-" << todo.size() - 1 << "\n";
-    job << "exec " << shellQuote(m_exe) << " work " << shellQuote((m_dir / "tasks").string())
-        << "/\"$SLURM_ARRAY_TASK_ID\".json\n";
-    writeScript(m_dir / "job.sbatch", job.str());
+    for (const auto& e : fs::directory_iterator(m_dir))
+      if (e.path().filename().string().rfind("job_", 0) == 0) fs::remove(e.path());
+    // One array per stage (dispatch.h): stage s is job.sbatch (s = 0) or job_<s>.sbatch, its
+    // tasks numbered on from the previous stage's, and it starts when the previous one ended.
+    const std::vector<std::vector<size_t>> stages = byStage(tasks, todo);
+    std::vector<std::string> scripts;
+    size_t k = 0;
+    for (size_t s = 0; s < stages.size(); ++s) {
+      const size_t first = k;
+      for (size_t i : stages[s])
+        writeFileAtomic(m_dir / "tasks" / (std::to_string(k++) + ".json"), tasks[i].dump(2) + "\n");
+      const std::string name = s == 0 ? "job.sbatch" : "job_" + std::to_string(s) + ".sbatch";
+      std::ostringstream job;
+      job << "#!/bin/bash\n"
+          << "# deformbench: one array task per case; each runs the case's child process(es).\n"
+          << "#SBATCH --job-name=deformbench-cases" << (s == 0 ? "" : "-" + std::to_string(s))
+          << "\n"
+          << "#SBATCH --ntasks=1\n#SBATCH --cpus-per-task=1\n"
+          << "#SBATCH --output=" << (m_dir / "logs" / "task_%a.out").string() << "\n"
+          << "#SBATCH --array=" << first << "-" << k - 1 << "\n";
+      job << "exec " << shellQuote(m_exe) << " work " << shellQuote((m_dir / "tasks").string())
+          << "/\"$SLURM_ARRAY_TASK_ID\".json\n";
+      writeScript(m_dir / name, job.str());
+      scripts.push_back(name);
+    }
+    if (scripts.empty()) {
+      std::ostringstream job;
+      job << "#!/bin/bash\n# deformbench: every case was finished already (--resume).\n";
+      writeScript(m_dir / "job.sbatch", job.str());
+    }
 
     std::ostringstream collect;
     collect << "#!/bin/bash\n"
@@ -209,14 +241,18 @@ class SlurmDispatcher : public Dispatcher {
 
     std::ostringstream submit;
     submit << "#!/bin/bash\n"
-           << "# Submits the case array, then the collect step once every array task ended.\n"
+           << "# Submits the case array(s), each after the previous one, then the collect step\n"
+           << "# once every array task ended.\n"
            << "set -euo pipefail\ncd \"$(dirname \"$0\")\"\n";
-    if (todo.empty()) {
+    if (scripts.empty()) {
       submit << "sbatch collect.sbatch\n";
     } else {
-      submit << "jid=$(sbatch --parsable \"$@\" job.sbatch)\n"
-             << "jid=${jid%%;*}\n"
-             << "sbatch --dependency=afterany:\"$jid\" collect.sbatch\n";
+      for (size_t s = 0; s < scripts.size(); ++s) {
+        submit << "jid=$(sbatch --parsable " << (s == 0 ? "" : "--dependency=afterany:\"$jid\" ")
+               << "\"$@\" " << scripts[s] << ")\n"
+               << "jid=${jid%%;*}\n";
+      }
+      submit << "sbatch --dependency=afterany:\"$jid\" collect.sbatch\n";
     }
     writeScript(m_dir / "submit.sh", submit.str());
     throw PlanWritten("slurm: " + std::to_string(todo.size()) + " case task(s) and the collect " +

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <set>
 #include <sstream>
 #include <variant>
@@ -687,6 +688,24 @@ bool readCachedReference(Cache& cache, const CacheKey& key, RunRecord& r) {
 
 }  // namespace
 
+fs::path comparedSurfaceFile(const fs::path& outDir, const std::string& label) {
+  return outDir / (sanitizeLabel(label) + ".compared.bin");
+}
+
+bool readComparedSurface(const fs::path& file, MatX3& positions) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) return false;
+  const std::vector<char> bytes((std::istreambuf_iterator<char>(in)),
+                                std::istreambuf_iterator<char>());
+  try {
+    ByteReader r(bytes);
+    r.matrix(positions);
+    return r.atEnd();
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
 BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
                              const BenchmarkOptions& options) {
   const auto explain = [&](const std::string& s) {
@@ -767,6 +786,14 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
   computeRunErrors(scene, result.organ, result.runs);
 
   writeRunSurfaces(options.outDir, scene, result.organ, result.runs);
+  if (options.writeComparedSurface)
+    for (const RunRecord& r : result.runs)
+      if (r.status == RunStatus::Ok && !r.compared.empty()) {
+        ByteWriter w;
+        w.matrix(r.compared.back().positions);
+        writeFileAtomic(comparedSurfaceFile(options.outDir, r.label),
+                        std::string_view(w.bytes().data(), w.bytes().size()));
+      }
   const auto doc = resultsJson(scene, result.organ, result.organLog, result.runs, machineInfo());
   result.resultsPath = writeResults(options.outDir, doc);
   return result;

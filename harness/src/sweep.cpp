@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
 
 namespace deform::harness {
@@ -123,27 +124,7 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     }
   }
   scene["models"] = models;
-  // One scene with every point; the reference is solved once, only at the compared instants.
-  // The runner reports each run started and finished: that is the progress.
-  if (progress) progress->addTotal(int(planned.size()) + 1);
-  CaseOptions co = options.cases;
-  co.progress = [progress](const std::string& line) {
-    if (!progress) return;
-    const std::string prefix = "running ";
-    if (line.rfind(prefix, 0) == 0) {
-      std::string label = line.substr(prefix.size());
-      if (label.size() > 4 && label.compare(label.size() - 4, 4, " ...") == 0)
-        label.resize(label.size() - 4);
-      progress->start(label);
-    } else {
-      const auto colon = line.find(": ");
-      progress->finish(line.substr(0, colon),
-                       colon == std::string::npos ? line : line.substr(colon + 2));
-    }
-  };
-  const CaseResult c =
-      runSceneCase(scene, options.outDir / "sweep_scene.json", options.outDir / "runs", loader, co);
-
+  // The points' outcomes (fillPoint), the reference's status, the results files.
   std::vector<SweepPoint> points;
   for (const Planned& p : planned) {
     SweepPoint s;
@@ -153,9 +134,12 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     s.param = p.param;
     s.value = p.value;
     s.calibrated = p.calibrated;
-    const RunRecord* r = c.run(p.label);
-    if (c.missing.count(p.plugin)) {
-      s.status = "missing plugin: " + c.missing.at(p.plugin);
+    points.push_back(s);
+  }
+  const auto fillPoint = [&](SweepPoint& s, const CaseResult& c) {
+    const RunRecord* r = c.run(s.label);
+    if (c.missing.count(s.plugin)) {
+      s.status = "missing plugin: " + c.missing.at(s.plugin);
     } else if (!r) {
       s.status = c.error.empty() ? "not run" : "not run: " + c.error;
     } else {
@@ -175,7 +159,81 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
         s.lossRatio = r->error->lossRatio;
       }
     }
-    points.push_back(s);
+  };
+  const auto referenceStatus = [&](const CaseResult& c) -> std::string {
+    if (c.result)
+      for (const RunRecord& r : c.result->runs)
+        if (r.isReference) return statusName(r.status);
+    return c.missing.count(parsed.reference->plugin) ? "missing" : "not run";
+  };
+  std::string refStatus = "not run";
+  std::string results = "runs/results.json";
+  std::vector<std::string> pointResults(points.size(), results);
+
+  CaseOptions co = options.cases;
+  if (!co.child) {
+    // One scene with every point; the reference is solved once, only at the compared instants.
+    // The runner reports each run started and finished: that is the progress.
+    if (progress) progress->addTotal(int(planned.size()) + 1);
+    co.progress = [progress](const std::string& line) {
+      if (!progress) return;
+      const std::string prefix = "running ";
+      if (line.rfind(prefix, 0) == 0) {
+        std::string label = line.substr(prefix.size());
+        if (label.size() > 4 && label.compare(label.size() - 4, 4, " ...") == 0)
+          label.resize(label.size() - 4);
+        progress->start(label);
+      } else {
+        const auto colon = line.find(": ");
+        progress->finish(line.substr(0, colon),
+                         colon == std::string::npos ? line : line.substr(colon + 2));
+      }
+    };
+    const CaseResult c = runSceneCase(scene, options.outDir / "sweep_scene.json",
+                                      options.outDir / "runs", loader, co);
+    for (SweepPoint& s : points) fillPoint(s, c);
+    refStatus = referenceStatus(c);
+  } else {
+    // One child case per point (scenes/point_<i>.json, runs/point_<i>/), handed to the
+    // dispatcher. The first point whose plugin loads solves the reference (stage 0) and leaves
+    // it in the cache; the others (stage 1) read it from there (`run --reuse-reference`), so
+    // it is solved once and every point's error is against the same surfaces.
+    std::error_code ec;
+    fs::create_directories(options.outDir, ec);
+    writeFileAtomic(options.outDir / "sweep_scene.json", scene.dump(2) + "\n");
+    // --no-cache: the reference still goes through a cache, the sweep's own.
+    if (co.cacheDir && co.cacheDir->empty()) co.cacheDir = options.outDir / "cache";
+    co.child->runArgs.push_back("--reuse-reference");
+    std::optional<size_t> first;
+    for (size_t i = 0; i < planned.size() && !first; ++i)
+      if (pluginProblem(loader, planned[i].plugin).empty()) first = i;
+    std::vector<SceneCase> cases;
+    for (size_t i = 0; i < planned.size(); ++i) {
+      SceneCase c;
+      c.scene = scene;
+      c.scene["models"] = ojson::array({models[i]});
+      const std::string id = "point_" + std::to_string(i);
+      c.sceneFile = options.outDir / "scenes" / (id + ".json");
+      c.outDir = options.outDir / "runs" / id;
+      c.options = co;
+      c.options.stage = first && i == *first ? 0 : 1;
+      cases.push_back(std::move(c));
+      pointResults[i] = "runs/" + id + "/results.json";
+    }
+    if (first) results = pointResults[*first];
+    if (progress) progress->addTotal(int(planned.size()));
+    runSceneCases(
+        cases, loader, co.dispatcher,
+        [&](size_t i) {
+          if (progress) progress->start(points[i].label);
+        },
+        [&](size_t i, CaseResult&& c) {
+          fillPoint(points[i], c);
+          if (first && i == *first) refStatus = referenceStatus(c);
+          if (progress) progress->finish(points[i].label, points[i].status);
+        });
+    if (!first)
+      refStatus = pluginProblem(loader, parsed.reference->plugin).empty() ? "not run" : "missing";
   }
   markPareto(points);
 
@@ -183,21 +241,16 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   doc["format"] = "deformbench-sweep/1";
   doc["scene"] = {{"name", parsed.name}, {"file", sceneFile}, {"sha256", parsed.sha256}};
   doc["reference"] = parsed.reference->model;
-  const RunRecord* ref = nullptr;
-  if (c.result)
-    for (const RunRecord& r : c.result->runs)
-      if (r.isReference) ref = &r;
-  doc["reference_status"] =
-      ref ? statusName(ref->status)
-          : (c.missing.count(parsed.reference->plugin) ? "missing" : "not run");
+  doc["reference_status"] = refStatus;
   doc["quick"] = options.quick;
   doc["haptic_budget_ms"] = 1.0;
-  doc["results"] = "runs/results.json";
+  doc["results"] = results;
   doc["points"] = ojson::array();
   std::ostringstream csv;
   csv << "model,plugin,label,param,value,status,ms_median,ms_p95,rmse_50_m,rmse_all_m,max_m,"
          "loss_ratio,pareto\n";
-  for (const SweepPoint& p : points) {
+  for (size_t i = 0; i < points.size(); ++i) {
+    const SweepPoint& p = points[i];
     doc["points"].push_back({{"model", p.model},
                              {"plugin", p.plugin},
                              {"label", p.label},
@@ -213,7 +266,8 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
                              {"valid", p.valid},
                              {"invalid_reason", p.invalidReason},
                              {"pareto", p.pareto},
-                             {"calibrated", p.calibrated}});
+                             {"calibrated", p.calibrated},
+                             {"results", pointResults[i]}});
     const auto f = [](double v) {
       if (!std::isfinite(v)) return std::string();
       std::ostringstream s;

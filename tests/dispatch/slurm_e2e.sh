@@ -8,6 +8,9 @@
 # dispatch_slurm_e2e when slurmctld, slurmd, munged and sbatch are found.
 set -euo pipefail
 exe=$(readlink -f "$1") plugins=$2 work=$3
+# Optional: the toy fixture's folder; then a sweep (two arrays, the second after the first) goes
+# through the same Slurm too (sweep_converge_test.sh's scene, a few seconds).
+toy=${4:-}
 for tool in slurmctld slurmd munged sbatch squeue; do
   command -v "$tool" > /dev/null || { echo "slurm_e2e: $tool not installed: skipped"; exit 77; }
 done
@@ -16,6 +19,7 @@ done
 rm -rf "$work"
 mkdir -p "$work/plugins" "$work/state" "$work/spool" "$work/munge"
 for p in pbd massspring; do ln -s "$plugins/deform_$p.so" "$work/plugins/"; done
+[ -n "$toy" ] && ln -s "$(readlink -f "$toy")/deform_toy.so" "$work/plugins/"
 host=$(hostname -s)
 cpus=$(nproc)
 pids=()
@@ -97,3 +101,26 @@ for r in json.load(open(sys.argv[1]))["rows"]:
 diff <(strip "$work/serial/hybrid-timing.json") <(strip "$work/cluster/hybrid-timing.json")
 grep -c "(resumed)" "$work/plan/logs/collect.out"
 echo "slurm_e2e: the table through Slurm equals the serial one"
+
+[ -n "$toy" ] || exit 0
+here=$(cd "$(dirname "$0")" && pwd)
+sweep=(--plugin-dir "$work/plugins" sweep "$here/sweep_toy.json" --quick --no-cache --no-plot)
+"$exe" "${sweep[@]}" --out "$work/sweep_serial" > "$work/sweep_serial.log" 2>&1
+"$exe" "${sweep[@]}" --out "$work/sweep_cluster" --slurm "$work/sweep_plan" > "$work/sweep_plan.log" 2>&1
+"$work/sweep_plan/submit.sh" > "$work/sweep_submit.log"
+for _ in $(seq 600); do
+  [ -z "$(squeue -h -o %i)" ] && break
+  sleep 0.5
+done
+[ -s "$work/sweep_cluster/sweep.json" ] || {
+  echo "no sweep"; cat "$work/sweep_plan/logs/"* "$work/slurmctld.log"; exit 1
+}
+points() {
+  python3 -c 'import json,sys
+s = json.load(open(sys.argv[1]))
+print(s["reference_status"])
+for p in s["points"]:
+    print({k: v for k, v in p.items() if k not in ("ms_median", "ms_p95", "pareto", "results")})' "$1"
+}
+diff <(points "$work/sweep_serial/sweep.json") <(points "$work/sweep_cluster/sweep.json")
+echo "slurm_e2e: the sweep through Slurm (two arrays) equals the serial one"

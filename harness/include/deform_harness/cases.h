@@ -46,6 +46,9 @@ struct CaseOptions {
   std::optional<ChildCaseOptions> child;
   /// Where the child cases run (dispatch.h): nullptr = here, one at a time. Not owned.
   Dispatcher* dispatcher = nullptr;
+  /// The case's dispatch stage (dispatch.h): a child case of stage S starts only after every
+  /// case of an earlier stage ended.
+  int stage = 0;
 };
 
 struct CaseResult {

@@ -17,6 +17,7 @@
 #pragma once
 
 #include <deform/plugin_loader.h>
+#include <deform_harness/cases.h>
 #include <deform_harness/progress.h>
 
 #include <filesystem>
@@ -63,6 +64,11 @@ struct ConvergeOptions {
   std::filesystem::path outDir;
   std::optional<std::filesystem::path> cacheDir;
   double excludeRadius = -1;  ///< m; < 0: 10% of the organ's bounding-box diagonal
+  /// Set: each level is a `deformbench run` child (cases.h) handed to `dispatcher` (dispatch.h;
+  /// nullptr: one at a time here), its surface read back exactly (`run --write-compared`);
+  /// the study is the same as in this process. nullopt: the levels run in this process.
+  std::optional<ChildCaseOptions> child;
+  Dispatcher* dispatcher = nullptr;  ///< not owned
 };
 
 /// The levels of a check of the reference itself: 1/8, 1/2.8 and 1 times its own elements, so

@@ -12,7 +12,7 @@
 //
 // The dispatcher runs tasks and reports each one's result in the calling thread; it never
 // changes what a task computes, so the outputs equal the serial run's (timings apart). Callers
-// (tables, stability, converge, later calibrate) build the tasks, consume the results in their
+// (tables, stability, sweep, converge, calibrate) build the tasks, consume the results in their
 // own order, and write their outputs as before.
 #pragma once
 
@@ -39,6 +39,13 @@ nlohmann::ordered_json lostTaskResult(const nlohmann::ordered_json& task,
 /// it; null otherwise.
 nlohmann::ordered_json resumedTaskResult(const nlohmann::ordered_json& task);
 
+/// Stages: a task may say "stage": S (default 0). Every dispatcher runs the tasks of a stage only
+/// after every task of the earlier stages ended (e.g. the sweep's first case solves the reference
+/// that the later ones read from the cache); the Slurm one writes one job array per stage, each
+/// submitted after the previous one. byStage() groups the indices `todo` by stage, ascending.
+std::vector<std::vector<size_t>> byStage(const std::vector<nlohmann::ordered_json>& tasks,
+                                         const std::vector<size_t>& todo);
+
 /// Thrown by the Slurm dispatcher once it has written the job files: the command stops there
 /// (its outputs are assembled by the collect step). what() is the summary to print.
 struct PlanWritten : std::runtime_error {
@@ -63,10 +70,12 @@ std::unique_ptr<Dispatcher> localDispatcher(int jobs);
 
 /// Writes the tasks and a Slurm job array into dir, then throws PlanWritten:
 ///   dir/tasks/<i>.json      one task per array index;
-///   dir/job.sbatch          the array: `deformbench work dir/tasks/$SLURM_ARRAY_TASK_ID.json`;
+///   dir/job.sbatch          the array: `deformbench work dir/tasks/$SLURM_ARRAY_TASK_ID.json`
+///                           (stage 0; job_<s>.sbatch for a later stage s);
 ///   dir/collect.sbatch      `collectCommand` (the same command with --resume, no --slurm) run
 ///                           in `workDir`;
-///   dir/submit.sh           sbatch job.sbatch, then collect.sbatch after it (afterany).
+///   dir/submit.sh           sbatch job.sbatch (then each job_<s>.sbatch after the previous
+///                           one), then collect.sbatch after the last (afterany).
 /// `executable` is the deformbench to run in the array tasks.
 std::unique_ptr<Dispatcher> slurmDispatcher(const std::filesystem::path& dir,
                                             const std::string& executable,

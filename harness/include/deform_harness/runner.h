@@ -191,7 +191,18 @@ struct BenchmarkOptions {
   /// Calibrations whose parameters a model (same plugin and model) takes where the scene writes
   /// none; the first file naming a model wins.
   std::vector<CalibrationParams> calibrations;
+  /// Also write, per ok run with a compared instant, its surface at the last compared instant,
+  /// exactly (binary, comparedSurfaceFile()): `converge` reads its levels from child processes
+  /// this way (`run --write-compared`, internal).
+  bool writeComparedSurface = false;
 };
+
+/// outDir/<label>.compared.bin (sanitized label): the run's surface at its last compared instant
+/// (BenchmarkOptions::writeComparedSurface); readComparedSurface() reads it back (false when the
+/// file is absent or unreadable).
+std::filesystem::path comparedSurfaceFile(const std::filesystem::path& outDir,
+                                          const std::string& label);
+bool readComparedSurface(const std::filesystem::path& file, MatX3& positions);
 
 /// Loads the plugins the scene names and resolves every run's parameters. Throws InputError or
 /// PluginError; runs nothing.

@@ -48,6 +48,11 @@ void markPareto(std::vector<SweepPoint>& points);
 struct SweepOptions {
   bool quick = false;
   std::filesystem::path outDir;
+  /// cases.child unset: one scene with every point, in this process (runs/results.json). Set:
+  /// each point is a child case (scenes/point_<i>.json, runs/point_<i>/) handed to
+  /// cases.dispatcher; the first loadable point solves the reference and caches it (dispatch
+  /// stage 0), the others read it back (stage 1, `run --reuse-reference`). The points are the
+  /// same either way, timings apart.
   CaseOptions cases;
   /// --calibration: each calibrated model is swept twice, at its defaults and calibrated.
   std::vector<CalibrationParams> calibrations;

@@ -95,15 +95,23 @@ class MpiDispatcher : public Dispatcher {
 
   void run(const std::vector<ojson>& tasks, const std::function<void(size_t)>& onStart,
            const std::function<void(size_t, const ojson&)>& onDone) override {
-    std::deque<size_t> todo;
+    std::vector<size_t> pending;
     for (size_t i = 0; i < tasks.size(); ++i) {
       const ojson r = resumedTaskResult(tasks[i]);
       if (r.is_null()) {
-        todo.push_back(i);
+        pending.push_back(i);
       } else if (onDone) {
         onDone(i, r);
       }
     }
+    for (const std::vector<size_t>& stage : byStage(tasks, pending))
+      runStage(tasks, std::deque<size_t>(stage.begin(), stage.end()), onStart, onDone);
+  }
+
+ private:
+  void runStage(const std::vector<ojson>& tasks, std::deque<size_t> todo,
+                const std::function<void(size_t)>& onStart,
+                const std::function<void(size_t, const ojson&)>& onDone) {
     struct Busy {
       size_t task;
       Clock::time_point lastSeen;
@@ -180,7 +188,6 @@ class MpiDispatcher : public Dispatcher {
     }
   }
 
- private:
   std::function<void(const std::string&)> m_note;
 };
 
