@@ -247,7 +247,7 @@ struct ContactResolution {
 };
 
 /// Keeps `proxy` out of the world's instruments by `response` over a step of dt (s). force: 3 #N
-/// node-major (N), accumulated into, for Penalty only. Throws deform::Error naming the
+/// node-major (N), accumulated into, for Penalty only. Throws std::invalid_argument naming the
 /// inconsistent field when the proxy does not describe what the response needs.
 ContactResolution respondToContact(ContactWorld& world, const ContactProxy& proxy,
                                    ContactResponse response, Real dt, Real* force = nullptr);
@@ -283,7 +283,8 @@ struct ContactConstraintSolver {
 /// once held stays (its target kept) and only new penetrations are added. The appended
 /// constraints' graspForces() become the instruments' reaction. solver.immovable are never
 /// held. The proxy's points are its nodes (no embedding, no radii; invMass and velocity unused).
-/// Returns the last solve's status.
+/// Returns the last solve's status; throws std::invalid_argument for such a proxy or an
+/// unsorted immovable list.
 StepStatus solveWithContactConstraints(ContactWorld& world, const ContactProxy& proxy,
                                        const StepInput& in, const ContactConstraintSolver& solver);
 
