@@ -201,6 +201,15 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
   long long n = options.baseElements;
   if (n <= 0 && ref.contains("params") && ref["params"].contains("elements"))
     n = ref["params"]["elements"].get<long long>();
+  if (n <= 0) {  // the plugin's own default, so the finest level is the reference as it runs
+    try {
+      for (const ParamSpec& spec : loader.load(ref.value("plugin", "")).params)
+        if (spec.key == "elements" && std::holds_alternative<long long>(spec.defaultValue))
+          n = std::get<long long>(spec.defaultValue);
+    } catch (const std::exception&) {
+      // no such plugin: the levels report it
+    }
+  }
   if (n <= 0) n = 5000;
   p.n = n;
   p.organ = loadOrgan(p.parsed);

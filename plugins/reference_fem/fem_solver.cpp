@@ -665,7 +665,8 @@ struct EquilibriumSolver::Newton {
   const std::vector<int>& cdofs;
   int ndof = 0, nf = 0;
   Real floorForce = 0;
-  bool refactor = false;  ///< CG was slow: factorise the next tangent afresh
+  bool refactor = false;     ///< CG was slow: factorise the next tangent afresh
+  bool staleFactor = false;  ///< the factor is a previous solve's (no fresh one yet)
   VecX g, gTrial, rhs, dxFree, step;
   // The load step's Newton iterations.
   VecX dc;                ///< remaining increments of the constrained dofs
@@ -741,7 +742,9 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
   // cross-section by 100%, far above the round-off of internal forces at rest.
   s.floorForce =
       1e-6 * m_sys.material().young * std::max<Real>(box.diagonal() * box.diagonal(), 1e-300);
-  m_haveFactor = false;  // each solve starts from a factorisation of its own first tangent
+  // A factor left by the previous solve on the same constrained set (prepareConstraints drops it
+  // otherwise) preconditions this solve's first CG; it is refactorised when CG is slow with it.
+  s.staleFactor = m_haveFactor;
   s.rhs.resize(s.nf);
   s.dxFree.resize(s.nf);
   s.step.resize(ndof);
@@ -828,9 +831,12 @@ bool EquilibriumSolver::newtonDirection(Newton& s, const VecX& xs) {
   const Real rhsNorm = s.rhs.norm();
   eta = std::max(eta, 0.1 * s.opt.tolerance * rep.forceScale / std::max(rhsNorm, 1e-300));
   int its = -1;
-  if (m_haveFactor && !s.refactor) its = preconditionedCg(s.rhs, eta * rhsNorm, kMaxCg, s.dxFree);
+  // With a previous solve's factor, give up after kRefactorCg iterations instead of kMaxCg.
+  if (m_haveFactor && !s.refactor)
+    its = preconditionedCg(s.rhs, eta * rhsNorm, s.staleFactor ? kRefactorCg : kMaxCg, s.dxFree);
   s.refactor = its > kRefactorCg;
   if (its < 0) {
+    s.staleFactor = false;
     // Measured on the liver lift: when the tangent is indefinite (CG met non-positive
     // curvature), a fresh factorisation of its projection both gives a better step than CG on
     // the projection with the old factor (which took 28 instead of 10 iterations) and serves as

@@ -24,17 +24,18 @@
 // |r| <= eta |rhs|, eta = min(0.1, 0.9 (|g_k| / |g_{k-1}|)^2) (1e-2 for a lift step), never
 // tighter than the final tolerance needs. The tangent is factorised afresh (pattern analysed once
 // per set of constrained nodes, lower triangle only, free dofs numbered node by node in CHOLMOD's
-// nested-dissection order of the node graph) at the first iteration of a solve, when CG
-// does not converge in 60 iterations, after a CG solve that needed more than 25, and when CG meets
-// a direction of non-positive curvature (K_ff indefinite: Neo-Hookean far from rest); then the
-// step is a direct solve with that factor. An indefinite tangent is replaced by one whose element
-// stress derivatives dP/dF are projected onto the PSD cone (eigenvalues clamped at 0; closed form
-// for Neo-Hookean), then, if needed, a growing diagonal shift is added. The convergence test is on
-// the true residual, so the answer does not depend on these choices beyond the tolerance.
-// When a load step fails (no convergence, more than 12 damped line-search iterations, inverted
-// elements that the line search cannot leave), it is halved (load stepping on both Dirichlet
-// targets and forces), down to 1/1024 of the whole increment; after a success the next increment
-// doubles (continuation).
+// nested-dissection order of the node graph) at the first iteration of a solve (unless the
+// previous solve on the same constrained set left a factor: CG with it, up to 25 iterations), when
+// CG does not converge in 60 iterations, after a CG solve that needed more than 25, and when CG
+// meets a direction of non-positive curvature (K_ff indefinite: Neo-Hookean far from rest); then
+// the step is a direct solve with that factor. An indefinite tangent is replaced by one whose
+// element stress derivatives dP/dF are projected onto the PSD cone (eigenvalues clamped at 0;
+// closed form for Neo-Hookean), then, if needed, a growing diagonal shift is added. The convergence
+// test is on the true residual, so the answer does not depend on these choices beyond the
+// tolerance. When a load step fails (no convergence, more than 12 damped line-search iterations,
+// inverted elements that the line search cannot leave), it is halved (load stepping on both
+// Dirichlet targets and forces), down to 1/1024 of the whole increment; after a success the next
+// increment doubles (continuation).
 //
 // Dynamic (implicit Euler with step h, lumped mass M, Rayleigh damping C = alpha M + beta K):
 // x_{n+1} minimises the incremental potential

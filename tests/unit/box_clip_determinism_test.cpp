@@ -1,9 +1,10 @@
 // Same input, same mesh, bit for bit, whatever the process did before: clipSurfaceByBoxes
 // (box_clip.h) and tetrahedralize (tet_mesher.h) on the liver phantom minus the fixed boxes of
-// scenes/liver_grasp_lift.json, at the sizes the reference_fem plugin uses in the shipped-scenes
-// conformance test. CGAL's corefinement orders its output by heap addresses, so before the clip
-// canonicalised it, a second clip after other allocations gave a different cap (a different
-// vertex count) and the mesh cache held whichever mesh the first run happened to build.
+// scenes/liver_grasp_lift.json, at the size the reference_fem plugin used in the shipped-scenes
+// conformance test (20,000 target tets, its default until issue G1). CGAL's corefinement orders its
+// output by heap addresses, so before the clip canonicalised it, a second clip after other
+// allocations gave a different cap (a different vertex count) and the mesh cache held whichever
+// mesh the first run happened to build.
 #include <deform/box_clip.h>
 #include <deform/phantom.h>
 #include <deform/tet_mesher.h>
