@@ -202,6 +202,66 @@ TEST_P(ThinProbeConformance, FrictionDragsTheSurfaceUnderASlidingBoxAndFrictionl
   if (tested == 0) GTEST_SKIP() << "no model of this plugin supports a coupled object";
 }
 
+/// The force-based models that replace projection by penalty forces under contact.method penalty.
+bool penaltyModel(const std::string& plugin) {
+  return frictionModel(plugin);
+}
+
+TEST_P(ThinProbeConformance, PenaltyContactPushesTheTopDownAndTheToolFeelsTheForce) {
+  if (!penaltyModel(GetParam())) GTEST_SKIP() << "its contact response has no penalty method";
+  // A 1 cm sphere comes down onto the top centre and presses 2 mm in over 20 ms.
+  const SurfaceMesh s = makePhantom("cube", 0.5);
+  const Box b = boundingBox(s.V);
+  const Real r = 0.01;
+  const Vec3 top(b.center().x(), b.center().y(), b.hi.z());
+  const Vec3 start = top + Vec3(0, 0, r + 0.001), end = top + Vec3(0, 0, r - 0.002);
+  json j;
+  j["organ"] = {{"mesh", "phantom:cube"},
+                {"resolution", 0.5},
+                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
+                {"fixed",
+                 {{"box",
+                   {{b.lo.x() - 1, b.lo.y() - 1, b.lo.z() - 1},
+                    {b.hi.x() + 1, b.hi.y() + 1, b.lo.z() + 0.2 * b.size().z()}}}}}};
+  j["gravity"] = {0, 0, 0};
+  j["dt"] = 1e-3;
+  j["duration"] = 0.03;
+  j["tools"] = {{{"type", "probe"},
+                 {"radius", r},
+                 {"shaft", {{"length", 0.0}}},
+                 {"trajectory",
+                  {{{"t", 0.0}, {"pos", {start.x(), start.y(), start.z()}}},
+                   {{"t", 0.02}, {"pos", {end.x(), end.y(), end.z()}}}}}}};
+  j["contact"] = {{"thickness", 1e-4}, {"method", "penalty"}, {"stiffness", 1e6}};
+  j["models"] = json::array({{{"plugin", "any"}}});
+  const Scene scene = parseScene(j, "");
+  const Organ organ = loadOrgan(scene);
+  int nearest = 0;
+  (organ.surface.V.rowwise() - top.transpose()).rowwise().squaredNorm().minCoeff(&nearest);
+  int tested = 0;
+  for (const ModelInfo& info :
+       conformanceLoader().loadFile(conformanceLoader().locate(GetParam()))) {
+    SCOPED_TRACE(info.name);
+    if (!info.has(Capability::Contact) || info.has(Capability::QuasiStatic)) continue;
+    ++tested;
+    std::unique_ptr<Model> model = info.create();
+    model->init(ModelSetup{organ, ParamValues::defaults(info.params), conformanceCache(), scene.dt,
+                           scene.gravity});
+    Interaction inter(scene, organ.surface);
+    Real pushUp = 0;
+    for (int k = 0; k < scene.numSteps(); ++k) {
+      const StepInput in = inter.prepare(k * scene.dt, scene.dt, *model);
+      ASSERT_EQ(model->step(in), StepStatus::Ok) << "step " << k;
+      pushUp = std::max(pushUp, in.contact->reactionForce(0).z());
+      inter.finishStep(in, *model);
+    }
+    // The tissue pushes the tool up and is pushed down under it.
+    EXPECT_GT(pushUp, 0.0) << "the tool felt no penalty force";
+    EXPECT_LT(model->surface()(nearest, 2), top.z() - 1e-4) << "the top was not pushed down";
+  }
+  if (tested == 0) GTEST_SKIP() << "no dynamic model of this plugin has the contact capability";
+}
+
 INSTANTIATE_TEST_SUITE_P(Plugins, ThinProbeConformance,
                          ::testing::ValuesIn(conformancePluginNames()),
                          [](const ::testing::TestParamInfo<std::string>& p) { return p.param; });

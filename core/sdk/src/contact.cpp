@@ -394,7 +394,6 @@ void checkProxy(const ContactProxy& p, ContactResponse r, Real dt, const Real* f
   const Eigen::Index points = e.points > 0 ? e.points : n;
   if (p.radii && (p.faces || e.points > 0 || p.radii->size() != points))
     fail("proxy.radii are for sphere proxies that are the nodes, one per node");
-  if (p.atStepStart && p.atStepStart->rows() != n) fail("proxy.atStepStart has not #nodes rows");
   if (r == ContactResponse::Display) {
     if (e.points > 0) fail("display-level projection moves points, not embedded nodes");
     return;
@@ -406,6 +405,7 @@ void checkProxy(const ContactProxy& p, ContactResponse r, Real dt, const Real* f
     return;
   }
   if (!p.invMass || p.invMass->size() != n) fail("proxy.invMass must hold one value per node");
+  if (p.atStepStart && p.atStepStart->rows() != n) fail("proxy.atStepStart has not #nodes rows");
 }
 
 }  // namespace
