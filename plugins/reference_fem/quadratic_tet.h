@@ -98,13 +98,7 @@ void evaluateQuadraticTet(const Material& material, const QuadraticTetRest& rest
     const Mat3x10 PG = (w * material.stress(F)) * G;
     for (int a = 0; a < 10; ++a) out.gradient.segment<3>(3 * a) += PG.col(a);
     if (mode != TetEvalMode::Stiffness) continue;
-    Mat9 D;
-    if constexpr (requires { material.projectedStressDerivative(F); }) {
-      D = projectSpd ? material.projectedStressDerivative(F) : material.stressDerivative(F);
-    } else {
-      D = material.stressDerivative(F);
-      if (projectSpd) D = projectPositiveSemiDefinite(D);
-    }
+    const Mat9 D = stressDerivativeAt(material, F, projectSpd);
     // vec(F)(i + 3 j) depends on x_b(k) through delta_ik G(j, b):
     // DG(r, 3 b + k) = sum_l D(r, k + 3 l) G(l, b);  K(3 a + i, .) = w sum_j G(j, a) DG(i + 3 j, .)
     Eigen::Matrix<Real, 9, 30> DG;

@@ -29,6 +29,33 @@ bool surfaceProxy(const std::string& plugin) {
   return false;
 }
 
+/// The cube phantom (resolution 0.5, soft tissue) held by its bottom fifth, without gravity, at
+/// dt 1 ms; b is its bounding box.
+json cubeScene(const Box& b) {
+  const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
+  json j;
+  j["organ"] = {{"mesh", "phantom:cube"},
+                {"resolution", 0.5},
+                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
+                {"fixed",
+                 {{"box",
+                   {{b.lo.x() - m.x(), b.lo.y() - m.y(), b.lo.z() - m.z()},
+                    {b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.2 * b.size().z()}}}}}};
+  j["gravity"] = {0, 0, 0};
+  j["dt"] = 1e-3;
+  return j;
+}
+
+/// A shaftless probe of radius r moving from `start` (t = 0) to `end` (t = 20 ms).
+json probeFromTo(Real r, const Vec3& start, const Vec3& end) {
+  return {{{"type", "probe"},
+           {"radius", r},
+           {"shaft", {{"length", 0.0}}},
+           {"trajectory",
+            {{{"t", 0.0}, {"pos", {start.x(), start.y(), start.z()}}},
+             {{"t", 0.02}, {"pos", {end.x(), end.y(), end.z()}}}}}}};
+}
+
 class ThinProbeConformance : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(ThinProbeConformance, AThinTipInTheMiddleOfACoarseTriangleLeavesNoSurfacePointInside) {
@@ -56,24 +83,9 @@ TEST_P(ThinProbeConformance, AThinTipInTheMiddleOfACoarseTriangleLeavesNoSurface
       (s.V.row(s.F(tri, 0)) + s.V.row(s.F(tri, 1)) + s.V.row(s.F(tri, 2))).transpose() / 3;
   const Real r = 0.12 * shortest, depth = 0.6 * r;  // the vertices stay > r away from the tip
   const Vec3 start = centroid + Vec3(0, 0, r + 0.002), end = centroid + Vec3(0, 0, r - depth);
-  const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
-  json j;
-  j["organ"] = {{"mesh", "phantom:cube"},
-                {"resolution", 0.5},
-                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
-                {"fixed",
-                 {{"box",
-                   {{b.lo.x() - m.x(), b.lo.y() - m.y(), b.lo.z() - m.z()},
-                    {b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.2 * b.size().z()}}}}}};
-  j["gravity"] = {0, 0, 0};
-  j["dt"] = 1e-3;
+  json j = cubeScene(b);
   j["duration"] = 0.03;
-  j["tools"] = {{{"type", "probe"},
-                 {"radius", r},
-                 {"shaft", {{"length", 0.0}}},
-                 {"trajectory",
-                  {{{"t", 0.0}, {"pos", {start.x(), start.y(), start.z()}}},
-                   {{"t", 0.02}, {"pos", {end.x(), end.y(), end.z()}}}}}}};
+  j["tools"] = probeFromTo(r, start, end);
   j["contact"] = {{"thickness", 1e-4}};
   j["models"] = json::array({{{"plugin", "any"}}});
   const Scene scene = parseScene(j, "");
@@ -138,21 +150,11 @@ TEST_P(ThinProbeConformance, FrictionDragsTheSurfaceUnderASlidingBoxAndFrictionl
   // only pushed down.
   const SurfaceMesh s = makePhantom("cube", 0.5);
   const Box b = boundingBox(s.V);
-  const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
   const Real half = 0.15 * b.size().x(), hz = 0.1 * half, slide = 0.005;
   const Vec3 top(b.center().x(), b.center().y(), b.hi.z());
   const Vec3 above = top + Vec3(0, 0, hz + 3e-4), pressed = top + Vec3(0, 0, hz - 1e-3),
              slid = pressed + Vec3(slide, 0, 0);
-  json j;
-  j["organ"] = {{"mesh", "phantom:cube"},
-                {"resolution", 0.5},
-                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
-                {"fixed",
-                 {{"box",
-                   {{b.lo.x() - m.x(), b.lo.y() - m.y(), b.lo.z() - m.z()},
-                    {b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.2 * b.size().z()}}}}}};
-  j["gravity"] = {0, 0, 0};
-  j["dt"] = 1e-3;
+  json j = cubeScene(b);
   j["duration"] = 0.08;
   const auto at = [](const Vec3& p) { return json{p.x(), p.y(), p.z()}; };
   j["objects"] = {{{"shape", "box"},
@@ -215,23 +217,9 @@ TEST_P(ThinProbeConformance, PenaltyContactPushesTheTopDownAndTheToolFeelsTheFor
   const Real r = 0.01;
   const Vec3 top(b.center().x(), b.center().y(), b.hi.z());
   const Vec3 start = top + Vec3(0, 0, r + 0.001), end = top + Vec3(0, 0, r - 0.002);
-  json j;
-  j["organ"] = {{"mesh", "phantom:cube"},
-                {"resolution", 0.5},
-                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
-                {"fixed",
-                 {{"box",
-                   {{b.lo.x() - 1, b.lo.y() - 1, b.lo.z() - 1},
-                    {b.hi.x() + 1, b.hi.y() + 1, b.lo.z() + 0.2 * b.size().z()}}}}}};
-  j["gravity"] = {0, 0, 0};
-  j["dt"] = 1e-3;
+  json j = cubeScene(b);
   j["duration"] = 0.03;
-  j["tools"] = {{{"type", "probe"},
-                 {"radius", r},
-                 {"shaft", {{"length", 0.0}}},
-                 {"trajectory",
-                  {{{"t", 0.0}, {"pos", {start.x(), start.y(), start.z()}}},
-                   {{"t", 0.02}, {"pos", {end.x(), end.y(), end.z()}}}}}}};
+  j["tools"] = probeFromTo(r, start, end);
   j["contact"] = {{"thickness", 1e-4}, {"method", "penalty"}, {"stiffness", 1e6}};
   j["models"] = json::array({{{"plugin", "any"}}});
   const Scene scene = parseScene(j, "");

@@ -123,6 +123,18 @@ struct TetEvaluation {
 
 enum class TetEvalMode { Energy, Gradient, Stiffness };
 
+/// dP/dF at F (9x9, vec(F) column-major), projected onto the PSD cone when projectSpd is set:
+/// in closed form where the material offers projectedStressDerivative(), else by eigenvalues.
+template <class Material>
+Mat9 stressDerivativeAt(const Material& material, const Mat3& F, bool projectSpd) {
+  if constexpr (requires { material.projectedStressDerivative(F); }) {
+    return projectSpd ? material.projectedStressDerivative(F) : material.stressDerivative(F);
+  } else {
+    const Mat9 D = material.stressDerivative(F);
+    return projectSpd ? projectPositiveSemiDefinite(D) : D;
+  }
+}
+
 /// Evaluates W = V psi(F) and, as asked, its gradient and stiffness. When projectSpd is set the
 /// stress derivative is projected onto the PSD cone first (so the stiffness is PSD).
 template <class Material>
@@ -135,13 +147,7 @@ void evaluateTet(const Material& material, const TetRest& rest, const std::array
   const Mat3 P = material.stress(F);
   for (int a = 0; a < 4; ++a) out.gradient.segment<3>(3 * a) = rest.volume * P * g.col(a);
   if (mode != TetEvalMode::Stiffness) return;
-  Mat9 D;
-  if constexpr (requires { material.projectedStressDerivative(F); }) {
-    D = projectSpd ? material.projectedStressDerivative(F) : material.stressDerivative(F);
-  } else {
-    D = material.stressDerivative(F);
-    if (projectSpd) D = projectPositiveSemiDefinite(D);
-  }
+  const Mat9 D = stressDerivativeAt(material, F, projectSpd);
   // K = V G^T D G with G(i + 3 j, 3 a + i) = g_a(j), using G's structure: the 3-column block b
   // of D G is sum_l g_b(l) D(:, 3 l .. 3 l + 2), the 3-row block a of G^T (D G) is
   // sum_j g_a(j) (D G)(3 j .. 3 j + 2, :).
