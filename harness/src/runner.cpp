@@ -333,6 +333,26 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
     const bool loaded =
         scene.gravity.squaredNorm() > 0 || !scene.loads.empty() || rec.graspTravel > 0;
     rec.motionFloor = loaded && rest.rows() > 0 ? 1e-6 * boundingBox(rest).diagonal() : 0.0;
+    // The organ's own surface inside the fixed region must stay (however the model holds it).
+    rec.fixedDrift = 0;
+    if (!organ.fixed.empty() && rest.rows() > 0) {
+      const std::vector<int> held = fixedNodeIndices(rest, organ.fixed, organ.surface);
+      const auto drift = [&](const MatX3& x) {
+        Real d = 0;
+        for (int v : held)
+          if (v < x.rows()) d = std::max(d, (x.row(v) - rest.row(v)).norm());
+        return d;
+      };
+      Real d = drift(rec.finalSurface);
+      for (const SurfaceSnapshot& c : rec.compared) d = std::max(d, drift(c.positions));
+      if (d > 1e-6 * boundingBox(rest).diagonal()) rec.fixedDrift = d;
+    }
+    if (rec.fixedDrift > 0.5 * rec.peakDisplacement && rec.fixedDrift > 0) {
+      std::ostringstream s;
+      s << "the fixed region did not hold: its surface moved " << rec.fixedDrift * 1e3
+        << " mm, over half the largest displacement (" << rec.peakDisplacement * 1e3 << " mm)";
+      rec.notes.push_back(s.str());
+    }
   }
   assessValidity(scene, rec);
 }

@@ -104,8 +104,9 @@ struct Fixture {
     scene.nearest = {1, 2};
     organ.source = "test:tet";
     organ.surface = deform::testing::tetSurface();
-    organ.fixed.boxes.push_back(Box{Vec3(-1, -1, -1), Vec3(0.01, 0.01, 0.01)});
   }
+  /// A fixed box around vertex 0 (the rigid test model does not hold it).
+  void fixCorner() { organ.fixed.boxes.push_back(Box{Vec3(-1, -1, -1), Vec3(0.01, 0.01, 0.01)}); }
 };
 
 ModelInfo infoFor(std::function<void(RigidTestModel&)> configure, bool grasp = true,
@@ -133,7 +134,8 @@ RunRecord runWith(const Fixture& f, std::function<void(RigidTestModel&)> configu
 }
 
 TEST(Runner, OkRunRecordsEveryStepAndFollowsTheGrasp) {
-  const Fixture f;
+  Fixture f;
+  f.fixCorner();
   const RunRecord r = runWith(f, [](RigidTestModel&) {});
   ASSERT_EQ(r.status, RunStatus::Ok) << r.message;
   EXPECT_EQ(r.steps, 100);
@@ -146,6 +148,14 @@ TEST(Runner, OkRunRecordsEveryStepAndFollowsTheGrasp) {
   EXPECT_GE(r.precomputeS, 0.0);
   EXPECT_EQ(r.counts.at("nodes"), 4);
   EXPECT_EQ(r.fixedNodes, 1);
+  // The rigid body lifts its fixed corner with everything else: the fixed region did not hold,
+  // and the run says so.
+  EXPECT_NEAR(r.fixedDrift, 0.02, 1e-12);
+  bool noted = false;
+  for (const std::string& n : r.notes)
+    noted = noted || n.find("fixed region did not hold") != n.npos;
+  EXPECT_TRUE(noted);
+  EXPECT_EQ(runWith(Fixture{}, [](RigidTestModel&) {}).fixedDrift, 0.0) << "nothing fixed";
   EXPECT_DOUBLE_EQ(r.phaseMs.at("solve"), 0.5);
   EXPECT_EQ(r.params["iterations"], 1);
   ASSERT_EQ(r.compared.size(), 2u);

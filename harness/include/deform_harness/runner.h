@@ -88,6 +88,10 @@ struct RunRecord {
   /// less than motionFloor is invalid ("did not move": a frozen solver).
   double peakDisplacement = -1;
   double motionFloor = 0;  ///< m, 1e-6 of the organ's bounding-box diagonal; 0: nothing asked
+  /// m, largest displacement of the organ's surface vertices inside the fixed region over the
+  /// final and compared surfaces (0 when it stays below 1e-6 of the diagonal or nothing is
+  /// fixed). More than half of peakDisplacement adds a note ("the fixed region did not hold").
+  double fixedDrift = 0;
   std::vector<Cache::Event> cacheEvents;
 
   MatX3 finalSurface;                     ///< after the last completed step
