@@ -4,7 +4,10 @@
 #pragma once
 
 #include <deform/cache.h>
+#include <deform/mesh.h>
 #include <deform/plugin_loader.h>
+
+#include <nlohmann/json.hpp>
 
 #include <string>
 #include <vector>
@@ -29,6 +32,23 @@ inline std::vector<std::string> conformancePluginNames() {
 inline Cache& conformanceCache() {
   static Cache c(Cache::defaultDir());
   return c;
+}
+
+/// The cube phantom (resolution 0.5, soft tissue) held by its bottom fifth, without gravity, at
+/// dt 1 ms; b is its bounding box.
+inline nlohmann::json cubeScene(const Box& b) {
+  const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
+  nlohmann::json j;
+  j["organ"] = {{"mesh", "phantom:cube"},
+                {"resolution", 0.5},
+                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
+                {"fixed",
+                 {{"box",
+                   {{b.lo.x() - m.x(), b.lo.y() - m.y(), b.lo.z() - m.z()},
+                    {b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.2 * b.size().z()}}}}}};
+  j["gravity"] = {0, 0, 0};
+  j["dt"] = 1e-3;
+  return j;
 }
 
 }  // namespace deform::harness

@@ -39,19 +39,10 @@ ProbeCase probeCase() {
   pc.radius = 0.15 * b.size().x();
   pc.depth = 0.1 * b.size().z();  // deeper sharp indentations defeat Neo-Hookean Newton solves
   pc.shaft = 0.5 * b.size().z();
-  const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
   const Vec3 start = pc.top + Vec3(0, 0, pc.radius + 0.002);
   const Vec3 end = pc.top + Vec3(0, 0, pc.radius - pc.depth);
   json& j = pc.scene;
-  j["organ"] = {{"mesh", "phantom:cube"},
-                {"resolution", 0.5},
-                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
-                {"fixed",
-                 {{"box",
-                   {{b.lo.x() - m.x(), b.lo.y() - m.y(), b.lo.z() - m.z()},
-                    {b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.2 * b.size().z()}}}}}};
-  j["gravity"] = {0, 0, 0};
-  j["dt"] = 1e-3;
+  j = cubeScene(b);
   j["duration"] = 0.05;
   j["tools"] = {{{"type", "probe"},
                  {"radius", pc.radius},

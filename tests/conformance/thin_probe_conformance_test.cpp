@@ -29,23 +29,6 @@ bool surfaceProxy(const std::string& plugin) {
   return false;
 }
 
-/// The cube phantom (resolution 0.5, soft tissue) held by its bottom fifth, without gravity, at
-/// dt 1 ms; b is its bounding box.
-json cubeScene(const Box& b) {
-  const Vec3 m = Vec3::Constant(0.05 * b.diagonal());
-  json j;
-  j["organ"] = {{"mesh", "phantom:cube"},
-                {"resolution", 0.5},
-                {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
-                {"fixed",
-                 {{"box",
-                   {{b.lo.x() - m.x(), b.lo.y() - m.y(), b.lo.z() - m.z()},
-                    {b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.2 * b.size().z()}}}}}};
-  j["gravity"] = {0, 0, 0};
-  j["dt"] = 1e-3;
-  return j;
-}
-
 /// A shaftless probe of radius r moving from `start` (t = 0) to `end` (t = 20 ms).
 json probeFromTo(Real r, const Vec3& start, const Vec3& end) {
   return {{{"type", "probe"},
