@@ -234,6 +234,7 @@ struct RunArgs {
   std::vector<std::string> pluginDirs;
   std::vector<std::string> calibrations;
   bool reuseReference = false;
+  bool reuseModelSolves = false;
   bool writeCompared = false;
 };
 
@@ -289,7 +290,8 @@ int cmdRun(const RunArgs& a) {
   options.outDir = a.out;
   options.run.maxSteps = a.steps;
   options.calibrations = readCalibrations(a.calibrations);
-  options.reuseReference = a.reuseReference;
+  options.reuseReference = a.reuseReference || a.reuseModelSolves;
+  options.reuseModelSolves = a.reuseModelSolves;
   options.writeComparedSurface = a.writeCompared;
   if (a.explain)
     options.explain = [](const std::string& s) { std::cout << "explain: " << s << "\n"; };
@@ -886,7 +888,10 @@ int realMain(int argc, char** argv) {
       ->allow_extra_args(false);
   run->add_flag("--reuse-reference", ra.reuseReference,
                 "read the reference from the cache when an earlier run with this flag solved "
-                "it (calibration trials; no reference timings then)")
+                "the same problem (calibration trials, the tables; its timings are that run's)")
+      ->group("");
+  run->add_flag("--reuse-model-solves", ra.reuseModelSolves,
+                "with --reuse-reference: quasi-static models too (the tables' reference checks)")
       ->group("");
   run->add_flag("--write-compared", ra.writeCompared,
                 "also write each run's surface at its last compared instant (converge's levels)")

@@ -99,6 +99,11 @@ ojson caseTask(const ojson& pruned, const fs::path& runScene, const fs::path& ou
   }
   if (options.explain) argv.push_back("--explain");
   argv.insert(argv.end(), co.runArgs.begin(), co.runArgs.end());
+  const auto flag = [&](bool on, const char* name) {
+    if (on && std::find(argv.begin(), argv.end(), name) == argv.end()) argv.push_back(name);
+  };
+  flag(options.reuseReference || options.reuseModelSolves, "--reuse-reference");
+  flag(options.reuseModelSolves, "--reuse-model-solves");
   if (options.run.maxSteps > 0)
     argv.insert(argv.end(), {"--steps", std::to_string(options.run.maxSteps)});
   ojson models = ojson::array();
@@ -191,6 +196,8 @@ Prepared prepareCase(const SceneCase& sc, PluginLoader& loader) {
   o.run = options.run;
   o.explain = options.explain;
   o.progress = options.progress;
+  o.reuseReference = options.reuseReference || options.reuseModelSolves;
+  o.reuseModelSolves = options.reuseModelSolves;
   const auto start = Clock::now();
   try {
     c.result = runBenchmark(runScene.string(), loader, o);

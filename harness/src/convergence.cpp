@@ -332,6 +332,7 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
     c.sceneFile = options.outDir / (id + ".json");
     c.outDir = options.outDir / id;
     c.options.cacheDir = options.cacheDir;
+    c.options.reuseModelSolves = options.reuseSolves;
     if (options.child) {
       c.options.child = options.child;
       c.options.child->runArgs.push_back("--write-compared");

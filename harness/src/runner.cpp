@@ -622,17 +622,27 @@ namespace {
 
 constexpr const char* kReferenceRunKind = "harness.reference_run";
 
-/// The key of a reference run (BenchmarkOptions::reuseReference).
-CacheKey referenceRunKey(const std::string& sceneFile, const Scene& scene, const Organ& organ,
-                         PluginLoader& loader, const PlannedRun& p, const RunOptions& run) {
+/// The key of a solve that BenchmarkOptions::reuseReference may share: the problem (the scene
+/// without its models, reference, name, description and output, a mesh file's path made
+/// absolute, and the organ as loaded), the plugin file (SHA-256), model and resolved parameters,
+/// and the step limit. Neither the run's label nor whether it runs as the reference or as a model
+/// enters: a convergence level at the reference's own parameters is the same solve.
+CacheKey solveKey(const std::string& sceneFile, const Scene& scene, const Organ& organ,
+                  PluginLoader& loader, const PlannedRun& p, const RunOptions& run) {
   nlohmann::json doc;
   {
     std::ifstream in(sceneFile);
     doc = nlohmann::json::parse(in);
   }
-  for (const char* k : {"models", "name", "description", "output"}) doc.erase(k);
+  for (const char* k : {"models", "reference", "name", "description", "output"}) doc.erase(k);
+  if (doc.contains("organ") && doc["organ"].contains("mesh") && doc["organ"]["mesh"].is_string()) {
+    const std::string mesh = doc["organ"]["mesh"];
+    if (mesh.rfind("phantom:", 0) != 0 && !fs::path(mesh).is_absolute())
+      doc["organ"]["mesh"] =
+          fs::absolute(fs::path(sceneFile).parent_path() / mesh).lexically_normal().string();
+  }
   CacheKey key;
-  key.add("harness.reference_run/1").add(doc.dump());
+  key.add("harness.reference_run/2").add(doc.dump());
   key.add(organ.surface.V).add(organ.surface.F);
   key.add(sha256File(loader.locate(p.spec.plugin))).add(p.info->name).add(p.info->version);
   key.add(paramsToJson(p.params).dump());
@@ -641,7 +651,8 @@ CacheKey referenceRunKey(const std::string& sceneFile, const Scene& scene, const
   return key;
 }
 
-void storeCachedReference(Cache& cache, const CacheKey& key, const RunRecord& r) {
+/// What a later run needs of a solve: its surfaces, counts, timings and the checks' inputs.
+void storeCachedSolve(Cache& cache, const CacheKey& key, const RunRecord& r) {
   ByteWriter w;
   w.pod(static_cast<int>(r.steps));
   w.pod(static_cast<int>(r.plannedSteps));
@@ -654,6 +665,23 @@ void storeCachedReference(Cache& cache, const CacheKey& key, const RunRecord& r)
   w.pod(r.settledAt.value_or(0.0));
   w.pod(static_cast<int>(r.valid));
   w.string(r.invalidReason);
+  w.pod(r.peakDisplacement);
+  w.pod(r.motionFloor);
+  w.pod(r.fixedDrift);
+  w.pod(r.precomputeS);
+  w.pod(r.stepStats);
+  w.pod(static_cast<int>(r.counts.size()));
+  for (const auto& [k, v] : r.counts) {
+    w.string(k);
+    w.pod(v);
+  }
+  w.pod(static_cast<int>(r.phaseMs.size()));
+  for (const auto& [k, v] : r.phaseMs) {
+    w.string(k);
+    w.pod(v);
+  }
+  w.pod(static_cast<int>(r.notes.size()));
+  for (const std::string& n : r.notes) w.string(n);
   w.pod(r.dt);
   w.matrix(r.finalSurface);
   w.matrix(r.finalFaces);
@@ -666,7 +694,7 @@ void storeCachedReference(Cache& cache, const CacheKey& key, const RunRecord& r)
   cache.put(kReferenceRunKind, key, w.bytes());
 }
 
-bool readCachedReference(Cache& cache, const CacheKey& key, RunRecord& r) {
+bool readCachedSolve(Cache& cache, const CacheKey& key, RunRecord& r) {
   const auto hit = cache.get(kReferenceRunKind, key);
   if (!hit) return false;
   try {
@@ -683,6 +711,20 @@ bool readCachedReference(Cache& cache, const CacheKey& key, RunRecord& r) {
     if (settled) r.settledAt = at;
     r.valid = b.pod<int>() != 0;
     r.invalidReason = b.string();
+    r.peakDisplacement = b.pod<double>();
+    r.motionFloor = b.pod<double>();
+    r.fixedDrift = b.pod<double>();
+    r.precomputeS = b.pod<double>();
+    r.stepStats = b.pod<StepStats>();
+    for (int i = 0, n = b.pod<int>(); i < n; ++i) {
+      std::string k = b.string();
+      r.counts[k] = b.pod<long long>();
+    }
+    for (int i = 0, n = b.pod<int>(); i < n; ++i) {
+      std::string k = b.string();
+      r.phaseMs[k] = b.pod<double>();
+    }
+    for (int i = 0, n = b.pod<int>(); i < n; ++i) r.notes.push_back(b.string());
     r.dt = b.pod<Real>();
     b.matrix(r.finalSurface);
     b.matrix(r.finalFaces);
@@ -701,8 +743,8 @@ bool readCachedReference(Cache& cache, const CacheKey& key, RunRecord& r) {
   }
   r.status = RunStatus::Ok;
   r.notes.push_back(
-      "reference read from the cache (solved by an earlier run of the same reference): no "
-      "timings");
+      "read from the cache (an earlier run solved the same problem with the same plugin and "
+      "parameters): its timings are that run's");
   return true;
 }
 
@@ -761,18 +803,22 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
     std::optional<CacheKey> refKey;
     RunRecord rec;
     bool fromCache = false;
-    if (p.isReference && options.reuseReference && !cacheDir.empty()) {
-      refKey = referenceRunKey(sceneFile, scene, result.organ, loader, p, options.run);
-      fromCache = readCachedReference(cache, *refKey, rec);
+    const bool shared = options.reuseReference && !cacheDir.empty() &&
+                        (p.isReference || (options.reuseModelSolves &&
+                                           solveOnlyAtComparedInstants(*p.info, p.params)));
+    if (shared) {
+      refKey = solveKey(sceneFile, scene, result.organ, loader, p, options.run);
+      fromCache = readCachedSolve(cache, *refKey, rec);
       if (fromCache) {
         rec.model = p.info->name;
         rec.params = paramsToJson(p.params);
-        explain("reference " + p.label + " read from the cache " + kReferenceRunKind);
+        explain((p.isReference ? "reference " : "model ") + p.label + " read from the cache " +
+                kReferenceRunKind);
       }
     }
     if (!fromCache) {
       rec = runModel(*p.info, p.params, scene, result.organ, cache, options.run);
-      if (refKey && rec.status == RunStatus::Ok) storeCachedReference(cache, *refKey, rec);
+      if (refKey && rec.status == RunStatus::Ok) storeCachedSolve(cache, *refKey, rec);
     }
     rec.plugin = p.spec.plugin;
     rec.label = p.label;

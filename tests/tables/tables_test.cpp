@@ -269,6 +269,16 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
     if (run["label"] == "reference_fem") referenceTets = run["counts"]["elements"];
   EXPECT_EQ(study["levels"][2]["elements"], referenceTets) << "the finest level is the same mesh";
   EXPECT_NE(notes[0].find(std::to_string(referenceTets) + " tets"), std::string::npos) << notes[0];
+  // The finest level is not solved again: it reads the case's reference solve from the cache
+  // (same problem, plugin and parameters; another label); the coarser levels are solved.
+  const auto levelNotes = [&](int k) {
+    const json r = readJson(out / ("convergence/hybrid/cube_down_20N/level_" + std::to_string(k)) /
+                            "results.json");
+    return r["runs"][0]["notes"].dump();
+  };
+  EXPECT_NE(levelNotes(2).find("read from the cache"), std::string::npos) << levelNotes(2);
+  EXPECT_EQ(levelNotes(1).find("read from the cache"), std::string::npos) << levelNotes(1);
+  EXPECT_EQ(levelNotes(0).find("read from the cache"), std::string::npos) << levelNotes(0);
 
   // The same study again (as a second tables run would ask for it): read from the cache.
   ConvergeOptions co;

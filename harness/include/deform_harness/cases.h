@@ -49,6 +49,9 @@ struct CaseOptions {
   /// The case's dispatch stage (dispatch.h): a child case of stage S starts only after every
   /// case of an earlier stage ended.
   int stage = 0;
+  /// BenchmarkOptions::reuseReference and reuseModelSolves (in a child: `run --reuse-reference`,
+  /// `--reuse-model-solves`): the tables share their reference solves through the cache.
+  bool reuseReference = false, reuseModelSolves = false;
 };
 
 struct CaseResult {

@@ -69,6 +69,9 @@ struct ConvergeOptions {
   /// the study is the same as in this process. nullopt: the levels run in this process.
   std::optional<ChildCaseOptions> child;
   Dispatcher* dispatcher = nullptr;  ///< not owned
+  /// Levels read from and stored in the cache's shared solves (runner.h, reuseModelSolves): the
+  /// finest level of a reference check is the reference the table's case already solved.
+  bool reuseSolves = false;
 };
 
 /// The levels of a check of the reference itself: 1/8, 1/2.8 and 1 times its own elements, so

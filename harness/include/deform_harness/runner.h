@@ -185,13 +185,18 @@ struct BenchmarkOptions {
   RunOptions run;
   std::function<void(const std::string&)> explain;   ///< --explain lines (may be empty)
   std::function<void(const std::string&)> progress;  ///< one line per run started/finished
-  /// Reference run cache (calibration trials, issue G2): the reference's compared and final
-  /// surfaces are read from the cache (kind "harness.reference_run") when an earlier run with
-  /// this option solved the same reference, and stored there after a solve. The key is the
-  /// scene without its models, name, description and output, the organ, the reference's plugin
-  /// file (SHA-256), model and resolved parameters, and the step limit. A reference read back has
-  /// no timings (a note says so). Off by default: the tables and sweeps time their references.
+  /// Shared reference solves (calibration trials, the tables): the reference's run is read from
+  /// the cache (kind "harness.reference_run") when an earlier run with this option solved the
+  /// same problem, and stored there after a solve. The key is the scene without its models,
+  /// reference, name, description and output, the organ, the plugin file (SHA-256), model and
+  /// resolved parameters, and the step limit; not the run's label. A run read back keeps the
+  /// surfaces, counts and timings of the run that solved it (a note says so). Off by default:
+  /// sweeps time their references.
   bool reuseReference = false;
+  /// With reuseReference: model runs that solve only at the compared instants (quasi-static
+  /// plugins) are shared too, so a convergence level at the reference's own parameters reads the
+  /// reference's solve (the tables' reference checks; `run --reuse-model-solves`, internal).
+  bool reuseModelSolves = false;
   /// Calibrations whose parameters a model (same plugin and model) takes where the scene writes
   /// none; the first file naming a model wins.
   std::vector<CalibrationParams> calibrations;

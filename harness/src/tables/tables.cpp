@@ -42,6 +42,7 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
   co.factors = kReferenceCheckFactors;
   co.outDir = o.outDir / "convergence" / c.id;
   co.cacheDir = o.cases.cacheDir;
+  co.reuseSolves = true;  // the finest level is the case's reference, solved once
   const fs::path sceneFile = o.outDir / "scenes" / (c.id + ".json");
   if (progress) progress->start("reference check " + c.id);
   ConvergenceResult res;
@@ -187,6 +188,10 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
   std::map<std::string, std::vector<std::pair<std::string, std::string>>> twins;  // --calibration
   for (const Case* c : order) {
     CaseOptions co = options.cases;
+    // Reference solves are shared through the cache by problem (runner.h, reuseReference):
+    // between tables that pose the same case, with the reference checks' finest levels, and
+    // with later commands on the same cache.
+    co.reuseReference = true;
     if (c->noCache) co.cacheDir = fs::path();
     ojson scene = c->scene;
     twins[c->id] = addCalibratedTwins(scene, options.calibrations);
