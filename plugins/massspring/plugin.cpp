@@ -25,7 +25,8 @@ DEFORM_PLUGIN(registry) {
                 std::string("implicit_euler")},
                {std::string("symplectic_euler"), std::string("implicit_euler")}};
   info.presets["bench"] = {{{"integrator", std::string("implicit_euler")}}};
-  info.presets["bench_8k"] = {{{"integrator", std::string("local_global")}},
+  info.presets["bench_8k"] = {{},
+                              {{"integrator", std::string("local_global")}},
                               {{"integrator", std::string("implicit_euler")}}};
   registry.add(std::move(info));
 }
