@@ -9,7 +9,7 @@ PACKAGES=(
   libcgal-dev libgmp-dev libmpfr-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   clang libclang-rt-14-dev llvm clang-format
-  libopenblas0-serial liblapack3
+  libopenblas0-serial liblapack3 liblapack-dev  # OpenBLAS's LAPACK: particle_bem's dense BEM solve
   python3-matplotlib python3-numpy
   libjs-three chromium python3-pil  # the report's 3D viewer (three.js) and its browser test
   openmpi-bin libopenmpi-dev

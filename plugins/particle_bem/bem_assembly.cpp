@@ -2,11 +2,21 @@
 
 #include "sph_elasticity.h"
 
-#include <Eigen/LU>
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <map>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+// LAPACK (Fortran symbols; the trailing length is gfortran's hidden length of `trans`).
+extern "C" {
+void dgetrf_(const int* m, const int* n, double* a, const int* lda, int* ipiv, int* info);
+void dgetrs_(const char* trans, const int* n, const int* nrhs, const double* a, const int* lda,
+             const int* ipiv, double* b, const int* ldb, int* info, size_t transLength);
+}
 
 namespace deform::particle_bem {
 
@@ -138,12 +148,39 @@ MatX mixedMatrix(const BemMatrices& bem, const MatX3& V, const std::vector<char>
   return A;
 }
 
-// In place: X <- A^-1 X, with A's LU stored in A.
-void luSolveInPlace(const Eigen::PartialPivLU<Eigen::Ref<MatX>>& lu, MatX& X) {
-  X = lu.permutationP() * X;
-  lu.matrixLU().triangularView<Eigen::UnitLower>().solveInPlace(X);
-  lu.matrixLU().triangularView<Eigen::Upper>().solveInPlace(X);
-}
+// The dense, non-symmetric collocation system, factorised once and solved for many right-hand
+// sides by LAPACK (dgetrf / dgetrs, partial pivoting): the system's LAPACK is OpenBLAS's, whose
+// blocked kernels use the vector units of the CPU it runs on (the serial build: one thread, the
+// same answer on every run). An exactly singular pivot is an error, not infinities.
+class DenseLu {
+ public:
+  explicit DenseLu(MatX& A) : m_a(A), m_piv(static_cast<size_t>(A.rows())) {
+    if (A.rows() != A.cols()) throw std::logic_error("DenseLu: the matrix is not square");
+    const int n = static_cast<int>(A.rows());
+    int info = 0;
+    if (n > 0) dgetrf_(&n, &n, A.data(), &n, m_piv.data(), &info);
+    if (info != 0)
+      throw std::runtime_error(
+          "particle_bem: the BEM system matrix is singular (LAPACK dgetrf "
+          "pivot " +
+          std::to_string(info) + " of " + std::to_string(n) + ")");
+  }
+  /// In place: X <- A^-1 X.
+  void solveInPlace(MatX& X) const {
+    const int n = static_cast<int>(m_a.rows()), nrhs = static_cast<int>(X.cols());
+    if (X.rows() != m_a.rows()) throw std::logic_error("DenseLu: right-hand side rows differ");
+    if (n == 0 || nrhs == 0) return;
+    int info = 0;
+    const char trans = 'N';
+    dgetrs_(&trans, &n, &nrhs, m_a.data(), &n, m_piv.data(), X.data(), &n, &info, 1);
+    if (info != 0) throw std::logic_error("DenseLu: dgetrs rejected its arguments");
+  }
+
+ private:
+  static_assert(std::is_same_v<Real, double>, "LAPACK's d-routines need double");
+  const MatX& m_a;
+  std::vector<int> m_piv;
+};
 
 // A piece of an element for integrating a traction field: corners, the element's normal, and
 // (for a source at one of its corners) the global vertex index at each corner, else -1.
@@ -356,11 +393,21 @@ SingularSupport singularSupport(const SurfaceMesh& s, Real young, Real poisson,
       }
   }
   out.delta = MatX::Zero(3 * n, 3 * out.nodes.size());
+  // Per face: its graded quadrature points, then for every node the three 3 x 3 sums
+  // sum_q N_k(y_q) U*(y_q - x_i) dw_q, accumulated in registers (U* symmetric: six entries) and
+  // added to delta once per face and node.
+  struct QuadraturePoint {
+    Vec3 y;
+    Real N[3], dw;
+  };
+  std::vector<QuadraturePoint> points;
+  const Real cu = K.displacementScale(), c34 = K.displacementDiagonal();
   for (size_t f = 0; f < faces.size(); ++f) {
     const Vec3 A = s.V.row(faces[f][0]).transpose(), B = s.V.row(faces[f][1]).transpose(),
                C = s.V.row(faces[f][2]).transpose();
     const Real area = 0.5 * (B - A).cross(C - A).norm();
     if (!(area > 0)) continue;
+    points.clear();
     for (size_t ti = 0; ti + 1 < br.size(); ++ti)
       for (size_t si = 0; si + 1 < br.size(); ++si)
         for (size_t p = 0; p < gx.size(); ++p)
@@ -369,29 +416,49 @@ SingularSupport singularSupport(const SurfaceMesh& s, Real young, Real poisson,
             const Real sig = br[si] + (br[si + 1] - br[si]) * gx[q];
             const Real wq = gw[p] * gw[q] * (br[ti + 1] - br[ti]) * (br[si + 1] - br[si]);
             const Real t2 = tau * tau;
-            Vec3 y;
-            Real N[3], dw;
+            QuadraturePoint pt;
             if (edgeType[f]) {  // y = (1 - t)((1 - sig) A + sig B) + t C, dA = 2 area (1 - t)
-              y = (1 - t2) * ((1 - sig) * A + sig * B) + t2 * C;
-              N[0] = (1 - t2) * (1 - sig);
-              N[1] = (1 - t2) * sig;
-              N[2] = t2;
-              dw = 4 * area * (1 - t2) * (1 - tau) * wq;  // (w - 1) dA with t = tau^2
+              pt.y = (1 - t2) * ((1 - sig) * A + sig * B) + t2 * C;
+              pt.N[0] = (1 - t2) * (1 - sig);
+              pt.N[1] = (1 - t2) * sig;
+              pt.N[2] = t2;
+              pt.dw = 4 * area * (1 - t2) * (1 - tau) * wq;  // (w - 1) dA with t = tau^2
             } else {  // y = A + rho ((1 - sig)(B - A) + sig (C - A)), dA = 2 area rho
-              y = A + t2 * ((1 - sig) * (B - A) + sig * (C - A));
-              N[0] = 1 - t2;
-              N[1] = t2 * (1 - sig);
-              N[2] = t2 * sig;
-              dw = 4 * area * t2 * (1 - tau) * wq;
+              pt.y = A + t2 * ((1 - sig) * (B - A) + sig * (C - A));
+              pt.N[0] = 1 - t2;
+              pt.N[1] = t2 * (1 - sig);
+              pt.N[2] = t2 * sig;
+              pt.dw = 4 * area * t2 * (1 - tau) * wq;
             }
-            for (int i = 0; i < n; ++i) {
-              const Vec3 r = y - s.V.row(i).transpose();
-              if (r.squaredNorm() == 0) continue;
-              const Mat3 U = K.displacement(r) * dw;
-              for (int k = 0; k < 3; ++k)
-                out.delta.block<3, 3>(3 * i, 3 * column[faces[f][k]]) += N[k] * U;
-            }
+            points.push_back(pt);
           }
+    for (int i = 0; i < n; ++i) {
+      const Real x0 = s.V(i, 0), x1 = s.V(i, 1), x2 = s.V(i, 2);
+      Real S[3][6] = {};  // per corner k: xx, yy, zz, xy, xz, yz
+      for (const QuadraturePoint& pt : points) {
+        const Real r0 = pt.y[0] - x0, r1 = pt.y[1] - x1, r2 = pt.y[2] - x2;
+        const Real l2 = r0 * r0 + r1 * r1 + r2 * r2;
+        if (l2 == 0) continue;
+        const Real inv = 1 / std::sqrt(l2);
+        const Real c = cu * inv * pt.dw, d = c * inv * inv, diag = c * c34;
+        const Real u[6] = {diag + d * r0 * r0, diag + d * r1 * r1, diag + d * r2 * r2,
+                           d * r0 * r1,        d * r0 * r2,        d * r1 * r2};
+        for (int k = 0; k < 3; ++k)
+          for (int e = 0; e < 6; ++e) S[k][e] += pt.N[k] * u[e];
+      }
+      for (int k = 0; k < 3; ++k) {
+        auto block = out.delta.block<3, 3>(3 * i, 3 * column[faces[f][k]]);
+        block(0, 0) += S[k][0];
+        block(1, 1) += S[k][1];
+        block(2, 2) += S[k][2];
+        block(0, 1) += S[k][3];
+        block(1, 0) += S[k][3];
+        block(0, 2) += S[k][4];
+        block(2, 0) += S[k][4];
+        block(1, 2) += S[k][5];
+        block(2, 1) += S[k][5];
+      }
+    }
   }
   return out;
 }
@@ -535,9 +602,9 @@ DeformationMatrix computeDeformationMatrix(BemMatrices&& bem, const SurfaceMesh&
   for (int j : fixed) B.middleCols(3 * j, 3).setZero();
   if (out.bordered) B.conservativeResize(n3 + 6, Eigen::NoChange);
   if (out.bordered) B.bottomRows(6).setZero();
-  Eigen::PartialPivLU<Eigen::Ref<MatX>> lu(A);
-  luSolveInPlace(lu, B);
-  luSolveInPlace(lu, gravRhs);
+  const DenseLu lu(A);
+  lu.solveInPlace(B);
+  lu.solveInPlace(gravRhs);
   B.conservativeResize(n3, Eigen::NoChange);
   for (int j : fixed) {
     B.middleRows(3 * j, 3).setZero();  // these rows held the reaction tractions
@@ -569,8 +636,7 @@ VecX solveBemRhs(const BemMatrices& bem, const SurfaceMesh& s, const std::vector
   MatX A = mixedMatrix(bem, s.V, isFixed, bordered, support);
   MatX rhs = MatX::Zero(A.rows(), 1);
   rhs.topRows(n3) = rhsIn;
-  Eigen::PartialPivLU<Eigen::Ref<MatX>> lu(A);
-  luSolveInPlace(lu, rhs);
+  DenseLu(A).solveInPlace(rhs);
   VecX u = rhs.col(0).head(n3);
   for (int j : fixed) u.segment<3>(3 * j).setZero();
   return u;
@@ -621,8 +687,7 @@ VecX solveBemPartial(const BemMatrices& bem, const SurfaceMesh& s, const VecX& p
     }
   MatX rhs = MatX::Zero(A.rows(), 1);
   rhs.topRows(n3) = rhsIn;
-  Eigen::PartialPivLU<Eigen::Ref<MatX>> lu(A);
-  luSolveInPlace(lu, rhs);
+  DenseLu(A).solveInPlace(rhs);
   VecX u = rhs.col(0).head(n3);
   for (int j = 0; j < n; ++j)
     if (isFixed[j]) u.segment<3>(3 * j).setZero();

@@ -32,6 +32,10 @@ class KelvinKernel {
   /// Both at once (shares the geometry).
   void both(const Vec3& r, const Vec3& n, Mat3& U, Mat3& T) const;
 
+  /// U* = scale / |r| (diagonal I + r_,i r_,j): the two constants, for loops that inline it.
+  Real displacementScale() const { return m_cu; }
+  Real displacementDiagonal() const { return m_cu34; }
+
   Real mu() const { return m_mu; }
   Real nu() const { return m_nu; }
 
