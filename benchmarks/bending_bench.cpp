@@ -3,6 +3,8 @@
 // on padded positions as the solvers keep them. Isometric (deform/isometric_bending.h) in float
 // and double, vectorised (AVX2 where the CPU has it) and scalar; the dihedral angle
 // (deform/pbd_kernels.h, projectDihedral) one hinge at a time as the PBD plugin projects it.
+// The isometric sweeps also run with two vertices in three immovable and the movable-slot
+// pattern passed (fixed:1), as the hybrid model projects them.
 // Time per sweep; the per-hinge cost is in the "ns_per_hinge" counter.
 #include <benchmark/benchmark.h>
 #include <deform/isometric_bending.h>
@@ -75,34 +77,53 @@ const Hinges& hinges() {
   return h;
 }
 
+// Arguments: simd; fixed = 1: two vertices in three immovable (w = 0, about the share of the
+// hybrid model's control nodes), the hinges of each colour sorted by their movable-slot pattern
+// and the pattern passed to the kernel, which then skips the slots immovable in a whole group.
 template <class T>
 void BM_IsometricSweep(benchmark::State& state) {
   const Hinges& H = hinges();
-  const bool simd = state.range(0) != 0;
+  const bool simd = state.range(0) != 0, fixed = state.range(1) != 0;
   const size_t n = H.iso.size();
   std::vector<T> x4(4 * H.s.numVertices(), T(0));
   for (int i = 0; i < H.s.numVertices(); ++i)
     for (int c = 0; c < 3; ++c) x4[4 * i + c] = static_cast<T>(H.s.V(i, c) * (1.0 + 1e-3 * c));
+  auto pattern = [&](size_t i) {
+    unsigned m = 0;
+    for (int k = 0; k < 4; ++k)
+      if (!fixed || H.iso[i].p[k] % 3 == 0) m |= 1u << k;
+    return static_cast<unsigned char>(m);
+  };
+  std::vector<size_t> order(n);
+  std::iota(order.begin(), order.end(), size_t(0));
+  for (size_t c = 0; fixed && c + 1 < H.colours.size(); ++c)
+    std::stable_sort(order.begin() + H.colours[c], order.begin() + H.colours[c + 1],
+                     [&](size_t a, size_t b) { return pattern(a) < pattern(b); });
   std::vector<int> p[4];
   std::vector<T> K[4], wK[4], rest(n), at(n, T(0)), scale(n), lambda(n, T(0));
-  for (size_t i = 0; i < n; ++i) {
+  std::vector<unsigned char> movable(n);
+  for (size_t j = 0; j < n; ++j) {
+    const size_t i = order[j];
+    movable[j] = pattern(i);
     Real denom = 0;
     for (int k = 0; k < 4; ++k) {
+      const Real w = (movable[j] >> k) & 1u ? 1.0 : 0.0;
       p[k].push_back(4 * H.iso[i].p[k]);
       K[k].push_back(static_cast<T>(H.iso[i].K[k]));
-      wK[k].push_back(static_cast<T>(H.iso[i].K[k]));  // w = 1
-      denom += H.iso[i].K[k] * H.iso[i].K[k];
+      wK[k].push_back(static_cast<T>(w * H.iso[i].K[k]));
+      denom += w * H.iso[i].K[k] * H.iso[i].K[k];
     }
-    rest[i] = static_cast<T>(H.iso[i].rest);
-    scale[i] = static_cast<T>(0.5 / denom);
+    rest[j] = static_cast<T>(H.iso[i].rest);
+    scale[j] = denom > 0 ? static_cast<T>(0.5 / denom) : T(0);
   }
-  const pbd::IsometricBatch<T> b{{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
-                                 {K[0].data(), K[1].data(), K[2].data(), K[3].data()},
-                                 {wK[0].data(), wK[1].data(), wK[2].data(), wK[3].data()},
-                                 rest.data(),
-                                 at.data(),
-                                 scale.data(),
-                                 lambda.data()};
+  pbd::IsometricBatch<T> b{{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
+                           {K[0].data(), K[1].data(), K[2].data(), K[3].data()},
+                           {wK[0].data(), wK[1].data(), wK[2].data(), wK[3].data()},
+                           rest.data(),
+                           at.data(),
+                           scale.data(),
+                           lambda.data()};
+  if (fixed) b.movable = movable.data();
   for (auto _ : state) {
     for (size_t c = 0; c + 1 < H.colours.size(); ++c)
       benchmark::DoNotOptimize(
@@ -136,11 +157,17 @@ void BM_DihedralSweep(benchmark::State& state) {
                                                    benchmark::Counter::kInvert);
 }
 
-BENCHMARK(BM_IsometricSweep<float>)->ArgName("simd")->Arg(1)->Arg(0)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_IsometricSweep<float>)
+    ->ArgNames({"simd", "fixed"})
+    ->Args({1, 0})
+    ->Args({0, 0})
+    ->Args({1, 1})
+    ->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_IsometricSweep<double>)
-    ->ArgName("simd")
-    ->Arg(1)
-    ->Arg(0)
+    ->ArgNames({"simd", "fixed"})
+    ->Args({1, 0})
+    ->Args({0, 0})
+    ->Args({1, 1})
     ->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_DihedralSweep)->Unit(benchmark::kMicrosecond);
 

@@ -42,6 +42,8 @@ const std::vector<Case>& cases() {
       // dt it may diverge, counted in diverged_steps).
       {"massspring_symplectic_euler", "massspring", json::object()},
       {"hybrid_fem_pbd", "hybrid_fem_pbd", json::object()},
+      // The hybrid's double-precision surface projection and grasp response (before G7 item 3).
+      {"hybrid_fem_pbd_float64", "hybrid_fem_pbd", {{"precision", "float64"}}},
       {"hybrid_fem_pbd_dihedral", "hybrid_fem_pbd", {{"bending_model", "dihedral"}}},
       {"fem_hex", "fem_hex", json::object()},
   };

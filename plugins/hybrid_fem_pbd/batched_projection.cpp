@@ -15,12 +15,15 @@ namespace deform::hybrid {
 namespace {
 
 // One constraint at a time: the reference for the AVX2 lanes and the tail of each colour.
-struct ScalarLanes {
-  using V = double;
+template <class Scalar>
+struct ScalarLanesT {
+  using T = Scalar;
+  using V = Scalar;
   using M = bool;
   static constexpr int kWidth = 1;
-  static V set1(double v) { return v; }
-  static V load(const double* p) { return *p; }
+  static V set1(T v) { return v; }
+  static V load(const T* p) { return *p; }
+  static void store(T* p, V v) { *p = v; }
   static V sqrt(V a) { return std::sqrt(a); }
   static V min(V a, V b) { return a < b ? a : b; }
   static V max(V a, V b) { return a > b ? a : b; }
@@ -32,19 +35,21 @@ struct ScalarLanes {
   static int count(M m) { return m ? 1 : 0; }
   static unsigned orBytes(const unsigned char* m) { return *m; }
   static bool anyByte(const unsigned char* m) { return *m != 0; }
-  static void loadPoints(const double* x4, const int* idx, V& x, V& y, V& z) {
-    const double* p = x4 + 4 * static_cast<long>(*idx);
+  static void loadPoints(const T* x4, const int* idx, V& x, V& y, V& z) {
+    const T* p = x4 + 4 * static_cast<long>(*idx);
     x = p[0];
     y = p[1];
     z = p[2];
   }
-  static void addPoints(double* x4, const int* idx, V dx, V dy, V dz) {
-    double* p = x4 + 4 * static_cast<long>(*idx);
+  static void addPoints(T* x4, const int* idx, V dx, V dy, V dz) {
+    T* p = x4 + 4 * static_cast<long>(*idx);
     p[0] += dx;
     p[1] += dy;
     p[2] += dz;
   }
 };
+using ScalarLanes = ScalarLanesT<double>;
+using ScalarLanesF = ScalarLanesT<float>;
 
 bool avx2Supported() {
 #ifdef DEFORM_HYBRID_AVX2
@@ -58,6 +63,10 @@ bool avx2Supported() {
 
 batched::StretchView SurfaceBatches::stretchView() const {
   return {sbMovable.data(), sa.data(), sb.data(), sRest.data(), sScaleA.data(), sScaleB.data()};
+}
+
+batched::StretchViewF SurfaceBatches::stretchViewF() const {
+  return {sbMovable.data(), sa.data(), sb.data(), fRest.data(), fScaleA.data(), fScaleB.data()};
 }
 
 batched::BendView SurfaceBatches::bendView() const {
@@ -183,7 +192,8 @@ long long projectIsometricPass(Real* x4, const SurfaceBatches& b, bool simd) {
       b.isoRest.data(),
       b.isoAlphaTilde.data(),
       b.isoScale.data(),
-      b.isoLambda.data()};
+      b.isoLambda.data(),
+      b.hMovable.data()};
   const size_t nhc = b.hColourStart.size() - 1;
   long long degenerate = 0;
   for (size_t col = 0; col < nhc; ++col) {
@@ -199,7 +209,104 @@ long long projectIsometricPass(Real* x4, const SurfaceBatches& b, bool simd) {
   return degenerate;
 }
 
+// One single-precision stretch sweep over every colour; measure != nullptr: the constraints'
+// lengths (stretchGroup) instead, through the same lanes for the same simd flag.
+long long stretchPassF(float* x4, const SurfaceBatches& b, bool simd, float* measure) {
+  static const bool kAvx2 = avx2Supported();
+  const bool vec = simd && kAvx2;
+  const batched::StretchViewF sv = b.stretchViewF();
+  const size_t nsc = b.sColourStart.size() - 1;
+  long long degenerate = 0;
+  for (size_t col = 0; col < nsc; ++col) {
+    size_t i = static_cast<size_t>(b.sColourStart[col]);
+    const size_t end = static_cast<size_t>(b.sColourStart[col + 1]);
+#ifdef DEFORM_HYBRID_AVX2
+    if (vec && !(b.sLastColourShared && col + 1 == nsc))
+      i += batched::stretchRangeAvx2(x4, sv, i, end, measure, &degenerate);
+#endif
+    for (; i < end; ++i) degenerate += batched::stretchGroup<ScalarLanesF>(x4, sv, i, measure);
+  }
+  (void)vec;
+  return degenerate;
+}
+
+// One single-precision isometric bending sweep (the shared float kernel); measure != nullptr:
+// the stencil lengths |v| instead.
+long long isometricPassF(float* x4, const SurfaceBatches& b, bool simd, float* measure) {
+  const pbd::IsometricBatch<float> v{
+      {b.isoP[0].data(), b.isoP[1].data(), b.isoP[2].data(), b.isoP[3].data()},
+      {b.fIsoK[0].data(), b.fIsoK[1].data(), b.fIsoK[2].data(), b.fIsoK[3].data()},
+      {b.fIsoWK[0].data(), b.fIsoWK[1].data(), b.fIsoWK[2].data(), b.fIsoWK[3].data()},
+      b.fIsoRest.data(),
+      b.fIsoAlphaTilde.data(),
+      b.fIsoScale.data(),
+      b.fIsoLambda.data(),
+      b.hMovable.data()};
+  const size_t nhc = b.hColourStart.size() - 1;
+  long long degenerate = 0;
+  auto range = [&](size_t begin, size_t end) {
+    if (measure != nullptr) {
+      pbd::isometricLengthsColour(x4, v, begin, end, measure, simd);
+    } else {
+      degenerate += pbd::projectIsometricColour(x4, v, begin, end, simd);
+    }
+  };
+  for (size_t col = 0; col < nhc; ++col) {
+    const size_t begin = static_cast<size_t>(b.hColourStart[col]);
+    const size_t end = static_cast<size_t>(b.hColourStart[col + 1]);
+    if (b.hLastColourShared && col + 1 == nhc) {
+      for (size_t i = begin; i < end; ++i) range(i, i + 1);
+    } else {
+      range(begin, end);
+    }
+  }
+  return degenerate;
+}
+
 }  // namespace
+
+void addSinglePrecision(SurfaceBatches& b, const MatX3& restV, const Vec3& origin, bool simd) {
+  b.singlePrecision = b.isometric;
+  if (!b.isometric || b.sColourStart.empty() || b.hColourStart.empty()) return;
+  b.origin = origin;
+  const size_t ns = b.sa.size(), nh = b.hCos0.size();
+  auto toFloat = [](const std::vector<Real>& d) { return std::vector<float>(d.begin(), d.end()); };
+  b.fScaleA = toFloat(b.sScaleA);
+  b.fScaleB = toFloat(b.sScaleB);
+  for (int k = 0; k < 4; ++k) {
+    b.fIsoK[k] = toFloat(b.isoK[k]);
+    b.fIsoWK[k] = toFloat(b.isoWK[k]);
+  }
+  b.fIsoScale = toFloat(b.isoScale);
+  b.fIsoAlphaTilde.assign(nh, 0.0f);
+  b.fIsoLambda.assign(nh, 0.0f);
+  std::vector<float> x4(4 * static_cast<size_t>(restV.rows()), 0.0f);
+  for (Eigen::Index i = 0; i < restV.rows(); ++i)
+    for (int a = 0; a < 3; ++a)
+      x4[4 * static_cast<size_t>(i) + a] = static_cast<float>(restV(i, a) - origin[a]);
+  // Rest lengths: measured on the rounded rest positions where they are the rest positions'
+  // distances (always, up to the rounding of the positions; the law-of-cosines lengths after a
+  // cut included), else the double value rounded.
+  std::vector<float> len(ns, 0.0f);
+  stretchPassF(x4.data(), b, simd, len.data());
+  b.fRest.resize(ns);
+  for (size_t i = 0; i < ns; ++i)
+    b.fRest[i] = std::abs(double(len[i]) - b.sRest[i]) <= 1e-4 * b.sRest[i]
+                     ? len[i]
+                     : static_cast<float>(b.sRest[i]);
+  b.fIsoRest.assign(nh, 0.0f);
+  isometricPassF(x4.data(), b, simd, b.fIsoRest.data());
+}
+
+long long projectSurfaceBatchesF(float* x4, const SurfaceBatches& b, int iterations, bool simd) {
+  if (!b.singlePrecision) return 0;
+  long long degenerate = 0;
+  for (int it = 0; it < iterations; ++it) {
+    degenerate += stretchPassF(x4, b, simd, nullptr);
+    if (b.kBending > 0) degenerate += isometricPassF(x4, b, simd, nullptr);
+  }
+  return degenerate;
+}
 
 long long projectSurfaceBatches(Real* x4, const SurfaceBatches& b, int iterations, bool simd) {
   if (b.sColourStart.empty() || b.hColourStart.empty()) return 0;  // never built: nothing active

@@ -8,7 +8,8 @@
 // Per-constraint data that do not change while the set of immovable particles stays the same
 // (the inverse masses, the stretch scales k w_a / (w_a + w_b), cos and sin of the rest angle) are
 // precomputed in SurfaceBatches, rebuilt only when that set changes (a grasp starts or ends, a
-// cut). Positions are projected in a padded #V by 4 array.
+// cut). Positions are projected in a padded #V by 4 array, in double or (the default, with the
+// isometric bending) in float relative to the organ's centre.
 #pragma once
 
 #include <deform/types.h>
@@ -40,8 +41,19 @@ struct SurfaceBatches {
   std::vector<int> isoP[4];  ///< 4 * particle index (row offsets in x4)
   std::vector<Real> isoK[4], isoWK[4], isoRest, isoAlphaTilde, isoScale;
   mutable std::vector<Real> isoLambda;  ///< written by the projection (classic PBD: unused)
+  // Single precision (the default `precision = float32`, isometric bending), set by
+  // addSinglePrecision(): the same constraints, order and stiffnesses in float, for positions
+  // relative to `origin` in a padded float array. The rest lengths and rest stencil lengths are
+  // measured in float from the rounded rest positions with the projection's own arithmetic, so
+  // that C = 0 bit for bit at rest.
+  bool singlePrecision = false;
+  Vec3 origin = Vec3::Zero();  ///< m
+  std::vector<float> fRest, fScaleA, fScaleB;
+  std::vector<float> fIsoK[4], fIsoWK[4], fIsoRest, fIsoAlphaTilde, fIsoScale;
+  mutable std::vector<float> fIsoLambda;
 
   batched::StretchView stretchView() const;
+  batched::StretchViewF stretchViewF() const;
   batched::BendView bendView() const;
 };
 
@@ -55,9 +67,19 @@ SurfaceBatches buildSurfaceBatches(const SurfaceConstraints& c, const ActiveCons
 /// rest gets a zero stencil (it is then never moved).
 void addIsometricBending(SurfaceBatches& b, const MatX3& restV);
 
+/// Adds the single-precision form of b's stretch and isometric bending data (b.isometric must be
+/// set): positions relative to origin (m), rest values measured at restV (#V by 3) rounded to
+/// float, with the arithmetic of projectSurfaceBatchesF(..., simd) for the same simd flag.
+void addSinglePrecision(SurfaceBatches& b, const MatX3& restV, const Vec3& origin, bool simd);
+
 /// `iterations` sweeps on the padded positions x4 (#V by 4, row-major, 4th column unused).
 /// simd: use the AVX2 path when the CPU has it. Returns the degenerate projections skipped.
 long long projectSurfaceBatches(Real* x4, const SurfaceBatches& b, int iterations, bool simd);
+
+/// projectSurfaceBatches() in single precision (b from addSinglePrecision()): x4 holds the
+/// positions minus b.origin as floats (#V by 4). Stretch eight constraints at a time (AVX2), the
+/// isometric hinges by the shared float kernel of deform/isometric_bending.h.
+long long projectSurfaceBatchesF(float* x4, const SurfaceBatches& b, int iterations, bool simd);
 
 /// Whether projectSurfaceBatches(..., simd = true) runs four constraints at a time here.
 bool surfaceSimdAvailable();

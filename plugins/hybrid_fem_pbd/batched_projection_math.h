@@ -1,6 +1,8 @@
 // Hybrid FEM+PBD: the arithmetic of the colour-batched surface projection, written once over a
-// "lanes" policy L so that the same code runs one constraint at a time (L::V = double) and four
-// at a time (L::V = __m256d, AVX2, batched_projection_avx2.cpp). Plain pointers and builtin
+// "lanes" policy L so that the same code runs one constraint at a time (L::V = double or float)
+// and four doubles or eight floats at a time (L::V = __m256d or __m256, AVX2,
+// batched_projection_avx2.cpp; the single-precision form is the stretch pass of the default
+// `precision = float32`). Plain pointers and builtin
 // types only: this header is compiled both with and without -mavx2, so it includes no library
 // header whose inline functions could be merged across the two instruction sets, and everything
 // here has internal linkage.
@@ -24,14 +26,19 @@ namespace deform::hybrid::batched {
 
 /// Structure-of-arrays views of one constraint list (built by SurfaceBatches). Positions are a
 /// padded #V by 4 array (x, y, z, 0) so that a point is one aligned-size load.
-struct StretchView {
+/// T = double, or float for the single-precision projection (positions then relative to the
+/// organ's centre, see SurfaceBatches).
+template <class T>
+struct StretchViewT {
   const unsigned char* bMovable;  ///< 1 when w_b > 0 (a is always movable: SurfaceBatches orients)
   const int* a;
   const int* b;
-  const double* rest;  ///< l, m
-  const double* sa;    ///< k w_a / (w_a + w_b)
-  const double* sb;    ///< k w_b / (w_a + w_b)
+  const T* rest;  ///< l, m
+  const T* sa;    ///< k w_a / (w_a + w_b)
+  const T* sb;    ///< k w_b / (w_a + w_b)
 };
+using StretchView = StretchViewT<double>;
+using StretchViewF = StretchViewT<float>;
 struct BendView {
   const unsigned char* movable;  ///< bit k set when w[k] > 0
   const int* p[4];     ///< x0, x1 wings; x2, x3 the shared edge (DihedralConstraint order)
@@ -91,18 +98,28 @@ inline typename L::V atan2Poly(typename L::V y, typename L::V x) {
 }
 
 /// Projects L::kWidth stretch constraints starting at i (independent in their movable
-/// particles). Returns the number of degenerate (zero-length) ones, which are left unchanged.
+/// particles), in L::T (double or float) arithmetic. Returns the number of degenerate
+/// (zero-length) ones, which are left unchanged. measure != nullptr: store |x_a - x_b| (0 where
+/// degenerate) to measure[i..] instead and change nothing (rest lengths measured with the
+/// projection's own arithmetic give C = 0 bit for bit at rest).
 template <class L>
-inline int stretchGroup(double* x4, const StretchView& s, std::size_t i) {
+inline int stretchGroup(typename L::T* x4, const StretchViewT<typename L::T>& s, std::size_t i,
+                        typename L::T* measure = nullptr) {
   using V = typename L::V;
+  using T = typename L::T;
   V ax, ay, az, bx, by, bz;
   L::loadPoints(x4, s.a + i, ax, ay, az);
   L::loadPoints(x4, s.b + i, bx, by, bz);
   const V dx = ax - bx, dy = ay - by, dz = az - bz;
   const V len2 = dx * dx + dy * dy + dz * dz;
-  const auto ok = L::gt(len2, L::set1(kTinyLength2));
-  const V len = L::sqrt(L::max(len2, L::set1(kTinyLength2)));
-  const V f = L::select(ok, (L::load(s.rest + i) - len) / len, L::set1(0.0));
+  const V tiny = L::set1(static_cast<T>(kTinyLength2));
+  const auto ok = L::gt(len2, tiny);
+  const V len = L::sqrt(L::max(len2, tiny));
+  if (measure != nullptr) {
+    L::store(measure + i, L::select(ok, len, L::set1(T(0))));
+    return 0;
+  }
+  const V f = L::select(ok, (L::load(s.rest + i) - len) / len, L::set1(T(0)));
   const V fa = L::load(s.sa + i) * f, fb = L::load(s.sb + i) * f;
   L::addPoints(x4, s.a + i, fa * dx, fa * dy, fa * dz);
   if (L::anyByte(s.bMovable + i)) L::addPoints(x4, s.b + i, -(fb * dx), -(fb * dy), -(fb * dz));

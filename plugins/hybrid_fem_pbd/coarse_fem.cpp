@@ -94,6 +94,11 @@ void CoarseLinearFem::setOutputNodes(int count) {
   m_rowKey.clear();  // rebuild Z (and its output rows) at the next solve
 }
 
+void CoarseLinearFem::setSinglePrecisionResponse(bool on) {
+  m_floatResponse = on;
+  m_rowKey.clear();  // rebuild the output rows at the next solve
+}
+
 void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& gravity,
                             const std::vector<Prescribed>& prescribed, MatX3& u,
                             std::vector<Vec3>* reactions) {
@@ -150,7 +155,11 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
         rhs[r++] = p.displacement[a] - cu;
       }
     m_lambda = m_S.solve(rhs);
-    if (m_outputNodes >= 0) {
+    if (m_outputNodes >= 0 && m_floatResponse) {
+      m_zl.resize(m_ZoutF.paddedRows());
+      m_ZoutF.multiply(m_lambda.data(), m_zl.data());
+      for (size_t k = 0; k < m_outDofs.size(); ++k) x[m_outDofs[k]] += m_zl[k];
+    } else if (m_outputNodes >= 0) {
       m_zl.noalias() = m_Zout * m_lambda;
       for (size_t k = 0; k < m_outDofs.size(); ++k) x[m_outDofs[k]] += m_zl[k];
     } else {
@@ -206,6 +215,10 @@ void CoarseLinearFem::buildPrescribedRows(const std::vector<Prescribed>& prescri
   if (m_outputNodes >= 0) {
     m_Zout.resize(static_cast<Eigen::Index>(m_outDofs.size()), m);
     for (size_t k = 0; k < m_outDofs.size(); ++k) m_Zout.row(k) = m_Z.row(m_outDofs[k]);
+    if (m_floatResponse) {
+      m_ZoutF.assign(m_Zout);
+      m_Zout.resize(0, 0);
+    }
   }
 }
 

@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "load_processing.h"
+#include "response_product.h"
 
 namespace deform::hybrid {
 
@@ -71,6 +72,11 @@ class CoarseLinearFem {
   /// computed). Z lambda is the per-step cost of a grasp: #free x #rows, three times the control
   /// rows on the liver (17k volume nodes, 5.5k on the surface). count < 0: every node (default).
   void setOutputNodes(int count);
+  /// With output nodes set (setOutputNodes), store Z's output rows in single precision and
+  /// accumulate Z lambda in double (response_product.h; the default of the hybrid model's
+  /// `precision = float32`), instead of double storage. Takes effect at the next rebuild of the
+  /// prescribed rows (call before the first solve).
+  void setSinglePrecisionResponse(bool on);
 
   int numNodes() const { return m_numNodes; }
   int numFreeDofs() const { return m_numFree; }
@@ -102,7 +108,9 @@ class CoarseLinearFem {
   VecX m_scratch, m_rhs, m_lambda, m_zl;
   int m_outputNodes = -1;
   std::vector<int> m_outDofs;  ///< free dofs of nodes [0, m_outputNodes)
-  MatX m_Zout;                 ///< m_Z's rows at m_outDofs
+  MatX m_Zout;                 ///< m_Z's rows at m_outDofs (double response)
+  bool m_floatResponse = false;
+  BlockedResponse m_ZoutF;  ///< m_Z's rows at m_outDofs in float (single-precision response)
   std::vector<std::array<Real, 7>> m_keyScratch;
 };
 

@@ -40,6 +40,10 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::real("cut_snap", "1", 0.1, 0.0, 0.3,
                       "incision: intersection points within this barycentric distance of a "
                       "vertex or edge snap to it"),
+      ParamSpec::choice("precision", "float32", {"float32", "float64"},
+                        "number type of the surface projection (isometric bending; positions "
+                        "relative to the organ's centre) and of the stored grasp response of "
+                        "the coarse FEM; state between steps and the FEM solve stay double"),
   };
 }
 
@@ -56,6 +60,8 @@ HybridConfig configFromParams(const ParamValues& p) {
   c.minCollapseQuality = p.real("min_collapse_quality");
   c.tetEdgeFactor = p.real("tet_edge_factor");
   c.cutSnap = p.real("cut_snap");
+  c.precision = p.choiceAs<HybridPrecision>(
+      "precision", {{"float32", HybridPrecision::Float32}, {"float64", HybridPrecision::Float64}});
   return c;
 }
 
@@ -156,6 +162,8 @@ void HybridModel::init(const Organ& organ, const HybridConfig& config, Cache* ca
   m_fem.init(m_mesh.volume, mat, fixedVolume, organ.source);
   // The surface reads MV at the control nodes only (the coarse surface, MV nodes 0..#Vc-1).
   m_fem.setOutputNodes(m_mesh.coarseSurface.numVertices());
+  m_fem.setSinglePrecisionResponse(m_cfg.precision == HybridPrecision::Float32);
+  m_origin = boundingBox(fine.V).center();
   m_fixedFine = fixedNodeIndices(fine.V, organ.fixed, fine);
 
   m_surf0 = CuttableSurface::fromMesh(fine.V, fine.V, fine.F);
@@ -284,7 +292,9 @@ StepStatus HybridModel::step(const StepInput& in) {
   // 2. Coarse FEM.
   t = Clock::now();
   m_fem.solve(m_nodal, in.gravity, m_prescribed, m_volumeU, &m_reactions);
-  m_volumeX = m_mesh.volume.V + m_volumeU;
+  // Only the control nodes (MV's rows 0..#Vc-1) are computed; the interior rows stay at rest.
+  const Eigen::Index nc = m_mesh.coarseSurface.numVertices();
+  m_volumeX.topRows(nc) = m_mesh.volume.V.topRows(nc) + m_volumeU.topRows(nc);
   // Newton's third law: the multipliers are the forces the grasps apply to the tissue.
   m_graspForces.assign(in.grasps.size(), Vec3::Zero());
   for (size_t e = 0; e < m_prescribed.size(); ++e)
@@ -302,7 +312,13 @@ StepStatus HybridModel::step(const StepInput& in) {
     m_active = activeConstraints(m_constraints, m_w);
     m_batches = buildSurfaceBatches(m_constraints, m_active, m_w, m_cfg.stretchStiffness,
                                     m_cfg.bendingStiffness, m_cfg.iterations);
-    if (m_cfg.bending == HybridBending::Isometric) addIsometricBending(m_batches, m_surf.rest);
+    if (m_cfg.bending == HybridBending::Isometric) {
+      addIsometricBending(m_batches, m_surf.rest);
+      if (m_cfg.precision == HybridPrecision::Float32 &&
+          m_cfg.projection != SurfaceProjection::Reference)
+        addSinglePrecision(m_batches, m_surf.rest, m_origin,
+                           m_cfg.projection == SurfaceProjection::Batched);
+    }
     m_activeValid = true;
   }
   const Real damp = std::exp(-m_cfg.damping * dt);
@@ -328,6 +344,21 @@ StepStatus HybridModel::step(const StepInput& in) {
     degenerate =
         projectSurfaceConstraints(m_p, m_w, m_constraints, m_active, m_cfg.stretchStiffness,
                                   m_cfg.bendingStiffness, m_cfg.iterations);
+  } else if (m_batches.singlePrecision) {
+    // Projected in float relative to the organ's centre; the result is taken back as the float
+    // correction added to the double prediction, so an unmoved particle keeps its double value.
+    m_x4f.resize(4 * static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) {
+      for (int a = 0; a < 3; ++a)
+        m_x4f[4 * size_t(i) + a] = static_cast<float>(m_p(i, a) - m_origin[a]);
+      m_x4f[4 * size_t(i) + 3] = 0.0f;
+    }
+    degenerate = projectSurfaceBatchesF(m_x4f.data(), m_batches, m_cfg.iterations,
+                                        m_cfg.projection == SurfaceProjection::Batched);
+    for (int i = 0; i < n; ++i)
+      for (int a = 0; a < 3; ++a)
+        m_p(i, a) += static_cast<Real>(m_x4f[4 * size_t(i) + a] -
+                                       static_cast<float>(m_p(i, a) - m_origin[a]));
   } else {
     m_x4.resize(4 * static_cast<size_t>(n));
     for (int i = 0; i < n; ++i)

@@ -45,6 +45,12 @@ enum class SurfaceProjection {
 /// (default) or the paper's dihedral angle (Eqs. (10)-(11)).
 enum class HybridBending { Isometric, Dihedral };
 
+/// Number type of the two per-step kernels that dominate the step on large organs: the surface
+/// projection (stretch and isometric bending; the dihedral bending and the Reference projection
+/// are always double) and the grasp response Z lambda of the coarse FEM (coarse_fem.h). State
+/// between steps, the FEM solve and everything else stay double.
+enum class HybridPrecision { Float32, Float64 };
+
 /// Resolved parameters (see paramSpecs()).
 struct HybridConfig {
   int iterations = 10;          ///< Gauss-Seidel sweeps on MS
@@ -58,6 +64,7 @@ struct HybridConfig {
   Real tetEdgeFactor = 1.0;       ///< interior tet edge length / mean coarse surface edge
   Real cutSnap = 0.1;             ///< CutOptions::snapFraction
   SurfaceProjection projection = SurfaceProjection::Batched;
+  HybridPrecision precision = HybridPrecision::Float32;
 };
 
 std::vector<ParamSpec> paramSpecs();
@@ -151,7 +158,9 @@ class HybridModel final : public Model {
   std::vector<int> m_prescribedGrasp;  ///< grasp index of each m_prescribed entry
   std::vector<Vec3> m_reactions;
   std::vector<char> m_immovableStep;
-  std::vector<Real> m_x4;  ///< #V by 4 padded positions for projectSurfaceBatches
+  std::vector<Real> m_x4;        ///< #V by 4 padded positions for projectSurfaceBatches
+  std::vector<float> m_x4f;      ///< the same relative to m_origin, for projectSurfaceBatchesF
+  Vec3 m_origin = Vec3::Zero();  ///< centre of the rest surface's bounding box, m
 };
 
 }  // namespace deform::hybrid

@@ -67,7 +67,8 @@ isobatch::View<T> view(const IsometricBatch<T>& b) {
           b.rest,
           b.alphaTilde,
           b.scale,
-          b.lambda};
+          b.lambda,
+          b.movable};
 }
 
 template <class T>

@@ -22,6 +22,7 @@ struct View {
   const T* alphaTilde;
   const T* scale;
   T* lambda;
+  const unsigned char* movable;  ///< nullptr or bit k per hinge: slot k movable
 };
 
 namespace {  // internal linkage on purpose (see the header comment)
@@ -57,9 +58,15 @@ inline int hingeGroup(typename L::T* x4, const View<typename L::T>& b, std::size
                          L::set1(T(0)));
   lambda = lambda + dl;
   L::store(b.lambda + i, lambda);
-  // dx_k = w_k dl g_k, g_k = K_k v / |v|.
+  // dx_k = w_k dl g_k, g_k = K_k v / |v|; a slot immovable in every lane adds exactly 0.
+  unsigned slots = 0xFu;
+  if (b.movable != nullptr) {
+    slots = 0;
+    for (int l = 0; l < L::kWidth; ++l) slots |= b.movable[i + l];
+  }
   const V s = dl / len;
   for (int k = 0; k < 4; ++k) {
+    if (!(slots & (1u << k))) continue;
     const V c = L::load(b.wK[k] + i) * s;
     L::addRows(x4, b.p[k] + i, c * vx, c * vy, c * vz);
   }

@@ -75,7 +75,11 @@ bool projectIsometricBending(const Vec3 x[4], const Real w[4], const Real K[4], 
 /// padded positions x4 (four T per particle: x, y, z, 0). Per hinge: p[k] the row offset
 /// 4 * particle of slot k; K[k] the weights; wK[k] = w_k K_k (inverse mass times weight);
 /// rest = s0; alphaTilde = alpha / dt^2; scale = k / (sum_k w_k K_k^2 + alphaTilde), 0 when no
-/// particle is movable; lambda the multiplier.
+/// particle is movable; lambda the multiplier. movable (optional, one byte per hinge): bit k set
+/// when slot k's particle is movable (w_k > 0); a vector group then skips the update of a slot
+/// that is immovable in all its hinges (an update of exactly zero, so the result is the same),
+/// which pays where many particles are immovable and the hinges of a colour are sorted by this
+/// pattern (the hybrid model's control nodes). nullptr: every slot is updated.
 template <class T>
 struct IsometricBatch {
   const int* p[4];
@@ -85,6 +89,7 @@ struct IsometricBatch {
   const T* alphaTilde;
   const T* scale;
   T* lambda;
+  const unsigned char* movable = nullptr;
 };
 
 /// Projects hinges [begin, end) of one colour: no two of them share a particle that moves (an
