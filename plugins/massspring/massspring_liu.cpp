@@ -41,7 +41,8 @@ namespace deform::massspring {
 
 namespace {
 
-using V4 = double __attribute__((vector_size(32)));
+// may_alias: the rows are std::vector<Row4> storage, read and written through this type.
+using V4 = double __attribute__((vector_size(32), may_alias));
 
 V4* rows(std::vector<Row4>& r) {
   return reinterpret_cast<V4*>(r.data());

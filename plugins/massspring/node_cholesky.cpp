@@ -12,7 +12,8 @@ struct NodeCholesky::Cholmod : SparseCholesky {
 
 namespace {
 
-using V4 = double __attribute__((vector_size(32)));
+// may_alias: the rows are std::vector<Row4> storage, read and written through this type.
+using V4 = double __attribute__((vector_size(32), may_alias));
 
 // Forward (L y = b) then backward (L^T x = y) substitution, supernode by supernode, on rows of
 // four doubles (the factor's values in float, widened as they are read). Per supernode: the
