@@ -37,6 +37,14 @@ const std::vector<Case>& cases() {
       {"massspring_local_global_3it",
        "massspring",
        {{"integrator", "local_global"}, {"local_global_iterations", 3}}},
+      // Liu et al.'s plain alternation from y, 10 iterations (local_global's default before the
+      // Chebyshev acceleration and warm start), on the same solver.
+      {"massspring_local_global_plain10",
+       "massspring",
+       {{"integrator", "local_global"},
+        {"local_global_iterations", 10},
+        {"local_global_acceleration", "none"},
+        {"local_global_warm_start", false}}},
       {"massspring_implicit_euler", "massspring", {{"integrator", "implicit_euler"}}},
       // One explicit step (the cost per substep of G3's automatic substepping; at the scene's
       // dt it may diverge, counted in diverged_steps).

@@ -1,9 +1,14 @@
 // Google Benchmark: one mass-spring step on a liver-sized closed surface (~2.2k nodes, ~6.6k edge
 // springs, as in the metaballs paper's Table 2 row with 6427 springs), under gravity with a grasp.
 #include "massspring_model.h"
+#include "node_cholesky.h"
 #include "support/meshes.h"
 
+#include <deform/phantom.h>
+
 #include <benchmark/benchmark.h>
+
+#include <vector>
 
 namespace {
 
@@ -51,6 +56,69 @@ void BM_MassSpringImplicitWithBending(benchmark::State& s) {
   runMassSpring(s, c);
 }
 
+// The local/global integrator's global step alone: A X = B with A = M + h^2 L of the 8,122-node
+// liver phantom's springs (edge + bending, h = 1 ms, no constrained nodes) and three right-hand
+// sides, by NodeCholesky (node_cholesky.h) and by CHOLMOD's supernodal solve.
+SparseMatrix liverSystemMatrix() {
+  Organ o;
+  o.source = "phantom:liver";
+  o.surface = makePhantom("liver");
+  massspring::MassSpringModel m;
+  m.init(o, massspring::MassSpringConfig{});
+  const Real h2 = 1e-6;
+  std::vector<Triplet> t;
+  for (Eigen::Index i = 0; i < m.masses().size(); ++i) t.emplace_back(i, i, m.masses()[i]);
+  for (const massspring::Spring& s : m.springs()) {
+    t.emplace_back(s.a, s.a, h2 * s.k);
+    t.emplace_back(s.b, s.b, h2 * s.k);
+    t.emplace_back(s.a, s.b, -h2 * s.k);
+    t.emplace_back(s.b, s.a, -h2 * s.k);
+  }
+  SparseMatrix A(m.masses().size(), m.masses().size());
+  A.setFromTriplets(t.begin(), t.end());
+  return A;
+}
+
+MatX liverRightHandSides(Eigen::Index n) {
+  MatX B(n, 3);
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) B(i, c) = std::sin(0.37 * double(i) + 1.3 * c);
+  return B;
+}
+
+void BM_LiverGlobalSolveNodeCholesky(benchmark::State& state) {
+  const SparseMatrix A = liverSystemMatrix();
+  massspring::NodeCholesky chol;
+  chol.factor(A);
+  const MatX B = liverRightHandSides(A.rows());
+  std::vector<massspring::Row4> Z(A.rows());
+  for (auto _ : state) {
+    for (Eigen::Index k = 0; k < A.rows(); ++k) {
+      const int i = chol.perm()[k];
+      Z[k] = {{B(i, 0), B(i, 1), B(i, 2), 0.0}};
+    }
+    chol.solveInPlace(Z.data());
+    benchmark::DoNotOptimize(Z.data());
+  }
+  state.counters["nnz_L"] = double(chol.factorNonZeros());
+  state.SetLabel("ordering " + chol.ordering());
+}
+
+void BM_LiverGlobalSolveCholmodSupernodal(benchmark::State& state) {
+  const SparseMatrix A = liverSystemMatrix();
+  installCholmodAllocator();
+  SparseCholesky chol;
+  chol.compute(A);
+  const MatX B = liverRightHandSides(A.rows());
+  MatX X;
+  for (auto _ : state) {
+    X = chol.solve(B);
+    benchmark::DoNotOptimize(X.data());
+  }
+}
+
+BENCHMARK(BM_LiverGlobalSolveNodeCholesky)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_LiverGlobalSolveCholmodSupernodal)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_MassSpringExplicitEdgesOnly)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_MassSpringExplicitWithBending)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_MassSpringSymplecticWithBending)->Unit(benchmark::kMillisecond);

@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 namespace deform::massspring {
 
@@ -43,8 +44,17 @@ std::vector<ParamSpec> paramSpecs() {
                          "explicit and symplectic Euler: substeps per time step; 0 = automatic, "
                          "enough to stay below the estimated stability limit; 1 = none (the "
                          "papers' experiments, which may diverge)"),
-      ParamSpec::integer("local_global_iterations", 10, 1, 10000,
+      ParamSpec::integer("local_global_iterations", 5, 1, 10000,
                          "local_global: local/global iterations per step"),
+      ParamSpec::choice("local_global_acceleration", "chebyshev", {"chebyshev", "none"},
+                        "local_global: Chebyshev semi-iterative acceleration of the iterations "
+                        "(Wang 2015) or none (Liu et al. 2013's plain alternation)"),
+      ParamSpec::real("local_global_rho", "1", 0.0, 0.0, 0.9999,
+                      "local_global with chebyshev: spectral radius of the plain iteration; 0 = "
+                      "estimated whenever the system matrix is factorised"),
+      ParamSpec::flag("local_global_warm_start", true,
+                      "local_global: start the iterations from the inertial prediction plus the "
+                      "previous step's correction (false: from the inertial prediction)"),
   };
 }
 
@@ -63,6 +73,11 @@ MassSpringConfig configFromParams(const ParamValues& p) {
   c.cgMaxIterations = static_cast<int>(p.integer("cg_max_iterations"));
   c.substeps = static_cast<int>(p.integer("substeps"));
   c.localGlobalIterations = static_cast<int>(p.integer("local_global_iterations"));
+  c.localGlobalAcceleration = p.choiceAs<LocalGlobalAcceleration>(
+      "local_global_acceleration",
+      {{"chebyshev", LocalGlobalAcceleration::Chebyshev}, {"none", LocalGlobalAcceleration::None}});
+  c.localGlobalRho = p.real("local_global_rho");
+  c.localGlobalWarmStart = p.flag("local_global_warm_start");
   return c;
 }
 
@@ -166,7 +181,7 @@ void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
   m_boxHalf = 0.5 * tol::kDivergenceBoxFactor * std::max(box.size().maxCoeff(), Real(1e-9));
   m_graspMask.assign(N, 0);
   if (m_config.integrator == Integrator::ImplicitEuler) buildPattern();
-  m_lgAnalysed = false;  // local_global: pattern analysed and factorised at the first step
+  m_lgChol.reset();  // local_global: pattern analysed and factorised at the first step
   m_lgH = -1;
   m_lgFactoredFor.clear();
   reset();
@@ -310,6 +325,7 @@ void MassSpringModel::reset() {
   m_degenerate = m_cgNotConverged = m_cgIterations = 0;
   m_graspForces.clear();
   m_phase.clear();
+  m_lgWarm.clear();
   if (!m_surfaceIdentity) {
     m_surface.resize(static_cast<Eigen::Index>(m_surfaceRows.size()), 3);
     for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);
@@ -346,6 +362,16 @@ void MassSpringModel::springForces(const MatX3& x, const MatX3& v, MatX3& f) {
     fb[1] -= m * d1;
     fb[2] -= m * d2;
   }
+}
+
+void MassSpringModel::setState(const MatX3& x, const MatX3& v) {
+  if (x.rows() != m_x.rows() || v.rows() != m_x.rows())
+    throw std::invalid_argument("MassSpringModel::setState: wrong number of rows");
+  m_x = x;
+  m_v = v;
+  m_xOld = x;
+  if (!m_surfaceIdentity)
+    for (size_t i = 0; i < m_surfaceRows.size(); ++i) m_surface.row(i) = m_x.row(m_surfaceRows[i]);
 }
 
 StepStatus MassSpringModel::checkDivergence() const {

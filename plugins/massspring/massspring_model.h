@@ -10,6 +10,7 @@
 // See README.md for every modelling choice.
 #pragma once
 
+#include "node_cholesky.h"
 #include "spring_kernels.h"
 
 #include <deform/model.h>
@@ -23,6 +24,10 @@
 namespace deform::massspring {
 
 enum class Integrator { ExplicitEuler, SymplecticEuler, ImplicitEuler, LocalGlobal };
+/// local_global: plain alternation (Liu et al. 2013) or Chebyshev semi-iterative acceleration of
+/// it (Wang 2015, "A Chebyshev semi-iterative approach for accelerating projective and
+/// position-based dynamics", ACM TOG 34(6) 246).
+enum class LocalGlobalAcceleration { None, Chebyshev };
 
 struct MassSpringConfig {
   Integrator integrator = Integrator::SymplecticEuler;
@@ -32,8 +37,21 @@ struct MassSpringConfig {
   Real massDamping = 1.0;   ///< 1/s, force -massDamping * m * v on every node
   Real cgTolerance = 1e-6;  ///< relative residual of the implicit solve
   int cgMaxIterations = 200;
-  int substeps = 0;                ///< explicit/symplectic Euler substeps per step; 0 = automatic
-  int localGlobalIterations = 10;  ///< local/global iterations per step (Liu et al. 2013)
+  int substeps = 0;               ///< explicit/symplectic Euler substeps per step; 0 = automatic
+  int localGlobalIterations = 5;  ///< local/global iterations per step (Liu et al. 2013)
+  LocalGlobalAcceleration localGlobalAcceleration = LocalGlobalAcceleration::Chebyshev;
+  /// Chebyshev: spectral radius of the plain iteration; 0 = estimated at each factorisation
+  /// (power iteration on the iteration linearised at the current positions).
+  Real localGlobalRho = 0.0;
+  /// Start each step's iterations from y + (x - y) of the previous step instead of from y.
+  bool localGlobalWarmStart = true;
+};
+
+/// local_global: a spring with a free end, as the iterations see it: its nodes' rows in the
+/// factor's order, c = h^2 k and the rest length L.
+struct LocalGlobalSpring {
+  int a, b;
+  Real c, rest;
 };
 
 /// Upper bound of the substeps parameter (and of the automatic choice).
@@ -79,6 +97,14 @@ class MassSpringModel final : public Model {
   /// Counts degenerate springs.
   void springForces(const MatX3& x, const MatX3& v, MatX3& f);
 
+  /// Replaces the positions and velocities (#N by 3, m and m/s): the next step starts there.
+  /// For tests and measurements that compare integrators from one state. Keeps the
+  /// local_global warm start (the last step's correction; reset() clears it).
+  void setState(const MatX3& x, const MatX3& v);
+  /// local_global: the spectral radius the Chebyshev weights use (estimated or given); 0 before
+  /// the first step and without acceleration.
+  Real localGlobalRho() const { return m_lgRho; }
+
  private:
   void buildSurface(const Organ& organ);
   void buildTets(const Organ& organ);
@@ -87,6 +113,7 @@ class MassSpringModel final : public Model {
   // Liu et al. 2013 (massspring_liu.cpp).
   StepStatus stepLocalGlobal(const StepInput& in, Real h);
   void factorLocalGlobal(Real h);
+  Real estimateLocalGlobalRho();
   void applyConstraints(const StepInput& in, Real h, const MatX3& xOld);
   void computeGraspForces(const StepInput& in);
   StepStatus checkDivergence() const;
@@ -118,16 +145,20 @@ class MassSpringModel final : public Model {
   std::vector<unsigned char> m_constrainedDof;
 
   // Local/global: A = M + h^2 L over nodes (the same for x, y and z), with the rows and columns of
-  // constrained (fixed, massless, grasped) nodes replaced by the identity; factorised by CHOLMOD
-  // when h or the constrained set changes (the pattern is analysed once).
+  // constrained (fixed, massless, grasped) nodes replaced by the identity; factorised when h or
+  // the constrained set changes (the pattern is analysed once). The iterations run in the
+  // factor's node order (rows of 4 doubles, NodeCholesky).
   SparseMatrix m_lgA;
   std::vector<std::array<int, 4>> m_lgSpringSlots;  // (aa, bb, ab, ba) value indices
   std::vector<int> m_lgDiag;
-  std::unique_ptr<SparseCholesky> m_lgChol;
-  bool m_lgAnalysed = false;
+  std::unique_ptr<NodeCholesky> m_lgChol;
   Real m_lgH = -1;
+  Real m_lgRho = 0;
   std::vector<unsigned char> m_lgConstrained, m_lgFactoredFor;
-  MatX m_lgRhs0, m_lgRhs, m_lgX;
+  std::vector<LocalGlobalSpring> m_lgSprings;  // springs with a free end
+  std::vector<Real> m_lgRowMass;         // node masses in the factor's order, 0 if constrained
+  std::vector<int> m_lgConstrainedRows;  // constrained nodes' rows
+  std::vector<Row4> m_lgR, m_lgX, m_lgXPrev, m_lgY4, m_lgWarm;
   MatX3 m_lgY;
   long long m_lgFactorisations = 0;
 

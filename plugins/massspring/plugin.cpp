@@ -8,11 +8,15 @@ DEFORM_PLUGIN(registry) {
   info.name = "massspring";
   info.description =
       "Mass-spring network on the organ surface (edge + bending springs, van Gelder stiffness) "
-      "or on tet edges; explicit, symplectic or implicit Euler";
+      "or on tet edges; explicit, symplectic or implicit Euler (Newton + CG, or prefactored "
+      "local/global iterations)";
   info.citation =
       "van Gelder 1998, Approximate simulation of elastic membranes by triangulated spring "
       "meshes, J. Graphics Tools 3(2); Baraff & Witkin 1998, "
-      "Large steps in cloth simulation, SIGGRAPH '98, doi:10.1145/280814.280821";
+      "Large steps in cloth simulation, SIGGRAPH '98, doi:10.1145/280814.280821; Liu, Bargteil, "
+      "O'Brien & Kavan 2013, Fast simulation of mass-spring systems, ACM TOG 32(6) 214; Wang "
+      "2015, A Chebyshev semi-iterative approach for accelerating projective and position-based "
+      "dynamics, ACM TOG 34(6) 246";
   info.version = "1.0";
   using C = deform::Capability;
   info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,        C::ReactionForce,

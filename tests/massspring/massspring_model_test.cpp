@@ -20,7 +20,7 @@ namespace deform::massspring {
 namespace {
 
 const Integrator kAll[] = {Integrator::ExplicitEuler, Integrator::SymplecticEuler,
-                           Integrator::ImplicitEuler};
+                           Integrator::ImplicitEuler, Integrator::LocalGlobal};
 
 Organ smallOrgan(Real young = 5500.0) {
   Organ o;
@@ -323,6 +323,22 @@ TEST(MassSpringModel, ParametersAreReadAndBadChoicesRejected) {
   EXPECT_EQ(m.counts().at("bending_springs"), 0);
   p.set("integrator", std::string("rk4"));
   EXPECT_THROW(configFromParams(p), InputError);
+
+  ParamValues q = ParamValues::defaults(specs);
+  const MassSpringConfig d = configFromParams(q);
+  EXPECT_EQ(d.integrator, Integrator::SymplecticEuler);  // the default stays explicit
+  EXPECT_EQ(d.localGlobalIterations, 5);
+  EXPECT_EQ(d.localGlobalAcceleration, LocalGlobalAcceleration::Chebyshev);
+  EXPECT_TRUE(d.localGlobalWarmStart);
+  q.set("local_global_acceleration", std::string("none"));
+  q.set("local_global_rho", 0.8);
+  q.set("local_global_warm_start", false);
+  const MassSpringConfig e = configFromParams(q);
+  EXPECT_EQ(e.localGlobalAcceleration, LocalGlobalAcceleration::None);
+  EXPECT_EQ(e.localGlobalRho, 0.8);
+  EXPECT_FALSE(e.localGlobalWarmStart);
+  q.set("local_global_acceleration", std::string("anderson"));
+  EXPECT_THROW(configFromParams(q), InputError);
 }
 
 }  // namespace
