@@ -939,8 +939,6 @@ EquilibriumSolver::NewtonOutcome EquilibriumSolver::lineSearchStep(Newton& s, Ve
       return NewtonOutcome::Continue;  // s.haveG stays false: the gradient is recomputed
     }
   }
-  // A load step that keeps needing damped steps is too large for Newton's region of fast
-  // convergence: give up early so it is halved, instead of grinding to maxIterations.
   if (kTrace) {
     Eigen::Index imax = 0;
     s.step.cwiseAbs().maxCoeff(&imax);
@@ -952,6 +950,8 @@ EquilibriumSolver::NewtonOutcome EquilibriumSolver::lineSearchStep(Newton& s, Ve
                  alpha, s.step.lpNorm<Eigen::Infinity>(), nd, X(0), X(1), X(2),
                  nd >= m_sys.numCornerNodes() ? " midside" : "", phi0, s.phiNext);
   }
+  // A load step that keeps needing damped steps is too large for Newton's region of fast
+  // convergence: give up early so it is halved, instead of grinding to maxIterations.
   if (alpha < 1 && ++s.damped > kMaxDampedIterations) return NewtonOutcome::Failed;
   xs += alpha * s.step;
   if (alpha == 1) {
