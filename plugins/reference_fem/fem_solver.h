@@ -30,7 +30,10 @@
 // meets a direction of non-positive curvature (K_ff indefinite: Neo-Hookean far from rest); then
 // the step is a direct solve with that factor. An indefinite tangent is replaced by one whose
 // element stress derivatives dP/dF are projected onto the PSD cone (eigenvalues clamped at 0;
-// closed form for Neo-Hookean), then, if needed, a growing diagonal shift is added. The convergence
+// closed form for Neo-Hookean), then, if needed, a growing diagonal shift is added. When the
+// factor is already one of a projected tangent, CG on the current projected tangent with it (up
+// to 25 iterations) comes first; a step solved on a projected tangent is lengthened (x2, x4, ...
+// up to x64) while the objective keeps falling along it. The convergence
 // test is on the true residual, so the answer does not depend on these choices beyond the
 // tolerance. When a load step fails (no convergence, more than 12 damped line-search iterations,
 // inverted elements that the line search cannot leave), it is halved (load stepping on both
@@ -97,8 +100,11 @@ struct SolveReport {
   int newtonIterations = 0;  ///< total over load steps
   int loadSteps = 0;         ///< accepted load steps
   int spdFallbacks = 0;      ///< factorisations that needed projection or a shift
-  Real residual = 0;         ///< final |g_free|_2, N
-  Real forceScale = 0;       ///< max(|f_ext|, |reaction|, 1e-6 E diag^2), N
+  /// Newton steps solved on a PSD-projected tangent (the exact one was indefinite), by a fresh
+  /// factorisation or by CG with an earlier projected factor.
+  int projectedSteps = 0;
+  Real residual = 0;    ///< final |g_free|_2, N
+  Real forceScale = 0;  ///< max(|f_ext|, |reaction|, 1e-6 E diag^2), N
   double seconds = 0;
   int failedLoadSteps = 0;       ///< load steps rejected (and halved)
   int factorizations = 0;        ///< successful numerical factorisations
@@ -263,7 +269,8 @@ class EquilibriumSolver {
   /// definite, or known to be indefinite) the tangent with PSD-projected element stress
   /// derivatives, else that with a growing diagonal shift. A fallback (not the operator
   /// itself) is counted in `fallbacks`. m_Kff holds what was factorised afterwards.
-  bool factorize(const VecX& x, const InertiaTerms* in, bool indefinite, int& fallbacks);
+  bool factorize(const VecX& x, const InertiaTerms* in, bool indefinite, int& fallbacks,
+                 bool projectedAssembled = false);
   /// Solves K_ff x = b (the operator: m_Kff's values, the exact tangent) to |residual| <=
   /// tolerance by conjugate gradients preconditioned with the current factor. Returns the
   /// iterations, -1 when it did not converge within maxIterations, -2 when it met a direction
@@ -286,6 +293,7 @@ class EquilibriumSolver {
   VecX m_fullValues;                ///< full-pattern tangent (stiffness damping only)
   VecX m_liftForce;                 ///< K dc (3N), buffer of subtractLiftForce
   bool m_haveFactor = false;        ///< m_chol holds a factor usable as a preconditioner
+  bool m_factorProjected = false;   ///< that factor is of a projected (or shifted) tangent
   long long m_factorNonZeros = 0;
   double m_factorFlops = 0;
   std::unique_ptr<SparseCholesky> m_chol;

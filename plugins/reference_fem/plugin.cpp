@@ -171,6 +171,7 @@ class ReferenceFemModel final : public Model {
     m_lastIterations = rep.newtonIterations;
     m_lastLoadSteps = rep.loadSteps;
     m_spdFallbacks += rep.spdFallbacks;
+    m_projectedSteps += rep.projectedSteps;
     m_newtonIterations += rep.newtonIterations;
     m_factorizations += rep.factorizations;
     m_pcgIterations += rep.pcgIterations;
@@ -213,7 +214,7 @@ class ReferenceFemModel final : public Model {
     m_fPrev = VecX::Zero(m_x.size());
     m_solver = std::make_unique<EquilibriumSolver>(*m_system);
     m_graspForces.clear();
-    m_unconverged = m_spdFallbacks = 0;
+    m_unconverged = m_spdFallbacks = m_projectedSteps = 0;
     m_newtonIterations = m_factorizations = m_pcgIterations = m_failedLoadSteps = 0;
     m_lastIterations = m_lastLoadSteps = 0;
     m_phase.clear();
@@ -231,6 +232,7 @@ class ReferenceFemModel final : public Model {
     return {{"degenerate_elements", m_system->degenerateElements()},
             {"unconverged_steps", m_unconverged},
             {"spd_fallbacks", m_spdFallbacks},
+            {"projected_steps", m_projectedSteps},
             {"newton_iterations_last_step", m_lastIterations},
             {"load_steps_last_step", m_lastLoadSteps},
             {"newton_iterations", m_newtonIterations},
@@ -335,7 +337,8 @@ class ReferenceFemModel final : public Model {
   VecX m_x, m_v, m_fPrev;
   MatX3 m_nodes, m_surface;
   std::vector<Vec3> m_graspForces;
-  long long m_unconverged = 0, m_spdFallbacks = 0, m_lastIterations = 0, m_lastLoadSteps = 0;
+  long long m_unconverged = 0, m_spdFallbacks = 0, m_projectedSteps = 0, m_lastIterations = 0,
+            m_lastLoadSteps = 0;
   long long m_newtonIterations = 0, m_factorizations = 0, m_pcgIterations = 0,
             m_failedLoadSteps = 0;  ///< totals over the run
   PhaseTimes m_phase;

@@ -187,6 +187,40 @@ TEST(QuadraticTet, ForcesAndStiffnessMatchFiniteDifferences) {
   }
 }
 
+// The regime of the liver phantom's clamp edge under gravity, where the quadratic Newton solve
+// slowed down (docs/notes/reference_fem-history.md): material points compressed to J ~ 0.05
+// with dP/dF eigenvalues down to -50 mu. The exact tangent is still the derivative of the
+// gradient there (the slow solve is not a tangent error), and it is indefinite.
+TEST(QuadraticTet, NeoHookeanTangentMatchesDifferencesUnderStrongCompression) {
+  const TetMesh mesh = jitteredBox(Vec3(0, 0, 0), Vec3(0.02, 0.015, 0.01), Vec3i(2, 1, 1));
+  const FemSystem sys(mesh, material(5500, 0.3), MaterialModel::NeoHookean,
+                      ElementOrder::Quadratic);
+  const int n = sys.numNodes();
+  VecX x = sys.restPositions();
+  Mat3 F;
+  F << 1.3, 0.35, 0.02, -0.05, 1.2, 0.03, 0.01, -0.02, 0.06;  // det F = 0.10
+  for (int i = 0; i < n; ++i)
+    x.segment<3>(3 * i) = F * x.segment<3>(3 * i) +
+                          2e-5 * Vec3(std::sin(3.1 * i), std::cos(1.7 * i), std::sin(0.9 * i + 2));
+  VecX g;
+  sys.elasticGradient(x, g);
+  ASSERT_TRUE(g.allFinite());
+  const Real h = 1e-8;
+  const VecX gFd = numericGradient(x, h, [&](const VecX& y) { return sys.elasticEnergy(y); });
+  EXPECT_LT((g - gFd).norm(), 1e-6 * g.norm());
+  VecX values;
+  sys.stiffnessValues(x, values, false);
+  const MatX K = dense(sys, values);
+  const MatX KFd = centralDifferences(x, h, [&](const VecX& y) {
+    VecX gy;
+    sys.elasticGradient(y, gy);
+    return gy;
+  });
+  EXPECT_LT((K - KFd).norm(), 1e-6 * K.norm());
+  const Eigen::SelfAdjointEigenSolver<MatX> es(K);
+  EXPECT_LT(es.eigenvalues().minCoeff(), -1e-6 * es.eigenvalues().maxCoeff());
+}
+
 // K v element by element (the solver's lift force K_fc dc), with v on two nodes only: the
 // elements it skips are those that would add nothing.
 TEST(FemSystemTangent, StiffnessTimesEqualsTheAssembledTangentTimesTheVector) {
