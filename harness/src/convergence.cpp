@@ -356,10 +356,12 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
     } else if (!run) {
       level.status = "not run: " + c.error;
     } else {
-      level.status = statusName(run->status);
+      level.status = run->status == RunStatus::Ok && !run->valid
+                         ? "invalid (" + run->invalidReason + ")"
+                         : std::string(statusName(run->status));
       if (run->counts.count("elements")) level.elements = run->counts.at("elements");
     }
-    if (run && run->status == RunStatus::Ok && level.elements > 0) {
+    if (run && run->status == RunStatus::Ok && run->valid && level.elements > 0) {
       MatX3 x;
       if (!run->compared.empty()) {
         surfaces[k] = run->compared.back().positions;

@@ -381,6 +381,12 @@ void assessValidity(const Scene& scene, RunRecord& rec) {
   }
   if (scene.compareAtEquilibrium && rec.status == RunStatus::Ok && !rec.settledAt)
     invalid("did not settle");
+  // A solver that counts the solves it gave up on (numeric "unconverged_steps") left a state
+  // that is not the equilibrium or the step the scene asked for.
+  if (const auto it = rec.numeric.find("unconverged_steps");
+      rec.status == RunStatus::Ok && it != rec.numeric.end() && it->second > 0)
+    invalid(std::to_string(it->second) + (it->second == 1 ? " solve" : " solves") +
+            " did not converge");
   if (rec.status == RunStatus::Ok && rec.peakDisplacement >= 0 &&
       rec.peakDisplacement < rec.motionFloor) {
     std::ostringstream s;

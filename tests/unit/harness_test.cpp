@@ -213,6 +213,18 @@ TEST(Runner, AModelThatDoesNotMoveUnderALoadIsInvalid) {
   EXPECT_TRUE(still.valid) << still.invalidReason;
 }
 
+// A solver that gave up on a solve (numeric "unconverged_steps" > 0, e.g. reference_fem's Newton)
+// is invalid, not ok in silence; the same counter at zero changes nothing.
+TEST(Runner, ARunWithUnconvergedSolvesIsInvalid) {
+  Fixture f;
+  const RunRecord gaveUp = runWith(f, [](RigidTestModel& m) { m.unconverged = 2; });
+  ASSERT_EQ(gaveUp.status, RunStatus::Ok) << gaveUp.message;
+  EXPECT_FALSE(gaveUp.valid);
+  EXPECT_EQ(gaveUp.invalidReason, "2 solves did not converge");
+  const RunRecord converged = runWith(f, [](RigidTestModel&) {});
+  EXPECT_TRUE(converged.valid) << converged.invalidReason;
+}
+
 TEST(Runner, EquilibriumComparisonStopsWhenSettled) {
   Fixture f;
   f.scene.compareAt.clear();

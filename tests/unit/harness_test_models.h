@@ -22,6 +22,7 @@ class RigidTestModel : public Model {
   bool throwInInit = false;
   bool ignoreGrasps = false;      ///< a model that holds nothing
   Vec3 drift = Vec3::Zero();      ///< m per step, always (a model that never settles)
+  long long unconverged = 0;      ///< reported as numeric "unconverged_steps"
   std::vector<StepInput> inputs;  ///< every input received
   std::vector<StepInput>* recordInto = nullptr;  ///< also appended here when set (outlives runs)
 
@@ -59,7 +60,9 @@ class RigidTestModel : public Model {
   }
   Counts counts() const override { return {{"nodes", m_x.rows()}}; }
   PhaseTimes phaseTimes() const override { return m_phase; }
-  NumericCounters numericCounters() const override { return {{"degenerate", 0}}; }
+  NumericCounters numericCounters() const override {
+    return {{"degenerate", 0}, {"unconverged_steps", unconverged}};
+  }
 
  private:
   MatX3 m_rest, m_x;

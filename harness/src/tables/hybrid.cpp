@@ -110,9 +110,9 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
     }
     if (c.missing.count("reference_fem")) {
       appendTo(status, "reference: " + statusOf(c, "reference_fem", nullptr));
-    } else if (ref && ref->status != RunStatus::Ok) {
-      appendTo(status, std::string("reference: ") + statusName(ref->status));
-      appendTo(note, "reference: " + ref->message);
+    } else if (!referenceStatus(c).empty()) {
+      appendTo(status, referenceStatus(c));
+      if (ref && !ref->message.empty()) appendTo(note, "reference: " + ref->message);
     }
     row["status"] = status.empty() ? "ok" : status;
     row["scene"] = relativeTo(c.sceneFile, dir);

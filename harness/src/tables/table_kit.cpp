@@ -151,6 +151,15 @@ std::string statusOf(const CaseResult& c, const std::string& plugin, const RunRe
   return statusName(r->status);
 }
 
+std::string referenceStatus(const CaseResult& c) {
+  if (!c.result) return "";
+  for (const RunRecord& r : c.result->runs)
+    if (r.isReference && (r.status != RunStatus::Ok || !r.valid))
+      return "reference: " + (r.status == RunStatus::Ok ? "invalid (" + r.invalidReason + ")"
+                                                        : std::string(statusName(r.status)));
+  return "";
+}
+
 std::string noteOf(const CaseResult& c, const RunRecord* r, bool wantsError) {
   std::string s;
   if (r) {
@@ -168,7 +177,9 @@ std::string relativeTo(const fs::path& p, const fs::path& base) {
 
 void caseCells(ojson& row, const CaseResult& c, const std::string& plugin, const RunRecord* r,
                const fs::path& dir, bool wantsError) {
-  row["status"] = statusOf(c, plugin, r);
+  std::string status = statusOf(c, plugin, r);
+  if (r && !r->isReference) appendTo(status, referenceStatus(c));
+  row["status"] = status;
   row["scene"] = relativeTo(c.sceneFile, dir);
   row["note"] = noteOf(c, r, wantsError);
 }
