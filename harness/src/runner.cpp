@@ -700,7 +700,7 @@ void storeCachedSolve(Cache& cache, const CacheKey& key, const RunRecord& r) {
   cache.put(kReferenceRunKind, key, w.bytes());
 }
 
-bool readCachedSolve(Cache& cache, const CacheKey& key, RunRecord& r) {
+bool readCachedSolve(Cache& cache, const CacheKey& key, bool reference, RunRecord& r) {
   const auto hit = cache.get(kReferenceRunKind, key);
   if (!hit) return false;
   try {
@@ -748,9 +748,9 @@ bool readCachedSolve(Cache& cache, const CacheKey& key, RunRecord& r) {
     return false;  // unreadable: solve again
   }
   r.status = RunStatus::Ok;
-  r.notes.push_back(
-      "read from the cache (an earlier run solved the same problem with the same plugin and "
-      "parameters): its timings are that run's");
+  r.notes.push_back(std::string(reference ? "reference" : "model solve") +
+                    " read from the cache (an earlier run solved the same problem with the same "
+                    "plugin and parameters): its timings are that run's");
   return true;
 }
 
@@ -814,7 +814,7 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
                                            solveOnlyAtComparedInstants(*p.info, p.params)));
     if (shared) {
       refKey = solveKey(sceneFile, scene, result.organ, loader, p, options.run);
-      fromCache = readCachedSolve(cache, *refKey, rec);
+      fromCache = readCachedSolve(cache, *refKey, p.isReference, rec);
       if (fromCache) {
         rec.model = p.info->name;
         rec.params = paramsToJson(p.params);
