@@ -6,6 +6,7 @@
 //      e.g. converge_liver 2 neo_hookean 2000 5600 16000 (RESOLUTION: of makePhantom, default 1;
 //      "gravity" drops the 2 N poke)
 #include "convergence.h"
+#include "liver_poke_case.h"
 
 #include <deform/phantom.h>
 
@@ -32,28 +33,11 @@ int main(int argc, char** argv) {
   mat.young = 5500;
   mat.poisson = 0.3;
   mat.density = 1000;
-  const Box fixed[2] = {{Vec3(-0.11, -0.08, -0.05), Vec3(0.11, -0.035, 0.05)},
-                        {Vec3(-0.11, -0.08, -0.05), Vec3(0.11, 0.03, -0.032)}};
-  const Vec3 poke(-0.0394, -0.0024, 0.0422);
-  const int pokeVertex = nearestVertex(liver.V, poke);
+  const std::array<Box, 2> fixed = liverPokeFixedBoxes();
+  const Vec3 poke = liverPokePoint();
   const bool withPoke = argc < 8 || std::string(argv[7]) != "gravity";
-  auto loads = [&](const FemSystem& sys) {
-    LoadCase lc;
-    const MatX3& V = sys.rest().V;
-    for (int i = 0; i < sys.numNodes(); ++i)
-      for (const Box& b : fixed)
-        if ((V.row(i).transpose().array() >= b.lo.array()).all() &&
-            (V.row(i).transpose().array() <= b.hi.array()).all()) {
-          lc.fixedNodes.push_back(i);
-          break;
-        }
-    lc.gravity = Vec3(0, 0, -9.81);
-    if (!withPoke) return lc;
-    const PointLoadPatch p = PointLoadSpreader(sys).patch(pokeVertex, 0.03);
-    for (size_t k = 0; k < p.nodes.size(); ++k)
-      lc.nodeForces.emplace_back(p.nodes[k], p.weights[k] * Vec3(0, 0, -2.0));
-    return lc;
-  };
+  const int pokeVertex = withPoke ? liverPokeVertex(liver) : -1;
+  auto loads = [&](const FemSystem& sys) { return liverPokeLoads(sys, pokeVertex); };
   const ConvergenceStudy s =
       runConvergenceStudy(liver, mat, model, loads, counts, {}, {}, 0, "phantom:liver", order);
   for (const auto& l : s.levels)

@@ -6,6 +6,7 @@
 // Run: diagnose_newton RESOLUTION TARGET ORDER [gravity|poke] (DEFORM_REFFEM_TRACE=1 for the
 // per-iteration trace of the solver).
 #include "fem_solver.h"
+#include "liver_poke_case.h"
 
 #include <deform/phantom.h>
 #include <deform/tet_mesher.h>
@@ -55,24 +56,8 @@ int main(int argc, char** argv) {
   mat.poisson = 0.3;
   mat.density = 1000;
   FemSystem sys(r.mesh, mat, MaterialModel::NeoHookean, order);
-  const Box fixed[2] = {{Vec3(-0.11, -0.08, -0.05), Vec3(0.11, -0.035, 0.05)},
-                        {Vec3(-0.11, -0.08, -0.05), Vec3(0.11, 0.03, -0.032)}};
-  LoadCase lc;
+  const LoadCase lc = liverPokeLoads(sys, poke ? liverPokeVertex(liver) : -1);
   const MatX3& V = sys.rest().V;
-  for (int i = 0; i < sys.numNodes(); ++i)
-    for (const Box& b : fixed)
-      if ((V.row(i).transpose().array() >= b.lo.array()).all() &&
-          (V.row(i).transpose().array() <= b.hi.array()).all()) {
-        lc.fixedNodes.push_back(i);
-        break;
-      }
-  lc.gravity = Vec3(0, 0, -9.81);
-  if (poke) {
-    const int c = nearestVertex(liver.V, Vec3(-0.0394, -0.0024, 0.0422));
-    const PointLoadPatch p = PointLoadSpreader(sys).patch(c, 0.03);
-    for (size_t k = 0; k < p.nodes.size(); ++k)
-      lc.nodeForces.emplace_back(p.nodes[k], p.weights[k] * Vec3(0, 0, -2.0));
-  }
   std::printf("nodes %d, fixed %zu\n", sys.numNodes(), lc.fixedNodes.size());
   SolveReport rep;
   const VecX x = solveEquilibrium(sys, lc, {}, &rep);

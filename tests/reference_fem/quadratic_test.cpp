@@ -5,6 +5,7 @@
 #include "../support/finite_difference.h"
 #include "convergence.h"
 #include "fem_solver.h"
+#include "liver_poke_case.h"
 #include "quadratic_tet.h"
 #include "test_shapes.h"
 
@@ -464,25 +465,9 @@ TEST(QuadraticTet, CantileverMatchesTimoshenkoAndConvergesUnderRefinement) {
 TEST(QuadraticTet, LiverRichardsonWithinOnePercent) {
   const SurfaceMesh liver = makePhantom("liver", 0.1);
   const Material mat = material(5500, 0.3, 1000);
-  const Box fixed[2] = {{Vec3(-0.11, -0.08, -0.05), Vec3(0.11, -0.035, 0.05)},
-                        {Vec3(-0.11, -0.08, -0.05), Vec3(0.11, 0.03, -0.032)}};
-  const int poke = nearestVertex(liver.V, Vec3(-0.0394, -0.0024, 0.0422));
-  auto loads = [&](const FemSystem& sys) {
-    LoadCase lc;
-    const MatX3& V = sys.rest().V;
-    for (int i = 0; i < sys.numNodes(); ++i)
-      for (const Box& b : fixed)
-        if ((V.row(i).transpose().array() >= b.lo.array()).all() &&
-            (V.row(i).transpose().array() <= b.hi.array()).all()) {
-          lc.fixedNodes.push_back(i);
-          break;
-        }
-    lc.gravity = Vec3(0, 0, -9.81);
-    const PointLoadPatch p = PointLoadSpreader(sys).patch(poke, 0.03);
-    for (size_t k = 0; k < p.nodes.size(); ++k)
-      lc.nodeForces.emplace_back(p.nodes[k], p.weights[k] * Vec3(0, 0, -2.0));
-    return lc;
-  };
+  const std::array<Box, 2> fixed = liverPokeFixedBoxes();
+  const int poke = liverPokeVertex(liver);
+  auto loads = [&](const FemSystem& sys) { return liverPokeLoads(sys, poke); };
   const std::vector<long long> counts = {1000, 2800, 8000};
   const ConvergenceStudy p2 =
       runConvergenceStudy(liver, mat, MaterialModel::Linear, loads, counts, {}, {}, 0,

@@ -110,8 +110,8 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
     }
     if (c.missing.count("reference_fem")) {
       appendTo(status, "reference: " + statusOf(c, "reference_fem", nullptr));
-    } else if (!referenceStatus(c).empty()) {
-      appendTo(status, referenceStatus(c));
+    } else if (const std::string refStatus = referenceStatus(c); !refStatus.empty()) {
+      appendTo(status, refStatus);
       if (ref && !ref->message.empty()) appendTo(note, "reference: " + ref->message);
     }
     row["status"] = status.empty() ? "ok" : status;
