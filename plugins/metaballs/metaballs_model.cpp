@@ -338,10 +338,17 @@ void MetaballsModel::collectGrasps(const StepInput& in) {
   // The jaws hold the tissue between them without turning it (the targets translate): the
   // carrying spheres keep their local rotations of the closing while held, so the skinning
   // offsets of the grasped vertices stay reachable by centre motions.
+  // Their radii too: eq. (12) would scale them with their links' lengths, which the grasp
+  // correction itself changes. Each correction then fed the next (the link stretch shrank the
+  // radius, the shrunk radius drew the grasped vertices in, the correction stretched the links
+  // further): on the method-comparison liver lift the surface grew by 2x every ~20 ms to 0.1 m.
   m_carryRot.resize(m_carry.size() * 9);
-  for (size_t k = 0; k < m_carry.size(); ++k)
+  m_carryR.resize(m_carry.size());
+  for (size_t k = 0; k < m_carry.size(); ++k) {
     std::copy_n(m_rot.begin() + 9 * std::ptrdiff_t(m_carry[k]), 9,
                 m_carryRot.begin() + 9 * std::ptrdiff_t(k));
+    m_carryR[k] = m_r(m_carry[k]);
+  }
 }
 
 void MetaballsModel::graspCorrection() {
@@ -512,6 +519,8 @@ StepStatus MetaballsModel::step(const StepInput& in) {
       }
     }
   }
+  for (size_t k = 0; k < m_carry.size() && !m_graspVerts.empty(); ++k)
+    m_r(m_carry[k]) = m_carryR[k];
   const double tVol = msSince(ts);
 
   ts = Clock::now();

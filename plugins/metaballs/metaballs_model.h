@@ -133,6 +133,7 @@ class MetaballsModel final : public Model {
   std::vector<int> m_carry;       // carrying spheres (sorted, not fixed)
   MatX m_WcPinv;                  // #carrying x #grasped vertices
   std::vector<Real> m_carryRot;   // #carrying*9: their rotations when the grasp closed
+  std::vector<Real> m_carryR;     // #carrying: their radii when the grasp closed
   MatX3 m_graspGap, m_graspDc;
   Phases m_phases;
   long long m_degenerate = 0;

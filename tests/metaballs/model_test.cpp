@@ -162,6 +162,40 @@ TEST(MetaballsModel, SmallGrasperHoldsTheSurfaceItClosesOn) {
             rig.model.metaballs().spheres.centers.col(2).maxCoeff() + 0.01);
 }
 
+// The method-comparison liver lift (2.2k vertices, 581 spheres asked, the scene's two fixed boxes,
+// an 8 mm grasper near the bottom box): the grasp correction and eq. (12) used to feed each other
+// through the carrying spheres' radii, and the surface grew by 2x every ~20 ms, to 0.1 m after
+// 150 ms of a 7.5 mm lift. The organ moves by about the lift, nowhere by many times it.
+TEST(MetaballsModel, GraspLiftNearAFixedRegionStaysBounded) {
+  const SurfaceMesh liver = makePhantom("liver", 0.27);
+  const std::vector<Box> fixed = {{Vec3(-0.11, -0.08, -0.05), Vec3(0.11, -0.035, 0.05)},
+                                  {Vec3(-0.11, -0.08, -0.05), Vec3(0.11, 0.03, -0.032)}};
+  Rig rig(liver, {{"spheres", 581LL}, {"voxel_resolution", 48LL}}, fixed);
+  const Vec3 p(-0.0235, 0.0744, -0.0232);
+  GraspInput grasp = testing::surfaceGrasp(liver, p, 0.008, rig.model.surface());
+  ASSERT_GE(grasp.vertices.size(), 1u);
+  const MatX3 t0 = grasp.targets;
+  StepInput in;
+  in.dt = 1e-3;
+  const int steps = 150;
+  const Real lift = 0.05 * steps * in.dt;  // 0.05 m/s, 7.5 mm
+  Real worstResidual = 0;
+  for (int i = 0; i < steps; ++i) {
+    grasp.targets = t0.rowwise() + Eigen::RowVector3d(0, 0, 0.05 * (i + 1) * in.dt);
+    in.grasps = {grasp};
+    ASSERT_EQ(rig.model.step(in), StepStatus::Ok);
+    worstResidual = std::max(worstResidual, testing::graspResidual(rig.model.surface(), grasp));
+  }
+  const Real largest = (rig.model.surface() - liver.V).rowwise().norm().maxCoeff();
+  std::printf(
+      "liver lift of %.3g mm near the fixed box: largest vertex motion %.3g mm, worst grasp "
+      "residual %.3g mm\n",
+      lift * 1e3, largest * 1e3, worstResidual * 1e3);
+  EXPECT_LT(worstResidual, 0.5e-3);
+  EXPECT_GT(largest, 0.5 * lift) << "the grasp lifted the organ";
+  EXPECT_LT(largest, 3 * lift);
+}
+
 // A point force spread by the harness over a 1 cm patch reaches the spheres by W^T: the patch moves
 // along the force.
 TEST(MetaballsModel, PatchLoadMovesThePatchAlongTheForce) {
@@ -279,17 +313,23 @@ TEST(MetaballsModel, Fig12LaplacianImprovesShapeRecovery) {
 // vertices within 15 mm of its axis point: the tube's radius is 13.5 mm) drags them 3 cm out of
 // the plane and holds. The rest of the organ stays near rest, so the change of the volume
 // enclosed by the skinned surface is the dragged section's. With eq. (12) the stretched section
-// thins and gains less volume than without; its skinned cross-section near the tool is smaller.
-// The volume gains differ by less than the spread between sphere sets (with / without, cm^3:
-// 2.68 / 6.86 at 850 spheres, 6.63 / 5.85 at 900, 1.38 / 5.28 at 950, where the tool's sphere
-// barely stretches; 6.72 / 7.37 at 900 before the construction ran in the surface's own frame),
-// so the volume is compared over three sphere budgets; the thinning holds at each.
+// thins and gains less volume than without; its skinned cross-section just outside the jaws is
+// smaller. The carrying spheres in the jaws keep their radii of the closing (before they did not,
+// and their radius factor fell to 0.16 at 950 spheres, the runaway of the grasp correction). The
+// volume gains with / without eq. (12), cm^3: 6.55 / 6.86 at 850 spheres, 5.83 / 5.85 at 900, 5.10
+// / 5.28 at 950; they are compared at each budget and summed.
 struct Fig13Result {
   Real dV, v0;       // volume change and rest volume of the closed surface (m^3)
-  Real sectionDisp;  // mean |v - c_center| over surface vertices within 1.5 cm of the grasp (m)
+  Real sectionDisp;  // mean |v - c_center| over the surface vertices in the ring (m)
   Real sectionRest;  // the same at rest
   Real minFactor;    // smallest r / r_rest (eq. 12)
 };
+/// m, the ring around the tool whose cross-section fig13Drag measures: the dragged section just
+/// outside the jaws (radius 15 mm). The carrying spheres in the jaws keep their radii of the
+/// closing (the jaws, not eq. 12, shape the tissue between them); their linked spheres take the
+/// factor.
+constexpr Real kSectionInner = 0.015, kSectionOuter = 0.025;
+
 Fig13Result fig13Drag(bool volumePreservation, long long spheres) {
   const SurfaceMesh gut = makePhantom("intestine");
   // First construction to find the spheres (deterministic: the second one is identical).
@@ -332,7 +372,8 @@ Fig13Result fig13Drag(bool volumePreservation, long long spheres) {
     Real sum = 0;
     int cnt = 0;
     for (int v = 0; v < sk.numVertices; ++v) {
-      if ((gut.V.row(v).transpose() - tool).norm() > 0.015) continue;
+      const Real dist = (gut.V.row(v).transpose() - tool).norm();
+      if (dist <= kSectionInner || dist > kSectionOuter) continue;
       Vec3 cc = Vec3::Zero();
       for (int s = 0; s < sk.count[size_t(v)]; ++s)
         cc += sk.weight[size_t(v * sk.slots + s)] *
@@ -353,7 +394,8 @@ TEST(MetaballsModel, Fig13VolumePreservationThinsTheDraggedSection) {
     const Fig13Result with = fig13Drag(true, spheres), without = fig13Drag(false, spheres);
     std::printf(
         "Fig. 13 intestine, %lld spheres, 3 cm drag: volume change with eq. 12 %+.3g cm^3 "
-        "(%+.2f%%), without %+.3g cm^3 (%+.2f%%); section offset near the tool: rest %.3g mm, "
+        "(%+.2f%%), without %+.3g cm^3 (%+.2f%%); section offset 15-25 mm from the tool: rest %.3g "
+        "mm, "
         "with %.3g mm, without %.3g mm; smallest radius factor %.4f\n",
         spheres, with.dV * 1e6, 100 * with.dV / with.v0, without.dV * 1e6,
         100 * without.dV / without.v0, with.sectionRest * 1e3, with.sectionDisp * 1e3,
@@ -362,6 +404,7 @@ TEST(MetaballsModel, Fig13VolumePreservationThinsTheDraggedSection) {
     EXPECT_GT(without.dV, 0) << spheres;
     // With it, the section thins: a smaller cross-section than without.
     EXPECT_LT(with.sectionDisp, without.sectionDisp) << spheres;
+    EXPECT_LT(with.dV, without.dV) << spheres;
     EXPECT_LT(with.minFactor, 1.0) << spheres;
     EXPECT_EQ(without.minFactor, 1.0) << spheres;
     gainWith += with.dV;
