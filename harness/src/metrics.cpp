@@ -85,15 +85,17 @@ ErrorMetrics computeErrors(const std::vector<MatX3>& model, const std::vector<Ma
         if (!std::binary_search(excluded.begin(), excluded.end(), i)) idx.push_back(i);
       }
     }
-    double sq = 0;
+    double sq = 0, refSq = 0;
     long long n = 0;
     for (size_t s = 0; s < model.size(); ++s) {
       for (int i : idx) {
         sq += (model[s].row(i) - reference[s].row(i)).squaredNorm();
+        refSq += (reference[s].row(i) - rest.row(i)).squaredNorm();
         ++n;
       }
     }
     m.rmseNearest.emplace_back(k, n > 0 ? std::sqrt(sq / double(n)) : 0.0);
+    m.referenceNearest.emplace_back(k, n > 0 ? std::sqrt(refSq / double(n)) : 0.0);
   }
   return m;
 }

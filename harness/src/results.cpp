@@ -240,6 +240,8 @@ json runJson(const RunRecord& run) {
     json err;
     err["reference"] = run.referenceModel;
     for (const auto& [k, v] : e.rmseNearest) err["rmse_" + std::to_string(k)] = finite(v);
+    for (const auto& [k, v] : e.referenceNearest)
+      err["reference_displacement_" + std::to_string(k)] = finite(v);
     // Which vertices rmse_k covers (docs/writing-a-plugin.md, "Metrics").
     err["rmse_k_samples"] = e.nearestSamples;
     if (e.excludedGrasped > 0) err["rmse_k_excluded_grasped"] = e.excludedGrasped;

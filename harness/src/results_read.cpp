@@ -75,13 +75,20 @@ RunRecord runFromJson(const json& j) {
   if (j.contains("error") && j["error"].is_object()) {
     const json& e = j["error"];
     ErrorMetrics m;
-    for (const auto& [k, v] : e.items()) {
-      const std::string digits = k.rfind("rmse_", 0) == 0 ? k.substr(5) : "";
-      if (!digits.empty() && std::all_of(digits.begin(), digits.end(),
-                                         [](unsigned char c) { return std::isdigit(c); }))
-        m.rmseNearest.emplace_back(std::stoi(digits), numberOrNaN(e, k.c_str()));
-    }
-    std::sort(m.rmseNearest.begin(), m.rmseNearest.end());
+    // "<prefix><k>" keys, k all digits: rmse_k and reference_displacement_k.
+    const auto perK = [&e](const std::string& prefix) {
+      std::vector<std::pair<int, double>> out;
+      for (const auto& [k, v] : e.items()) {
+        const std::string digits = k.rfind(prefix, 0) == 0 ? k.substr(prefix.size()) : "";
+        if (!digits.empty() && std::all_of(digits.begin(), digits.end(),
+                                           [](unsigned char c) { return std::isdigit(c); }))
+          out.emplace_back(std::stoi(digits), numberOrNaN(e, k.c_str()));
+      }
+      std::sort(out.begin(), out.end());
+      return out;
+    };
+    m.rmseNearest = perK("rmse_");
+    m.referenceNearest = perK("reference_displacement_");
     m.rmseAll = numberOrNaN(e, "rmse_all");
     m.max = numberOrNaN(e, "max");
     m.lossRatio = numberOrNaN(e, "loss_ratio");

@@ -43,6 +43,10 @@ TEST(Metrics, HandComputedSingleInstant) {
   EXPECT_DOUBLE_EQ(e.rmseNearest[0].second, std::sqrt(9.0 / 2.0));
   EXPECT_DOUBLE_EQ(e.rmseNearest[1].second, std::sqrt(25.0 / 3.0));
   EXPECT_DOUBLE_EQ(e.rmseNearest[2].second, 2.5) << "k larger than #V covers every vertex";
+  // The displacement rmse_k measures: the reference's, over the same vertices (|u_ref| = 1).
+  ASSERT_EQ(e.referenceNearest.size(), 3u);
+  EXPECT_EQ(e.referenceNearest[1].first, 3);
+  EXPECT_DOUBLE_EQ(e.referenceNearest[1].second, 1.0);
   // The k nearest are taken on the REST surface around the focus: focus at the far vertex.
   const ErrorMetrics far = computeErrors(model, ref, rest, Vec3(10, 0, 0), {1});
   EXPECT_DOUBLE_EQ(far.rmseNearest[0].second, 0.0);
@@ -59,6 +63,28 @@ TEST(Metrics, PooledOverInstants) {
   EXPECT_DOUBLE_EQ(e.rmseAll, std::sqrt(1.0 / 4.0));
   EXPECT_DOUBLE_EQ(e.lossRatio, 1.0 / 8.0);
   EXPECT_DOUBLE_EQ(e.rmseNearest[0].second, std::sqrt(1.0 / 2.0));
+  EXPECT_DOUBLE_EQ(e.referenceNearest[0].second, 2.0);
+}
+
+TEST(Metrics, ReferenceDisplacementOverTheSamplesOnly) {
+  // The nearest vertex moves 3 in the reference, the far one 4: the k = 1 figure is the near
+  // one's, and it reaches results.json and back.
+  const MatX3 rest = rows({Vec3(0, 0, 0), Vec3(5, 0, 0)});
+  MatX3 ref = rest;
+  ref.row(0) += Vec3(0, 3, 0).transpose();
+  ref.row(1) += Vec3(4, 0, 0).transpose();
+  const ErrorMetrics e = computeErrors(rest, ref, rest, Vec3(0, 0, 0), {1, 2});
+  EXPECT_DOUBLE_EQ(e.referenceNearest[0].second, 3.0);
+  EXPECT_DOUBLE_EQ(e.referenceNearest[1].second, std::sqrt(25.0 / 2.0));
+  RunRecord r;
+  r.error = e;
+  r.referenceModel = "reference_fem";
+  const auto j = runJson(r);
+  EXPECT_DOUBLE_EQ(j["error"]["reference_displacement_1"].get<double>(), 3.0);
+  const RunRecord back = runFromJson(j);
+  ASSERT_TRUE(back.error);
+  EXPECT_EQ(back.error->referenceNearest, e.referenceNearest);
+  EXPECT_EQ(back.error->rmseNearest, e.rmseNearest) << "rmse_k is not confused with them";
 }
 
 TEST(Metrics, LossRatioWhenTheReferenceDoesNotMove) {

@@ -8,6 +8,8 @@
 //                grasp scene (no loads; the focus is a grasp's closing point) N_k leaves out the
 //                grasped vertices (graspedSurfaceVertices()): every model holds those at the
 //                tool, so they would make rmse_k trivially small.
+//   reference_displacement_k = sqrt( (1/k) sum_{i in N_k} |y_i - X_i|^2 ), the displacement
+//                rmse_k measures (an error at least this large says nothing of the motion)
 //   rmse_all   = the same over every vertex, max = max_i d_i
 //   loss_ratio = sum_i |u_ref,i - u_model,i| / sum_i |u_ref,i|   (the particle/BEM paper's
 //                "accuracy loss ratio"; u_ref - u_model = y - x, so the numerator is sum_i d_i)
@@ -26,8 +28,11 @@ namespace deform::harness {
 
 struct ErrorMetrics {
   std::vector<std::pair<int, double>> rmseNearest;  ///< (k, rmse_k in m) in samples.nearest order
-  double rmseAll = 0;                               ///< m
-  double max = 0;                                   ///< m
+  /// (k, reference_displacement_k in m): the reference's rms displacement from rest over rmse_k's
+  /// vertices and instants, in the same order.
+  std::vector<std::pair<int, double>> referenceNearest;
+  double rmseAll = 0;  ///< m
+  double max = 0;      ///< m
   double lossRatio =
       0;             ///< dimensionless; +inf when the reference does not move but the model does
   int instants = 0;  ///< how many instants were compared
