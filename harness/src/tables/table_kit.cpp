@@ -135,6 +135,14 @@ ojson rmseMm(const RunRecord* r, int k) {
   });
 }
 
+ojson referenceDisplacementMm(const RunRecord* r, int k) {
+  return errorFigure(r, [k](const ErrorMetrics& e) {
+    for (const auto& [kk, v] : e.referenceNearest)
+      if (kk == k) return 1e3 * v;
+    return std::nan("");
+  });
+}
+
 ojson lossRatio(const RunRecord* r) {
   return errorFigure(r, [](const ErrorMetrics& e) { return e.lossRatio; });
 }

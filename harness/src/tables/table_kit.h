@@ -98,6 +98,9 @@ ojson errorFigure(const RunRecord* r, const std::function<double(const ErrorMetr
 /// rmse_k in mm (null when the run has no such figure).
 ojson rmseMm(const RunRecord* r, int k);
 
+/// reference_displacement_k in mm: the displacement rmse_k measures (null without it).
+ojson referenceDisplacementMm(const RunRecord* r, int k);
+
 ojson lossRatio(const RunRecord* r);
 
 /// The precomputation time of a run that stepped, or null.
