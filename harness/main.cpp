@@ -244,11 +244,20 @@ std::vector<CalibrationParams> readCalibrations(const std::vector<std::string>& 
   std::vector<CalibrationParams> out;
   for (const std::string& f : files) {
     CalibrationParams c = readCalibrationFile(f);
-    for (const CalibrationParams& o : out)
-      if (o.plugin == c.plugin && o.model == c.model)
+    // One file per model and organ: calibrations of one model on different organs (a table
+    // over several phantoms) each apply to their own organ's cases.
+    for (const CalibrationParams& o : out) {
+      if (o.plugin != c.plugin || o.model != c.model) continue;
+      const bool overlap =
+          o.organs.empty() || c.organs.empty() ||
+          std::any_of(c.organs.begin(), c.organs.end(),
+                      [&o](const std::string& organ) { return calibrationApplies(o, organ); });
+      if (overlap)
         throw InputError(f, "",
-                         "a second calibration of " + c.plugin + "/" + c.model +
-                             " (first: " + o.file + "); give one file per model");
+                         "a second calibration of " + c.plugin + "/" + c.model + " for " +
+                             (c.organs.empty() ? std::string("any organ") : c.organs.front()) +
+                             " (first: " + o.file + "); give one file per model and organ");
+    }
     out.push_back(std::move(c));
   }
   return out;

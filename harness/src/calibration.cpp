@@ -177,6 +177,23 @@ const char* calibMetricName(CalibMetric m) {
   return "?";
 }
 
+std::string calibrationOrgan(const std::string& mesh, double resolution, double scale) {
+  const auto num = [](double v) {
+    std::ostringstream s;
+    s << std::setprecision(12) << v;
+    return s.str();
+  };
+  if (mesh.empty()) return "";
+  if (mesh.rfind("phantom:", 0) == 0)
+    return mesh + ", resolution " + num(resolution) + (scale != 1.0 ? ", scale " + num(scale) : "");
+  return fs::absolute(fs::path(mesh)).lexically_normal().string() + ", scale " + num(scale);
+}
+
+bool calibrationApplies(const CalibrationParams& c, const std::string& organ) {
+  return c.organs.empty() || organ.empty() ||
+         std::find(c.organs.begin(), c.organs.end(), organ) != c.organs.end();
+}
+
 CalibrationParams readCalibrationFile(const std::string& file) {
   std::ifstream in(file);
   if (!in) throw InputError(file, "", "cannot read the calibration file");
@@ -198,6 +215,13 @@ CalibrationParams readCalibrationFile(const std::string& file) {
   if (!doc.contains("params") || !doc["params"].is_object())
     throw InputError(file, "/params", "\"params\" must be an object");
   c.params = doc["params"];
+  if (doc.contains("organs")) {
+    const json& organs = doc["organs"];
+    if (!organs.is_array() ||
+        !std::all_of(organs.begin(), organs.end(), [](const json& o) { return o.is_string(); }))
+      throw InputError(file, "/organs", "\"organs\" must be an array of strings");
+    for (const json& o : organs) c.organs.push_back(o.get<std::string>());
+  }
   return c;
 }
 
@@ -207,12 +231,16 @@ std::vector<std::pair<std::string, std::string>> addCalibratedTwins(
   if (!scene.contains("models") || !scene["models"].is_array()) return added;
   ojson models = scene["models"];
   ojson out = ojson::array();
+  const ojson organ = scene.value("organ", ojson::object());
+  const std::string organId =
+      calibrationOrgan(organ.value("mesh", std::string()), organ.value("resolution", 1.0),
+                       organ.value("scale", 1.0));
   for (const ojson& m : models) {
     out.push_back(m);
     const std::string plugin = m.value("plugin", "");
     const std::string model = m.value("model", plugin);
     for (const CalibrationParams& c : calibrations) {
-      if (c.plugin != plugin || c.model != model) continue;
+      if (c.plugin != plugin || c.model != model || !calibrationApplies(c, organId)) continue;
       ojson twin = m;
       const std::string label = m.value("label", "");
       twin["label"] = (label.empty() ? model : label) + "+cal";
@@ -241,6 +269,7 @@ struct SceneInfo {
   ojson doc;                            ///< the scene as written
   ojson modelParams = ojson::object();  ///< the scene's params for the model, when it names it
   bool hasModel = false;
+  std::string organ;  ///< calibrationOrgan() of its organ
 };
 
 SceneInfo loadScene(const std::string& file, const std::string& plugin, const std::string& model,
@@ -255,6 +284,7 @@ SceneInfo loadScene(const std::string& file, const std::string& plugin, const st
   if (metric == CalibMetric::Rmse50 &&
       std::find(parsed.nearest.begin(), parsed.nearest.end(), 50) == parsed.nearest.end())
     throw InputError(file, "/samples/nearest", "--metric rmse_50 needs 50 among the nearest");
+  s.organ = calibrationOrgan(parsed.organ.mesh, parsed.organ.resolution, parsed.organ.scale);
   std::ifstream in(file);
   s.doc = ojson::parse(in);
   for (const ojson& m : s.doc.value("models", ojson::array())) {
@@ -514,6 +544,12 @@ class Calibrator {
     doc["metric"] = calibMetricName(m_o.metric);
     if (!m_o.label.empty()) doc["label"] = m_o.label;
     doc["params"] = calibrated;
+    // The organs it was fitted on: a calibration applies to scenes of these organs only.
+    ojson organs = ojson::array();
+    for (const SceneInfo& sc : m_train)
+      if (std::find(organs.begin(), organs.end(), sc.organ) == organs.end())
+        organs.push_back(sc.organ);
+    doc["organs"] = organs;
     ojson defaultsJson = ojson::object();
     ojson space = ojson::object();
     for (size_t d = 0; d < m_dims.size(); ++d) {

@@ -514,12 +514,24 @@ std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
     nlohmann::json given = spec->params;
     const CalibrationParams* calibration = nullptr;
     if (!run.isReference) {
+      const std::string organ =
+          calibrationOrgan(scene.organ.mesh, scene.organ.resolution, scene.organ.scale);
+      const CalibrationParams* elsewhere = nullptr;
       for (const CalibrationParams& c : options.calibrations) {
-        if (c.plugin == spec->plugin && c.model == run.info->name) {
-          calibration = &c;
-          break;
+        if (c.plugin != spec->plugin || c.model != run.info->name) continue;
+        if (!calibrationApplies(c, organ)) {
+          elsewhere = &c;
+          continue;
         }
+        calibration = &c;
+        break;
       }
+      // A calibration is per organ: fitted on another, it would pass for one of this organ.
+      if (!calibration && elsewhere)
+        throw InputError(elsewhere->file, "/organs",
+                         "fitted on " + elsewhere->organs.front() +
+                             (elsewhere->organs.size() > 1 ? " and others" : "") +
+                             ", not on this scene's organ (" + organ + ")");
     }
     if (calibration) {
       nlohmann::json merged = calibration->params;

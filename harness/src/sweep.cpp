@@ -99,8 +99,19 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     // With a calibration of this model (--calibration), every point once more at the
     // calibrated parameters (the scene's own values still win): a second curve, "+cal".
     const CalibrationParams* calibration = nullptr;
-    for (const CalibrationParams& cp : options.calibrations)
-      if (cp.plugin == plugin && cp.model == modelName) calibration = &cp;
+    const ojson organ = scene.value("organ", ojson::object());
+    const std::string organId =
+        calibrationOrgan(organ.value("mesh", std::string()), organ.value("resolution", 1.0),
+                         organ.value("scale", 1.0));
+    for (const CalibrationParams& cp : options.calibrations) {
+      if (cp.plugin != plugin || cp.model != modelName) continue;
+      if (!calibrationApplies(cp, organId))
+        throw InputError(cp.file, "/organs",
+                         "fitted on " + cp.organs.front() +
+                             (cp.organs.size() > 1 ? " and others" : "") +
+                             ", not on this scene's organ (" + organId + ")");
+      calibration = &cp;
+    }
     for (const bool calibrated : {false, true}) {
       if (calibrated && !calibration) continue;
       for (const json& v : values) {

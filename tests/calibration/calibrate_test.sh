@@ -4,7 +4,9 @@
 #   recover     the reference is the toy at gain 0.4: calibration from the default gain 1 finds
 #               it within 0.02, although trials below gain 0.2 diverge (scored, not fatal);
 #               then `run --calibration` uses it and --explain says where gain came from, and
-#               `sweep --calibration` shows the default and the calibrated point
+#               `sweep --calibration` shows the default and the calibrated point; the file
+#               names the organ it was fitted on, and applies to scenes of that organ only (a
+#               scene of another organ is refused in one line; one file per model and organ)
 #   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0:
 #               one stderr line each and exit 2
 set -euo pipefail
@@ -32,6 +34,7 @@ assert c["train"]["before"] > 1e-4, c["train"]  # gain 1 is far from 0.4
 assert c["train"]["after"] < 0.05 * c["train"]["before"], c["train"]
 assert c["validation"]["after"] < 0.05 * c["validation"]["before"], c["validation"]
 assert 1 <= c["evaluations"] <= 16 and c["wall_s"] > 0
+assert c["organs"] == ["phantom:gallbladder, resolution 0.3"], c["organs"]
 rows = list(csv.DictReader(open(os.path.join(d, "trials.csv"))))
 assert len(rows) == c["evaluations"], (len(rows), c["evaluations"])
 diverged = [r for r in rows if "diverged" in r["status"]]
@@ -56,6 +59,37 @@ assert set(p) == {"toy", "toy+cal"}, list(p)
 assert p["toy+cal"]["calibrated"] and not p["toy"]["calibrated"]
 assert p["toy+cal"]["rmse_all"] < 0.05 * p["toy"]["rmse_all"], p
 PY
+  # Per organ: the same model on a coarser gallbladder is another organ.
+  python3 - "$here/toy_reference.json" "$work/cal/calibration.json" "$work" <<'PY'
+import json, sys
+scene, cal, work = json.load(open(sys.argv[1])), json.load(open(sys.argv[2])), sys.argv[3]
+scene["organ"]["resolution"] = 0.25
+json.dump(scene, open(work + "/other_organ.json", "w"))
+cal["organs"] = ["phantom:gallbladder, resolution 0.25"]
+cal["params"]["gain"] = 0.5
+json.dump(cal, open(work + "/other_cal.json", "w"))
+PY
+  set +e
+  "${db[@]}" run "$work/other_organ.json" --out "$work/run_other" --no-cache \
+    --calibration "$work/cal/calibration.json" >"$work/other.out" 2>"$work/other.err"
+  code=$?
+  set -e
+  [[ $code == 2 && $(wc -l <"$work/other.err") == 1 ]] || { cat "$work/other.err"; fail "other organ: exit $code"; }
+  grep -qF "not on this scene's organ (phantom:gallbladder, resolution 0.25)" "$work/other.err" \
+    || { cat "$work/other.err"; fail "other organ: message"; }
+  # Both files: each applies to its own organ.
+  "${db[@]}" run "$work/other_organ.json" --out "$work/run_both" --no-cache --explain \
+    --calibration "$work/cal/calibration.json" --calibration "$work/other_cal.json" \
+    >"$work/both.txt" 2>&1 || { cat "$work/both.txt"; fail "two organs' calibrations"; }
+  grep -q "gain from calibration $work/other_cal.json" "$work/both.txt" \
+    || { cat "$work/both.txt"; fail "the other organ's calibration was not the one applied"; }
+  set +e
+  "${db[@]}" run "$work/other_organ.json" --out "$work/run_twice" --no-cache \
+    --calibration "$work/other_cal.json" --calibration "$work/other_cal.json" >/dev/null 2>"$work/twice.err"
+  code=$?
+  set -e
+  [[ $code == 2 ]] && grep -qF "a second calibration of toy/toy" "$work/twice.err" \
+    || { cat "$work/twice.err"; fail "two calibrations of one model and organ accepted"; }
   ;;
 bad_input)
   check() {  # check NAME EXPECTED_TEXT ARGS...

@@ -143,6 +143,33 @@ TEST(Calibration, CalibrationFileAndTwins) {
   EXPECT_EQ(scene["models"][1]["label"], "pbd+cal");
   EXPECT_EQ(scene["models"][1]["params"]["thickness"], 0.004);
   EXPECT_EQ(scene["models"][1]["params"]["damping"], 3);  // the scene's value wins
+
+  // Per organ: a calibration fitted on the cube twins the cube's models only.
+  {
+    std::ofstream(file) << R"({"format": "deformbench-calibration/1", "model": "pbd",
+      "plugin": "pbd", "metric": "rmse_50", "params": {"thickness": 0.028},
+      "organs": ["phantom:cube, resolution 1"]})";
+  }
+  const CalibrationParams cube = readCalibrationFile(file);
+  ASSERT_EQ(cube.organs.size(), 1u);
+  EXPECT_EQ(calibrationOrgan("phantom:cube", 1.0, 1.0), cube.organs[0]);
+  const auto twinsOn = [&cube](const std::string& mesh) {
+    nlohmann::ordered_json s = {{"organ", {{"mesh", mesh}}},
+                                {"models", {{{"plugin", "pbd"}, {"label", "pbd"}}}}};
+    return addCalibratedTwins(s, {cube}).size();
+  };
+  EXPECT_EQ(twinsOn("phantom:cube"), 1u);
+  EXPECT_EQ(twinsOn("phantom:liver"), 0u) << "fitted on the cube, not the liver";
+  EXPECT_TRUE(calibrationApplies(c, calibrationOrgan("phantom:liver", 1.0, 1.0)))
+      << "a file without organs applies to any organ";
+  EXPECT_NE(calibrationOrgan("phantom:cube", 0.5, 1.0), cube.organs[0]);
+  EXPECT_EQ(calibrationOrgan("mesh.stl", 1.0, 0.001),
+            (std::filesystem::current_path() / "mesh.stl").string() + ", scale 0.001");
+  {
+    std::ofstream(file) << R"({"format": "deformbench-calibration/1", "model": "pbd",
+      "plugin": "pbd", "params": {}, "organs": "phantom:cube"})";
+  }
+  EXPECT_THROW(readCalibrationFile(file), InputError);
   std::filesystem::remove_all(dir);
 }
 

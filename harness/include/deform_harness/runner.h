@@ -174,7 +174,18 @@ struct CalibrationParams {
   std::string plugin;  ///< plugin name as in scenes
   std::string model;   ///< model name within the plugin
   nlohmann::json params = nlohmann::json::object();
+  /// The organs of its training scenes (calibrationOrgan()); a calibration applies to scenes
+  /// of these organs only. Empty (a file written before they were recorded): to any organ.
+  std::vector<std::string> organs;
 };
+
+/// The organ a calibration is fitted on, as written in calibration.json "organs": the mesh
+/// ("phantom:NAME" or the file's absolute path) with its resolution (phantoms) or scale (files),
+/// e.g. "phantom:cube, resolution 1". The fixed region, material and loads are not part of it.
+std::string calibrationOrgan(const std::string& mesh, double resolution, double scale);
+/// Whether c applies to a scene of that organ (calibrationOrgan(); "" for a scene without a
+/// mesh, which any calibration applies to).
+bool calibrationApplies(const CalibrationParams& c, const std::string& organ);
 
 struct BenchmarkOptions {
   std::vector<std::string> only;  ///< run only models whose label, model or plugin matches

@@ -95,8 +95,13 @@ Table calibrationTable(
   t.name = "calibration";
   t.title = "Default and calibrated parameters side by side (--calibration)";
   t.source = "";  // no paper: the same cases at default and calibrated parameters
-  for (const CalibrationParams& c : calibrations)
-    t.notes.push_back(c.plugin + "/" + c.model + ": " + c.file + " " + c.params.dump());
+  for (const CalibrationParams& c : calibrations) {
+    std::string organs;
+    for (const std::string& o : c.organs) organs += (organs.empty() ? "" : "; ") + o;
+    t.notes.push_back(c.plugin + "/" + c.model + ": " + c.file + " " + c.params.dump() +
+                      (organs.empty() ? std::string(", applied to every organ (no organs recorded)")
+                                      : ", fitted on and applied to " + organs + " only"));
+  }
   t.columns = {{"case", "case"},
                {"model", "model"},
                {"rmse_50_default_mm", "rmse_50 default (mm)"},
