@@ -5,6 +5,7 @@
 #include <deform/plugin_loader.h>
 #include <deform/scene.h>
 #include <deform_harness/bench.h>
+#include <deform_harness/calibration.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/convergence.h>
@@ -20,6 +21,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 namespace deform::harness {
@@ -226,6 +228,52 @@ std::vector<std::string> notesWith(const json& table, const std::string& part) {
   for (const auto& n : table["notes"])
     if (n.get<std::string>().find(part) != std::string::npos) out.push_back(n);
   return out;
+}
+
+TEST_F(TempDir, CalibrationsApplyToTheirOrganAndTheirRowsKeepValidity) {
+  if (!built({"massspring", "reference_fem"}))
+    GTEST_SKIP() << "massspring or reference_fem is not built";
+  // Two calibrations of mass-spring: one fitted on the cube (the quick hybrid cases' phantom),
+  // one on the liver. Only the cube's is twinned; the calibration table says so, and a default
+  // run that did not settle is "invalid" there as in the paper table, never ok.
+  const fs::path plugins = pluginSubset(m_dir / "plugins", {"massspring", "reference_fem"});
+  const auto calibration = [this](const std::string& name, const std::string& organ, double t) {
+    const fs::path f = m_dir / (name + ".json");
+    std::ofstream(f) << json{
+        {"format", "deformbench-calibration/1"},
+        {"plugin", "massspring"},
+        {"model", "massspring"},
+        {"params", {{"thickness", t}}},
+        {"organs", {organ}}}.dump();
+    return readCalibrationFile(f.string());
+  };
+  PluginLoader loader({plugins.string()});
+  TablesOptions o;
+  o.quick = true;
+  o.outDir = m_dir / "out";
+  o.cases.cacheDir = m_dir / "cache";
+  o.referenceElements = 800;
+  o.referenceCheck = false;
+  o.calibrations = {calibration("liver", "phantom:liver, resolution 0.27", 0.02),
+                    calibration("cube", "phantom:cube, resolution 1", 0.2)};
+  buildTables({"hybrid-accuracy"}, loader, o, nullptr);
+  const json doc = readJson(o.outDir / "calibration.json");
+  ASSERT_EQ(doc["rows"].size(), 4u) << "one twin per quick case (all cube), none from the liver's";
+  bool invalidDefault = false;
+  for (const auto& row : doc["rows"]) {
+    EXPECT_EQ(row["model"], "massspring");
+    ASSERT_TRUE(row["rmse_50_calibrated_mm"].is_number()) << row.dump();
+    const std::string status = row["status"];
+    invalidDefault |= status.find("default invalid (did not settle)") != std::string::npos;
+  }
+  EXPECT_TRUE(invalidDefault) << "pressed down, the default membrane creeps past the 2 s cap: "
+                              << doc["rows"].dump();
+  const std::string notes = doc["notes"].dump();
+  EXPECT_NE(notes.find("applied to phantom:cube, resolution 1 only"), std::string::npos) << notes;
+  const json results = readJson(o.outDir / "runs/hybrid/cube_up_2N/results.json");
+  std::set<std::string> labels;
+  for (const auto& run : results["runs"]) labels.insert(run["label"].get<std::string>());
+  EXPECT_EQ(labels.count("massspring+cal"), 1u);
 }
 
 TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {

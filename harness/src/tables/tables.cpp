@@ -133,12 +133,15 @@ Table calibrationTable(
       ojson row = {{"case", c->id}, {"model", original}};
       metrics(a, "default", row);
       metrics(b, "calibrated", row);
+      // Each run's status as the paper tables give it: a run that did not do what the scene
+      // asked (did not settle, an empty grasp) is "invalid (why)", never ok.
       std::string status;
       if (!a || !b) status = "not run";
-      if (a && a->status != RunStatus::Ok)
-        status += "default " + std::string(statusName(a->status));
-      if (b && b->status != RunStatus::Ok)
-        status += (status.empty() ? "" : ", ") + std::string("calibrated ") + statusName(b->status);
+      for (const auto& [which, r] : {std::pair{"default ", a}, std::pair{"calibrated ", b}}) {
+        if (!r) continue;
+        const std::string st = statusOf(it->second, r->plugin, r);
+        if (st != "ok") status += (status.empty() ? "" : ", ") + std::string(which) + st;
+      }
       row["status"] = status.empty() ? "ok" : status;
       t.rows.push_back(row);
     }
