@@ -194,6 +194,13 @@ bool calibrationApplies(const CalibrationParams& c, const std::string& organ) {
          std::find(c.organs.begin(), c.organs.end(), organ) != c.organs.end();
 }
 
+void throwCalibrationOrganMismatch(const CalibrationParams& c, const std::string& organ) {
+  throw InputError(c.file, "/organs",
+                   "fitted on " + (c.organs.empty() ? std::string("?") : c.organs.front()) +
+                       (c.organs.size() > 1 ? " and others" : "") +
+                       ", not on this scene's organ (" + organ + ")");
+}
+
 CalibrationParams readCalibrationFile(const std::string& file) {
   std::ifstream in(file);
   if (!in) throw InputError(file, "", "cannot read the calibration file");

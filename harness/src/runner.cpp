@@ -527,11 +527,7 @@ std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
         break;
       }
       // A calibration is per organ: fitted on another, it would pass for one of this organ.
-      if (!calibration && elsewhere)
-        throw InputError(elsewhere->file, "/organs",
-                         "fitted on " + elsewhere->organs.front() +
-                             (elsewhere->organs.size() > 1 ? " and others" : "") +
-                             ", not on this scene's organ (" + organ + ")");
+      if (!calibration && elsewhere) throwCalibrationOrganMismatch(*elsewhere, organ);
     }
     if (calibration) {
       nlohmann::json merged = calibration->params;

@@ -105,11 +105,7 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
                          organ.value("scale", 1.0));
     for (const CalibrationParams& cp : options.calibrations) {
       if (cp.plugin != plugin || cp.model != modelName) continue;
-      if (!calibrationApplies(cp, organId))
-        throw InputError(cp.file, "/organs",
-                         "fitted on " + cp.organs.front() +
-                             (cp.organs.size() > 1 ? " and others" : "") +
-                             ", not on this scene's organ (" + organId + ")");
+      if (!calibrationApplies(cp, organId)) throwCalibrationOrganMismatch(cp, organId);
       calibration = &cp;
     }
     for (const bool calibrated : {false, true}) {

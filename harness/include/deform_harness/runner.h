@@ -186,6 +186,10 @@ std::string calibrationOrgan(const std::string& mesh, double resolution, double 
 /// Whether c applies to a scene of that organ (calibrationOrgan(); "" for a scene without a
 /// mesh, which any calibration applies to).
 bool calibrationApplies(const CalibrationParams& c, const std::string& organ);
+/// Throws the InputError (c's file, "/organs") of a scene of that organ given a calibration
+/// fitted on others (run and sweep refuse it; the tables skip such cases).
+[[noreturn]] void throwCalibrationOrganMismatch(const CalibrationParams& c,
+                                                const std::string& organ);
 
 struct BenchmarkOptions {
   std::vector<std::string> only;  ///< run only models whose label, model or plugin matches

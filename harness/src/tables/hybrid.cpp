@@ -210,9 +210,10 @@ TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing)
         "reference displacement_50: the reference's RMS displacement over the same 50 vertices, "
         "the motion the errors measure; an error as large says nothing of it. PBD and "
         "mass-spring run on the fine surface mesh, as in the paper, at their default "
-        "parameters: a 1 cm shell with a volume constraint (PBD) and a 1 cm membrane with no "
-        "interior (mass-spring, which a downward push dents inward and whose flat faces have no "
-        "stiffness against small transverse loads). Their stiffness is a parameter's, not the "
+        "parameters: a shell of `thickness` with a volume constraint (PBD) and a membrane of "
+        "`thickness` with no interior (mass-spring, which a downward push dents inward and whose "
+        "flat faces have no stiffness against small transverse loads). Their stiffness is a "
+        "parameter's, not the "
         "material's: --calibration adds them fitted to the reference (deformbench calibrate).",
         kHybridNote};
   }
