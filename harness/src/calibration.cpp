@@ -194,11 +194,27 @@ bool calibrationApplies(const CalibrationParams& c, const std::string& organ) {
          std::find(c.organs.begin(), c.organs.end(), organ) != c.organs.end();
 }
 
-void throwCalibrationOrganMismatch(const CalibrationParams& c, const std::string& organ) {
-  throw InputError(c.file, "/organs",
-                   "fitted on " + (c.organs.empty() ? std::string("?") : c.organs.front()) +
-                       (c.organs.size() > 1 ? " and others" : "") +
-                       ", not on this scene's organ (" + organ + ")");
+std::string calibrationOrgan(const ojson& organ) {
+  return calibrationOrgan(organ.value("mesh", std::string()), organ.value("resolution", 1.0),
+                          organ.value("scale", 1.0));
+}
+
+const CalibrationParams* calibrationFor(const std::vector<CalibrationParams>& calibrations,
+                                        const std::string& plugin, const std::string& model,
+                                        const std::string& organ, bool skipOtherOrgans) {
+  const CalibrationParams* elsewhere = nullptr;
+  for (const CalibrationParams& c : calibrations) {
+    if (c.plugin != plugin || c.model != model) continue;
+    if (calibrationApplies(c, organ)) return &c;
+    if (!elsewhere) elsewhere = &c;
+  }
+  // A calibration is per organ: fitted on another, it would pass for one of this organ.
+  if (elsewhere && !skipOtherOrgans)
+    throw InputError(elsewhere->file, "/organs",
+                     "fitted on " + elsewhere->organs.front() +
+                         (elsewhere->organs.size() > 1 ? " and others" : "") +
+                         ", not on this scene's organ (" + organ + ")");
+  return nullptr;
 }
 
 CalibrationParams readCalibrationFile(const std::string& file) {
@@ -238,29 +254,24 @@ std::vector<std::pair<std::string, std::string>> addCalibratedTwins(
   if (!scene.contains("models") || !scene["models"].is_array()) return added;
   ojson models = scene["models"];
   ojson out = ojson::array();
-  const ojson organ = scene.value("organ", ojson::object());
-  const std::string organId =
-      calibrationOrgan(organ.value("mesh", std::string()), organ.value("resolution", 1.0),
-                       organ.value("scale", 1.0));
+  const std::string organ = calibrationOrgan(scene.value("organ", ojson::object()));
   for (const ojson& m : models) {
     out.push_back(m);
     const std::string plugin = m.value("plugin", "");
     const std::string model = m.value("model", plugin);
-    for (const CalibrationParams& c : calibrations) {
-      if (c.plugin != plugin || c.model != model || !calibrationApplies(c, organId)) continue;
-      ojson twin = m;
-      const std::string label = m.value("label", "");
-      twin["label"] = (label.empty() ? model : label) + "+cal";
-      ojson params = ojson::object();
-      // json -> ordered_json through text (no implicit conversion between the two types).
-      for (const auto& [k, v] : c.params.items()) params[k] = ojson::parse(v.dump());
-      const ojson written = m.value("params", ojson::object());
-      for (const auto& [k, v] : written.items()) params[k] = v;
-      twin["params"] = params;
-      added.emplace_back(label, twin["label"].get<std::string>());
-      out.push_back(twin);
-      break;
-    }
+    const CalibrationParams* c = calibrationFor(calibrations, plugin, model, organ, true);
+    if (!c) continue;
+    ojson twin = m;
+    const std::string label = m.value("label", "");
+    twin["label"] = (label.empty() ? model : label) + "+cal";
+    ojson params = ojson::object();
+    // json -> ordered_json through text (no implicit conversion between the two types).
+    for (const auto& [k, v] : c->params.items()) params[k] = ojson::parse(v.dump());
+    const ojson written = m.value("params", ojson::object());
+    for (const auto& [k, v] : written.items()) params[k] = v;
+    twin["params"] = params;
+    added.emplace_back(label, twin["label"].get<std::string>());
+    out.push_back(twin);
   }
   scene["models"] = out;
   return added;

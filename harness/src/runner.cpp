@@ -506,29 +506,18 @@ std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
   }
   std::vector<PlannedRun> planned;
   std::set<std::string> labels;
+  const std::string organ =
+      calibrationOrgan(scene.organ.mesh, scene.organ.resolution, scene.organ.scale);
   for (const ModelSpec* spec : specs) {
     PlannedRun run;
     run.spec = *spec;
     run.isReference = scene.reference && spec == &*scene.reference;
     run.info = &loader.load(spec->plugin, spec->model);
     nlohmann::json given = spec->params;
-    const CalibrationParams* calibration = nullptr;
-    if (!run.isReference) {
-      const std::string organ =
-          calibrationOrgan(scene.organ.mesh, scene.organ.resolution, scene.organ.scale);
-      const CalibrationParams* elsewhere = nullptr;
-      for (const CalibrationParams& c : options.calibrations) {
-        if (c.plugin != spec->plugin || c.model != run.info->name) continue;
-        if (!calibrationApplies(c, organ)) {
-          elsewhere = &c;
-          continue;
-        }
-        calibration = &c;
-        break;
-      }
-      // A calibration is per organ: fitted on another, it would pass for one of this organ.
-      if (!calibration && elsewhere) throwCalibrationOrganMismatch(*elsewhere, organ);
-    }
+    const CalibrationParams* calibration =
+        run.isReference
+            ? nullptr
+            : calibrationFor(options.calibrations, spec->plugin, run.info->name, organ, false);
     if (calibration) {
       nlohmann::json merged = calibration->params;
       for (const auto& [k, v] : spec->params.items()) merged[k] = v;

@@ -85,6 +85,7 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   };
   std::vector<Planned> planned;
   ojson models = ojson::array();
+  const std::string organ = calibrationOrgan(scene.value("organ", ojson::object()));
   for (const auto& m : scene["models"]) {
     const std::string plugin = m.value("plugin", "");
     const std::string modelName = m.value("model", plugin);
@@ -98,16 +99,8 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     if (values.empty()) values.push_back(nullptr);
     // With a calibration of this model (--calibration), every point once more at the
     // calibrated parameters (the scene's own values still win): a second curve, "+cal".
-    const CalibrationParams* calibration = nullptr;
-    const ojson organ = scene.value("organ", ojson::object());
-    const std::string organId =
-        calibrationOrgan(organ.value("mesh", std::string()), organ.value("resolution", 1.0),
-                         organ.value("scale", 1.0));
-    for (const CalibrationParams& cp : options.calibrations) {
-      if (cp.plugin != plugin || cp.model != modelName) continue;
-      if (!calibrationApplies(cp, organId)) throwCalibrationOrganMismatch(cp, organId);
-      calibration = &cp;
-    }
+    const CalibrationParams* calibration =
+        calibrationFor(options.calibrations, plugin, modelName, organ, false);
     for (const bool calibrated : {false, true}) {
       if (calibrated && !calibration) continue;
       for (const json& v : values) {

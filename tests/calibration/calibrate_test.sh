@@ -83,6 +83,15 @@ PY
     >"$work/both.txt" 2>&1 || { cat "$work/both.txt"; fail "two organs' calibrations"; }
   grep -q "gain from calibration $work/other_cal.json" "$work/both.txt" \
     || { cat "$work/both.txt"; fail "the other organ's calibration was not the one applied"; }
+  # sweep takes the same pair: the file of this scene's organ, whichever comes first.
+  "${db[@]}" sweep "$work/other_organ.json" --out "$work/sweep_both" --no-cache --no-plot \
+    --calibration "$work/cal/calibration.json" --calibration "$work/other_cal.json" \
+    >"$work/sweep_both.txt" 2>&1 || { cat "$work/sweep_both.txt"; fail "sweep with two organs' calibrations"; }
+  python3 - "$work/sweep_both/sweep.json" <<'PY'
+import json, sys
+p = {q["label"]: q for q in json.load(open(sys.argv[1]))["points"]}
+assert set(p) == {"toy", "toy+cal"}, list(p)
+PY
   set +e
   "${db[@]}" run "$work/other_organ.json" --out "$work/run_twice" --no-cache \
     --calibration "$work/other_cal.json" --calibration "$work/other_cal.json" >/dev/null 2>"$work/twice.err"

@@ -186,10 +186,15 @@ std::string calibrationOrgan(const std::string& mesh, double resolution, double 
 /// Whether c applies to a scene of that organ (calibrationOrgan(); "" for a scene without a
 /// mesh, which any calibration applies to).
 bool calibrationApplies(const CalibrationParams& c, const std::string& organ);
-/// Throws the InputError (c's file, "/organs") of a scene of that organ given a calibration
-/// fitted on others (run and sweep refuse it; the tables skip such cases).
-[[noreturn]] void throwCalibrationOrganMismatch(const CalibrationParams& c,
-                                                const std::string& organ);
+/// calibrationOrgan() of a scene's "organ" object as written (mesh, resolution, scale).
+std::string calibrationOrgan(const nlohmann::ordered_json& organ);
+/// The calibration of plugin/model that applies to a scene of `organ` (calibrationOrgan()),
+/// or null when none names the model. When some name it but all were fitted on other organs:
+/// null with skipOtherOrgans (the tables, whose cases span several phantoms), else an
+/// InputError naming the first such file and its organ (run and sweep refuse the scene).
+const CalibrationParams* calibrationFor(const std::vector<CalibrationParams>& calibrations,
+                                        const std::string& plugin, const std::string& model,
+                                        const std::string& organ, bool skipOtherOrgans);
 
 struct BenchmarkOptions {
   std::vector<std::string> only;  ///< run only models whose label, model or plugin matches
