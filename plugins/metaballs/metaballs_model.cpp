@@ -519,8 +519,7 @@ StepStatus MetaballsModel::step(const StepInput& in) {
       }
     }
   }
-  for (size_t k = 0; k < m_carry.size() && !m_graspVerts.empty(); ++k)
-    m_r(m_carry[k]) = m_carryR[k];
+  for (size_t k = 0; k < m_carry.size(); ++k) m_r(m_carry[k]) = m_carryR[k];
   const double tVol = msSince(ts);
 
   ts = Clock::now();
