@@ -73,6 +73,7 @@ batched::BendView SurfaceBatches::bendView() const {
   return {hMovable.data(),
           {hp[0].data(), hp[1].data(), hp[2].data(), hp[3].data()},
           {hw[0].data(), hw[1].data(), hw[2].data(), hw[3].data()},
+          {hwd[0].data(), hwd[1].data(), hwd[2].data(), hwd[3].data()},
           hCos0.data(),
           hSin0.data(),
           kBending};
@@ -128,15 +129,20 @@ SurfaceBatches buildSurfaceBatches(const SurfaceConstraints& c, const ActiveCons
   for (int k = 0; k < 4; ++k) {
     b.hp[k].reserve(nb);
     b.hw[k].reserve(nb);
+    b.hwd[k].reserve(nb);
   }
   b.hMovable.reserve(nb);
   b.hCos0.reserve(nb);
   b.hSin0.reserve(nb);
   for (int i : hOrder) {
     const pbd::DihedralConstraint& h = c.bending[i];
+    Real wi[4], wd[4];
+    for (int k = 0; k < 4; ++k) wi[k] = w[h.p[k]];
+    hingeDenominatorWeights(wi, wd);
     for (int k = 0; k < 4; ++k) {
       b.hp[k].push_back(h.p[k]);
-      b.hw[k].push_back(w[h.p[k]]);
+      b.hw[k].push_back(wi[k]);
+      b.hwd[k].push_back(wd[k]);
     }
     b.hMovable.push_back(static_cast<unsigned char>(hPattern(i)));
     b.hCos0.push_back(std::cos(h.restAngle));
@@ -175,7 +181,7 @@ void addIsometricBending(SurfaceBatches& b, const MatX3& restV) {
     for (int k = 0; k < 4; ++k) {
       b.isoK[k][i] = h.K[k];
       b.isoWK[k][i] = b.hw[k][i] * h.K[k];
-      denom += b.hw[k][i] * h.K[k] * h.K[k];
+      denom += b.hwd[k][i] * h.K[k] * h.K[k];
     }
     b.isoRest[i] = h.rest;
     b.isoScale[i] = denom > 0 ? b.kBending / denom : 0.0;

@@ -29,8 +29,8 @@ struct SurfaceBatches {
   std::vector<int> sColourStart;  ///< #colours + 1 offsets into the stretch arrays
   // Bending, in ActiveConstraints colour order (sorted by movable-slot pattern within a colour).
   std::vector<int> hp[4];
-  std::vector<unsigned char> hMovable;  ///< bit k: w[hp[k]] > 0
-  std::vector<Real> hw[4], hCos0, hSin0;
+  std::vector<unsigned char> hMovable;            ///< bit k: w[hp[k]] > 0
+  std::vector<Real> hw[4], hwd[4], hCos0, hSin0;  ///< hwd: hingeDenominatorWeights() of hw
   std::vector<int> hColourStart;
   bool sLastColourShared = false, hLastColourShared = false;  ///< colour overflow: sequential
   Real kStretch = 0, kBending = 0;                            ///< per-iteration stiffnesses
@@ -63,7 +63,8 @@ SurfaceBatches buildSurfaceBatches(const SurfaceConstraints& c, const ActiveCons
                                    const VecX& w, Real kStretch, Real kBending, int iterations);
 
 /// Switches the bending pass of b to the isometric constraint (classic stiffness b.kBending) on
-/// the same hinges, with stencils from the rest positions restV (#V by 3). A hinge degenerate at
+/// the same hinges, with stencils from the rest positions restV (#V by 3), dividing by the
+/// weights hingeDenominatorWeights() as the dihedral pass does. A hinge degenerate at
 /// rest gets a zero stencil (it is then never moved).
 void addIsometricBending(SurfaceBatches& b, const MatX3& restV);
 

@@ -41,11 +41,12 @@ using StretchView = StretchViewT<double>;
 using StretchViewF = StretchViewT<float>;
 struct BendView {
   const unsigned char* movable;  ///< bit k set when w[k] > 0
-  const int* p[4];     ///< x0, x1 wings; x2, x3 the shared edge (DihedralConstraint order)
-  const double* w[4];  ///< inverse masses, 1/kg
-  const double* cos0;  ///< cos theta0
-  const double* sin0;  ///< sin theta0
-  double k;            ///< per-iteration bending stiffness
+  const int* p[4];      ///< x0, x1 wings; x2, x3 the shared edge (DihedralConstraint order)
+  const double* w[4];   ///< inverse masses, 1/kg
+  const double* wd[4];  ///< the inverse masses the update divides by (hingeDenominatorWeights)
+  const double* cos0;   ///< cos theta0
+  const double* sin0;   ///< sin theta0
+  double k;             ///< per-iteration bending stiffness
 };
 
 namespace {  // internal linkage on purpose (see the header comment)
@@ -127,17 +128,19 @@ inline int stretchGroup(typename L::T* x4, const StretchViewT<typename L::T>& s,
 }
 
 /// Projects L::kWidth dihedral constraints starting at i. Returns the number of degenerate ones.
-/// The gradient and the update of a particle slot are skipped when the slot is immovable in every
-/// lane (w = 0 there, so it contributes nothing): SurfaceBatches sorts each colour by its
-/// movable-slot pattern so that the groups of four share it.
+/// Every slot's gradient enters the denominator (with the weights wd); the update of a particle
+/// slot is skipped when the slot is immovable in every lane (w = 0 there, so it would add
+/// nothing): SurfaceBatches sorts each colour by its movable-slot pattern so that the groups of
+/// four share it.
 template <class L>
 inline int bendGroup(double* x4, const BendView& h, std::size_t i) {
   using V = typename L::V;
   const unsigned mask = L::orBytes(h.movable + i);
-  V x[4], y[4], z[4], w[4];
+  V x[4], y[4], z[4], w[4], wd[4];
   for (int k = 0; k < 4; ++k) {
     L::loadPoints(x4, h.p[k] + i, x[k], y[k], z[k]);
     w[k] = L::load(h.w[k] + i);
+    wd[k] = L::load(h.wd[k] + i);
   }
   const V ex = x[3] - x[2], ey = y[3] - y[2], ez = z[3] - z[2];
   const V elen2 = ex * ex + ey * ey + ez * ez;
@@ -161,29 +164,21 @@ inline int bendGroup(double* x4, const BendView& h, std::size_t i) {
   const V invA = b2s * elen * r, invB = a2s * elen * r, invE = a2s * b2s * r;
   const V uAx = nAx * invA, uAy = nAy * invA, uAz = nAz * invA;
   const V uBx = nBx * invB, uBy = nBy * invB, uBz = nBz * invB;
-  V gx[4] = {}, gy[4] = {}, gz[4] = {};  // only the movable slots are filled and read
-  V denom = L::set1(0.0);
-  if (mask & 1u) {
-    gx[0] = elen * uAx, gy[0] = elen * uAy, gz[0] = elen * uAz;
-    denom = denom + w[0] * (gx[0] * gx[0] + gy[0] * gy[0] + gz[0] * gz[0]);
-  }
-  if (mask & 2u) {
-    gx[1] = elen * uBx, gy[1] = elen * uBy, gz[1] = elen * uBz;
-    denom = denom + w[1] * (gx[1] * gx[1] + gy[1] * gy[1] + gz[1] * gz[1]);
-  }
-  if (mask & 4u) {
+  V gx[4], gy[4], gz[4];
+  gx[0] = elen * uAx, gy[0] = elen * uAy, gz[0] = elen * uAz;
+  gx[1] = elen * uBx, gy[1] = elen * uBy, gz[1] = elen * uBz;
+  {
     const V d03 = ((x[0] - x[3]) * ex + (y[0] - y[3]) * ey + (z[0] - z[3]) * ez) * invE;
     const V d13 = ((x[1] - x[3]) * ex + (y[1] - y[3]) * ey + (z[1] - z[3]) * ez) * invE;
     gx[2] = d03 * uAx + d13 * uBx, gy[2] = d03 * uAy + d13 * uBy, gz[2] = d03 * uAz + d13 * uBz;
-    denom = denom + w[2] * (gx[2] * gx[2] + gy[2] * gy[2] + gz[2] * gz[2]);
-  }
-  if (mask & 8u) {
     const V d02 = -(p20x * ex + p20y * ey + p20z * ez) * invE;  // (x0 - x2).e / |e|
     const V d12 = -(p21x * ex + p21y * ey + p21z * ez) * invE;  // (x1 - x2).e / |e|
     gx[3] = -(d02 * uAx + d12 * uBx), gy[3] = -(d02 * uAy + d12 * uBy),
     gz[3] = -(d02 * uAz + d12 * uBz);
-    denom = denom + w[3] * (gx[3] * gx[3] + gy[3] * gy[3] + gz[3] * gz[3]);
   }
+  V denom = L::set1(0.0);
+  for (int k = 0; k < 4; ++k)
+    denom = denom + wd[k] * (gx[k] * gx[k] + gy[k] * gy[k] + gz[k] * gz[k]);
   ok = L::band(ok, L::gt(denom, L::set1(0.0)));
   // s = (nB x nA) . e, c = |e| nA . nB
   const V s =

@@ -102,6 +102,18 @@ std::vector<int> orderByColour(const std::vector<int>& ids, const VecX& w, Nodes
 
 }  // namespace
 
+void hingeDenominatorWeights(const Real w[4], Real wd[4]) {
+  Real sum = 0;
+  int movable = 0;
+  for (int k = 0; k < 4; ++k)
+    if (w[k] > 0) {
+      sum += w[k];
+      ++movable;
+    }
+  const Real standIn = movable > 0 ? sum / movable : 0;
+  for (int k = 0; k < 4; ++k) wd[k] = w[k] > 0 ? w[k] : standIn;
+}
+
 ActiveConstraints activeConstraints(const SurfaceConstraints& c, const VecX& w) {
   ActiveConstraints a;
   for (size_t i = 0; i < c.stretch.size(); ++i)
@@ -149,19 +161,28 @@ long long projectSurfaceConstraints(MatX3& p, const VecX& w, const SurfaceConstr
     if (kb <= 0) continue;
     for (int i : active.bending) {
       const pbd::DihedralConstraint& h = c.bending[i];
-      Vec3 x[4], dx[4];
+      Vec3 x[4];
       Real wi[4];
       for (int k = 0; k < 4; ++k) {
         x[k] = p.row(h.p[k]).transpose();
         wi[k] = w[h.p[k]];
       }
-      Real lambda = 0;
-      if (!pbd::projectDihedralMovable(x, wi, h.restAngle, 0, kb, lambda, dx)) {
+      Real theta, wd[4];
+      Vec3 g[4];
+      hingeDenominatorWeights(wi, wd);
+      if (!pbd::dihedralAngle(x[0], x[1], x[2], x[3], theta, g)) {
         ++degenerate;
         continue;
       }
+      Real denom = 0;
+      for (int k = 0; k < 4; ++k) denom += wd[k] * g[k].squaredNorm();
+      if (!(denom > 0)) {
+        ++degenerate;
+        continue;
+      }
+      const Real dl = pbd::multiplierUpdate(pbd::wrapAngle(theta - h.restAngle), denom, 0, kb, 0);
       for (int k = 0; k < 4; ++k)
-        if (wi[k] > 0) p.row(h.p[k]) += dx[k].transpose();
+        if (wi[k] > 0) p.row(h.p[k]) += (wi[k] * dl * g[k]).transpose();
     }
   }
   return degenerate;
