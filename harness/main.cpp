@@ -465,6 +465,7 @@ struct TablesArgs {
   bool resume = false;
   bool inProcess = false;
   bool noReferenceCheck = false;
+  bool surfaceBaselines = false;
   DispatchArgs dispatch;
   std::vector<std::string> calibrations;
 };
@@ -478,6 +479,7 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
   o.cases = caseOptions(a);
   o.referenceElements = ta.referenceElements;
   o.referenceCheck = !ta.noReferenceCheck;
+  o.surfaceBaselines = ta.surfaceBaselines;
   o.calibrations = readCalibrations(ta.calibrations);
   if (ta.resume && ta.inProcess)
     throw InputError("--resume", "", "needs the cases in child processes (drop --in-process)");
@@ -940,6 +942,9 @@ int realMain(int argc, char** argv) {
   tables->add_flag("--no-reference-check", ta.noReferenceCheck,
                    "skip the convergence study of each table's reference (three solves at 1/8, "
                    "1/2.8 and 1 x its tets; cached)");
+  tables->add_flag("--surface-baselines", ta.surfaceBaselines,
+                   "hybrid tables: PBD and mass-spring on the organ's surface mesh alone, as the "
+                   "paper ran them (default: on its volume, network = volume)");
   tables->add_flag("--explain", ta.common.explain,
                    "say what each case loaded, built, cached, skipped");
   tables

@@ -5,6 +5,7 @@
 #include <deform/contact.h>
 
 #include <deform/mesh.h>
+#include <deform/tet_mesher.h>
 
 #include <Eigen/IterativeLinearSolvers>
 
@@ -24,6 +25,13 @@ std::vector<ParamSpec> paramSpecs() {
                         "Euler, implicit Euler with one Newton step (Baraff & Witkin 1998), or "
                         "implicit Euler by local/global iterations with a prefactored matrix "
                         "(Liu et al. 2013)"),
+      ParamSpec::choice("network", "surface", {"surface", "volume"},
+                        "surface: springs on the organ's surface mesh (the papers' baselines); "
+                        "volume: on the tet edges of the surface tetrahedralised with about "
+                        "volume_elements tets (a mesh file with tets is used as given either "
+                        "way)"),
+      ParamSpec::integer("volume_elements", 4000, 100, 10000000,
+                         "network = volume: target number of tets"),
       ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
                       "surface input: membrane thickness t in the spring rule k = E t sum|T|/L^2")
           .calibrate(0.0001, 0.3, ParamScale::Log),
@@ -65,6 +73,8 @@ MassSpringConfig configFromParams(const ParamValues& p) {
                                             {"symplectic_euler", Integrator::SymplecticEuler},
                                             {"implicit_euler", Integrator::ImplicitEuler},
                                             {"local_global", Integrator::LocalGlobal}});
+  c.volumeNetwork = p.choice("network") == "volume";
+  c.volumeElements = p.integer("volume_elements");
   c.thickness = p.real("thickness");
   c.bendingRatio = p.real("bending_ratio");
   c.dampingRatio = p.real("damping_ratio");
@@ -91,7 +101,15 @@ Real triangleArea(const MatX3& V, const MatX3i& F, Eigen::Index f) {
 }  // namespace
 
 void MassSpringModel::init(const ModelSetup& setup) {
-  init(setup.organ, configFromParams(setup.params));
+  const MassSpringConfig config = configFromParams(setup.params);
+  if (config.volumeNetwork && !setup.organ.volume) {
+    Organ organ = setup.organ;
+    organ.volume =
+        surfaceVolumeCached(organ.surface, config.volumeElements, organ.source, setup.cache);
+    init(organ, config);
+  } else {
+    init(setup.organ, config);
+  }
   m_setupDt = setup.dt;
 }
 

@@ -31,7 +31,9 @@ enum class LocalGlobalAcceleration { None, Chebyshev };
 
 struct MassSpringConfig {
   Integrator integrator = Integrator::SymplecticEuler;
-  Real thickness = 0.01;    ///< m, membrane thickness for the surface rule
+  bool volumeNetwork = false;       ///< tetrahedralise a surface organ (network = volume)
+  long long volumeElements = 4000;  ///< target tets of that volume
+  Real thickness = 0.01;            ///< m, membrane thickness for the surface rule
   Real bendingRatio = 0.1;  ///< bending spring stiffness / stiffness of the hinge edge's spring
   Real dampingRatio = 0.1;  ///< zeta of each spring's axial dashpot
   Real massDamping = 1.0;   ///< 1/s, force -massDamping * m * v on every node

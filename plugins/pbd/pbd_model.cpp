@@ -4,6 +4,7 @@
 
 #include <deform/contact.h>
 #include <deform/mesh.h>
+#include <deform/tet_mesher.h>
 
 #include <algorithm>
 #include <array>
@@ -19,6 +20,13 @@ namespace deform::pbd {
 std::vector<ParamSpec> paramSpecs() {
   return {
       ParamSpec::integer("iterations", 10, 1, 10000, "Gauss-Seidel sweeps over all constraints"),
+      ParamSpec::choice("network", "surface", {"surface", "volume"},
+                        "surface: constraints on the organ's surface mesh (the papers' "
+                        "baselines); volume: on the tets of the surface tetrahedralised with "
+                        "about volume_elements tets (a mesh file with tets is used as given "
+                        "either way)"),
+      ParamSpec::integer("volume_elements", 4000, 100, 10000000,
+                         "network = volume: target number of tets"),
       ParamSpec::choice("stiffness_mode", "xpbd", {"classic", "xpbd"},
                         "classic: [0,1] stiffness with k' = 1-(1-k)^(1/n); xpbd: compliances "
                         "from E, nu, thickness"),
@@ -54,6 +62,8 @@ std::vector<ParamSpec> paramSpecs() {
 PbdConfig configFromParams(const ParamValues& p) {
   PbdConfig c;
   c.iterations = static_cast<int>(p.integer("iterations"));
+  c.volumeNetwork = p.choice("network") == "volume";
+  c.volumeElements = p.integer("volume_elements");
   c.mode = p.choiceAs<StiffnessMode>(
       "stiffness_mode", {{"classic", StiffnessMode::Classic}, {"xpbd", StiffnessMode::Xpbd}});
   c.stretchStiffness = p.real("stretch_stiffness");
@@ -131,7 +141,12 @@ Real triangleArea(const MatX3& V, const MatX3i& F, Eigen::Index f) {
 }  // namespace
 
 void PbdModel::init(const ModelSetup& setup) {
-  init(setup.organ, configFromParams(setup.params));
+  const PbdConfig config = configFromParams(setup.params);
+  if (!config.volumeNetwork || setup.organ.volume) return init(setup.organ, config);
+  Organ organ = setup.organ;
+  organ.volume =
+      surfaceVolumeCached(organ.surface, config.volumeElements, organ.source, setup.cache);
+  init(organ, config);
 }
 
 void PbdModel::init(const Organ& organ, const PbdConfig& config) {

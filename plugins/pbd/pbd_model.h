@@ -29,6 +29,8 @@ enum class BendingModel { Isometric, Dihedral };
 /// Resolved parameters (see paramSpecs() for units, ranges and meaning).
 struct PbdConfig {
   int iterations = 10;
+  bool volumeNetwork = false;       ///< tetrahedralise a surface organ (network = volume)
+  long long volumeElements = 4000;  ///< target tets of that volume
   StiffnessMode mode = StiffnessMode::Xpbd;
   Real stretchStiffness = 1.0;  ///< classic, [0, 1]
   Real bendingStiffness = 0.1;  ///< classic, [0, 1]

@@ -5,6 +5,7 @@
 #include "massspring_model.h"
 #include "../support/grasp.h"
 #include "../support/meshes.h"
+#include "../support/press.h"
 
 #include <deform/mesh_io.h>
 #include <deform/phantom.h>
@@ -339,6 +340,32 @@ TEST(MassSpringModel, ParametersAreReadAndBadChoicesRejected) {
   EXPECT_FALSE(e.localGlobalWarmStart);
   q.set("local_global_acceleration", std::string("anderson"));
   EXPECT_THROW(configFromParams(q), InputError);
+}
+
+// network = volume: springs on the tet edges of the surface tetrahedralised (its vertices kept as
+// the first nodes); pressed, the cube drops as a solid of Poisson ratio 1/4 does.
+TEST(MassSpringModel, VolumeNetworkIsPressedLikeASolid) {
+  const testing::CubePress press = testing::cubePress(0.5);
+  ParamValues p = ParamValues::defaults(paramSpecs());
+  p.set("network", std::string("volume"));
+  p.set("volume_elements", 500LL);
+  p.set("mass_damping", 20.0);
+  Cache cache{std::filesystem::path()};
+  MassSpringModel m;
+  m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
+  const Counts c = m.counts();
+  EXPECT_GT(c.at("nodes"), press.organ.surface.numVertices());
+  EXPECT_GT(c.at("elements"), 100);
+  EXPECT_EQ(c.at("bending_springs"), 0);
+  EXPECT_EQ(maxDistance(m.surface(), press.organ.surface.V), 0.0);
+  StepInput in;
+  in.dt = 1e-3;
+  in.loads = press.loads;
+  for (int s = 0; s < 1000; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
+  const Real drop = testing::meanTopDrop(press, m.surface());
+  std::printf("volume mass-spring: top drops %.3f mm, F L / (E A) = %.3f mm\n", 1e3 * drop,
+              1e3 * press.expectedDrop);
+  EXPECT_NEAR(drop, press.expectedDrop, 0.25 * press.expectedDrop);
 }
 
 }  // namespace

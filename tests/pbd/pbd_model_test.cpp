@@ -4,8 +4,11 @@
 #include "pbd_model.h"
 #include "../support/grasp.h"
 #include "../support/meshes.h"
+#include "../support/press.h"
 
 #include <gtest/gtest.h>
+
+#include <cstdio>
 
 namespace deform::pbd {
 namespace {
@@ -267,6 +270,32 @@ TEST(PbdModel, BadMaterialIsAnInputError) {
   o.material.young = -1;
   PbdModel m;
   EXPECT_THROW(m.init(o, PbdConfig{}), InputError);
+}
+
+// network = volume: the surface tetrahedralised (its vertices kept as the first nodes), tet edges
+// and volumes with compliances from E and nu; pressed, the cube drops as a solid does.
+TEST(PbdModel, VolumeNetworkIsPressedLikeASolid) {
+  const testing::CubePress press = testing::cubePress(0.5);
+  ParamValues p = ParamValues::defaults(paramSpecs());
+  p.set("network", std::string("volume"));
+  p.set("volume_elements", 500LL);
+  p.set("damping", 20.0);
+  Cache cache{std::filesystem::path()};
+  PbdModel m;
+  m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
+  const Counts c = m.counts();
+  EXPECT_GT(c.at("nodes"), press.organ.surface.numVertices());
+  EXPECT_GT(c.at("elements"), 100);
+  EXPECT_EQ(c.at("volume_constraints"), c.at("elements"));
+  EXPECT_EQ(c.at("bending_constraints"), 0);
+  EXPECT_EQ(maxDistance(m.surface(), press.organ.surface.V), 0.0);
+  StepInput in = input(1e-3);
+  in.loads = press.loads;
+  for (int s = 0; s < 1000; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
+  const Real drop = testing::meanTopDrop(press, m.surface());
+  std::printf("volume PBD: top drops %.3f mm, F L / (E A) = %.3f mm\n", 1e3 * drop,
+              1e3 * press.expectedDrop);
+  EXPECT_NEAR(drop, press.expectedDrop, 0.25 * press.expectedDrop);
 }
 
 }  // namespace

@@ -179,7 +179,12 @@ TEST_F(TempDir, QuickHybridTimingRunsWhatLoadsAndSaysWhatIsMissing) {
     const Scene s = parseSceneFile(scene.string());
     EXPECT_EQ(s.models.size(), 3u);
     EXPECT_TRUE(s.reference.has_value());
+    // PBD and mass-spring run on the volume of the fine surface (the note says so).
+    for (const ModelSpec& m : s.models)
+      if (m.plugin != "hybrid_fem_pbd") EXPECT_EQ(m.params.value("network", ""), "volume");
   }
+  EXPECT_NE(doc["notes"].dump().find("run on the volume of the same fine surface"),
+            std::string::npos);
   const std::string csv = readText(o.outDir / "hybrid-timing.csv");
   EXPECT_EQ(csv.substr(0, csv.find('\n')).rfind("phantom,force_N,direction,hybrid_ms", 0), 0u)
       << csv.substr(0, 80);
@@ -256,7 +261,11 @@ TEST_F(TempDir, CalibrationsApplyToTheirOrganAndTheirRowsKeepValidity) {
   o.referenceCheck = false;
   o.calibrations = {calibration("liver", "phantom:liver, resolution 0.27", 0.02),
                     calibration("cube", "phantom:cube, resolution 1", 0.2)};
+  o.surfaceBaselines = true;  // the membrane, whose thickness these calibrations fit
   buildTables({"hybrid-accuracy"}, loader, o, nullptr);
+  EXPECT_FALSE(readJson(o.outDir / "scenes/hybrid/cube_up_2N.json")["models"][2]["params"].contains(
+      "network"))
+      << "--surface-baselines: the paper's surface networks";
   const json doc = readJson(o.outDir / "calibration.json");
   ASSERT_EQ(doc["rows"].size(), 4u) << "one twin per quick case (all cube), none from the liver's";
   bool invalidDefault = false;

@@ -305,6 +305,35 @@ SurfaceMesh refineSurfaceEdges(const SurfaceMesh& surface, Real maxEdge) {
   return out;
 }
 
+TetMesh surfaceVolumeCached(const SurfaceMesh& surface, long long elements,
+                            const std::string& source, Cache& cache) {
+  CacheKey key;
+  key.add("tets.surface/1").add(surface.V).add(surface.F).add(elements);
+  const int nv = surface.numVertices();
+  if (auto hit = cache.get("tets.surface", key)) {
+    try {
+      ByteReader r(*hit);
+      TetMesh m;
+      r.matrix(m.V);
+      r.matrix(m.T);
+      if (m.numVertices() >= nv && m.numTets() > 0 && m.V.topRows(nv) == surface.V) return m;
+    } catch (const std::exception&) {
+      // unreadable entry: mesh again
+    }
+  }
+  TetMeshOptions o;
+  o.targetElements = elements;
+  o.source = source;
+  TetMeshResult r = tetrahedralize(surface, o);
+  if (r.inputVertices != nv || r.mesh.numVertices() < nv || r.mesh.V.topRows(nv) != surface.V)
+    throw InputError(source, "", "cannot tetrahedralise: the mesher changed the surface");
+  ByteWriter w;
+  w.matrix(r.mesh.V);
+  w.matrix(r.mesh.T);
+  cache.put("tets.surface", key, w.bytes());
+  return std::move(r.mesh);
+}
+
 TetMeshQuality tetMeshQuality(const TetMesh& mesh) {
   TetMeshQuality q;
   q.elements = mesh.numTets();

@@ -49,6 +49,9 @@ struct TablesOptions {
   /// --calibration: every case model a calibration names runs twice in its case, at its
   /// defaults and calibrated ("+cal"), and a further table "calibration" shows both.
   std::vector<CalibrationParams> calibrations;
+  /// --surface-baselines: the hybrid tables run PBD and mass-spring on the organ's surface mesh
+  /// alone, as the hybrid paper did, instead of on its volume (`network = volume`).
+  bool surfaceBaselines = false;
 };
 
 /// Names of the six tables, in DESIGN.md's order.

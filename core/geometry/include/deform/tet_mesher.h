@@ -20,6 +20,8 @@
 
 namespace deform {
 
+class Cache;
+
 struct TetMeshOptions {
   /// Target interior edge length (m). 0: derived from targetElements and the enclosed volume.
   Real edgeLength = 0;
@@ -62,6 +64,14 @@ struct TetMeshResult {
 /// not self-intersect (checked unless options.checkSelfIntersections is false). Throws
 /// InputError(options.source, "", "cannot tetrahedralise: ...") when it cannot.
 TetMeshResult tetrahedralize(const SurfaceMesh& surface, const TetMeshOptions& options = {});
+
+/// The volume of a surface for a model that works on tets (`network = volume` of pbd and
+/// massspring): the surface tetrahedralised with about `elements` tets, without surface
+/// refinement, so that surface vertex i is node i and the interior nodes follow. Kept in `cache`
+/// (entry "tets.surface", keyed by the surface and `elements`), so the models of one organ share
+/// one mesh. Throws InputError(source, "", "cannot tetrahedralise: ...") when it cannot.
+TetMesh surfaceVolumeCached(const SurfaceMesh& surface, long long elements,
+                            const std::string& source, Cache& cache);
 
 /// Quality measures of a tet mesh (tets assumed positively oriented).
 TetMeshQuality tetMeshQuality(const TetMesh& mesh);

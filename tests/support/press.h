@@ -1,0 +1,63 @@
+// A press shared by the volume-network tests of pbd and massspring (`network = volume`): the
+// 0.1 m cube phantom (E = 5.5 kPa, nu = 0.3, rho = 1000), its bottom face fixed, its top face
+// pushed down by a traction of total force F spread by vertex area. A solid of that material
+// drops by about F L / (E A) (uniaxial stress; the fixed bottom stiffens it by a few percent);
+// a shell or membrane of the surface alone does not behave like that.
+#pragma once
+
+#include <deform/mesh.h>
+#include <deform/model.h>
+#include <deform/phantom.h>
+
+#include <vector>
+
+namespace deform::testing {
+
+struct CubePress {
+  Organ organ;
+  std::vector<int> top;          ///< the top face's surface vertices
+  std::vector<PointLoad> loads;  ///< the traction as nodal forces, one load per top vertex
+  Real expectedDrop = 0;         ///< m, F L / (E A)
+};
+
+inline CubePress cubePress(Real force, Real resolution = 0.5) {
+  CubePress p;
+  Organ& o = p.organ;
+  o.source = "phantom:cube";
+  o.surface = makePhantom("cube", resolution);
+  o.material.young = 5500;
+  o.material.poisson = 0.3;
+  o.material.density = 1000;
+  const Box b = boundingBox(o.surface.V);
+  const Real side = b.size().z(), eps = 1e-6 * side;
+  o.fixed.boxes.push_back(
+      {b.lo - Vec3::Constant(eps), Vec3(b.hi.x(), b.hi.y(), b.lo.z()) + Vec3::Constant(eps)});
+  std::vector<Real> area(o.surface.numVertices(), 0.0);
+  Real total = 0;
+  for (Eigen::Index f = 0; f < o.surface.F.rows(); ++f) {
+    bool onTop = true;
+    for (int k = 0; k < 3; ++k) onTop = onTop && o.surface.V(o.surface.F(f, k), 2) > b.hi.z() - eps;
+    if (!onTop) continue;
+    const Vec3 a = o.surface.V.row(o.surface.F(f, 0)), c = o.surface.V.row(o.surface.F(f, 1)),
+               d = o.surface.V.row(o.surface.F(f, 2));
+    const Real third = 0.5 * (c - a).cross(d - a).norm() / 3;
+    for (int k = 0; k < 3; ++k) area[o.surface.F(f, k)] += third;
+    total += 3 * third;
+  }
+  for (int v = 0; v < o.surface.numVertices(); ++v)
+    if (area[v] > 0) {
+      p.top.push_back(v);
+      p.loads.push_back(PointLoad::onVertex(v, Vec3(0, 0, -force * area[v] / total)));
+    }
+  p.expectedDrop = force * side / (o.material.young * total);
+  return p;
+}
+
+/// Mean downward displacement of the top vertices (m): rest and now are #V by 3 surfaces.
+inline Real meanTopDrop(const CubePress& p, const MatX3& now) {
+  Real sum = 0;
+  for (int v : p.top) sum += p.organ.surface.V(v, 2) - now(v, 2);
+  return sum / static_cast<Real>(p.top.size());
+}
+
+}  // namespace deform::testing
