@@ -170,6 +170,7 @@ void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
   m_config = config;
   m_setupDt = 0;
   m_springs.clear();
+  m_tets.resize(0, 4);
   m_edgeSprings = m_bendingSprings = 0;
   if (organ.volume) {
     buildTets(organ);
@@ -272,6 +273,7 @@ void MassSpringModel::buildTets(const Organ& organ) {
   if (N == 0 || T.numTets() == 0)
     throw InputError(organ.source, "organ.volume", "massspring needs a non-empty tet mesh");
   m_rest = T.V;
+  m_tets = T.T;
   m_elements = T.numTets();
   const SurfaceMesh& S = organ.surface;
   m_surfaceIdentity = S.numVertices() == N && S.V == T.V;
@@ -670,6 +672,7 @@ Counts MassSpringModel::counts() const {
 
 NumericCounters MassSpringModel::numericCounters() const {
   NumericCounters c{{"degenerate_springs", m_degenerate}};
+  if (m_tets.rows() > 0) c["inverted_tets"] = invertedTets(m_tets, m_x);
   if (m_config.integrator == Integrator::ImplicitEuler) {
     c["cg_not_converged"] = m_cgNotConverged;
     c["cg_iterations"] = m_cgIterations;

@@ -122,6 +122,7 @@ class MassSpringModel final : public Model {
 
   MassSpringConfig m_config;
   MatX3 m_rest, m_x, m_v, m_f, m_xOld;
+  MatX4i m_tets;           // tet input: the tets (for inverted_tets)
   VecX m_mass, m_invMass;  // invMass 0 for fixed or massless nodes
   VecX m_contactInvMass;   // invMass with grasped nodes 0 too (contact response)
   std::vector<int> m_fixed;

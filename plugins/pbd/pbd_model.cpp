@@ -162,6 +162,7 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
   m_dihedral.clear();
   m_iso.clear();
   m_tet.clear();
+  m_tets.resize(0, 4);
   m_hasVolume = false;
 
   if (organ.volume) {
@@ -351,6 +352,7 @@ void PbdModel::buildSurface(const Organ& organ) {
 
 void PbdModel::buildTets(const Organ& organ) {
   const TetMesh& T = *organ.volume;
+  m_tets = T.T;
   const int N = T.numVertices();
   if (N == 0 || T.numTets() == 0)
     throw InputError(organ.source, "organ.volume", "pbd needs a non-empty tetrahedral mesh");
@@ -748,8 +750,10 @@ Counts PbdModel::counts() const {
 }
 
 NumericCounters PbdModel::numericCounters() const {
-  return {{"degenerate_constraints", m_degenerate},
-          {"degenerate_hinges_at_init", m_degenerateAtInit}};
+  NumericCounters c{{"degenerate_constraints", m_degenerate},
+                    {"degenerate_hinges_at_init", m_degenerateAtInit}};
+  if (m_tets.rows() > 0) c["inverted_tets"] = invertedTets(m_tets, m_x);
+  return c;
 }
 
 }  // namespace deform::pbd

@@ -132,6 +132,7 @@ class PbdModel final : public Model {
       m_lambdaIsoF;
   std::vector<int> m_graspIso;
   std::vector<TetVolumeConstraint> m_tet;
+  MatX4i m_tets;  // tet input: the tets (for inverted_tets)
   bool m_hasVolume = false;
   Real m_restVolume = 0, m_volumeCompliance = 0;
   long long m_elements = 0;

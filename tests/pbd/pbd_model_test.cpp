@@ -296,6 +296,7 @@ TEST(PbdModel, VolumeNetworkIsPressedLikeASolid) {
   std::printf("volume PBD: top drops %.3f mm, F L / (E A) = %.3f mm\n", 1e3 * drop,
               1e3 * press.expectedDrop);
   EXPECT_NEAR(drop, press.expectedDrop, 0.25 * press.expectedDrop);
+  EXPECT_EQ(m.numericCounters().at("inverted_tets"), 0);
 }
 
 }  // namespace

@@ -185,6 +185,13 @@ TEST_F(TempDir, QuickHybridTimingRunsWhatLoadsAndSaysWhatIsMissing) {
   }
   EXPECT_NE(doc["notes"].dump().find("run on the volume of the same fine surface"),
             std::string::npos);
+  // Pressed down by 20 N the networks turn tets inside out (no barrier against it): the row
+  // says so.
+  const json& pressed = doc["rows"][3];
+  ASSERT_EQ(pressed["direction"], "down");
+  EXPECT_NE(pressed["note"].get<std::string>().find("tets inverted at the compared state"),
+            std::string::npos)
+      << pressed.dump();
   const std::string csv = readText(o.outDir / "hybrid-timing.csv");
   EXPECT_EQ(csv.substr(0, csv.find('\n')).rfind("phantom,force_N,direction,hybrid_ms", 0), 0u)
       << csv.substr(0, 80);

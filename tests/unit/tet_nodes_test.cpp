@@ -72,6 +72,23 @@ TEST(TetMeasures, AnInvertedTetOrABadIndexIsAnInputErrorNamingTheTet) {
   EXPECT_THROW(measureTets(m, 1000, "cube.msh"), InputError);
 }
 
+TEST(TetMeasures, InvertedTetsCountsTheElementsTurnedInsideOut) {
+  const TetMesh m = fiveTetCube(0.02);
+  EXPECT_EQ(invertedTets(m.T, m.V), 0);
+  // Corner 0 belongs to the corner tet (0, 1, 2, 4) only: pushed through the opposite face
+  // (the plane x + y + z = side), that tet alone turns inside out.
+  MatX3 x = m.V;
+  x.row(0) = Vec3::Constant(0.02);
+  EXPECT_EQ(invertedTets(m.T, x), 1);
+  // Flattened onto that face (exactly: x1 - x0 = -(x2 - x0)): zero volume counts too.
+  x.row(0) = Vec3(0.01, 0.01, 0);
+  EXPECT_EQ(invertedTets(m.T, x), 1);
+  // A mirror image of the whole cube inverts all five.
+  x = m.V;
+  x.col(0) *= -1;
+  EXPECT_EQ(invertedTets(m.T, x), 5);
+}
+
 TEST(SurfaceVertexNodes, PrefixIdentityPermutedNodesAndAVertexOffTheMesh) {
   const TetMesh m = fiveTetCube(0.02);
   Organ organ;

@@ -63,4 +63,11 @@ TetMeasures measureTets(const TetMesh& T, Real density, const std::string& sourc
   return m;
 }
 
+long long invertedTets(const MatX4i& T, const MatX3& x) {
+  long long n = 0;
+  for (Eigen::Index t = 0; t < T.rows(); ++t)
+    if (!(tetVolume(x.row(T(t, 0)), x.row(T(t, 1)), x.row(T(t, 2)), x.row(T(t, 3))) > 0)) ++n;
+  return n;
+}
+
 }  // namespace deform

@@ -155,6 +155,14 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
       row[figure] = timing ? stepMedian(r) : rmseMm(r, 50);
       row["paper_" + figure] = nullptr;
       if (r && !r->message.empty()) appendTo(note, std::string(m.key) + ": " + r->message);
+      // A network that turned tets inside out has left the solid it models (it has no barrier
+      // against inversion): the reader learns why such an error is large.
+      if (r) {
+        const auto it = r->numeric.find("inverted_tets");
+        if (it != r->numeric.end() && it->second > 0)
+          appendTo(note, std::string(m.key) + ": " + std::to_string(it->second) +
+                             " tets inverted at the compared state");
+      }
     }
     const RunRecord* ref = c.run("reference_fem");
     if (timing) {

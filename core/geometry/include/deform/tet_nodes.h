@@ -31,4 +31,8 @@ struct TetMeasures {
 /// at rest (volume <= 0 with the file's orientation).
 TetMeasures measureTets(const TetMesh& T, Real density, const std::string& source);
 
+/// Tets of T (positively oriented at rest, as measureTets() requires) whose signed volume at the
+/// node positions x (#N by 3) is zero or negative: the elements a deformation turned inside out.
+long long invertedTets(const MatX4i& T, const MatX3& x);
+
 }  // namespace deform
