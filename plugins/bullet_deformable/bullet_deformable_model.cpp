@@ -94,33 +94,6 @@ class ConfigurableDeformableSolver : public btDeformableBodySolver {
   }
 };
 
-constexpr long long kMeshCacheVersion = 1;
-
-TetMesh meshSurface(const Organ& organ, long long targetTets, Cache& cache) {
-  TetMeshOptions o;
-  o.targetElements = targetTets;
-  o.source = organ.source;
-  CacheKey key;
-  key.add(kMeshCacheVersion).add(organ.surface.V).add(organ.surface.F).add(targetTets);
-  if (auto hit = cache.get("bullet_deformable.tets", key)) {
-    try {
-      ByteReader r(*hit);
-      TetMesh m;
-      r.matrix(m.V);
-      r.matrix(m.T);
-      if (m.numVertices() >= organ.surface.numVertices() && m.numTets() > 0) return m;
-    } catch (const std::exception&) {
-      // corrupt payload: remesh
-    }
-  }
-  const TetMeshResult r = tetrahedralize(organ.surface, o);
-  ByteWriter w;
-  w.matrix(r.mesh.V);
-  w.matrix(r.mesh.T);
-  cache.put("bullet_deformable.tets", key, w.bytes());
-  return r.mesh;
-}
-
 }  // namespace
 
 // The Bullet objects of one run, in construction order. The soft body and the forces are not
@@ -161,7 +134,7 @@ void BulletDeformableModel::init(const ModelSetup& setup) {
     // The loader's surface of a tet file is the boundary over the same nodes: match by position.
     surfaceNode = surfaceVertexNodes(organ, mesh.V);
   } else {
-    mesh = meshSurface(organ, config.targetTets, setup.cache);
+    mesh = surfaceVolumeCached(organ.surface, config.targetTets, organ.source, setup.cache);
     for (int i = 0; i < organ.surface.numVertices(); ++i) surfaceNode[size_t(i)] = i;
   }
   const std::vector<int> fixed = fixedNodeIndices(mesh.V, organ.fixed, organ.surface);

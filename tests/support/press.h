@@ -9,6 +9,7 @@
 #include <deform/model.h>
 #include <deform/phantom.h>
 
+#include <limits>
 #include <vector>
 
 namespace deform::testing {
@@ -53,10 +54,16 @@ inline CubePress cubePress(Real force, Real resolution = 0.5) {
   return p;
 }
 
-/// Mean downward displacement of the top vertices (m): rest and now are #V by 3 surfaces.
-inline Real meanTopDrop(const CubePress& p, const MatX3& now) {
+/// Steps `model` (initialised on p.organ) `steps` times under the press at dt = 1 ms and returns
+/// the mean downward displacement of the top vertices (m); NaN when a step did not return Ok.
+inline Real pressedDrop(Model& model, const CubePress& p, int steps) {
+  StepInput in;
+  in.dt = 1e-3;
+  in.loads = p.loads;
+  for (int s = 0; s < steps; ++s)
+    if (model.step(in) != StepStatus::Ok) return std::numeric_limits<Real>::quiet_NaN();
   Real sum = 0;
-  for (int v : p.top) sum += p.organ.surface.V(v, 2) - now(v, 2);
+  for (int v : p.top) sum += p.organ.surface.V(v, 2) - model.surface()(v, 2);
   return sum / static_cast<Real>(p.top.size());
 }
 
