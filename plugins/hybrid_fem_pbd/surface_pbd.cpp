@@ -161,28 +161,20 @@ long long projectSurfaceConstraints(MatX3& p, const VecX& w, const SurfaceConstr
     if (kb <= 0) continue;
     for (int i : active.bending) {
       const pbd::DihedralConstraint& h = c.bending[i];
-      Vec3 x[4];
-      Real wi[4];
+      Vec3 x[4], dx[4];
+      Real wi[4], wd[4];
       for (int k = 0; k < 4; ++k) {
         x[k] = p.row(h.p[k]).transpose();
         wi[k] = w[h.p[k]];
       }
-      Real theta, wd[4];
-      Vec3 g[4];
       hingeDenominatorWeights(wi, wd);
-      if (!pbd::dihedralAngle(x[0], x[1], x[2], x[3], theta, g)) {
+      Real lambda = 0;
+      if (!pbd::projectDihedral(x, wi, wd, h.restAngle, 0, kb, lambda, dx)) {
         ++degenerate;
         continue;
       }
-      Real denom = 0;
-      for (int k = 0; k < 4; ++k) denom += wd[k] * g[k].squaredNorm();
-      if (!(denom > 0)) {
-        ++degenerate;
-        continue;
-      }
-      const Real dl = pbd::multiplierUpdate(pbd::wrapAngle(theta - h.restAngle), denom, 0, kb, 0);
       for (int k = 0; k < 4; ++k)
-        if (wi[k] > 0) p.row(h.p[k]) += (wi[k] * dl * g[k]).transpose();
+        if (wi[k] > 0) p.row(h.p[k]) += dx[k].transpose();
     }
   }
   return degenerate;

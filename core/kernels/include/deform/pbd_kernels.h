@@ -116,14 +116,17 @@ inline Real wrapAngle(Real a) {
   return a;
 }
 
-/// Projects one dihedral constraint. x[4], w[4] in the order of DihedralConstraint::p.
-inline bool projectDihedral(const Vec3 x[4], const Real w[4], Real restAngle, Real alphaTilde,
-                            Real k, Real& lambda, Vec3 dx[4]) {
+/// Projects one dihedral constraint. x[4], w[4] in the order of DihedralConstraint::p. wd[4]:
+/// the inverse masses the update divides by (sum_i wd_i |g_i|^2); particle i still moves by
+/// w_i dl g_i. The hybrid FEM+PBD model passes stand-ins for its immovable particles there
+/// (hingeDenominatorWeights in plugins/hybrid_fem_pbd/surface_pbd.h).
+inline bool projectDihedral(const Vec3 x[4], const Real w[4], const Real wd[4], Real restAngle,
+                            Real alphaTilde, Real k, Real& lambda, Vec3 dx[4]) {
   Real theta;
   Vec3 g[4];
   if (!dihedralAngle(x[0], x[1], x[2], x[3], theta, g)) return false;
-  const Real denom = w[0] * g[0].squaredNorm() + w[1] * g[1].squaredNorm() +
-                     w[2] * g[2].squaredNorm() + w[3] * g[3].squaredNorm();
+  const Real denom = wd[0] * g[0].squaredNorm() + wd[1] * g[1].squaredNorm() +
+                     wd[2] * g[2].squaredNorm() + wd[3] * g[3].squaredNorm();
   if (denom + alphaTilde <= 0) return false;
   const Real dl = multiplierUpdate(wrapAngle(theta - restAngle), denom, alphaTilde, k, lambda);
   lambda += dl;
@@ -131,48 +134,10 @@ inline bool projectDihedral(const Vec3 x[4], const Real w[4], Real restAngle, Re
   return true;
 }
 
-/// The same projection as projectDihedral() (identical arithmetic for the particles that move),
-/// computing the gradient only of particles with w > 0: a hinge with several immovable
-/// particles (e.g. next to the control nodes of the hybrid FEM+PBD model) costs less. dx[i] is
-/// set to zero for immovable particles.
-inline bool projectDihedralMovable(const Vec3 x[4], const Real w[4], Real restAngle,
-                                   Real alphaTilde, Real k, Real& lambda, Vec3 dx[4]) {
-  const Vec3 e = x[3] - x[2];
-  const Real elen2 = e.squaredNorm();
-  const Vec3 nA = (x[2] - x[0]).cross(x[3] - x[0]);
-  const Vec3 nB = (x[3] - x[1]).cross(x[2] - x[1]);
-  const Real a2 = nA.squaredNorm(), b2 = nB.squaredNorm();
-  constexpr Real kTiny = tol::kDegenerateLength * tol::kDegenerateLength;
-  if (elen2 <= kTiny || a2 <= kTiny * kTiny || b2 <= kTiny * kTiny) return false;
-  const Real elen = std::sqrt(elen2);
-  const Vec3 uA = nA / a2, uB = nB / b2;
-  Vec3 g[4];
-  Real denom = 0;
-  if (w[0] > 0) {
-    g[0] = elen * uA;
-    denom += w[0] * g[0].squaredNorm();
-  }
-  if (w[1] > 0) {
-    g[1] = elen * uB;
-    denom += w[1] * g[1].squaredNorm();
-  }
-  if (w[2] > 0) {
-    g[2] = ((x[0] - x[3]).dot(e) / elen) * uA + ((x[1] - x[3]).dot(e) / elen) * uB;
-    denom += w[2] * g[2].squaredNorm();
-  }
-  if (w[3] > 0) {
-    g[3] = -((x[0] - x[2]).dot(e) / elen) * uA - ((x[1] - x[2]).dot(e) / elen) * uB;
-    denom += w[3] * g[3].squaredNorm();
-  }
-  if (denom + alphaTilde <= 0) return false;
-  const Real invAB = 1.0 / std::sqrt(a2 * b2);
-  const Real cosT = nA.dot(nB) * invAB;
-  const Real sinT = nB.cross(nA).dot(e) * invAB / elen;
-  const Real theta = std::atan2(sinT, cosT);
-  const Real dl = multiplierUpdate(wrapAngle(theta - restAngle), denom, alphaTilde, k, lambda);
-  lambda += dl;
-  for (int i = 0; i < 4; ++i) dx[i] = w[i] > 0 ? Vec3(w[i] * dl * g[i]) : Vec3::Zero();
-  return true;
+/// Projects one dihedral constraint, dividing by the particles' own inverse masses.
+inline bool projectDihedral(const Vec3 x[4], const Real w[4], Real restAngle, Real alphaTilde,
+                            Real k, Real& lambda, Vec3 dx[4]) {
+  return projectDihedral(x, w, w, restAngle, alphaTilde, k, lambda, dx);
 }
 
 }  // namespace deform::pbd
