@@ -45,10 +45,13 @@ case $mode in
     "${mpirun[@]}" --enable-recovery -n 3 "$exe" "${common[@]}" --out "$work/other" --mpi \
       > "$work/other.log" 2>&1 &
     launcher=$!
-    # The first `deformbench run` child whose parent is rank 1: kill that parent.
+    # The first `deformbench run` child of this test (its --out is under $work: ctest runs the
+    # other dispatch tests at the same time, with the same executable) whose parent is rank 1:
+    # kill that parent.
+    own_runs=$(printf '%s' "$work/other/runs/" | sed 's/[][\\.*^$+?(){}|]/\\&/g')
     killed=""
     for _ in $(seq 1 1500); do
-      for child in $(pgrep -f "^$exe.* run .*/other/runs/" || true); do
+      for child in $(pgrep -f "^$exe.* run .*$own_runs" || true); do
         parent=$(ps -o ppid= -p "$child" | tr -d ' ') || continue
         if tr '\0' '\n' < "/proc/$parent/environ" 2>/dev/null | grep -qx OMPI_COMM_WORLD_RANK=1; then
           kill -9 "$parent" && killed=$parent
