@@ -23,6 +23,8 @@ class RigidTestModel : public Model {
   bool ignoreGrasps = false;      ///< a model that holds nothing
   Vec3 drift = Vec3::Zero();      ///< m per step, always (a model that never settles)
   long long unconverged = 0;      ///< reported as numeric "unconverged_steps"
+  long long inverted = -1;        ///< >= 0: reported as numeric "inverted_tets"
+  long long elements = 0;         ///< > 0: reported as counts "elements"
   std::vector<StepInput> inputs;  ///< every input received
   std::vector<StepInput>* recordInto = nullptr;  ///< also appended here when set (outlives runs)
 
@@ -58,10 +60,16 @@ class RigidTestModel : public Model {
     m_x = m_rest;
     m_steps = 0;
   }
-  Counts counts() const override { return {{"nodes", m_x.rows()}}; }
+  Counts counts() const override {
+    Counts c{{"nodes", m_x.rows()}};
+    if (elements > 0) c["elements"] = elements;
+    return c;
+  }
   PhaseTimes phaseTimes() const override { return m_phase; }
   NumericCounters numericCounters() const override {
-    return {{"degenerate", 0}, {"unconverged_steps", unconverged}};
+    NumericCounters c{{"degenerate", 0}, {"unconverged_steps", unconverged}};
+    if (inverted >= 0) c["inverted_tets"] = inverted;
+    return c;
   }
 
  private:
