@@ -387,17 +387,18 @@ void assessValidity(const Scene& scene, RunRecord& rec) {
       rec.status == RunStatus::Ok && it != rec.numeric.end() && it->second > 0)
     invalid(std::to_string(it->second) + (it->second == 1 ? " solve" : " solves") +
             " did not converge");
-  // A tet network that turned over 1% of its tets inside out (numeric "inverted_tets" against
+  // A tet network that turned over 0.5% of its tets inside out (numeric "inverted_tets" against
   // counts "elements") has folded through itself: its state is no deformation of the solid it
   // models, and its error measures the fold. A few slivers inverted under a load stay valid (the
-  // hybrid tables note them).
+  // hybrid tables note them). In the hybrid tables (4000-tet networks) the rows that keep their
+  // shape invert at most 0.4%, those whose error exceeds the displacement at least 0.9%.
   if (const auto it = rec.numeric.find("inverted_tets");
       rec.status == RunStatus::Ok && it != rec.numeric.end() && it->second > 0) {
     const auto elements = rec.counts.find("elements");
-    if (elements != rec.counts.end() && it->second * 100 > elements->second) {
+    if (elements != rec.counts.end() && it->second * 200 > elements->second) {
       std::ostringstream s;
       s << it->second << " of " << elements->second
-        << " tets inverted (over 1%): the network folded through itself";
+        << " tets inverted (over 0.5%): the network folded through itself";
       invalid(s.str());
     }
   }

@@ -196,7 +196,7 @@ TEST_F(TempDir, QuickHybridTimingRunsWhatLoadsAndSaysWhatIsMissing) {
   const std::string foldedStatus = folded["status"];
   for (const char* m : {"pbd: invalid (", "massspring: invalid ("})
     EXPECT_NE(foldedStatus.find(m), std::string::npos) << m << " in " << foldedStatus;
-  EXPECT_NE(foldedStatus.find("tets inverted (over 1%)"), std::string::npos) << foldedStatus;
+  EXPECT_NE(foldedStatus.find("tets inverted (over 0.5%)"), std::string::npos) << foldedStatus;
   const json& pressed = doc["rows"][1];
   ASSERT_EQ(pressed["direction"], "down");
   EXPECT_EQ(pressed["status"].get<std::string>().find("invalid"), std::string::npos)

@@ -251,24 +251,25 @@ TEST(Runner, ARunWithUnconvergedSolvesIsInvalid) {
   EXPECT_TRUE(converged.valid) << converged.invalidReason;
 }
 
-// A tet network that turned over 1% of its tets inside out (numeric "inverted_tets" against counts
-// "elements") is invalid; a few inverted slivers, or the counter without an element count, are not.
-TEST(Runner, ARunThatInvertedOverOnePercentOfItsTetsIsInvalid) {
+// A tet network that turned over 0.5% of its tets inside out (numeric "inverted_tets" against
+// counts "elements") is invalid; a few inverted slivers, or the counter without an element count,
+// are not.
+TEST(Runner, ARunThatInvertedOverHalfAPercentOfItsTetsIsInvalid) {
   Fixture f;
   const RunRecord folded = runWith(f, [](RigidTestModel& m) {
     m.elements = 4000;
-    m.inverted = 41;
+    m.inverted = 21;
   });
   ASSERT_EQ(folded.status, RunStatus::Ok) << folded.message;
   EXPECT_FALSE(folded.valid);
   EXPECT_EQ(folded.invalidReason,
-            "41 of 4000 tets inverted (over 1%): the network folded through itself");
+            "21 of 4000 tets inverted (over 0.5%): the network folded through itself");
   const RunRecord slivers = runWith(f, [](RigidTestModel& m) {
     m.elements = 4000;
-    m.inverted = 40;
+    m.inverted = 20;
   });
   EXPECT_TRUE(slivers.valid) << slivers.invalidReason;
-  const RunRecord uncounted = runWith(f, [](RigidTestModel& m) { m.inverted = 41; });
+  const RunRecord uncounted = runWith(f, [](RigidTestModel& m) { m.inverted = 21; });
   EXPECT_TRUE(uncounted.valid) << uncounted.invalidReason;
 }
 

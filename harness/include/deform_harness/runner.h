@@ -80,7 +80,7 @@ struct RunRecord {
   /// Validity (DESIGN "Metrics"): false with a reason when the run did not do what the scene
   /// asked: its grasp held nothing, its grasp residual exceeds 10% of the tool's travel, it did
   /// not settle, it did not move although the scene loads the organ, its solver gave up on a
-  /// solve (numeric unconverged_steps), it inverted over 1% of its tets (numeric inverted_tets
+  /// solve (numeric unconverged_steps), it inverted over 0.5% of its tets (numeric inverted_tets
   /// against counts elements), or it diverged / failed / was unsupported. Set by
   /// assessValidity().
   bool valid = true;

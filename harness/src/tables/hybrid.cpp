@@ -156,7 +156,7 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
       row["paper_" + figure] = nullptr;
       if (r && !r->message.empty()) appendTo(note, std::string(m.key) + ": " + r->message);
       // A few tets a network turned inside out under the load (it has no barrier against
-      // inversion); over 1% of them make the run invalid, and its status says so.
+      // inversion); over 0.5% of them make the run invalid, and its status says so.
       if (r && r->valid) {
         const auto it = r->numeric.find("inverted_tets");
         if (it != r->numeric.end() && it->second > 0)
