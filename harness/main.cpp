@@ -30,6 +30,7 @@
 #include <iostream>
 #include <map>
 #include <optional>
+#include <set>
 #include <sstream>
 
 namespace {
@@ -580,6 +581,9 @@ int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
               << fmt(p.msMedian) << std::setw(14) << fmt(1e3 * p.rmseNearest) << std::setw(14)
               << fmt(1e3 * p.rmseAll) << (p.pareto ? "*" : "") << "\n";
   }
+  std::set<std::string> notes;  // the calibrated points' (the same for most of them)
+  for (const SweepPoint& p : points)
+    if (!p.note.empty() && notes.insert(p.note).second) std::cout << "note: " << p.note << "\n";
   if (!noPlot)
     plot("plot_sweep.py", {(o.outDir / "sweep.json").string(), (o.outDir / "sweep.png").string()});
   std::cout << "sweep: " << (o.outDir / "sweep.json").string() << "\n";

@@ -217,6 +217,24 @@ const CalibrationParams* calibrationFor(const std::vector<CalibrationParams>& ca
   return nullptr;
 }
 
+std::vector<std::string> calibrationDifferences(const CalibrationParams& c, const json& resolved,
+                                                const std::string& except) {
+  std::vector<std::string> out;
+  for (const auto& [k, fitted] : c.held.items()) {
+    if (k == except || !resolved.contains(k) || resolved[k] == fitted) continue;
+    out.push_back(k + " = " + resolved[k].dump() + " (fitted with " + fitted.dump() + ")");
+  }
+  return out;
+}
+
+std::string calibrationDifferenceNote(const CalibrationParams& c, const json& resolved,
+                                      const std::string& except) {
+  std::string list;
+  for (const std::string& d : calibrationDifferences(c, resolved, except))
+    list += (list.empty() ? "" : ", ") + d;
+  return list.empty() ? "" : "calibration " + c.file + " was fitted with other parameters: " + list;
+}
+
 CalibrationParams readCalibrationFile(const std::string& file) {
   std::ifstream in(file);
   if (!in) throw InputError(file, "", "cannot read the calibration file");
@@ -244,6 +262,11 @@ CalibrationParams readCalibrationFile(const std::string& file) {
         !std::all_of(organs.begin(), organs.end(), [](const json& o) { return o.is_string(); }))
       throw InputError(file, "/organs", "\"organs\" must be an array of strings");
     for (const json& o : organs) c.organs.push_back(o.get<std::string>());
+  }
+  if (doc.contains("held")) {
+    if (!doc["held"].is_object())
+      throw InputError(file, "/held", "\"held\" must be an object of parameter values");
+    c.held = doc["held"];
   }
   return c;
 }
@@ -410,6 +433,26 @@ class Calibrator {
     return out;
   }
 
+  /// The model's parameters outside the calibrated ones, resolved as each training scene runs
+  /// them, where all scenes agree (CalibrationParams::held).
+  ojson heldParams() const {
+    std::vector<json> resolved;
+    for (const SceneInfo& s : m_train)
+      resolved.push_back(paramsToJson(
+          resolveParams(m_info.params, json::parse(s.modelParams.dump()), s.file, "/params")));
+    ojson held = ojson::object();
+    for (const ParamSpec& ps : m_info.params) {
+      if (resolved.empty() ||
+          std::any_of(m_dims.begin(), m_dims.end(),
+                      [&](const CalibDimension& d) { return d.key == ps.key; }) ||
+          !std::all_of(resolved.begin(), resolved.end(),
+                       [&](const json& r) { return r[ps.key] == resolved.front()[ps.key]; }))
+        continue;
+      held[ps.key] = ojson::parse(resolved.front()[ps.key].dump());
+    }
+    return held;
+  }
+
   ojson pointParams(const std::vector<double>& values) const {
     ojson p = ojson::object();
     for (size_t d = 0; d < m_dims.size(); ++d) p[m_dims[d].key] = values[d];
@@ -568,6 +611,7 @@ class Calibrator {
       if (std::find(organs.begin(), organs.end(), sc.organ) == organs.end())
         organs.push_back(sc.organ);
     doc["organs"] = organs;
+    doc["held"] = heldParams();
     ojson defaultsJson = ojson::object();
     ojson space = ojson::object();
     for (size_t d = 0; d < m_dims.size(); ++d) {

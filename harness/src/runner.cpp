@@ -539,6 +539,8 @@ std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
       given = merged;
     }
     run.params = resolveParams(run.info->params, given, scene.file, spec->jsonPath + "/params");
+    if (calibration)
+      run.calibrationNote = calibrationDifferenceNote(*calibration, paramsToJson(run.params));
     if (options.explain) {
       // Where each parameter came from: the scene, a calibration file, or the default.
       std::string from;
@@ -862,6 +864,7 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
               " steps (the compared instants and the grasp closings; the interaction was "
               "prepared every step)");
     }
+    if (!p.calibrationNote.empty()) rec.notes.push_back(p.calibrationNote);
     for (const auto& note : rec.notes) explain(p.label + ": " + note);
     progress(p.label + ": " + statusName(rec.status) +
              (rec.message.empty() ? "" : " (" + rec.message + ")"));

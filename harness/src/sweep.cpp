@@ -81,7 +81,7 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   struct Planned {
     std::string model, plugin, label, param;
     json value;
-    bool calibrated = false;
+    const CalibrationParams* calibration = nullptr;  ///< the "+cal" points'
   };
   std::vector<Planned> planned;
   ojson models = ojson::array();
@@ -119,7 +119,8 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
         if (calibrated) label += "+cal";
         copy["label"] = label;
         models.push_back(copy);
-        planned.push_back({modelName, plugin, label, knob.param, v, calibrated});
+        planned.push_back(
+            {modelName, plugin, label, knob.param, v, calibrated ? calibration : nullptr});
       }
     }
   }
@@ -133,11 +134,15 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     s.label = p.label;
     s.param = p.param;
     s.value = p.value;
-    s.calibrated = p.calibrated;
+    s.calibrated = p.calibration != nullptr;
     points.push_back(s);
   }
-  const auto fillPoint = [&](SweepPoint& s, const CaseResult& c) {
+  const auto fillPoint = [&](size_t i, const CaseResult& c) {
+    SweepPoint& s = points[i];
     const RunRecord* r = c.run(s.label);
+    // A calibrated point whose other parameters differ from those of the fit (the knob apart).
+    const CalibrationParams* calibration = planned[i].calibration;
+    if (r && calibration) s.note = calibrationDifferenceNote(*calibration, r->params, s.param);
     if (c.missing.count(s.plugin)) {
       s.status = "missing plugin: " + c.missing.at(s.plugin);
     } else if (!r) {
@@ -191,7 +196,7 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     };
     const CaseResult c = runSceneCase(scene, options.outDir / "sweep_scene.json",
                                       options.outDir / "runs", loader, co);
-    for (SweepPoint& s : points) fillPoint(s, c);
+    for (size_t i = 0; i < points.size(); ++i) fillPoint(i, c);
     refStatus = referenceStatus(c);
   } else {
     // One child case per point (scenes/point_<i>.json, runs/point_<i>/), handed to the
@@ -228,7 +233,7 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
           if (progress) progress->start(points[i].label);
         },
         [&](size_t i, CaseResult&& c) {
-          fillPoint(points[i], c);
+          fillPoint(i, c);
           if (first && i == *first) refStatus = referenceStatus(c);
           if (progress) progress->finish(points[i].label, points[i].status);
         });
@@ -267,6 +272,7 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
                              {"invalid_reason", p.invalidReason},
                              {"pareto", p.pareto},
                              {"calibrated", p.calibrated},
+                             {"note", p.note},
                              {"results", pointResults[i]}});
     const auto f = [](double v) {
       if (!std::isfinite(v)) return std::string();

@@ -6,7 +6,9 @@
 #               then `run --calibration` uses it and --explain says where gain came from, and
 #               `sweep --calibration` shows the default and the calibrated point; the file
 #               names the organ it was fitted on, and applies to scenes of that organ only (a
-#               scene of another organ is refused in one line; one file per model and organ)
+#               scene of another organ is refused in one line; one file per model and organ);
+#               it records the other parameters the training ran with, and a run or sweep
+#               point of the calibrated model with another value of one gets a note
 #   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0:
 #               one stderr line each and exit 2
 set -euo pipefail
@@ -35,6 +37,7 @@ assert c["train"]["after"] < 0.05 * c["train"]["before"], c["train"]
 assert c["validation"]["after"] < 0.05 * c["validation"]["before"], c["validation"]
 assert 1 <= c["evaluations"] <= 16 and c["wall_s"] > 0
 assert c["organs"] == ["phantom:gallbladder, resolution 0.3"], c["organs"]
+assert c["held"] == {"iterations": 20, "mode": "rigid", "diverge_below": 0.2}, c["held"]
 rows = list(csv.DictReader(open(os.path.join(d, "trials.csv"))))
 assert len(rows) == c["evaluations"], (len(rows), c["evaluations"])
 diverged = [r for r in rows if "diverged" in r["status"]]
@@ -49,6 +52,36 @@ PY
   grep -q "gain from calibration $work/cal/calibration.json" "$work/run.txt" \
     || { cat "$work/run.txt"; fail "--explain does not say gain came from the calibration"; }
   grep -q "diverge_below from scene" "$work/run.txt" || fail "--explain: diverge_below not from scene"
+  python3 - "$work/run/results.json" <<'PY'
+import json, sys
+run = json.load(open(sys.argv[1]))["runs"][0]
+assert not any("fitted with other parameters" in n for n in run.get("notes", [])), run["notes"]
+PY
+  # Another value of a parameter the training held: the run and the sweep's calibrated point
+  # say so (the calibration still applies).
+  python3 - "$here/toy_reference.json" "$work/other_iterations.json" <<'PY'
+import json, sys
+scene = json.load(open(sys.argv[1]))
+scene["models"][0]["params"]["iterations"] = 30
+json.dump(scene, open(sys.argv[2], "w"))
+PY
+  "${db[@]}" run "$work/other_iterations.json" --out "$work/run_iter" --no-cache \
+    --calibration "$work/cal/calibration.json" >"$work/run_iter.txt" 2>&1 || { cat "$work/run_iter.txt"; fail run_iter; }
+  note="calibration $work/cal/calibration.json was fitted with other parameters: iterations = 30 (fitted with 20)"
+  python3 - "$work/run_iter/results.json" "$note" <<'PY'
+import json, sys
+run = json.load(open(sys.argv[1]))["runs"][0]
+assert sys.argv[2] in run.get("notes", []), run.get("notes")
+assert abs(run["params"]["gain"] - json.load(open(sys.argv[1].replace("run_iter/results.json", "cal/calibration.json")))["params"]["gain"]) < 1e-12
+PY
+  "${db[@]}" sweep "$work/other_iterations.json" --out "$work/sweep_iter" --no-cache --no-plot \
+    --calibration "$work/cal/calibration.json" >"$work/sweep_iter.txt" 2>&1 || { cat "$work/sweep_iter.txt"; fail sweep_iter; }
+  grep -qF "note: $note" "$work/sweep_iter.txt" || { cat "$work/sweep_iter.txt"; fail "sweep: no note"; }
+  python3 - "$work/sweep_iter/sweep.json" "$note" <<'PY'
+import json, sys
+p = {q["label"]: q for q in json.load(open(sys.argv[1]))["points"]}
+assert p["toy+cal"]["note"] == sys.argv[2] and p["toy"]["note"] == "", p
+PY
   # sweep --calibration: the model at its defaults and calibrated, the latter far closer.
   "${db[@]}" sweep "$here/toy_reference.json" --out "$work/sweep" --no-cache --no-plot \
     --calibration "$work/cal/calibration.json" >"$work/sweep.txt" 2>&1 || { cat "$work/sweep.txt"; fail sweep; }

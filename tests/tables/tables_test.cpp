@@ -263,14 +263,17 @@ TEST_F(TempDir, CalibrationsApplyToTheirOrganAndTheirRowsKeepValidity) {
   // one on the liver. Only the cube's is twinned; the calibration table says so, and a default
   // run that did not settle is "invalid" there as in the paper table, never ok.
   const fs::path plugins = pluginSubset(m_dir / "plugins", {"massspring", "reference_fem"});
+  // The cube's file says it was fitted on the volume network: its twins, run on the surface
+  // network (--surface-baselines), carry a note.
   const auto calibration = [this](const std::string& name, const std::string& organ, double t) {
     const fs::path f = m_dir / (name + ".json");
-    std::ofstream(f) << json{
-        {"format", "deformbench-calibration/1"},
-        {"plugin", "massspring"},
-        {"model", "massspring"},
-        {"params", {{"thickness", t}}},
-        {"organs", {organ}}}.dump();
+    std::ofstream(f) << json{{"format", "deformbench-calibration/1"},
+                             {"plugin", "massspring"},
+                             {"model", "massspring"},
+                             {"params", {{"thickness", t}}},
+                             {"organs", {organ}},
+                             {"held", {{"network", "volume"}}}}
+                            .dump();
     return readCalibrationFile(f.string());
   };
   PluginLoader loader({plugins.string()});
@@ -295,6 +298,11 @@ TEST_F(TempDir, CalibrationsApplyToTheirOrganAndTheirRowsKeepValidity) {
     ASSERT_TRUE(row["rmse_50_calibrated_mm"].is_number()) << row.dump();
     const std::string status = row["status"];
     invalidDefault |= status.find("default invalid (did not settle)") != std::string::npos;
+    EXPECT_NE(
+        row["note"].get<std::string>().find(
+            "was fitted with other parameters: network = \"surface\" (fitted with \"volume\")"),
+        std::string::npos)
+        << row.dump();
   }
   EXPECT_TRUE(invalidDefault) << "pressed down, the default membrane creeps past the 2 s cap: "
                               << doc["rows"].dump();

@@ -173,4 +173,51 @@ TEST(Calibration, CalibrationFileAndTwins) {
   std::filesystem::remove_all(dir);
 }
 
+// "held": the other parameters the training ran with. A run with another value of one is named;
+// parameters the file does not hold, and a sweep's knob, are not compared.
+TEST(Calibration, HeldParametersNameWhatARunChanged) {
+  const auto dir = std::filesystem::temp_directory_path() / "deform_calibration_held_test";
+  std::filesystem::create_directories(dir);
+  const auto file = (dir / "calibration.json").string();
+  {
+    std::ofstream(file) << R"({"format": "deformbench-calibration/1", "model": "pbd",
+      "plugin": "pbd", "params": {"thickness": 0.004},
+      "held": {"network": "surface", "iterations": 10}})";
+  }
+  const CalibrationParams c = readCalibrationFile(file);
+  const nlohmann::json same = {{"network", "surface"}, {"iterations", 10}, {"thickness", 0.004}};
+  EXPECT_TRUE(calibrationDifferences(c, same).empty());
+  EXPECT_EQ(calibrationDifferenceNote(c, same), "");
+  nlohmann::json other = same;
+  other["network"] = "volume";
+  other["iterations"] = 40;
+  other["damping"] = 20;  // not held: not compared
+  EXPECT_EQ(calibrationDifferences(c, other),
+            (std::vector<std::string>{"iterations = 40 (fitted with 10)",
+                                      "network = \"volume\" (fitted with \"surface\")"}));
+  EXPECT_EQ(calibrationDifferences(c, other, "iterations").size(), 1u);
+  EXPECT_EQ(
+      calibrationDifferenceNote(c, other, "iterations"),
+      "calibration " + file +
+          " was fitted with other parameters: network = \"volume\" (fitted with \"surface\")");
+
+  // A file without "held" (written before it was recorded) names nothing.
+  {
+    std::ofstream(file) << R"({"format": "deformbench-calibration/1", "model": "pbd",
+      "plugin": "pbd", "params": {"thickness": 0.004}})";
+  }
+  EXPECT_TRUE(calibrationDifferences(readCalibrationFile(file), other).empty());
+  {
+    std::ofstream(file) << R"({"format": "deformbench-calibration/1", "model": "pbd",
+      "plugin": "pbd", "params": {}, "held": ["network"]})";
+  }
+  try {
+    readCalibrationFile(file);
+    ADD_FAILURE() << "a \"held\" that is not an object was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/held"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace

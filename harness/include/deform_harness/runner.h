@@ -168,6 +168,9 @@ struct PlannedRun {
   ParamValues params;
   std::string label;
   bool isReference = false;
+  /// calibrationDifferenceNote() of the --calibration it takes ("" when none or no difference):
+  /// added to the run's notes.
+  std::string calibrationNote;
 };
 
 /// The calibrated parameters of one model (DIR/calibration.json of `deformbench calibrate`).
@@ -179,7 +182,23 @@ struct CalibrationParams {
   /// The organs of its training scenes (calibrationOrgan()); a calibration applies to scenes
   /// of these organs only. Empty (a file written before they were recorded): to any organ.
   std::vector<std::string> organs;
+  /// The model's other parameters as the training scenes ran them (resolved: written or
+  /// default), where every training scene had the same value, e.g. {"network": "surface"}. A
+  /// run of the calibrated model with other values gets a note (calibrationDifferences()).
+  /// Empty: a file written before they were recorded.
+  nlohmann::json held = nlohmann::json::object();
 };
+
+/// The parameters in which a run of c's model (its resolved params, as in results.json) differs
+/// from what c was fitted with (c.held), one text each: `network = "volume" (fitted with
+/// "surface")`. `except`: a parameter not to compare (a sweep's knob).
+std::vector<std::string> calibrationDifferences(const CalibrationParams& c,
+                                                const nlohmann::json& resolved,
+                                                const std::string& except = "");
+/// The note a run gets when calibrationDifferences() is not empty ("" when it is): `calibration
+/// FILE was fitted with other parameters: network = "volume" (fitted with "surface")`.
+std::string calibrationDifferenceNote(const CalibrationParams& c, const nlohmann::json& resolved,
+                                      const std::string& except = "");
 
 /// The organ a calibration is fitted on, as written in calibration.json "organs": the mesh
 /// ("phantom:NAME" or the file's absolute path) with its resolution (phantoms) or scale (files),

@@ -38,6 +38,8 @@ struct SweepPoint {
   std::string invalidReason;  ///< when !valid
   bool pareto = false;
   bool calibrated = false;  ///< run at a --calibration file's parameters (its own front)
+  /// Calibrated points: calibrationDifferenceNote() (the knob apart), "" when none.
+  std::string note;
 };
 
 /// Marks the points on the Pareto front of (msMedian, rmseNearest): ok, valid points with an

@@ -110,7 +110,8 @@ Table calibrationTable(
                {"rmse_all_calibrated_mm", "rmse_all calibrated (mm)"},
                {"loss_ratio_default", "loss ratio default"},
                {"loss_ratio_calibrated", "loss ratio calibrated"},
-               {"status", "status"}};
+               {"status", "status"},
+               {"note", "note"}};
   const auto metrics = [](const RunRecord* r, const char* suffix, ojson& row) {
     double r50 = NAN, all = NAN, loss = NAN;
     if (r && r->error) {
@@ -143,6 +144,16 @@ Table calibrationTable(
         if (st != "ok") status += (status.empty() ? "" : ", ") + std::string(which) + st;
       }
       row["status"] = status.empty() ? "ok" : status;
+      // A twin whose other parameters are not those its calibration was fitted with (e.g. a
+      // surface network's thickness on a volume network) says so.
+      std::string note;
+      if (b) {
+        const CalibrationParams* cal =
+            calibrationFor(calibrations, b->plugin, b->model,
+                           calibrationOrgan(c->scene.value("organ", ojson::object())), true);
+        if (cal) note = calibrationDifferenceNote(*cal, b->params);
+      }
+      row["note"] = note;
       t.rows.push_back(row);
     }
   }
