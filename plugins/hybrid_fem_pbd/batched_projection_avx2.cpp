@@ -1,7 +1,8 @@
 // AVX2 lanes for batched_projection_math.h: four constraints per __m256d, eight per __m256
 // (single-precision stretch), and the blocked float x double product of response_product.h.
-// Compiled with -mavx2 -mfma; includes nothing but the intrinsics and the internal-linkage math
-// header.
+// Compiled with -mavx2 -mfma; includes nothing but the intrinsics, the row gathers of
+// deform/simd_rows_avx2.h and the internal-linkage math header.
+#include <deform/simd_rows_avx2.h>
 #include <immintrin.h>
 
 #include "batched_projection_avx2.h"
@@ -29,34 +30,13 @@ struct Avx2Lanes {
   static int count(M m) { return __builtin_popcount(_mm256_movemask_pd(m)); }
   static unsigned orBytes(const unsigned char* m) { return m[0] | m[1] | m[2] | m[3]; }
   static bool anyByte(const unsigned char* m) { return (m[0] | m[1] | m[2] | m[3]) != 0; }
-  // Gathers the points idx[0..3] of the padded array into x, y, z lanes.
+  // The points idx[0..3] of the padded array <-> x, y, z lanes (deform/simd_rows_avx2.h); the
+  // four points of an add are distinct or immovable (their lanes are then exactly zero).
   static void loadPoints(const double* x4, const int* idx, V& x, V& y, V& z) {
-    const V r0 = _mm256_loadu_pd(x4 + 4 * static_cast<long>(idx[0]));
-    const V r1 = _mm256_loadu_pd(x4 + 4 * static_cast<long>(idx[1]));
-    const V r2 = _mm256_loadu_pd(x4 + 4 * static_cast<long>(idx[2]));
-    const V r3 = _mm256_loadu_pd(x4 + 4 * static_cast<long>(idx[3]));
-    const V t0 = _mm256_unpacklo_pd(r0, r1);  // x0 x1 z0 z1
-    const V t1 = _mm256_unpackhi_pd(r0, r1);  // y0 y1 w0 w1
-    const V t2 = _mm256_unpacklo_pd(r2, r3);
-    const V t3 = _mm256_unpackhi_pd(r2, r3);
-    x = _mm256_permute2f128_pd(t0, t2, 0x20);
-    y = _mm256_permute2f128_pd(t1, t3, 0x20);
-    z = _mm256_permute2f128_pd(t0, t2, 0x31);
+    simd::gatherRows4([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, x, y, z);
   }
-  // Adds (dx, dy, dz) lane k to point idx[k]; the four points are distinct or immovable (their
-  // lanes are then exactly zero), so the read-modify-writes do not interfere.
   static void addPoints(double* x4, const int* idx, V dx, V dy, V dz) {
-    const V zero = _mm256_setzero_pd();
-    const V t0 = _mm256_unpacklo_pd(dx, dy);  // dx0 dy0 dx2 dy2
-    const V t1 = _mm256_unpackhi_pd(dx, dy);  // dx1 dy1 dx3 dy3
-    const V t2 = _mm256_unpacklo_pd(dz, zero);
-    const V t3 = _mm256_unpackhi_pd(dz, zero);
-    const V row[4] = {_mm256_permute2f128_pd(t0, t2, 0x20), _mm256_permute2f128_pd(t1, t3, 0x20),
-                      _mm256_permute2f128_pd(t0, t2, 0x31), _mm256_permute2f128_pd(t1, t3, 0x31)};
-    for (int k = 0; k < 4; ++k) {
-      double* p = x4 + 4 * static_cast<long>(idx[k]);
-      _mm256_storeu_pd(p, _mm256_add_pd(_mm256_loadu_pd(p), row[k]));
-    }
+    simd::addToRows4([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, dx, dy, dz);
   }
 };
 
@@ -79,38 +59,12 @@ struct Float8Lanes {
     for (int k = 0; k < 8; ++k) any |= m[k];
     return any != 0;
   }
-  // Rows idx[k] and idx[k + 4] share a 256-bit register, then a 4 x 4 transpose per 128-bit half.
+  // The points idx[0..7] <-> lanes, as above.
   static void loadPoints(const float* x4, const int* idx, V& x, V& y, V& z) {
-    auto row = [&](int k) { return x4 + 4 * static_cast<long>(idx[k]); };
-    const V r04 = _mm256_loadu2_m128(row(4), row(0));
-    const V r15 = _mm256_loadu2_m128(row(5), row(1));
-    const V r26 = _mm256_loadu2_m128(row(6), row(2));
-    const V r37 = _mm256_loadu2_m128(row(7), row(3));
-    const V t0 = _mm256_unpacklo_ps(r04, r15);  // x0 x1 y0 y1 | x4 x5 y4 y5
-    const V t1 = _mm256_unpackhi_ps(r04, r15);  // z0 z1 w0 w1 | z4 z5 w4 w5
-    const V t2 = _mm256_unpacklo_ps(r26, r37);
-    const V t3 = _mm256_unpackhi_ps(r26, r37);
-    x = _mm256_shuffle_ps(t0, t2, 0x44);
-    y = _mm256_shuffle_ps(t0, t2, 0xEE);
-    z = _mm256_shuffle_ps(t1, t3, 0x44);
+    simd::gatherRows8([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, x, y, z);
   }
-  // Adds lane k to point idx[k]: distinct or immovable points (exactly zero lanes), as above.
   static void addPoints(float* x4, const int* idx, V dx, V dy, V dz) {
-    const V zero = _mm256_setzero_ps();
-    const V a = _mm256_unpacklo_ps(dx, dy);  // dx0 dy0 dx1 dy1 | dx4 dy4 dx5 dy5
-    const V b = _mm256_unpackhi_ps(dx, dy);  // dx2 dy2 dx3 dy3 | dx6 dy6 dx7 dy7
-    const V c = _mm256_unpacklo_ps(dz, zero);
-    const V d = _mm256_unpackhi_ps(dz, zero);
-    const V r04 = _mm256_shuffle_ps(a, c, 0x44), r15 = _mm256_shuffle_ps(a, c, 0xEE);
-    const V r26 = _mm256_shuffle_ps(b, d, 0x44), r37 = _mm256_shuffle_ps(b, d, 0xEE);
-    const __m128 rows[8] = {_mm256_castps256_ps128(r04),   _mm256_castps256_ps128(r15),
-                            _mm256_castps256_ps128(r26),   _mm256_castps256_ps128(r37),
-                            _mm256_extractf128_ps(r04, 1), _mm256_extractf128_ps(r15, 1),
-                            _mm256_extractf128_ps(r26, 1), _mm256_extractf128_ps(r37, 1)};
-    for (int k = 0; k < 8; ++k) {
-      float* p = x4 + 4 * static_cast<long>(idx[k]);
-      _mm_storeu_ps(p, _mm_add_ps(_mm_loadu_ps(p), rows[k]));
-    }
+    simd::addToRows8([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, dx, dy, dz);
   }
 };
 
