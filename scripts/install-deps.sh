@@ -14,6 +14,7 @@ PACKAGES=(
   libjs-three chromium python3-pil  # the report's 3D viewer (three.js) and its browser test
   openmpi-bin libopenmpi-dev
   libnlopt-dev libnlopt-cxx-dev  # deformbench calibrate
+  calculix-ccx  # the calculix plugin: an independent nonlinear FEM (ccx), run as a child process
 )
 if [[ ${1:-} == --tests ]]; then PACKAGES+=(slurm-wlm munge); fi
 missing=()
