@@ -176,7 +176,10 @@ PhaseTimes HexFemModel::phaseTimes() const {
 }
 
 NumericCounters HexFemModel::numericCounters() const {
-  return {{"rotation_not_converged", m_rotationNotConverged},
+  return {{"unconverged_steps", m_unconvergedSteps},
+          {"rotation_not_converged", m_rotationNotConverged},
+          {"rotation_svd_fallbacks", m_rotationSvd},
+          {"rotation_iterations", m_rotationIterations},
           {"pcg_not_converged", m_pcgNotConverged},
           {"pcg_iterations", m_pcgIterations},
           {"ignored_grasp_nodes", m_ignoredGraspNodes},
@@ -396,16 +399,23 @@ void HexFemModel::updateInverseDiagonal() {
   }
 }
 
-void HexFemModel::updateRotations() {
+bool HexFemModel::updateRotations() {
+  bool converged = true;
   const Mat38 G = hexShapeGradients(Vec3::Constant(m_grid.cellSize), Vec3::Zero());
   for (int e = 0; e < m_grid.numHexes(); ++e) {
     const auto& hex = m_grid.hexes[e];
     Mat3 F = Mat3::Zero();
     for (int a = 0; a < 8; ++a) F.noalias() += m_x.row(hex[a]).transpose() * G.col(a).transpose();
-    const int it = extractRotation(F, m_q[e], m_config.rotationIterations, 1e-9);
-    if (it >= m_config.rotationIterations) ++m_rotationNotConverged;
+    const RotationExtraction r = extractRotationInfo(F, m_q[e], m_config.rotationIterations, 1e-9);
+    m_rotationIterations += r.iterations;
+    m_rotationSvd += r.svd ? 1 : 0;
+    if (!r.converged) {
+      ++m_rotationNotConverged;
+      converged = false;
+    }
     m_R[e] = m_q[e].toRotationMatrix();
   }
+  return converged;
 }
 
 void HexFemModel::reset() {
@@ -426,6 +436,7 @@ void HexFemModel::reset() {
   m_graspForces.clear();
   m_lastIterations = 0;
   m_rotationNotConverged = m_pcgNotConverged = m_ignoredGraspNodes = m_pcgIterations = 0;
+  m_rotationSvd = m_rotationIterations = m_unconvergedSteps = 0;
   m_msAssembly = m_msSolve = m_msSurface = 0;
   if (m_numDofs > 0) {
     Eigen::Map<VecX>(m_A.valuePtr(), m_A.nonZeros()) = m_baseValues;
@@ -585,7 +596,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
   if (in.contact) m_stepStart = m_x;
 
   const bool corot = m_config.elastic == ElasticModel::Corotational;
-  if (corot) updateRotations();
+  const bool rotationsOk = !corot || updateRotations();
 
   // The scale of the right-hand side for the CG stopping test: its inertia and load part
   // M v + h f_ext, filtered, in the D^-1 norm (see below).
@@ -604,7 +615,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
   m_msAssembly = msSince(t0);
 
   const auto t1 = Clock::now();
-  bool ok = true;
+  bool ok = true, solveConverged = true;
   m_v = m_v0;
   m_lastIterations = 0;
   if (m_numDofs > 0) {
@@ -661,10 +672,17 @@ StepStatus HexFemModel::step(const StepInput& in) {
         res2 = residual2();
         converged = res2 <= tol2;
       }
-      if (ok && !converged) ++m_pcgNotConverged;
+      if (ok && !converged) {
+        ++m_pcgNotConverged;
+        solveConverged = false;
+      }
       m_pcgIterations += m_lastIterations;
     }
   }
+
+  // A step whose rotations or CG solve gave up is not the step the scene asked for: the harness
+  // reads unconverged_steps into validity.
+  if (!rotationsOk || !solveConverged) ++m_unconvergedSteps;
 
   // Reaction at the carrying nodes: (b - A v+)_C / h, from the elements touching them, each
   // node's share to the grasps whose vertices it carries (by their weights on it).

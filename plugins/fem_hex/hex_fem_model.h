@@ -121,7 +121,7 @@ class HexFemModel : public Model {
   void applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b, Real scale,
                      VecX& out) const;
   void applyAllElements(const VecX& in, Real a, Real b, Real scale, VecX& out, bool rotated) const;
-  void updateRotations();
+  bool updateRotations();  // false when an element's rotation did not converge
   void updateInverseDiagonal();
   void filter(VecX& r) const;
   /// Grasped surface vertices of `in` -> prescribed carrying nodes and their targets (m_grasped,
@@ -206,7 +206,9 @@ class HexFemModel : public Model {
   int m_lastIterations = 0;
   double m_msAssembly = 0, m_msSolve = 0, m_msSurface = 0;
   long long m_rotationNotConverged = 0, m_pcgNotConverged = 0, m_ignoredGraspNodes = 0;
-  long long m_pcgIterations = 0;  // CG iterations over the run
+  long long m_rotationSvd = 0, m_rotationIterations = 0;  // SVD fallbacks, Newton steps
+  long long m_unconvergedSteps = 0;  // steps with a rotation or the CG solve not converged
+  long long m_pcgIterations = 0;     // CG iterations over the run
 };
 
 }  // namespace deform::fem_hex
