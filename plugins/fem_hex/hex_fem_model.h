@@ -75,6 +75,10 @@ struct HexFemConfig {
   int pcgMaxIterations = 50;
   PcgPreconditioner pcgPreconditioner = PcgPreconditioner::Rest;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
+  /// Also pin every node of the cells that carry a surface vertex of the organ's fixed region
+  /// (its embedding weights), so the clamped surface does not move; false: only the nodes
+  /// fixedNodesOf returns (the grid nodes inside the region).
+  bool clampCells = true;
   CholeskySolver::Kind cholesky = CholeskySolver::Kind::Auto;
   bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
 };
@@ -82,7 +86,8 @@ struct HexFemConfig {
 class HexFemModel : public Model {
  public:
   /// Builds grid, embedding, K0, mass, sparsity pattern and factorisation. fixedNodesOf maps the
-  /// rest node positions to the pinned node indices. Throws InputError for unusable input.
+  /// rest node positions to the pinned node indices; with config.clampCells the nodes carrying
+  /// the surface vertices of organ.fixed are pinned too. Throws InputError for unusable input.
   void initialize(const Organ& organ, const HexFemConfig& config, Real dt,
                   const std::function<std::vector<int>(const MatX3&)>& fixedNodesOf);
 
@@ -153,6 +158,7 @@ class HexFemModel : public Model {
   std::vector<int> m_nodeElemStart, m_nodeElems;  // node -> elements (CSR)
   bool m_factorOk = false;
   long long m_factorNonZeros = 0;
+  long long m_fixedInRegion = 0;       // nodes fixedNodesOf returned (before the clamped cells)
   double m_flopsPerFactorNonZero = 0;  // factorisation flops / nnz(L) of the analysed ordering
   Real m_totalMass = 0;
   Vec3 m_restCenter = Vec3::Zero();

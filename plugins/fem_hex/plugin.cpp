@@ -44,6 +44,10 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::integer("pcg_max_iterations", 50, 1, 100000, "CG iteration cap per step"),
       ParamSpec::integer("rotation_iterations", 8, 1, 1000,
                          "iteration cap of the warm-started element rotation extraction"),
+      ParamSpec::choice("clamp", "cells", {"cells", "nodes"},
+                        "cells: pin the grid nodes inside the fixed region and every node of the "
+                        "cells carrying a surface vertex of it (the clamped surface stays put); "
+                        "nodes: only the grid nodes inside the region"),
       ParamSpec::choice("cholesky", "auto", {"auto", "simplicial", "supernodal"},
                         "CHOLMOD factorisation kind (auto: CHOLMOD picks supernodal when the "
                         "factor is dense enough)"),
@@ -71,6 +75,7 @@ HexFemConfig configFromParams(const ParamValues& p) {
       {{"rest", PcgPreconditioner::Rest}, {"rest_grasped", PcgPreconditioner::RestGrasped}});
   c.pcgMaxIterations = static_cast<int>(p.integer("pcg_max_iterations"));
   c.rotationIterations = static_cast<int>(p.integer("rotation_iterations"));
+  c.clampCells = p.choice("clamp") == "cells";
   c.cholesky = p.choiceAs<CholeskySolver::Kind>("cholesky",
                                                 {{"auto", CholeskySolver::Kind::Auto},
                                                  {"simplicial", CholeskySolver::Kind::Simplicial},
