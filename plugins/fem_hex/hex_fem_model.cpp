@@ -530,6 +530,7 @@ void HexFemModel::prescribeGrasps(const StepInput& in) {
       }
     m_JcPinv = nc > 0 ? MatX(Eigen::CompleteOrthogonalDecomposition<MatX>(m_Jc).pseudoInverse())
                       : MatX(0, m);
+    m_JcColSum = m_Jc.colwise().sum().transpose();
     m_carryShare.setZero(nc, Eigen::Index(in.grasps.size()));
     for (Eigen::Index r = 0; r < m; ++r)
       for (Eigen::Index c = 0; c < nc; ++c)
@@ -551,8 +552,17 @@ void HexFemModel::prescribeGrasps(const StepInput& in) {
       p += m_embedding.weights(v, a) * m_x.row(m_embedding.nodeIds(v, a)).transpose();
     gap.row(r) = m_graspVertTargets.row(r) - p.transpose();
   }
-  m_graspDq.resize(nc, 3);
-  m_graspDq.noalias() = m_JcPinv * gap;
+  // dq = b + J_C^+ (gap - J_C b), b the weighted mean of the gaps each node carries: a rigidly
+  // translated grasp moves its carrying nodes with it (J_C b = gap when every node of the cells is
+  // free), where the plain minimum-norm dq = J_C^+ gap moves the heavily weighted nodes farther
+  // than the tool and the lightly weighted ones less (the kidney's surface outran a 10 mm lift by
+  // 1.2 mm).
+  m_graspBase.noalias() = m_Jc.transpose() * gap;
+  for (Eigen::Index c = 0; c < nc; ++c)
+    if (m_JcColSum[c] > 0) m_graspBase.row(c) /= m_JcColSum[c];
+  gap.noalias() -= m_Jc * m_graspBase;
+  m_graspDq = m_graspBase;
+  m_graspDq.noalias() += m_JcPinv * gap;
   for (Eigen::Index c = 0; c < nc; ++c) {
     const int n = m_grasped[size_t(c)];
     m_target.row(n) = m_x.row(n) + m_graspDq.row(c);

@@ -202,6 +202,8 @@ class HexFemModel : public Model {
   MatX m_JcPinv;                      // its pseudo-inverse
   MatX m_carryShare;                  // #carrying x #grasps: share of each node's reaction
   MatX3 m_graspGap, m_graspDq;        // t - J q per grasped vertex; the carrying nodes' dq
+  MatX3 m_graspBase;                  // per carrying node: the weighted mean gap it carries
+  VecX m_JcColSum;                    // column sums of m_Jc
   std::vector<int> m_touched;         // elements touching grasped nodes
   std::vector<int> m_touchedGrasped;  // grasp set m_touched was built for
   std::vector<char> m_elemMark;

@@ -167,6 +167,9 @@ TEST(HexFemModel, GraspedSurfacePointsFollowTheirTargetsAndTheTissuePullsBack) {
     const Real rise = m.nodes()(mid, 2) - rest(mid, 2);
     EXPECT_GT(rise, 0.0);
     EXPECT_LT(rise, 0.01);
+    // A rigidly lifted grasp moves its carrying nodes with the tool: no surface point rises
+    // above the lift (the minimum-norm correction alone moved some 12% farther on the kidney).
+    EXPECT_LT((m.surface() - liverLike().V).rowwise().norm().maxCoeff(), lift.norm() + 1e-9);
   }
 }
 
@@ -190,6 +193,9 @@ TEST(HexFemModel, SmallGraspHoldsItsSurfaceVertex) {
   }
   EXPECT_GT(m.graspedNodes().size(), 1u);  // a whole hexahedron's nodes carry the vertex
   EXPECT_LT(m.graspForces()[0].z(), 0.0);
+  // They move with the tool (minimum norm alone moved the heavier ones farther, w_a / sum w^2).
+  const MatX3 rest = m.grid().nodes;
+  for (int n : m.graspedNodes()) EXPECT_NEAR((m.nodes().row(n) - rest.row(n)).norm(), 0.01, 1e-12);
 }
 
 // A point force spread by the harness over a patch reaches the nodes by J^T: the patch moves along
