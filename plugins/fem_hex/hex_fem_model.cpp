@@ -187,8 +187,8 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
 Counts HexFemModel::counts() const {
   return {{"elements", m_grid.numHexes()},
           {"nodes", m_grid.numNodes()},
-          {"fixed_nodes", static_cast<long long>(m_fixedList.size())},
-          {"fixed_nodes_in_region", m_fixedInRegion},
+          {"fixed_nodes", m_fixedInRegion},
+          {"clamped_nodes", static_cast<long long>(m_fixedList.size())},
           {"dofs", m_numDofs},
           {"cholesky_factor_nonzeros", m_factorNonZeros},
           {"cholesky_flops_per_factor_nonzero", std::llround(m_flopsPerFactorNonZero)},
