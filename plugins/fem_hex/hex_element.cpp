@@ -1,5 +1,8 @@
 #include "hex_element.h"
 
+#include <Eigen/Cholesky>
+#include <Eigen/SVD>
+
 #include <cmath>
 
 namespace deform::fem_hex {
@@ -162,16 +165,47 @@ Mat3 hexCentreGradient(const Vec3& size, const Mat38& x) {
   return x * hexShapeGradients(size, Vec3::Zero()).transpose();
 }
 
-int extractRotation(const Mat3& F, Quat& q, int maxIterations, Real tolerance) {
-  int it = 0;
-  for (; it < maxIterations; ++it) {
+namespace {
+
+Quat rotationFromSvd(const Mat3& F) {
+  // The maximiser of tr(R^T F) over proper rotations: R = U diag(1, 1, det(U V^T)) V^T.
+  const Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 U = svd.matrixU();
+  if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) = -U.col(2);
+  Quat q(Mat3(U * svd.matrixV().transpose()));
+  q.normalize();
+  return q;
+}
+
+}  // namespace
+
+RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations, Real tolerance) {
+  RotationExtraction out;
+  if (!F.allFinite() || !q.coeffs().allFinite()) return out;  // converged stays false
+  for (; out.iterations < maxIterations; ++out.iterations) {
     const Mat3 R = q.toRotationMatrix();
-    const Vec3 num = R.col(0).cross(F.col(0)) + R.col(1).cross(F.col(1)) + R.col(2).cross(F.col(2));
-    const Real den =
-        std::abs(R.col(0).dot(F.col(0)) + R.col(1).dot(F.col(1)) + R.col(2).dot(F.col(2))) + 1e-300;
-    const Vec3 omega = num / den;
-    const Real w = omega.norm();
-    if (!(w > tolerance)) break;  // also stops on NaN
+    // Gradient of tr(R^T F) under R <- exp([omega]) R: g = sum_i r_i x f_i. Its Hessian is
+    // -(tr(A) I - sym(A)), A = F R^T.
+    const Vec3 g = R.col(0).cross(F.col(0)) + R.col(1).cross(F.col(1)) + R.col(2).cross(F.col(2));
+    const Mat3 A = F * R.transpose();
+    const Real trA = A.trace();
+    const Mat3 H = trA * Mat3::Identity() - 0.5 * (A + A.transpose());
+    const Eigen::LLT<Mat3> llt(H);
+    Vec3 omega;
+    if (trA > 0 && llt.info() == Eigen::Success) {
+      omega = llt.solve(g);  // Newton step
+    } else {
+      omega = g / (std::abs(trA) + 1e-300);  // Müller et al.'s step, far from the maximum
+    }
+    Real w = omega.norm();
+    if (!(w > tolerance)) {
+      out.converged = std::isfinite(w);
+      break;
+    }
+    if (w > 1) {  // a Newton step beyond a radian is outside its quadratic model
+      omega /= w;
+      w = 1;
+    }
     // Near convergence (the usual case when warm-started) the first-order quaternion of the
     // axis-angle update avoids sin/cos; the fixed point omega = 0 is the same either way.
     q = (w < 1e-3 ? Quat(1, 0.5 * omega.x(), 0.5 * omega.y(), 0.5 * omega.z())
@@ -179,7 +213,17 @@ int extractRotation(const Mat3& F, Quat& q, int maxIterations, Real tolerance) {
         q;
     q.normalize();
   }
-  return it;
+  if (!out.converged && out.iterations >= maxIterations) {
+    // Far from the warm start (or a maximum too flat for Newton's step): the exact rotation.
+    q = rotationFromSvd(F);
+    out.svd = true;
+    out.converged = q.coeffs().allFinite();
+  }
+  return out;
+}
+
+int extractRotation(const Mat3& F, Quat& q, int maxIterations, Real tolerance) {
+  return extractRotationInfo(F, q, maxIterations, tolerance).iterations;
 }
 
 Mat38 hexCorotationalForce(const Mat24& K0, const Mat3& R, const Mat38& x, const Mat38& X) {

@@ -63,11 +63,29 @@ Mat38 hexElasticForce(const Vec3& size, Real young, Real poisson, const Mat38& u
 /// Deformation gradient at the element centre: F = sum_a x_a (grad N_a(0))^T.
 Mat3 hexCentreGradient(const Vec3& size, const Mat38& x);
 
-/// Rotation of the polar decomposition of F, by the iteration of Müller et al. 2016 ("A robust
-/// method to extract the rotational part of deformations", MIG): maximise tr(R^T F) by repeated
-/// axis-angle updates omega = sum_i r_i x f_i / |sum_i r_i . f_i| of the quaternion q, warm-started
-/// from q (so a few iterations per step suffice; always returns a rotation, even for inverted F).
-/// Returns the number of iterations used.
+/// Outcome of one rotation extraction.
+struct RotationExtraction {
+  int iterations = 0;      ///< Newton (or Müller) updates taken
+  bool converged = false;  ///< the last step was below the tolerance, or the SVD gave R
+  bool svd = false;        ///< the iteration cap was reached and R came from the SVD of F
+};
+
+/// Rotation R of the polar decomposition of F: the proper rotation maximising tr(R^T F) (for
+/// inverted F the one with the smallest singular value negated). Warm-started from q, by Newton
+/// steps on that objective under R <- exp([omega]) R:
+///   omega = (tr(A) I - sym(A))^-1 sum_i r_i x f_i,   A = F R^T,
+/// which converge quadratically (one or two steps per time step when warm-started). Müller et
+/// al. 2016 ("A robust method to extract the rotational part of deformations", MIG) replace the
+/// matrix by tr(A) I; their iteration removes only about two thirds of the angle error per step
+/// near the solution (the error contracts by sym(A) / tr(A)), so a cap of 8 iterations never
+/// reaches a 1e-9 rad tolerance from an error above 1e-5 rad. Their step is kept where the
+/// Newton matrix is not positive definite (far from the maximum); a step is clamped at 1 rad.
+/// Stops when |omega| <= tolerance (rad). When maxIterations are used up, R is taken from the
+/// SVD of F (exact; reported in `svd`). Not converged only when F or q is not finite.
+RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations,
+                                       Real tolerance = 1e-12);
+
+/// extractRotationInfo, returning the number of iterations.
 int extractRotation(const Mat3& F, Quat& q, int maxIterations, Real tolerance = 1e-12);
 
 /// Corotational element force f = -R K0 (R^T x - X) (N), x, X: current and rest positions.

@@ -89,6 +89,29 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   m_fixedList = fixedNodesOf(m_rest);
   std::sort(m_fixedList.begin(), m_fixedList.end());
   m_fixedList.erase(std::unique(m_fixedList.begin(), m_fixedList.end()), m_fixedList.end());
+  m_fixedInRegion = static_cast<long long>(m_fixedList.size());
+  if (config.clampCells && !organ.fixed.empty()) {
+    // The grid sticks out of the organ by up to a cell, so the nodes inside the fixed region may
+    // be few (or none) and the clamped surface vertices hang from free nodes: on the OpenHELP
+    // kidney (bottom 15 mm fixed, 967 hexahedra) that surface moved 2.1 mm under a 10 mm lift.
+    // Pin the nodes that carry those vertices, as a grasp prescribes its carrying nodes.
+    std::vector<int> held;
+    for (Eigen::Index v = 0; v < organ.surface.V.rows(); ++v) {
+      const Vec3 p = organ.surface.V.row(v).transpose();
+      for (const Box& b : organ.fixed.boxes)
+        if (b.contains(p)) {
+          held.push_back(static_cast<int>(v));
+          break;
+        }
+    }
+    for (int v : organ.fixed.surfaceVertices)
+      if (v >= 0 && v < organ.surface.numVertices()) held.push_back(v);
+    for (int v : held)
+      for (int a = 0; a < 8; ++a)
+        if (m_embedding.weights(v, a) > 1e-12) m_fixedList.push_back(m_embedding.nodeIds(v, a));
+    std::sort(m_fixedList.begin(), m_fixedList.end());
+    m_fixedList.erase(std::unique(m_fixedList.begin(), m_fixedList.end()), m_fixedList.end());
+  }
   m_isFixed.assign(N, 0);
   for (int n : m_fixedList) {
     if (n < 0 || n >= N) throw InputError(where, "fixed", "fixed node index out of range");
@@ -164,7 +187,8 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
 Counts HexFemModel::counts() const {
   return {{"elements", m_grid.numHexes()},
           {"nodes", m_grid.numNodes()},
-          {"fixed_nodes", static_cast<long long>(m_fixedList.size())},
+          {"fixed_nodes", m_fixedInRegion},
+          {"clamped_nodes", static_cast<long long>(m_fixedList.size())},
           {"dofs", m_numDofs},
           {"cholesky_factor_nonzeros", m_factorNonZeros},
           {"cholesky_flops_per_factor_nonzero", std::llround(m_flopsPerFactorNonZero)},
@@ -176,7 +200,10 @@ PhaseTimes HexFemModel::phaseTimes() const {
 }
 
 NumericCounters HexFemModel::numericCounters() const {
-  return {{"rotation_not_converged", m_rotationNotConverged},
+  return {{"unconverged_steps", m_unconvergedSteps},
+          {"rotation_not_converged", m_rotationNotConverged},
+          {"rotation_svd_fallbacks", m_rotationSvd},
+          {"rotation_iterations", m_rotationIterations},
           {"pcg_not_converged", m_pcgNotConverged},
           {"pcg_iterations", m_pcgIterations},
           {"ignored_grasp_nodes", m_ignoredGraspNodes},
@@ -396,16 +423,23 @@ void HexFemModel::updateInverseDiagonal() {
   }
 }
 
-void HexFemModel::updateRotations() {
+bool HexFemModel::updateRotations() {
+  bool converged = true;
   const Mat38 G = hexShapeGradients(Vec3::Constant(m_grid.cellSize), Vec3::Zero());
   for (int e = 0; e < m_grid.numHexes(); ++e) {
     const auto& hex = m_grid.hexes[e];
     Mat3 F = Mat3::Zero();
     for (int a = 0; a < 8; ++a) F.noalias() += m_x.row(hex[a]).transpose() * G.col(a).transpose();
-    const int it = extractRotation(F, m_q[e], m_config.rotationIterations, 1e-9);
-    if (it >= m_config.rotationIterations) ++m_rotationNotConverged;
+    const RotationExtraction r = extractRotationInfo(F, m_q[e], m_config.rotationIterations, 1e-9);
+    m_rotationIterations += r.iterations;
+    m_rotationSvd += r.svd ? 1 : 0;
+    if (!r.converged) {
+      ++m_rotationNotConverged;
+      converged = false;
+    }
     m_R[e] = m_q[e].toRotationMatrix();
   }
+  return converged;
 }
 
 void HexFemModel::reset() {
@@ -426,6 +460,7 @@ void HexFemModel::reset() {
   m_graspForces.clear();
   m_lastIterations = 0;
   m_rotationNotConverged = m_pcgNotConverged = m_ignoredGraspNodes = m_pcgIterations = 0;
+  m_rotationSvd = m_rotationIterations = m_unconvergedSteps = 0;
   m_msAssembly = m_msSolve = m_msSurface = 0;
   if (m_numDofs > 0) {
     Eigen::Map<VecX>(m_A.valuePtr(), m_A.nonZeros()) = m_baseValues;
@@ -495,6 +530,7 @@ void HexFemModel::prescribeGrasps(const StepInput& in) {
       }
     m_JcPinv = nc > 0 ? MatX(Eigen::CompleteOrthogonalDecomposition<MatX>(m_Jc).pseudoInverse())
                       : MatX(0, m);
+    m_JcColSum = m_Jc.colwise().sum().transpose();
     m_carryShare.setZero(nc, Eigen::Index(in.grasps.size()));
     for (Eigen::Index r = 0; r < m; ++r)
       for (Eigen::Index c = 0; c < nc; ++c)
@@ -516,8 +552,17 @@ void HexFemModel::prescribeGrasps(const StepInput& in) {
       p += m_embedding.weights(v, a) * m_x.row(m_embedding.nodeIds(v, a)).transpose();
     gap.row(r) = m_graspVertTargets.row(r) - p.transpose();
   }
-  m_graspDq.resize(nc, 3);
-  m_graspDq.noalias() = m_JcPinv * gap;
+  // dq = b + J_C^+ (gap - J_C b), b the weighted mean of the gaps each node carries: a rigidly
+  // translated grasp moves its carrying nodes with it (J_C b = gap when every node of the cells is
+  // free), where the plain minimum-norm dq = J_C^+ gap moves the heavily weighted nodes farther
+  // than the tool and the lightly weighted ones less (the kidney's surface outran a 10 mm lift by
+  // 1.2 mm).
+  m_graspBase.noalias() = m_Jc.transpose() * gap;
+  for (Eigen::Index c = 0; c < nc; ++c)
+    if (m_JcColSum[c] > 0) m_graspBase.row(c) /= m_JcColSum[c];
+  gap.noalias() -= m_Jc * m_graspBase;
+  m_graspDq = m_graspBase;
+  m_graspDq.noalias() += m_JcPinv * gap;
   for (Eigen::Index c = 0; c < nc; ++c) {
     const int n = m_grasped[size_t(c)];
     m_target.row(n) = m_x.row(n) + m_graspDq.row(c);
@@ -585,7 +630,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
   if (in.contact) m_stepStart = m_x;
 
   const bool corot = m_config.elastic == ElasticModel::Corotational;
-  if (corot) updateRotations();
+  const bool rotationsOk = !corot || updateRotations();
 
   // The scale of the right-hand side for the CG stopping test: its inertia and load part
   // M v + h f_ext, filtered, in the D^-1 norm (see below).
@@ -604,7 +649,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
   m_msAssembly = msSince(t0);
 
   const auto t1 = Clock::now();
-  bool ok = true;
+  bool ok = true, solveConverged = true;
   m_v = m_v0;
   m_lastIterations = 0;
   if (m_numDofs > 0) {
@@ -661,10 +706,17 @@ StepStatus HexFemModel::step(const StepInput& in) {
         res2 = residual2();
         converged = res2 <= tol2;
       }
-      if (ok && !converged) ++m_pcgNotConverged;
+      if (ok && !converged) {
+        ++m_pcgNotConverged;
+        solveConverged = false;
+      }
       m_pcgIterations += m_lastIterations;
     }
   }
+
+  // A step whose rotations or CG solve gave up is not the step the scene asked for: the harness
+  // reads unconverged_steps into validity.
+  if (!rotationsOk || !solveConverged) ++m_unconvergedSteps;
 
   // Reaction at the carrying nodes: (b - A v+)_C / h, from the elements touching them, each
   // node's share to the grasps whose vertices it carries (by their weights on it).

@@ -75,6 +75,10 @@ struct HexFemConfig {
   int pcgMaxIterations = 50;
   PcgPreconditioner pcgPreconditioner = PcgPreconditioner::Rest;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
+  /// Also pin every node of the cells that carry a surface vertex of the organ's fixed region
+  /// (its embedding weights), so the clamped surface does not move; false: only the nodes
+  /// fixedNodesOf returns (the grid nodes inside the region).
+  bool clampCells = true;
   CholeskySolver::Kind cholesky = CholeskySolver::Kind::Auto;
   bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
 };
@@ -82,7 +86,8 @@ struct HexFemConfig {
 class HexFemModel : public Model {
  public:
   /// Builds grid, embedding, K0, mass, sparsity pattern and factorisation. fixedNodesOf maps the
-  /// rest node positions to the pinned node indices. Throws InputError for unusable input.
+  /// rest node positions to the pinned node indices; with config.clampCells the nodes carrying
+  /// the surface vertices of organ.fixed are pinned too. Throws InputError for unusable input.
   void initialize(const Organ& organ, const HexFemConfig& config, Real dt,
                   const std::function<std::vector<int>(const MatX3&)>& fixedNodesOf);
 
@@ -121,7 +126,7 @@ class HexFemModel : public Model {
   void applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b, Real scale,
                      VecX& out) const;
   void applyAllElements(const VecX& in, Real a, Real b, Real scale, VecX& out, bool rotated) const;
-  void updateRotations();
+  bool updateRotations();  // false when an element's rotation did not converge
   void updateInverseDiagonal();
   void filter(VecX& r) const;
   /// Grasped surface vertices of `in` -> prescribed carrying nodes and their targets (m_grasped,
@@ -153,6 +158,7 @@ class HexFemModel : public Model {
   std::vector<int> m_nodeElemStart, m_nodeElems;  // node -> elements (CSR)
   bool m_factorOk = false;
   long long m_factorNonZeros = 0;
+  long long m_fixedInRegion = 0;       // nodes fixedNodesOf returned (before the clamped cells)
   double m_flopsPerFactorNonZero = 0;  // factorisation flops / nnz(L) of the analysed ordering
   Real m_totalMass = 0;
   Vec3 m_restCenter = Vec3::Zero();
@@ -196,6 +202,8 @@ class HexFemModel : public Model {
   MatX m_JcPinv;                      // its pseudo-inverse
   MatX m_carryShare;                  // #carrying x #grasps: share of each node's reaction
   MatX3 m_graspGap, m_graspDq;        // t - J q per grasped vertex; the carrying nodes' dq
+  MatX3 m_graspBase;                  // per carrying node: the weighted mean gap it carries
+  VecX m_JcColSum;                    // column sums of m_Jc
   std::vector<int> m_touched;         // elements touching grasped nodes
   std::vector<int> m_touchedGrasped;  // grasp set m_touched was built for
   std::vector<char> m_elemMark;
@@ -206,7 +214,9 @@ class HexFemModel : public Model {
   int m_lastIterations = 0;
   double m_msAssembly = 0, m_msSolve = 0, m_msSurface = 0;
   long long m_rotationNotConverged = 0, m_pcgNotConverged = 0, m_ignoredGraspNodes = 0;
-  long long m_pcgIterations = 0;  // CG iterations over the run
+  long long m_rotationSvd = 0, m_rotationIterations = 0;  // SVD fallbacks, Newton steps
+  long long m_unconvergedSteps = 0;  // steps with a rotation or the CG solve not converged
+  long long m_pcgIterations = 0;     // CG iterations over the run
 };
 
 }  // namespace deform::fem_hex

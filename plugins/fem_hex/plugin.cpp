@@ -43,7 +43,13 @@ std::vector<ParamSpec> paramSpecs() {
                         "the grasp set changes"),
       ParamSpec::integer("pcg_max_iterations", 50, 1, 100000, "CG iteration cap per step"),
       ParamSpec::integer("rotation_iterations", 8, 1, 1000,
-                         "iteration cap of the warm-started element rotation extraction"),
+                         "cap of the warm-started Newton steps of the element rotation extraction "
+                         "(1e-9 rad); past it the rotation comes from the SVD of F (numeric "
+                         "rotation_svd_fallbacks)"),
+      ParamSpec::choice("clamp", "cells", {"cells", "nodes"},
+                        "cells: pin the grid nodes inside the fixed region and every node of the "
+                        "cells carrying a surface vertex of it (the clamped surface stays put); "
+                        "nodes: only the grid nodes inside the region"),
       ParamSpec::choice("cholesky", "auto", {"auto", "simplicial", "supernodal"},
                         "CHOLMOD factorisation kind (auto: CHOLMOD picks supernodal when the "
                         "factor is dense enough)"),
@@ -71,6 +77,7 @@ HexFemConfig configFromParams(const ParamValues& p) {
       {{"rest", PcgPreconditioner::Rest}, {"rest_grasped", PcgPreconditioner::RestGrasped}});
   c.pcgMaxIterations = static_cast<int>(p.integer("pcg_max_iterations"));
   c.rotationIterations = static_cast<int>(p.integer("rotation_iterations"));
+  c.clampCells = p.choice("clamp") == "cells";
   c.cholesky = p.choiceAs<CholeskySolver::Kind>("cholesky",
                                                 {{"auto", CholeskySolver::Kind::Auto},
                                                  {"simplicial", CholeskySolver::Kind::Simplicial},

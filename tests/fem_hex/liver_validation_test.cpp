@@ -172,6 +172,45 @@ TEST(FemHexLiverValidation, ValidationScenesMatchTheShippedScenes) {
   }
 }
 
+// A run whose steps gave up (here the CG solve, capped at one iteration) is invalid: fem_hex
+// reports them as numeric unconverged_steps, which the harness's validity rule reads (issue 35
+// item 4; an unconverged rotation counts the same way). The same run uncapped stays valid.
+TEST(FemHexLiverValidation, UnconvergedStepsMakeTheRunInvalid) {
+  json j = {
+      {"name", "capped"},
+      {"organ",
+       {{"mesh", "phantom:cube"},
+        {"resolution", 0.4},
+        {"fixed", {{"box", {{-1, -1, -1}, {1, 1, -0.04}}}}}}},
+      {"gravity", {0, 0, -9.81}},
+      {"dt", 0.001},
+      {"duration", 0.01},
+      {"models",
+       {{{"plugin", "fem_hex"},
+         {"label", "capped"},
+         {"params", {{"elements", 100}, {"pcg_max_iterations", 1}, {"pcg_tolerance", 1e-12}}}},
+        {{"plugin", "fem_hex"}, {"label", "default"}, {"params", {{"elements", 100}}}}}}};
+  const Scene scene = parseScene(j, "capped.json");
+  const Organ organ = loadOrgan(scene);
+  const std::vector<PlannedRun> planned = planRuns(scene, loader(), BenchmarkOptions{});
+  ASSERT_EQ(planned.size(), 2u);
+  Cache cache(Cache::defaultDir());
+  for (const PlannedRun& p : planned) {
+    SCOPED_TRACE(p.label);
+    const RunRecord r = runModel(*p.info, p.params, scene, organ, cache);
+    ASSERT_EQ(r.status, RunStatus::Ok) << r.message;
+    EXPECT_EQ(r.numeric.at("rotation_not_converged"), 0);
+    if (p.label == "capped") {
+      EXPECT_GT(r.numeric.at("unconverged_steps"), 0);
+      EXPECT_FALSE(r.valid);
+      EXPECT_NE(r.invalidReason.find("did not converge"), std::string::npos) << r.invalidReason;
+    } else {
+      EXPECT_EQ(r.numeric.at("unconverged_steps"), 0);
+      EXPECT_TRUE(r.valid) << r.invalidReason;
+    }
+  }
+}
+
 TEST(FemHexLiverValidation, GraspLiftAgainstReference) {
   const fs::path file = shippedScene("liver_grasp_lift");
   const Comparison c = compare(readJson(file), file, {967, 4000});
@@ -225,7 +264,10 @@ TEST(FemHexLiverValidation, GraspLiftAgainstReference) {
   // Refinement brings fem_hex closer to the reference, everywhere and at the grasp.
   EXPECT_LT(fine.error->rmseAll, hex.error->rmseAll);
   EXPECT_LT(fine.error->lossRatio, hex.error->lossRatio);
-  EXPECT_LT(rmse(fine, 10), rmse(hex, 10));
+  // The 10 ungrasped vertices nearest the grasp lie in carrying cells at both resolutions, which
+  // move rigidly with the tool: their error is the same (the reference's departure from a rigid
+  // lift there), not smaller.
+  EXPECT_LE(rmse(fine, 10), rmse(hex, 10) * (1 + 1e-9));
   EXPECT_LT(rmse(fine, 50), rmse(hex, 50));
 }
 
@@ -263,8 +305,12 @@ TEST(FemHexLiverValidation, PokeAgainstReference) {
     // Along the force, at the load and on average far from it (the force and gravity push down).
     EXPECT_GT(u.dot(force), 0.0) << r->label;
     EXPECT_GT(uFar.dot(force), 0.0) << r->label;
-    // Far from the load the models agree on the sag to within the stiffness margin.
-    EXPECT_GT(uFar.z() / uRefFar.z(), 0.5) << r->label;
+    // Far from the load the models agree on the sag to within the stiffness margin. fem_hex pins
+    // every node of the cells carrying the clamped surface (clamp = cells), which at 967
+    // hexahedra (11.5 mm cells around two large fixed boxes) stiffens it: far-field sag 0.50 of
+    // the reference's (it was 1.0 with only the nodes inside the boxes pinned, when the clamped
+    // surface itself moved 2.4 mm); 0.88 at 4000.
+    EXPECT_GT(uFar.z() / uRefFar.z(), 0.4) << r->label;
     EXPECT_LT(uFar.z() / uRefFar.z(), 1.5) << r->label;
   }
   // The point load's displacement is singular: fem_hex spreads the force over one cell's nodes,
@@ -272,15 +318,16 @@ TEST(FemHexLiverValidation, PokeAgainstReference) {
   const Real dHex = (hex.finalSurface.row(loaded) - X.row(loaded)).norm();
   const Real dFine = (fine.finalSurface.row(loaded) - X.row(loaded)).norm();
   EXPECT_GT(dFine, 1.1 * dHex);
-  // Far field and whole surface: bounded at both resolutions. No ordering under refinement: the
-  // reference (linear tets, 5000 elements) is itself stiffer than converged, and since fem_hex
-  // counts its boundary cells by volume fraction and bends without locking, its 4000-hexahedron
-  // run sags past it (far field 10.9 mm against 7.9 mm) where the 967 one happens to match it;
-  // quadratic tets on the same mesh give 9.4 mm (docs/notes/g3-fem-hex-element.md).
+  // Far field and whole surface: bounded at both resolutions, and closer with refinement now that
+  // the clamped cells make the coarse grid the stiffer one (far field 3.9 and 7.0 mm against the
+  // reference's 7.9; the reference, linear tets at 5000 elements, is itself stiffer than
+  // converged: quadratic tets on the same mesh give 9.4 mm, docs/notes/g3-fem-hex-element.md).
   for (const RunRecord* r : {&hex, &fine}) {
     EXPECT_LT(rmseOver(r->finalSurface, far), 0.5 * peakRef) << r->label;
-    EXPECT_LT(r->error->lossRatio, 0.5) << r->label;
+    EXPECT_LT(r->error->lossRatio, 0.6) << r->label;
   }
+  EXPECT_LT(fine.error->lossRatio, hex.error->lossRatio);
+  EXPECT_LT(rmseOver(fine.finalSurface, far), rmseOver(hex.finalSurface, far));
 }
 
 }  // namespace
