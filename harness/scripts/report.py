@@ -524,11 +524,11 @@ def results_table(path, viewer_href=None):
 def main():
     try:
         return run_report()
-    except BadInput as e:
-        print("report: %s" % e)
+    except BadInput as e:  # `deformbench report` prefixes "deformbench: report: "
+        print(e)
         return 2
     except Exception as e:  # one line, never a traceback
-        print("report: internal error: %s: %s" % (type(e).__name__, e))
+        print("internal error: %s: %s" % (type(e).__name__, e))
         return 3
 
 
