@@ -134,7 +134,9 @@ std::vector<char> serializeRunRecord(const RunRecord& r) {
   w.pod(r.solvedSteps);
   w.pod(static_cast<long long>(r.stepMs.size()));
   for (double v : r.stepMs) w.pod(v);
-  w.pod(r.stepStats);
+  for (double v : {r.stepStats.median, r.stepStats.p95, r.stepStats.max, r.stepStats.mean})
+    w.pod(v);  // field by field: the struct's padding is not data
+  w.pod(r.stepStats.samples);
   putMap(w, r.phaseMs);
   putMap(w, r.numeric);
   w.pod(r.fixedNodes);
@@ -213,7 +215,9 @@ RunRecord deserializeRunRecord(const std::vector<char>& bytes) {
     r.stepMs.resize(size_t(n));
     for (double& v : r.stepMs) v = b.pod<double>();
   }
-  r.stepStats = b.pod<StepStats>();
+  for (double* v : {&r.stepStats.median, &r.stepStats.p95, &r.stepStats.max, &r.stepStats.mean})
+    *v = b.pod<double>();
+  r.stepStats.samples = b.pod<int>();
   getMap(b, r.phaseMs);
   getMap(b, r.numeric);
   r.fixedNodes = b.pod<int>();
