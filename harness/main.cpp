@@ -23,6 +23,8 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -54,6 +56,40 @@ std::vector<std::string> searchPath(const std::vector<std::string>& extraDirs) {
   std::vector<std::string> path = extraDirs;
   for (const auto& d : PluginLoader::defaultSearchPath()) path.push_back(d);
   return path;
+}
+
+/// A check for a positive option value that says so in words (CLI11's PositiveNumber prints its
+/// range with the largest double written out in 309 digits).
+CLI::Validator positiveValue(bool whole) {
+  return CLI::Validator(
+      [whole](std::string& text) -> std::string {
+        double v = 0;
+        size_t used = 0;
+        try {
+          v = std::stod(text, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used != text.size() || !std::isfinite(v)) return "'" + text + "' is not a number";
+        if (whole && (v < 1 || v != std::floor(v)))
+          return "must be a whole number of at least 1, got " + text;
+        if (!whole && !(v > 0)) return "must be above 0, got " + text;
+        return "";
+      },
+      whole ? "INT >= 1" : "> 0");
+}
+
+/// Plugin names are file names (deform_NAME.so) without folders: a name that is a path would
+/// put the stability outputs outside --out.
+void requirePluginName(const std::string& option, const std::string& name) {
+  const bool ok = !name.empty() && name.front() != '.' &&
+                  std::all_of(name.begin(), name.end(), [](unsigned char c) {
+                    return std::isalnum(c) || c == '_' || c == '-' || c == '.' || c == '+';
+                  });
+  if (!ok)
+    throw InputError(option, name,
+                     "not a plugin name (letters, digits, '_', '-', '.', no folders; "
+                     "`deformbench plugins` lists them)");
 }
 
 std::string valueText(const json& v) {
@@ -237,6 +273,7 @@ struct RunArgs {
   bool reuseReference = false;
   bool reuseModelSolves = false;
   bool writeCompared = false;
+  bool inProcess = false;
 };
 
 /// The --calibration files, read and checked (InputError names the file); two files for one
@@ -303,6 +340,7 @@ int cmdRun(const RunArgs& a) {
   options.reuseReference = a.reuseReference || a.reuseModelSolves;
   options.reuseModelSolves = a.reuseModelSolves;
   options.writeComparedSurface = a.writeCompared;
+  options.isolateRuns = !a.inProcess;
   if (a.explain)
     options.explain = [](const std::string& s) { std::cout << "explain: " << s << "\n"; };
   options.progress = [](const std::string& s) { std::cout << s << "\n" << std::flush; };
@@ -429,7 +467,7 @@ std::unique_ptr<Dispatcher> makeDispatcher(const DispatchArgs& d) {
 
 void addDispatch(CLI::App* cmd, DispatchArgs& d) {
   auto* jobs = cmd->add_option("--jobs", d.jobs, "cases at once, each its own process (default 1)")
-                   ->check(CLI::PositiveNumber);
+                   ->check(positiveValue(true));
   auto* slurm = cmd->add_option("--slurm", d.slurm,
                                 "write a Slurm job array of the cases and a collect step into "
                                 "this folder (submits nothing; see README)");
@@ -464,6 +502,7 @@ struct TablesArgs {
   long long referenceElements = 0;
   double timeout = 0;
   bool resume = false;
+  bool retryFailed = false;
   bool inProcess = false;
   bool noReferenceCheck = false;
   bool surfaceBaselines = false;
@@ -495,6 +534,7 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
     child.pluginArgs = pluginDirArgs(loader.searchPath());
     if (ta.timeout > 0) child.timeoutS = ta.timeout;
     child.resume = ta.resume;
+    child.retryFailed = ta.retryFailed;
     o.cases.child = child;
   }
   std::vector<Table> tables;
@@ -521,6 +561,7 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
 struct ChildArgs {
   bool given = false;  ///< --jobs, --mpi, --slurm, --resume or --timeout on the command line
   bool resume = false;
+  bool retryFailed = false;
   double timeout = 0;
   DispatchArgs dispatch;
 };
@@ -528,9 +569,13 @@ struct ChildArgs {
 void addChildArgs(CLI::App* cmd, ChildArgs& c, const std::string& what) {
   cmd->add_option("--timeout", c.timeout,
                   "seconds per " + what + ", each in its own process (implies child processes)")
-      ->check(CLI::PositiveNumber);
-  cmd->add_flag("--resume", c.resume,
-                "reuse the " + what + "s already finished in --out (implies child processes)");
+      ->check(positiveValue(false));
+  auto* resume =
+      cmd->add_flag("--resume", c.resume,
+                    "reuse the " + what + "s already finished in --out (implies child processes)");
+  cmd->add_flag("--retry-failed", c.retryFailed,
+                "with --resume: run the " + what + "s whose run failed (crash, timeout) again")
+      ->needs(resume);
   addDispatch(cmd, c.dispatch);
 }
 
@@ -549,6 +594,7 @@ std::optional<ChildCaseOptions> childOptions(const ChildArgs& c, PluginLoader& l
   child.pluginArgs = pluginDirArgs(loader.searchPath());
   child.timeoutS = c.timeout > 0 ? c.timeout : defaultTimeoutS;
   child.resume = c.resume;
+  child.retryFailed = c.retryFailed;
   return child;
 }
 
@@ -669,6 +715,7 @@ struct StabilityArgs {
 };
 
 int cmdStability(const StabilityArgs& a) {
+  for (const std::string& m : a.models) requirePluginName("--model", m);
   PluginLoader loader(searchPath(a.common.pluginDirs));
   StabilityOptions o;
   o.quick = a.common.quick;
@@ -896,7 +943,7 @@ int realMain(int argc, char** argv) {
   auto* noCacheOpt = run->add_flag("--no-cache", ra.noCache, "do not read or write the cache");
   cacheOpt->excludes(noCacheOpt);
   run->add_option("--steps", ra.steps, "stop every run after this many steps (quick tries)")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveValue(true));
   run->add_option("--calibration", ra.calibrations,
                   "calibration.json of `deformbench calibrate`: its model takes those parameters "
                   "where the scene writes none (repeatable, one file per model)")
@@ -911,6 +958,9 @@ int realMain(int argc, char** argv) {
   run->add_flag("--write-compared", ra.writeCompared,
                 "also write each run's surface at its last compared instant (converge's levels)")
       ->group("");
+  run->add_flag("--in-process", ra.inProcess,
+                "run the models in this process (a crash of one ends the command; debuggers)")
+      ->group("");
   run->add_flag("--strict", ra.strict,
                 "exit 1 when a model failed (one stderr line each; results.json still written)");
 
@@ -921,7 +971,7 @@ int realMain(int argc, char** argv) {
   phantom->add_option("name", phName, "phantom name (see --list)");
   phantom->add_option("--out", phOut, "output mesh file (.obj, .off, .stl, .vtp)");
   phantom->add_option("--resolution", phRes, "vertex-count scale (1 = default)")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveValue(false));
   phantom->add_flag("--list", phList, "list the phantoms");
 
   const auto addCommon = [](CLI::App* cmd, CommonArgs& c, bool quick) {
@@ -942,7 +992,7 @@ int realMain(int argc, char** argv) {
   tables
       ->add_option("--reference-elements", ta.referenceElements,
                    "target tets of the reference FEM, quadratic (default 20000; 4000 with --quick)")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveValue(true));
   tables->add_flag("--no-reference-check", ta.noReferenceCheck,
                    "skip the convergence study of each table's reference (three solves at 1/8, "
                    "1/2.8 and 1 x its tets; cached)");
@@ -954,8 +1004,13 @@ int realMain(int argc, char** argv) {
   tables
       ->add_option("--timeout", ta.timeout,
                    "seconds per case, each case running in its own process (default 900)")
-      ->check(CLI::PositiveNumber);
-  tables->add_flag("--resume", ta.resume, "reuse the cases already finished in --out");
+      ->check(positiveValue(false));
+  auto* tablesResume =
+      tables->add_flag("--resume", ta.resume, "reuse the cases already finished in --out");
+  tables
+      ->add_flag("--retry-failed", ta.retryFailed,
+                 "with --resume: run the cases with a failed run (crash, timeout) again")
+      ->needs(tablesResume);
   tables->add_flag("--in-process", ta.inProcess,
                    "run the cases in this process (no time limit, a crash ends the command)");
   addCommon(tables, ta.common, true);
@@ -1003,7 +1058,7 @@ int realMain(int argc, char** argv) {
       ->add_option("--timeout", cal.timeout,
                    "seconds per model run, each in its own process "
                    "(default 900)")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveValue(false));
   addDispatch(calibrate, cal.dispatch);
   addCommon(calibrate, cal.common, false);
 
@@ -1015,7 +1070,7 @@ int realMain(int argc, char** argv) {
   stability->add_option("--model", st.models, "plugin to test (repeatable; default: all found)");
   stability->add_option("--case", st.cases, "case id to run (repeatable; default: the set)");
   stability->add_option("--timeout", st.timeout, "seconds per case (default 120, 60 with --quick)")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveValue(false));
   addDispatch(stability, st.dispatch);
   stability->add_flag("--no-plot", st.noPlot, "write the data only");
   addCommon(stability, st.common, true);
@@ -1035,8 +1090,8 @@ int realMain(int argc, char** argv) {
   bench->add_option("--threshold", ba.threshold, "slowdown flagged above this fraction (0.25)")
       ->check(CLI::NonNegativeNumber);
   bench->add_option("--repeat", ba.repeat, "runs per case (median taken)")
-      ->check(CLI::PositiveNumber);
-  bench->add_option("--steps", ba.steps, "steps per run")->check(CLI::PositiveNumber);
+      ->check(positiveValue(true));
+  bench->add_option("--steps", ba.steps, "steps per run")->check(positiveValue(true));
   bench->add_option("--only", ba.only, "case id or plugin (repeatable)");
   addCommon(bench, ba.common, false);
 
@@ -1050,7 +1105,7 @@ int realMain(int argc, char** argv) {
   converge
       ->add_option("--elements", convElements,
                    "coarsest level's elements (default: the reference's own)")
-      ->check(CLI::PositiveNumber);
+      ->check(positiveValue(true));
   bool convOfReference = false;
   converge->add_flag("--of-reference", convOfReference,
                      "levels 1/8, 1/2.8 and 1 times the reference's own elements: the estimate "

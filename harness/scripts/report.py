@@ -48,6 +48,194 @@ def esc(x):
     return html.escape(str(x))
 
 
+# ------------------------------------------------------------------------- what the report reads
+# Every file is checked before it is drawn: a field of the wrong type, a number no measurement
+# can have (|v| > 1e100, where the report's arithmetic would overflow) or a surface that is not
+# the one its results.json describes ends the report with one line naming the file and the
+# field, exit code 2 (docs/commands.md, "report").
+
+PLAUSIBLE = 1e100
+
+
+class BadInput(Exception):
+    pass
+
+
+def load_json(path):
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except OSError as e:
+        raise BadInput("%s: cannot read: %s" % (path, e.strerror or e))
+    except ValueError as e:
+        raise BadInput("%s: not JSON: %s" % (path, e))
+
+
+def need(cond, path, where, problem):
+    if not cond:
+        raise BadInput("%s: %s: %s" % (path, where, problem))
+
+
+def check_number(path, where, v, nullable=True, minimum=None):
+    if v is None and nullable:
+        return
+    need(isinstance(v, (int, float)) and not isinstance(v, bool), path, where,
+         "expected a number, got %s" % type_name(v))
+    need(math.isfinite(v) and abs(v) <= PLAUSIBLE, path, where,
+         "%r is not a plausible value (over %g)" % (v, PLAUSIBLE))
+    if minimum is not None:
+        need(v >= minimum, path, where, "%r is below %g" % (v, minimum))
+
+
+def check_string(path, where, v, nullable=False):
+    if v is None and nullable:
+        return
+    need(isinstance(v, str), path, where, "expected a string, got %s" % type_name(v))
+
+
+def type_name(v):
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return "a boolean"
+    if isinstance(v, (int, float)):
+        return "a number (%r)" % v
+    if isinstance(v, str):
+        return "a string (%r)" % (v if len(v) < 40 else v[:37] + "...")
+    return "a list" if isinstance(v, list) else "an object"
+
+
+def check_object(path, where, v, nullable=False):
+    if v is None and nullable:
+        return {}
+    need(isinstance(v, dict), path, where, "expected an object, got %s" % type_name(v))
+    return v
+
+
+def count_obj_vertices(data):
+    return sum(1 for line in data.splitlines() if line.startswith(b"v "))
+
+
+def check_results(path):
+    """A results.json and the final surfaces it names; returns the document."""
+    import hashlib
+    doc = check_object(path, "top level", load_json(path))
+    need(doc.get("format") == "deformbench-results/1", path, "format",
+         "expected \"deformbench-results/1\", got %s" % type_name(doc.get("format")))
+    scene = check_object(path, "scene", doc.get("scene"))
+    check_string(path, "scene.name", scene.get("name"))
+    organ = check_object(path, "organ", doc.get("organ"), nullable=True)
+    check_number(path, "organ.vertices", organ.get("vertices"), minimum=0)
+    runs = doc.get("runs")
+    need(isinstance(runs, list), path, "runs", "expected a list, got %s" % type_name(runs))
+    base = os.path.dirname(path)
+    for i, r in enumerate(runs):
+        at = "runs[%d]" % i
+        check_object(path, at, r)
+        check_string(path, at + ".label", r.get("label"))
+        at = "runs[%d] (%s)" % (i, r["label"])
+        for k in ("status", "model", "role", "message", "invalid_reason"):
+            check_string(path, at + "." + k, r.get(k), nullable=k != "status")
+        need(r["status"] in ("ok", "diverged", "unsupported", "failed"), path, at + ".status",
+             "unknown status %r" % r["status"])
+        need(r.get("valid") in (None, True, False), path, at + ".valid",
+             "expected true or false, got %s" % type_name(r.get("valid")))
+        check_object(path, at + ".params", r.get("params"), nullable=True)
+        check_number(path, at + ".precompute_s", r.get("precompute_s"), minimum=0)
+        for k, v in check_object(path, at + ".step_ms", r.get("step_ms"), nullable=True).items():
+            check_number(path, at + ".step_ms." + k, v, minimum=0)
+        for k, v in check_object(path, at + ".error", r.get("error"), nullable=True).items():
+            if k.startswith("rmse_") and k not in ("rmse_k_samples", "rmse_k_excluded_grasped") \
+                    or k in ("max", "loss_ratio") or k.startswith("reference_displacement_"):
+                check_number(path, at + ".error." + k, v, minimum=0)
+        surface = r.get("final_surface")
+        if surface is None:
+            continue
+        check_string(path, at + ".final_surface", surface)
+        rel = os.path.normpath(surface)
+        need(not os.path.isabs(rel) and not rel.startswith(".."), path, at + ".final_surface",
+             "%r is outside the results folder" % surface)
+        try:
+            with open(os.path.join(base, rel), "rb") as f:
+                data = f.read()
+        except OSError as e:
+            raise BadInput("%s: %s.final_surface: cannot read %s: %s"
+                           % (path, at, surface, e.strerror or e))
+        n = count_obj_vertices(data)
+        want = r.get("final_surface_vertices")
+        if want is not None:
+            check_number(path, at + ".final_surface_vertices", want, minimum=0)
+            need(n == want, path, at + ".final_surface",
+                 "%s has %d vertices, results.json says %d (the surfaces are from another run)"
+                 % (surface, n, want))
+        elif organ.get("vertices") is not None:
+            need(n >= organ["vertices"], path, at + ".final_surface",
+                 "%s has %d vertices, the organ %d (the surfaces are from another run)"
+                 % (surface, n, organ["vertices"]))
+        digest = r.get("final_surface_sha256")
+        if digest is not None:
+            check_string(path, at + ".final_surface_sha256", digest)
+            need(hashlib.sha256(data).hexdigest() == digest, path, at + ".final_surface",
+                 "%s does not match its SHA-256 in results.json (the surfaces are from "
+                 "another run)" % surface)
+    return doc
+
+
+def check_table(path, doc):
+    for k in ("table", "title"):
+        check_string(path, k, doc.get(k))
+    cols = doc.get("columns")
+    need(isinstance(cols, list), path, "columns", "expected a list, got %s" % type_name(cols))
+    for i, c in enumerate(cols):
+        check_object(path, "columns[%d]" % i, c)
+        check_string(path, "columns[%d].key" % i, c.get("key"))
+        check_string(path, "columns[%d].header" % i, c.get("header"))
+    rows = doc.get("rows")
+    need(isinstance(rows, list), path, "rows", "expected a list, got %s" % type_name(rows))
+    for i, r in enumerate(rows):
+        check_object(path, "rows[%d]" % i, r)
+        for k, v in r.items():
+            if isinstance(v, float):
+                check_number(path, "rows[%d].%s" % (i, k), v)
+
+
+def check_sweep(path):
+    doc = check_object(path, "top level", load_json(path))
+    pts = doc.get("points")
+    need(isinstance(pts, list), path, "points", "expected a list, got %s" % type_name(pts))
+    for i, p in enumerate(pts):
+        check_object(path, "points[%d]" % i, p)
+        for k in ("label", "model", "status"):
+            check_string(path, "points[%d].%s" % (i, k), p.get(k))
+        for k in ("ms_median", "rmse_50", "rmse_all", "max"):
+            check_number(path, "points[%d].%s" % (i, k), p.get(k), minimum=0)
+    check_number(path, "haptic_budget_ms", doc.get("haptic_budget_ms"), minimum=0)
+    return doc
+
+
+def check_stability(path):
+    doc = check_object(path, "top level", load_json(path))
+    check_table(path, doc)
+    for i, r in enumerate(doc["rows"]):
+        check_string(path, "rows[%d].model" % i, r.get("model"))
+        check_string(path, "rows[%d].status" % i, r.get("status"))
+    return doc
+
+
+def check_calibration(path, c):
+    check_string(path, "metric", c.get("metric"), nullable=True)
+    for k, v in check_object(path, "params", c.get("params"), nullable=True).items():
+        check_number(path, "params." + k, v, nullable=False)
+    for k, v in check_object(path, "defaults", c.get("defaults"), nullable=True).items():
+        check_number(path, "defaults." + k, v)
+    for part in ("train", "validation"):
+        o = check_object(path, part, c.get(part))
+        for k in ("before", "after"):
+            check_number(path, "%s.%s" % (part, k), o.get(k))
+    check_number(path, "evaluations", c.get("evaluations"))
+    check_number(path, "wall_s", c.get("wall_s"))
+
+
 def cell(v):
     if v is None:
         return "-"
@@ -119,8 +307,7 @@ def organ_figure(results_path):
     import numpy as np
 
     base = os.path.dirname(results_path)
-    with open(results_path) as f:
-        doc = json.load(f)
+    doc = check_results(results_path)
     runs = [r for r in doc["runs"] if r.get("final_surface")]
     ref = next((r for r in runs if r.get("role") == "reference"), None)
     models = [r for r in runs if r.get("role") != "reference"]
@@ -288,8 +475,7 @@ def svg_scatter(points, xlabel, ylabel, budget_ms=None):
 
 
 def results_table(path, viewer_href=None):
-    with open(path) as f:
-        doc = json.load(f)
+    doc = check_results(path)
     rows, links = [], []
 
     def href_of(r):
@@ -336,6 +522,17 @@ def results_table(path, viewer_href=None):
 
 
 def main():
+    try:
+        return run_report()
+    except BadInput as e:  # `deformbench report` prefixes "deformbench: report: "
+        print(e)
+        return 2
+    except Exception as e:  # one line, never a traceback
+        print("internal error: %s: %s" % (type(e).__name__, e))
+        return 3
+
+
+def run_report():
     if len(sys.argv) != 3:
         print(__doc__)
         return 2
@@ -345,6 +542,13 @@ def main():
         return 2
     sections = []
     notes = []
+    # Every file the report reads is checked first: a bad one ends it with one line.
+    for path in sorted(glob.glob(os.path.join(root, "**", "results.json"), recursive=True)):
+        check_results(path)
+    if os.path.exists(os.path.join(root, "sweep.json")):
+        check_sweep(os.path.join(root, "sweep.json"))
+    if os.path.exists(os.path.join(root, "stability.json")):
+        check_stability(os.path.join(root, "stability.json"))
     if not HAVE_MPL:
         notes.append("matplotlib is not installed for %s: the report has no pictures."
                      % sys.executable)
@@ -417,6 +621,7 @@ def main():
             continue
         if not isinstance(doc, dict) or doc.get("format") != "deformbench-table/1":
             continue
+        check_table(path, doc)
         if doc["table"] == "stability":
             continue  # in its own section
         cols = [(c["key"], c["header"]) for c in doc["columns"]]
@@ -455,6 +660,7 @@ def main():
             continue
         if not isinstance(c, dict) or c.get("format") != "deformbench-calibration/1":
             continue
+        check_calibration(path, c)
         scale = 1.0 if c.get("metric") == "loss_ratio" else 1e3
         def val(v):
             return None if v is None else scale * v

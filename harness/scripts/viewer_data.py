@@ -323,7 +323,10 @@ def page_parts(data, lib_src=None):
         app = f.read()
     with open(os.path.join(VIEWER_DIR, "viewer.css")) as f:
         css = f.read()
-    payload = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
+    # Inside <script> only "</script" and "<!--" change how HTML reads the text: escape every
+    # "<" (and ">", "&") as \u003c etc., which JSON.parse reads back unchanged.
+    payload = (json.dumps(data, separators=(",", ":")).replace("<", "\\u003c")
+               .replace(">", "\\u003e").replace("&", "\\u0026"))
     head = "<style>%s</style>" % css
     lib = ('<script src="%s"></script>' % html.escape(lib_src) if lib_src else
            "<script>%s</script>" % library_text())

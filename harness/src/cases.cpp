@@ -178,8 +178,15 @@ Prepared prepareCase(const SceneCase& sc, PluginLoader& loader) {
       readText(runScene) == prunedText) {
     try {
       readCase(c, ojson::parse(readText(sc.outDir / "case.json")));
-      c.resumed = true;
-      return p;
+      const bool failed =
+          c.result && std::any_of(c.result->runs.begin(), c.result->runs.end(),
+                                  [](const RunRecord& r) { return r.status == RunStatus::Failed; });
+      if (!(options.child->retryFailed && failed)) {
+        c.resumed = true;
+        return p;
+      }
+      c.result.reset();  // --retry-failed: run it again
+      c.wallS = 0;
     } catch (const std::exception&) {
       c.result.reset();  // unreadable: run it again
     }

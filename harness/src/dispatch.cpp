@@ -80,6 +80,10 @@ ojson resumedTaskResult(const ojson& task) {
     return nullptr;
   try {
     const ojson o = ojson::parse(readText(task["outcome"].get<std::string>()));
+    // "retry_failed": a child that was killed, timed out or exited non-zero runs again.
+    const bool failed = o.value("timed_out", false) || !o.value("spawn_error", "").empty() ||
+                        o.value("wait_status", 0) != 0;
+    if (failed && task.value("retry_failed", false)) return nullptr;
     if (o.at("argv") == task.at("argv")) return o;
   } catch (const std::exception&) {
     // absent or unreadable: run it

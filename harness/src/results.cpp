@@ -231,6 +231,9 @@ json runJson(const RunRecord& run) {
         case Cache::EventKind::Corrupt:
           c["corrupt"] = c["corrupt"].get<int>() + 1;
           break;
+        case Cache::EventKind::StoreFailed:
+          c["store_failed"] = c.value("store_failed", 0) + 1;
+          break;
       }
     }
     j["cache"] = c;

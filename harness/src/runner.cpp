@@ -3,16 +3,19 @@
 #include <deform/contact.h>
 #include <deform/interaction.h>
 #include <deform_harness/results.h>
+#include <deform_harness/run_isolation.h>
 #include <deform_harness/runner.h>
-
 #include <dlfcn.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <iomanip>
 #include <iterator>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <variant>
@@ -206,6 +209,7 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   long long residualCount = 0;
 
   for (int k = 0; k < n; ++k) {
+    if (options.onStep && k > 0 && (k & 4095) == 0) options.onStep(k, n);
     const Real t = k * scene.dt;
     const StepInput in = interaction.prepare(t, scene.dt, model);
     const auto& hands = interaction.handForces();
@@ -500,6 +504,8 @@ std::string eventName(Cache::EventKind k) {
       return "stored";
     case Cache::EventKind::Disabled:
       return "disabled";
+    case Cache::EventKind::StoreFailed:
+      return "store failed";
   }
   return "?";
 }
@@ -760,6 +766,7 @@ bool readCachedSolve(Cache& cache, const CacheKey& key, bool reference, RunRecor
     if (!b.atEnd()) throw std::runtime_error("trailing bytes");
   } catch (const std::exception&) {
     r = RunRecord();
+    cache.reject(kReferenceRunKind, key);
     return false;  // unreadable: solve again
   }
   r.status = RunStatus::Ok;
@@ -767,6 +774,106 @@ bool readCachedSolve(Cache& cache, const CacheKey& key, bool reference, RunRecor
                     " read from the cache (an earlier run solved the same problem with the same "
                     "plugin and parameters): its timings are that run's");
   return true;
+}
+
+/// The note a run gets for each cache entry it could not store (once per kind).
+void noteCacheStoreFailures(RunRecord& rec) {
+  std::set<std::string> kinds;
+  for (const Cache::Event& e : rec.cacheEvents) {
+    if (e.what != Cache::EventKind::StoreFailed || !kinds.insert(e.kind).second) continue;
+    rec.notes.push_back("warning: the cache entry " + e.kind + " could not be stored (" + e.detail +
+                        "); the run went on without the cache");
+  }
+}
+
+/// Runs longer than this many steps get a warning before they start and progress lines.
+constexpr long long kLongRunSteps = 1000000;
+
+std::string longRunWarning(const Scene& scene, const RunOptions& run) {
+  const long long n =
+      run.maxSteps >= 0 ? std::min(run.maxSteps, scene.numSteps()) : scene.numSteps();
+  if (n <= kLongRunSteps) return "";
+  std::ostringstream s;
+  s << "warning: " << n << " steps per run (dt " << scene.dt << " s over " << scene.duration
+    << " s): each model steps that many times; progress is printed as it goes";
+  return s.str();
+}
+
+/// Prints "LABEL: step K of N (P%)" at most every 10 s (and never for short runs).
+std::function<void(int, int)> stepProgress(const std::string& label,
+                                           const std::function<void(const std::string&)>& out) {
+  auto last =
+      std::make_shared<std::chrono::steady_clock::time_point>(std::chrono::steady_clock::now());
+  return [label, out, last](int done, int total) {
+    const auto now = std::chrono::steady_clock::now();
+    if (now - *last < std::chrono::seconds(total > kLongRunSteps ? 2 : 10)) return;
+    *last = now;
+    std::ostringstream s;
+    s << "  " << label << ": step " << done << " of " << total << " (" << std::setprecision(3)
+      << 100.0 * done / std::max(total, 1) << "%)";
+    out(s.str());
+  };
+}
+
+/// The SHA-256 and vertex count of each written final surface, in results.json beside its path,
+/// so that `report` can refuse a surface that is not the one this results.json describes.
+void signSurfaces(const fs::path& dir, const std::vector<RunRecord>& runs,
+                  nlohmann::ordered_json& doc) {
+  for (size_t i = 0; i < runs.size() && i < doc["runs"].size(); ++i) {
+    if (runs[i].finalSurfaceFile.empty()) continue;
+    auto& j = doc["runs"][i];
+    j["final_surface_vertices"] = runs[i].finalSurface.rows();
+    j["final_surface_sha256"] = sha256File((dir / runs[i].finalSurfaceFile).string());
+  }
+}
+
+/// The top-level entries of outDir that its results.json names (run folders, the rest surface,
+/// .compared.bin files): what a new results.json replaces.
+std::set<std::string> namedEntries(const fs::path& outDir) {
+  std::set<std::string> out;
+  std::error_code ec;
+  for (fs::directory_iterator it(outDir, ec), end; !ec && it != end; it.increment(ec))
+    if (it->path().filename().string().size() > 13 &&
+        it->path().filename().string().rfind(".compared.bin") ==
+            it->path().filename().string().size() - 13)
+      out.insert(it->path().filename().string());
+  try {
+    std::ifstream in(outDir / "results.json");
+    if (!in) return out;
+    const nlohmann::json doc = nlohmann::json::parse(in);
+    const auto add = [&](const nlohmann::json& v) {
+      if (!v.is_string()) return;
+      const fs::path p = fs::path(v.get<std::string>()).lexically_normal();
+      if (p.empty() || p.is_absolute()) return;
+      const std::string first = p.begin()->string();
+      if (first != ".." && first != "." && first.rfind(".staging.", 0) != 0) out.insert(first);
+    };
+    if (doc.contains("organ") && doc["organ"].is_object())
+      add(doc["organ"].value("rest_surface", nlohmann::json()));
+    for (const auto& r : doc.value("runs", nlohmann::json::array()))
+      if (r.is_object())
+        for (const char* k : {"final_surface", "surface_series", "grasp_forces"})
+          if (r.contains(k)) add(r[k]);
+  } catch (const std::exception&) {
+    // unreadable: only its results.json goes
+  }
+  return out;
+}
+
+/// Moves what `staging` holds into outDir: the old results.json first out, then the entries it
+/// named, then the new entries in, results.json last.
+void swapInResults(const fs::path& staging, const fs::path& outDir) {
+  const std::set<std::string> stale = namedEntries(outDir);
+  fs::remove(outDir / "results.json");
+  for (const std::string& e : stale) fs::remove_all(outDir / e);
+  for (const auto& entry : fs::directory_iterator(staging)) {
+    const std::string name = entry.path().filename().string();
+    if (name == "results.json") continue;
+    fs::remove_all(outDir / name);
+    fs::rename(entry.path(), outDir / name);
+  }
+  fs::rename(staging / "results.json", outDir / "results.json");
+  fs::remove_all(staging);
 }
 
 }  // namespace
@@ -818,6 +925,7 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
   fs::create_directories(options.outDir, ec);
   if (ec || !fs::is_directory(options.outDir))
     throw InputError(options.outDir.string(), "", "cannot create the output folder");
+  if (const std::string w = longRunWarning(scene, options.run); !w.empty()) progress(w);
 
   for (const PlannedRun& p : planned) {
     progress("running " + p.label + " ...");
@@ -838,9 +946,18 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
       }
     }
     if (!fromCache) {
-      rec = runModel(*p.info, p.params, scene, result.organ, cache, options.run);
-      if (refKey && rec.status == RunStatus::Ok) storeCachedSolve(cache, *refKey, rec);
+      RunOptions ro = options.run;
+      if (!ro.onStep && options.progress) ro.onStep = stepProgress(p.label, options.progress);
+      rec = options.isolateRuns
+                ? runModelIsolated(*p.info, p.params, scene, result.organ, cache, ro)
+                : runModel(*p.info, p.params, scene, result.organ, cache, ro);
+      if (refKey && rec.status == RunStatus::Ok) {
+        cache.clearEvents();
+        storeCachedSolve(cache, *refKey, rec);
+        for (const auto& e : cache.events()) rec.cacheEvents.push_back(e);
+      }
     }
+    noteCacheStoreFailures(rec);
     rec.plugin = p.spec.plugin;
     rec.label = p.label;
     rec.jsonPath = p.spec.jsonPath;
@@ -873,17 +990,33 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
   }
   computeRunErrors(scene, result.organ, result.runs);
 
-  writeRunSurfaces(options.outDir, scene, result.organ, result.runs);
-  if (options.writeComparedSurface)
-    for (const RunRecord& r : result.runs)
-      if (r.status == RunStatus::Ok && !r.compared.empty()) {
-        ByteWriter w;
-        w.matrix(r.compared.back().positions);
-        writeFileAtomic(comparedSurfaceFile(options.outDir, r.label),
-                        std::string_view(w.bytes().data(), w.bytes().size()));
-      }
-  const auto doc = resultsJson(scene, result.organ, result.organLog, result.runs, machineInfo());
-  result.resultsPath = writeResults(options.outDir, doc);
+  // Everything is written into a staging folder first and swapped in whole: a rerun that fails
+  // while writing (a full disk) leaves the previous results as they were, never a results.json
+  // beside surfaces of another run (docs/results-format.md, "Writing").
+  const fs::path staging = options.outDir / (".staging." + std::to_string(::getpid()));
+  fs::remove_all(staging, ec);
+  try {
+    fs::create_directories(staging);
+    writeRunSurfaces(staging, scene, result.organ, result.runs);
+    if (options.writeComparedSurface)
+      for (const RunRecord& r : result.runs)
+        if (r.status == RunStatus::Ok && !r.compared.empty()) {
+          ByteWriter w;
+          w.matrix(r.compared.back().positions);
+          writeFileAtomic(comparedSurfaceFile(staging, r.label),
+                          std::string_view(w.bytes().data(), w.bytes().size()));
+        }
+    auto doc = resultsJson(scene, result.organ, result.organLog, result.runs, machineInfo());
+    signSurfaces(staging, result.runs, doc);
+    writeResults(staging, doc);
+    swapInResults(staging, options.outDir);
+  } catch (const std::exception& e) {
+    fs::remove_all(staging, ec);
+    if (dynamic_cast<const InputError*>(&e)) throw;
+    throw InputError(options.outDir.string(), "",
+                     std::string("cannot write the results: ") + e.what());
+  }
+  result.resultsPath = options.outDir / "results.json";
   return result;
 }
 

@@ -23,6 +23,7 @@ Metaballs constructMetaballsCached(const SurfaceMesh& surface, const Constructio
       return m;
     } catch (const std::runtime_error&) {
       // Unreadable entry: rebuild and overwrite it.
+      cache.reject("metaballs.construction", key);
     }
   }
   Metaballs m = constructMetaballs(surface, p);

@@ -18,7 +18,7 @@ namespace deform::particle_bem {
 
 namespace {
 
-constexpr const char* kMatrixVersion = "particle_bem.M/3";
+constexpr const char* kMatrixVersion = "particle_bem.M/4";  // 4: with the numeric counters
 
 using Clock = std::chrono::steady_clock;
 double ms(Clock::time_point a, Clock::time_point b) {
@@ -214,11 +214,21 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
       r.matrix(m_bem.gravity);
       m_bem.bordered = r.pod<char>() != 0;
       m_bem.fixed = coarseFixed;
+      // The counters the assembly counted: a run that reads M reports what the one that
+      // assembled it did.
+      NumericCounters counted;
+      for (long long i = 0, n = r.pod<long long>(); i < n; ++i) {
+        std::string k = r.string();
+        counted[k] = r.pod<long long>();
+      }
       loaded = r.atEnd() && m_bem.M.rows() == 3 * nc && m_bem.M.cols() == 3 * nc &&
                m_bem.gravity.rows() == 3 * nc;
+      if (loaded)
+        for (const auto& [k, v] : counted) m_numeric[k] = v;
     } catch (const std::exception&) {
       loaded = false;
     }
+    if (!loaded) setup.cache.reject("particle_bem.M", key);
   }
   if (!loaded) {
     BemMatrices bem = assembleBem(m_coarse, m_material.young, m_material.poisson, quad);
@@ -245,6 +255,14 @@ void ParticleBemModel::initGuided(const ModelSetup& setup, const SignedDistanceF
     w.matrix(m_bem.M);
     w.matrix(m_bem.gravity);
     w.pod<char>(m_bem.bordered ? 1 : 0);
+    NumericCounters counted;
+    for (const char* k : {"bem_degenerate_triangles", "singular_support_faces"})
+      if (const auto it = m_numeric.find(k); it != m_numeric.end()) counted[k] = it->second;
+    w.pod(static_cast<long long>(counted.size()));
+    for (const auto& [k, v] : counted) {
+      w.string(k);
+      w.pod(v);
+    }
     setup.cache.put("particle_bem.M", key, w.bytes());
   }
   m_nodalArea = nodalAreas(m_coarse);

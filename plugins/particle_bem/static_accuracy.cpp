@@ -80,6 +80,7 @@ nlohmann::json bemStaticAccuracy(const SurfaceMesh& organ,
         row["cached"] = true;
       } catch (const std::exception&) {
         row = nlohmann::json();
+        cache.reject("particle_bem.static_accuracy", key);
       }
     }
     if (row.is_null()) {

@@ -278,6 +278,7 @@ class ReferenceFemModel final : public Model {
       } catch (const std::exception&) {
         // fall through: remesh
       }
+      cache.reject("reference_fem.tets", key);
     }
     Eigen::VectorXi map = Eigen::VectorXi::LinSpaced(nv, 0, nv - 1);
     TetMeshResult r;

@@ -236,6 +236,9 @@ TEST(GuidedModel, GravitySagsAndCacheHits) {
   ASSERT_GE(cache.events().size(), 2u);
   EXPECT_EQ(cache.events().back().what, Cache::EventKind::Hit);
   EXPECT_EQ(a->deformationMatrix().M, b->deformationMatrix().M);
+  // Issue 35: the assembly's counters survive a cache hit.
+  EXPECT_TRUE(b->numericCounters().count("bem_degenerate_triangles"));
+  EXPECT_EQ(a->numericCounters(), b->numericCounters());
   for (int s = 0; s < 300; ++s) {
     StepInput in = input(s);
     in.gravity = Vec3(0, 0, -9.81);

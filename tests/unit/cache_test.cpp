@@ -225,6 +225,39 @@ TEST_F(CacheTest, FlippedPayloadByteIsCorruptAndRemoved) {
   EXPECT_EQ(c.get("test.kind", key("a")), payload(1000, 1));
 }
 
+// Issue 35: a cache on a full (or otherwise unwritable) disk is a warning, not a failed run.
+TEST_F(CacheTest, AFailedStoreIsAnEventNotAnError) {
+  Cache c(m_dir);
+  fs::create_directories(m_dir);
+  std::ofstream(m_dir / "test.kind") << "a file where the kind's folder belongs";
+  EXPECT_NO_THROW(c.put("test.kind", key("a"), payload(100, 1)));
+  ASSERT_EQ(kinds(c), std::vector<EK>{EK::StoreFailed});
+  EXPECT_NE(c.events().back().detail.find("test.kind"), std::string::npos)
+      << c.events().back().detail;
+  // The write itself failing (here: the entry's name is taken by a folder) is the same.
+  fs::remove(m_dir / "test.kind");
+  c.put("test.kind", key("b"), payload(100, 1));
+  const fs::path entry = onlyEntry("test.kind");
+  fs::remove(entry);
+  fs::create_directories(entry / "x");
+  c.clearEvents();
+  EXPECT_NO_THROW(c.put("test.kind", key("b"), payload(100, 2)));
+  EXPECT_EQ(kinds(c), std::vector<EK>{EK::StoreFailed});
+}
+
+// Issue 35: an entry whose payload passes the checksum but that the caller cannot parse (an
+// entry re-signed after truncation) is not a hit.
+TEST_F(CacheTest, ARejectedHitIsCorruptAndRemoved) {
+  Cache c(m_dir);
+  c.put("test.kind", key("a"), payload(100, 1));
+  const fs::path entry = onlyEntry("test.kind");
+  c.clearEvents();
+  ASSERT_TRUE(c.get("test.kind", key("a")).has_value());
+  c.reject("test.kind", key("a"));
+  EXPECT_EQ(kinds(c), std::vector<EK>{EK::Corrupt});
+  EXPECT_FALSE(fs::exists(entry));
+}
+
 TEST_F(CacheTest, FlippedHeaderByteIsCorrupt) {
   Cache c(m_dir);
   for (int offset : {0, 8, 16, 30, 60}) {  // magic, version, size, key digest, payload digest

@@ -1,7 +1,12 @@
 #include <deform/plugin_loader.h>
 #include <dlfcn.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <csignal>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -66,6 +71,41 @@ std::string pluginNameOf(const std::string& file) {
                            "instruments_ode"})
     if (stem == core) return std::string();
   return stem;
+}
+
+/// Loads the file and runs its registration in a forked child: "" when the child ended
+/// normally, else "killed by signal 11 (SIGSEGV) while loading and registering". A plugin that
+/// crashes there (its static initialisers, deform_abi_version or deform_register) must not take
+/// this process down: `plugins` lists it, `stability` and the tables give it failed rows.
+std::string crashWhileRegistering(const std::string& path) {
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) return "";  // cannot probe: load it here as before
+  if (pid == 0) {
+    // Only the plugin's own code runs here; output and exit handlers stay the parent's.
+    if (void* dl = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL)) {
+      const auto abi = reinterpret_cast<AbiVersionFn>(dlsym(dl, "deform_abi_version"));
+      const auto reg = reinterpret_cast<RegisterFn>(dlsym(dl, "deform_register"));
+      try {
+        if (abi && reg && abi() == DEFORM_ABI_VERSION) {
+          Registry registry;
+          reg(registry);
+        }
+      } catch (...) {
+        // reported by the real load
+      }
+    }
+    ::_exit(0);
+  }
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  if (!WIFSIGNALED(status)) return "";
+  const int sig = WTERMSIG(status);
+  const char* name = sigabbrev_np(sig);
+  return "killed by signal " + std::to_string(sig) +
+         (name ? std::string(" (SIG") + name + ")" : std::string()) +
+         " while loading and registering";
 }
 
 }  // namespace
@@ -161,6 +201,9 @@ const std::vector<ModelInfo>& PluginLoader::loadFile(const std::string& path) {
   for (const auto& h : m_handles) {
     if (h->path == canonical.string()) return h->registry.models();
   }
+
+  if (const std::string crash = crashWhileRegistering(canonical.string()); !crash.empty())
+    throw PluginError(Kind::InitFailure, path, "the plugin crashed: " + crash);
 
   auto handle = std::make_unique<Handle>();
   handle->path = canonical.string();

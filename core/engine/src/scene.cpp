@@ -19,6 +19,9 @@ namespace deform {
 
 namespace {
 
+/// Longest model label accepted (its run folder is a file name, at most 255 bytes).
+constexpr size_t kMaxLabelChars = 200;
+
 namespace fs = std::filesystem;
 using nlohmann::json;
 
@@ -231,6 +234,10 @@ ModelSpec parseModelSpec(const Ctx& c, const json& j, const std::string& path) {
   if (const json* v = r.optional("label")) {
     m.label = c.string(*v, r.child("label"));
     if (m.label.empty()) c.fail(r.child("label"), "must not be empty");
+    // A label names the run's folder (a file name: 255 bytes at most) and a table row.
+    if (m.label.size() > kMaxLabelChars)
+      c.fail(r.child("label"), "longer than " + std::to_string(kMaxLabelChars) + " characters (" +
+                                   std::to_string(m.label.size()) + ")");
   }
   if (const json* v = r.optional("params")) {
     if (!v->is_object()) c.fail(r.child("params"), "expected an object, got " + typeName(*v));

@@ -8,22 +8,38 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <new>
+#include <string>
 
 namespace deform::io {
 
 std::string readWholeFile(const std::string& path) {
+  namespace fs = std::filesystem;
   std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) throw InputError(path, "", "is a directory");
+  const fs::file_status st = fs::status(path, ec);  // follows symbolic links
+  if (fs::is_directory(st)) throw InputError(path, "", "is a directory");
+  // A device (a link to /dev/zero reads forever), a socket: no mesh. Pipes are read (a shell's
+  // <(...)), up to the same limit as files.
+  if (fs::is_character_file(st) || fs::is_block_file(st) || fs::is_socket(st))
+    throw InputError(path, "", "not a regular file (a device or a socket): not a mesh file");
+  constexpr size_t kMaxBytes = size_t(1) << 32;
+  if (fs::is_regular_file(st) && fs::file_size(path, ec) > kMaxBytes && !ec)
+    throw InputError(path, "", "file larger than 4 GiB: too large for a surface mesh");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path, "", std::string("cannot open file: ") + std::strerror(errno));
   // Read in chunks rather than trusting a seek to the end, so pipes and odd files work too.
   constexpr size_t kChunk = size_t(1) << 20;
-  constexpr size_t kMaxBytes = size_t(1) << 34;
   std::string data;
   while (in) {
     const size_t old = data.size();
-    if (old >= kMaxBytes) throw InputError(path, "", "file larger than 16 GiB");
-    data.resize(old + kChunk);
+    if (old >= kMaxBytes) throw InputError(path, "", "more than 4 GiB read: not a mesh file");
+    try {
+      data.resize(old + kChunk);
+    } catch (const std::bad_alloc&) {
+      throw InputError(
+          path, "",
+          "out of memory after reading " + std::to_string(old >> 20) + " MiB of the file");
+    }
     in.read(data.data() + old, static_cast<std::streamsize>(kChunk));
     data.resize(old + static_cast<size_t>(in.gcount()));
   }

@@ -320,6 +320,7 @@ TetMesh surfaceVolumeCached(const SurfaceMesh& surface, long long elements,
     } catch (const std::exception&) {
       // unreadable entry: mesh again
     }
+    cache.reject("tets.surface", key);
   }
   TetMeshOptions o;
   o.targetElements = elements;

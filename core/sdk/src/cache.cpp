@@ -410,8 +410,10 @@ void Cache::put(const std::string& kind, const CacheKey& key, const std::vector<
   std::error_code ec;
   fs::create_directories(folder, ec);
   if (ec || !fs::is_directory(folder)) {
-    throw InputError(folder.string(), "",
-                     "cannot create the cache directory" + (ec ? ": " + ec.message() : ""));
+    m_events.push_back({kind, hex, EventKind::StoreFailed,
+                        folder.string() + ": cannot create the cache directory" +
+                            (ec ? ": " + ec.message() : "")});
+    return;
   }
   Digest keyDigest{};
   fromHex(hex, keyDigest);
@@ -425,8 +427,30 @@ void Cache::put(const std::string& kind, const CacheKey& key, const std::vector<
   bytes.append(reinterpret_cast<const char*>(keyDigest.data()), keyDigest.size());
   bytes.append(reinterpret_cast<const char*>(payloadDigest.data()), payloadDigest.size());
   bytes.append(payload.data(), payload.size());
-  writeFileAtomic(entryPath(kind, hex), bytes);
+  try {
+    writeFileAtomic(entryPath(kind, hex), bytes);
+  } catch (const std::exception& e) {
+    // A cache is an optimisation: a full disk costs the next run its precomputation, not this
+    // run its result.
+    m_events.push_back({kind, hex, EventKind::StoreFailed, e.what()});
+    return;
+  }
   m_events.push_back({kind, hex, EventKind::Stored});
+}
+
+void Cache::reject(const std::string& kind, const CacheKey& key) {
+  const std::string hex = key.hex();
+  for (auto it = m_events.rbegin(); it != m_events.rend(); ++it) {
+    if (it->kind == kind && it->key == hex && it->what == EventKind::Hit) {
+      it->what = EventKind::Corrupt;
+      it->detail = "the payload passed its checksum but could not be read";
+      break;
+    }
+  }
+  if (!m_dir.empty() && validKind(kind)) {
+    std::error_code ec;
+    fs::remove(entryPath(kind, hex), ec);
+  }
 }
 
 }  // namespace deform

@@ -32,6 +32,9 @@ struct ChildCaseOptions {
   /// Reuse a case finished by an earlier command in the same outDir (its outDir/case.json exists
   /// and the scene it ran is unchanged) instead of running it again.
   bool resume = false;
+  /// With resume: a finished case with a failed run (a crash, a timeout, an exception) runs
+  /// again instead (`--retry-failed`); ok, diverged and unsupported runs stay as they were.
+  bool retryFailed = false;
   /// More arguments of the `deformbench run` child (calibration: --reuse-reference).
   std::vector<std::string> runArgs;
 };

@@ -129,6 +129,9 @@ struct RunOptions {
   /// state at that moment). false: step() every step. nullopt: runModel() decides with
   /// solveOnlyAtComparedInstants(); simulate() alone treats nullopt as false.
   std::optional<bool> quasiStaticAtComparedInstants;
+  /// Called by simulate() every 4096 steps with (steps done, steps planned): progress of long
+  /// runs (runBenchmark() prints it when a run takes long). May be empty.
+  std::function<void(int, int)> onStep;
 };
 
 /// Whether runModel() solves a model only at the compared instants: it has the quasi_static
@@ -245,6 +248,9 @@ struct BenchmarkOptions {
   /// exactly (binary, comparedSurfaceFile()): `converge` reads its levels from child processes
   /// this way (`run --write-compared`, internal).
   bool writeComparedSurface = false;
+  /// Each run in a forked child process (run_isolation.h): a plugin that crashes in init() or
+  /// step() fails its own run only. false: in this process (`run --in-process`, a debugger).
+  bool isolateRuns = true;
 };
 
 /// outDir/<label>.compared.bin (sanitized label): the run's surface at its last compared instant

@@ -119,11 +119,14 @@ class ByteReader {
 
 class Cache {
  public:
-  enum class EventKind { Hit, Miss, Corrupt, Stored, Disabled };
+  /// StoreFailed: put() could not write the entry (a full disk, a read-only folder); the run
+  /// goes on without it and `detail` says why.
+  enum class EventKind { Hit, Miss, Corrupt, Stored, Disabled, StoreFailed };
   struct Event {
     std::string kind;  ///< what was cached, e.g. "metaballs.spheres"
     std::string key;   ///< hex digest
     EventKind what;
+    std::string detail = {};  ///< StoreFailed: the reason
   };
 
   /// dir empty: caching disabled (get always misses, put does nothing).
@@ -133,7 +136,13 @@ class Cache {
   static std::filesystem::path defaultDir();
 
   std::optional<std::vector<char>> get(const std::string& kind, const CacheKey& key);
+  /// Stores an entry. Never throws for the disk's trouble: a failed write (ENOSPC, EACCES, ...)
+  /// is an event StoreFailed with the reason, and the caller goes on with what it computed.
   void put(const std::string& kind, const CacheKey& key, const std::vector<char>& payload);
+  /// The caller could not use the payload get() returned (a payload that passes the checksum
+  /// but does not parse, e.g. an entry re-signed after truncation): the entry is deleted and
+  /// its Hit event becomes Corrupt, so the run does not count it as a hit.
+  void reject(const std::string& kind, const CacheKey& key);
 
   const std::filesystem::path& dir() const { return m_dir; }
   const std::vector<Event>& events() const { return m_events; }
