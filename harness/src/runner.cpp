@@ -438,7 +438,7 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
     }
     if (const std::string p = supportProblem(scene, rec); !p.empty()) rec.notes.push_back(p);
     rec.prescribedMotion = std::max<double>(rec.graspTravel, prescribedMotionBesidesGrasps(scene));
-    if (const std::string n = outrunNote(scene, rec); !n.empty()) rec.notes.push_back(n);
+    if (const std::string note = outrunNote(scene, rec); !note.empty()) rec.notes.push_back(note);
   }
   assessValidity(scene, rec);
 }
