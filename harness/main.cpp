@@ -218,10 +218,12 @@ void printTable(const BenchmarkResult& r) {
     row.push_back(counts.empty() ? "-" : counts);
     if (anyError) {
       if (run.error) {
-        for (const auto& kv : run.error->rmseNearest) row.push_back(fmt(1e3 * kv.second));
-        row.push_back(fmt(1e3 * run.error->rmseAll));
-        row.push_back(fmt(1e3 * run.error->max));
-        row.push_back(fmt(run.error->lossRatio));
+        // "*": against an invalid reference (the line under the table says which and why).
+        const std::string mark = run.referenceValid.value_or(true) ? "" : "*";
+        for (const auto& kv : run.error->rmseNearest) row.push_back(fmt(1e3 * kv.second) + mark);
+        row.push_back(fmt(1e3 * run.error->rmseAll) + mark);
+        row.push_back(fmt(1e3 * run.error->max) + mark);
+        row.push_back(fmt(run.error->lossRatio) + mark);
       } else {
         for (size_t i = 0; i < r.scene.nearest.size() + 3; ++i) row.push_back("-");
       }
@@ -245,6 +247,17 @@ void printTable(const BenchmarkResult& r) {
   };
   printRow(header);
   for (const auto& row : rows) printRow(row);
+  {
+    const auto against = std::find_if(r.runs.begin(), r.runs.end(), [](const RunRecord& run) {
+      return !run.referenceValid.value_or(true);
+    });
+    const bool marked = std::any_of(r.runs.begin(), r.runs.end(), [](const RunRecord& run) {
+      return run.error && !run.referenceValid.value_or(true);
+    });
+    if (against != r.runs.end())
+      std::cout << (marked ? "*: errors against an invalid reference: " : "no errors: ")
+                << against->referenceInvalidReason << "\n";
+  }
   for (const RunRecord& run : r.runs) {
     if (run.error && run.error->excludedGrasped > 0) {
       std::cout << "rmse_k: the k surface vertices nearest the grasp that no grasp holds ("

@@ -332,7 +332,7 @@ def organ_figure(results_path):
             m = float(err[:n].max()) if n else 0.0
             if m > true_max:
                 true_max, true_at = m, r["label"]
-            if r.get("status") == "ok" and r.get("valid", True) is not False:
+            if run_valid(r):
                 ok_max = max(ok_max, m)
         surfaces.append((r, v, fcs, err))
     # The full range of the valid runs; a run beyond it (invalid, diverged) is drawn in the
@@ -374,8 +374,10 @@ def organ_figure(results_path):
             title += "\n" + (params if len(params) < 48 else params[:45] + "...")
         if r.get("error") and r["error"].get("rmse_all") is not None:
             title += "\nrmse_all %.3g mm" % (1e3 * r["error"]["rmse_all"])
-        if r.get("valid") is False:
-            title += "\nINVALID: %s" % r.get("invalid_reason", "")
+        if not run_valid(r):
+            title += "\nINVALID: %s" % r.get("invalid_reason", r.get("status", ""))
+        if r.get("reference_valid") is False:
+            title += "\nagainst an invalid reference"
         ax.set_title(title, fontsize=8)
     if ref_v is not None:
         sm = plt.cm.ScalarMappable(cmap=cmap, norm=norm)
@@ -398,12 +400,28 @@ def run_hash(label):
     return "#run=" + quote(label, safe="()=,.")
 
 
+def run_valid(r):
+    """A run may be ranked: it ended ok and is not marked invalid (a failed or unsupported run
+    is never valid, whatever an old results.json says)."""
+    return r.get("status", "ok") == "ok" and r.get("valid", True) is not False
+
+
+def reference_mark(r):
+    """'against an invalid reference (why)' for a run whose errors are against one, else ''."""
+    if r.get("reference_valid") is False:
+        why = r.get("reference_invalid_reason") or ""
+        return "against an invalid reference" + (" (%s)" % why if why else "")
+    return ""
+
+
 def run_point_text(r, ms, err, err_name):
     params = ", ".join("%s=%s" % kv for kv in sorted((r.get("params") or {}).items()))
-    return "%s (%s)\n%s\n%s %.4g mm, %.4g ms/step%s" % (
+    ref = reference_mark(r)
+    return "%s (%s)\n%s\n%s %.4g mm, %.4g ms/step%s%s" % (
         r.get("label", "?"), r.get("model", ""), params or "default parameters", err_name,
-        1e3 * err, ms, "" if r.get("valid", True) is not False else
-        "\nINVALID: %s" % r.get("invalid_reason", ""))
+        1e3 * err, ms, "" if run_valid(r) else
+        "\nINVALID: %s" % r.get("invalid_reason", r.get("status", "")),
+        "\n" + ref if ref else "")
 
 
 def svg_scatter(points, xlabel, ylabel, budget_ms=None):
@@ -498,8 +516,10 @@ def results_table(path, viewer_href=None):
             "rmse_50": 1e3 * e["rmse_50"] if e.get("rmse_50") is not None else None,
             "rmse_all": 1e3 * e["rmse_all"] if e.get("rmse_all") is not None else None,
             "loss_ratio": e.get("loss_ratio"),
-            "valid": r.get("valid"),
-            "invalid_reason": r.get("invalid_reason"),
+            "valid": r.get("valid") if r.get("status", "ok") == "ok" else False,
+            "invalid_reason": r.get("invalid_reason") or (
+                None if run_valid(r) else r.get("status")),
+            "reference": reference_mark(r) or None,
             "message": r.get("message", ""),
         })
     cols = [("label", "run"), ("status", "status"), ("ms", "ms/step"), ("p95", "p95 ms"),
@@ -507,6 +527,8 @@ def results_table(path, viewer_href=None):
             ("rmse_50", "rmse_50 mm"), ("rmse_all", "rmse_all mm"), ("loss_ratio", "loss ratio")]
     if any(r["valid"] is not None for r in rows):
         cols += [("valid", "valid"), ("invalid_reason", "why invalid")]
+    if any(r["reference"] for r in rows):
+        cols.append(("reference", "errors"))
     cols.append(("message", "message"))
     pts = []
     for r in doc["runs"]:
@@ -516,7 +538,7 @@ def results_table(path, viewer_href=None):
         pts.append({"x": sm["median"], "y": 1e3 * e["rmse_all"], "series": r.get("model", "?"),
                     "text": run_point_text(r, sm["median"], e["rmse_all"], "rmse_all"),
                     "href": href_of(r),
-                    "valid": r.get("valid", True) is not False})
+                    "valid": run_valid(r) and r.get("reference_valid") is not False})
     plot = svg_scatter(pts, "ms per step (median)", "rmse_all (mm)") if len(pts) > 1 else ""
     return doc, html_table(cols, rows, links) + plot
 

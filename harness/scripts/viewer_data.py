@@ -259,8 +259,12 @@ def _run_entry(r, local_t, scale, data, per, base, link_base):
         "params": r.get("params") or {},
         "status": r.get("status"),
         "message": r.get("message", ""),
-        "valid": r.get("valid"),
-        "invalid_reason": r.get("invalid_reason"),
+        # A failed or unsupported run is never valid, whatever an old results.json says.
+        "valid": r.get("valid") if r.get("status", "ok") == "ok" else False,
+        "invalid_reason": r.get("invalid_reason") or (
+            None if r.get("status", "ok") == "ok" else r.get("status")),
+        "reference_valid": r.get("reference_valid"),
+        "reference_invalid_reason": r.get("reference_invalid_reason"),
         "step_ms": num(sm.get("median")),
         "precompute_s": num(r.get("precompute_s")),
         "rmse_all_m": num(e.get("rmse_all")),

@@ -55,6 +55,7 @@ RunRecord failedRun(const ojson& spec, bool isReference, const std::string& mess
   r.isReference = isReference;
   r.status = RunStatus::Failed;
   r.message = message;
+  invalidateIfNotOk(r);
   return r;
 }
 

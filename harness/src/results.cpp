@@ -266,8 +266,15 @@ json runJson(const RunRecord& run) {
   } else if (run.equilibrium) {
     j["settled_at_s"] = nullptr;
   }
-  j["valid"] = run.valid;
-  if (!run.valid) j["invalid_reason"] = run.invalidReason;
+  // A run that did not end ok is never valid, whoever made its record.
+  const bool valid = run.valid && run.status == RunStatus::Ok;
+  j["valid"] = valid;
+  if (!valid)
+    j["invalid_reason"] = run.invalidReason.empty() ? notRunReason(run) : run.invalidReason;
+  if (run.referenceValid) {
+    j["reference_valid"] = *run.referenceValid;
+    if (!*run.referenceValid) j["reference_invalid_reason"] = run.referenceInvalidReason;
+  }
   if (!run.finalSurfaceFile.empty()) j["final_surface"] = run.finalSurfaceFile;
   if (!run.seriesFile.empty()) j["surface_series"] = run.seriesFile;
   if (!run.graspForceFile.empty()) j["grasp_forces"] = run.graspForceFile;

@@ -104,8 +104,12 @@ RunRecord runFromJson(const json& j) {
   if (j.contains("settled_at_s") && j["settled_at_s"].is_number())
     r.settledAt = j["settled_at_s"].get<double>();
   // Results written before validity existed: a run is valid unless its status says otherwise.
-  r.valid = j.value("valid", r.status == RunStatus::Ok);
+  r.valid = j.value("valid", r.status == RunStatus::Ok) && r.status == RunStatus::Ok;
   r.invalidReason = j.value("invalid_reason", r.valid ? "" : statusName(r.status));
+  if (j.contains("reference_valid") && j["reference_valid"].is_boolean()) {
+    r.referenceValid = j["reference_valid"].get<bool>();
+    r.referenceInvalidReason = j.value("reference_invalid_reason", "");
+  }
   r.finalSurfaceFile = j.value("final_surface", "");
   r.seriesFile = j.value("surface_series", "");
   r.graspForceFile = j.value("grasp_forces", "");

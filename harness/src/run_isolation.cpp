@@ -152,6 +152,8 @@ std::vector<char> serializeRunRecord(const RunRecord& r) {
   w.pod(r.peakDisplacement);
   w.pod(r.motionFloor);
   w.pod(r.fixedDrift);
+  w.pod(static_cast<int>(r.fixedRegion));
+  w.pod(r.prescribedMotion);
   w.pod(static_cast<long long>(r.cacheEvents.size()));
   for (const Cache::Event& e : r.cacheEvents) {
     w.string(e.kind);
@@ -183,7 +185,9 @@ std::vector<char> serializeRunRecord(const RunRecord& r) {
   for (const Vec3& p : r.objectsFinal) putVec3(w, p);
   w.pod(r.contactPairs);
   w.pod(r.contacts);
-  // Not carried (runModel() does not fill them): error, referenceModel and the output files.
+  // Not carried (runModel() does not fill them): error, referenceModel, referenceValid and
+  // referenceInvalidReason (markReferenceValidity() sets them after every run) and the output
+  // files.
   return std::move(w.bytes());
 }
 
@@ -233,6 +237,8 @@ RunRecord deserializeRunRecord(const std::vector<char>& bytes) {
   r.peakDisplacement = b.pod<double>();
   r.motionFloor = b.pod<double>();
   r.fixedDrift = b.pod<double>();
+  r.fixedRegion = b.pod<int>() != 0;
+  r.prescribedMotion = b.pod<double>();
   for (long long i = 0, n = b.pod<long long>(); i < n; ++i) {
     Cache::Event e;
     e.kind = b.string();

@@ -164,6 +164,81 @@ double secondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+/// How far (infinity norm, m) the scene itself places its ODE bodies from the organ's centre:
+/// the keyframes of its tools and the start and keyframes of its objects.
+Real sceneReach(const Scene& scene, const Vec3& centre) {
+  Real reach = 0;
+  const auto take = [&](const Vec3& p) {
+    reach = std::max(reach, (p - centre).cwiseAbs().maxCoeff());
+  };
+  for (const ToolSpec& t : scene.tools)
+    for (const KeyFrame& k : t.trajectory) take(k.pos);
+  for (const ObjectSpec& o : scene.objects) {
+    take(o.pos);
+    for (const KeyFrame& k : o.trajectory) take(k.pos);
+  }
+  return reach;
+}
+
+/// Divergence of the scene's ODE bodies (dynamic tools, objects) after the interaction was
+/// prepared for the step ending at tEnd: a position or hand force that is NaN or Inf, or a body
+/// outside the divergence box grown by the scene's own reach and a free fall over tEnd (a free
+/// object may fall off the organ; it cannot reach 1e200 m). "" when every body is sane. A body
+/// that explodes (an unstable coupling or contact loop: objects at 1e204 m, hand forces at
+/// 1e209 N) would otherwise feed the model forces that no scene asked for.
+std::string instrumentDivergence(const Interaction& interaction, const Scene& scene, Real tEnd,
+                                 const Vec3& centre, Real halfSide, Real reach) {
+  const Real allowed = halfSide + reach + 0.5 * scene.gravity.norm() * tEnd * tEnd;
+  const auto problem = [&](const std::string& who, const Vec3& p, const Vec3* force) {
+    std::ostringstream s;
+    if (!p.allFinite() || (force && !force->allFinite())) {
+      s << who << " is NaN or Inf";
+    } else if ((p - centre).cwiseAbs().maxCoeff() > allowed) {
+      s << who << " is " << (p - centre).norm() << " m from the organ's centre";
+      if (force) s << " (hand force " << force->norm() << " N)";
+    } else {
+      return std::string();
+    }
+    return s.str();
+  };
+  for (const Interaction::HandForce& h : interaction.handForces())
+    if (std::string p = problem(h.instrument, h.position, &h.force); !p.empty()) return p;
+  const std::vector<Vec3> objects = interaction.objectPositions();
+  for (size_t j = 0; j < objects.size(); ++j)
+    if (std::string p = problem("objects/" + std::to_string(j), objects[j], nullptr); !p.empty())
+      return p;
+  return "";
+}
+
+/// The largest motion (m) a scene prescribes besides the grasps (whose travel the interaction
+/// measures): a probe's or a driven object's keyframes from their first, a pin_head's pin from
+/// its anchor.
+Real prescribedMotionBesidesGrasps(const Scene& scene) {
+  Real m = 0;
+  const auto travel = [&](const std::vector<KeyFrame>& path, const Vec3& from) {
+    for (const KeyFrame& k : path) m = std::max(m, (k.pos - from).norm());
+  };
+  for (const ToolSpec& t : scene.tools)
+    if (t.type == ToolType::Probe && !t.trajectory.empty())
+      travel(t.trajectory, t.trajectory.front().pos);
+  for (const ObjectSpec& o : scene.objects)
+    if (!o.trajectory.empty()) travel(o.trajectory, o.trajectory.front().pos);
+  for (const LoadSpec& l : scene.loads)
+    if (l.type == LoadType::PinHead) travel(l.path, l.at);
+  return m;
+}
+
+/// Nodes a model holds in the fixed region: its own count when it reports counts "fixed_nodes"
+/// (a model that pins by its own rule, e.g. the sphere carrying each fixed surface vertex),
+/// else those of its nodes (at rest) inside the region.
+int fixedNodeCount(const Model& model, const Organ& organ) {
+  if (organ.fixed.empty()) return 0;
+  const Counts counts = model.counts();
+  if (const auto it = counts.find("fixed_nodes"); it != counts.end())
+    return static_cast<int>(it->second);
+  return static_cast<int>(fixedNodeIndices(model.nodes(), organ.fixed, organ.surface).size());
+}
+
 }  // namespace
 
 void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOptions& options,
@@ -181,8 +256,11 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   rec.dt = scene.dt;
   rec.status = RunStatus::Ok;
 
+  rec.fixedRegion = !organ.fixed.empty();
+  rec.fixedNodes = fixedNodeCount(model, organ);  // nodes() are at rest after init / reset
   const Box box = boundingBox(organ.surface.V);
   const Real halfSide = 0.5 * tol::kDivergenceBoxFactor * std::max(box.size().maxCoeff(), 1e-9);
+  const Real reach = sceneReach(scene, box.center());
   const std::vector<int> compareSteps = comparedSteps(scene, n);
   const int every =
       options.keepSeries && scene.surfaces == SurfaceOutput::Every ? scene.surfaceEvery : 0;
@@ -219,6 +297,17 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
     }
     for (size_t h = 0; h < hands.size(); ++h)
       rec.handForces.push_back({k + 1, static_cast<int>(h), hands[h].force, hands[h].position});
+    if (const std::string bad = instrumentDivergence(interaction, scene, (k + 1) * scene.dt,
+                                                     box.center(), halfSide, reach);
+        !bad.empty()) {
+      // Not the model's own divergence, but its run is no longer the scene's: stop it here.
+      rec.status = RunStatus::Diverged;
+      std::ostringstream s;
+      s << "diverged at step " << k + 1 << " (t = " << (k + 1) * scene.dt
+        << " s): an object or instrument diverged: " << bad;
+      rec.message = s.str();
+      break;
+    }
     if (sparse && !std::binary_search(solveSteps.begin(), solveSteps.end(), k + 1)) {
       // Not an instant anyone looks at: the quasi-static state between solves is not needed.
       rec.steps = k + 1;
@@ -351,14 +440,51 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
       for (const SurfaceSnapshot& c : rec.compared) d = std::max(d, drift(c.positions));
       if (d > 1e-6 * boundingBox(rest).diagonal()) rec.fixedDrift = d;
     }
-    if (rec.fixedDrift > 0.5 * rec.peakDisplacement && rec.fixedDrift > 0) {
-      std::ostringstream s;
-      s << "the fixed region did not hold: its surface moved " << rec.fixedDrift * 1e3
-        << " mm, over half the largest displacement (" << rec.peakDisplacement * 1e3 << " mm)";
-      rec.notes.push_back(s.str());
-    }
+    if (const std::string p = supportProblem(scene, rec); !p.empty()) rec.notes.push_back(p);
+    rec.prescribedMotion = std::max<double>(rec.graspTravel, prescribedMotionBesidesGrasps(scene));
+    if (const std::string note = outrunNote(scene, rec); !note.empty()) rec.notes.push_back(note);
   }
   assessValidity(scene, rec);
+}
+
+std::string supportProblem(const Scene&, const RunRecord& rec) {
+  if (!rec.fixedRegion || rec.status != RunStatus::Ok) return "";
+  if (rec.fixedNodes == 0)
+    return "the fixed region holds none of the model's nodes (fixed_nodes 0): nothing supports "
+           "the organ";
+  if (rec.fixedDrift > 0 && rec.fixedDrift > 0.05 * rec.peakDisplacement) {
+    std::ostringstream s;
+    s << "the fixed region did not hold: its surface moved " << rec.fixedDrift * 1e3
+      << " mm, over 5% of the largest displacement (" << rec.peakDisplacement * 1e3 << " mm)";
+    return s.str();
+  }
+  return "";
+}
+
+std::string outrunNote(const Scene& scene, const RunRecord& rec) {
+  if (rec.status != RunStatus::Ok || rec.prescribedMotion <= 0 || rec.peakDisplacement <= 0)
+    return "";
+  // Driven by prescribed motion alone: a point force moves the organ as far as its stiffness
+  // lets it, which no tool bounds.
+  for (const LoadSpec& l : scene.loads)
+    if (l.type == LoadType::PointForce) return "";
+  const double ratio = rec.peakDisplacement / rec.prescribedMotion;
+  if (ratio <= 1.5) return "";
+  std::ostringstream s;
+  s.precision(3);
+  s << "the surface outran the tool: surface points moved up to " << rec.peakDisplacement * 1e3
+    << " mm, " << ratio << "x the largest prescribed motion (" << rec.prescribedMotion * 1e3
+    << " mm; over 1.5x in a quasi-static scene)";
+  return s.str();
+}
+
+std::string notRunReason(const RunRecord& rec) {
+  if (rec.status == RunStatus::Ok) return "";
+  const std::string status = statusName(rec.status);
+  if (rec.message.empty()) return status;
+  // "diverged at step ...": the message already says it.
+  if (rec.message.rfind(status, 0) == 0) return rec.message;
+  return status + " (" + rec.message + ")";
 }
 
 void assessValidity(const Scene& scene, RunRecord& rec) {
@@ -369,7 +495,7 @@ void assessValidity(const Scene& scene, RunRecord& rec) {
     rec.valid = false;
     rec.invalidReason = why;
   };
-  if (rec.status != RunStatus::Ok) invalid(statusName(rec.status));
+  if (rec.status != RunStatus::Ok) invalid(notRunReason(rec));
   if (!rec.emptyGrasps.empty()) invalid("grasp held nothing");
   // Scale of the residual test: the tool's travel, at least its jaw radius (a grasp that holds
   // still is judged against the size of what it holds).
@@ -414,10 +540,21 @@ void assessValidity(const Scene& scene, RunRecord& rec) {
       << " m although the scene loads the organ";
     invalid(s.str());
   }
+  if (const std::string p = supportProblem(scene, rec); !p.empty()) invalid(p);
 }
 
-RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene& scene,
-                   const Organ& organ, Cache& cache, const RunOptions& options) {
+void invalidateIfNotOk(RunRecord& rec) {
+  if (rec.status == RunStatus::Ok) return;
+  if (rec.valid || rec.invalidReason.empty()) rec.invalidReason = notRunReason(rec);
+  rec.valid = false;
+}
+
+namespace {
+
+/// runModel() without the final validity guard: its early returns (unsupported, init threw,
+/// a surface of the wrong size) skip simulate() and with it assessValidity().
+RunRecord runModelUnguarded(const ModelInfo& info, const ParamValues& params, const Scene& scene,
+                            const Organ& organ, Cache& cache, const RunOptions& options) {
   RunRecord rec;
   rec.model = info.name;
   rec.plugin = info.name;
@@ -459,8 +596,6 @@ RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene
 
   try {
     rec.counts = model->counts();
-    rec.fixedNodes =
-        static_cast<int>(fixedNodeIndices(model->nodes(), organ.fixed, organ.surface).size());
     if (model->surface().rows() != organ.surface.numVertices()) {
       rec.status = RunStatus::Failed;
       rec.message = "after init, surface() has " + std::to_string(model->surface().rows()) +
@@ -479,6 +614,15 @@ RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene
     rec.status = RunStatus::Failed;
     rec.message = "unknown exception";
   }
+  return rec;
+}
+
+}  // namespace
+
+RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene& scene,
+                   const Organ& organ, Cache& cache, const RunOptions& options) {
+  RunRecord rec = runModelUnguarded(info, params, scene, organ, cache, options);
+  invalidateIfNotOk(rec);  // every early return too: a failed or unsupported run is never valid
   return rec;
 }
 
@@ -609,14 +753,35 @@ std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
   return kept;
 }
 
+namespace {
+
+/// Marks every model run with whether its reference is valid (DESIGN "Metrics": reference_valid
+/// false marks every error computed against a reference that is invalid, failed or not
+/// converged; a reference whose solver gave up on a solve is invalid by assessValidity()).
+void markReferenceValidity(const RunRecord& ref, std::vector<RunRecord>& runs) {
+  const bool ok = ref.status == RunStatus::Ok && ref.valid;
+  std::string why;
+  if (!ok) {
+    why = "the reference " + ref.label + " is " +
+          (ref.status == RunStatus::Ok ? "invalid: " + ref.invalidReason : notRunReason(ref));
+  }
+  for (RunRecord& r : runs) {
+    if (r.isReference) continue;
+    r.referenceValid = ok;
+    r.referenceInvalidReason = why;
+  }
+}
+
+}  // namespace
+
 void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs) {
   const auto ref =
       std::find_if(runs.begin(), runs.end(), [](const RunRecord& r) { return r.isReference; });
   if (ref == runs.end()) return;
+  markReferenceValidity(*ref, runs);
   if (ref->status != RunStatus::Ok) {
     for (RunRecord& r : runs) {
-      if (!r.isReference)
-        r.notes.push_back("no error: the reference run is " + std::string(statusName(ref->status)));
+      if (!r.isReference) r.notes.push_back("no error: the reference run is " + notRunReason(*ref));
     }
     return;
   }
@@ -669,7 +834,8 @@ CacheKey solveKey(const std::string& sceneFile, const Scene& scene, const Organ&
           fs::absolute(fs::path(sceneFile).parent_path() / mesh).lexically_normal().string();
   }
   CacheKey key;
-  key.add("harness.reference_run/2").add(doc.dump());
+  // /3: the validity rules of wave 3 (supports, instruments) changed what a stored valid means.
+  key.add("harness.reference_run/3").add(doc.dump());
   key.add(organ.surface.V).add(organ.surface.F);
   key.add(sha256File(loader.locate(p.spec.plugin))).add(p.info->name).add(p.info->version);
   key.add(paramsToJson(p.params).dump());
@@ -685,6 +851,7 @@ void storeCachedSolve(Cache& cache, const CacheKey& key, const RunRecord& r) {
   w.pod(static_cast<int>(r.plannedSteps));
   w.pod(static_cast<int>(r.solvedSteps));
   w.pod(static_cast<int>(r.fixedNodes));
+  w.pod(static_cast<int>(r.fixedRegion));
   w.pod(r.graspResidual);
   w.pod(r.graspTravel);
   w.pod(static_cast<int>(r.equilibrium));
@@ -730,6 +897,7 @@ bool readCachedSolve(Cache& cache, const CacheKey& key, bool reference, RunRecor
     r.plannedSteps = b.pod<int>();
     r.solvedSteps = b.pod<int>();
     r.fixedNodes = b.pod<int>();
+    r.fixedRegion = b.pod<int>() != 0;
     r.graspResidual = b.pod<double>();
     r.graspTravel = b.pod<double>();
     r.equilibrium = b.pod<int>() != 0;

@@ -570,7 +570,11 @@ Counts MetaballsModel::counts() const {
           {"links", l},
           {"constraints", l + (m_laplacian ? s : 0)},
           {"surface_vertices", m_skin.numVertices},
-          {"fixed_spheres", static_cast<long long>(m_fixedList.size())}};
+          {"fixed_spheres", static_cast<long long>(m_fixedList.size())},
+          // The harness's fixed_nodes (and its "holds nothing" validity rule) takes this count:
+          // the spheres this model pins by its own rule, not only those whose centres lie in
+          // the region.
+          {"fixed_nodes", static_cast<long long>(m_fixedList.size())}};
 }
 
 NumericCounters MetaballsModel::numericCounters() const {

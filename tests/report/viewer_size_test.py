@@ -82,9 +82,39 @@ def main():
     small = viewer_data.build(doc, V, F, runs[:3], budget=data["encoded_bytes"] // 20)
     if not small["thinned"] or small["times"][-1] != data["times"][-1]:
         fails.append("a small budget did not thin the frames keeping the last one")
+    fails += validity_marks()
     for f in fails:
         print("FAIL: " + f)
     return 1 if fails else 0
+
+
+def validity_marks():
+    """Issue 35 item 7 and issue 33 item 7: a failed run is never shown valid, even when an old
+    results.json says so; errors against an invalid reference say so in the viewer's data and
+    the report's run table."""
+    import json
+    import tempfile
+    import report  # noqa: E402
+    fails = []
+    failed = {"label": "f", "model": "f", "status": "failed", "valid": True, "message": "init: x"}
+    against = {"label": "m", "model": "m", "status": "ok", "valid": True,
+               "reference_valid": False, "reference_invalid_reason": "the reference r is invalid: 2 solves did not converge",
+               "error": {"rmse_all": 0.001}, "step_ms": {"median": 0.1}}
+    if viewer_data._run_entry(failed, [0.0], [1, 1, 1], "", {}, None, "")["valid"] is not False:
+        fails.append("viewer: a failed run written valid: true is shown valid")
+    entry = viewer_data._run_entry(against, [0.0], [1, 1, 1], "", {}, None, "")
+    if entry.get("reference_valid") is not False or "2 solves" not in (entry.get("reference_invalid_reason") or ""):
+        fails.append("viewer: reference_valid false is not passed on")
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "results.json")
+        with open(path, "w") as f:
+            json.dump({"scene": {"name": "marks"}, "runs": [failed, against]}, f)
+        _, html = report.results_table(path)
+    if "against an invalid reference" not in html:
+        fails.append("report: the run table does not say 'against an invalid reference'")
+    if html.count(">no<") < 1:
+        fails.append("report: a failed run written valid: true is shown valid")
+    return fails
 
 
 if __name__ == "__main__":

@@ -15,7 +15,9 @@
 #include <deform_harness/sweep.h>
 #include <deform_harness/tables.h>
 #include <gtest/gtest.h>
+
 #include <sys/wait.h>
+#include "../../harness/src/tables/table_kit.h"  // the tables' internal kit: status cells
 
 #include <cmath>
 #include <cstdio>
@@ -804,6 +806,34 @@ TEST(Sweep, ParetoFrontAndKnobs) {
   EXPECT_EQ(sweepKnob(info, false).values, (std::vector<nlohmann::json>{"explicit_euler", 2}));
   EXPECT_TRUE(sweepKnob(info, true).values.at(0).is_number_float());
   EXPECT_TRUE(sweepKnob(ModelInfo{}, false).param.empty());
+}
+
+// Issue 33 item 7 and issue 35 item 16: a row whose errors are against an invalid reference says
+// so and carries reference_valid false; a row whose reference failed gives the reason.
+TEST(TableKit, ARowAgainstAnInvalidReferenceIsMarkedAndAFailedOneSaysWhy) {
+  CaseResult c;
+  c.sceneFile = "cases/x.json";
+  c.result = BenchmarkResult{};
+  RunRecord model, ref;
+  model.label = "pbd";
+  model.referenceValid = false;
+  ref.label = "reference_fem";
+  ref.isReference = true;
+  ref.valid = false;
+  ref.invalidReason = "2 solves did not converge";
+  c.result->runs = {model, ref};
+  tables::ojson row;
+  tables::caseCells(row, c, "pbd", c.run("pbd"), ".", true);
+  EXPECT_EQ(row["status"],
+            "ok; against an invalid reference (reference: invalid (2 solves did not converge))");
+  EXPECT_EQ(row["reference_valid"], false);
+
+  c.result->runs[1].status = RunStatus::Failed;
+  c.result->runs[1].message = "init: cannot tetrahedralise";
+  EXPECT_EQ(tables::referenceStatus(c), "reference: failed (init: cannot tetrahedralise)");
+  c.result->runs[1].status = RunStatus::Ok;
+  c.result->runs[1].valid = true;
+  EXPECT_EQ(tables::referenceStatus(c), "");
 }
 
 }  // namespace

@@ -210,7 +210,138 @@ TEST(Runner, GraspResidualAndValidity) {
 
   const RunRecord diverged = runWith(f, [](RigidTestModel& m) { m.nanAtStep = 7; });
   EXPECT_FALSE(diverged.valid);
-  EXPECT_EQ(diverged.invalidReason, "diverged");
+  EXPECT_EQ(diverged.invalidReason.rfind("diverged at step 7", 0), 0u) << diverged.invalidReason;
+}
+
+// Broken runs (issue 35 items 2, 3, 7): each is invalid with its reason, never ok in silence.
+
+// Supports that hold: a fixed region that holds none of the model's nodes, or whose surface moves
+// with the organ, makes the run invalid; a model's own count of what it pins is the one reported.
+TEST(Runner, ASupportThatHoldsNothingIsInvalid) {
+  Fixture f;
+  f.organ.fixed.boxes.push_back(Box{Vec3(-1, -1, -1), Vec3(-0.5, -0.5, -0.5)});  // holds nothing
+  const RunRecord empty = runWith(f, [](RigidTestModel&) {});
+  ASSERT_EQ(empty.status, RunStatus::Ok) << empty.message;
+  EXPECT_EQ(empty.fixedNodes, 0);
+  EXPECT_FALSE(empty.valid);
+  EXPECT_EQ(empty.invalidReason.rfind("the fixed region holds none of the model's nodes", 0), 0u)
+      << empty.invalidReason;
+
+  Fixture corner;
+  corner.fixCorner();  // holds vertex 0, which the rigid body lifts with the rest
+  const RunRecord lifted = runWith(corner, [](RigidTestModel&) {});
+  EXPECT_EQ(lifted.fixedNodes, 1);
+  EXPECT_FALSE(lifted.valid);
+  EXPECT_EQ(lifted.invalidReason.rfind("the fixed region did not hold: its surface moved 20 mm, "
+                                       "over 5% of the largest displacement (20 mm)",
+                                       0),
+            0u)
+      << lifted.invalidReason;
+  // A model that pins by its own rule reports the count; results take it.
+  EXPECT_EQ(runWith(corner, [](RigidTestModel& m) { m.fixedNodes = 7; }).fixedNodes, 7);
+  EXPECT_TRUE(runWith(Fixture{}, [](RigidTestModel&) {}).valid) << "nothing fixed, nothing to hold";
+
+  // The 5% threshold itself.
+  RunRecord r;
+  r.fixedRegion = true;
+  r.fixedNodes = 3;
+  r.peakDisplacement = 0.010;
+  r.fixedDrift = 0.00049;
+  EXPECT_EQ(supportProblem(f.scene, r), "");
+  r.fixedDrift = 0.00051;
+  EXPECT_NE(supportProblem(f.scene, r), "");
+  r.fixedRegion = false;
+  EXPECT_EQ(supportProblem(f.scene, r), "") << "no fixed region: nothing to hold";
+}
+
+// Every early return of runModel() (unsupported, init threw, a surface of the wrong size) and
+// every failure is invalid with its status and message as the reason.
+TEST(Runner, FailedAndUnsupportedRunsAreNeverValid) {
+  const Fixture f;
+  const RunRecord unsupported = runWith(
+      f, [](RigidTestModel&) {}, /*grasp=*/false);
+  ASSERT_EQ(unsupported.status, RunStatus::Unsupported);
+  EXPECT_FALSE(unsupported.valid);
+  EXPECT_EQ(unsupported.invalidReason.rfind("unsupported (the scene's tool 0 (grasper)", 0), 0u)
+      << unsupported.invalidReason;
+  const RunRecord init = runWith(f, [](RigidTestModel& m) { m.throwInInit = true; });
+  ASSERT_EQ(init.status, RunStatus::Failed);
+  EXPECT_FALSE(init.valid);
+  EXPECT_EQ(init.invalidReason.rfind("failed (init: ", 0), 0u) << init.invalidReason;
+  const RunRecord rows = runWith(f, [](RigidTestModel& m) { m.shortSurface = true; });
+  ASSERT_EQ(rows.status, RunStatus::Failed);
+  EXPECT_FALSE(rows.valid);
+  EXPECT_NE(rows.invalidReason.find("surface() has 3 rows, the organ has 4"), std::string::npos)
+      << rows.invalidReason;
+  const RunRecord step = runWith(f, [](RigidTestModel& m) { m.throwAtStep = 3; });
+  EXPECT_FALSE(step.valid);
+  EXPECT_EQ(step.invalidReason, "failed (step 3: injected failure)");
+  // Whoever made the record, results.json never says valid: true for a run that did not end ok.
+  RunRecord crashed;
+  crashed.status = RunStatus::Failed;
+  crashed.message = "SIGSEGV";
+  const auto j = runJson(crashed);
+  EXPECT_FALSE(j.at("valid").get<bool>());
+  EXPECT_EQ(j.at("invalid_reason"), "failed (SIGSEGV)");
+  invalidateIfNotOk(crashed);
+  EXPECT_FALSE(crashed.valid);
+}
+
+// An instrument whose coupling blows up (here a dynamic grasper at k dt^2 / m = 6, above the
+// limit 4 of ODE's step: parseScene() would refuse it, the struct is built by hand) stops the run
+// at that step, diverged and invalid, before its forces reach the model.
+TEST(Runner, AnExplodingInstrumentStopsTheRunAndIsInvalid) {
+  Fixture f;
+  ToolDynamics d;
+  d.mass = 0.01;  // 0.012 kg with the jaws
+  d.coupling.stiffness = 720;
+  d.coupling.damping = 0;
+  f.scene.tools[0].dynamics = d;
+  EXPECT_NEAR(couplingStabilityNumber(d.coupling, 1.2 * d.mass, f.scene.dt), 6.0, 1e-12);
+  Cache cache{fs::path()};
+  ModelInfo info = infoFor([](RigidTestModel&) {});
+  info.capabilities.push_back(Capability::ReactionForce);
+  const RunRecord r = runModel(info, ParamValues::defaults(info.params), f.scene, f.organ, cache);
+  ASSERT_EQ(r.status, RunStatus::Diverged) << r.message;
+  EXPECT_NE(r.message.find("an object or instrument diverged: tools/0"), std::string::npos)
+      << r.message;
+  EXPECT_LT(r.steps, 30) << "stopped at the explosion, not at the end";
+  EXPECT_FALSE(r.valid);
+
+  d.coupling.stiffness = 200;  // k dt^2 / m = 1.7: stable
+  f.scene.tools[0].dynamics = d;
+  const RunRecord calm =
+      runModel(info, ParamValues::defaults(info.params), f.scene, f.organ, cache);
+  EXPECT_EQ(calm.status, RunStatus::Ok) << calm.message;
+}
+
+// Outrunning the tool: a note with the ratio when the surface moves over 1.5x the largest
+// prescribed motion in a scene driven by prescribed motion alone.
+TEST(Runner, ASurfaceThatOutrunsTheToolGetsANote) {
+  Fixture f;
+  RunRecord r;
+  r.prescribedMotion = 0.010;
+  r.peakDisplacement = 0.0185;
+  EXPECT_EQ(outrunNote(f.scene, r),
+            "the surface outran the tool: surface points moved up to 18.5 mm, 1.85x the largest "
+            "prescribed motion (10 mm; over 1.5x in a quasi-static scene)");
+  r.peakDisplacement = 0.0149;
+  EXPECT_EQ(outrunNote(f.scene, r), "");
+  r.peakDisplacement = 0.0185;
+  LoadSpec force;
+  f.scene.loads.push_back(force);
+  EXPECT_EQ(outrunNote(f.scene, r), "") << "a point force is not bounded by any tool";
+  // In a run: the rigid body lets go of the grasp and drifts 1 mm per step, 100 mm against the
+  // tool's 20 mm lift.
+  const RunRecord drifting = runWith(Fixture{}, [](RigidTestModel& m) {
+    m.ignoreGrasps = true;
+    m.drift = Vec3(0.001, 0, 0);
+  });
+  EXPECT_NEAR(drifting.prescribedMotion, 0.02, 1e-12);
+  bool noted = false;
+  for (const std::string& n : drifting.notes)
+    noted |= n.rfind("the surface outran the tool", 0) == 0;
+  EXPECT_TRUE(noted);
 }
 
 // A frozen solver (status ok, nothing moves) under a load is invalid; the same model in a scene
@@ -394,6 +525,44 @@ TEST(Runner, ErrorsAgainstTheReferenceRun) {
   EXPECT_EQ(runs[0].referenceModel, "exact");
   EXPECT_NEAR(runs[0].error->max, 0.001, 1e-12);
   EXPECT_NEAR(runs[0].error->rmseAll, std::sqrt(0.5) * 0.001, 1e-12);  // half the instants off
+}
+
+// A reference that is invalid or failed marks every model run (issue 33 item 7), and a failed
+// one says why in the note that replaces the errors.
+TEST(Runner, ErrorsAgainstAnInvalidReferenceAreMarked) {
+  const Fixture f;
+  std::vector<RunRecord> runs;
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.push_back(runWith(f, [](RigidTestModel& m) { m.unconverged = 2; }));
+  runs.back().isReference = true;
+  runs.back().label = "ref";
+  computeRunErrors(f.scene, f.organ, runs);
+  ASSERT_TRUE(runs[0].error.has_value()) << "an invalid reference that ran still gives errors";
+  ASSERT_TRUE(runs[0].referenceValid.has_value());
+  EXPECT_FALSE(*runs[0].referenceValid);
+  EXPECT_EQ(runs[0].referenceInvalidReason,
+            "the reference ref is invalid: 2 solves did not converge");
+  const auto j = runJson(runs[0]);
+  EXPECT_FALSE(j.at("reference_valid").get<bool>());
+  EXPECT_FALSE(runJson(runs[1]).contains("reference_valid")) << "not on the reference itself";
+
+  runs[1] = runWith(f, [](RigidTestModel& m) { m.throwInInit = true; });
+  runs[1].isReference = true;
+  runs[1].label = "ref";
+  runs[0].error.reset();
+  runs[0].notes.clear();
+  computeRunErrors(f.scene, f.organ, runs);
+  EXPECT_FALSE(runs[0].error.has_value());
+  EXPECT_FALSE(*runs[0].referenceValid);
+  ASSERT_FALSE(runs[0].notes.empty());
+  EXPECT_EQ(runs[0].notes.back().rfind("no error: the reference run is failed (init: ", 0), 0u)
+      << runs[0].notes.back();
+
+  runs[1] = runWith(f, [](RigidTestModel&) {});
+  runs[1].isReference = true;
+  computeRunErrors(f.scene, f.organ, runs);
+  EXPECT_TRUE(*runs[0].referenceValid);
+  EXPECT_TRUE(runJson(runs[0]).at("reference_valid").get<bool>());
 }
 
 TEST(Metrics, GraspSceneRmseKLeavesOutTheGraspedVertices) {

@@ -25,6 +25,8 @@ class RigidTestModel : public Model {
   long long unconverged = 0;      ///< reported as numeric "unconverged_steps"
   long long inverted = -1;        ///< >= 0: reported as numeric "inverted_tets"
   long long elements = 0;         ///< > 0: reported as counts "elements"
+  long long fixedNodes = -1;      ///< >= 0: reported as counts "fixed_nodes" (its own rule)
+  bool shortSurface = false;      ///< surface() has one row too few (a broken mapping)
   std::vector<StepInput> inputs;  ///< every input received
   std::vector<StepInput>* recordInto = nullptr;  ///< also appended here when set (outlives runs)
 
@@ -32,6 +34,7 @@ class RigidTestModel : public Model {
     if (throwInInit) throw InputError("test", "", "cannot handle this organ");
     m_rest = setup.organ.surface.V;
     m_x = m_rest;
+    m_short = m_rest.topRows(m_rest.rows() - 1);
   }
   StepStatus step(const StepInput& in) override {
     inputs.push_back(in);
@@ -55,7 +58,7 @@ class RigidTestModel : public Model {
     return m_steps == reportDivergedAtStep ? StepStatus::Diverged : StepStatus::Ok;
   }
   const MatX3& nodes() const override { return m_x; }
-  const MatX3& surface() const override { return m_x; }
+  const MatX3& surface() const override { return shortSurface ? m_short : m_x; }
   void reset() override {
     m_x = m_rest;
     m_steps = 0;
@@ -63,6 +66,7 @@ class RigidTestModel : public Model {
   Counts counts() const override {
     Counts c{{"nodes", m_x.rows()}};
     if (elements > 0) c["elements"] = elements;
+    if (fixedNodes >= 0) c["fixed_nodes"] = fixedNodes;
     return c;
   }
   PhaseTimes phaseTimes() const override { return m_phase; }
@@ -73,7 +77,7 @@ class RigidTestModel : public Model {
   }
 
  private:
-  MatX3 m_rest, m_x;
+  MatX3 m_rest, m_x, m_short;
   int m_steps = 0;
   PhaseTimes m_phase;
 };

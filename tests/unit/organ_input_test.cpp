@@ -136,5 +136,46 @@ TEST(GraspOutsideOrgan, OnTheSurfaceWithinTheRadiusOrInsideIsAccepted) {
   EXPECT_NO_THROW(loadOrgan(parseScene(probe, "x.json")));
 }
 
+// ---------------------------------------------------------------- loads against the organ
+
+/// The 0.1 m cube phantom with one load at `at` (patch radius 1 cm).
+json loadScene(const Vec3& at, const char* type = "point_force") {
+  json load = {{"type", type}, {"at", {at.x(), at.y(), at.z()}}};
+  if (std::string(type) == "point_force") {
+    load["force"] = {0, 0, 1};
+  } else {
+    load["stiffness"] = 100;
+    load["path"] = {{{"t", 0.0}, {"pos", {at.x(), at.y(), at.z()}}},
+                    {{"t", 0.5}, {"pos", {at.x(), at.y(), at.z() + 0.01}}}};
+  }
+  return {{"organ", {{"mesh", "phantom:cube"}, {"resolution", 0.3}}},
+          {"loads", {load}},
+          {"models", {{{"plugin", "pbd"}}}}};
+}
+
+// Issue 35 item 6: a point force 17 m from the organ was applied at the nearest vertex in silence.
+TEST(LoadAwayFromOrgan, FartherThanItsRadiusIsOneClearError) {
+  for (const char* type : {"point_force", "pin_head"}) {
+    SCOPED_TRACE(type);
+    try {
+      loadOrgan(parseScene(loadScene(Vec3(10, 10, 10), type), "scenes/far.json"));
+      FAIL() << "no error";
+    } catch (const InputError& e) {
+      EXPECT_EQ(e.file(), "scenes/far.json");
+      EXPECT_EQ(e.place(), "/loads/0/at");
+      EXPECT_NE(
+          std::string(e.what()).find("m outside the organ's surface, beyond its radius 0.01 m"),
+          std::string::npos)
+          << e.what();
+      EXPECT_NE(std::string(e.what()).find("17.2"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_THROW(loadOrgan(parseScene(loadScene(Vec3(0, 0, 0)), "x.json")), InputError)
+      << "5 cm deep inside: the nearest vertex is far from the point";
+  EXPECT_NO_THROW(loadOrgan(parseScene(loadScene(Vec3(0, 0, 0.05)), "x.json")));
+  EXPECT_NO_THROW(loadOrgan(parseScene(loadScene(Vec3(0, 0, 0.059)), "x.json")));
+  EXPECT_THROW(loadOrgan(parseScene(loadScene(Vec3(0, 0, 0.061)), "x.json")), InputError);
+}
+
 }  // namespace
 }  // namespace deform

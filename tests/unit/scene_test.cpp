@@ -568,5 +568,42 @@ TEST(SceneFile, DuplicateKeysAreErrorsWithTheirPath) {
   fs::remove(p);
 }
 
+// Issue 35 item 3: a coupling unstable at the scene's dt (ODE's semi-implicit Euler step:
+// (k dt^2 + 2 c dt) / m must stay below 4) is refused at load, naming the numbers.
+TEST(SceneParse, AnUnstableCouplingIsRefusedNamingTheNumbers) {
+  json j = minimalScene();
+  j["dt"] = 0.001;
+  j["objects"] = json::parse(R"([{"shape": "box", "size": [0.01, 0.01, 0.01], "mass": 0.1,
+      "pos": [0, 0, 0.06], "stiffness": 4e5, "damping": 1,
+      "trajectory": [{"t": 0, "pos": [0, 0, 0.06]}, {"t": 1, "pos": [0, 0, 0.05]}]}])");
+  try {
+    parseScene(j, "scenes/box.json");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), "scenes/box.json");
+    EXPECT_EQ(e.place(), "/objects/0");
+    const std::string what = e.what();
+    EXPECT_NE(what.find("(k dt^2 + 2 c dt) / m = 4.02 with k 4e+05 N/m, c 1 N s/m, m 0.1 kg"),
+              std::string::npos)
+        << what;
+    EXPECT_NE(what.find("must stay below 4"), std::string::npos) << what;
+  }
+  j["objects"][0]["stiffness"] = 1e5;  // (0.1 + 0.002) / 0.1 = 1.02: stable
+  EXPECT_NO_THROW(parseScene(j, "x.json"));
+  j["objects"][0].erase("trajectory");  // a free object has no coupling
+  j["objects"][0]["stiffness"] = 1e9;
+  EXPECT_NO_THROW(parseScene(j, "x.json"));
+  // A grasper moves its jaws too (1.2 x its mass, 0.06 kg): at dt 10 ms 2390 N/m is 3.98, 2410
+  // N/m 4.02.
+  json g = minimalScene();
+  g["dt"] = 0.01;
+  g["duration"] = 0.1;
+  g["tools"] = json::parse(R"([{"type": "grasper", "dynamics": {"mass": 0.05, "stiffness": 2390,
+      "damping": 0}, "trajectory": [{"t": 0, "pos": [0, 0, 0.05], "jaw": "closed"}]}])");
+  EXPECT_NO_THROW(parseScene(g, "x.json"));
+  g["tools"][0]["dynamics"]["stiffness"] = 2410;
+  EXPECT_THROW(parseScene(g, "x.json"), InputError);
+}
+
 }  // namespace
 }  // namespace deform

@@ -522,6 +522,7 @@ Scene parseScene(const nlohmann::json& j, const std::string& file) {
     for (size_t i = 0; i < v->size(); ++i)
       s.loads.push_back(parseLoad(c, (*v)[i], "/loads/" + std::to_string(i)));
   }
+  checkCouplingStability(s);
   const json& models = c.array(r.required("models"), "/models");
   if (models.empty()) c.fail("/models", "needs at least one model");
   std::set<std::string> labels;
@@ -882,6 +883,7 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog) {
       std::unique(organ.fixed.surfaceVertices.begin(), organ.fixed.surfaceVertices.end()),
       organ.fixed.surfaceVertices.end());
   checkGraspsReachOrgan(scene, organ);
+  checkLoadsReachOrgan(scene, organ);
   return organ;
 }
 

@@ -66,7 +66,8 @@ struct RunRecord {
   StepStats stepStats;
   std::map<std::string, double> phaseMs;  ///< median per phase over the steps after warm-up
   NumericCounters numeric;
-  int fixedNodes = 0;  ///< model nodes pinned by the fixed region
+  int fixedNodes = 0;  ///< model nodes pinned by the fixed region (fixed_nodes in results.json)
+  bool fixedRegion = false;  ///< the organ has a fixed region (set by simulate())
   std::vector<int> emptyGrasps;
   /// RMS distance (m) of the grasped surface points to their targets over every step with a
   /// grasp in force (at the end of each step); -1 when no grasp was in force.
@@ -81,10 +82,17 @@ struct RunRecord {
   /// asked: its grasp held nothing, its grasp residual exceeds 10% of the tool's travel, it did
   /// not settle, it did not move although the scene loads the organ, its solver gave up on a
   /// solve (numeric unconverged_steps), it inverted over 0.5% of its tets (numeric inverted_tets
-  /// against counts elements), or it diverged / failed / was unsupported. Set by
-  /// assessValidity().
+  /// against counts elements), its support held none of its nodes or let the clamped surface
+  /// move over 5% of the largest displacement (supportProblem()), or it diverged (an object or
+  /// instrument included) / failed / was unsupported. Set by assessValidity(); runModel() sets it
+  /// on every path, its early returns included.
   bool valid = true;
   std::string invalidReason;
+  /// Whether the errors of this (model) run are against a valid reference: nullopt when the
+  /// scene run had no reference; false (with referenceInvalidReason) when the reference is
+  /// invalid, failed, diverged or unsupported. Set by computeRunErrors().
+  std::optional<bool> referenceValid;
+  std::string referenceInvalidReason;
   /// Largest surface displacement from rest (m) at the compared instants and the end; -1 when not
   /// measured. A run whose scene loads the organ (gravity, a load, a moving grasp) and that moves
   /// less than motionFloor is invalid ("did not move": a frozen solver).
@@ -92,8 +100,12 @@ struct RunRecord {
   double motionFloor = 0;  ///< m, 1e-6 of the organ's bounding-box diagonal; 0: nothing asked
   /// m, largest displacement of the organ's surface vertices inside the fixed region over the
   /// final and compared surfaces (0 when it stays below 1e-6 of the diagonal or nothing is
-  /// fixed). More than half of peakDisplacement adds a note ("the fixed region did not hold").
+  /// fixed). More than 5% of peakDisplacement adds a note ("the fixed region did not hold") and
+  /// makes the run invalid.
   double fixedDrift = 0;
+  /// The largest motion the scene prescribes (m): the grasps' travel, a pin_head's pin travel.
+  /// 0 when none. See outrunNote().
+  double prescribedMotion = 0;
   std::vector<Cache::Event> cacheEvents;
 
   MatX3 finalSurface;                     ///< after the last completed step
@@ -265,10 +277,33 @@ bool readComparedSurface(const std::filesystem::path& file, MatX3& positions);
 std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
                                  const BenchmarkOptions& options);
 
-/// Fills record.valid / invalidReason from its status, grasps, residual and settling.
+/// Fills record.valid / invalidReason from its status, grasps, residual, settling, solver
+/// counters and support (DESIGN "Metrics", docs/results-format.md "Validity").
 void assessValidity(const Scene& scene, RunRecord& record);
 
-/// Errors of every ok model run against the reference run (if there is one and it is ok).
+/// Why a run's support did not hold ("" when it did or nothing is fixed): the organ has a fixed
+/// region (record.fixedRegion) but the model holds none of its nodes there (record.fixedNodes ==
+/// 0), or the organ's surface inside the region moved more than 5% of the run's largest surface
+/// displacement (record.fixedDrift against record.peakDisplacement).
+std::string supportProblem(const Scene& scene, const RunRecord& record);
+
+/// Why a run that stopped before stepping, or whose stepping threw, is invalid: its status and
+/// message ("failed (init: ...)", "unsupported (...)"); "" for an ok run.
+std::string notRunReason(const RunRecord& record);
+/// A run whose status is not ok is invalid (valid false, invalidReason notRunReason() unless a
+/// reason is already there). runModel() applies it on every path; a record made elsewhere (a
+/// crashed child, a failed case) must too.
+void invalidateIfNotOk(RunRecord& record);
+
+/// The note a run gets when its surface outran the tool ("" otherwise): in a scene driven by
+/// prescribed motion alone (grasps or pin heads, no point force), surface points that moved
+/// more than 1.5x the largest prescribed motion (record.peakDisplacement against
+/// record.prescribedMotion), with the ratio.
+std::string outrunNote(const Scene& scene, const RunRecord& record);
+
+/// Errors of every ok model run against the reference run (if there is one and it is ok), and
+/// each model run's referenceValid: false when the reference is invalid, failed, diverged or
+/// unsupported (the errors, where there are any, are then against an invalid reference).
 void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs);
 
 struct BenchmarkResult {

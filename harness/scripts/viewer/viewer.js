@@ -345,6 +345,7 @@
           (run.step_ms != null ? run.step_ms.toPrecision(3) + ' ms/step' : 'no step time');
         if (p.i !== refIndex) {
           lines += '<br>rmse_all ' + fmtMm(run.rmse_all_m) + ' &middot; max ' + fmtMm(run.max_m) + ' (compared instants)';
+          if (run.reference_valid === false) lines += '<br><span class="bad">against an invalid reference' + (run.reference_invalid_reason ? ': ' + esc(run.reference_invalid_reason) : '') + '</span>';
           lines += '<br>' + (fmax != null ? 'this frame: max ' + fmtMm(fmax) : (exact ? 'no reference surface at this time' : 'no surface at this time: showing t = ' + run.times[lf].toFixed(3) + ' s'));
         } else if (!exact) {
           lines += '<br>no surface at this time: showing t = ' + run.times[lf].toFixed(3) + ' s';

@@ -176,6 +176,9 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
       if (ref && !ref->message.empty()) appendTo(note, "reference: " + ref->message);
     }
     row["status"] = status.empty() ? "ok" : status;
+    for (const HybridModel& m : kHybridModels)
+      if (const RunRecord* r = c.run(m.plugin); r && !r->referenceValid.value_or(true))
+        row["reference_valid"] = false;  // its figures are against an invalid reference
     row["scene"] = relativeTo(c.sceneFile, dir);
     row["note"] = note;
     rows.push_back(row);

@@ -161,10 +161,14 @@ std::string statusOf(const CaseResult& c, const std::string& plugin, const RunRe
 
 std::string referenceStatus(const CaseResult& c) {
   if (!c.result) return "";
-  for (const RunRecord& r : c.result->runs)
-    if (r.isReference && (r.status != RunStatus::Ok || !r.valid))
-      return "reference: " + (r.status == RunStatus::Ok ? "invalid (" + r.invalidReason + ")"
-                                                        : std::string(statusName(r.status)));
+  for (const RunRecord& r : c.result->runs) {
+    if (!r.isReference || (r.status == RunStatus::Ok && r.valid)) continue;
+    // A reference that ran but is invalid still gave errors: they are marked. One that failed
+    // gave none: its reason is what the reader needs.
+    if (r.status == RunStatus::Ok)
+      return "against an invalid reference (reference: invalid (" + r.invalidReason + "))";
+    return "reference: " + notRunReason(r);
+  }
   return "";
 }
 
@@ -188,6 +192,7 @@ void caseCells(ojson& row, const CaseResult& c, const std::string& plugin, const
   std::string status = statusOf(c, plugin, r);
   if (r && !r->isReference) appendTo(status, referenceStatus(c));
   row["status"] = status;
+  if (r && r->referenceValid && !*r->referenceValid) row["reference_valid"] = false;
   row["scene"] = relativeTo(c.sceneFile, dir);
   row["note"] = noteOf(c, r, wantsError);
 }

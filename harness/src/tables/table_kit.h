@@ -110,8 +110,10 @@ ojson precomputeS(const RunRecord* r);
 /// not do what the scene asked (DESIGN "Metrics": validity), or "missing plugin X: why".
 std::string statusOf(const CaseResult& c, const std::string& plugin, const RunRecord* r);
 
-/// "reference: failed", "reference: invalid (why)" when the case's reference ran but its answer
-/// is not one to measure errors against (e.g. its solver did not converge); "" otherwise.
+/// "against an invalid reference (reference: invalid (why))" when the case's reference ran but
+/// its answer is not one to measure errors against (e.g. its solver did not converge: the row's
+/// errors are against it); "reference: failed (message)" (or diverged, unsupported) when it gave
+/// no answer; "" otherwise.
 std::string referenceStatus(const CaseResult& c);
 
 /// A note on the row: the run's message and notes, and a missing reference.

@@ -135,7 +135,8 @@ ParamValues resolveParams(const std::vector<ParamSpec>& specs, const nlohmann::j
 
 /// Loads the organ: phantom or file, scaled to metres, validated (or repaired when the scene
 /// asks; each change is appended to repairLog). Throws InputError naming the mesh file.
-/// Also checks every grasp against the loaded organ (checkGraspsReachOrgan).
+/// Also checks every grasp and load against the loaded organ (checkGraspsReachOrgan,
+/// checkLoadsReachOrgan).
 Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog = nullptr);
 
 /// Throws InputError(scene.file, "/tools/I/trajectory/K/pos", ...) when a grasper's jaws close
@@ -143,6 +144,29 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog = nullpt
 /// organ farther than the tool's radius from its surface: that grasp would attach nothing.
 /// Closing inside the organ is allowed (volumetric models grasp interior nodes).
 void checkGraspsReachOrgan(const Scene& scene, const Organ& organ);
+
+/// Throws InputError(scene.file, "/loads/I/at", ...) when a load's point lies farther than its
+/// patch radius from the organ's surface (outside or inside): the harness would apply it at the
+/// nearest surface vertex, somewhere the scene did not say. Called by loadOrgan().
+void checkLoadsReachOrgan(const Scene& scene, const Organ& organ);
+
+/// Stability of a virtual coupling F = k (x_hand - x) + c (v_hand - v) on a body of mass m
+/// under ODE's dWorldStep, a semi-implicit (symplectic) Euler step with the coupling force taken
+/// at the start of the step: v' = v + dt F(x, v) / m, x' = x + dt v'. On x'' = -(k x + c x') / m
+/// with a = k dt^2 / m and b = c dt / m one step maps (x, dt v) by [[1 - a, 1 - b], [-a, 1 - b]]
+/// (trace 2 - a - b, determinant 1 - b); by the Schur-Cohn (Jury) conditions both eigenvalues
+/// lie inside the unit circle iff 0 < b < 2, a > 0 and a + 2 b < 4. Without damping this is the
+/// familiar omega dt < 2 of symplectic Euler (Hairer, Lubich, Wanner, Geometric Numerical
+/// Integration, 2nd ed., Springer 2006, ch. I.1 and I.5); damping taken explicitly narrows it.
+/// couplingStabilityNumber() is a + 2 b; at or above kCouplingStabilityLimit the body's motion
+/// grows every step whatever touches it.
+constexpr Real kCouplingStabilityLimit = 4.0;
+Real couplingStabilityNumber(const CouplingParams& coupling, Real mass, Real dt);
+
+/// Throws InputError(scene.file, "/tools/I/dynamics" or "/objects/J", ...) naming k, c, m, dt
+/// and the number when a dynamic tool's or a driven object's coupling is unstable at the
+/// scene's dt (couplingStabilityNumber() >= 4). Called by parseScene().
+void checkCouplingStability(const Scene& scene);
 
 /// JSON of resolved parameter values (for results.json).
 nlohmann::json paramsToJson(const ParamValues& values);
