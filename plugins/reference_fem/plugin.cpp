@@ -92,7 +92,8 @@ class ReferenceFemModel final : public Model {
     }
     m_restSurface = organ.surface.V;
     m_meshedNodes = mesh.numVertices();
-    m_isolatedNodes = addClampedSurfaceNodes(organ, m_surfaceNode, mesh);
+    const std::vector<int> isolated = addClampedSurfaceNodes(organ, m_surfaceNode, mesh);
+    m_isolatedNodes = (long long)isolated.size();
     // The organ's triangles as node rows: the contact proxy besides the nodes themselves (the
     // surface the harness draws and checks against instruments). With a conforming mesh the
     // triangles with a vertex inside a fixed box (an isolated node) are left out: they are
@@ -111,6 +112,9 @@ class ReferenceFemModel final : public Model {
     m_system =
         std::make_unique<FemSystem>(std::move(mesh), organ.material, model, order, volumetric);
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
+    m_fixed.insert(m_fixed.end(), isolated.begin(), isolated.end());
+    std::sort(m_fixed.begin(), m_fixed.end());
+    m_fixed.erase(std::unique(m_fixed.begin(), m_fixed.end()), m_fixed.end());
     // A pinned vertex reports its rest position exactly (a vertex snapped onto a box face by
     // clipSurfaceByBoxes is a node a hair's breadth from it).
     m_isFixed.assign(size_t(m_system->numNodes()), 0);
@@ -163,7 +167,7 @@ class ReferenceFemModel final : public Model {
       }
     for (const PointLoad& l : in.loads)
       for (size_t k = 0; k < l.vertices.size(); ++k) {
-        // An isolated clamped node takes no load (the support does), as before it was a node.
+        // A load share on an isolated clamped node goes to the support (it is dropped).
         const int node = m_surfaceNode[size_t(l.vertices[k])];
         if (node < m_meshedNodes) lc.nodeForces.emplace_back(node, l.weights[k] * l.force);
       }
@@ -324,25 +328,21 @@ class ReferenceFemModel final : public Model {
   }
 
   /// Every surface vertex becomes a node: the vertices the conforming clip left without one
-  /// (-1 in surfaceNode: strictly inside a fixed box, outside the meshed solid) are appended to
-  /// `mesh` as nodes of no tet, pinned by the box like the material around them. Returns how
-  /// many.
-  static long long addClampedSurfaceNodes(const Organ& organ, std::vector<int>& surfaceNode,
-                                          TetMesh& mesh) {
-    long long added = 0;
-    for (int n : surfaceNode) added += n < 0;
-    if (added == 0) return 0;
+  /// (-1 in surfaceNode: inside a fixed box, or snapped onto its face, outside the meshed solid)
+  /// are appended to `mesh` as nodes of no tet. Returns them; the caller pins them (they stay at
+  /// rest with the clamped material around them).
+  static std::vector<int> addClampedSurfaceNodes(const Organ& organ, std::vector<int>& surfaceNode,
+                                                 TetMesh& mesh) {
+    std::vector<int> added;
+    for (int n : surfaceNode) added.resize(added.size() + (n < 0));
+    if (added.empty()) return added;
     Eigen::Index next = mesh.V.rows();
-    mesh.V.conservativeResize(next + Eigen::Index(added), 3);
+    mesh.V.conservativeResize(next + Eigen::Index(added.size()), 3);
+    added.clear();
     for (size_t v = 0; v < surfaceNode.size(); ++v) {
       if (surfaceNode[v] >= 0) continue;
-      const Vec3 p = organ.surface.V.row(Eigen::Index(v)).transpose();
-      bool clamped = false;
-      for (const Box& b : organ.fixed.boxes) clamped = clamped || b.contains(p);
-      if (!clamped)
-        throw std::logic_error(
-            "reference_fem: a surface vertex outside the fixed boxes has no node");
-      mesh.V.row(next) = p.transpose();
+      mesh.V.row(next) = organ.surface.V.row(Eigen::Index(v));
+      added.push_back(int(next));
       surfaceNode[v] = int(next++);
     }
     return added;
