@@ -52,6 +52,7 @@
 // Positions are 3N vectors, node-major (x of node i at 3 i + k), metres.
 #pragma once
 
+#include "mean_dilatation_tet.h"
 #include "quadratic_tet.h"
 
 #include <deform/fem_tet.h>
@@ -78,6 +79,26 @@ enum class ElementOrder { Linear = 1, Quadratic = 2 };
 
 /// 1 -> Linear, 2 -> Quadratic; throws InputError otherwise.
 ElementOrder parseElementOrder(long long order);
+
+/// How the volumetric part of the Neo-Hookean energy is integrated: at every quadrature point
+/// (the plain displacement element), or on the element's volume (mean dilatation, P2-P0: free of
+/// volumetric locking as nu -> 1/2; mean_dilatation_tet.h).
+enum class VolumetricFormulation { Displacement, MeanDilatation };
+/// The `volumetric` parameter: auto picks by the material (see resolveVolumetricFormulation).
+enum class VolumetricChoice { Auto, Displacement, MeanDilatation };
+/// Poisson ratio from which `auto` uses the mean-dilatation element (and the force floor of an
+/// unloaded solve follows the bulk modulus, see EquilibriumSolver::solve): published soft-tissue
+/// and phantom values are 0.45-0.499 (docs/scene-format.md).
+inline constexpr Real kNearlyIncompressiblePoisson = 0.45;
+
+/// "auto" | "displacement" | "mean_dilatation"; throws InputError on anything else.
+VolumetricChoice parseVolumetricChoice(const std::string& name);
+/// auto: MeanDilatation for Neo-Hookean P2 tets at nu >= kNearlyIncompressiblePoisson, else
+/// Displacement. An explicit mean_dilatation needs Neo-Hookean and P2 tets (a 4-node tet has a
+/// single volume already, the element would not change); InputError otherwise.
+VolumetricFormulation resolveVolumetricFormulation(VolumetricChoice choice, MaterialModel model,
+                                                   ElementOrder order, Real poisson);
+const char* volumetricFormulationName(VolumetricFormulation f);
 
 /// Boundary conditions and loads of one solve.
 struct LoadCase {
@@ -128,6 +149,9 @@ class FemSystem {
   /// `rest` is the corner (P1) mesh; Quadratic adds the midside nodes (see the file comment).
   FemSystem(TetMesh rest, const Material& material, MaterialModel model, ElementOrder order,
             CorotationalTangent corotationalTangent = CorotationalTangent::Exact);
+  /// With the volumetric formulation (MeanDilatation: Neo-Hookean P2 only, else InputError).
+  FemSystem(TetMesh rest, const Material& material, MaterialModel model, ElementOrder order,
+            VolumetricFormulation volumetric);
 
   /// Rest nodes (all of them: corners, then midside nodes for P2) and the corner tets.
   const TetMesh& rest() const { return m_rest; }
@@ -140,7 +164,11 @@ class FemSystem {
   /// Midside node of the edge between corner nodes a and b (-1 when there is none).
   int edgeNode(int a, int b) const;
   MaterialModel model() const { return m_model; }
+  VolumetricFormulation volumetric() const { return m_volumetric; }
   const Material& material() const { return m_material; }
+  /// Pa: the modulus that scales the internal forces' round-off: E, or the bulk modulus when that
+  /// is larger at nu >= kNearlyIncompressiblePoisson (kappa = 167 E at nu = 0.499).
+  Real stiffestModulus() const;
   VecX restPositions() const;  ///< 3N
   /// #N, kg: lumped mass (P1: rho V / 4 per tet; P2: HRZ, rho V / 36 per corner, 4 rho V / 27
   /// per midside node). Used by the dynamic solve.
@@ -183,6 +211,10 @@ class FemSystem {
   void forEachMaterial(Fn&& fn) const;
   /// Calls sink(t, k) with the column-major element stiffness k (3n x 3n) of every tet t that
   /// is not degenerate nor inverted, and for which want(t) holds.
+  /// One P2 tet (t) at x: evaluateQuadraticTet with `mat`, or the mean-dilatation element.
+  template <class Mat>
+  void evaluateQuadratic(const Mat& mat, int t, const VecX& x, TetEvalMode mode,
+                         QuadraticTetEvaluation& e, bool projectSpd) const;
   template <class Sink, class Want>
   void forEachElementStiffness(const VecX& x, bool projectSpd, Sink&& sink, Want&& want) const;
   void addMidsideNodes();
@@ -190,7 +222,9 @@ class FemSystem {
   Material m_material;
   MaterialModel m_model;
   ElementOrder m_order = ElementOrder::Linear;
+  VolumetricFormulation m_volumetric = VolumetricFormulation::Displacement;
   LameParameters m_lame;
+  MeanDilatationNeoHookean m_meanDilatation;
   CorotationalTangent m_corotationalTangent;
   int m_numCorners = 0;
   std::vector<int> m_elemNodes;                  ///< #tets x nodesPerElement()
@@ -241,6 +275,9 @@ class EquilibriumSolver {
   /// The sorted constrained dofs of `loads`, their final positions written into target (fixed
   /// wins over prescribed).
   std::vector<int> constrainedDofs(const LoadCase& loads, VecX& target) const;
+  /// No force at the start nor the end, x at rest, every constrained dof's target at rest.
+  bool isUnloadedRest(const VecX& x, const VecX& fStart, const VecX& fEnd,
+                      const std::vector<int>& cdofs, const VecX& target) const;
   /// |free part of grad|; sets the report's force scale (|f|, |constrained part|, the floor).
   Real residual(Newton& s, const VecX& grad, const VecX& f) const;
   /// One load step: from xs (converged at the previous level) to forces f and targets tgt.

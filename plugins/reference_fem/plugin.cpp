@@ -30,6 +30,10 @@ std::vector<ParamSpec> referenceFemParams() {
       ParamSpec::integer("element_order", 2, 1, 2,
                          "2: 10-node (quadratic, straight-sided) tets with midside nodes added to "
                          "the Gmsh mesh; 1: 4-node (linear) tets, stiff in bending"),
+      ParamSpec::choice("volumetric", "auto", {"auto", "displacement", "mean_dilatation"},
+                        "volumetric term of neo_hookean P2 tets: per quadrature point "
+                        "(displacement) or on each element's volume (mean_dilatation, free of "
+                        "volumetric locking as nu -> 0.5); auto: mean_dilatation at nu >= 0.45"),
       ParamSpec::integer("elements", 1000, 100, 5000000,
                          "target number of tets (used when edge_length is 0; an organ's surface "
                          "vertices are all nodes, so a fine surface gives more)"),
@@ -64,6 +68,8 @@ class ReferenceFemModel final : public Model {
         "solve", {{"quasi_static", SolveKind::QuasiStatic}, {"dynamic", SolveKind::Dynamic}});
     const MaterialModel model = parseMaterialModel(p.choice("material"));
     const ElementOrder order = parseElementOrder(p.integer("element_order"));
+    const VolumetricFormulation volumetric = resolveVolumetricFormulation(
+        parseVolumetricChoice(p.choice("volumetric")), model, order, setup.organ.material.poisson);
     m_options.tolerance = p.real("newton_tolerance");
     m_options.maxIterations = int(p.integer("max_newton_iterations"));
     m_options.maxHalvings = int(p.integer("max_load_halvings"));
@@ -85,24 +91,30 @@ class ReferenceFemModel final : public Model {
       m_surfaceNode = meshSurface(organ, p, setup.cache, mesh);
     }
     m_restSurface = organ.surface.V;
-    m_pinnedOutside = 0;
-    for (int n : m_surfaceNode) m_pinnedOutside += n < 0;
+    m_meshedNodes = mesh.numVertices();
+    const std::vector<int> isolated = addClampedSurfaceNodes(organ, m_surfaceNode, mesh);
+    m_isolatedNodes = (long long)isolated.size();
     // The organ's triangles as node rows: the contact proxy besides the nodes themselves (the
     // surface the harness draws and checks against instruments). With a conforming mesh the
-    // triangles with a vertex inside a fixed box (no node) are left out: they are clamped there.
+    // triangles with a vertex inside a fixed box (an isolated node) are left out: they are
+    // clamped there.
     m_contactF.resize(organ.surface.F.rows(), 3);
     Eigen::Index rows = 0;
     for (Eigen::Index f = 0; f < organ.surface.F.rows(); ++f) {
-      bool nodes = true;
+      bool meshed = true;
       for (int k = 0; k < 3; ++k) {
         m_contactF(rows, k) = m_surfaceNode.at(size_t(organ.surface.F(f, k)));
-        nodes = nodes && m_contactF(rows, k) >= 0;
+        meshed = meshed && m_contactF(rows, k) < m_meshedNodes;
       }
-      rows += nodes;
+      rows += meshed;
     }
     m_contactF.conservativeResize(rows, 3);
-    m_system = std::make_unique<FemSystem>(std::move(mesh), organ.material, model, order);
+    m_system =
+        std::make_unique<FemSystem>(std::move(mesh), organ.material, model, order, volumetric);
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
+    m_fixed.insert(m_fixed.end(), isolated.begin(), isolated.end());
+    std::sort(m_fixed.begin(), m_fixed.end());
+    m_fixed.erase(std::unique(m_fixed.begin(), m_fixed.end()), m_fixed.end());
     // A pinned vertex reports its rest position exactly (a vertex snapped onto a box face by
     // clipSurfaceByBoxes is a node a hair's breadth from it).
     m_isFixed.assign(size_t(m_system->numNodes()), 0);
@@ -136,12 +148,12 @@ class ReferenceFemModel final : public Model {
     lc.gravity = in.gravity;
     std::vector<char> fixed(size_t(m_system->numNodes()), 0);
     for (int n : m_fixed) fixed[size_t(n)] = 1;
-    // Every organ surface vertex is a node of the tet mesh (J a selection), except vertices
-    // inside a clipped-off fixed box (-1): those are pinned, and the support takes their share.
+    // Every organ surface vertex is a node of the tet mesh (J a selection); those inside a
+    // fixed box are pinned (fixed wins over a grasp; the support takes their load share).
     for (const GraspInput& g : in.grasps) {
       for (size_t k = 0; k < g.vertices.size(); ++k) {
         const int node = m_surfaceNode[size_t(g.vertices[k])];
-        if (node < 0 || fixed[size_t(node)]) continue;
+        if (fixed[size_t(node)]) continue;
         lc.prescribedNodes.push_back(node);
         lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
         lc.targets.bottomRows(1) = g.targets.row(Eigen::Index(k));
@@ -155,8 +167,9 @@ class ReferenceFemModel final : public Model {
       }
     for (const PointLoad& l : in.loads)
       for (size_t k = 0; k < l.vertices.size(); ++k) {
+        // A load share on an isolated clamped node goes to the support (it is dropped).
         const int node = m_surfaceNode[size_t(l.vertices[k])];
-        if (node >= 0) lc.nodeForces.emplace_back(node, l.weights[k] * l.force);
+        if (node < m_meshedNodes) lc.nodeForces.emplace_back(node, l.weights[k] * l.force);
       }
 
     SolveReport rep;
@@ -183,7 +196,7 @@ class ReferenceFemModel final : public Model {
       Vec3 f = Vec3::Zero();
       for (int v : g.vertices) {
         const int n = m_surfaceNode[size_t(v)];
-        if (n >= 0 && !fixed[size_t(n)]) f -= m_solver->lastGradient().segment<3>(3 * n);
+        if (!fixed[size_t(n)]) f -= m_solver->lastGradient().segment<3>(3 * n);
       }
       m_graspForces.push_back(f);
     }
@@ -225,11 +238,13 @@ class ReferenceFemModel final : public Model {
     return {{"nodes", m_system->numNodes()},
             {"elements", m_system->rest().numTets()},
             {"fixed_nodes", (long long)m_fixed.size()},
-            {"surface_vertices_not_nodes", m_pinnedOutside}};
+            {"isolated_clamped_nodes", m_isolatedNodes}};
   }
   PhaseTimes phaseTimes() const override { return m_phase; }
   NumericCounters numericCounters() const override {
+    const bool md = m_system->volumetric() == VolumetricFormulation::MeanDilatation;
     return {{"degenerate_elements", m_system->degenerateElements()},
+            {"mean_dilatation_elements", md ? m_system->rest().numTets() : 0},
             {"unconverged_steps", m_unconverged},
             {"spd_fallbacks", m_spdFallbacks},
             {"projected_steps", m_projectedSteps},
@@ -245,7 +260,7 @@ class ReferenceFemModel final : public Model {
  private:
   /// Tetrahedralises the organ's surface (or, with conform_fixed and fixed boxes, the organ minus
   /// the boxes: clipSurfaceByBoxes) into `mesh`; returns surface vertex -> node, -1 for a vertex
-  /// inside a fixed box that is no node (pinned: it stays at rest).
+  /// inside a fixed box that the clip removed (addClampedSurfaceNodes makes it a node).
   static std::vector<int> meshSurface(const Organ& organ, const ParamValues& p, Cache& cache,
                                       TetMesh& mesh) {
     TetMeshOptions o;
@@ -313,12 +328,33 @@ class ReferenceFemModel final : public Model {
     return std::vector<int>(map.data(), map.data() + map.size());
   }
 
+  /// Every surface vertex becomes a node: the vertices the conforming clip left without one
+  /// (-1 in surfaceNode: inside a fixed box, or snapped onto its face, outside the meshed solid)
+  /// are appended to `mesh` as nodes of no tet. Returns them; the caller pins them (they stay at
+  /// rest with the clamped material around them).
+  static std::vector<int> addClampedSurfaceNodes(const Organ& organ, std::vector<int>& surfaceNode,
+                                                 TetMesh& mesh) {
+    std::vector<int> added;
+    for (int n : surfaceNode) added.resize(added.size() + (n < 0));
+    if (added.empty()) return added;
+    Eigen::Index next = mesh.V.rows();
+    mesh.V.conservativeResize(next + Eigen::Index(added.size()), 3);
+    added.clear();
+    for (size_t v = 0; v < surfaceNode.size(); ++v) {
+      if (surfaceNode[v] >= 0) continue;
+      mesh.V.row(next) = organ.surface.V.row(Eigen::Index(v));
+      added.push_back(int(next));
+      surfaceNode[v] = int(next++);
+    }
+    return added;
+  }
+
   void updatePositions() {
     const int n = m_system->numNodes();
     m_nodes = Eigen::Map<const MatX3>(m_x.data(), n, 3);
     m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
     for (size_t i = 0; i < m_surfaceNode.size(); ++i)
-      if (m_surfaceNode[i] < 0 || m_isFixed[size_t(m_surfaceNode[i])])
+      if (m_isFixed[size_t(m_surfaceNode[i])])
         m_surface.row(Eigen::Index(i)) = m_restSurface.row(Eigen::Index(i));
       else
         m_surface.row(Eigen::Index(i)) = m_x.segment<3>(3 * m_surfaceNode[i]).transpose();
@@ -330,10 +366,11 @@ class ReferenceFemModel final : public Model {
   std::unique_ptr<FemSystem> m_system;
   std::unique_ptr<EquilibriumSolver> m_solver;
   std::vector<int> m_fixed;
-  std::vector<int> m_surfaceNode;  ///< surface vertex -> node; -1: inside a fixed box, no node
-  MatX3 m_restSurface;             ///< reported for the vertices that are no node or pinned
+  std::vector<int> m_surfaceNode;  ///< surface vertex -> node
+  MatX3 m_restSurface;             ///< reported for the pinned vertices
   std::vector<char> m_isFixed;     ///< per node: pinned by the fixed region
-  long long m_pinnedOutside = 0;   ///< surface vertices with no node
+  int m_meshedNodes = 0;           ///< corner nodes of the tets; isolated clamped ones follow
+  long long m_isolatedNodes = 0;   ///< surface vertices inside a clipped-off fixed box
   MatX3i m_contactF;               ///< organ triangles as node rows (contact proxy)
   VecX m_x, m_v, m_fPrev;
   MatX3 m_nodes, m_surface;
