@@ -192,9 +192,20 @@ VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
     throw InputError(options.outDir.string(), "", "cannot create the output folder");
   Cache cache(options.cacheDir ? *options.cacheDir : Cache::defaultDir());
 
-  // reference_fem first: it meshes (or finds the mesh in the cache); calculix reads the same.
-  const SolverRun ref = solve(refInfo, refParams, scene, organ, cache, options);
-  const SolverRun ccx = solve(ccxInfo, ccxParams, scene, organ, cache, options);
+  // A scene calculix cannot run (contact: probes, instruments, objects) is not solved at all.
+  SolverRun ref, ccx;
+  if (const std::string why = unsupportedReason(ccxInfo, scene); !why.empty()) {
+    ccx.rec.model = ccxInfo.name;
+    ccx.rec.status = RunStatus::Unsupported;
+    ccx.rec.message = why;
+    ref.rec.model = refInfo.name;
+    ref.rec.status = RunStatus::Unsupported;
+    ref.rec.message = "not run: calculix cannot run this scene";
+  } else {
+    // reference_fem first: it meshes (or finds the mesh in the cache); calculix reads the same.
+    ref = solve(refInfo, refParams, scene, organ, cache, options);
+    ccx = solve(ccxInfo, ccxParams, scene, organ, cache, options);
+  }
   result.reference = describe(ref);
   result.calculix = describe(ccx);
 

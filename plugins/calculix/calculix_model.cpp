@@ -28,6 +28,7 @@ class CalculixModel final : public Model {
     m_increments.maximum = std::max(m_increments.initial, p.real("max_increment"));
     m_increments.minimum = std::min(m_increments.initial, p.real("min_increment"));
     m_increments.maxIncrements = int(p.integer("max_increments"));
+    m_increments.residualTolerance = p.real("residual_tolerance");
     const Organ& organ = setup.organ;
 
     OrganTetOptions meshOptions;  // the mesh reference_fem builds with the same parameters

@@ -63,6 +63,8 @@ std::string ccxStepDeck(const CcxModel& model, const CcxLoads& loads, const CcxI
   std::ostringstream s;
   const bool nlgeom = model.material == CcxMaterial::NeoHookean;
   s << "*STEP" << (nlgeom ? ", NLGEOM" : "") << ", INC=" << inc.maxIncrements << "\n";
+  s << "*CONTROLS, PARAMETERS=FIELD\n"
+    << num(inc.residualTolerance) << ", " << num(10 * inc.residualTolerance) << "\n";
   s << "*STATIC\n"
     << num(nlgeom ? inc.initial : 1.0) << ", 1.0, " << num(inc.minimum) << ", "
     << num(nlgeom ? inc.maximum : 1.0) << "\n";

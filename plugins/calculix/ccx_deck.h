@@ -46,8 +46,11 @@ struct CcxLoads {
 struct CcxIncrements {
   Real initial = 0.25;  ///< first increment, as a fraction of the step
   Real minimum = 1e-5;  ///< smallest increment before ccx gives up
-  Real maximum = 0.25;  ///< largest increment
+  Real maximum = 1.0;   ///< largest increment
   int maxIncrements = 1000;
+  /// *CONTROLS, PARAMETERS=FIELD: R_n (largest residual over the average force) and C_n = 10 x
+  /// it (largest displacement correction over the increment's displacement).
+  Real residualTolerance = 1e-5;
 };
 
 /// The model part: *NODE, *ELEMENT, *MATERIAL, *SOLID SECTION and the fixed dofs.

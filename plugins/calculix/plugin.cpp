@@ -26,9 +26,13 @@ std::vector<deform::ParamSpec> calculixParams() {
                       "wall-clock limit of the Gmsh child process"),
       ParamSpec::real("initial_increment", "1", 0.25, 1e-6, 1.0,
                       "ccx's first load increment, as a fraction of each solve (NLGEOM)"),
-      ParamSpec::real("max_increment", "1", 0.25, 1e-6, 1.0, "ccx's largest load increment"),
+      ParamSpec::real("max_increment", "1", 1.0, 1e-6, 1.0, "ccx's largest load increment"),
       ParamSpec::real("min_increment", "1", 1e-5, 1e-12, 1.0,
                       "ccx gives up (a failed run) below this increment"),
+      ParamSpec::real("residual_tolerance", "1", 1e-5, 1e-12, 0.1,
+                      "ccx's convergence test (*CONTROLS, FIELD): largest residual force <= this x "
+                      "the average force, and largest displacement correction <= 10 x this x the "
+                      "increment's displacement (ccx's own defaults: 0.005, 0.01)"),
       ParamSpec::integer("max_increments", 1000, 1, 1000000, "ccx's increments per solve"),
       ParamSpec::real("timeout", "s", 3600.0, 1.0, 604800.0,
                       "wall-clock limit of one ccx run (killed after it: a failed run)"),
@@ -52,5 +56,7 @@ DEFORM_PLUGIN(registry) {
                        Capability::TetInput, Capability::QuasiStatic};
   info.params = calculixParams();
   info.create = [] { return deform::calculix::makeCalculixModel(); };
+  // The conformance suite's scenes check: a coarse mesh, seconds per ccx run.
+  info.presets["conformance"] = {{{"elements", 300LL}}};
   registry.add(std::move(info));
 }

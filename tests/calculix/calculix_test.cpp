@@ -110,7 +110,7 @@ TEST(Calculix, GravityCantileverAgreesWithReferenceFem) {
   const MatX3 ccx = solveOnce("calculix", organ, in, 1000);
   const double rel = relativeRms(ref, ccx, organ.surface.V);
   std::printf("gravity cantilever: calculix differs from reference_fem by %.4f%% RMS\n", 100 * rel);
-  EXPECT_LT(rel, 1e-3);
+  EXPECT_LT(rel, 1e-4);
   // And it sags as the beam does (1.4868 mm at the tip, beam theory with shear): the
   // comparison is not two zeros.
   double sag = 0;
@@ -133,7 +133,7 @@ TEST(Calculix, LinearMaterialAgreesWithReferenceFem) {
       PointLoad::onVertex(nearestVertex(organ.surface.V, Vec3(0.1, 0, 0.005)), Vec3(0, 0.3, -0.5))};
   const MatX3 ref = solveOnce("reference_fem", organ, in, 300, "linear");
   const MatX3 ccx = solveOnce("calculix", organ, in, 300, "linear");
-  EXPECT_LT(relativeRms(ref, ccx, organ.surface.V), 1e-3);
+  EXPECT_LT(relativeRms(ref, ccx, organ.surface.V), 1e-4);
 }
 
 harness::RunRecord runScene(const std::string& plugin, const nlohmann::json& params) {
