@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -122,6 +123,8 @@ CcxRun runCcx(const std::string& ccx, const std::string& input, double timeoutSe
   }
   if (pid == 0) {
     ::setpgid(0, 0);
+    // ccx dies with the process that started it (a harness killed at its timeout).
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
     if (::chdir(dirStr.c_str()) != 0) ::_exit(126);
     const int in = ::open("/dev/null", O_RDONLY);
     const int log = ::open(logStr.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);

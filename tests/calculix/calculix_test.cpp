@@ -109,7 +109,9 @@ TEST(Calculix, GravityCantileverAgreesWithReferenceFem) {
   const MatX3 ref = solveOnce("reference_fem", organ, in, 1000);
   const MatX3 ccx = solveOnce("calculix", organ, in, 1000);
   const double rel = relativeRms(ref, ccx, organ.surface.V);
-  std::printf("gravity cantilever: calculix differs from reference_fem by %.2e of the RMS displacement\n", rel);
+  std::printf(
+      "gravity cantilever: calculix differs from reference_fem by %.2e of the RMS displacement\n",
+      rel);
   EXPECT_LT(rel, 1e-4);
   // And it sags as the beam does (1.4868 mm at the tip, beam theory with shear): the
   // comparison is not two zeros.
