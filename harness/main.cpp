@@ -20,6 +20,7 @@
 #include <deform_harness/stability.h>
 #include <deform_harness/sweep.h>
 #include <deform_harness/tables.h>
+#include <deform_harness/verify.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -862,6 +863,34 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
   return 0;
 }
 
+// ------------------------------------------------------------------------------ verify
+
+int cmdVerify(const std::string& scene, const CommonArgs& a, int steps) {
+  PluginLoader loader(searchPath(a.pluginDirs));
+  VerifyOptions o;
+  o.outDir = makeOutDir(a.out);
+  o.cacheDir = cacheChoice(a);
+  o.maxSteps = steps;
+  const VerifyResult r = runVerify(scene, loader, o);
+  const auto times = [](const VerifySolverTimes& t) {
+    return fmt(t.wallS) + " s wall, " + fmt(t.cpuS) + " s CPU";
+  };
+  for (const VerifyInstant& in : r.instants)
+    std::cout << "t = " << fmt(in.time) << " s: calculix differs from reference_fem by "
+              << fmt(100 * in.rmsRelative) << "% RMS, " << fmt(100 * in.maxRelative)
+              << "% max of the RMS displacement " << fmt(1e3 * in.referenceRms) << " mm ("
+              << in.vertices << " vertices); reference_fem " << times(in.reference) << ", calculix "
+              << times(in.calculix) << "\n";
+  for (const std::string& note : r.notes) std::cout << "note: " << note << "\n";
+  if (!r.message.empty())
+    std::cout << "warning: " << r.message << "\n";
+  else if (!r.agrees)
+    std::cout << "warning: the solvers differ by more than " << fmt(100 * kVerifyGoal)
+              << "% RMS at some instant\n";
+  std::cout << "wrote " << r.jsonPath.string() << "\n";
+  return 0;
+}
+
 // ------------------------------------------------------------------------------ conformance
 
 struct ConformanceArgs {
@@ -1128,6 +1157,17 @@ int realMain(int argc, char** argv) {
   ChildArgs convChild;
   addChildArgs(converge, convChild, "level");
 
+  std::string verifyScene;
+  CommonArgs va;
+  int verifySteps = -1;
+  CLI::App* verify = app.add_subcommand(
+      "verify", "the scene's reference solved by reference_fem and by CalculiX (ccx) on one mesh");
+  verify->add_option("scene", verifyScene, "scene file with a reference")->required();
+  verify->add_option("--out", va.out, "output folder (verify.json)")->required();
+  verify->add_option("--steps", verifySteps, "stop after this many steps")
+      ->check(CLI::PositiveNumber);
+  addCommon(verify, va, false);
+
   std::vector<std::string> workTasks;
   CLI::App* work =
       app.add_subcommand("work", "run task files written by --slurm (one array task each)");
@@ -1206,6 +1246,10 @@ int realMain(int argc, char** argv) {
       }
     }
     return 0;
+  }
+  if (*verify) {
+    va.pluginDirs = pluginDirs;
+    return cmdVerify(verifyScene, va, verifySteps);
   }
   if (*converge) {
     ca.pluginDirs = pluginDirs;

@@ -581,6 +581,12 @@ RunRecord runModelUnguarded(const ModelInfo& info, const ParamValues& params, co
     const auto t0 = std::chrono::steady_clock::now();
     model->init(setup);
     rec.precomputeS = secondsSince(t0);
+  } catch (const UnsupportedError& e) {
+    // The model cannot run here at all (a program or library it needs is missing).
+    rec.status = RunStatus::Unsupported;
+    rec.message = e.what();
+    rec.cacheEvents = cache.events();
+    return rec;
   } catch (const std::exception& e) {
     rec.status = RunStatus::Failed;
     rec.message = std::string("init: ") + e.what();

@@ -1,6 +1,7 @@
 #include "fem_solver.h"
 
 #include <deform/error.h>
+#include <deform/organ_tets.h>
 
 #include <algorithm>
 #include <chrono>
@@ -192,25 +193,11 @@ FemSystem::FemSystem(TetMesh rest, const Material& material, MaterialModel model
 }
 
 void FemSystem::addMidsideNodes() {
-  const int nt = m_rest.numTets();
-  std::vector<std::pair<int, int>> all;
-  all.reserve(size_t(6 * nt));
-  for (int t = 0; t < nt; ++t)
-    for (const auto& e : kQuadraticEdges) {
-      const int a = m_rest.T(t, e[0]), b = m_rest.T(t, e[1]);
-      all.emplace_back(std::min(a, b), std::max(a, b));
-    }
-  std::sort(all.begin(), all.end());
-  all.erase(std::unique(all.begin(), all.end()), all.end());
-  m_edges = std::move(all);
-  m_rest.V.conservativeResize(Eigen::Index(m_numCorners + int(m_edges.size())), 3);
-  for (size_t k = 0; k < m_edges.size(); ++k)
-    m_rest.V.row(Eigen::Index(m_numCorners + int(k))) =
-        0.5 * (m_rest.V.row(m_edges[k].first) + m_rest.V.row(m_edges[k].second));
-  for (int t = 0; t < nt; ++t)
-    for (int e = 0; e < 6; ++e)
-      m_elemNodes[size_t(10 * t + 4 + e)] =
-          edgeNode(m_rest.T(t, kQuadraticEdges[e][0]), m_rest.T(t, kQuadraticEdges[e][1]));
+  QuadraticTetNodes q = deform::addMidsideNodes(m_rest);  // deform/organ_tets.h
+  m_edges = std::move(q.edges);
+  m_rest.V = std::move(q.V);
+  for (int t = 0; t < m_rest.numTets(); ++t)
+    for (int a = 4; a < 10; ++a) m_elemNodes[size_t(10 * t + a)] = q.elements(t, a);
 }
 
 int FemSystem::edgeNode(int a, int b) const {

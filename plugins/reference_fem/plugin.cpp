@@ -2,11 +2,9 @@
 // README.md for the method, the parameters and the reasons behind each choice.
 #include "fem_solver.h"
 
-#include <deform/box_clip.h>
 #include <deform/contact.h>
+#include <deform/organ_tets.h>
 #include <deform/registry.h>
-#include <deform/tet_mesher.h>
-#include <deform/tet_nodes.h>
 
 #include <algorithm>
 #include <chrono>
@@ -15,8 +13,6 @@
 namespace deform::reffem {
 
 namespace {
-
-constexpr const char* kMeshCacheVersion = "reference_fem.tets/4";
 
 enum class SolveKind { QuasiStatic, Dynamic };
 
@@ -78,18 +74,15 @@ class ReferenceFemModel final : public Model {
     m_dt = setup.dt;
     const Organ& organ = setup.organ;
 
-    TetMesh mesh;
-    if (organ.volume) {
-      mesh = *organ.volume;
-      for (int t = 0; t < mesh.numTets(); ++t) {
-        const auto r = mesh.T.row(t);
-        if (tetVolume(mesh.V.row(r(0)), mesh.V.row(r(1)), mesh.V.row(r(2)), mesh.V.row(r(3))) < 0)
-          std::swap(mesh.T(t, 2), mesh.T(t, 3));
-      }
-      m_surfaceNode = surfaceVertexNodes(organ, mesh.V);
-    } else {
-      m_surfaceNode = meshSurface(organ, p, setup.cache, mesh);
-    }
+    OrganTetOptions meshOptions;  // deform/organ_tets.h (calculix meshes the same way)
+    meshOptions.edgeLength = p.real("edge_length");
+    meshOptions.targetElements = p.integer("elements");
+    meshOptions.refineSurface = p.flag("refine_surface");
+    meshOptions.conformFixed = p.flag("conform_fixed");
+    meshOptions.timeoutSeconds = p.real("mesh_timeout");
+    OrganTets tets = organTets(organ, meshOptions, setup.cache);
+    TetMesh mesh = std::move(tets.mesh);
+    m_surfaceNode = std::move(tets.surfaceNode);
     m_restSurface = organ.surface.V;
     m_meshedNodes = mesh.numVertices();
     const std::vector<int> isolated = addClampedSurfaceNodes(organ, m_surfaceNode, mesh);
@@ -258,97 +251,6 @@ class ReferenceFemModel final : public Model {
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
  private:
-  /// Tetrahedralises the organ's surface (or, with conform_fixed and fixed boxes, the organ minus
-  /// the boxes: clipSurfaceByBoxes) into `mesh`; returns surface vertex -> node, -1 for a vertex
-  /// inside a fixed box that the clip removed (addClampedSurfaceNodes makes it a node).
-  static std::vector<int> meshSurface(const Organ& organ, const ParamValues& p, Cache& cache,
-                                      TetMesh& mesh) {
-    TetMeshOptions o;
-    o.edgeLength = p.real("edge_length");
-    o.targetElements = p.integer("elements");
-    o.refineSurface = p.flag("refine_surface");
-    o.timeoutSeconds = p.real("mesh_timeout");
-    o.source = organ.source;
-    const int nv = organ.surface.numVertices();
-    const bool conform = p.flag("conform_fixed") && !organ.fixed.boxes.empty();
-    CacheKey key;
-    key.add(kMeshCacheVersion).add(organ.surface.V).add(organ.surface.F);
-    key.add(o.edgeLength).add(o.targetElements).add((long long)o.refineSurface);
-    key.add((long long)conform);
-    if (conform)
-      for (const Box& b : organ.fixed.boxes)
-        for (int k = 0; k < 3; ++k) key.add(b.lo[k]).add(b.hi[k]);
-    if (auto hit = cache.get("reference_fem.tets", key)) {
-      try {
-        ByteReader r(*hit);
-        TetMesh m;
-        Eigen::VectorXi map;
-        r.matrix(m.V);
-        r.matrix(m.T);
-        r.matrix(map);
-        if (map.size() == nv && m.numTets() > 0 && map.maxCoeff() < m.numVertices()) {
-          mesh = std::move(m);
-          return std::vector<int>(map.data(), map.data() + map.size());
-        }
-      } catch (const std::exception&) {
-        // fall through: remesh
-      }
-      cache.reject("reference_fem.tets", key);
-    }
-    Eigen::VectorXi map = Eigen::VectorXi::LinSpaced(nv, 0, nv - 1);
-    TetMeshResult r;
-    if (conform) {
-      BoxClipOptions c;
-      c.source = organ.source;
-      // Cap triangles about as long as the interior tet edges, but no longer than the organ's
-      // mean edge: the cut lines are as fine as the organ's surface, and cap triangles much
-      // longer than the cut segments they stand on are needles (full liver phantom at 8,000
-      // tets: a zero-area cap triangle and a flat tet; capped: min dihedral 0.85 deg).
-      const Real interior =
-          o.edgeLength > 0 ? o.edgeLength
-                           : edgeLengthForElements(signedVolume(organ.surface.V, organ.surface.F),
-                                                   o.targetElements);
-      const MatX2i E = uniqueEdges(organ.surface.F);
-      Real sum = 0;
-      for (Eigen::Index e = 0; e < E.rows(); ++e)
-        sum += (organ.surface.V.row(E(e, 0)) - organ.surface.V.row(E(e, 1))).norm();
-      c.capEdgeLength = E.rows() > 0 ? std::min(interior, sum / Real(E.rows())) : interior;
-      const BoxClipResult clip = clipSurfaceByBoxes(organ.surface, organ.fixed.boxes, c);
-      map = Eigen::Map<const Eigen::VectorXi>(clip.inputToClipped.data(), nv);
-      r = tetrahedralize(clip.surface, o);
-    } else {
-      r = tetrahedralize(organ.surface, o);
-    }
-    ByteWriter w;
-    w.matrix(r.mesh.V);
-    w.matrix(r.mesh.T);
-    w.matrix(map);
-    cache.put("reference_fem.tets", key, w.bytes());
-    mesh = r.mesh;
-    return std::vector<int>(map.data(), map.data() + map.size());
-  }
-
-  /// Every surface vertex becomes a node: the vertices the conforming clip left without one
-  /// (-1 in surfaceNode: inside a fixed box, or snapped onto its face, outside the meshed solid)
-  /// are appended to `mesh` as nodes of no tet. Returns them; the caller pins them (they stay at
-  /// rest with the clamped material around them).
-  static std::vector<int> addClampedSurfaceNodes(const Organ& organ, std::vector<int>& surfaceNode,
-                                                 TetMesh& mesh) {
-    std::vector<int> added;
-    for (int n : surfaceNode) added.resize(added.size() + (n < 0));
-    if (added.empty()) return added;
-    Eigen::Index next = mesh.V.rows();
-    mesh.V.conservativeResize(next + Eigen::Index(added.size()), 3);
-    added.clear();
-    for (size_t v = 0; v < surfaceNode.size(); ++v) {
-      if (surfaceNode[v] >= 0) continue;
-      mesh.V.row(next) = organ.surface.V.row(Eigen::Index(v));
-      added.push_back(int(next));
-      surfaceNode[v] = int(next++);
-    }
-    return added;
-  }
-
   void updatePositions() {
     const int n = m_system->numNodes();
     m_nodes = Eigen::Map<const MatX3>(m_x.data(), n, 3);

@@ -29,6 +29,7 @@
 #pragma once
 
 #include <deform/fem_tet.h>
+#include <deform/organ_tets.h>
 
 #include <array>
 #include <cmath>
@@ -40,8 +41,8 @@ using Vec30 = Eigen::Matrix<Real, 30, 1>;
 using Mat30 = Eigen::Matrix<Real, 30, 30>;
 using Mat3x10 = Eigen::Matrix<Real, 3, 10>;
 
-/// Corner pairs of the midside nodes 4..9.
-inline constexpr int kQuadraticEdges[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+/// Corner pairs of the midside nodes 4..9 (deform/organ_tets.h).
+inline constexpr const int (&kQuadraticEdges)[6][2] = kQuadraticTetEdges;
 
 /// Barycentric coordinates of the 4-point degree-2 rule (weights 1/4 each).
 std::array<Vec4, 4> quadraticTetQuadrature();

@@ -1,0 +1,61 @@
+// deformbench SDK: the tet mesh of an organ as the reference solvers (reference_fem and calculix)
+// build it, so that both solve on one mesh: Gmsh tets of the organ's surface (or, with fixed boxes
+// and conformFixed, of the organ minus the boxes, whose caps are then the clamped boundary), kept
+// in the on-disk cache; and the 10-node (quadratic) tets made from it by adding one node at the
+// midpoint of every edge.
+#pragma once
+
+#include <deform/model.h>
+
+#include <utility>
+#include <vector>
+
+namespace deform {
+
+class Cache;
+
+/// Corner pairs of the midside nodes 4..9 of a 10-node tet: edges (0,1), (0,2), (0,3), (1,2),
+/// (1,3), (2,3).
+inline constexpr int kQuadraticTetEdges[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+
+struct OrganTetOptions {
+  Real edgeLength = 0;              ///< target interior edge length, m; 0: from targetElements
+  long long targetElements = 1000;  ///< target number of tets when edgeLength is 0
+  bool refineSurface = true;        ///< split long surface edges first (TetMeshOptions)
+  /// Mesh the organ minus the fixed boxes (the caps are clamped, the same at every refinement);
+  /// false: the whole organ (the nodes inside the boxes are pinned by fixedNodeIndices).
+  bool conformFixed = true;
+  Real timeoutSeconds = 600;  ///< wall-clock limit of the Gmsh child process
+};
+
+/// A corner (4-node) tet mesh of an organ and where its surface vertices are.
+struct OrganTets {
+  TetMesh mesh;  ///< positively oriented tets (tetVolume > 0)
+  /// #V: the node of each organ surface vertex; -1 for a vertex inside a clipped-off fixed box
+  /// (no node: it is pinned and stays at rest).
+  std::vector<int> surfaceNode;
+};
+
+/// The organ's tets: organ.volume when the mesh file had tetrahedra (reoriented where negative,
+/// surface vertices found by position), otherwise Gmsh's tets of the surface with `options`,
+/// kept in `cache` (entry "reference_fem.tets": reference_fem and calculix share it). Throws
+/// InputError(organ.source, ...) when the organ cannot be meshed.
+OrganTets organTets(const Organ& organ, const OrganTetOptions& options, Cache& cache);
+
+/// 10-node tets from a corner mesh: the corner nodes keep their indices 0..N-1, one node per
+/// unique edge follows at the edge's midpoint (straight sides), numbered in the order of the
+/// sorted (lower, higher) corner pairs.
+struct QuadraticTetNodes {
+  MatX3 V;  ///< #N + #E by 3, m: the corners, then the midside nodes
+  /// #T by 10: the corners of each tet, then its midside nodes in kQuadraticTetEdges order.
+  Eigen::Matrix<int, Eigen::Dynamic, 10, Eigen::RowMajor> elements;
+  std::vector<std::pair<int, int>> edges;  ///< #E sorted corner pairs (a < b) of the midside nodes
+  int numCorners = 0;
+
+  /// The midside node of the edge between corner nodes a and b; -1 when there is none.
+  int edgeNode(int a, int b) const;
+};
+
+QuadraticTetNodes addMidsideNodes(const TetMesh& corners);
+
+}  // namespace deform

@@ -1,0 +1,74 @@
+// deformbench harness: `verify SCENE`: the scene's reference solved twice on one mesh, by
+// reference_fem and by the calculix plugin (CalculiX's ccx, an independent nonlinear FEM), and
+// the two compared at every compared instant.
+//
+// Both solvers get the mesh parameters of the scene's reference (elements, edge_length,
+// refine_surface, conform_fixed, element_order, material), so they solve on the same tets
+// (deform/organ_tets.h, one cache entry), with the same fixed nodes, grasped nodes and per-vertex
+// forces. At each compared instant, over the compared vertices V (every surface vertex no grasp
+// holds: the held ones are prescribed alike in both),
+//     rms_relative = sqrt(mean_V |x_ccx - x_ref|^2) / sqrt(mean_V |x_ref - X|^2),
+//     max_relative = max_V |x_ccx - x_ref|          / sqrt(mean_V |x_ref - X|^2),
+// x_ref reference_fem's positions, X the rest surface. The goal is rms_relative <= 1%.
+// Times: wall and CPU (this process and its children: user + system, getrusage) of each solve.
+#pragma once
+
+#include <deform/plugin_loader.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace deform::harness {
+
+struct VerifyOptions {
+  std::filesystem::path outDir;
+  std::optional<std::filesystem::path> cacheDir;  ///< nullopt: default; empty: no cache
+  int maxSteps = -1;
+};
+
+struct VerifySolverTimes {
+  double wallS = 0, cpuS = 0;
+};
+
+struct VerifyInstant {
+  int step = 0;
+  double time = 0;
+  int vertices = 0;
+  double referenceRms = 0;  ///< m, RMS displacement of reference_fem over the vertices
+  double rmsDifference = 0, maxDifference = 0;  ///< m
+  double rmsRelative = 0, maxRelative = 0;
+  VerifySolverTimes reference, calculix;  ///< the solve of this instant
+};
+
+struct VerifySolver {
+  std::string plugin;
+  nlohmann::ordered_json params;
+  std::string status, message;
+  std::vector<std::string> notes;
+  nlohmann::ordered_json counts;
+  double precomputeS = 0;
+  VerifySolverTimes total;  ///< every solve of the run (the compared instants and grasp closings)
+};
+
+struct VerifyResult {
+  std::string sceneFile, sceneName;
+  VerifySolver reference, calculix;
+  std::vector<VerifyInstant> instants;
+  bool agrees = false;  ///< both ran and every instant's rms_relative <= kVerifyGoal
+  std::string message;  ///< why there is no comparison, if there is none
+  std::vector<std::string> notes;
+  std::filesystem::path jsonPath;
+};
+
+inline constexpr double kVerifyGoal = 0.01;
+
+/// Runs both solvers and writes OUT/verify.json (format deformbench-verify/1). Throws
+/// InputError for bad input (the scene, a reference that is neither reference_fem nor calculix,
+/// a material calculix has no counterpart of); a solver that fails is recorded, not thrown.
+VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
+                       const VerifyOptions& options);
+
+}  // namespace deform::harness

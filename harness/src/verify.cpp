@@ -1,0 +1,296 @@
+// `deformbench verify`: reference_fem against CalculiX on one mesh (verify.h).
+#include <deform/cache.h>
+#include <deform/error.h>
+#include <deform/scene.h>
+#include <deform_harness/cases.h>
+#include <deform_harness/metrics.h>
+#include <deform_harness/runner.h>
+#include <deform_harness/verify.h>
+
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace deform::harness {
+
+namespace fs = std::filesystem;
+using ojson = nlohmann::ordered_json;
+
+namespace {
+
+/// The parameters that fix the mesh and the constitutive model: both plugins declare them with
+/// the same meaning, so the same values give the same tets.
+const char* const kSharedParams[] = {"material",    "element_order",  "elements",
+                                     "edge_length", "refine_surface", "conform_fixed",
+                                     "mesh_timeout"};
+
+double cpuSecondsNow() {
+  double s = 0;
+  for (int who : {RUSAGE_SELF, RUSAGE_CHILDREN}) {
+    struct rusage u {};
+    getrusage(who, &u);
+    s += double(u.ru_utime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec) + double(u.ru_stime.tv_sec) +
+         1e-6 * double(u.ru_stime.tv_usec);
+  }
+  return s;
+}
+
+/// Forwards to a model and records the wall and CPU time of each step() (the CPU time includes
+/// the child processes the step waited for: ccx).
+class TimedModel final : public Model {
+ public:
+  explicit TimedModel(Model& m) : m_model(m) {}
+  void init(const ModelSetup& setup) override { m_model.init(setup); }
+  StepStatus step(const StepInput& in) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    const double c0 = cpuSecondsNow();
+    const StepStatus s = m_model.step(in);
+    VerifySolverTimes t;
+    t.wallS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    t.cpuS = cpuSecondsNow() - c0;
+    steps.push_back(t);
+    return s;
+  }
+  const MatX3& nodes() const override { return m_model.nodes(); }
+  const MatX3& surface() const override { return m_model.surface(); }
+  void reset() override { m_model.reset(); }
+  Counts counts() const override { return m_model.counts(); }
+  PhaseTimes phaseTimes() const override { return m_model.phaseTimes(); }
+  NumericCounters numericCounters() const override { return m_model.numericCounters(); }
+  std::vector<Vec3> graspForces() const override { return m_model.graspForces(); }
+
+  std::vector<VerifySolverTimes> steps;
+
+ private:
+  Model& m_model;
+};
+
+struct SolverRun {
+  RunRecord rec;
+  std::vector<VerifySolverTimes> stepTimes;  ///< one per step() call, in order
+};
+
+/// runModel() with each step timed (wall and CPU).
+SolverRun solve(const ModelInfo& info, const ParamValues& params, const Scene& scene,
+                const Organ& organ, Cache& cache, const VerifyOptions& options) {
+  SolverRun out;
+  RunRecord& rec = out.rec;
+  rec.model = rec.plugin = rec.label = info.name;
+  rec.params = paramsToJson(params);
+  const std::string why = unsupportedReason(info, scene);
+  if (!why.empty()) {
+    rec.status = RunStatus::Unsupported;
+    rec.message = why;
+    return out;
+  }
+  std::unique_ptr<Model> model;
+  try {
+    model = info.create();
+    const ModelSetup setup{organ, params, cache, scene.dt, scene.gravity};
+    const auto t0 = std::chrono::steady_clock::now();
+    model->init(setup);
+    rec.precomputeS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  } catch (const UnsupportedError& e) {
+    rec.status = RunStatus::Unsupported;
+    rec.message = e.what();
+    return out;
+  } catch (const std::exception& e) {
+    rec.status = RunStatus::Failed;
+    rec.message = std::string("init: ") + e.what();
+    return out;
+  }
+  TimedModel timed(*model);
+  try {
+    rec.counts = model->counts();
+    RunOptions o;
+    o.maxSteps = options.maxSteps;
+    o.keepSeries = false;
+    o.quasiStaticAtComparedInstants = solveOnlyAtComparedInstants(info, params);
+    simulate(timed, scene, organ, o, rec);
+  } catch (const std::exception& e) {
+    rec.status = RunStatus::Failed;
+    rec.message = e.what();
+  }
+  out.stepTimes = timed.steps;
+  return out;
+}
+
+VerifySolver describe(const SolverRun& run) {
+  VerifySolver s;
+  s.plugin = run.rec.model;
+  s.params = ojson::parse(run.rec.params.dump());
+  s.status = statusName(run.rec.status);
+  s.message = run.rec.message;
+  s.notes = run.rec.notes;
+  s.counts = ojson::object();
+  for (const auto& [k, v] : run.rec.counts) s.counts[k] = v;
+  s.precomputeS = run.rec.precomputeS;
+  for (const VerifySolverTimes& t : run.stepTimes) {
+    s.total.wallS += t.wallS;
+    s.total.cpuS += t.cpuS;
+  }
+  return s;
+}
+
+ojson timesJson(const VerifySolverTimes& t) {
+  return {{"wall_s", t.wallS}, {"cpu_s", t.cpuS}};
+}
+
+ojson solverJson(const VerifySolver& s) {
+  return {{"plugin", s.plugin},
+          {"params", s.params},
+          {"status", s.status},
+          {"message", s.message},
+          {"notes", s.notes},
+          {"counts", s.counts},
+          {"precompute_s", s.precomputeS},
+          {"solve", timesJson(s.total)}};
+}
+
+}  // namespace
+
+VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
+                       const VerifyOptions& options) {
+  VerifyResult result;
+  result.sceneFile = sceneFile;
+  const Scene scene = parseSceneFile(sceneFile);
+  result.sceneName = scene.name;
+  if (!scene.reference)
+    throw InputError(sceneFile, "/reference", "verify needs a scene with a reference");
+  const ModelSpec& spec = *scene.reference;
+  if (spec.plugin != "reference_fem" && spec.plugin != "calculix")
+    throw InputError(sceneFile, spec.jsonPath + "/plugin",
+                     "verify compares reference_fem and calculix; the reference is " + spec.plugin);
+  // The scene's reference parameters; the other solver takes the shared ones.
+  nlohmann::json shared = nlohmann::json::object();
+  for (const char* k : kSharedParams)
+    if (spec.params.contains(k)) shared[k] = spec.params[k];
+  nlohmann::json refGiven = spec.plugin == "reference_fem" ? spec.params : shared;
+  const nlohmann::json ccxGiven = spec.plugin == "calculix" ? spec.params : shared;
+  std::vector<std::string> notes;
+  if (refGiven.contains("solve") && refGiven["solve"] != "quasi_static") {
+    refGiven["solve"] = "quasi_static";
+    notes.push_back("reference_fem solved quasi-statically (the scene's reference is dynamic)");
+  }
+  if (refGiven.contains("material") && refGiven["material"] == "corotational")
+    throw InputError(sceneFile, spec.jsonPath + "/params/material",
+                     "calculix has no corotational material: verify compares linear or "
+                     "neo_hookean");
+  const ModelInfo& refInfo = loader.load("reference_fem");
+  const ModelInfo& ccxInfo = loader.load("calculix");
+  const ParamValues refParams =
+      resolveParams(refInfo.params, refGiven, sceneFile, spec.jsonPath + "/params");
+  const ParamValues ccxParams =
+      resolveParams(ccxInfo.params, ccxGiven, sceneFile, spec.jsonPath + "/params");
+
+  const Organ organ = loadOrgan(scene);
+  std::error_code ec;
+  fs::create_directories(options.outDir, ec);
+  if (ec || !fs::is_directory(options.outDir))
+    throw InputError(options.outDir.string(), "", "cannot create the output folder");
+  Cache cache(options.cacheDir ? *options.cacheDir : Cache::defaultDir());
+
+  // A scene calculix cannot run (contact: probes, instruments, objects) is not solved at all.
+  SolverRun ref, ccx;
+  if (const std::string why = unsupportedReason(ccxInfo, scene); !why.empty()) {
+    ccx.rec.model = ccxInfo.name;
+    ccx.rec.status = RunStatus::Unsupported;
+    ccx.rec.message = why;
+    ref.rec.model = refInfo.name;
+    ref.rec.status = RunStatus::Unsupported;
+    ref.rec.message = "not run: calculix cannot run this scene";
+  } else {
+    // reference_fem first: it meshes (or finds the mesh in the cache); calculix reads the same.
+    ref = solve(refInfo, refParams, scene, organ, cache, options);
+    ccx = solve(ccxInfo, ccxParams, scene, organ, cache, options);
+  }
+  result.reference = describe(ref);
+  result.calculix = describe(ccx);
+
+  const int n =
+      options.maxSteps >= 0 ? std::min(options.maxSteps, scene.numSteps()) : scene.numSteps();
+  const std::vector<int> solveSteps = quasiStaticSolveSteps(scene, n);
+  const auto timesAt = [&](const SolverRun& r, int step) {
+    const auto it = std::find(solveSteps.begin(), solveSteps.end(), step);
+    const size_t i = size_t(it - solveSteps.begin());
+    return it != solveSteps.end() && i < r.stepTimes.size() ? r.stepTimes[i] : VerifySolverTimes{};
+  };
+  if (ref.rec.status != RunStatus::Ok || ccx.rec.status != RunStatus::Ok) {
+    result.message = "no comparison: reference_fem " + result.reference.status +
+                     (ref.rec.message.empty() ? "" : " (" + ref.rec.message + ")") + ", calculix " +
+                     result.calculix.status +
+                     (ccx.rec.message.empty() ? "" : " (" + ccx.rec.message + ")");
+  } else if (ref.rec.compared.size() != ccx.rec.compared.size()) {
+    result.message = "no comparison: the solvers reached different compared instants";
+  } else {
+    if (ref.rec.counts.at("nodes") != ccx.rec.counts.at("nodes") ||
+        ref.rec.counts.at("elements") != ccx.rec.counts.at("elements"))
+      notes.push_back(
+          "the solvers' meshes differ in size (nodes, elements): the comparison "
+          "includes the mesh difference");
+    const MatX3& rest = organ.surface.V;
+    const std::vector<int> held = graspedSurfaceVertices(scene, rest);
+    std::vector<int> compared;
+    for (int v = 0; v < int(rest.rows()); ++v)
+      if (!std::binary_search(held.begin(), held.end(), v)) compared.push_back(v);
+    result.agrees = true;
+    for (size_t i = 0; i < ref.rec.compared.size(); ++i) {
+      const SurfaceSnapshot& a = ref.rec.compared[i];
+      const SurfaceSnapshot& b = ccx.rec.compared[i];
+      VerifyInstant in;
+      in.step = a.step;
+      in.time = a.time;
+      in.vertices = int(compared.size());
+      double u2 = 0, d2 = 0, dmax = 0;
+      for (int v : compared) {
+        u2 += (a.positions.row(v) - rest.row(v)).squaredNorm();
+        const double d = (a.positions.row(v) - b.positions.row(v)).norm();
+        d2 += d * d;
+        dmax = std::max(dmax, d);
+      }
+      const double m = std::max<double>(1.0, double(compared.size()));
+      in.referenceRms = std::sqrt(u2 / m);
+      in.rmsDifference = std::sqrt(d2 / m);
+      in.maxDifference = dmax;
+      in.rmsRelative = in.referenceRms > 0 ? in.rmsDifference / in.referenceRms : NAN;
+      in.maxRelative = in.referenceRms > 0 ? in.maxDifference / in.referenceRms : NAN;
+      in.reference = timesAt(ref, a.step);
+      in.calculix = timesAt(ccx, b.step);
+      result.agrees = result.agrees && in.rmsRelative <= kVerifyGoal;
+      result.instants.push_back(in);
+    }
+    if (result.instants.empty()) {
+      result.agrees = false;
+      result.message = "no comparison: no compared instant";
+    }
+  }
+
+  ojson doc;
+  doc["format"] = "deformbench-verify/1";
+  doc["scene"] = {{"name", scene.name}, {"file", sceneFile}};
+  doc["goal_rms_relative"] = kVerifyGoal;
+  doc["agrees"] = result.agrees;
+  doc["message"] = result.message;
+  result.notes = notes;
+  doc["notes"] = notes;
+  doc["solvers"] = {solverJson(result.reference), solverJson(result.calculix)};
+  doc["instants"] = ojson::array();
+  for (const VerifyInstant& in : result.instants)
+    doc["instants"].push_back({{"step", in.step},
+                               {"time_s", in.time},
+                               {"vertices", in.vertices},
+                               {"reference_rms_displacement_m", in.referenceRms},
+                               {"rms_difference_m", in.rmsDifference},
+                               {"max_difference_m", in.maxDifference},
+                               {"rms_relative", numberOrNull(in.rmsRelative)},
+                               {"max_relative", numberOrNull(in.maxRelative)},
+                               {"reference_fem", timesJson(in.reference)},
+                               {"calculix", timesJson(in.calculix)}});
+  result.jsonPath = options.outDir / "verify.json";
+  writeFileAtomic(result.jsonPath, doc.dump(2) + "\n");
+  return result;
+}
+
+}  // namespace deform::harness

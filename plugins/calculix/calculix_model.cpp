@@ -1,0 +1,175 @@
+#include "calculix_model.h"
+
+#include "ccx_process.h"
+
+#include <deform/error.h>
+#include <deform/organ_tets.h>
+
+#include <chrono>
+#include <cmath>
+#include <map>
+
+namespace deform::calculix {
+
+namespace {
+
+class CalculixModel final : public Model {
+ public:
+  void init(const ModelSetup& setup) override {
+    const ParamValues& p = setup.params;
+    // First, before any meshing: a machine without CalculiX cannot run this model at all.
+    m_ccx = findCcx();
+    if (m_ccx.empty())
+      throw UnsupportedError(
+          "ccx not found (install CalculiX, e.g. Debian's calculix-ccx, or set DEFORM_CCX to "
+          "the program)");
+    m_timeout = p.real("timeout");
+    m_increments.initial = p.real("initial_increment");
+    m_increments.maximum = std::max(m_increments.initial, p.real("max_increment"));
+    m_increments.minimum = std::min(m_increments.initial, p.real("min_increment"));
+    m_increments.maxIncrements = int(p.integer("max_increments"));
+    m_increments.residualTolerance = p.real("residual_tolerance");
+    const Organ& organ = setup.organ;
+
+    OrganTetOptions meshOptions;  // the mesh reference_fem builds with the same parameters
+    meshOptions.edgeLength = p.real("edge_length");
+    meshOptions.targetElements = p.integer("elements");
+    meshOptions.refineSurface = p.flag("refine_surface");
+    meshOptions.conformFixed = p.flag("conform_fixed");
+    meshOptions.timeoutSeconds = p.real("mesh_timeout");
+    OrganTets tets = organTets(organ, meshOptions, setup.cache);
+    m_surfaceNode = std::move(tets.surfaceNode);
+    m_numElements = tets.mesh.numTets();
+    if (p.integer("element_order") == 2) {
+      QuadraticTetNodes q = addMidsideNodes(tets.mesh);
+      m_model.nodes = std::move(q.V);
+      m_model.elements = q.elements.cast<int>();
+    } else {
+      m_model.nodes = tets.mesh.V;
+      m_model.elements = tets.mesh.T;
+    }
+    m_model.material = p.choiceAs<CcxMaterial>(
+        "material", {{"linear", CcxMaterial::Linear}, {"neo_hookean", CcxMaterial::NeoHookean}});
+    m_model.young = organ.material.young;
+    m_model.poisson = organ.material.poisson;
+    m_model.density = organ.material.density;
+    m_fixed = fixedNodeIndices(m_model.nodes, organ.fixed, organ.surface);
+    m_model.fixedDofs.assign(size_t(m_model.nodes.rows()), {false, false, false});
+    for (int n : m_fixed) m_model.fixedDofs[size_t(n)] = {true, true, true};
+    m_modelDeck = ccxModelDeck(m_model);
+    m_restSurface = organ.surface.V;
+    m_pinnedOutside = 0;
+    for (int n : m_surfaceNode) m_pinnedOutside += n < 0;
+    reset();
+  }
+
+  StepStatus step(const StepInput& in) override {
+    const auto start = std::chrono::steady_clock::now();
+    CcxLoads loads;
+    loads.gravity = in.gravity;
+    // Grasped surface vertices: prescribed displacements (a vertex with no node, or on a node of
+    // the fixed region, stays where the support holds it, as in reference_fem).
+    std::map<int, Vec3> held;
+    for (const GraspInput& g : in.grasps)
+      for (size_t k = 0; k < g.vertices.size(); ++k) {
+        const int node = m_surfaceNode[size_t(g.vertices[k])];
+        if (node < 0 || isFixed(node)) continue;
+        held[node] =
+            g.targets.row(Eigen::Index(k)).transpose() - m_model.nodes.row(node).transpose();
+      }
+    for (const NodeGrasp& g : in.nodeConstraints)
+      for (size_t k = 0; k < g.nodes.size(); ++k)
+        if (!isFixed(g.nodes[k]))
+          held[g.nodes[k]] = g.targets.row(Eigen::Index(k)).transpose() -
+                             m_model.nodes.row(g.nodes[k]).transpose();
+    loads.displacements.assign(held.begin(), held.end());
+    for (const PointLoad& l : in.loads)
+      for (size_t k = 0; k < l.vertices.size(); ++k) {
+        const int node = m_surfaceNode[size_t(l.vertices[k])];
+        if (node >= 0) loads.forces.emplace_back(node, l.weights[k] * l.force);
+      }
+
+    const CcxRun run =
+        runCcx(m_ccx, m_modelDeck + ccxStepDeck(m_model, loads, m_increments), m_timeout);
+    ++m_runs;
+    m_wallMs += 1e3 * run.wallSeconds;
+    m_cpuMs += 1e3 * run.cpuSeconds;
+    if (!run.ok) throw std::runtime_error("ccx: " + run.message);
+    double time = 0;
+    const MatX3 u = ccxLastDisplacements(run.dat, int(m_model.nodes.rows()), time);
+    if (std::abs(time - 1.0) > 1e-6)
+      throw std::runtime_error("ccx: the step stopped at " + std::to_string(time) + " of its load");
+    m_nodes = m_model.nodes + u;
+    updateSurface();
+    m_phase["solve"] =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    m_phase["ccx_wall"] = 1e3 * run.wallSeconds;
+    m_phase["ccx_cpu"] = 1e3 * run.cpuSeconds;
+    return m_nodes.allFinite() ? StepStatus::Ok : StepStatus::Diverged;
+  }
+
+  const MatX3& nodes() const override { return m_nodes; }
+  const MatX3& surface() const override { return m_surface; }
+
+  void reset() override {
+    m_nodes = m_model.nodes;
+    m_runs = 0;
+    m_wallMs = m_cpuMs = 0;
+    m_phase.clear();
+    updateSurface();
+  }
+
+  Counts counts() const override {
+    return {{"nodes", (long long)m_model.nodes.rows()},
+            {"elements", m_numElements},
+            {"fixed_nodes", (long long)m_fixed.size()},
+            {"surface_vertices_not_nodes", m_pinnedOutside}};
+  }
+  PhaseTimes phaseTimes() const override { return m_phase; }
+  NumericCounters numericCounters() const override {
+    // Totals over the run; CPU time is the ccx child processes' (user + system, their rusage).
+    return {{"ccx_runs", m_runs},
+            {"ccx_wall_ms", std::llround(m_wallMs)},
+            {"ccx_cpu_ms", std::llround(m_cpuMs)}};
+  }
+
+ private:
+  bool isFixed(int node) const {
+    const auto& d = m_model.fixedDofs[size_t(node)];
+    return d[0] && d[1] && d[2];
+  }
+
+  void updateSurface() {
+    m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
+    for (size_t i = 0; i < m_surfaceNode.size(); ++i) {
+      const int n = m_surfaceNode[i];
+      if (n < 0 || isFixed(n))
+        m_surface.row(Eigen::Index(i)) = m_restSurface.row(Eigen::Index(i));
+      else
+        m_surface.row(Eigen::Index(i)) = m_nodes.row(n);
+    }
+  }
+
+  std::string m_ccx;
+  double m_timeout = 3600;
+  CcxIncrements m_increments;
+  CcxModel m_model;
+  std::string m_modelDeck;
+  long long m_numElements = 0;
+  std::vector<int> m_fixed;
+  std::vector<int> m_surfaceNode;  ///< surface vertex -> node; -1: inside a fixed box, no node
+  MatX3 m_restSurface;
+  long long m_pinnedOutside = 0;
+  MatX3 m_nodes, m_surface;
+  long long m_runs = 0;
+  double m_wallMs = 0, m_cpuMs = 0;
+  PhaseTimes m_phase;
+};
+
+}  // namespace
+
+std::unique_ptr<Model> makeCalculixModel() {
+  return std::make_unique<CalculixModel>();
+}
+
+}  // namespace deform::calculix

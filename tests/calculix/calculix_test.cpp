@@ -1,0 +1,200 @@
+// The calculix plugin (CalculiX's ccx as a child process) against reference_fem on one mesh, and
+// how it reports a missing or failing ccx. ccx is installed by scripts/install-deps.sh; where it
+// is missing the comparison tests are skipped (the missing-ccx test runs everywhere).
+#include <deform/cache.h>
+#include <deform/error.h>
+#include <deform/model.h>
+#include <deform/phantom.h>
+#include <deform/plugin_loader.h>
+#include <deform/scene.h>
+#include <deform_harness/runner.h>
+#include <gtest/gtest.h>
+
+#include "ccx_deck.h"
+#include "ccx_process.h"
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+
+using namespace deform;
+namespace fs = std::filesystem;
+
+namespace {
+
+PluginLoader& loader() {
+  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
+  return *l;
+}
+
+Cache& cache() {
+  static Cache c(fs::path(DEFORM_BUILD_DIR) / "test-cache");
+  return c;
+}
+
+/// Sets an environment variable for the lifetime of the object.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const std::string& value) : m_name(name) {
+    if (const char* old = std::getenv(name)) m_old = old;
+    setenv(name, value.c_str(), 1);
+  }
+  ~ScopedEnv() {
+    if (m_old) {
+      setenv(m_name, m_old->c_str(), 1);
+    } else {
+      unsetenv(m_name);
+    }
+  }
+
+ private:
+  const char* m_name;
+  std::optional<std::string> m_old;
+};
+
+/// An executable shell script in a fresh folder (a stand-in for ccx).
+std::string fakeCcx(const std::string& name, const std::string& body) {
+  const fs::path dir = fs::path(DEFORM_BUILD_DIR) / "test-calculix" / name;
+  fs::create_directories(dir);
+  const fs::path file = dir / "ccx";
+  std::ofstream(file) << "#!/bin/sh\n" << body << "\n";
+  fs::permissions(file, fs::perms::owner_all);
+  return file.string();
+}
+
+Organ beam() {
+  Organ organ;
+  organ.source = "phantom:beam";
+  organ.surface = makePhantom("beam", 1.0);
+  organ.material.young = 1e7;
+  organ.material.poisson = 0.3;
+  organ.material.density = 1000;
+  Box clamp;
+  clamp.lo = Vec3(-0.01, -0.01, -0.01);
+  clamp.hi = Vec3(1e-6, 0.01, 0.01);
+  organ.fixed.boxes = {clamp};
+  return organ;
+}
+
+MatX3 solveOnce(const std::string& plugin, const Organ& organ, const StepInput& in,
+                long long elements, std::string material = "neo_hookean") {
+  const ModelInfo& info = loader().load(plugin);
+  ParamValues p = ParamValues::defaults(info.params);
+  p.set("elements", elements);
+  p.set("material", material);
+  std::unique_ptr<Model> model = info.create();
+  model->init(ModelSetup{organ, p, cache(), 1e-3, in.gravity});
+  EXPECT_EQ(model->step(in), StepStatus::Ok);
+  return model->surface();
+}
+
+/// RMS of |a - b| over the rows, relative to the RMS of |a - rest|.
+double relativeRms(const MatX3& a, const MatX3& b, const MatX3& rest) {
+  return std::sqrt((a - b).rowwise().squaredNorm().mean() /
+                   (a - rest).rowwise().squaredNorm().mean());
+}
+
+// The same discrete problem twice: the same tets (one cache entry), the same 10-node elements
+// with the same 4-point rule, the same Neo-Hookean energy (C10 = mu/2, D1 = 2/K), consistent
+// gravity in both. What remains is each solver's stopping test and ccx's printed precision
+// (7 digits): 0.1% of the displacement is far above that and far below any modelling
+// difference (linear tets are 18% stiff on this beam, a nu 0.3 -> 0.31 change is ~0.7%).
+TEST(Calculix, GravityCantileverAgreesWithReferenceFem) {
+  if (calculix::findCcx().empty()) GTEST_SKIP() << "ccx not installed";
+  const Organ organ = beam();
+  StepInput in;
+  in.dt = 1e-3;
+  in.gravity = Vec3(0, 0, -9.81);
+  const MatX3 ref = solveOnce("reference_fem", organ, in, 1000);
+  const MatX3 ccx = solveOnce("calculix", organ, in, 1000);
+  const double rel = relativeRms(ref, ccx, organ.surface.V);
+  std::printf(
+      "gravity cantilever: calculix differs from reference_fem by %.2e of the RMS displacement\n",
+      rel);
+  EXPECT_LT(rel, 1e-4);
+  // And it sags as the beam does (1.4868 mm at the tip, beam theory with shear): the
+  // comparison is not two zeros.
+  double sag = 0;
+  int n = 0;
+  for (Eigen::Index v = 0; v < organ.surface.V.rows(); ++v)
+    if (organ.surface.V(v, 0) > 0.1 - 1e-9) {
+      sag -= ccx(v, 2) - organ.surface.V(v, 2);
+      ++n;
+    }
+  EXPECT_NEAR(sag / n, 1.4868e-3, 0.02 * 1.4868e-3);
+}
+
+// material linear: *ELASTIC without NLGEOM against reference_fem's small-strain material.
+TEST(Calculix, LinearMaterialAgreesWithReferenceFem) {
+  if (calculix::findCcx().empty()) GTEST_SKIP() << "ccx not installed";
+  const Organ organ = beam();
+  StepInput in;
+  in.dt = 1e-3;
+  in.loads = {
+      PointLoad::onVertex(nearestVertex(organ.surface.V, Vec3(0.1, 0, 0.005)), Vec3(0, 0.3, -0.5))};
+  const MatX3 ref = solveOnce("reference_fem", organ, in, 300, "linear");
+  const MatX3 ccx = solveOnce("calculix", organ, in, 300, "linear");
+  EXPECT_LT(relativeRms(ref, ccx, organ.surface.V), 1e-4);
+}
+
+harness::RunRecord runScene(const std::string& plugin, const nlohmann::json& params) {
+  const Scene scene =
+      parseSceneFile(std::string(DEFORM_SOURCE_DIR) + "/tests/calculix/cantilever.json");
+  const Organ organ = loadOrgan(scene);
+  const ModelInfo& info = loader().load(plugin);
+  const ParamValues p = resolveParams(info.params, params, "test", "/params");
+  return harness::runModel(info, p, scene, organ, cache());
+}
+
+TEST(Calculix, MissingCcxIsUnsupported) {
+  ScopedEnv env("DEFORM_CCX", "/nonexistent/ccx");
+  EXPECT_EQ(calculix::findCcx(), "");
+  const harness::RunRecord r = runScene("calculix", {{"elements", 300}});
+  EXPECT_EQ(r.status, harness::RunStatus::Unsupported);
+  EXPECT_NE(r.message.find("ccx not found"), std::string::npos) << r.message;
+}
+
+TEST(Calculix, FailingCcxIsAFailedRunWithItsMessage) {
+  if (calculix::findCcx().empty()) GTEST_SKIP() << "ccx not installed";
+  // A real ccx failure: one increment of a quarter of the load cannot finish the step.
+  const harness::RunRecord r = runScene("calculix", {{"elements", 300}, {"max_increments", 1}});
+  EXPECT_EQ(r.status, harness::RunStatus::Failed);
+  EXPECT_NE(r.message.find("ccx"), std::string::npos) << r.message;
+  EXPECT_NE(r.message.find("*ERROR"), std::string::npos) << r.message;
+  EXPECT_FALSE(r.valid);
+}
+
+TEST(Calculix, CcxPastItsDeadlineIsKilledAndReported) {
+  const std::string fake = fakeCcx("slow", "sleep 30");
+  const calculix::CcxRun run = calculix::runCcx(fake, "*NODE\n", 0.5);
+  EXPECT_FALSE(run.ok);
+  EXPECT_NE(run.message.find("did not finish within 0.5 s"), std::string::npos) << run.message;
+  EXPECT_LT(run.wallSeconds, 10);
+}
+
+TEST(Calculix, CcxErrorLinesBecomeTheMessage) {
+  const std::string fake = fakeCcx("error", "echo ' *ERROR in fake: no such keyword'; exit 201");
+  const calculix::CcxRun run = calculix::runCcx(fake, "*NODE\n", 30);
+  EXPECT_FALSE(run.ok);
+  EXPECT_NE(run.message.find("status 201"), std::string::npos) << run.message;
+  EXPECT_NE(run.message.find("*ERROR in fake: no such keyword"), std::string::npos) << run.message;
+}
+
+TEST(Calculix, DatTableIsRead) {
+  const std::string dat =
+      "\n displacements (vx,vy,vz) for set NALL and time  0.5000000E+00\n\n"
+      "         1  1.000000E+00  0.000000E+00  0.000000E+00\n"
+      "         2  0.000000E+00  0.000000E+00  0.000000E+00\n\n"
+      " displacements (vx,vy,vz) for set NALL and time  0.1000000E+01\n\n"
+      "         2 -1.500000E-03  2.000000E-03  3.000000E-03\n"
+      "         1  1.000000E-03  0.000000E+00 -4.000000E-03\n";
+  double t = 0;
+  const MatX3 u = calculix::ccxLastDisplacements(dat, 2, t);
+  EXPECT_DOUBLE_EQ(t, 1.0);
+  EXPECT_DOUBLE_EQ(u(1, 0), -1.5e-3);
+  EXPECT_DOUBLE_EQ(u(0, 2), -4e-3);
+  EXPECT_THROW(calculix::ccxLastDisplacements(dat, 3, t), std::runtime_error);
+}
+
+}  // namespace

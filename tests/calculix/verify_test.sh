@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# verify_test.sh DEFORMBENCH WORK: `deformbench verify` on the small cantilever scene writes
+# verify.json with its fields and prints one line per compared instant; the two solvers agree
+# (same mesh, same discrete problem) well within the 1% goal. Without ccx: calculix is
+# unsupported, said in verify.json and on stdout, exit 0.
+set -euo pipefail
+exe=$(readlink -f "$1") work=$2
+here=$(cd "$(dirname "$0")" && pwd)
+rm -rf "$work"
+mkdir -p "$work"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+
+have_ccx=1
+command -v ccx >/dev/null || have_ccx=0
+"$exe" verify "$here/cantilever.json" --out "$work/v" >"$work/out.txt" 2>"$work/err.txt" \
+  || { cat "$work/out.txt" "$work/err.txt"; fail "verify exited $?"; }
+cat "$work/out.txt"
+python3 - "$work/v/verify.json" "$have_ccx" <<'PY'
+import json, sys
+v = json.load(open(sys.argv[1]))
+have_ccx = sys.argv[2] == "1"
+assert v["format"] == "deformbench-verify/1", v["format"]
+assert v["scene"]["name"] == "calculix-cantilever"
+names = [s["plugin"] for s in v["solvers"]]
+assert names == ["reference_fem", "calculix"], names
+for s in v["solvers"]:
+    for k in ("status", "message", "params", "counts", "precompute_s", "solve"):
+        assert k in s, (s["plugin"], k)
+if not have_ccx:
+    assert v["solvers"][1]["status"] == "unsupported" and v["instants"] == [], v
+    assert "ccx not found" in v["message"], v["message"]
+    sys.exit(0)
+assert v["solvers"][0]["counts"]["nodes"] == v["solvers"][1]["counts"]["nodes"], v["solvers"]
+assert len(v["instants"]) == 2, v["instants"]
+for i, t in zip(v["instants"], (0.01, 0.02)):
+    assert abs(i["time_s"] - t) < 1e-9, i
+    for k in ("vertices", "reference_rms_displacement_m", "rms_difference_m", "max_difference_m"):
+        assert i[k] > 0, (k, i)
+    assert i["rms_relative"] < 1e-4 and i["max_relative"] >= i["rms_relative"], i
+    for s in ("reference_fem", "calculix"):
+        assert i[s]["wall_s"] > 0 and i[s]["cpu_s"] > 0, (s, i)
+assert v["agrees"] is True
+PY
+lines=$(grep -c '^t = ' "$work/out.txt" || true)
+if [ "$have_ccx" = 1 ] && [ "$lines" != 2 ]; then fail "expected 2 lines, got $lines"; fi
+# Missing ccx: not a crash, an unsupported solver.
+DEFORM_CCX=/nonexistent/ccx "$exe" verify "$here/cantilever.json" --out "$work/missing" \
+  >"$work/out2.txt" 2>&1 || { cat "$work/out2.txt"; fail "verify without ccx exited $?"; }
+grep -q "ccx not found" "$work/out2.txt" || { cat "$work/out2.txt"; fail "no 'ccx not found'"; }
+grep -q '"unsupported"' "$work/missing/verify.json" || fail "calculix not unsupported"
+echo PASS
