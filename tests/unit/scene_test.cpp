@@ -258,7 +258,8 @@ TEST(SceneErrors, OutOfRangeValues) {
   expectError(with("/tools/0/type", "scalpel"), "/tools/0/type", "\"grasper\" or \"probe\"");
   expectError(with("/tools/0/trajectory", json::array()), "/tools/0/trajectory",
               "at least one keyframe");
-  expectError(with("/loads/0/type", "torque"), "/loads/0/type", "\"point_force\" or \"pin_head\"");
+  expectError(with("/loads/0/type", "torque"), "/loads/0/type",
+              "\"point_force\", \"pin_head\" or \"traction\"");
   expectError(with("/loads/0/end", 0.0), "/loads/0/end", "must be > start");
   expectError(with("/loads/1/stiffness", 0), "/loads/1/stiffness", "must be > 0");
   expectError(with("/organ/fixed/box/1/2", -2), "/organ/fixed/box", "low -1 > high -2");
@@ -573,7 +574,7 @@ TEST(Scene, FixedRegionsWithAxesAreRollersAndTheOldFormsStayValid) {
   j["organ"]["fixed"] = json::parse(R"([
     {"box": [[-1, -1, -1], [1, 1, -0.04]]},
     {"boxes": [[[-1, -1, -1], [-0.049, 1, 1]], [[-1, -1, -1], [1, -0.049, 1]]], "axes": "xy"},
-    {"box": [[-1, -1, 0.049], [1, 1, 1]], "axes": "z", "vertices": []},
+    {"box": [[-1, -1, 0.049], [1, 1, 1]], "axes": "z"},
     {"vertices": [4]},
     {"box": [[0, 0, 0], [1, 1, 1]], "axes": "yxz"}
   ])");
