@@ -1028,7 +1028,7 @@ int realMain(int argc, char** argv) {
   CLI::App* tables = app.add_subcommand(
       "tables",
       "regenerate the papers' tables (metaballs-construction, method-comparison, "
-      "bem-timing, bem-accuracy, hybrid-accuracy, hybrid-timing, or all)");
+      "bem-timing, bem-accuracy, hybrid-accuracy, hybrid-timing, verification, or all)");
   tables->add_option("name", tableNamesArg, "table name(s) or all")->required();
   tables->add_option("--out", ta.common.out, "output folder")->required();
   tables

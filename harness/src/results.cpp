@@ -314,6 +314,16 @@ json interactionJson(const Scene& scene, const Organ& organ) {
   json boxes = json::array();
   for (const Box& b : organ.fixed.boxes) boxes.push_back({vec(b.lo), vec(b.hi)});
   j["fixed"] = {{"boxes", boxes}, {"surface_vertices", organ.fixed.surfaceVertices}};
+  if (!organ.fixed.rollers.empty()) {
+    json rollers = json::array();
+    for (const RollerBox& r : organ.fixed.rollers) {
+      std::string axes;
+      for (int k = 0; k < 3; ++k)
+        if (r.axes & (1 << k)) axes += char('x' + k);
+      rollers.push_back({{"box", {vec(r.box.lo), vec(r.box.hi)}}, {"axes", axes}});
+    }
+    j["fixed"]["rollers"] = rollers;
+  }
   json tools = json::array();
   for (const ToolSpec& t : scene.tools) {
     json path = json::array();

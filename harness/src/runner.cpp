@@ -135,6 +135,9 @@ std::string unsupportedReason(const ModelInfo& info, const Scene& scene) {
   if (!scene.objects.empty() && !info.has(Capability::ContactReaction))
     return lacks("the scene's rigid objects (a free object rests on the reported contact reaction)",
                  Capability::ContactReaction);
+  if (!scene.organ.fixed.rollers.empty() && !info.has(Capability::RollerSupport))
+    return lacks("the scene's roller supports (fixed boxes holding some axes only)",
+                 Capability::RollerSupport);
   if (!scene.loads.empty() && !info.has(Capability::PointForce)) {
     return "the scene's loads need the point_force capability, which " + info.name +
            " does not have";

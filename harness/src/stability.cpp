@@ -68,14 +68,6 @@ std::pair<std::string, ojson> stabilityReference(PluginLoader& loader, bool quic
 
 }  // namespace
 
-double cantileverSag(double young, double poisson, double density, double gravity, double length,
-                     double side) {
-  const double q = density * gravity * side * side, inertia = side * side * side * side / 12;
-  const double shear = young / (2 * (1 + poisson)), kappa = 5.0 / 6.0;
-  return q * std::pow(length, 4) / (8 * young * inertia) +
-         q * length * length / (2 * kappa * shear * side * side);
-}
-
 SurfaceMesh sliverMesh(double resolution) {
   SurfaceMesh m = makePhantom("liver", resolution);
   const MatX2i E = uniqueEdges(m.F);

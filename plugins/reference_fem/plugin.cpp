@@ -112,6 +112,14 @@ class ReferenceFemModel final : public Model {
     // clipSurfaceByBoxes is a node a hair's breadth from it).
     m_isFixed.assign(size_t(m_system->numNodes()), 0);
     for (int n : m_fixed) m_isFixed[size_t(n)] = 1;
+    // Roller supports: single dofs held at rest (the boxes are never clipped away: their nodes
+    // stay free along the other axes).
+    m_rollerDofs.clear();
+    for (const auto& [node, axes] : rollerNodeAxes(m_system->rest().V, organ.fixed)) {
+      if (m_isFixed[size_t(node)]) continue;
+      for (int k = 0; k < 3; ++k)
+        if (axes & (1 << k)) m_rollerDofs.push_back(3 * node + k);
+    }
     reset();
   }
 
@@ -138,6 +146,7 @@ class ReferenceFemModel final : public Model {
     const auto start = std::chrono::steady_clock::now();
     LoadCase lc;
     lc.fixedNodes = m_fixed;
+    lc.fixedDofs = m_rollerDofs;
     lc.gravity = in.gravity;
     std::vector<char> fixed(size_t(m_system->numNodes()), 0);
     for (int n : m_fixed) fixed[size_t(n)] = 1;
@@ -228,10 +237,12 @@ class ReferenceFemModel final : public Model {
   }
 
   Counts counts() const override {
-    return {{"nodes", m_system->numNodes()},
-            {"elements", m_system->rest().numTets()},
-            {"fixed_nodes", (long long)m_fixed.size()},
-            {"isolated_clamped_nodes", m_isolatedNodes}};
+    Counts c = {{"nodes", m_system->numNodes()},
+                {"elements", m_system->rest().numTets()},
+                {"fixed_nodes", (long long)m_fixed.size()},
+                {"isolated_clamped_nodes", m_isolatedNodes}};
+    if (!m_rollerDofs.empty()) c["roller_dofs"] = (long long)m_rollerDofs.size();
+    return c;
   }
   PhaseTimes phaseTimes() const override { return m_phase; }
   NumericCounters numericCounters() const override {
@@ -268,6 +279,7 @@ class ReferenceFemModel final : public Model {
   std::unique_ptr<FemSystem> m_system;
   std::unique_ptr<EquilibriumSolver> m_solver;
   std::vector<int> m_fixed;
+  std::vector<int> m_rollerDofs;   ///< 3 node + axis held at rest by roller boxes
   std::vector<int> m_surfaceNode;  ///< surface vertex -> node
   MatX3 m_restSurface;             ///< reported for the pinned vertices
   std::vector<char> m_isFixed;     ///< per node: pinned by the fixed region
@@ -299,10 +311,11 @@ DEFORM_PLUGIN(registry) {
       "Gross, Graphics Interface 2004; Neo-Hookean (isochoric/volumetric split): Bonet & Wood, "
       "Nonlinear Continuum Mechanics for FEA, 2nd ed. 2008, doi:10.1017/CBO9780511755446";
   info.version = "1.0";
-  info.capabilities = {
-      Capability::Grasp,         Capability::PointForce,      Capability::Gravity,
-      Capability::ReactionForce, Capability::NeedsPrecompute, Capability::TetInput,
-      Capability::QuasiStatic,   Capability::Contact,         Capability::ContactReaction};
+  info.capabilities = {Capability::Grasp,           Capability::PointForce,
+                       Capability::Gravity,         Capability::ReactionForce,
+                       Capability::NeedsPrecompute, Capability::TetInput,
+                       Capability::QuasiStatic,     Capability::Contact,
+                       Capability::ContactReaction, Capability::RollerSupport};
   info.params = reffem::referenceFemParams();
   info.create = [] { return std::make_unique<reffem::ReferenceFemModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).

@@ -4,6 +4,7 @@
 #include <deform/cache.h>
 #include <deform/plugin_loader.h>
 #include <deform/scene.h>
+#include <deform_harness/analytic.h>
 #include <deform_harness/bench.h>
 #include <deform_harness/calibration.h>
 #include <deform_harness/cases.h>
@@ -536,12 +537,99 @@ TEST_F(TempDir, TableCaseInAChildSurvivesACrashAndAHangAndResumes) {
   EXPECT_EQ(rerun.run("ref"), nullptr);
 }
 
+// ------------------------------------------------------------------------------- verification
+
+TEST(Analytic, ElasticaReproducesMattiassonsTipLoadTable) {
+  // Mattiasson 1981 (IJNME 17:145), cantilever with a tip load, by elliptic integrals:
+  // P L^2 / EI -> tip v / L, u / L, rotation (rad).
+  struct Row {
+    double load, v, u, angle;
+  };
+  for (const Row& r : {Row{1, 0.30172, 0.05643, 0.46135}, Row{2, 0.49346, 0.16064, 0.78175},
+                       Row{10, 0.81061, 0.55500, 1.43029}}) {
+    const ElasticaTip t = elasticaCantilever(2.0, 3.0, 0, r.load * 3.0 / 4.0);
+    ASSERT_TRUE(t.converged) << r.load;
+    EXPECT_NEAR(t.sag / 2.0, r.v, 1e-5) << r.load;
+    EXPECT_NEAR(t.shortening / 2.0, r.u, 1e-5) << r.load;
+    EXPECT_NEAR(t.angle, r.angle, 1e-5) << r.load;
+  }
+}
+
+TEST(Analytic, ElasticaUnderItsOwnWeightTendsToBeamTheoryAndStiffensAtLargeLoads) {
+  const double L = 0.1, EI = 1e7 * 1e-8 / 12, q = 1000 * 9.81 * 1e-4;
+  const ElasticaTip small = elasticaCantilever(L, EI, q, 0);
+  ASSERT_TRUE(small.converged);
+  const double eb = q * std::pow(L, 4) / (8 * EI);  // Euler-Bernoulli, q L^4 / 8 EI
+  EXPECT_NEAR(small.sag, eb, 1e-3 * eb);
+  EXPECT_NEAR(small.angle, q * L * L * L / (6 * EI), 1e-3 * small.angle);
+  // Large: sag well below the linear answer, and the tip comes back towards the clamp.
+  const ElasticaTip large = elasticaCantilever(L, EI, 3 * EI / (L * L * L), 0);
+  ASSERT_TRUE(large.converged);
+  EXPECT_LT(large.sag, 0.9 * 3.0 / 8 * L);
+  EXPECT_GT(large.sag, 0.25 * L);
+  EXPECT_GT(large.shortening, 0.02 * L);
+  // Doubling the steps changes nothing the table prints.
+  EXPECT_NEAR(elasticaCantilever(L, EI, 3 * EI / (L * L * L), 0, 4000).sag, large.sag, 1e-9 * L);
+}
+
+TEST(Analytic, NeoHookeanUniaxialLimits) {
+  // Small strain: Young's modulus and Poisson's ratio.
+  const UniaxialState s = neoHookeanUniaxialAtStretch(1e4, 0.3, 1 - 1e-5);
+  ASSERT_TRUE(s.converged);
+  EXPECT_NEAR(s.nominalStress, -1e4 * 1e-5, 1e-3 * 1e4 * 1e-5);
+  EXPECT_NEAR((s.lateralStretch - 1) / 1e-5, 0.3, 1e-3);
+  // Nearly incompressible: J = 1, b = a^-1/2.
+  const UniaxialState inc = neoHookeanUniaxialAtStretch(1e4, 0.4999, 0.8);
+  EXPECT_NEAR(inc.lateralStretch, 1 / std::sqrt(0.8), 1e-4);
+  // The dead-load solve inverts the stretch solve.
+  const UniaxialState d = neoHookeanUniaxialAtNominalStress(5500, 0.3, -1100);
+  ASSERT_TRUE(d.converged);
+  EXPECT_NEAR(neoHookeanUniaxialAtStretch(5500, 0.3, d.axialStretch).nominalStress, -1100, 1e-6);
+  EXPECT_LT(d.axialStretch, 1 - 0.2) << "softer than linear in compression";
+  EXPECT_GT(d.axialStretch, 0.7);
+}
+
+TEST_F(TempDir, QuickVerificationTableListsEveryRowWithItsValue) {
+  // The fixtures only: no reference_fem and no calculix, so nothing is solved and the table
+  // says so; the values are the analytic and published ones.
+  PluginLoader loader({DEFORM_TEST_FIXTURE_PLUGIN_DIR});
+  TablesOptions o;
+  o.quick = true;
+  o.outDir = m_dir / "out";
+  o.cases.cacheDir = fs::path();
+  const auto tables = buildTables({"verification"}, loader, o, nullptr);
+  ASSERT_EQ(tables.size(), 1u);
+  const json doc = readJson(o.outDir / "verification.json");
+  ASSERT_EQ(doc["rows"].size(), 5u);
+  std::vector<std::string> keys;
+  for (const auto& c : doc["columns"]) keys.push_back(c["key"]);
+  for (const char* k : {"reference_fem_mm", "calculix_mm", "value_mm", "error_pct",
+                        "reference_fem_s", "calculix_s", "status"})
+    EXPECT_NE(std::find(keys.begin(), keys.end(), k), keys.end()) << k;
+  const auto& rows = doc["rows"];
+  EXPECT_NEAR(rows[0]["value_mm"].get<double>(),
+              1e3 * cantileverSag(1e7, 0.3, 1000, 9.81, 0.1, 0.01), 1e-9);
+  EXPECT_NEAR(rows[1]["value_mm"].get<double>(), 30.0, 5.0) << "elastica, q L^3 / EI = 3";
+  EXPECT_GT(rows[2]["value_mm"].get<double>(), 10.0) << "the cube's middle descends ~1.2 cm";
+  EXPECT_EQ(rows[3]["value_mm"].get<double>(), 14.74);
+  EXPECT_NEAR(rows[4]["value_mm"].get<double>(), 6.89, 0.01);
+  for (size_t i : {1u, 3u, 4u}) EXPECT_EQ(rows[i]["status"], "skipped (--quick)") << rows[i].dump();
+  for (size_t i : {0u, 2u}) {
+    const std::string status = rows[i]["status"];
+    EXPECT_NE(status.find("missing plugin reference_fem"), std::string::npos) << status;
+    EXPECT_TRUE(rows[i]["reference_fem_mm"].is_null());
+    EXPECT_NE(rows[i]["note"].get<std::string>().find("CalculiX: not available"),
+              std::string::npos);
+    EXPECT_TRUE(fs::exists(o.outDir / rows[i]["scene"].get<std::string>()));
+  }
+}
+
 TEST(Tables, UnknownTableIsAnInputError) {
   PluginLoader loader({DEFORM_TEST_FIXTURE_PLUGIN_DIR});
   TablesOptions o;
   o.outDir = fs::temp_directory_path() / "deform_tables_unknown";
   EXPECT_THROW(buildTables({"nonsense"}, loader, o, nullptr), InputError);
-  EXPECT_EQ(tableNames().size(), 6u);
+  EXPECT_EQ(tableNames().size(), 7u);
 }
 
 // ---------------------------------------------------------------------------------- stability

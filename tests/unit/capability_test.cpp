@@ -13,7 +13,7 @@ namespace {
 
 TEST(Capability, EveryNameParsesBackToItsCapabilityAndNamesAreUnique) {
   std::set<std::string> names;
-  for (int i = 0; i <= static_cast<int>(Capability::ContactReaction); ++i) {
+  for (int i = 0; i <= static_cast<int>(Capability::RollerSupport); ++i) {
     const auto c = static_cast<Capability>(i);
     const std::string name = capabilityName(c);
     EXPECT_TRUE(names.insert(name).second) << "duplicate name " << name;
@@ -34,6 +34,27 @@ TEST(Capability, AppendedEnumeratorsKeepTheValuesOldPluginsWereBuiltWith) {
   EXPECT_EQ(static_cast<int>(Capability::QuasiStatic), 7);
   EXPECT_EQ(static_cast<int>(Capability::Contact), 8);
   EXPECT_EQ(static_cast<int>(Capability::ContactReaction), 9);
+  EXPECT_EQ(static_cast<int>(Capability::RollerSupport), 10);
+  EXPECT_STREQ(capabilityName(Capability::RollerSupport), "roller_support");
+}
+
+TEST(Capability, RollerSupportsNeedRollerSupportNeverAFullPin) {
+  nlohmann::json j = nlohmann::json::parse(R"({
+    "organ": {"mesh": "phantom:cube",
+              "fixed": [{"box": [[-1, -1, -1], [1, 1, -0.049]], "axes": "z"}]},
+    "models": [{"plugin": "toy"}]
+  })");
+  ModelInfo info;
+  info.name = "toy";
+  const std::string why = harness::unsupportedReason(info, parseScene(j, "s.json"));
+  EXPECT_NE(why.find("roller_support"), std::string::npos) << why;
+  EXPECT_NE(why.find("roller supports"), std::string::npos) << why;
+  info.capabilities = {Capability::RollerSupport};
+  EXPECT_EQ(harness::unsupportedReason(info, parseScene(j, "s.json")), "");
+  // A box holding every axis is an ordinary clamp: no capability needed.
+  j["organ"]["fixed"][0]["axes"] = "zxy";
+  info.capabilities.clear();
+  EXPECT_EQ(harness::unsupportedReason(info, parseScene(j, "s.json")), "");
 }
 
 Scene objectScene(bool withObject) {

@@ -2,9 +2,12 @@
 // pin heads, probes, the focus point and the fixed region.
 #include <deform/contact.h>
 #include <deform/interaction.h>
+#include <deform/phantom.h>
 #include <gtest/gtest.h>
 
 #include "harness_test_models.h"
+
+#include <algorithm>
 
 namespace deform {
 namespace {
@@ -277,6 +280,34 @@ TEST(FixedNodes, BoxesAndNearestNodesToListedVertices) {
   region.surfaceVertices = {3, 2};  // rest (0,0,0.1) -> node 2; rest (0,0.1,0) -> node 3
   EXPECT_EQ(fixedNodeIndices(nodes, region, rest), (std::vector<int>{0, 2, 3, 4}));
   EXPECT_TRUE(fixedNodeIndices(nodes, FixedRegion{}, rest).empty());
+}
+
+TEST(RegionPatch, ConsistentAreaWeightsOverTheTrianglesInsideTheBox) {
+  const SurfaceMesh cube = makePhantom("cube", 0.3);
+  const Box top{Vec3(-1, -1, 0.05 - 1e-9), Vec3(1, 1, 1)};
+  const SurfacePatch p = regionPatch(cube, top);
+  ASSERT_FALSE(p.vertices.empty());
+  EXPECT_TRUE(std::is_sorted(p.vertices.begin(), p.vertices.end()));
+  Real sum = 0;
+  Vec3 centroid = Vec3::Zero();
+  for (size_t k = 0; k < p.vertices.size(); ++k) {
+    EXPECT_NEAR(cube.V(p.vertices[k], 2), 0.05, 1e-12) << "only the top face is loaded";
+    sum += p.weights[k];
+    centroid += p.weights[k] * cube.V.row(p.vertices[k]).transpose();
+  }
+  EXPECT_NEAR(sum, 1.0, 1e-12);
+  // A uniform traction's resultant acts at the face's centre.
+  EXPECT_LT((centroid - Vec3(0, 0, 0.05)).norm(), 1e-12);
+  // Corner vertices of the square face carry less than edge and interior ones.
+  const int corner = nearestVertex(cube.V, Vec3(0.05, 0.05, 0.05));
+  const int middle = nearestVertex(cube.V, Vec3(0, 0, 0.05));
+  const auto weightOf = [&](int v) {
+    const auto it = std::find(p.vertices.begin(), p.vertices.end(), v);
+    return it == p.vertices.end() ? -1.0 : p.weights[size_t(it - p.vertices.begin())];
+  };
+  EXPECT_GT(weightOf(corner), 0);
+  EXPECT_LT(weightOf(corner), weightOf(middle));
+  EXPECT_TRUE(regionPatch(cube, Box{Vec3(-1, -1, 0.2), Vec3(1, 1, 1)}).vertices.empty());
 }
 
 }  // namespace

@@ -258,7 +258,8 @@ TEST(SceneErrors, OutOfRangeValues) {
   expectError(with("/tools/0/type", "scalpel"), "/tools/0/type", "\"grasper\" or \"probe\"");
   expectError(with("/tools/0/trajectory", json::array()), "/tools/0/trajectory",
               "at least one keyframe");
-  expectError(with("/loads/0/type", "torque"), "/loads/0/type", "\"point_force\" or \"pin_head\"");
+  expectError(with("/loads/0/type", "torque"), "/loads/0/type",
+              "\"point_force\", \"pin_head\" or \"traction\"");
   expectError(with("/loads/0/end", 0.0), "/loads/0/end", "must be > start");
   expectError(with("/loads/1/stiffness", 0), "/loads/1/stiffness", "must be > 0");
   expectError(with("/organ/fixed/box/1/2", -2), "/organ/fixed/box", "low -1 > high -2");
@@ -603,6 +604,86 @@ TEST(SceneParse, AnUnstableCouplingIsRefusedNamingTheNumbers) {
   EXPECT_NO_THROW(parseScene(g, "x.json"));
   g["tools"][0]["dynamics"]["stiffness"] = 2410;
   EXPECT_THROW(parseScene(g, "x.json"), InputError);
+}
+
+TEST(Scene, FixedRegionsWithAxesAreRollersAndTheOldFormsStayValid) {
+  json j = minimalScene();
+  j["organ"]["fixed"] = json::parse(R"([
+    {"box": [[-1, -1, -1], [1, 1, -0.04]]},
+    {"boxes": [[[-1, -1, -1], [-0.049, 1, 1]], [[-1, -1, -1], [1, -0.049, 1]]], "axes": "xy"},
+    {"box": [[-1, -1, 0.049], [1, 1, 1]], "axes": "z"},
+    {"vertices": [4]},
+    {"box": [[0, 0, 0], [1, 1, 1]], "axes": "yxz"}
+  ])");
+  const Scene s = parseScene(j, "scene.json");
+  const FixedRegion& f = s.organ.fixed;
+  ASSERT_EQ(f.boxes.size(), 2u) << "a box holding x, y and z is a clamp";
+  ASSERT_EQ(f.rollers.size(), 3u);
+  EXPECT_EQ(f.rollers[0].axes, 3);
+  EXPECT_EQ(f.rollers[1].axes, 3);
+  EXPECT_EQ(f.rollers[2].axes, 4);
+  EXPECT_EQ(f.rollers[2].box.lo.z(), 0.049);
+  EXPECT_EQ(f.surfaceVertices, std::vector<int>{4});
+  // The old single-object form.
+  j["organ"]["fixed"] = json::parse(R"({"box": [[-1, -1, -1], [1, 1, -0.04]]})");
+  const Scene old = parseScene(j, "scene.json");
+  EXPECT_EQ(old.organ.fixed.boxes.size(), 1u);
+  EXPECT_TRUE(old.organ.fixed.rollers.empty());
+}
+
+TEST(Scene, BadRollersNameTheFileAndThePlace) {
+  json j = minimalScene();
+  j["organ"]["fixed"] = json::parse(R"({"box": [[-1, -1, -1], [1, 1, 1]], "axes": "w"})");
+  expectError(j, "/organ/fixed/axes", "expected letters of \"xyz\"");
+  j["organ"]["fixed"] = json::parse(R"([{"box": [[-1, -1, -1], [1, 1, 1]]},
+                                        {"box": [[-1, -1, -1], [1, 1, 1]], "axes": "zz"}])");
+  expectError(j, "/organ/fixed/1/axes", "axis 'z' given twice");
+  j["organ"]["fixed"] = json::parse(R"({"box": [[-1, -1, -1], [1, 1, 1]], "axes": ""})");
+  expectError(j, "/organ/fixed/axes", "must name at least one axis");
+  j["organ"]["fixed"] = json::parse(R"({"vertices": [1], "axes": "z"})");
+  expectError(j, "/organ/fixed/axes", "applies to \"box\" or \"boxes\"");
+  j["organ"]["fixed"] = json::parse(R"({"box": [[-1, -1, -1], [1, 1, 1]], "axes": "z",
+                                        "vertices": [1]})");
+  expectError(j, "/organ/fixed/vertices", "pinned fully");
+  j["organ"]["fixed"] = json::parse(R"([{"box": [[-1, -1, -1], [1, 1, 1]], "axis": "z"}])");
+  expectError(j, "/organ/fixed/0/axis", "unknown key 'axis' (did you mean 'axes'?");
+}
+
+TEST(Scene, TractionLoadsSpreadOverTheRegionsSurface) {
+  json j = minimalScene();
+  j["loads"] = json::parse(R"([{"type": "traction", "region": {"box": [[-1, -1, 0.049], [1, 1, 1]]},
+                                "force": [0, 0, -3], "end": 2}])");
+  const Scene s = parseScene(j, "scene.json");
+  ASSERT_EQ(s.loads.size(), 1u);
+  EXPECT_EQ(s.loads[0].type, LoadType::Traction);
+  EXPECT_EQ(s.loads[0].force, Vec3(0, 0, -3));
+  EXPECT_EQ(s.loads[0].region.lo.z(), 0.049);
+  EXPECT_EQ(s.loads[0].end, 2.0);
+  EXPECT_NO_THROW(loadOrgan(s));
+
+  json bad = j;
+  bad["loads"][0].erase("region");
+  expectError(bad, "/loads/0/region", "required key is missing");
+  bad = j;
+  bad["loads"][0]["at"] = {0, 0, 0};
+  expectError(bad, "/loads/0/at", "unknown key 'at'");
+  bad = j;
+  bad["loads"][0]["region"] = {{"sphere", 1}};
+  expectError(bad, "/loads/0/region/sphere", "unknown key 'sphere'");
+  bad = j;
+  bad["loads"][0]["type"] = "pressure";
+  expectError(bad, "/loads/0/type", "\"traction\"");
+  // A region with no whole surface triangle inside: an error naming the box, at organ loading.
+  bad = j;
+  bad["loads"][0]["region"]["box"] = {{-1, -1, 0.2}, {1, 1, 1}};
+  try {
+    loadOrgan(parseScene(bad, "scene.json"));
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), "scene.json");
+    EXPECT_EQ(e.place(), "/loads/0/region/box");
+    EXPECT_NE(std::string(e.what()).find("no surface triangle"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

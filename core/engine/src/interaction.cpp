@@ -41,6 +41,13 @@ bool jawClosed(const std::vector<KeyFrame>& trajectory, Real t) {
 Interaction::Interaction(const Scene& scene, const SurfaceMesh& restSurface)
     : m_scene(scene), m_rest(restSurface), m_attach(scene.tools.size()) {
   for (const LoadSpec& load : scene.loads) {
+    if (load.type == LoadType::Traction) {
+      m_loadPatches.push_back(regionPatch(m_rest, load.region));
+      m_loadVertices.push_back(m_loadPatches.back().vertices.empty()
+                                   ? nearestVertex(m_rest.V, load.at)
+                                   : m_loadPatches.back().vertices.front());
+      continue;
+    }
     m_loadVertices.push_back(nearestVertex(m_rest.V, load.at));
     m_loadPatches.push_back(pressurePatch(m_rest, m_loadVertices.back(), load.radius));
   }
@@ -304,7 +311,7 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
     p.surfaceVertex = m_loadVertices[l];
     p.vertices = m_loadPatches[l].vertices;
     p.weights = m_loadPatches[l].weights;
-    if (load.type == LoadType::PointForce) {
+    if (load.type == LoadType::PointForce || load.type == LoadType::Traction) {
       p.force = load.force;
     } else {
       // Pin head: a spring from the rest point to the pin, evaluated at the end of the step like
@@ -442,6 +449,29 @@ SurfacePatch pressurePatch(const SurfaceMesh& rest, int c, Real radius) {
     if (v == c || f <= 0) continue;
     patch.vertices.push_back(v);
     patch.weights.push_back(f / total);
+  }
+  return patch;
+}
+
+SurfacePatch regionPatch(const SurfaceMesh& rest, const Box& box) {
+  SurfacePatch patch;
+  std::map<int, Real> area;
+  Real total = 0;
+  for (int f = 0; f < rest.numFaces(); ++f) {
+    bool inside = true;
+    for (int k = 0; k < 3; ++k)
+      inside = inside && box.contains(rest.V.row(rest.F(f, k)).transpose());
+    if (!inside) continue;
+    const Vec3 X0 = rest.V.row(rest.F(f, 0)), X1 = rest.V.row(rest.F(f, 1)),
+               X2 = rest.V.row(rest.F(f, 2));
+    const Real a = 0.5 * (X1 - X0).cross(X2 - X0).norm();
+    for (int k = 0; k < 3; ++k) area[rest.F(f, k)] += a / 3;
+    total += a;
+  }
+  if (!(total > 0)) return patch;
+  for (const auto& [v, a] : area) {
+    patch.vertices.push_back(v);
+    patch.weights.push_back(a / total);
   }
   return patch;
 }

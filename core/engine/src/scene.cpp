@@ -1,6 +1,7 @@
 // Scene files: strict parsing and validation (DESIGN.md "Scene file"), parameter resolution
 // against a model's declarations, and loading the organ the scene describes.
 #include <deform/cache.h>
+#include <deform/interaction.h>
 #include <deform/mesh_check.h>
 #include <deform/mesh_io.h>
 #include <deform/phantom.h>
@@ -246,14 +247,44 @@ ModelSpec parseModelSpec(const Ctx& c, const json& j, const std::string& path) {
   return m;
 }
 
-FixedRegion parseFixed(const Ctx& c, const json& j, const std::string& path) {
-  ObjectReader r(j, path, c.file, {"box", "boxes", "vertices"});
-  FixedRegion f;
-  if (const json* v = r.optional("box")) f.boxes.push_back(c.box(*v, r.child("box")));
+/// "axes": a non-empty subset of "xyz" as bits (1 x, 2 y, 4 z).
+int parseAxes(const Ctx& c, const json& j, const std::string& path) {
+  const std::string s = c.string(j, path);
+  int axes = 0;
+  for (char ch : s) {
+    const int bit = ch == 'x' ? 1 : ch == 'y' ? 2 : ch == 'z' ? 4 : 0;
+    if (!bit) c.fail(path, "expected letters of \"xyz\" (the axes held), got \"" + s + "\"");
+    if (axes & bit) c.fail(path, "axis '" + std::string(1, ch) + "' given twice in \"" + s + "\"");
+    axes |= bit;
+  }
+  if (!axes) c.fail(path, "must name at least one axis (\"x\", \"yz\", \"xyz\", ...)");
+  return axes;
+}
+
+/// One fixed region object, merged into f: "box"/"boxes" pinned fully, or held along "axes" only
+/// (roller supports), and "vertices" pinned fully.
+void parseFixedObject(const Ctx& c, const json& j, const std::string& path, FixedRegion& f) {
+  ObjectReader r(j, path, c.file, {"box", "boxes", "vertices", "axes"});
+  int axes = 7;
+  if (const json* v = r.optional("axes")) {
+    axes = parseAxes(c, *v, r.child("axes"));
+    if (!r.has("box") && !r.has("boxes"))
+      c.fail(r.child("axes"), "applies to \"box\" or \"boxes\", and this region has neither");
+    if (axes != 7 && r.has("vertices"))
+      c.fail(r.child("vertices"),
+             "listed vertices are pinned fully; give them in a region without \"axes\"");
+  }
+  const auto add = [&](const Box& b) {
+    if (axes == 7)
+      f.boxes.push_back(b);
+    else
+      f.rollers.push_back({b, axes});
+  };
+  if (const json* v = r.optional("box")) add(c.box(*v, r.child("box")));
   if (const json* v = r.optional("boxes")) {
     c.array(*v, r.child("boxes"));
     for (size_t i = 0; i < v->size(); ++i)
-      f.boxes.push_back(c.box((*v)[i], r.child("boxes") + "/" + std::to_string(i)));
+      add(c.box((*v)[i], r.child("boxes") + "/" + std::to_string(i)));
   }
   if (const json* v = r.optional("vertices")) {
     c.array(*v, r.child("vertices"));
@@ -263,6 +294,17 @@ FixedRegion parseFixed(const Ctx& c, const json& j, const std::string& path) {
       if (idx < 0 || idx > 2147483647LL) c.fail(p, "vertex index must be >= 0, got " + num(idx));
       f.surfaceVertices.push_back(static_cast<int>(idx));
     }
+  }
+}
+
+/// "fixed": one region object, or a list of them (e.g. a clamp and two roller faces).
+FixedRegion parseFixed(const Ctx& c, const json& j, const std::string& path) {
+  FixedRegion f;
+  if (j.is_array()) {
+    for (size_t i = 0; i < j.size(); ++i)
+      parseFixedObject(c, j[i], path + "/" + std::to_string(i), f);
+  } else {
+    parseFixedObject(c, j, path, f);
   }
   return f;
 }
@@ -440,12 +482,25 @@ LoadSpec parseLoad(const Ctx& c, const json& j, const std::string& path) {
   } else if (type == "pin_head") {
     l.type = LoadType::PinHead;
     keys = {"type", "at", "stiffness", "path", "radius", "start", "end"};
+  } else if (type == "traction") {
+    l.type = LoadType::Traction;
+    keys = {"type", "region", "force", "start", "end"};
   } else {
-    c.fail(path + "/type", "expected \"point_force\" or \"pin_head\", got \"" + type + "\"");
+    c.fail(path + "/type",
+           "expected \"point_force\", \"pin_head\" or \"traction\", got \"" + type + "\"");
   }
   ObjectReader r(j, path, c.file, keys);
-  l.at = c.vec3(r.required("at"), r.child("at"));
-  if (l.type == LoadType::PointForce) {
+  if (l.type == LoadType::Traction) {
+    ObjectReader region(r.required("region"), r.child("region"), c.file, {"box"});
+    l.region = c.box(region.required("box"), region.child("box"));
+    l.at = l.region.center();
+    l.force = c.vec3(r.required("force"), r.child("force"));
+  } else {
+    l.at = c.vec3(r.required("at"), r.child("at"));
+  }
+  if (l.type == LoadType::Traction) {
+    // force read above
+  } else if (l.type == LoadType::PointForce) {
     l.force = c.vec3(r.required("force"), r.child("force"));
   } else {
     l.stiffness = c.positive(r.required("stiffness"), r.child("stiffness"));
@@ -884,6 +939,14 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog) {
       organ.fixed.surfaceVertices.end());
   checkGraspsReachOrgan(scene, organ);
   checkLoadsReachOrgan(scene, organ);
+  // A traction whose region holds no surface triangle would load nothing.
+  for (size_t i = 0; i < scene.loads.size(); ++i) {
+    const LoadSpec& l = scene.loads[i];
+    if (l.type == LoadType::Traction && regionPatch(organ.surface, l.region).vertices.empty())
+      throw InputError(scene.file, "/loads/" + std::to_string(i) + "/region/box",
+                       "no surface triangle of the organ lies inside this box (all three "
+                       "vertices inside): the traction would load nothing");
+  }
   return organ;
 }
 

@@ -155,6 +155,23 @@ SurfaceMesh makeBeam(Real res) {
   });
 }
 
+// Cook's membrane (Cook 1974): the tapered panel with corners (0, 0), (48, 44), (48, 60) and
+// (0, 44) mm in x-y, extruded 8 mm along z from z = 0 (a plane-strain benchmark once both z faces
+// are on rollers: the thickness does not change the answer). Lattice 4p x 2p x layers, the x-y
+// cells following the taper; with 2p rows the midpoint (48, 52) mm of the loaded edge is a vertex.
+SurfaceMesh makeCooksMembrane(Real res) {
+  auto layers = [](int p) { return std::max(1, static_cast<int>(std::lround(p / 3.0))); };
+  const int p = chooseLattice(targetCount(706, res), 2, [layers](int q) {
+    return latticeBoxVertexCount(4 * q, 2 * q, layers(q));
+  });
+  const int n = 2 * p, nx = 2 * n, nz = layers(p);
+  return buildLatticeBox(nx, n, nz, [n, nx, nz](int i, int j, int k) {
+    const Real x = 0.048 * i / nx;
+    const Real lower = 0.044 / 0.048 * x, upper = 0.044 + 0.016 / 0.048 * x;
+    return Vec3(x, lower + (upper - lower) * j / n, 0.008 * k / nz);
+  });
+}
+
 // Steak: a 0.12 x 0.12 x 0.02 m slab whose square outline is blended 40% toward a disc (rounded
 // corners) and gently, smoothly irregular, with a slightly domed, uneven top.
 SurfaceMesh makeSteak(Real res) {
@@ -209,6 +226,10 @@ const PhantomEntry kPhantoms[] = {
     {"beam",
      "cantilever box x in [0, 0.1], y and z in [-0.005, 0.005] m, square cells (10c x c x c)",
      makeBeam},
+    {"cooks_membrane",
+     "Cook's membrane: the tapered panel (0, 0), (48, 44), (48, 60), (0, 44) mm in x-y, 8 mm "
+     "thick along z from z = 0 (plane strain with z-rollers on both faces)",
+     makeCooksMembrane},
 };
 
 const PhantomEntry& findPhantom(const std::string& name) {

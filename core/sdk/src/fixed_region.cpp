@@ -27,4 +27,17 @@ std::vector<int> fixedNodeIndices(const MatX3& nodes, const FixedRegion& region,
   return out;
 }
 
+std::vector<std::pair<int, int>> rollerNodeAxes(const MatX3& nodes, const FixedRegion& region) {
+  std::vector<std::pair<int, int>> out;
+  if (region.rollers.empty()) return out;
+  for (Eigen::Index n = 0; n < nodes.rows(); ++n) {
+    const Vec3 p = nodes.row(n).transpose();
+    int axes = 0;
+    for (const RollerBox& r : region.rollers)
+      if (r.box.contains(p)) axes |= r.axes;
+    if (axes) out.emplace_back(static_cast<int>(n), axes);
+  }
+  return out;
+}
+
 }  // namespace deform

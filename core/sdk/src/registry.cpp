@@ -29,13 +29,15 @@ const char* capabilityName(Capability c) {
       return "contact";
     case Capability::ContactReaction:
       return "contact_reaction";
+    case Capability::RollerSupport:
+      return "roller_support";
   }
   assert(false && "unknown Capability");
   return "unknown";
 }
 
 // The last enumerator: capabilities are only ever appended (registry.h), so move this with them.
-constexpr Capability kLastCapability = Capability::ContactReaction;
+constexpr Capability kLastCapability = Capability::RollerSupport;
 
 bool capabilityFromName(const std::string& name, Capability& out) {
   for (int i = 0; i <= static_cast<int>(kLastCapability); ++i) {

@@ -23,6 +23,7 @@
 
 #include <deform/mesh.h>
 #include <deform/plugin_loader.h>
+#include <deform_harness/analytic.h>  // cantileverSag
 #include <deform_harness/cases.h>
 #include <deform_harness/progress.h>
 
@@ -51,11 +52,6 @@ struct StabilityCase {
   double beamTheory = 0;  ///< m, cantilever tip sag by beam theory (0: not a cantilever)
   double duration = 0;    ///< s; 0: the sweep's default
 };
-
-/// Tip sag of a clamped square cantilever (side t, length L) under its own weight: Euler-Bernoulli
-/// q L^4 / (8 E I) plus Timoshenko shear q L^2 / (2 kappa G A), q = rho g t^2, kappa = 5/6.
-double cantileverSag(double young, double poisson, double density, double gravity, double length,
-                     double side);
 
 /// The organ of the "slivers" case: the liver phantom at the resolution with every fourth edge
 /// split at 2% of its length, so that each split leaves two needle triangles (about 1.1 degrees at

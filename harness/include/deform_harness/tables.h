@@ -1,4 +1,4 @@
-// deformbench harness: the six tables the project regenerates (DESIGN.md "Tables the project
+// deformbench harness: the seven tables the project regenerates (DESIGN.md "Tables the project
 // must regenerate"), each from generated scenes run through the plugin loader and the runner.
 // A table names its plugins and their parameters as data; the harness never links a plugin's
 // code. The paper's own figures are printed beside ours where the paper gives them.
@@ -9,6 +9,7 @@
 //   bem-accuracy            Zhu, Gu & Zhou 2010, Table 2
 //   hybrid-accuracy         hybrid FEM+PBD paper (Scientific Programming 2021), Tables 2-3
 //   hybrid-timing           the same paper, Tables 4-5
+//   verification            reference_fem and CalculiX against analytic and published solutions
 //
 // Output in DIR: <table>.md, <table>.csv, <table>.json; scenes/<group>/<case>.json (rerun any
 // row with `deformbench run`); runs/<group>/<case>/ (results.json and surfaces of that case, and
@@ -54,7 +55,7 @@ struct TablesOptions {
   bool surfaceBaselines = false;
 };
 
-/// Names of the six tables, in DESIGN.md's order.
+/// Names of the seven tables, in DESIGN.md's order.
 std::vector<std::string> tableNames();
 
 /// Builds the named tables ("all" expands to every one; an unknown name is an InputError),

@@ -161,5 +161,8 @@ TableDef bemTiming(const TablesOptions& o);
 TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader, Progress* progress);
 /// hybrid-accuracy (timing false) or hybrid-timing: the same cases, other figures.
 TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing);
+/// verification: reference_fem at its defaults (and CalculiX when its plugin loads) against
+/// analytic and published solutions.
+TableDef verification(const TablesOptions& o, PluginLoader& loader);
 
 }  // namespace deform::harness::tables

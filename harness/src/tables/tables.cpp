@@ -1,4 +1,4 @@
-// The table system (tables.h): the six tables' definitions (one file each in this folder, on the
+// The table system (tables.h): the seven tables' definitions (one file each in this folder, on the
 // TableDef seam of table_kit.h) run as one set of cases, their references checked, written.
 #include "table_kit.h"
 
@@ -70,8 +70,8 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
 }  // namespace
 
 std::vector<std::string> tableNames() {
-  return {"metaballs-construction", "method-comparison", "bem-timing",
-          "bem-accuracy",           "hybrid-accuracy",   "hybrid-timing"};
+  return {"metaballs-construction", "method-comparison", "bem-timing",  "bem-accuracy",
+          "hybrid-accuracy",        "hybrid-timing",     "verification"};
 }
 
 std::vector<std::string> tableWarnings(const std::vector<Table>& tables) {
@@ -187,7 +187,8 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       {"bem-timing", [&] { return bemTiming(options); }},
       {"bem-accuracy", [&] { return bemAccuracy(options, loader, progress); }},
       {"hybrid-accuracy", [&] { return hybridTable(options, refElements, false); }},
-      {"hybrid-timing", [&] { return hybridTable(options, refElements, true); }}};
+      {"hybrid-timing", [&] { return hybridTable(options, refElements, true); }},
+      {"verification", [&] { return verification(options, loader); }}};
   std::vector<TableDef> defs;
   std::set<std::string> seen;
   for (const std::string& n : wanted)

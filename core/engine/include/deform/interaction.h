@@ -59,6 +59,12 @@ struct SurfacePatch {
 };
 SurfacePatch pressurePatch(const SurfaceMesh& rest, int c, Real radius);
 
+/// A uniform traction over the rest surface triangles whose three vertices lie inside `box`, as
+/// consistent nodal forces of linear triangles: each vertex gets a third of the area of its
+/// loaded triangles, over the loaded area (the weights sum to 1). The vertices ascend (the first
+/// one stands for the patch's centre); empty when no triangle lies inside the box.
+SurfacePatch regionPatch(const SurfaceMesh& rest, const Box& box);
+
 class Interaction {
  public:
   Interaction(const Scene& scene, const SurfaceMesh& restSurface);

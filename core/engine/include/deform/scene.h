@@ -54,13 +54,16 @@ struct ObjectSpec {
   CouplingParams coupling;
 };
 
-enum class LoadType { PointForce, PinHead };
+enum class LoadType { PointForce, PinHead, Traction };
 
 /// point_force: constant `force` at the surface vertex nearest `at`, between start and end.
 /// pin_head: f = k (x(t) - x0) at the vertex nearest `at`, where x(t) is the keyframed pin
 /// position and x0 = `at` (hybrid paper's experiments).
 /// Either acts as a traction over the surface patch of `radius` around that vertex, spread by
 /// the harness (interaction.h, pressurePatch), the same for every model.
+/// traction: the constant total `force` spread as a uniform traction over the organ's surface
+/// triangles inside `region` (interaction.h, regionPatch: consistent area weights); `at` is the
+/// region's centre.
 struct LoadSpec {
   LoadType type = LoadType::PointForce;
   Vec3 at = Vec3::Zero();
@@ -68,6 +71,7 @@ struct LoadSpec {
   Real stiffness = 0;          ///< N/m (pin_head)
   std::vector<KeyFrame> path;  ///< pin positions (pin_head)
   Real radius = 0.01;          ///< m, the pressure patch ("radius", default 1 cm)
+  Box region;                  ///< traction: the surface triangles inside this box are loaded
   Real start = 0, end = 1e30;  ///< s
 };
 

@@ -33,12 +33,23 @@ struct Material {
   Real density = 1000.0;  ///< kg/m^3
 };
 
+/// A roller support: the model nodes inside `box` are held at rest along the axes whose bit is
+/// set in `axes` (1 x, 2 y, 4 z) and free along the others: a frictionless wall, a symmetry plane,
+/// a plane-strain face. Only models with the "roller_support" capability receive scenes with
+/// rollers (the others are reported unsupported, never pinned fully in silence).
+struct RollerBox {
+  Box box;
+  int axes = 7;
+};
+
 /// Region whose model nodes are pinned: nodes inside any box, and the model node nearest to each
-/// listed surface vertex (identity-mapped models pin exactly those vertices).
+/// listed surface vertex (identity-mapped models pin exactly those vertices); plus roller boxes,
+/// which hold some axes only (rollerNodeAxes).
 struct FixedRegion {
   std::vector<Box> boxes;
   std::vector<int> surfaceVertices;
-  bool empty() const { return boxes.empty() && surfaceVertices.empty(); }
+  std::vector<RollerBox> rollers;
+  bool empty() const { return boxes.empty() && surfaceVertices.empty() && rollers.empty(); }
 };
 
 /// The organ as the scene defines it, in metres, validated (or repaired when the scene asked).
@@ -54,6 +65,11 @@ struct Organ {
 /// restSurface: the organ's rest surface (to resolve listed surface vertices). Sorted, unique.
 std::vector<int> fixedNodeIndices(const MatX3& nodes, const FixedRegion& region,
                                   const SurfaceMesh& restSurface);
+
+/// The nodes the region's roller boxes hold and along which axes: (node, axis bits as in
+/// RollerBox, the union over the boxes containing it), sorted by node. Nodes that
+/// fixedNodeIndices pins fully are included too; a model skips them.
+std::vector<std::pair<int, int>> rollerNodeAxes(const MatX3& nodes, const FixedRegion& region);
 
 /// What init() receives. References stay valid for the model's lifetime.
 struct ModelSetup {

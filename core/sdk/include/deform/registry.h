@@ -36,7 +36,9 @@
 // 5: the contact responses of deform/contact.h become one proxy description (ContactProxy) and
 // two calls, respondToContact() and solveWithContactConstraints(), in place of ten functions
 // (issue G6): plugins with the contact capability port their calls.
-#define DEFORM_ABI_VERSION 5
+// 6: FixedRegion gains `rollers` (roller supports: boxes holding some axes only) and Capability
+// gains RollerSupport (issue 33): plugin sources compile unchanged, binaries must be rebuilt.
+#define DEFORM_ABI_VERSION 6
 
 namespace deform {
 
@@ -54,6 +56,9 @@ enum class Capability {
   /// reported to StepInput::contact (ContactWorld::addReaction), so a free rigid object rests on
   /// the organ and a probe feels the tissue. Required by scenes with rigid objects.
   ContactReaction,
+  /// "roller_support": honours FixedRegion::rollers (boxes holding some axes only); required by
+  /// scenes with a fixed region that has "axes".
+  RollerSupport,
 };
 
 /// The capability named `name` (the spelling capabilityName() gives); false when unknown.
