@@ -380,8 +380,7 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
 
   // The same study again (as a second tables run would ask for it): read from the cache.
   ConvergeOptions co;
-  co.baseElements = 800;
-  co.factors = {1.0 / 8.0, 1.0 / 2.8, 1.0};
+  co.hRatios = kReferenceCheckRatios;
   co.outDir = m_dir / "again";
   co.cacheDir = cache;
   const ConvergenceResult cached =
@@ -434,12 +433,52 @@ TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) 
   EXPECT_FALSE(fast.asymptotic);
   EXPECT_LT(fast.relativeError, 0.01);
   EXPECT_NE(convergenceWarning(fast).find("asymptotic"), std::string::npos);
+  EXPECT_EQ(fast.reason, "not_asymptotic");
+  EXPECT_NE(fast.message.find("p = 6.00 is outside 0.5-4"), std::string::npos) << fast.message;
   // Levels that do not refine: no estimate, and the warning says the convergence is unknown.
   ConvergenceResult flat;
   richardsonEstimate(h0, h0, h0, 1e-3, 1e-3, 0.01, flat);
   EXPECT_TRUE(std::isnan(flat.relativeError));
+  EXPECT_EQ(flat.reason, "not_refining");
   EXPECT_NE(convergenceSummary(flat).find("no discretisation error estimate"), std::string::npos);
   EXPECT_NE(convergenceWarning(flat).find("unknown"), std::string::npos);
+}
+
+TEST(ReferenceCheck, SaysWhyRichardsonDoesNotApply) {
+  const double h0 = 0.01, h1 = 0.0071, h2 = 0.005, peak = 0.01;
+  // Differences that grow with refinement: not monotone; the spread bounds the error.
+  ConvergenceResult grow;
+  richardsonEstimate(h0, h1, h2, 1e-5, 2e-5, peak, grow);
+  EXPECT_TRUE(std::isnan(grow.relativeError));
+  EXPECT_EQ(grow.reason, "not_monotone");
+  EXPECT_NE(grow.message.find("do not shrink monotonically"), std::string::npos) << grow.message;
+  EXPECT_NEAR(grow.boundRelative, 2e-3, 1e-12);
+  EXPECT_NE(convergenceWarning(grow).find("bounded by the levels' spread, 0.2%"), std::string::npos)
+      << convergenceWarning(grow);
+  EXPECT_NE(convergenceSummary(grow).find("differ by up to 0.2%"), std::string::npos)
+      << convergenceSummary(grow);
+  // Levels whose measured sizes are 1.05 apart (the surface bounds the coarse ones): too close.
+  ConvergenceResult close;
+  richardsonEstimate(h0, h0 / 1.05, h2, 2e-5, 1e-5, peak, close);
+  EXPECT_EQ(close.reason, "levels_too_close");
+  EXPECT_NE(close.message.find("too close in size (h ratios 1.05 and"), std::string::npos)
+      << close.message;
+  EXPECT_TRUE(std::isnan(close.relativeError));
+  // Identical answers on refinement: nothing to extrapolate.
+  ConvergenceResult same;
+  richardsonEstimate(h0, h1, h2, 0, 0, peak, same);
+  EXPECT_EQ(same.reason, "coincide");
+  EXPECT_FALSE(same.converged);
+  // A clean second-order study has no reason; the RMS analysis recovers its order as well.
+  ConvergenceResult clean;
+  const auto sq = [](double h) { return h * h; };
+  richardsonEstimate(h0, h1, h2, sq(h0) - sq(h1), sq(h1) - sq(h2), peak, clean);
+  EXPECT_EQ(clean.reason, "");
+  EXPECT_TRUE(std::isnan(clean.boundRelative));
+  richardsonRms(h0, h1, h2, 0.1 * (sq(h0) - sq(h1)), 0.1 * (sq(h1) - sq(h2)), peak, clean);
+  EXPECT_NEAR(clean.rmsOrder, 2.0, 1e-6);
+  EXPECT_NEAR(clean.rmsRelativeError, 0.1 * sq(h2) / peak, 1e-9);
+  EXPECT_TRUE(clean.rmsConverged);
 }
 
 /// A small grasp-and-lift scene on the cube with the given models and reference.
