@@ -341,6 +341,17 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
   // vertices), and mass-spring, given the hybrid's damping, settles within the quick cap under
   // tension (pressed down, its hollow membrane buckles and creeps for longer: flagged).
   ASSERT_FALSE(doc["rows"].empty());
+  // Every row names the reference it is judged against (order, tets) and its estimate, or why
+  // there is none; the rows of other forces say which case's study that is.
+  for (const auto& row : doc["rows"]) {
+    const std::string ref = row["reference"].is_string() ? row["reference"].get<std::string>() : "";
+    EXPECT_EQ(ref.rfind("P1, ", 0), 0u) << row.dump();
+    EXPECT_TRUE(ref.find("error") != std::string::npos ||
+                ref.find("no estimate (") != std::string::npos)
+        << ref;
+    const bool checked = row["force_N"] == 20.0 && row["direction"] == "down";
+    EXPECT_EQ(ref.find("(study of hybrid/cube_down_20N)") == std::string::npos, checked) << ref;
+  }
   for (const auto& row : doc["rows"]) {
     ASSERT_TRUE(row["reference_disp_mm"].is_number()) << row.dump();
     EXPECT_GT(row["reference_disp_mm"].get<double>(), 0.1) << row.dump();
@@ -442,6 +453,61 @@ TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) 
   EXPECT_EQ(flat.reason, "not_refining");
   EXPECT_NE(convergenceSummary(flat).find("no discretisation error estimate"), std::string::npos);
   EXPECT_NE(convergenceWarning(flat).find("unknown"), std::string::npos);
+}
+
+TEST_F(TempDir, ConvergeLevelsRefineByEdgeLength) {
+  if (!built({"reference_fem"})) GTEST_SKIP() << "reference_fem is not built";
+  PluginLoader loader({pluginSubset(m_dir / "plugins", {"reference_fem"}).string()});
+  // The dispatch test's cube under gravity (surface edges ~20 mm at resolution 0.4), P1.
+  const nlohmann::ordered_json scene = {
+      {"name", "converge-h"},
+      {"organ",
+       {{"mesh", "phantom:cube"},
+        {"resolution", 0.4},
+        {"material", {{"young", 3000}, {"poisson", 0.3}, {"density", 1000}}},
+        {"fixed", {{"box", {{-0.06, -0.06, -0.06}, {0.06, 0.06, -0.045}}}}}}},
+      {"gravity", {0, -9.81, 0}},
+      {"dt", 0.01},
+      {"duration", 0.01},
+      {"models", {{{"plugin", "reference_fem"}, {"label", "unused"}}}},  // a scene needs one
+      {"reference",
+       {{"plugin", "reference_fem"}, {"params", {{"element_order", 1}, {"elements", 150}}}}},
+      {"output", {{"surfaces", "none"}}}};
+  ConvergeOptions o;
+  o.baseEdgeLength = 0.02;
+  o.outDir = m_dir / "h";
+  o.cacheDir = fs::path();
+  const ConvergenceResult r =
+      runConvergence(scene, (m_dir / "scene.json").string(), loader, o, nullptr);
+  ASSERT_EQ(r.levels.size(), 3u);
+  // The levels ask for h, h/1.4, h/2 and the meshes made really differ by about those ratios.
+  EXPECT_DOUBLE_EQ(r.levels[0].targetH, 0.02);
+  EXPECT_NEAR(r.levels[0].targetH / r.levels[1].targetH, 1.4, 1e-12);
+  EXPECT_NEAR(r.levels[0].targetH / r.levels[2].targetH, 2.0, 1e-12);
+  for (const auto& l : r.levels) EXPECT_EQ(l.status, "ok");
+  EXPECT_GT(r.levels[0].h / r.levels[1].h, 1.2) << r.levels[0].h << " " << r.levels[1].h;
+  EXPECT_GT(r.levels[1].h / r.levels[2].h, 1.2) << r.levels[1].h << " " << r.levels[2].h;
+  EXPECT_NE(r.reason, "levels_too_close") << r.message;
+  const json doc = readJson(o.outDir / "convergence.json");
+  EXPECT_NEAR(doc["levels"][2]["target_h_m"].get<double>(), 0.01, 1e-12);
+  EXPECT_EQ(readJson(o.outDir / "level_1.json")["models"][0]["params"]["edge_length"],
+            r.levels[1].targetH);
+  // The reference's own check (2h, 1.4h, h of its 150 targets, ~40 mm): its finest level is the
+  // reference as it runs (params untouched), and every level is as coarse as the surface allows,
+  // so the study says the levels are too close, in the JSON and in the summary.
+  ConvergeOptions own;
+  own.hRatios = kReferenceCheckRatios;
+  own.outDir = m_dir / "own";
+  own.cacheDir = fs::path();
+  const ConvergenceResult c =
+      runConvergence(scene, (m_dir / "scene.json").string(), loader, own, nullptr);
+  EXPECT_FALSE(
+      readJson(own.outDir / "level_2.json")["models"][0]["params"].contains("edge_length"));
+  EXPECT_NEAR(c.levels[0].targetH / c.levels[2].targetH, 2.0, 1e-12);
+  EXPECT_EQ(c.reason, "levels_too_close") << c.message;
+  EXPECT_EQ(readJson(own.outDir / "convergence.json")["reason"], "levels_too_close");
+  EXPECT_NE(convergenceSummary(c).find("too close in size"), std::string::npos)
+      << convergenceSummary(c);
 }
 
 TEST(ReferenceCheck, SaysWhyRichardsonDoesNotApply) {

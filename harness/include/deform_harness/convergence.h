@@ -43,10 +43,10 @@ namespace deform::harness {
 struct ConvergenceLevelResult {
   long long targetElements = 0, elements = 0;
   double h = 0;                 ///< m, (organ volume / elements)^(1/3) of the mesh made
-  double targetH = 0;           ///< m, the edge length the level asked for (0: by elements)
   double peakDisplacement = 0;  ///< m
   std::string status;
   double solveS = 0;  ///< precompute + steps, s
+  double targetH = 0;  ///< m, the edge length the level asked for (0: by elements)
 };
 
 struct ConvergenceResult {
