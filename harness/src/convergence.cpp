@@ -55,10 +55,10 @@ std::pair<std::string, std::string> levelsProblem(double h0, double h1, double h
                                 mm(h2) + " from their tet counts)"};
   if (h0 / h1 < kMinLevelRatio || h1 / h2 < kMinLevelRatio)
     return {"levels_too_close",
-            "the levels are too close in size (h ratios " + fixedDigits(h0 / h1, 2) + " and " +
-                fixedDigits(h1 / h2, 2) + ", below " + fixedDigits(kMinLevelRatio, 1) +
-                ": mesh noise is as large as the refinement; the organ's surface vertices, all "
-                "of them nodes, bound the coarse levels' size: refine from a smaller h)"};
+            "the levels are too close in size to extrapolate (h ratios " + fixedDigits(h0 / h1, 2) +
+                " and " + fixedDigits(h1 / h2, 2) + ", below " + fixedDigits(kMinLevelRatio, 1) +
+                ": all of the organ's surface vertices are nodes, so a fine surface bounds the "
+                "coarse levels' size; refine from a smaller h)"};
   return {};
 }
 
