@@ -527,7 +527,8 @@ TEST(ReferenceCheck, SaysWhyRichardsonDoesNotApply) {
   ConvergenceResult close;
   richardsonEstimate(h0, h0 / 1.05, h2, 2e-5, 1e-5, peak, close);
   EXPECT_EQ(close.reason, "levels_too_close");
-  EXPECT_NE(close.message.find("too close in size to extrapolate (h ratios 1.05 and"), std::string::npos)
+  EXPECT_NE(close.message.find("too close in size to extrapolate (h ratios 1.05 and"),
+            std::string::npos)
       << close.message;
   EXPECT_TRUE(std::isnan(close.relativeError));
   // Identical answers on refinement: nothing to extrapolate.

@@ -45,7 +45,7 @@ struct ConvergenceLevelResult {
   double h = 0;                 ///< m, (organ volume / elements)^(1/3) of the mesh made
   double peakDisplacement = 0;  ///< m
   std::string status;
-  double solveS = 0;  ///< precompute + steps, s
+  double solveS = 0;   ///< precompute + steps, s
   double targetH = 0;  ///< m, the edge length the level asked for (0: by elements)
 };
 
