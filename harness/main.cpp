@@ -815,20 +815,22 @@ int cmdBench(const BenchArgs& a) {
   return 0;
 }
 
-int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements, bool ofReference,
-                const ChildArgs& ch) {
+int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements,
+                double edgeLength, bool ofReference, const ChildArgs& ch) {
   PluginLoader loader(searchPath(a.pluginDirs));
   ConvergeOptions o;
   o.outDir = makeOutDir(a.out);
   o.cacheDir = cacheChoice(a);
   o.baseElements = elements;
+  o.baseEdgeLength = edgeLength;
   const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(ch.dispatch);
   o.dispatcher = dispatcher.get();
   o.child = childOptions(ch, loader, 86400);
   if (ofReference) {
-    if (elements > 0)
-      throw InputError("--of-reference", "", "takes the reference's own elements: drop --elements");
-    o.factors = kReferenceCheckFactors;
+    if (elements > 0 || edgeLength > 0)
+      throw InputError("--of-reference", "",
+                       "takes the reference's own size: drop --elements and --edge-length");
+    o.hRatios = kReferenceCheckRatios;
   }
   ConvergenceResult r;
   {
@@ -836,26 +838,46 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
     r = runConvergence(scene, loader, o, &progress);
   }
   for (const auto& l : r.levels) {
-    std::cout << "level " << std::setw(9) << l.targetElements << " target: " << l.elements
-              << " elements, h = " << fmt(1e3 * l.h)
+    std::cout << "level: ";
+    if (l.targetH > 0) {
+      std::cout << "target h = " << fmt(1e3 * l.targetH) << " mm";
+    } else {
+      std::cout << l.targetElements << " target elements";
+    }
+    std::cout << ": " << l.elements << " elements, h = " << fmt(1e3 * l.h)
               << " mm, peak |u| = " << fmt(1e3 * l.peakDisplacement) << " mm, " << l.status << ", "
               << fmt(l.solveS) << " s\n";
   }
   if (r.cached)
     std::cout << "(the study was read from the precomputation cache; --no-cache reruns it)\n";
-  if (!r.message.empty()) {
+  if (r.reason == "levels_failed") {
     std::cout << "warning: " << r.message << "\n";
     return 0;
   }
   std::cout << "max surface difference between levels: " << fmt(1e3 * r.d01) << " mm, then "
-            << fmt(1e3 * r.d12) << " mm (vertices near loads and grasps left out)\n";
-  std::cout << "observed order p = " << fmt(r.order) << ", estimated error of the finest level "
-            << fmt(1e3 * r.errorEstimate) << " mm = " << fmt(100 * r.relativeError)
-            << "% of the peak displacement\n";
+            << fmt(1e3 * r.d12) << " mm (vertices near loads and grasps left out); RMS "
+            << fmt(1e3 * r.rms01) << " mm, then " << fmt(1e3 * r.rms12) << " mm\n";
+  if (std::isnan(r.relativeError)) {
+    std::cout << "warning: " << r.message;
+    if (std::isfinite(r.boundRelative))
+      std::cout << "; the levels differ by up to " << fmt(100 * r.boundRelative)
+                << "% of the peak displacement";
+    std::cout << "\n";
+  } else {
+    std::cout << "observed order p = " << fmt(r.order) << ", estimated error of the finest level "
+              << fmt(1e3 * r.errorEstimate) << " mm = " << fmt(100 * r.relativeError)
+              << "% of the peak displacement\n";
+  }
+  if (std::isfinite(r.rmsRelativeError))
+    std::cout << "RMS differences: observed order p = " << fmt(r.rmsOrder)
+              << ", estimated RMS error " << fmt(100 * r.rmsRelativeError)
+              << "% of the peak displacement\n";
   if (!r.converged) {
-    std::cout << "warning: the reference is not converged to 1%"
-              << (r.asymptotic ? "" : " (the levels are not in the asymptotic range)")
-              << ": raise its \"elements\" or read its errors as bounds of that size\n";
+    if (!std::isnan(r.relativeError))
+      std::cout << "warning: the reference is not shown converged to 1%"
+                << (r.asymptotic ? "" : " (" + r.message + ")")
+                << ": refine it (a smaller \"edge_length\") or read its errors as bounds of that "
+                   "size\n";
   } else {
     std::cout << "the reference is converged to within 1% at " << r.levels[2].elements
               << " elements\n";
@@ -1036,8 +1058,8 @@ int realMain(int argc, char** argv) {
                    "target tets of the reference FEM, quadratic (default 20000; 4000 with --quick)")
       ->check(positiveValue(true));
   tables->add_flag("--no-reference-check", ta.noReferenceCheck,
-                   "skip the convergence study of each table's reference (three solves at 1/8, "
-                   "1/2.8 and 1 x its tets; cached)");
+                   "skip the convergence study of each table's reference (three solves at 2, "
+                   "1.4 and 1 x its edge length; cached)");
   tables->add_flag("--surface-baselines", ta.surfaceBaselines,
                    "hybrid tables: PBD and mass-spring on the organ's surface mesh alone, as the "
                    "paper ran them (default: on its volume, network = volume)");
@@ -1140,19 +1162,24 @@ int realMain(int argc, char** argv) {
   std::string convScene;
   CommonArgs ca;
   long long convElements = 0;
+  double convEdgeLength = 0;
   CLI::App* converge = app.add_subcommand(
-      "converge", "is the scene's reference converged? three refinements + Richardson");
+      "converge", "is the scene's reference converged? three mesh sizes + Richardson");
   converge->add_option("scene", convScene, "scene file with a reference")->required();
   converge->add_option("--out", ca.out, "output folder")->required();
   converge
+      ->add_option("--edge-length", convEdgeLength,
+                   "coarsest level's edge length h in m (levels h, h/1.4, h/2; default: the "
+                   "reference's own)")
+      ->check(positiveValue(false));
+  converge
       ->add_option("--elements", convElements,
-                   "coarsest level's elements (default: the reference's own)")
+                   "coarsest level's h as the edge length of about this many tets")
       ->check(positiveValue(true));
   bool convOfReference = false;
   converge->add_flag("--of-reference", convOfReference,
-                     "levels 1/8, 1/2.8 and 1 times the reference's own elements: the estimate "
-                     "is the error of the reference as the scene runs it (cached; `run` then "
-                     "prints it)");
+                     "levels 2h, 1.4h and h of the reference's own size h: the estimate is the "
+                     "error of the reference as the scene runs it (cached; `run` then prints it)");
   addCommon(converge, ca, false);
   ChildArgs convChild;
   addChildArgs(converge, convChild, "level");
@@ -1254,7 +1281,9 @@ int realMain(int argc, char** argv) {
   if (*converge) {
     ca.pluginDirs = pluginDirs;
     convChild.given = childArgsGiven(converge);
-    return cmdConverge(convScene, ca, convElements, convOfReference, convChild);
+    if (convElements > 0 && convEdgeLength > 0)
+      throw InputError("converge", "--elements", "give --elements or --edge-length, not both");
+    return cmdConverge(convScene, ca, convElements, convEdgeLength, convOfReference, convChild);
   }
   return kExitBadInput;
 }

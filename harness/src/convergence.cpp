@@ -1,6 +1,7 @@
 // The reference's mesh convergence from three runs of the reference plugin (see convergence.h).
 #include <deform/cache.h>
 #include <deform/interaction.h>
+#include <deform/tet_mesher.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/convergence.h>
 
@@ -14,42 +15,119 @@ namespace deform::harness {
 namespace fs = std::filesystem;
 using ojson = nlohmann::ordered_json;
 
-void richardsonEstimate(double h0, double h1, double h2, double d01, double d12, double peak,
-                        ConvergenceResult& out) {
-  out.d01 = d01;
-  out.d12 = d12;
-  if (!(d12 > 0) || !(d01 > 0) || !(h0 > h1 && h1 > h2 && h2 > 0)) {
-    out.message = "no Richardson estimate: the levels do not refine or their answers coincide";
-    return;
-  }
-  // f(p) = (h0^p - h1^p) / (h1^p - h2^p) grows monotonically in p; bisection on [1e-3, 20].
+namespace {
+
+std::string fixedDigits(double v, int digits) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+std::string mm(double m) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g mm", 1e3 * m);
+  return buf;
+}
+
+/// The observed order p of differences d01, d12 on levels h0 > h1 > h2: the root of
+/// (h0^p - h1^p) / (h1^p - h2^p) = d01 / d12, which grows monotonically in p (bisection on
+/// [1e-3, 20]). -1: the ratio is below the root's range (the differences shrink more slowly
+/// than any positive order: not monotone); +inf: above it.
+double observedOrder(double h0, double h1, double h2, double d01, double d12) {
   const auto f = [&](double p) {
     return (std::pow(h0, p) - std::pow(h1, p)) / (std::pow(h1, p) - std::pow(h2, p));
   };
   const double target = d01 / d12;
   double lo = 1e-3, hi = 20;
-  if (target <= f(lo) || target >= f(hi)) {
-    out.message =
-        "no Richardson estimate: the differences do not shrink monotonically (d01/d12 = " +
-        std::to_string(target) + ")";
-    return;
-  }
+  if (target <= f(lo)) return -1;
+  if (target >= f(hi)) return INFINITY;
   for (int i = 0; i < 200; ++i) {
     const double mid = 0.5 * (lo + hi);
     (f(mid) < target ? lo : hi) = mid;
   }
-  const double p = 0.5 * (lo + hi);
+  return 0.5 * (lo + hi);
+}
+
+/// Why three levels cannot be extrapolated by size alone ("" when they can): reason and message.
+std::pair<std::string, std::string> levelsProblem(double h0, double h1, double h2) {
+  if (!(h0 > 0 && h1 > 0 && h2 > 0) || !(h0 > h1 && h1 > h2))
+    return {"not_refining", "the levels do not refine (h " + mm(h0) + ", " + mm(h1) + ", " +
+                                mm(h2) + " from their tet counts)"};
+  if (h0 / h1 < kMinLevelRatio || h1 / h2 < kMinLevelRatio)
+    return {"levels_too_close",
+            "the levels are too close in size to extrapolate (h ratios " + fixedDigits(h0 / h1, 2) +
+                " and " + fixedDigits(h1 / h2, 2) + ", below " + fixedDigits(kMinLevelRatio, 1) +
+                ": all of the organ's surface vertices are nodes, so a fine surface bounds the "
+                "coarse levels' size; refine from a smaller h)"};
+  return {};
+}
+
+}  // namespace
+
+void richardsonEstimate(double h0, double h1, double h2, double d01, double d12, double peak,
+                        ConvergenceResult& out) {
+  out.d01 = d01;
+  out.d12 = d12;
+  out.reason.clear();
+  out.message.clear();
+  const auto noEstimate = [&](const std::string& reason, const std::string& message) {
+    out.reason = reason;
+    out.message = "no Richardson estimate: " + message;
+    out.boundRelative = peak > 0 ? std::max(d01, d12) / peak : NAN;
+  };
+  if (const auto [reason, message] = levelsProblem(h0, h1, h2); !reason.empty()) {
+    noEstimate(reason, message);
+    return;
+  }
+  if (!(d12 > 0) || !(d01 > 0)) {
+    noEstimate("coincide", "the levels' answers coincide (differences " + mm(d01) + " then " +
+                               mm(d12) + "): nothing to extrapolate");
+    return;
+  }
+  const double p = observedOrder(h0, h1, h2, d01, d12);
+  if (p < 0) {
+    noEstimate("not_monotone", "the differences do not shrink monotonically with h (" + mm(d01) +
+                                   " then " + mm(d12) + ", d01/d12 = " + fixedDigits(d01 / d12, 2) +
+                                   ")");
+    return;
+  }
+  if (!std::isfinite(p)) {
+    noEstimate("not_asymptotic", "the differences shrink faster than any order up to 20 (" +
+                                     mm(d01) + " then " + mm(d12) +
+                                     "): the levels are not in the asymptotic range");
+    return;
+  }
   out.order = p;
   out.errorEstimate = d12 * std::pow(h2, p) / (std::pow(h1, p) - std::pow(h2, p));
   out.relativeError = peak > 0 ? out.errorEstimate / peak : NAN;
   out.asymptotic = p >= 0.5 && p <= 4;
   out.converged = out.asymptotic && out.relativeError <= 0.01;
+  if (!out.asymptotic) {
+    out.reason = "not_asymptotic";
+    out.message = "the observed order p = " + fixedDigits(p, 2) +
+                  " is outside 0.5-4: the levels are not in the asymptotic range";
+    out.boundRelative = peak > 0 ? std::max(d01, d12) / peak : NAN;
+  }
+}
+
+void richardsonRms(double h0, double h1, double h2, double rms01, double rms12, double peak,
+                   ConvergenceResult& out) {
+  out.rmsOrder = out.rmsRelativeError = NAN;
+  out.rmsConverged = false;
+  if (!levelsProblem(h0, h1, h2).first.empty() || !(rms01 > 0) || !(rms12 > 0) || !(peak > 0))
+    return;
+  const double p = observedOrder(h0, h1, h2, rms01, rms12);
+  if (!(p > 0) || !std::isfinite(p)) return;
+  out.rmsOrder = p;
+  out.rmsRelativeError = rms12 * std::pow(h2, p) / (std::pow(h1, p) - std::pow(h2, p)) / peak;
+  out.rmsConverged = p >= 0.5 && p <= 4 && out.rmsRelativeError <= 0.01;
 }
 
 namespace {
 
 constexpr const char* kCacheKind = "harness.convergence";
-constexpr const char* kCacheVersion = "harness.convergence/2";  // 2: RMS differences
+// 2: RMS differences; 3: levels by edge length, reasons, RMS orders
+constexpr const char* kCacheVersion = "harness.convergence/3";
 
 ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   ojson doc;
@@ -59,6 +137,7 @@ ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   for (const auto& l : r.levels)
     doc["levels"].push_back({{"target_elements", l.targetElements},
                              {"elements", l.elements},
+                             {"target_h_m", l.targetH},
                              {"h_m", l.h},
                              {"peak_displacement_m", l.peakDisplacement},
                              {"status", l.status},
@@ -72,7 +151,13 @@ ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   doc["relative_error"] = numberOrNull(r.relativeError);
   doc["asymptotic"] = r.asymptotic;
   doc["converged"] = r.converged;
+  doc["richardson_applies"] = r.reason.empty() || r.reason == "not_asymptotic";
+  doc["reason"] = r.reason.empty() ? ojson(nullptr) : ojson(r.reason);
   doc["message"] = r.message;
+  doc["bound_relative"] = numberOrNull(r.boundRelative);
+  doc["rms_order"] = numberOrNull(r.rmsOrder);
+  doc["rms_relative_error"] = numberOrNull(r.rmsRelativeError);
+  doc["rms_converged"] = r.rmsConverged;
   doc["cached"] = r.cached;
   return doc;
 }
@@ -87,6 +172,7 @@ ConvergenceResult fromJson(const ojson& doc) {
     ConvergenceLevelResult level;
     level.targetElements = l.at("target_elements").get<long long>();
     level.elements = l.at("elements").get<long long>();
+    level.targetH = l.at("target_h_m").get<double>();
     level.h = l.at("h_m").get<double>();
     level.peakDisplacement = l.at("peak_displacement_m").get<double>();
     level.status = l.at("status").get<std::string>();
@@ -103,6 +189,11 @@ ConvergenceResult fromJson(const ojson& doc) {
   r.asymptotic = doc.at("asymptotic").get<bool>();
   r.converged = doc.at("converged").get<bool>();
   r.message = doc.at("message").get<std::string>();
+  r.reason = doc.at("reason").is_string() ? doc.at("reason").get<std::string>() : "";
+  r.boundRelative = numberOrNaN(doc, "bound_relative");
+  r.rmsOrder = numberOrNaN(doc, "rms_order");
+  r.rmsRelativeError = numberOrNaN(doc, "rms_relative_error");
+  r.rmsConverged = doc.at("rms_converged").get<bool>();
   return r;
 }
 
@@ -113,42 +204,59 @@ std::string percent(double fraction) {
 }
 
 std::string fixed(double v, int digits) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
-  return buf;
+  return fixedDigits(v, digits);
 }
 
 }  // namespace
 
 std::string convergenceSummary(const ConvergenceResult& r) {
-  std::string levels;
-  for (const auto& l : r.levels)
+  std::string levels, sizes;
+  for (const auto& l : r.levels) {
     levels += (levels.empty() ? "" : " / ") +
               std::to_string(l.elements > 0 ? l.elements : l.targetElements);
-  if (std::isnan(r.relativeError))
-    return "no discretisation error estimate (" +
-           (r.message.empty() ? std::string("no levels ran") : r.message) + "; levels " + levels +
-           " tets)";
+    if (l.h > 0) sizes += (sizes.empty() ? "" : " / ") + fixed(1e3 * l.h, 2);
+  }
+  levels += " tets";
+  if (!sizes.empty()) levels += ", h " + sizes + " mm";
   std::string rms;
-  if (std::isfinite(r.rms12) && r.levels.size() == 3 && r.levels[2].peakDisplacement > 0)
+  if (std::isfinite(r.rms12) && r.levels.size() == 3 && r.levels[2].peakDisplacement > 0) {
     rms = "; RMS level differences " + percent(r.rms01 / r.levels[2].peakDisplacement) + " then " +
           percent(r.rms12 / r.levels[2].peakDisplacement);
+    if (std::isfinite(r.rmsRelativeError))
+      rms +=
+          ", RMS estimate " + percent(r.rmsRelativeError) + " (p = " + fixed(r.rmsOrder, 2) + ")";
+  }
+  if (std::isnan(r.relativeError)) {
+    std::string bound;
+    if (std::isfinite(r.boundRelative))
+      bound = "; the levels differ by up to " + percent(r.boundRelative) + " of the peak";
+    return "no discretisation error estimate (" +
+           (r.message.empty() ? std::string("no levels ran") : r.message) + bound + "; levels " +
+           levels + rms + ")";
+  }
   return "estimated discretisation error " + percent(r.relativeError) + " of the peak (levels " +
-         levels + " tets, p = " + fixed(r.order, 2) + rms + ")";
+         levels + ", p = " + fixed(r.order, 2) + rms + ")";
 }
 
 std::string convergenceWarning(const ConvergenceResult& r) {
   if (r.converged) return "";
-  if (std::isnan(r.relativeError))
-    return "the reference's convergence is unknown (" +
-           (r.message.empty() ? std::string("no estimate") : r.message) + ")";
+  if (std::isnan(r.relativeError)) {
+    std::string w = "the reference's convergence is unknown (" +
+                    (r.message.empty() ? std::string("no estimate") : r.message) + ")";
+    if (std::isfinite(r.boundRelative))
+      w += ": read its errors as bounded by the levels' spread, " + percent(r.boundRelative) +
+           " of the peak";
+    return w;
+  }
   std::string w;
   if (r.relativeError > 0.01) w = "the reference is not converged to 1% of the peak";
   if (!r.asymptotic)
     w +=
         std::string(w.empty() ? "the estimate is unreliable" : ", and the estimate is unreliable") +
         ": the levels are not in the asymptotic range (p = " + fixed(r.order, 2) + ")";
-  return w + ": read its errors as bounds of " + percent(r.relativeError) + " of the peak or more";
+  const double bound =
+      std::isfinite(r.boundRelative) ? std::max(r.boundRelative, r.relativeError) : r.relativeError;
+  return w + ": read its errors as bounds of " + percent(bound) + " of the peak or more";
 }
 
 ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loader,
@@ -167,12 +275,16 @@ ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loa
 namespace {
 
 /// A study's inputs resolved from its scene: the scene with absolute mesh path, parsed, the
-/// reference's element base, the organ, the excluded radius and the cache key (none when the
-/// plugin or the mesh cannot be hashed).
+/// reference, its size h (and the tets it stands for), the organ, the excluded radius and the
+/// cache key (none when the plugin or the mesh cannot be hashed).
 struct PreparedStudy {
   ojson base, ref;
   Scene parsed;
-  long long n = 0;
+  double h = 0;               ///< m, the size the ratios scale
+  long long n = 0;            ///< the tets h stands for (levels of a plugin without `edge_length`)
+  bool byEdgeLength = false;  ///< the plugin takes `edge_length`
+  /// h is the reference's own: a level at ratio 1 keeps the reference's params unchanged.
+  bool ownSize = false;
   Organ organ;
   double volume = 0, exclude = 0;
   std::optional<CacheKey> key;
@@ -192,28 +304,51 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
   p.parsed = parseScene(nlohmann::json::parse(base.dump()), sceneFile);
   if (!p.parsed.reference)
     throw InputError(sceneFile, "/reference", "the scene has no reference to check");
-  if (options.factors.size() != 3 || !(options.factors[0] > 0) ||
-      !(options.factors[0] < options.factors[1] && options.factors[1] < options.factors[2]))
+  const std::vector<double>& r = options.hRatios;
+  if (r.size() != 3 || !(r[2] > 0) || !(r[0] > r[1] && r[1] > r[2]))
     throw InputError(sceneFile, "convergence levels",
-                     "need three increasing positive element factors");
+                     "need three decreasing positive edge-length ratios");
   p.ref = base["reference"];
   const ojson& ref = p.ref;
-  long long n = options.baseElements;
-  if (n <= 0 && ref.contains("params") && ref["params"].contains("elements"))
-    n = ref["params"]["elements"].get<long long>();
-  if (n <= 0) {  // the plugin's own default, so the finest level is the reference as it runs
-    try {
-      for (const ParamSpec& spec : loader.load(ref.value("plugin", "")).params)
-        if (spec.key == "elements" && std::holds_alternative<long long>(spec.defaultValue))
-          n = std::get<long long>(spec.defaultValue);
-    } catch (const std::exception&) {
-      // no such plugin: the levels report it
-    }
-  }
-  if (n <= 0) n = 5000;
-  p.n = n;
   p.organ = loadOrgan(p.parsed);
   p.volume = std::fabs(signedVolume(p.organ.surface.V, p.organ.surface.F));
+  // The reference's own size: its params, else the plugin's defaults.
+  double ownH = 0;
+  long long ownN = 0;
+  if (ref.contains("params")) {
+    const ojson& params = ref["params"];
+    if (params.contains("edge_length") && params["edge_length"].is_number())
+      ownH = params["edge_length"].get<double>();
+    if (params.contains("elements") && params["elements"].is_number_integer())
+      ownN = params["elements"].get<long long>();
+  }
+  try {
+    for (const ParamSpec& spec : loader.load(ref.value("plugin", "")).params) {
+      if (spec.key == "edge_length") {
+        p.byEdgeLength = true;
+        if (ownH <= 0 && std::holds_alternative<double>(spec.defaultValue))
+          ownH = std::get<double>(spec.defaultValue);
+      }
+      if (spec.key == "elements" && ownN <= 0 &&
+          std::holds_alternative<long long>(spec.defaultValue))
+        ownN = std::get<long long>(spec.defaultValue);
+    }
+  } catch (const std::exception&) {
+    // no such plugin: the levels report it
+  }
+  if (ownN <= 0) ownN = 5000;
+  if (options.baseEdgeLength > 0) {
+    p.h = options.baseEdgeLength;
+  } else if (options.baseElements > 0) {
+    p.h = edgeLengthForElements(p.volume, options.baseElements);
+  } else {
+    p.ownSize = true;
+    p.h = ownH > 0 ? ownH : edgeLengthForElements(p.volume, ownN);
+  }
+  p.n = p.ownSize && ownH <= 0
+            ? ownN
+            : std::max<long long>(
+                  1, std::llround(std::pow(edgeLengthForElements(p.volume, 1) / p.h, 3)));
   p.exclude = options.excludeRadius >= 0 ? options.excludeRadius
                                          : 0.1 * boundingBox(p.organ.surface.V).diagonal();
   // The cache key: everything the levels' answers depend on. The models are not run.
@@ -226,8 +361,8 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
     what.erase("name");
     what.erase("description");
     k.add(what.dump());
-    k.add(n).add(p.exclude);
-    for (double f : options.factors) k.add(f);
+    k.add(p.h).add(p.exclude).add((long long)p.ownSize);
+    for (double f : options.hRatios) k.add(f);
     k.add(sha256File(loader.locate(plugin)));
     const std::string mesh = base["organ"].value("mesh", "");
     if (mesh.rfind("phantom:", 0) != 0) k.add(sha256File(mesh));
@@ -248,7 +383,7 @@ std::optional<ConvergenceResult> cachedReferenceCheck(const std::string& sceneFi
     std::ifstream in(sceneFile);
     const ojson scene = ojson::parse(in);
     ConvergeOptions o;
-    o.factors = kReferenceCheckFactors;
+    o.hRatios = kReferenceCheckRatios;
     const PreparedStudy p = prepareStudy(scene, sceneFile, loader, o);
     if (!p.key) return std::nullopt;
     Cache cache(cacheDir ? *cacheDir : Cache::defaultDir());
@@ -270,7 +405,6 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
   const ojson& base = prepared.base;
   const ojson& ref = prepared.ref;
   const Scene& parsed = prepared.parsed;
-  const long long n = prepared.n;
   const Organ& organ = prepared.organ;
   const double volume = prepared.volume, exclude = prepared.exclude;
   const std::optional<CacheKey>& key = prepared.key;
@@ -310,19 +444,30 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
 
   ConvergenceResult out;
   std::vector<MatX3> displacement;
-  const std::vector<double>& factors = options.factors;
+  const std::vector<double>& factors = options.hRatios;
   if (progress) progress->addTotal(int(factors.size()));
-  // The level scenes: the reference plugin alone, as a model, at the level's elements.
+  // The level scenes: the reference plugin alone, as a model, at the level's size: its
+  // `edge_length` (Gmsh's size field), or for a plugin without one `elements` scaled by r^-3. A
+  // level at ratio 1 of the reference's own size is the reference as the scene runs it.
   std::vector<SceneCase> cases;
   std::vector<std::string> ids;
   for (size_t k = 0; k < factors.size(); ++k) {
     ConvergenceLevelResult level;
-    level.targetElements = static_cast<long long>(std::llround(factors[k] * double(n)));
+    const double ratio = factors[k];
+    level.targetElements =
+        std::max<long long>(1, std::llround(double(prepared.n) / (ratio * ratio * ratio)));
     ojson j = base;
     j["models"] = ojson::array();
     ojson r = ref;
     if (!r.contains("params")) r["params"] = ojson::object();
-    r["params"]["elements"] = level.targetElements;
+    if (prepared.byEdgeLength) level.targetH = ratio * prepared.h;
+    if (!(ratio == 1.0 && prepared.ownSize)) {
+      if (prepared.byEdgeLength) {
+        r["params"]["edge_length"] = level.targetH;
+      } else {
+        r["params"]["elements"] = level.targetElements;
+      }
+    }
     r["label"] = "level_" + std::to_string(k);
     j["models"].push_back(r);
     j.erase("reference");
@@ -343,7 +488,10 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
   }
   const auto started = [&](size_t k) {
     if (progress)
-      progress->start(ids[k] + " (" + std::to_string(out.levels[k].targetElements) + " elements)");
+      progress->start(ids[k] +
+                      (out.levels[k].targetH > 0
+                           ? " (h " + fixed(1e3 * out.levels[k].targetH, 2) + " mm)"
+                           : " (" + std::to_string(out.levels[k].targetElements) + " elements)"));
   };
   // A level's outcome: its status, elements and surface at the last compared instant.
   std::vector<std::optional<MatX3>> surfaces(factors.size());
@@ -392,6 +540,7 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
     level.peakDisplacement = u.rowwise().norm().maxCoeff();
   }
   if (displacement.size() != 3) {
+    out.reason = "levels_failed";
     out.message = "no estimate: not every level ran to its compared instant";
   } else {
     const auto maxDiff = [&](const MatX3& a, const MatX3& b) {
@@ -410,12 +559,13 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
         }
       return counted > 0 ? std::sqrt(sum / double(counted)) : NAN;
     };
-    richardsonEstimate(out.levels[0].h, out.levels[1].h, out.levels[2].h,
-                       maxDiff(displacement[0], displacement[1]),
-                       maxDiff(displacement[1], displacement[2]), out.levels[2].peakDisplacement,
-                       out);
+    const double h0 = out.levels[0].h, h1 = out.levels[1].h, h2 = out.levels[2].h;
+    const double peak = out.levels[2].peakDisplacement;
+    richardsonEstimate(h0, h1, h2, maxDiff(displacement[0], displacement[1]),
+                       maxDiff(displacement[1], displacement[2]), peak, out);
     out.rms01 = rmsDiff(displacement[0], displacement[1]);
     out.rms12 = rmsDiff(displacement[1], displacement[2]);
+    richardsonRms(h0, h1, h2, out.rms01, out.rms12, peak, out);
   }
   const ojson doc = toJson(out, sceneFile);
   writeFileAtomic(options.outDir / "convergence.json", doc.dump(2) + "\n");

@@ -48,6 +48,16 @@ void richardson(ConvergenceStudy& s, const std::vector<char>& include) {
   for (Eigen::Index i = 0; i < L[n - 1].surfaceDisplacement.rows(); ++i)
     if (include.empty() || include[size_t(i)])
       peak = std::max(peak, L[n - 1].surfaceDisplacement.row(i).norm());
+  s.reason.clear();
+  if (!(h0 > h1 && h1 > h2)) {
+    s.reason = "not_refining";
+  } else if (h0 / h1 < 1.1 || h1 / h2 < 1.1) {
+    s.reason = "levels_too_close";
+  } else if (!(d12 > 0) || !(d01 > 0)) {
+    s.reason = "coincide";
+  } else if (d12 >= d01) {
+    s.reason = "not_monotone";
+  }
   if (!(d12 > 0) || !(d01 > 0) || !(h0 > h1 && h1 > h2)) {
     s.observedOrder = 0;
     s.errorEstimate = d12;
@@ -80,6 +90,7 @@ void richardson(ConvergenceStudy& s, const std::vector<char>& include) {
   s.errorEstimate = d12 * std::pow(h2, p) / (std::pow(h1, p) - std::pow(h2, p));
   s.relativeError = peak > 0 ? s.errorEstimate / peak : 0;
   s.withinOnePercent = s.asymptotic && s.relativeError <= 0.01;
+  if (s.reason.empty() && !s.asymptotic) s.reason = "not_asymptotic";
 }
 
 ConvergenceStudy runConvergenceStudyOnMeshes(const std::vector<TetMesh>& meshes, int numSurface,

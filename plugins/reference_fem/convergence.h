@@ -17,6 +17,7 @@
 #include <deform/tet_mesher.h>
 
 #include <functional>
+#include <string>
 #include <vector>
 
 namespace deform::reffem {
@@ -38,6 +39,10 @@ struct ConvergenceStudy {
   Real relativeError = 0;   ///< errorEstimate / peak displacement of the finest level
   bool asymptotic = false;  ///< 0.5 <= p <= 4 (monotone convergence in the asymptotic range)
   bool withinOnePercent = false;  ///< asymptotic && relativeError <= 0.01
+  /// Why the extrapolation does not apply or is not trusted ("" when it is), as the harness's
+  /// study words it (deform_harness/convergence.h): "not_refining", "levels_too_close" (a
+  /// measured h ratio below 1.1), "coincide", "not_monotone" (d12 >= d01), "not_asymptotic".
+  std::string reason;
 };
 
 /// Builds the load case for a given system (nodes 0..#V-1 are the input surface vertices; with

@@ -381,6 +381,11 @@ TEST(ReferenceFemConvergence, RichardsonRecoversKnownOrderAndError) {
   const Real trueError = (C * std::pow(0.0019, p)).rowwise().norm().maxCoeff();
   EXPECT_NEAR(s.errorEstimate, trueError, 1e-6 * trueError);
   EXPECT_TRUE(s.asymptotic);
+  EXPECT_EQ(s.reason, "");
+  // Two levels 1.05 apart in size: the study says they are too close to extrapolate.
+  s.levels[1].h = 0.004 / 1.05;
+  richardson(s, {});
+  EXPECT_EQ(s.reason, "levels_too_close");
 }
 
 namespace {

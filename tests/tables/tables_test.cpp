@@ -344,6 +344,17 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
   // vertices), and mass-spring, given the hybrid's damping, settles within the quick cap under
   // tension (pressed down, its hollow membrane buckles and creeps for longer: flagged).
   ASSERT_FALSE(doc["rows"].empty());
+  // Every row names the reference it is judged against (order, tets) and its estimate, or why
+  // there is none; the rows of other forces say which case's study that is.
+  for (const auto& row : doc["rows"]) {
+    const std::string ref = row["reference"].is_string() ? row["reference"].get<std::string>() : "";
+    EXPECT_EQ(ref.rfind("P1, ", 0), 0u) << row.dump();
+    EXPECT_TRUE(ref.find("error") != std::string::npos ||
+                ref.find("no estimate (") != std::string::npos)
+        << ref;
+    const bool checked = row["force_N"] == 20.0 && row["direction"] == "down";
+    EXPECT_EQ(ref.find("(study of hybrid/cube_down_20N)") == std::string::npos, checked) << ref;
+  }
   for (const auto& row : doc["rows"]) {
     ASSERT_TRUE(row["reference_disp_mm"].is_number()) << row.dump();
     EXPECT_GT(row["reference_disp_mm"].get<double>(), 0.1) << row.dump();
@@ -383,8 +394,7 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
 
   // The same study again (as a second tables run would ask for it): read from the cache.
   ConvergeOptions co;
-  co.baseElements = 800;
-  co.factors = {1.0 / 8.0, 1.0 / 2.8, 1.0};
+  co.hRatios = kReferenceCheckRatios;
   co.outDir = m_dir / "again";
   co.cacheDir = cache;
   const ConvergenceResult cached =
@@ -437,12 +447,108 @@ TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) 
   EXPECT_FALSE(fast.asymptotic);
   EXPECT_LT(fast.relativeError, 0.01);
   EXPECT_NE(convergenceWarning(fast).find("asymptotic"), std::string::npos);
+  EXPECT_EQ(fast.reason, "not_asymptotic");
+  EXPECT_NE(fast.message.find("p = 6.00 is outside 0.5-4"), std::string::npos) << fast.message;
   // Levels that do not refine: no estimate, and the warning says the convergence is unknown.
   ConvergenceResult flat;
   richardsonEstimate(h0, h0, h0, 1e-3, 1e-3, 0.01, flat);
   EXPECT_TRUE(std::isnan(flat.relativeError));
+  EXPECT_EQ(flat.reason, "not_refining");
   EXPECT_NE(convergenceSummary(flat).find("no discretisation error estimate"), std::string::npos);
   EXPECT_NE(convergenceWarning(flat).find("unknown"), std::string::npos);
+}
+
+TEST_F(TempDir, ConvergeLevelsRefineByEdgeLength) {
+  if (!built({"reference_fem"})) GTEST_SKIP() << "reference_fem is not built";
+  PluginLoader loader({pluginSubset(m_dir / "plugins", {"reference_fem"}).string()});
+  // The dispatch test's cube under gravity (surface edges ~20 mm at resolution 0.4), P1.
+  const nlohmann::ordered_json scene = {
+      {"name", "converge-h"},
+      {"organ",
+       {{"mesh", "phantom:cube"},
+        {"resolution", 0.4},
+        {"material", {{"young", 3000}, {"poisson", 0.3}, {"density", 1000}}},
+        {"fixed", {{"box", {{-0.06, -0.06, -0.06}, {0.06, 0.06, -0.045}}}}}}},
+      {"gravity", {0, -9.81, 0}},
+      {"dt", 0.01},
+      {"duration", 0.01},
+      {"models", {{{"plugin", "reference_fem"}, {"label", "unused"}}}},  // a scene needs one
+      {"reference",
+       {{"plugin", "reference_fem"}, {"params", {{"element_order", 1}, {"elements", 150}}}}},
+      {"output", {{"surfaces", "none"}}}};
+  ConvergeOptions o;
+  o.baseEdgeLength = 0.02;
+  o.outDir = m_dir / "h";
+  o.cacheDir = fs::path();
+  const ConvergenceResult r =
+      runConvergence(scene, (m_dir / "scene.json").string(), loader, o, nullptr);
+  ASSERT_EQ(r.levels.size(), 3u);
+  // The levels ask for h, h/1.4, h/2 and the meshes made really differ by about those ratios.
+  EXPECT_DOUBLE_EQ(r.levels[0].targetH, 0.02);
+  EXPECT_NEAR(r.levels[0].targetH / r.levels[1].targetH, 1.4, 1e-12);
+  EXPECT_NEAR(r.levels[0].targetH / r.levels[2].targetH, 2.0, 1e-12);
+  for (const auto& l : r.levels) EXPECT_EQ(l.status, "ok");
+  EXPECT_GT(r.levels[0].h / r.levels[1].h, 1.2) << r.levels[0].h << " " << r.levels[1].h;
+  EXPECT_GT(r.levels[1].h / r.levels[2].h, 1.2) << r.levels[1].h << " " << r.levels[2].h;
+  EXPECT_NE(r.reason, "levels_too_close") << r.message;
+  const json doc = readJson(o.outDir / "convergence.json");
+  EXPECT_NEAR(doc["levels"][2]["target_h_m"].get<double>(), 0.01, 1e-12);
+  EXPECT_EQ(readJson(o.outDir / "level_1.json")["models"][0]["params"]["edge_length"],
+            r.levels[1].targetH);
+  // The reference's own check (2h, 1.4h, h of its 150 targets, ~40 mm): its finest level is the
+  // reference as it runs (params untouched), and every level is as coarse as the surface allows,
+  // so the study says the levels are too close, in the JSON and in the summary.
+  ConvergeOptions own;
+  own.hRatios = kReferenceCheckRatios;
+  own.outDir = m_dir / "own";
+  own.cacheDir = fs::path();
+  const ConvergenceResult c =
+      runConvergence(scene, (m_dir / "scene.json").string(), loader, own, nullptr);
+  EXPECT_FALSE(
+      readJson(own.outDir / "level_2.json")["models"][0]["params"].contains("edge_length"));
+  EXPECT_NEAR(c.levels[0].targetH / c.levels[2].targetH, 2.0, 1e-12);
+  EXPECT_EQ(c.reason, "levels_too_close") << c.message;
+  EXPECT_EQ(readJson(own.outDir / "convergence.json")["reason"], "levels_too_close");
+  EXPECT_NE(convergenceSummary(c).find("too close in size"), std::string::npos)
+      << convergenceSummary(c);
+}
+
+TEST(ReferenceCheck, SaysWhyRichardsonDoesNotApply) {
+  const double h0 = 0.01, h1 = 0.0071, h2 = 0.005, peak = 0.01;
+  // Differences that grow with refinement: not monotone; the spread bounds the error.
+  ConvergenceResult grow;
+  richardsonEstimate(h0, h1, h2, 1e-5, 2e-5, peak, grow);
+  EXPECT_TRUE(std::isnan(grow.relativeError));
+  EXPECT_EQ(grow.reason, "not_monotone");
+  EXPECT_NE(grow.message.find("do not shrink monotonically"), std::string::npos) << grow.message;
+  EXPECT_NEAR(grow.boundRelative, 2e-3, 1e-12);
+  EXPECT_NE(convergenceWarning(grow).find("bounded by the levels' spread, 0.2%"), std::string::npos)
+      << convergenceWarning(grow);
+  EXPECT_NE(convergenceSummary(grow).find("differ by up to 0.2%"), std::string::npos)
+      << convergenceSummary(grow);
+  // Levels whose measured sizes are 1.05 apart (the surface bounds the coarse ones): too close.
+  ConvergenceResult close;
+  richardsonEstimate(h0, h0 / 1.05, h2, 2e-5, 1e-5, peak, close);
+  EXPECT_EQ(close.reason, "levels_too_close");
+  EXPECT_NE(close.message.find("too close in size to extrapolate (h ratios 1.05 and"),
+            std::string::npos)
+      << close.message;
+  EXPECT_TRUE(std::isnan(close.relativeError));
+  // Identical answers on refinement: nothing to extrapolate.
+  ConvergenceResult same;
+  richardsonEstimate(h0, h1, h2, 0, 0, peak, same);
+  EXPECT_EQ(same.reason, "coincide");
+  EXPECT_FALSE(same.converged);
+  // A clean second-order study has no reason; the RMS analysis recovers its order as well.
+  ConvergenceResult clean;
+  const auto sq = [](double h) { return h * h; };
+  richardsonEstimate(h0, h1, h2, sq(h0) - sq(h1), sq(h1) - sq(h2), peak, clean);
+  EXPECT_EQ(clean.reason, "");
+  EXPECT_TRUE(std::isnan(clean.boundRelative));
+  richardsonRms(h0, h1, h2, 0.1 * (sq(h0) - sq(h1)), 0.1 * (sq(h1) - sq(h2)), peak, clean);
+  EXPECT_NEAR(clean.rmsOrder, 2.0, 1e-6);
+  EXPECT_NEAR(clean.rmsRelativeError, 0.1 * sq(h2) / peak, 1e-9);
+  EXPECT_TRUE(clean.rmsConverged);
 }
 
 /// A small grasp-and-lift scene on the cube with the given models and reference.

@@ -1,14 +1,26 @@
 // deformbench harness: is the scene's reference converged? The reference plugin is run (through
-// the loader and the runner, like any model) at three element counts N, 2.8 N, 8 N (interior
-// edge-length ratio ~1.41), and the surface displacement at the last compared instant is
-// extrapolated (Richardson). With h_k = (organ volume / #elements_k)^(1/3), d_01 = max_i
-// |u_0,i - u_1,i| and d_12 likewise, and the ansatz u_k = u + C h_k^p, the observed order p solves
+// the loader and the runner, like any model) on three meshes refined by size: target interior
+// edge lengths r_0 h, r_1 h, r_2 h (by default h, h/1.4, h/2; a check of the reference itself
+// 2h, 1.4h, h, so the finest level is the reference as the scene runs it), given to the plugin
+// as its `edge_length` parameter (Gmsh's size field; a plugin without one gets `elements`
+// scaled by r^-3). The surface displacement at the last compared instant is extrapolated
+// (Richardson). With h_k = (organ volume / #elements_k)^(1/3) of the mesh actually made,
+// d_01 = max_i |u_0,i - u_1,i| and d_12 likewise, and the ansatz u_k = u + C h_k^p, the observed
+// order p solves
 //   (h_0^p - h_1^p) / (h_1^p - h_2^p) = d_01 / d_12
 // and the finest level's error is e_2 = d_12 h_2^p / (h_1^p - h_2^p) (Roache 1997,
 // doi:10.1146/annurev.fluid.29.1.123; the same analysis as plugins/reference_fem/convergence.h,
 // here on runs of the plugin rather than on its kernels). Vertices within `excludeRadius` of a
 // point load (singular in 3D elasticity) or of where a grasp closes (the attached node set
-// depends on the mesh) are left out.
+// depends on the mesh) are left out. The same analysis runs on the RMS level differences
+// (rms_order, rms_relative_error): the tables' error columns are RMS figures.
+//
+// Where Richardson does not apply the study says why (ConvergenceResult::reason, message):
+// levels that failed, levels that do not refine or are too close in h (ratio below
+// kMinLevelRatio: the organ's surface vertices, all nodes, bound the coarse levels' size),
+// answers that coincide, differences that do not shrink (d_12 >= d_01: not monotone), an order
+// outside 0.5-4 (not in the asymptotic range). Without an estimate, the largest level difference
+// is given as a bound (Roache's oscillatory case: the spread of the levels' answers).
 //
 // The study is deterministic, so its result is kept in the precomputation cache (kind
 // "harness.convergence"), keyed by the scene as run (organ, loads, tools, times, the reference
@@ -30,10 +42,11 @@ namespace deform::harness {
 
 struct ConvergenceLevelResult {
   long long targetElements = 0, elements = 0;
-  double h = 0;                 ///< m
+  double h = 0;                 ///< m, (organ volume / elements)^(1/3) of the mesh made
   double peakDisplacement = 0;  ///< m
   std::string status;
-  double solveS = 0;  ///< precompute + steps, s
+  double solveS = 0;   ///< precompute + steps, s
+  double targetH = 0;  ///< m, the edge length the level asked for (0: by elements)
 };
 
 struct ConvergenceResult {
@@ -47,20 +60,51 @@ struct ConvergenceResult {
   double errorEstimate = NAN, relativeError = NAN;
   bool asymptotic = false;  ///< 0.5 <= p <= 4
   bool converged = false;   ///< asymptotic && relativeError <= 1%
-  std::string message;      ///< why there is no estimate, if there is none
-  bool cached = false;      ///< read from the precomputation cache, not recomputed
+  /// Why Richardson does not apply (or its estimate is unreliable), "" when it does:
+  /// "levels_failed", "not_refining", "levels_too_close", "coincide", "not_monotone",
+  /// "not_asymptotic".
+  std::string reason;
+  std::string message;  ///< the reason in words, if there is one
+  /// Without an estimate (or with an unreliable one): max(d01, d12) / peak, the spread of the
+  /// levels' answers, which bounds the error when the levels oscillate about the answer.
+  double boundRelative = NAN;
+  /// The same Richardson analysis on the RMS differences rms01, rms12 (relative to the peak).
+  double rmsOrder = NAN, rmsRelativeError = NAN;
+  bool rmsConverged = false;  ///< the RMS analysis is asymptotic and within 1%
+  bool cached = false;        ///< read from the precomputation cache, not recomputed
 };
 
+/// Smallest ratio h_k / h_{k+1} of consecutive levels' measured sizes for which the study
+/// extrapolates: closer levels differ mostly by mesh noise (Roache's minimum refinement ratio).
+inline constexpr double kMinLevelRatio = 1.1;
+
 /// Richardson analysis of three levels (h0 > h1 > h2, differences d01, d12): fills order,
-/// errorEstimate, asymptotic. relativeError needs the peak displacement: errorEstimate / peak.
+/// errorEstimate, relativeError (errorEstimate / peak), asymptotic, converged, and reason,
+/// message and boundRelative where it does not apply.
 void richardsonEstimate(double h0, double h1, double h2, double d01, double d12, double peak,
                         ConvergenceResult& out);
 
+/// The same on the RMS differences: fills rmsOrder, rmsRelativeError, rmsConverged only.
+void richardsonRms(double h0, double h1, double h2, double rms01, double rms12, double peak,
+                   ConvergenceResult& out);
+
+/// Level sizes of `converge`: h, h/1.4, h/2 from the reference's own h.
+inline const std::vector<double> kRefineRatios = {1.0, 1.0 / 1.4, 0.5};
+
+/// The levels of a check of the reference itself: 2h, 1.4h and h, so that the finest level is
+/// the reference as the scene runs it and the estimate is its error (what the tables check, and
+/// `converge --of-reference`).
+inline const std::vector<double> kReferenceCheckRatios = {2.0, 1.4, 1.0};
+
 struct ConvergeOptions {
-  long long baseElements = 0;  ///< N; 0: the scene reference's own "elements" (else 5000)
-  /// Level k targets llround(factors[k] * N) elements: three, increasing. {1/8, 1/2.8, 1} makes
-  /// the finest level the reference at N itself (what the tables check).
-  std::vector<double> factors = {1.0, 2.8, 8.0};
+  /// h: > 0 this edge length (m); else from baseElements N (the interior edge length that gives
+  /// about N tets in the organ, edgeLengthForElements); else the reference's own `edge_length`,
+  /// or its own `elements` (the plugin's default when the scene sets none).
+  double baseEdgeLength = 0;
+  long long baseElements = 0;
+  /// Level k's target edge length is hRatios[k] * h: three, decreasing. A ratio of exactly 1
+  /// leaves the reference's params as they are (the same mesh and answer as the scene's).
+  std::vector<double> hRatios = kRefineRatios;
   std::filesystem::path outDir;
   std::optional<std::filesystem::path> cacheDir;
   double excludeRadius = -1;  ///< m; < 0: 10% of the organ's bounding-box diagonal
@@ -74,12 +118,7 @@ struct ConvergeOptions {
   bool reuseSolves = false;
 };
 
-/// The levels of a check of the reference itself: 1/8, 1/2.8 and 1 times its own elements, so
-/// that the finest level is the reference as the scene runs it and the estimate is its error
-/// (what the tables check, and `converge --of-reference`).
-inline const std::vector<double> kReferenceCheckFactors = {1.0 / 8.0, 1.0 / 2.8, 1.0};
-
-/// The cached check of the scene's reference (kReferenceCheckFactors, its own elements), if a
+/// The cached check of the scene's reference (kReferenceCheckRatios, its own size), if a
 /// study of exactly that scene and plugin build is in the cache; nothing is run.
 std::optional<ConvergenceResult> cachedReferenceCheck(
     const std::string& sceneFile, PluginLoader& loader,
@@ -95,8 +134,8 @@ ConvergenceResult runConvergence(const nlohmann::ordered_json& scene, const std:
                                  PluginLoader& loader, const ConvergeOptions& options,
                                  Progress* progress);
 
-/// One line: "estimated discretisation error X% of the peak (levels a / b / c tets, p = q)", or
-/// why there is no estimate.
+/// One line: "estimated discretisation error X% of the peak (levels a / b / c tets, h ..., p =
+/// q)", or why there is no estimate and the bound.
 std::string convergenceSummary(const ConvergenceResult& r);
 
 /// The warning the study calls for ("" when the reference is converged to 1%).

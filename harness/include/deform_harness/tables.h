@@ -22,11 +22,12 @@
 //
 // Reference check (issue F2): after the cases, each distinct reference a table uses
 // (method-comparison: one per organ; the hybrid tables: per phantom the 20 N downward case) is
-// run through the convergence study of convergence.h at 1/8, 1/2.8 and 1 x its target tets, the
+// run through the convergence study of convergence.h at 2, 1.4 and 1 x its edge length, the
 // finest level being the table's reference itself, in this process and cached. The table's notes
 // get "reference (CASE): ..., estimated discretisation error X% of the peak (levels ..., p = ...)"
 // and, when the estimate is above 1%, not asymptotic or missing, a "warning: reference (CASE):"
-// note; the study is written to DIR/convergence/CASE/.
+// note; the study is written to DIR/convergence/CASE/. Each row judged against a checked
+// reference gets a "reference" cell: its order, tets and estimated error (or why none).
 #pragma once
 
 #include <deform_harness/cases.h>

@@ -7,6 +7,8 @@
 #include <deform_harness/convergence.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <map>
 #include <set>
 
@@ -20,7 +22,25 @@ namespace {
 /// not shown converged to 1% of the peak displacement.
 struct ReferenceCheck {
   std::string note, warning;
+  /// The rows' "reference" cell: which reference (order, tets) and its estimated error.
+  std::string cell;
 };
+
+/// A study's reason (ConvergenceResult::reason) in a few words, for a table cell.
+std::string reasonWords(const std::string& reason) {
+  static const std::map<std::string, std::string> words = {
+      {"levels_failed", "a level did not run"},      {"not_refining", "levels do not refine"},
+      {"levels_too_close", "levels too close in h"}, {"coincide", "levels coincide"},
+      {"not_monotone", "differences not monotone"},  {"not_asymptotic", "order not asymptotic"}};
+  const auto it = words.find(reason);
+  return it == words.end() ? reason : it->second;
+}
+
+std::string percentCell(double fraction) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2g%%", 100 * fraction);
+  return buf;
+}
 
 /// The convergence study of case c's reference (convergence.h) at three levels, the finest being
 /// the reference the table used (same params, same target count: the same mesh and answer), so
@@ -32,14 +52,15 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
   const ojson& ref = c.scene["reference"];
   const std::string plugin = ref.value("plugin", "");
   const RunRecord* run = r.run(ref.value("label", plugin));
+  const ojson& params = ref["params"];
+  const std::string order = "P" + std::to_string(params.value("element_order", 1));
   if (!run || run->status != RunStatus::Ok) {
     out.note = what + ": convergence not checked: " + statusOf(r, plugin, run);
+    out.cell = order + ", not checked (" + statusOf(r, plugin, run) + ")";
     return out;
   }
-  const ojson& params = ref["params"];
-  ConvergeOptions co;
-  co.baseElements = params.value("elements", 0LL);
-  co.factors = kReferenceCheckFactors;
+  ConvergeOptions co;  // the reference's own size h: levels 2h, 1.4h, h
+  co.hRatios = kReferenceCheckRatios;
   co.outDir = o.outDir / "convergence" / c.id;
   co.cacheDir = o.cases.cacheDir;
   co.reuseSolves = true;  // the finest level is the case's reference, solved once
@@ -54,7 +75,16 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
   std::string elements = "? tets";
   if (run->counts.count("elements"))
     elements = std::to_string(run->counts.at("elements")) + " tets";
-  out.note = what + ": " + plugin + " P" + std::to_string(params.value("element_order", 1)) + " " +
+  out.cell = order + ", " + elements + ", ";
+  if (std::isfinite(res.relativeError)) {
+    out.cell += "error " + percentCell(res.relativeError) + " (est.)";
+    if (!res.asymptotic) out.cell += ", " + reasonWords(res.reason);
+  } else {
+    out.cell += "no estimate (" + reasonWords(res.reason) + ")";
+    if (std::isfinite(res.boundRelative))
+      out.cell += ", levels differ by " + percentCell(res.boundRelative);
+  }
+  out.note = what + ": " + plugin + " " + order + " " +
              params.value("material", std::string("neo_hookean")) + ", " + elements + ", " +
              convergenceSummary(res) + "; study in " +
              relativeTo(co.outDir / "convergence.json", o.outDir) + ".";
@@ -274,22 +304,33 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       if (!checks.at(id).warning.empty()) t.notes.push_back(checks.at(id).warning);
     }
     t.columns = d.columns;
+    // Every row judged against a checked reference says which one and its estimated error.
+    const bool referenceColumn = !d.checks.empty() && options.referenceCheck;
+    if (referenceColumn) {
+      auto at = std::find_if(t.columns.begin(), t.columns.end(),
+                             [](const TableColumn& c) { return c.key == "status"; });
+      t.columns.insert(at, {"reference", "reference"});
+    }
     for (ojson row : d.rows(results, options.outDir)) {
       // A row whose reference is not shown converged to 1% is flagged in its status, not only
       // noted under the table: the row of the checked case, and the rows sharing its reference
       // set-up (the hybrid tables check one case per phantom).
       for (const std::string& id : d.checks) {
-        if (!checks.count(id) || checks.at(id).warning.empty() || !row.contains("status")) continue;
+        if (!checks.count(id)) continue;
         const std::string scene = row.value("scene", "");
         const std::string phantom = row.value("phantom", "");
         const bool covered = scene == "scenes/" + id + ".json" ||
                              (!phantom.empty() && id.rfind("hybrid/" + phantom + "_", 0) == 0);
         if (!covered) continue;
+        row["reference"] = checks.at(id).cell +
+                           (scene == "scenes/" + id + ".json" ? "" : " (study of " + id + ")");
+        if (checks.at(id).warning.empty() || !row.contains("status")) continue;
         std::string status = row["status"].is_string() ? row["status"].get<std::string>() : "";
         appendTo(status, "reference not shown converged to 1% (see the notes)");
         row["status"] = status;
       }
-      t.rows.push_back(inColumnOrder(row, d.columns));
+      if (referenceColumn && !row.contains("reference")) row["reference"] = nullptr;
+      t.rows.push_back(inColumnOrder(row, t.columns));
     }
     writeTable(t, options.outDir);
     tables.push_back(std::move(t));
