@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <optional>
 #include <sstream>
@@ -56,14 +57,37 @@ ojson stabilityParams(PluginLoader& loader, const std::string& plugin, bool quic
       .value_or(ojson::object());
 }
 
-/// The sweep's reference: the first plugin found that declares a "stability_reference" preset,
-/// with those parameters ("stability_reference_quick" with --quick); empty name when none does.
-std::pair<std::string, ojson> stabilityReference(PluginLoader& loader, bool quick) {
-  for (const std::string& plugin : loader.discover())
-    if (auto params = presetParams(loader, plugin,
-                                   quick ? "stability_reference_quick" : "stability_reference"))
-      return {plugin, *params};
-  return {"", ojson::object()};
+/// The sweep's reference (DESIGN: one reference everywhere): reference_fem at its defaults
+/// (quadratic tets, its default element count), and for the error estimate the same order at
+/// about 2.8x fewer target tets (h x 1.4).
+struct ReferenceSpec {
+  std::string plugin = "reference_fem";
+  ojson params = ojson::object();  ///< the defaults
+  ojson coarse = ojson::object();
+  long long order = 2, elements = 0;  ///< of the defaults (0: not known)
+  std::string problem;                ///< why there is none ("" when it loads)
+};
+
+ReferenceSpec stabilityReference(PluginLoader& loader) {
+  ReferenceSpec spec;
+  try {
+    const ModelInfo& info = loader.load(spec.plugin);
+    long long minimum = 1;
+    for (const ParamSpec& p : info.params) {
+      if (p.key == "elements" && std::holds_alternative<long long>(p.defaultValue)) {
+        spec.elements = std::get<long long>(p.defaultValue);
+        minimum = std::max<long long>(1, (long long)p.min);
+      }
+      if (p.key == "element_order" && std::holds_alternative<long long>(p.defaultValue))
+        spec.order = std::get<long long>(p.defaultValue);
+    }
+    if (spec.elements > 0)
+      spec.coarse = {
+          {"elements", std::max(minimum, (long long)std::llround(spec.elements / 2.83))}};
+  } catch (const std::exception& e) {
+    spec.problem = e.what();
+  }
+  return spec;
 }
 
 }  // namespace
@@ -328,8 +352,58 @@ StabilityRecord classifyStabilityRun(int waitStatus, bool timedOut, double timeo
   return r;
 }
 
+double relativeDisplacement(const MatX3& rest, const MatX3& moved) {
+  if (rest.rows() == 0 || moved.rows() != rest.rows()) return -1;
+  const double size = boundingBox(rest).size().maxCoeff();
+  if (!(size > 0)) return -1;
+  return std::sqrt((moved - rest).rowwise().squaredNorm().mean()) / size;
+}
+
+std::string collapseProblem(const MatX3& rest, const MatX3& moved, const std::vector<int>& held) {
+  if (rest.rows() == 0 || moved.rows() != rest.rows()) return "";
+  const double size = boundingBox(rest).size().maxCoeff();
+  const double rel = relativeDisplacement(rest, moved);
+  if (!std::isfinite(rel)) return "";  // NaN/Inf is divergence, judged elsewhere
+  if (!held.empty()) {
+    std::vector<char> isHeld(size_t(rest.rows()), 0);
+    Vec3 heldCentre = Vec3::Zero();
+    for (int v : held) {
+      if (v < 0 || v >= rest.rows()) continue;
+      isHeld[size_t(v)] = 1;
+      heldCentre += rest.row(v).transpose();
+    }
+    heldCentre /= double(held.size());
+    const Vec3 centre = rest.colwise().mean().transpose();
+    const Vec3 d = centre - heldCentre;
+    if (d.norm() > 1e-3 * size) {  // a support on one side: the organ's back is behind it
+      const Vec3 n = d.normalized();
+      double back = std::numeric_limits<double>::infinity();
+      for (int v : held)
+        if (v >= 0 && v < rest.rows()) back = std::min(back, rest.row(v).dot(n));
+      int free = 0, through = 0;
+      for (Eigen::Index i = 0; i < rest.rows(); ++i) {
+        if (isHeld[size_t(i)]) continue;
+        ++free;
+        through += moved.row(i).dot(n) < back - 0.05 * size;
+      }
+      if (free > 0 && through > 0.1 * free) {
+        std::ostringstream m;
+        m << through << " of " << free << " free surface vertices went through the support (over "
+          << 0.05 * size << " m beyond it)";
+        return m.str();
+      }
+    }
+  }
+  if (rel > 1) {
+    std::ostringstream m;
+    m << "moved by more than its size (RMS displacement " << rel << " of it)";
+    return m.str();
+  }
+  return "";
+}
+
 StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX3* reference,
-                               const MatX3& rest, double threshold) {
+                               const MatX3& rest, double threshold, const std::vector<int>& held) {
   r.reason.clear();
   r.errorRatio = r.displacementRatio = -1;
   if (r.status == "diverged" || r.status == "failed") {
@@ -346,6 +420,20 @@ StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX
   if (!(refRms > 0) || !std::isfinite(refRms) || !std::isfinite(err)) return r;
   r.errorRatio = err / refRms;
   r.displacementRatio = moved / refRms;
+  // A collapse (the reference moves the organ by under 10% of its size) is a verdict of its own
+  // whatever the reference's precision: the difference is the size of the organ.
+  if (const double refRel = relativeDisplacement(rest, *reference); refRel >= 0 && refRel < 0.1) {
+    const std::string collapse = collapseProblem(rest, *model, held);
+    if (!collapse.empty()) {
+      r.verdict = "collapsed";
+      r.reason = collapse;
+      return r;
+    }
+  }
+  if (r.referenceError > threshold) {
+    r.reason = "reference not converged";
+    return r;
+  }
   if (r.errorRatio <= threshold) {
     r.verdict = "accurate";
   } else {
@@ -355,6 +443,38 @@ StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX
                                            : "wrong_shape";
   }
   return r;
+}
+
+std::vector<std::string> markScaleDependent(std::vector<StabilityRecord>& records) {
+  std::vector<std::string> lines;
+  std::map<std::string, std::vector<StabilityRecord*>> byModel;
+  for (StabilityRecord& r : records)
+    if (r.group == "scale") byModel[r.model].push_back(&r);
+  for (auto& [model, rows] : byModel) {
+    if (rows.size() < 3) continue;
+    double lo = std::numeric_limits<double>::infinity(), hi = 0;
+    bool known = true;
+    for (const StabilityRecord* r : rows) {
+      known = known && r->relativeDisplacement > 0 && std::isfinite(r->relativeDisplacement);
+      lo = std::min(lo, r->relativeDisplacement);
+      hi = std::max(hi, r->relativeDisplacement);
+    }
+    if (!known || hi <= 1.1 * lo) continue;
+    std::ostringstream line;
+    line << model << ":";
+    for (StabilityRecord* r : rows) {
+      line << " " << g(r->relativeDisplacement) << " (" << r->caseId << ")";
+      if (r->verdict == "accurate") {
+        r->verdict = "inaccurate";
+        r->reason = "scale_dependent";
+      } else if (r->verdict == "inaccurate" &&
+                 r->reason.find("scale_dependent") == std::string::npos) {
+        r->reason += ", scale_dependent";
+      }
+    }
+    lines.push_back(line.str());
+  }
+  return lines;
 }
 
 namespace {
@@ -376,35 +496,43 @@ ojson recordJson(const StabilityRecord& r) {
           {"error_ratio", ratio(r.errorRatio)},
           {"displacement_ratio", ratio(r.displacementRatio)},
           {"relative_displacement", ratio(r.relativeDisplacement)},
-          {"tip_sag_m", ratio(r.tipSag)}};
+          {"tip_sag_m", ratio(r.tipSag)},
+          {"reference_error", ratio(r.referenceError)},
+          {"reference_error_source", r.referenceSource},
+          {"reference", r.reference},
+          {"scene_sha256", r.sceneHash}};
 }
 
-/// The reference of a case: rest and final surface of reference_fem on the case's scene.
-struct CaseReference {
+/// One reference solve: rest and final surface of reference_fem on the case's scene.
+struct ReferenceSolve {
   bool ok = false;
   MatX3 rest, final;
+  long long tets = -1;  ///< the mesh's tets (counts "elements"); -1: not reported
   std::string message;  ///< why there is none
 };
 
-/// Solves the case's reference in this process with the `run` pipeline (reference_fem on the
-/// case scene at dt = 1 ms: the quasi-static answer does not depend on the step), or reads it
-/// from the cache (kind "harness.stability_reference").
-CaseReference solveReference(const StabilityCase& c, PluginLoader& loader,
-                             const StabilityOptions& options, Cache& cache) {
-  CaseReference ref;
-  StabilityCase rc = c;
-  rc.dt = 1e-3;
-  const auto [plugin, params] = stabilityReference(loader, options.quick);
-  if (plugin.empty()) {
-    ref.message = "reference: no plugin declares itself the stability reference";
-    return ref;
-  }
-  const ojson scene = stabilityScene(rc, plugin, params, options.quick);
-  const fs::path sceneFile = options.outDir / "reference" / "scenes" / (c.id + ".json");
+/// The reference of a case: the solve at the defaults, the coarser one, and what they say.
+struct CaseReference {
+  bool ok = false;
+  MatX3 rest, final;
+  std::string message;       ///< why there is none
+  std::string what;          ///< "reference_fem P2, 1000 target tets (1130 tets)"
+  double estimate = -1;      ///< RMS(fine - coarse) / the fine's RMS displacement; -1: none
+  std::string estimateNote;  ///< why there is no estimate
+};
+
+/// Solves the case's reference scene in this process with the `run` pipeline, or reads it from
+/// the cache (kind "harness.stability_reference"). tag: "" (the defaults) or "coarse".
+ReferenceSolve solveReferenceScene(const StabilityCase& c, const ojson& scene,
+                                   const std::string& tag, PluginLoader& loader,
+                                   const StabilityOptions& options, Cache& cache) {
+  ReferenceSolve ref;
+  const std::string name = tag.empty() ? c.id : c.id + "_" + tag;
+  const fs::path sceneFile = options.outDir / "reference" / "scenes" / (name + ".json");
   fs::create_directories(sceneFile.parent_path());
   writeFileAtomic(sceneFile, scene.dump(2) + "\n");
   CacheKey key;
-  key.add("harness.stability_reference/1").add(scene.dump());
+  key.add("harness.stability_reference/2").add(scene.dump());
   if (c.organ == "slivers")
     key.add(sha256File((options.outDir / "meshes" / "slivers.obj").string()));
   if (auto hit = cache.get("harness.stability_reference", key)) {
@@ -412,6 +540,7 @@ CaseReference solveReference(const StabilityCase& c, PluginLoader& loader,
       ByteReader r(*hit);
       r.matrix(ref.rest);
       r.matrix(ref.final);
+      ref.tets = r.pod<long long>();
       ref.ok = r.atEnd() && ref.rest.rows() == ref.final.rows();
       if (ref.ok) return ref;
     } catch (const std::exception&) {
@@ -421,7 +550,7 @@ CaseReference solveReference(const StabilityCase& c, PluginLoader& loader,
   try {
     BenchmarkOptions bo;
     bo.cacheDir = options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir);
-    bo.outDir = options.outDir / "reference" / "runs" / c.id;
+    bo.outDir = options.outDir / "reference" / "runs" / name;
     fs::create_directories(bo.outDir);
     const BenchmarkResult res = runBenchmark(sceneFile.string(), loader, bo);
     if (res.runs.empty()) throw std::runtime_error("no run");
@@ -430,8 +559,13 @@ CaseReference solveReference(const StabilityCase& c, PluginLoader& loader,
       ref.message = std::string("reference ") + statusName(run.status) + ": " + run.message;
       return ref;
     }
+    if (!run.valid) {
+      ref.message = "reference invalid: " + run.invalidReason;
+      return ref;
+    }
     ref.rest = res.organ.surface.V;
     ref.final = run.finalSurface;
+    if (const auto it = run.counts.find("elements"); it != run.counts.end()) ref.tets = it->second;
     ref.ok = ref.rest.rows() == ref.final.rows() && ref.rest.rows() > 0;
     if (!ref.ok) {
       ref.message = "reference surface has the wrong size";
@@ -440,9 +574,53 @@ CaseReference solveReference(const StabilityCase& c, PluginLoader& loader,
     ByteWriter w;
     w.matrix(ref.rest);
     w.matrix(ref.final);
+    w.pod(ref.tets);
     cache.put("harness.stability_reference", key, w.bytes());
   } catch (const std::exception& e) {
     ref.message = std::string("reference: ") + e.what();
+  }
+  return ref;
+}
+
+/// The reference scene of a case (at dt = 1 ms: the quasi-static answer does not depend on the
+/// step) with the given reference parameters.
+ojson referenceScene(const StabilityCase& c, const ReferenceSpec& spec, const ojson& params,
+                     bool quick) {
+  StabilityCase rc = c;
+  rc.dt = 1e-3;
+  return stabilityScene(rc, spec.plugin, params, quick);
+}
+
+/// Solves the case's reference at the defaults and, for its error estimate, at the coarser
+/// level (both cached).
+CaseReference solveReference(const StabilityCase& c, const ReferenceSpec& spec,
+                             PluginLoader& loader, const StabilityOptions& options, Cache& cache) {
+  CaseReference ref;
+  if (!spec.problem.empty()) {
+    ref.message = "reference: " + spec.plugin + " does not load: " + spec.problem;
+    return ref;
+  }
+  const ReferenceSolve fine = solveReferenceScene(
+      c, referenceScene(c, spec, spec.params, options.quick), "", loader, options, cache);
+  if (!fine.ok) {
+    ref.message = fine.message;
+    return ref;
+  }
+  ref.ok = true;
+  ref.rest = fine.rest;
+  ref.final = fine.final;
+  ref.what = spec.plugin + " P" + std::to_string(spec.order) + ", " +
+             std::to_string(spec.elements) + " target tets" +
+             (fine.tets > 0 ? " (" + std::to_string(fine.tets) + " tets)" : "");
+  const ReferenceSolve coarse = solveReferenceScene(
+      c, referenceScene(c, spec, spec.coarse, options.quick), "coarse", loader, options, cache);
+  const double rms = std::sqrt((fine.final - fine.rest).rowwise().squaredNorm().mean());
+  if (!coarse.ok) {
+    ref.estimateNote = "no estimate: the coarser solve: " + coarse.message;
+  } else if (coarse.tets > 0 && coarse.tets == fine.tets) {
+    ref.estimateNote = "no estimate: the coarser level has as many tets";
+  } else if (coarse.final.rows() == fine.final.rows() && rms > 0) {
+    ref.estimate = std::sqrt((fine.final - coarse.final).rowwise().squaredNorm().mean()) / rms;
   }
   return ref;
 }
@@ -512,13 +690,28 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     StabilityRecord record;
     fs::path dir, caseFile;
     std::string label;
+    bool rerun = false;  ///< its finished case was stale or failed: run it, whatever is on disk
   };
   std::vector<StabilityRecord> records;
   std::vector<Pending> pending;
+  const ReferenceSpec refSpec = stabilityReference(loader);
+  const std::string sliverHash =
+      fs::exists(options.outDir / "meshes" / "slivers.obj")
+          ? sha256File((options.outDir / "meshes" / "slivers.obj").string())
+          : std::string();
   for (const std::string& plugin : models) {
     const std::string problem = pluginProblem(loader, plugin);
+    const ojson params = stabilityParams(loader, plugin, options.quick);
     for (const StabilityCase& c : cases) {
       const fs::path caseFile = options.outDir / "cases" / plugin / (c.id + ".json");
+      const ojson scene = stabilityScene(c, plugin, params, options.quick);
+      // The case's identity for --resume: its scene, the reference's scene, the sliver mesh.
+      std::string identity = scene.dump();
+      if (c.reference)
+        identity += referenceScene(c, refSpec, refSpec.params, options.quick).dump() +
+                    referenceScene(c, refSpec, refSpec.coarse, options.quick).dump();
+      if (c.organ == "slivers") identity += sliverHash;
+      const std::string hash = sha256Hex(identity.data(), identity.size());
       if (options.resume && fs::exists(caseFile)) {
         try {
           std::ifstream in(caseFile);
@@ -533,22 +726,32 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
           r.wallS = j.value("wall_s", 0.0);
           r.verdict = j.value("verdict", "");
           r.reason = j.value("reason", "");
+          r.referenceSource = j.value("reference_error_source", "");
+          r.reference = j.value("reference", "");
+          r.sceneHash = j.value("scene_sha256", "");
           for (auto [key, v] : {std::pair{"error_ratio", &r.errorRatio},
                                 {"displacement_ratio", &r.displacementRatio},
                                 {"relative_displacement", &r.relativeDisplacement},
-                                {"tip_sag_m", &r.tipSag}})
+                                {"tip_sag_m", &r.tipSag},
+                                {"reference_error", &r.referenceError}})
             *v = j.contains(key) && j[key].is_number() ? j[key].get<double>() : -1.0;
           r.resumed = true;
-          records.push_back(r);
-          continue;
+          // A case whose scene changed (another case set, reference or model parameters) or,
+          // with --retry-failed, that failed is run again.
+          if (r.sceneHash == hash && !(options.retryFailed && r.status == "failed")) {
+            records.push_back(r);
+            continue;
+          }
         } catch (const std::exception&) {
           // unreadable: run it again
         }
       }
       Pending p;
+      p.rerun = options.resume && fs::exists(caseFile);
       p.record.model = plugin;
       p.record.caseId = c.id;
       p.record.group = c.group;
+      p.record.sceneHash = hash;
       p.caseFile = caseFile;
       p.dir = options.outDir / "runs" / plugin / c.id;
       p.label = plugin + " " + c.id;
@@ -558,11 +761,7 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       }
       const fs::path sceneFile = options.outDir / "scenes" / plugin / (c.id + ".json");
       fs::create_directories(sceneFile.parent_path());
-      writeFileAtomic(
-          sceneFile,
-          stabilityScene(c, plugin, stabilityParams(loader, plugin, options.quick), options.quick)
-                  .dump(2) +
-              "\n");
+      writeFileAtomic(sceneFile, scene.dump(2) + "\n");
       pending.push_back(p);
     }
   }
@@ -600,7 +799,7 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
                      {"timeout_s", timeout},
                      {"fresh_dir", fs::absolute(p.dir).string()},
                      {"outcome", fs::absolute(p.dir / "outcome.json").string()},
-                     {"resume", options.resume}});
+                     {"resume", options.resume && !p.rerun}});
     jobCase.push_back(&p);
   }
   std::unique_ptr<Dispatcher> local;
@@ -640,7 +839,7 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     for (const auto& c : cases)
       if (byKey.count({plugin, c.id})) ordered.push_back(byKey.at({plugin, c.id}));
 
-  std::vector<std::string> referenceFailures;
+  std::vector<std::string> referenceFailures, referenceLines;
   // Verdicts: each case's reference solved once (or read from the cache), then every finished
   // run compared with it (resumed records keep theirs).
   std::map<std::string, StabilityCase> caseById;
@@ -664,20 +863,59 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       CaseReference ref;
       if (c.reference && anyStable) {
         if (progress) progress->start("reference " + id);
-        ref = solveReference(c, loader, options, cache);
+        ref = solveReference(c, refSpec, loader, options, cache);
         if (progress) progress->finish("reference " + id, ref.ok ? "ok" : ref.message);
+      }
+      // The reference's own error: against beam theory where there is one, else its estimate.
+      double refError = -1;
+      std::string refSource;
+      if (ref.ok && c.beamTheory > 0) {
+        refError = std::abs(tipSag(ref.final, ref.rest) - c.beamTheory) / c.beamTheory;
+        refSource = "beam theory";
+      } else if (ref.ok && ref.estimate >= 0) {
+        refError = ref.estimate;
+        refSource = "coarser solve";
+      }
+      if (ref.ok) {
+        std::string line = id + ": " + ref.what;
+        if (c.beamTheory > 0) line += ", tip sag " + g(tipSag(ref.final, ref.rest)) + " m";
+        if (refError >= 0) line += ", error " + g(100 * refError) + "% (" + refSource + ")";
+        if (c.beamTheory > 0 && ref.estimate >= 0)
+          line += ", coarser-solve estimate " + g(100 * ref.estimate) + "%";
+        if (refError < 0 && !ref.estimateNote.empty()) line += ", " + ref.estimateNote;
+        referenceLines.push_back(line);
+      }
+      // The surface vertices in the case's fixed box (the support of the collapse test).
+      std::vector<int> held;
+      if (ref.ok) {
+        const ojson box =
+            stabilityScene(c, "", ojson::object(), options.quick)["organ"]["fixed"]["box"];
+        const Vec3 lo(box[0][0], box[0][1], box[0][2]), hi(box[1][0], box[1][1], box[1][2]);
+        for (Eigen::Index i = 0; i < ref.rest.rows(); ++i)
+          if ((ref.rest.row(i).transpose().array() >= lo.array()).all() &&
+              (ref.rest.row(i).transpose().array() <= hi.array()).all())
+            held.push_back(int(i));
       }
       for (StabilityRecord* r : recs) {
         const fs::path runDir = options.outDir / "runs" / r->model / r->caseId;
         const std::optional<MatX3> final =
             r->status == "stable" ? finalSurfaceOf(runDir) : std::nullopt;
         const MatX3* model = final ? &*final : nullptr;
+        r->referenceError = refError;
+        r->referenceSource = refSource;
+        r->reference = ref.what;
         *r = judgeStability(*r, model, ref.ok ? &ref.final : nullptr, ref.rest,
-                            options.accuracyThreshold);
+                            options.accuracyThreshold, held);
+        // The reference's own row is the reference: never accurate by comparison with itself.
+        if (r->model == refSpec.plugin &&
+            stabilityParams(loader, r->model, options.quick) == refSpec.params &&
+            (r->verdict == "accurate" || r->verdict == "inaccurate")) {
+          r->verdict = "unchecked";
+          r->reason = "the reference itself";
+          r->errorRatio = -1;
+        }
         if (ref.ok && model && model->rows() == ref.rest.rows()) {
-          const Box box = boundingBox(ref.rest);
-          r->relativeDisplacement =
-              std::sqrt((*model - ref.rest).rowwise().squaredNorm().mean()) / box.size().maxCoeff();
+          r->relativeDisplacement = relativeDisplacement(ref.rest, *model);
           if (c.beamTheory > 0) r->tipSag = tipSag(*model, ref.rest);
         }
         const fs::path caseFile = options.outDir / "cases" / r->model / (r->caseId + ".json");
@@ -685,6 +923,13 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       }
       if (c.reference && anyStable && !ref.ok) referenceFailures.push_back(id + ": " + ref.message);
     }
+  }
+  // The scale group (issue 35): the same problem in other units must move alike.
+  const std::vector<std::string> scaleLines = markScaleDependent(ordered);
+  for (const StabilityRecord& r : ordered) {
+    const fs::path caseFile = options.outDir / "cases" / r.model / (r.caseId + ".json");
+    if (r.group == "scale" && fs::exists(caseFile))
+      writeFileAtomic(caseFile, recordJson(r).dump(2) + "\n");
   }
 
   Table t;
@@ -699,16 +944,27 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
                   "phantom with needle triangles; scale: no gravity); ") +
           (options.quick ? "--quick case set." : "full case set.")};
   t.notes.push_back(
-      "verdict: the final surface against reference_fem's quasi-static answer on the same scene "
+      "verdict: the final surface against the reference's quasi-static answer on the same scene "
       "(" +
-      std::string(options.quick ? "1500" : "5000") +
-      " target tets, solved once per case, cached): accurate when error_ratio = rmse_all / the "
-      "reference's RMS displacement <= " +
+      (refSpec.problem.empty()
+           ? refSpec.plugin + " at its defaults: P" + std::to_string(refSpec.order) + ", " +
+                 std::to_string(refSpec.elements) + " target tets"
+           : refSpec.plugin + ", which does not load") +
+      ", solved once per case, cached; its error is reference_error: against beam theory on "
+      "the cantilevers, elsewhere estimated as its RMS difference from a coarser P" +
+      std::to_string(refSpec.order) + " solve (" +
+      (refSpec.coarse.contains("elements") ? refSpec.coarse["elements"].dump() : "?") +
+      " target tets, h x 1.4) over its RMS displacement): accurate when error_ratio = rmse_all "
+      "/ the reference's RMS displacement <= " +
       g(options.accuracyThreshold) +
       "; else inaccurate, frozen (moves < 10% of the reference: displacement_ratio < 0.1), "
-      "too_soft (> 2x) or wrong_shape. unchecked: no quasi-static answer (pull, invert, "
-      "flatten), no reference, or unsupported. A model still moving at the end is compared as "
-      "it is.");
+      "too_soft (> 2x), wrong_shape or scale_dependent (scale group: the model's "
+      "relative_displacement differs by over 10% across 1 cm, 10 cm and 1 m). collapsed: the "
+      "model went through its support or moved by more than its size while the reference moves "
+      "it by under 10% of its size. unchecked: no quasi-static answer (pull, invert, flatten), "
+      "no reference, unsupported, the reference itself, or reference not converged (its "
+      "reference_error above " +
+      g(options.accuracyThreshold) + "). A model still moving at the end is compared as it is.");
   t.notes.push_back(
       "poisson group: a model stiffer than the reference there (displacement_ratio well below 1) "
       "is locking; scale group: the same problem at 1 cm, 10 cm and 1 m (force x s^2, density / "
@@ -731,6 +987,8 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
                {"relative_displacement", "rel. displacement"},
                {"tip_sag_m", "tip sag m"},
                {"beam_theory_m", "beam theory m"},
+               {"reference_error", "reference error"},
+               {"reference", "reference"},
                {"wall_s", "wall s"},
                {"message", "message"},
                {"scene", "scene"}};
@@ -749,22 +1007,27 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     row["scene"] = "scenes/" + r.model + "/" + r.caseId + ".json";
     if (r.message.rfind("killed by signal", 0) == 0) ++crashes;
     ++verdicts[r.model][r.verdict];
-    if (r.verdict == "inaccurate") inaccurate[r.model].push_back(r.caseId + " " + r.reason);
+    if (r.verdict == "inaccurate" || r.verdict == "collapsed")
+      inaccurate[r.model].push_back(r.caseId + " " +
+                                    (r.verdict == "collapsed" ? "collapsed" : r.reason));
     t.rows.push_back(row);
   }
   t.notes.push_back("Crashes (killed by a signal): " + std::to_string(crashes) + ".");
   for (const auto& [model, counts] : verdicts) {
     std::string line = "Verdicts of " + model + ":";
-    for (const char* v : {"accurate", "inaccurate", "diverged", "failed", "unchecked"})
+    for (const char* v : kStabilityVerdicts)
       line += std::string(" ") + v + " " + std::to_string(counts.count(v) ? counts.at(v) : 0);
     if (inaccurate.count(model)) {
-      line += " (inaccurate:";
+      line += " (inaccurate or collapsed:";
       for (const auto& what : inaccurate.at(model)) line += " " + what + ",";
       line.back() = ')';
     }
     t.notes.push_back(line + ".");
   }
   for (const auto& f : referenceFailures) t.notes.push_back("No reference for " + f + ".");
+  for (const auto& f : referenceLines) t.notes.push_back("Reference of " + f + ".");
+  for (const auto& f : scaleLines)
+    t.notes.push_back("scale_dependent (relative displacement over 10% apart) " + f + ".");
   writeTable(t, options.outDir);
   return ordered;
 }
