@@ -14,6 +14,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <set>
 #include <sstream>
 
 namespace deform::harness {
@@ -521,67 +522,6 @@ struct CaseReference {
   std::string estimateNote;  ///< why there is no estimate
 };
 
-/// Solves the case's reference scene in this process with the `run` pipeline, or reads it from
-/// the cache (kind "harness.stability_reference"). tag: "" (the defaults) or "coarse".
-ReferenceSolve solveReferenceScene(const StabilityCase& c, const ojson& scene,
-                                   const std::string& tag, PluginLoader& loader,
-                                   const StabilityOptions& options, Cache& cache) {
-  ReferenceSolve ref;
-  const std::string name = tag.empty() ? c.id : c.id + "_" + tag;
-  const fs::path sceneFile = options.outDir / "reference" / "scenes" / (name + ".json");
-  fs::create_directories(sceneFile.parent_path());
-  writeFileAtomic(sceneFile, scene.dump(2) + "\n");
-  CacheKey key;
-  key.add("harness.stability_reference/2").add(scene.dump());
-  if (c.organ == "slivers")
-    key.add(sha256File((options.outDir / "meshes" / "slivers.obj").string()));
-  if (auto hit = cache.get("harness.stability_reference", key)) {
-    try {
-      ByteReader r(*hit);
-      r.matrix(ref.rest);
-      r.matrix(ref.final);
-      ref.tets = r.pod<long long>();
-      ref.ok = r.atEnd() && ref.rest.rows() == ref.final.rows();
-      if (ref.ok) return ref;
-    } catch (const std::exception&) {
-      // unreadable entry: solve again
-    }
-  }
-  try {
-    BenchmarkOptions bo;
-    bo.cacheDir = options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir);
-    bo.outDir = options.outDir / "reference" / "runs" / name;
-    fs::create_directories(bo.outDir);
-    const BenchmarkResult res = runBenchmark(sceneFile.string(), loader, bo);
-    if (res.runs.empty()) throw std::runtime_error("no run");
-    const RunRecord& run = res.runs.front();
-    if (run.status != RunStatus::Ok) {
-      ref.message = std::string("reference ") + statusName(run.status) + ": " + run.message;
-      return ref;
-    }
-    if (!run.valid) {
-      ref.message = "reference invalid: " + run.invalidReason;
-      return ref;
-    }
-    ref.rest = res.organ.surface.V;
-    ref.final = run.finalSurface;
-    if (const auto it = run.counts.find("elements"); it != run.counts.end()) ref.tets = it->second;
-    ref.ok = ref.rest.rows() == ref.final.rows() && ref.rest.rows() > 0;
-    if (!ref.ok) {
-      ref.message = "reference surface has the wrong size";
-      return ref;
-    }
-    ByteWriter w;
-    w.matrix(ref.rest);
-    w.matrix(ref.final);
-    w.pod(ref.tets);
-    cache.put("harness.stability_reference", key, w.bytes());
-  } catch (const std::exception& e) {
-    ref.message = std::string("reference: ") + e.what();
-  }
-  return ref;
-}
-
 /// The reference scene of a case (at dt = 1 ms: the quasi-static answer does not depend on the
 /// step) with the given reference parameters.
 ojson referenceScene(const StabilityCase& c, const ReferenceSpec& spec, const ojson& params,
@@ -591,17 +531,69 @@ ojson referenceScene(const StabilityCase& c, const ReferenceSpec& spec, const oj
   return stabilityScene(rc, spec.plugin, params, quick);
 }
 
-/// Solves the case's reference at the defaults and, for its error estimate, at the coarser
-/// level (both cached).
-CaseReference solveReference(const StabilityCase& c, const ReferenceSpec& spec,
-                             PluginLoader& loader, const StabilityOptions& options, Cache& cache) {
-  CaseReference ref;
-  if (!spec.problem.empty()) {
-    ref.message = "reference: " + spec.plugin + " does not load: " + spec.problem;
-    return ref;
+/// The cache key of a reference solve: its scene without the words (the cases of one E at two
+/// time steps share it) and, for the slivers, the mesh.
+CacheKey referenceKey(const StabilityCase& c, ojson scene, const fs::path& outDir) {
+  scene.erase("name");
+  scene.erase("description");
+  CacheKey key;
+  key.add("harness.stability_reference/2").add(scene.dump());
+  if (c.organ == "slivers") key.add(sha256File((outDir / "meshes" / "slivers.obj").string()));
+  return key;
+}
+
+std::optional<ReferenceSolve> cachedReference(Cache& cache, const CacheKey& key) {
+  if (auto hit = cache.get("harness.stability_reference", key)) {
+    try {
+      ReferenceSolve ref;
+      ByteReader r(*hit);
+      r.matrix(ref.rest);
+      r.matrix(ref.final);
+      ref.tets = r.pod<long long>();
+      ref.ok = r.atEnd() && ref.rest.rows() == ref.final.rows() && ref.rest.rows() > 0;
+      if (ref.ok) return ref;
+    } catch (const std::exception&) {
+      // unreadable entry: solve again
+    }
   }
-  const ReferenceSolve fine = solveReferenceScene(
-      c, referenceScene(c, spec, spec.params, options.quick), "", loader, options, cache);
+  return std::nullopt;
+}
+
+/// A finished reference run (`deformbench run` of its scene into dir): its rest and final
+/// surface and tet count, or why there is none.
+ReferenceSolve readReferenceRun(const fs::path& dir) {
+  ReferenceSolve ref;
+  try {
+    std::ifstream in(dir / "results.json");
+    if (!in) throw std::runtime_error("no results.json");
+    const ojson doc = ojson::parse(in);
+    const ojson& run = doc.at("runs").at(0);
+    const std::string status = run.at("status");
+    if (status != "ok") {
+      ref.message = "reference " + status + ": " + run.value("message", "");
+      return ref;
+    }
+    if (!run.value("valid", true)) {
+      ref.message = "reference invalid: " + run.value("invalid_reason", std::string());
+      return ref;
+    }
+    ref.rest = readObj((dir / doc.at("organ").at("rest_surface").get<std::string>()).string()).V;
+    ref.final = readObj((dir / run.at("final_surface").get<std::string>()).string()).V;
+    if (run.contains("counts") && run["counts"].contains("elements"))
+      ref.tets = run["counts"]["elements"].get<long long>();
+    ref.ok = ref.rest.rows() == ref.final.rows() && ref.rest.rows() > 0;
+    if (!ref.ok) ref.message = "reference surface has the wrong size";
+  } catch (const std::exception& e) {
+    ref.message = std::string("reference: ") + e.what();
+  }
+  return ref;
+}
+
+/// The case's reference from its solve at the defaults and its coarser one. The estimate assumes
+/// second order: |fine - coarse| / ((h_coarse / h_fine)^2 - 1), h from the tet counts.
+CaseReference combineReference(const ReferenceSpec& spec, const ReferenceSolve& fine,
+                               const ReferenceSolve& coarse) {
+  CaseReference ref;
   if (!fine.ok) {
     ref.message = fine.message;
     return ref;
@@ -612,15 +604,17 @@ CaseReference solveReference(const StabilityCase& c, const ReferenceSpec& spec,
   ref.what = spec.plugin + " P" + std::to_string(spec.order) + ", " +
              std::to_string(spec.elements) + " target tets" +
              (fine.tets > 0 ? " (" + std::to_string(fine.tets) + " tets)" : "");
-  const ReferenceSolve coarse = solveReferenceScene(
-      c, referenceScene(c, spec, spec.coarse, options.quick), "coarse", loader, options, cache);
   const double rms = std::sqrt((fine.final - fine.rest).rowwise().squaredNorm().mean());
+  const double h =
+      fine.tets > 0 && coarse.tets > 0 ? std::cbrt(double(fine.tets) / double(coarse.tets)) : 0.0;
   if (!coarse.ok) {
     ref.estimateNote = "no estimate: the coarser solve: " + coarse.message;
-  } else if (coarse.tets > 0 && coarse.tets == fine.tets) {
-    ref.estimateNote = "no estimate: the coarser level has as many tets";
+  } else if (h < 1.05) {
+    ref.estimateNote = "no estimate: the coarser level has nearly as many tets (" +
+                       std::to_string(coarse.tets) + ")";
   } else if (coarse.final.rows() == fine.final.rows() && rms > 0) {
-    ref.estimate = std::sqrt((fine.final - coarse.final).rowwise().squaredNorm().mean()) / rms;
+    ref.estimate =
+        std::sqrt((fine.final - coarse.final).rowwise().squaredNorm().mean()) / rms / (h * h - 1);
   }
   return ref;
 }
@@ -802,6 +796,83 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
                      {"resume", options.resume && !p.rerun}});
     jobCase.push_back(&p);
   }
+  // Each case's reference (at the defaults and the coarser level): from the cache, else a
+  // "child" task beside the models' (its own time limit, so a reference that takes too long
+  // leaves its case unchecked instead of stopping the sweep).
+  const double refTimeout = 5 * timeout;
+  Cache cache(options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir));
+  struct RefJob {
+    std::string caseId, tag;
+    CacheKey key;
+    fs::path dir;
+    ReferenceSolve solve;
+    std::string hex;  ///< the key's digest
+    int twin = -1;    ///< the job with the same scene whose solve this one takes
+  };
+  std::vector<RefJob> refJobs;
+  std::map<size_t, size_t> refJobOfTask;  ///< task index -> refJobs index
+  {
+    std::set<std::string> judged;
+    for (const Pending& p : pending) judged.insert(p.record.caseId);
+    for (const StabilityRecord& r : records)  // resumed before they were judged
+      if (r.verdict.empty()) judged.insert(r.caseId);
+    for (const StabilityCase& c : cases) {
+      if (!c.reference || !judged.count(c.id)) continue;
+      for (const std::string tag : {"", "coarse"}) {
+        RefJob job;
+        job.caseId = c.id;
+        job.tag = tag;
+        if (!refSpec.problem.empty()) {
+          job.solve.message = "reference: " + refSpec.plugin + " does not load: " + refSpec.problem;
+          refJobs.push_back(job);
+          continue;
+        }
+        const ojson scene = referenceScene(
+            c, refSpec, tag.empty() ? refSpec.params : refSpec.coarse, options.quick);
+        job.key = referenceKey(c, scene, options.outDir);
+        if (auto hit = cachedReference(cache, job.key)) {
+          job.solve = *hit;
+          refJobs.push_back(job);
+          continue;
+        }
+        if (const auto twin = std::find_if(refJobs.begin(), refJobs.end(),
+                                           [&](const RefJob& j) { return j.hex == job.key.hex(); });
+            twin != refJobs.end()) {  // the same scene (one E at two time steps): solved once
+          job.twin = int(twin - refJobs.begin());
+          job.hex = job.key.hex();
+          refJobs.push_back(job);
+          continue;
+        }
+        job.hex = job.key.hex();
+        const std::string name = tag.empty() ? c.id : c.id + "_" + tag;
+        const fs::path sceneFile = options.outDir / "reference" / "scenes" / (name + ".json");
+        fs::create_directories(sceneFile.parent_path());
+        writeFileAtomic(sceneFile, scene.dump(2) + "\n");
+        // The folder names the scene's hash: a --resume never reads another scene's outcome.
+        job.dir = options.outDir / "reference" / "runs" / (name + "_" + job.hex.substr(0, 8));
+        std::vector<std::string> argv = {exe};
+        for (const auto& a : pluginDirArgs(options.pluginDirs)) argv.push_back(a);
+        argv.insert(argv.end(), {"run", fs::absolute(sceneFile).string(), "--out",
+                                 fs::absolute(job.dir).string()});
+        if (!options.cacheDir.empty())
+          argv.insert(argv.end(), {"--cache-dir", fs::absolute(options.cacheDir).string()});
+        refJobOfTask[tasks.size()] = refJobs.size();
+        tasks.push_back({{"kind", "child"},
+                         {"argv", argv},
+                         {"log", fs::absolute(job.dir / "log.txt").string()},
+                         {"timeout_s", refTimeout},
+                         {"fresh_dir", fs::absolute(job.dir).string()},
+                         {"outcome", fs::absolute(job.dir / "outcome.json").string()},
+                         {"resume", options.resume}});
+        refJobs.push_back(job);
+      }
+    }
+  }
+  if (progress) progress->addTotal(int(refJobOfTask.size()));
+  const auto refLabel = [&](const RefJob& j) {
+    return "reference " + j.caseId + (j.tag.empty() ? "" : " (" + j.tag + ")");
+  };
+
   std::unique_ptr<Dispatcher> local;
   Dispatcher* dispatcher = options.dispatcher;
   if (!dispatcher) {
@@ -811,9 +882,36 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
   dispatcher->run(
       tasks,
       [&](size_t i) {
-        if (progress) progress->start(jobCase[i]->label);
+        if (!progress) return;
+        if (refJobOfTask.count(i))
+          progress->start(refLabel(refJobs[refJobOfTask.at(i)]));
+        else
+          progress->start(jobCase[i]->label);
       },
       [&](size_t i, const ojson& o) {
+        if (refJobOfTask.count(i)) {
+          RefJob& job = refJobs[refJobOfTask.at(i)];
+          ChildOutcome outcome;
+          outcome.waitStatus = o.value("wait_status", 0);
+          outcome.timedOut = o.value("timed_out", false);
+          std::string failure = o.value("spawn_error", "");
+          if (failure.empty())
+            failure = childFailure(outcome, refTimeout, lastLogLine(job.dir / "log.txt", 300));
+          if (!failure.empty()) {
+            job.solve.message = "reference failed: " + failure;
+          } else {
+            job.solve = readReferenceRun(job.dir);
+            if (job.solve.ok) {
+              ByteWriter w;
+              w.matrix(job.solve.rest);
+              w.matrix(job.solve.final);
+              w.pod(job.solve.tets);
+              cache.put("harness.stability_reference", job.key, w.bytes());
+            }
+          }
+          if (progress) progress->finish(refLabel(job), job.solve.ok ? "ok" : job.solve.message);
+          return;
+        }
         Pending& p = *jobCase[i];
         StabilityRecord r;
         const std::string spawnError = o.value("spawn_error", "");
@@ -848,23 +946,19 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     std::map<std::string, std::vector<StabilityRecord*>> toJudge;
     for (auto& r : ordered)
       if (r.verdict.empty()) toJudge[r.caseId].push_back(&r);
-    int references = 0;
-    for (const auto& [id, recs] : toJudge) {
-      const bool anyStable = std::any_of(
-          recs.begin(), recs.end(), [](const StabilityRecord* r) { return r->status == "stable"; });
-      references += caseById.at(id).reference && anyStable;
-    }
-    if (progress && references > 0) progress->addTotal(references);
-    Cache cache(options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir));
+    for (RefJob& j : refJobs)
+      if (j.twin >= 0) j.solve = refJobs[size_t(j.twin)].solve;
     for (auto& [id, recs] : toJudge) {
       const StabilityCase& c = caseById.at(id);
       const bool anyStable = std::any_of(
           recs.begin(), recs.end(), [](const StabilityRecord* r) { return r->status == "stable"; });
       CaseReference ref;
-      if (c.reference && anyStable) {
-        if (progress) progress->start("reference " + id);
-        ref = solveReference(c, refSpec, loader, options, cache);
-        if (progress) progress->finish("reference " + id, ref.ok ? "ok" : ref.message);
+      if (c.reference) {
+        ReferenceSolve fine, coarse;
+        fine.message = coarse.message = "reference not run";
+        for (const RefJob& j : refJobs)
+          if (j.caseId == id) (j.tag.empty() ? fine : coarse) = j.solve;
+        ref = combineReference(refSpec, fine, coarse);
       }
       // The reference's own error: against beam theory where there is one, else its estimate.
       double refError = -1;
