@@ -10,8 +10,9 @@
 //   unsupported  the case needs a capability the model lacks
 // and a verdict beside it: every case with a quasi-static answer (all but pull, invert and
 // flatten) gets a reference (reference_fem at its defaults, quadratic tets, on the same scene,
-// solved once per case in this process and kept in the cache, with a coarser quadratic solve for
-// its error estimate), and the model's final surface is compared with it:
+// solved once per case as a child process with 5x the case's time limit and kept in the cache,
+// with a coarser quadratic solve for its error estimate), and the model's final surface is
+// compared with it:
 //   accurate     error_ratio = rmse_all / (the reference's RMS displacement) <= the threshold
 //                (20% by default)
 //   inaccurate   above it, with a reason: frozen (the model's RMS displacement is below 10% of the
