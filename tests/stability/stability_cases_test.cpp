@@ -158,6 +158,9 @@ TEST(StabilityVerdict, TheScaleGroupCallsAModelScaleDependentOverTenPercent) {
   add("fem_hex", "scale_0.01m", 0.040, "inaccurate");
   add("fem_hex", "scale_0.1m", 0.0094, "accurate");
   add("fem_hex", "scale_1m", 0.040, "collapsed");
+  add("pbd", "scale_0.01m", 0.17, "unchecked");  // reference not converged: still the model's
+  add("pbd", "scale_0.1m", 0.23, "unchecked");
+  add("pbd", "scale_1m", -1, "diverged");  // unknown: not judged
   StabilityRecord other;
   other.model = "fem_hex";
   other.group = "force";
@@ -172,7 +175,8 @@ TEST(StabilityVerdict, TheScaleGroupCallsAModelScaleDependentOverTenPercent) {
   EXPECT_EQ(rows[4].verdict, "inaccurate");
   EXPECT_EQ(rows[4].reason, "scale_dependent");
   EXPECT_EQ(rows[5].verdict, "collapsed");
-  EXPECT_EQ(rows[6].verdict, "accurate");
+  EXPECT_EQ(rows[6].verdict, "unchecked") << "pbd: a diverged scale case leaves it unjudged";
+  EXPECT_EQ(rows[9].verdict, "accurate");
 }
 
 TEST(StabilityCases, BeamTheoryAndTheNewCases) {

@@ -142,7 +142,8 @@ StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX
 
 /// The scale group's check (in place): for each model whose relative displacements at the three
 /// scale cases are all known and whose largest exceeds its smallest by over 10%, every scale row
-/// judged accurate or inaccurate becomes inaccurate with reason scale_dependent. Returns one line
+/// judged accurate, inaccurate or unchecked becomes inaccurate with reason scale_dependent (the
+/// model's own numbers: no reference needed). Returns one line
 /// per such model ("pbd: 0.17 (scale_0.01m) 0.23 (scale_0.1m) 1.8 (scale_1m)").
 std::vector<std::string> markScaleDependent(std::vector<StabilityRecord>& records);
 
