@@ -721,7 +721,7 @@ int cmdCalibrate(const CalibrateArgs& a) {
 
 struct StabilityArgs {
   CommonArgs common;
-  bool resume = false;
+  bool resume = false, retryFailed = false;
   std::vector<std::string> models, cases;
   double timeout = 0;
   DispatchArgs dispatch;
@@ -733,7 +733,8 @@ int cmdStability(const StabilityArgs& a) {
   PluginLoader loader(searchPath(a.common.pluginDirs));
   StabilityOptions o;
   o.quick = a.common.quick;
-  o.resume = a.resume;
+  o.resume = a.resume || a.retryFailed;
+  o.retryFailed = a.retryFailed;
   o.outDir = makeOutDir(a.common.out);
   o.models = a.models;
   o.cases = a.cases;
@@ -753,12 +754,13 @@ int cmdStability(const StabilityArgs& a) {
     Progress progress(0, "stability");
     records = runStability(loader, o, &progress);
   }
+  // Verdicts, never "stable" alone: a run that reached its end may still have collapsed.
   std::map<std::string, std::map<std::string, int>> summary;
-  for (const auto& r : records) ++summary[r.model][r.status];
+  for (const auto& r : records) ++summary[r.model][r.verdict];
   std::cout << "\n";
   for (const auto& [model, counts] : summary) {
     std::cout << std::left << std::setw(18) << model;
-    for (const char* s : {"stable", "diverged", "failed", "unsupported"})
+    for (const char* s : kStabilityVerdicts)
       std::cout << " " << s << "=" << (counts.count(s) ? counts.at(s) : 0);
     std::cout << "\n";
   }
@@ -1130,7 +1132,10 @@ int realMain(int argc, char** argv) {
   CLI::App* stability = app.add_subcommand(
       "stability", "every model over stiff and extreme cases, each in its own process");
   stability->add_option("--out", st.common.out, "output folder")->required();
-  stability->add_flag("--resume", st.resume, "skip the cases already finished in --out");
+  stability->add_flag("--resume", st.resume,
+                      "skip the cases already finished in --out (with the same scenes)");
+  stability->add_flag("--retry-failed", st.retryFailed,
+                      "with --resume (implied): run the cases that failed again");
   stability->add_option("--model", st.models, "plugin to test (repeatable; default: all found)");
   stability->add_option("--case", st.cases, "case id to run (repeatable; default: the set)");
   stability->add_option("--timeout", st.timeout, "seconds per case (default 120, 60 with --quick)")

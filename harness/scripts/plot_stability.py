@@ -4,8 +4,8 @@
 usage: plot_stability.py STABILITY.json OUTDIR
 
 One picture per model, OUTDIR/stability_<model>.png: the map of Young's modulus against the time
-step (cells coloured by verdict: accurate / inaccurate, with its reason / diverged, with the step /
-failed / unchecked; by status for a stability.json without verdicts), and a strip of the other
+step (cells coloured by verdict: accurate / inaccurate, with its reason / collapsed / diverged, with
+the step / failed / unchecked, with its reason; by status for a stability.json without verdicts), and a strip of the other
 cases (Poisson ratio, large forces, cantilever, scale, slivers, pull, invert, flatten).
 """
 import json
@@ -18,6 +18,7 @@ from deform_plot_common import STATUS_COLOURS, pyplot_or_exit  # noqa: E402
 VERDICT_COLOURS = {
     "accurate": "#4caf50",
     "inaccurate": "#fff176",
+    "collapsed": "#ab47bc",
     "diverged": "#ff9800",
     "failed": "#d32f2f",
     "unchecked": "#bbdefb",
@@ -40,6 +41,8 @@ def label(r):
         text += "\nstep %d" % r["step"]
     if text == "unchecked" and r["status"] != "stable":
         text += "\n(%s)" % r["status"]
+    elif text == "unchecked" and r.get("reason"):
+        text += "\n(%s)" % r["reason"].replace("reference not converged", "ref. not conv.")
     return text
 
 

@@ -5,6 +5,8 @@
 #include <deform_harness/results.h>
 #include <deform_harness/run_isolation.h>
 #include <deform_harness/runner.h>
+#include <deform_harness/stability.h>
+
 #include <dlfcn.h>
 #include <unistd.h>
 
@@ -793,6 +795,25 @@ void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRec
       if (!r.isReference) r.notes.push_back("no error: the reference run is " + notRunReason(*ref));
     }
     return;
+  }
+  // A collapse (issue 35, as stability's verdict "collapsed"): where the reference moves the
+  // organ by under 10% of its size, a model that went through its support or moved by more than
+  // its size did not model the scene.
+  if (ref->valid && relativeDisplacement(organ.surface.V, ref->finalSurface) >= 0 &&
+      relativeDisplacement(organ.surface.V, ref->finalSurface) < 0.1) {
+    const std::vector<int> held =
+        organ.fixed.empty() ? std::vector<int>{}
+                            : fixedNodeIndices(organ.surface.V, organ.fixed, organ.surface);
+    for (RunRecord& r : runs) {
+      if (r.isReference || r.status != RunStatus::Ok || !r.valid) continue;
+      const std::string why = collapseProblem(
+          organ.surface.V,
+          r.finalSurface.topRows(std::min(r.finalSurface.rows(), organ.surface.V.rows())), held);
+      if (why.empty()) continue;
+      r.valid = false;
+      r.invalidReason =
+          "collapsed: " + why + ", while the reference moves the organ by under 10% of its size";
+    }
   }
   const Interaction interaction(scene, organ.surface);
   const Vec3 focus = interaction.focusPoint();

@@ -11,8 +11,10 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <optional>
+#include <set>
 #include <sstream>
 
 namespace deform::harness {
@@ -56,14 +58,37 @@ ojson stabilityParams(PluginLoader& loader, const std::string& plugin, bool quic
       .value_or(ojson::object());
 }
 
-/// The sweep's reference: the first plugin found that declares a "stability_reference" preset,
-/// with those parameters ("stability_reference_quick" with --quick); empty name when none does.
-std::pair<std::string, ojson> stabilityReference(PluginLoader& loader, bool quick) {
-  for (const std::string& plugin : loader.discover())
-    if (auto params = presetParams(loader, plugin,
-                                   quick ? "stability_reference_quick" : "stability_reference"))
-      return {plugin, *params};
-  return {"", ojson::object()};
+/// The sweep's reference (DESIGN: one reference everywhere): reference_fem at its defaults
+/// (quadratic tets, its default element count), and for the error estimate the same order at
+/// about 2.8x fewer target tets (h x 1.4).
+struct ReferenceSpec {
+  std::string plugin = "reference_fem";
+  ojson params = ojson::object();  ///< the defaults
+  ojson coarse = ojson::object();
+  long long order = 2, elements = 0;  ///< of the defaults (0: not known)
+  std::string problem;                ///< why there is none ("" when it loads)
+};
+
+ReferenceSpec stabilityReference(PluginLoader& loader) {
+  ReferenceSpec spec;
+  try {
+    const ModelInfo& info = loader.load(spec.plugin);
+    long long minimum = 1;
+    for (const ParamSpec& p : info.params) {
+      if (p.key == "elements" && std::holds_alternative<long long>(p.defaultValue)) {
+        spec.elements = std::get<long long>(p.defaultValue);
+        minimum = std::max<long long>(1, (long long)p.min);
+      }
+      if (p.key == "element_order" && std::holds_alternative<long long>(p.defaultValue))
+        spec.order = std::get<long long>(p.defaultValue);
+    }
+    if (spec.elements > 0)
+      spec.coarse = {
+          {"elements", std::max(minimum, (long long)std::llround(spec.elements / 2.83))}};
+  } catch (const std::exception& e) {
+    spec.problem = e.what();
+  }
+  return spec;
 }
 
 }  // namespace
@@ -320,8 +345,58 @@ StabilityRecord classifyStabilityRun(int waitStatus, bool timedOut, double timeo
   return r;
 }
 
+double relativeDisplacement(const MatX3& rest, const MatX3& moved) {
+  if (rest.rows() == 0 || moved.rows() != rest.rows()) return -1;
+  const double size = boundingBox(rest).size().maxCoeff();
+  if (!(size > 0)) return -1;
+  return std::sqrt((moved - rest).rowwise().squaredNorm().mean()) / size;
+}
+
+std::string collapseProblem(const MatX3& rest, const MatX3& moved, const std::vector<int>& held) {
+  if (rest.rows() == 0 || moved.rows() != rest.rows()) return "";
+  const double size = boundingBox(rest).size().maxCoeff();
+  const double rel = relativeDisplacement(rest, moved);
+  if (!std::isfinite(rel)) return "";  // NaN/Inf is divergence, judged elsewhere
+  if (!held.empty()) {
+    std::vector<char> isHeld(size_t(rest.rows()), 0);
+    Vec3 heldCentre = Vec3::Zero();
+    for (int v : held) {
+      if (v < 0 || v >= rest.rows()) continue;
+      isHeld[size_t(v)] = 1;
+      heldCentre += rest.row(v).transpose();
+    }
+    heldCentre /= double(held.size());
+    const Vec3 centre = rest.colwise().mean().transpose();
+    const Vec3 d = centre - heldCentre;
+    if (d.norm() > 1e-3 * size) {  // a support on one side: the organ's back is behind it
+      const Vec3 n = d.normalized();
+      double back = std::numeric_limits<double>::infinity();
+      for (int v : held)
+        if (v >= 0 && v < rest.rows()) back = std::min(back, rest.row(v).dot(n));
+      int free = 0, through = 0;
+      for (Eigen::Index i = 0; i < rest.rows(); ++i) {
+        if (isHeld[size_t(i)]) continue;
+        ++free;
+        through += moved.row(i).dot(n) < back - 0.05 * size;
+      }
+      if (free > 0 && through > 0.1 * free) {
+        std::ostringstream m;
+        m << through << " of " << free << " free surface vertices went through the support (over "
+          << 0.05 * size << " m beyond it)";
+        return m.str();
+      }
+    }
+  }
+  if (rel > 1) {
+    std::ostringstream m;
+    m << "moved by more than its size (RMS displacement " << rel << " of it)";
+    return m.str();
+  }
+  return "";
+}
+
 StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX3* reference,
-                               const MatX3& rest, double threshold) {
+                               const MatX3& rest, double threshold, const std::vector<int>& held) {
   r.reason.clear();
   r.errorRatio = r.displacementRatio = -1;
   if (r.status == "diverged" || r.status == "failed") {
@@ -338,6 +413,20 @@ StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX
   if (!(refRms > 0) || !std::isfinite(refRms) || !std::isfinite(err)) return r;
   r.errorRatio = err / refRms;
   r.displacementRatio = moved / refRms;
+  // A collapse (the reference moves the organ by under 10% of its size) is a verdict of its own
+  // whatever the reference's precision: the difference is the size of the organ.
+  if (const double refRel = relativeDisplacement(rest, *reference); refRel >= 0 && refRel < 0.1) {
+    const std::string collapse = collapseProblem(rest, *model, held);
+    if (!collapse.empty()) {
+      r.verdict = "collapsed";
+      r.reason = collapse;
+      return r;
+    }
+  }
+  if (r.referenceError > threshold) {
+    r.reason = "reference not converged";
+    return r;
+  }
   if (r.errorRatio <= threshold) {
     r.verdict = "accurate";
   } else {
@@ -347,6 +436,39 @@ StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX
                                            : "wrong_shape";
   }
   return r;
+}
+
+std::vector<std::string> markScaleDependent(std::vector<StabilityRecord>& records) {
+  std::vector<std::string> lines;
+  std::map<std::string, std::vector<StabilityRecord*>> byModel;
+  for (StabilityRecord& r : records)
+    if (r.group == "scale") byModel[r.model].push_back(&r);
+  for (auto& [model, rows] : byModel) {
+    if (rows.size() < 3) continue;
+    double lo = std::numeric_limits<double>::infinity(), hi = 0;
+    bool known = true;
+    for (const StabilityRecord* r : rows) {
+      known = known && r->relativeDisplacement > 0 && std::isfinite(r->relativeDisplacement);
+      lo = std::min(lo, r->relativeDisplacement);
+      hi = std::max(hi, r->relativeDisplacement);
+    }
+    if (!known || hi <= 1.1 * lo) continue;
+    std::ostringstream line;
+    line << model << ":";
+    for (StabilityRecord* r : rows) {
+      line << " " << g(r->relativeDisplacement) << " (" << r->caseId << ")";
+      // The model's own relative displacements, whatever the reference's precision.
+      if (r->verdict == "accurate" || r->verdict == "unchecked") {
+        r->verdict = "inaccurate";
+        r->reason = "scale_dependent";
+      } else if (r->verdict == "inaccurate" &&
+                 r->reason.find("scale_dependent") == std::string::npos) {
+        r->reason += ", scale_dependent";
+      }
+    }
+    lines.push_back(line.str());
+  }
+  return lines;
 }
 
 namespace {
@@ -368,73 +490,124 @@ ojson recordJson(const StabilityRecord& r) {
           {"error_ratio", ratio(r.errorRatio)},
           {"displacement_ratio", ratio(r.displacementRatio)},
           {"relative_displacement", ratio(r.relativeDisplacement)},
-          {"tip_sag_m", ratio(r.tipSag)}};
+          {"tip_sag_m", ratio(r.tipSag)},
+          {"reference_error", ratio(r.referenceError)},
+          {"reference_error_source", r.referenceSource},
+          {"reference", r.reference},
+          {"scene_sha256", r.sceneHash}};
 }
 
-/// The reference of a case: rest and final surface of reference_fem on the case's scene.
-struct CaseReference {
+/// One reference solve: rest and final surface of reference_fem on the case's scene.
+struct ReferenceSolve {
   bool ok = false;
   MatX3 rest, final;
+  long long tets = -1;  ///< the mesh's tets (counts "elements"); -1: not reported
   std::string message;  ///< why there is none
 };
 
-/// Solves the case's reference in this process with the `run` pipeline (reference_fem on the
-/// case scene at dt = 1 ms: the quasi-static answer does not depend on the step), or reads it
-/// from the cache (kind "harness.stability_reference").
-CaseReference solveReference(const StabilityCase& c, PluginLoader& loader,
-                             const StabilityOptions& options, Cache& cache) {
-  CaseReference ref;
+/// The reference of a case: the solve at the defaults, the coarser one, and what they say.
+struct CaseReference {
+  bool ok = false;
+  MatX3 rest, final;
+  std::string message;       ///< why there is none
+  std::string what;          ///< "reference_fem P2, 1000 target tets (1130 tets)"
+  double estimate = -1;      ///< RMS(fine - coarse) / the fine's RMS displacement; -1: none
+  std::string estimateNote;  ///< why there is no estimate
+};
+
+/// The reference scene of a case (at dt = 1 ms: the quasi-static answer does not depend on the
+/// step) with the given reference parameters.
+ojson referenceScene(const StabilityCase& c, const ReferenceSpec& spec, const ojson& params,
+                     bool quick) {
   StabilityCase rc = c;
   rc.dt = 1e-3;
-  const auto [plugin, params] = stabilityReference(loader, options.quick);
-  if (plugin.empty()) {
-    ref.message = "reference: no plugin declares itself the stability reference";
-    return ref;
-  }
-  const ojson scene = stabilityScene(rc, plugin, params, options.quick);
-  const fs::path sceneFile = options.outDir / "reference" / "scenes" / (c.id + ".json");
-  fs::create_directories(sceneFile.parent_path());
-  writeFileAtomic(sceneFile, scene.dump(2) + "\n");
+  return stabilityScene(rc, spec.plugin, params, quick);
+}
+
+/// The cache key of a reference solve: its scene without the words (the cases of one E at two
+/// time steps share it) and, for the slivers, the mesh.
+CacheKey referenceKey(const StabilityCase& c, ojson scene, const fs::path& outDir) {
+  scene.erase("name");
+  scene.erase("description");
   CacheKey key;
-  key.add("harness.stability_reference/1").add(scene.dump());
-  if (c.organ == "slivers")
-    key.add(sha256File((options.outDir / "meshes" / "slivers.obj").string()));
+  key.add("harness.stability_reference/2").add(scene.dump());
+  if (c.organ == "slivers") key.add(sha256File((outDir / "meshes" / "slivers.obj").string()));
+  return key;
+}
+
+std::optional<ReferenceSolve> cachedReference(Cache& cache, const CacheKey& key) {
   if (auto hit = cache.get("harness.stability_reference", key)) {
     try {
+      ReferenceSolve ref;
       ByteReader r(*hit);
       r.matrix(ref.rest);
       r.matrix(ref.final);
-      ref.ok = r.atEnd() && ref.rest.rows() == ref.final.rows();
+      ref.tets = r.pod<long long>();
+      ref.ok = r.atEnd() && ref.rest.rows() == ref.final.rows() && ref.rest.rows() > 0;
       if (ref.ok) return ref;
     } catch (const std::exception&) {
       // unreadable entry: solve again
     }
   }
+  return std::nullopt;
+}
+
+/// A finished reference run (`deformbench run` of its scene into dir): its rest and final
+/// surface and tet count, or why there is none.
+ReferenceSolve readReferenceRun(const fs::path& dir) {
+  ReferenceSolve ref;
   try {
-    BenchmarkOptions bo;
-    bo.cacheDir = options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir);
-    bo.outDir = options.outDir / "reference" / "runs" / c.id;
-    fs::create_directories(bo.outDir);
-    const BenchmarkResult res = runBenchmark(sceneFile.string(), loader, bo);
-    if (res.runs.empty()) throw std::runtime_error("no run");
-    const RunRecord& run = res.runs.front();
-    if (run.status != RunStatus::Ok) {
-      ref.message = std::string("reference ") + statusName(run.status) + ": " + run.message;
+    std::ifstream in(dir / "results.json");
+    if (!in) throw std::runtime_error("no results.json");
+    const ojson doc = ojson::parse(in);
+    const ojson& run = doc.at("runs").at(0);
+    const std::string status = run.at("status");
+    if (status != "ok") {
+      ref.message = "reference " + status + ": " + run.value("message", "");
       return ref;
     }
-    ref.rest = res.organ.surface.V;
-    ref.final = run.finalSurface;
+    if (!run.value("valid", true)) {
+      ref.message = "reference invalid: " + run.value("invalid_reason", std::string());
+      return ref;
+    }
+    ref.rest = readObj((dir / doc.at("organ").at("rest_surface").get<std::string>()).string()).V;
+    ref.final = readObj((dir / run.at("final_surface").get<std::string>()).string()).V;
+    if (run.contains("counts") && run["counts"].contains("elements"))
+      ref.tets = run["counts"]["elements"].get<long long>();
     ref.ok = ref.rest.rows() == ref.final.rows() && ref.rest.rows() > 0;
-    if (!ref.ok) {
-      ref.message = "reference surface has the wrong size";
-      return ref;
-    }
-    ByteWriter w;
-    w.matrix(ref.rest);
-    w.matrix(ref.final);
-    cache.put("harness.stability_reference", key, w.bytes());
+    if (!ref.ok) ref.message = "reference surface has the wrong size";
   } catch (const std::exception& e) {
     ref.message = std::string("reference: ") + e.what();
+  }
+  return ref;
+}
+
+/// The case's reference from its solve at the defaults and its coarser one. The estimate assumes
+/// second order: |fine - coarse| / ((h_coarse / h_fine)^2 - 1), h from the tet counts.
+CaseReference combineReference(const ReferenceSpec& spec, const ReferenceSolve& fine,
+                               const ReferenceSolve& coarse) {
+  CaseReference ref;
+  if (!fine.ok) {
+    ref.message = fine.message;
+    return ref;
+  }
+  ref.ok = true;
+  ref.rest = fine.rest;
+  ref.final = fine.final;
+  ref.what = spec.plugin + " P" + std::to_string(spec.order) + ", " +
+             std::to_string(spec.elements) + " target tets" +
+             (fine.tets > 0 ? " (" + std::to_string(fine.tets) + " tets)" : "");
+  const double rms = std::sqrt((fine.final - fine.rest).rowwise().squaredNorm().mean());
+  const double h =
+      fine.tets > 0 && coarse.tets > 0 ? std::cbrt(double(fine.tets) / double(coarse.tets)) : 0.0;
+  if (!coarse.ok) {
+    ref.estimateNote = "no estimate: the coarser solve: " + coarse.message;
+  } else if (h < 1.05) {
+    ref.estimateNote = "no estimate: the coarser level has nearly as many tets (" +
+                       std::to_string(coarse.tets) + ")";
+  } else if (coarse.final.rows() == fine.final.rows() && rms > 0) {
+    ref.estimate =
+        std::sqrt((fine.final - coarse.final).rowwise().squaredNorm().mean()) / rms / (h * h - 1);
   }
   return ref;
 }
@@ -504,13 +677,28 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     StabilityRecord record;
     fs::path dir, caseFile;
     std::string label;
+    bool rerun = false;  ///< its finished case was stale or failed: run it, whatever is on disk
   };
   std::vector<StabilityRecord> records;
   std::vector<Pending> pending;
+  const ReferenceSpec refSpec = stabilityReference(loader);
+  const std::string sliverHash =
+      fs::exists(options.outDir / "meshes" / "slivers.obj")
+          ? sha256File((options.outDir / "meshes" / "slivers.obj").string())
+          : std::string();
   for (const std::string& plugin : models) {
     const std::string problem = pluginProblem(loader, plugin);
+    const ojson params = stabilityParams(loader, plugin, options.quick);
     for (const StabilityCase& c : cases) {
       const fs::path caseFile = options.outDir / "cases" / plugin / (c.id + ".json");
+      const ojson scene = stabilityScene(c, plugin, params, options.quick);
+      // The case's identity for --resume: its scene, the reference's scene, the sliver mesh.
+      std::string identity = scene.dump();
+      if (c.reference)
+        identity += referenceScene(c, refSpec, refSpec.params, options.quick).dump() +
+                    referenceScene(c, refSpec, refSpec.coarse, options.quick).dump();
+      if (c.organ == "slivers") identity += sliverHash;
+      const std::string hash = sha256Hex(identity.data(), identity.size());
       if (options.resume && fs::exists(caseFile)) {
         try {
           std::ifstream in(caseFile);
@@ -525,22 +713,32 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
           r.wallS = j.value("wall_s", 0.0);
           r.verdict = j.value("verdict", "");
           r.reason = j.value("reason", "");
+          r.referenceSource = j.value("reference_error_source", "");
+          r.reference = j.value("reference", "");
+          r.sceneHash = j.value("scene_sha256", "");
           for (auto [key, v] : {std::pair{"error_ratio", &r.errorRatio},
                                 {"displacement_ratio", &r.displacementRatio},
                                 {"relative_displacement", &r.relativeDisplacement},
-                                {"tip_sag_m", &r.tipSag}})
+                                {"tip_sag_m", &r.tipSag},
+                                {"reference_error", &r.referenceError}})
             *v = j.contains(key) && j[key].is_number() ? j[key].get<double>() : -1.0;
           r.resumed = true;
-          records.push_back(r);
-          continue;
+          // A case whose scene changed (another case set, reference or model parameters) or,
+          // with --retry-failed, that failed is run again.
+          if (r.sceneHash == hash && !(options.retryFailed && r.status == "failed")) {
+            records.push_back(r);
+            continue;
+          }
         } catch (const std::exception&) {
           // unreadable: run it again
         }
       }
       Pending p;
+      p.rerun = options.resume && fs::exists(caseFile);
       p.record.model = plugin;
       p.record.caseId = c.id;
       p.record.group = c.group;
+      p.record.sceneHash = hash;
       p.caseFile = caseFile;
       p.dir = options.outDir / "runs" / plugin / c.id;
       p.label = plugin + " " + c.id;
@@ -550,11 +748,7 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       }
       const fs::path sceneFile = options.outDir / "scenes" / plugin / (c.id + ".json");
       fs::create_directories(sceneFile.parent_path());
-      writeFileAtomic(
-          sceneFile,
-          stabilityScene(c, plugin, stabilityParams(loader, plugin, options.quick), options.quick)
-                  .dump(2) +
-              "\n");
+      writeFileAtomic(sceneFile, scene.dump(2) + "\n");
       pending.push_back(p);
     }
   }
@@ -592,9 +786,86 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
                      {"timeout_s", timeout},
                      {"fresh_dir", fs::absolute(p.dir).string()},
                      {"outcome", fs::absolute(p.dir / "outcome.json").string()},
-                     {"resume", options.resume}});
+                     {"resume", options.resume && !p.rerun}});
     jobCase.push_back(&p);
   }
+  // Each case's reference (at the defaults and the coarser level): from the cache, else a
+  // "child" task beside the models' (its own time limit, so a reference that takes too long
+  // leaves its case unchecked instead of stopping the sweep).
+  const double refTimeout = 5 * timeout;
+  Cache cache(options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir));
+  struct RefJob {
+    std::string caseId, tag;
+    CacheKey key;
+    fs::path dir;
+    ReferenceSolve solve;
+    std::string hex;  ///< the key's digest
+    int twin = -1;    ///< the job with the same scene whose solve this one takes
+  };
+  std::vector<RefJob> refJobs;
+  std::map<size_t, size_t> refJobOfTask;  ///< task index -> refJobs index
+  {
+    std::set<std::string> judged;
+    for (const Pending& p : pending) judged.insert(p.record.caseId);
+    for (const StabilityRecord& r : records)  // resumed before they were judged
+      if (r.verdict.empty()) judged.insert(r.caseId);
+    for (const StabilityCase& c : cases) {
+      if (!c.reference || !judged.count(c.id)) continue;
+      for (const std::string tag : {"", "coarse"}) {
+        RefJob job;
+        job.caseId = c.id;
+        job.tag = tag;
+        if (!refSpec.problem.empty()) {
+          job.solve.message = "reference: " + refSpec.plugin + " does not load: " + refSpec.problem;
+          refJobs.push_back(job);
+          continue;
+        }
+        const ojson scene = referenceScene(
+            c, refSpec, tag.empty() ? refSpec.params : refSpec.coarse, options.quick);
+        job.key = referenceKey(c, scene, options.outDir);
+        if (auto hit = cachedReference(cache, job.key)) {
+          job.solve = *hit;
+          refJobs.push_back(job);
+          continue;
+        }
+        if (const auto twin = std::find_if(refJobs.begin(), refJobs.end(),
+                                           [&](const RefJob& j) { return j.hex == job.key.hex(); });
+            twin != refJobs.end()) {  // the same scene (one E at two time steps): solved once
+          job.twin = int(twin - refJobs.begin());
+          job.hex = job.key.hex();
+          refJobs.push_back(job);
+          continue;
+        }
+        job.hex = job.key.hex();
+        const std::string name = tag.empty() ? c.id : c.id + "_" + tag;
+        const fs::path sceneFile = options.outDir / "reference" / "scenes" / (name + ".json");
+        fs::create_directories(sceneFile.parent_path());
+        writeFileAtomic(sceneFile, scene.dump(2) + "\n");
+        // The folder names the scene's hash: a --resume never reads another scene's outcome.
+        job.dir = options.outDir / "reference" / "runs" / (name + "_" + job.hex.substr(0, 8));
+        std::vector<std::string> argv = {exe};
+        for (const auto& a : pluginDirArgs(options.pluginDirs)) argv.push_back(a);
+        argv.insert(argv.end(), {"run", fs::absolute(sceneFile).string(), "--out",
+                                 fs::absolute(job.dir).string()});
+        if (!options.cacheDir.empty())
+          argv.insert(argv.end(), {"--cache-dir", fs::absolute(options.cacheDir).string()});
+        refJobOfTask[tasks.size()] = refJobs.size();
+        tasks.push_back({{"kind", "child"},
+                         {"argv", argv},
+                         {"log", fs::absolute(job.dir / "log.txt").string()},
+                         {"timeout_s", refTimeout},
+                         {"fresh_dir", fs::absolute(job.dir).string()},
+                         {"outcome", fs::absolute(job.dir / "outcome.json").string()},
+                         {"resume", options.resume}});
+        refJobs.push_back(job);
+      }
+    }
+  }
+  if (progress) progress->addTotal(int(refJobOfTask.size()));
+  const auto refLabel = [&](const RefJob& j) {
+    return "reference " + j.caseId + (j.tag.empty() ? "" : " (" + j.tag + ")");
+  };
+
   std::unique_ptr<Dispatcher> local;
   Dispatcher* dispatcher = options.dispatcher;
   if (!dispatcher) {
@@ -604,9 +875,36 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
   dispatcher->run(
       tasks,
       [&](size_t i) {
-        if (progress) progress->start(jobCase[i]->label);
+        if (!progress) return;
+        if (refJobOfTask.count(i))
+          progress->start(refLabel(refJobs[refJobOfTask.at(i)]));
+        else
+          progress->start(jobCase[i]->label);
       },
       [&](size_t i, const ojson& o) {
+        if (refJobOfTask.count(i)) {
+          RefJob& job = refJobs[refJobOfTask.at(i)];
+          ChildOutcome outcome;
+          outcome.waitStatus = o.value("wait_status", 0);
+          outcome.timedOut = o.value("timed_out", false);
+          std::string failure = o.value("spawn_error", "");
+          if (failure.empty())
+            failure = childFailure(outcome, refTimeout, lastLogLine(job.dir / "log.txt", 300));
+          if (!failure.empty()) {
+            job.solve.message = "reference failed: " + failure;
+          } else {
+            job.solve = readReferenceRun(job.dir);
+            if (job.solve.ok) {
+              ByteWriter w;
+              w.matrix(job.solve.rest);
+              w.matrix(job.solve.final);
+              w.pod(job.solve.tets);
+              cache.put("harness.stability_reference", job.key, w.bytes());
+            }
+          }
+          if (progress) progress->finish(refLabel(job), job.solve.ok ? "ok" : job.solve.message);
+          return;
+        }
         Pending& p = *jobCase[i];
         StabilityRecord r;
         const std::string spawnError = o.value("spawn_error", "");
@@ -632,7 +930,7 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     for (const auto& c : cases)
       if (byKey.count({plugin, c.id})) ordered.push_back(byKey.at({plugin, c.id}));
 
-  std::vector<std::string> referenceFailures;
+  std::vector<std::string> referenceFailures, referenceLines;
   // Verdicts: each case's reference solved once (or read from the cache), then every finished
   // run compared with it (resumed records keep theirs).
   std::map<std::string, StabilityCase> caseById;
@@ -641,35 +939,70 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     std::map<std::string, std::vector<StabilityRecord*>> toJudge;
     for (auto& r : ordered)
       if (r.verdict.empty()) toJudge[r.caseId].push_back(&r);
-    int references = 0;
-    for (const auto& [id, recs] : toJudge) {
-      const bool anyStable = std::any_of(
-          recs.begin(), recs.end(), [](const StabilityRecord* r) { return r->status == "stable"; });
-      references += caseById.at(id).reference && anyStable;
-    }
-    if (progress && references > 0) progress->addTotal(references);
-    Cache cache(options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir));
+    for (RefJob& j : refJobs)
+      if (j.twin >= 0) j.solve = refJobs[size_t(j.twin)].solve;
     for (auto& [id, recs] : toJudge) {
       const StabilityCase& c = caseById.at(id);
       const bool anyStable = std::any_of(
           recs.begin(), recs.end(), [](const StabilityRecord* r) { return r->status == "stable"; });
       CaseReference ref;
-      if (c.reference && anyStable) {
-        if (progress) progress->start("reference " + id);
-        ref = solveReference(c, loader, options, cache);
-        if (progress) progress->finish("reference " + id, ref.ok ? "ok" : ref.message);
+      if (c.reference) {
+        ReferenceSolve fine, coarse;
+        fine.message = coarse.message = "reference not run";
+        for (const RefJob& j : refJobs)
+          if (j.caseId == id) (j.tag.empty() ? fine : coarse) = j.solve;
+        ref = combineReference(refSpec, fine, coarse);
+      }
+      // The reference's own error: against beam theory where there is one, else its estimate.
+      double refError = -1;
+      std::string refSource;
+      if (ref.ok && c.beamTheory > 0) {
+        refError = std::abs(tipSag(ref.final, ref.rest) - c.beamTheory) / c.beamTheory;
+        refSource = "beam theory";
+      } else if (ref.ok && ref.estimate >= 0) {
+        refError = ref.estimate;
+        refSource = "coarser solve";
+      }
+      if (ref.ok) {
+        std::string line = id + ": " + ref.what;
+        if (c.beamTheory > 0) line += ", tip sag " + g(tipSag(ref.final, ref.rest)) + " m";
+        if (refError >= 0) line += ", error " + g(100 * refError) + "% (" + refSource + ")";
+        if (c.beamTheory > 0 && ref.estimate >= 0)
+          line += ", coarser-solve estimate " + g(100 * ref.estimate) + "%";
+        if (refError < 0 && !ref.estimateNote.empty()) line += ", " + ref.estimateNote;
+        referenceLines.push_back(line);
+      }
+      // The surface vertices in the case's fixed box (the support of the collapse test).
+      std::vector<int> held;
+      if (ref.ok) {
+        const ojson box =
+            stabilityScene(c, "", ojson::object(), options.quick)["organ"]["fixed"]["box"];
+        const Vec3 lo(box[0][0], box[0][1], box[0][2]), hi(box[1][0], box[1][1], box[1][2]);
+        for (Eigen::Index i = 0; i < ref.rest.rows(); ++i)
+          if ((ref.rest.row(i).transpose().array() >= lo.array()).all() &&
+              (ref.rest.row(i).transpose().array() <= hi.array()).all())
+            held.push_back(int(i));
       }
       for (StabilityRecord* r : recs) {
         const fs::path runDir = options.outDir / "runs" / r->model / r->caseId;
         const std::optional<MatX3> final =
             r->status == "stable" ? finalSurfaceOf(runDir) : std::nullopt;
         const MatX3* model = final ? &*final : nullptr;
+        r->referenceError = refError;
+        r->referenceSource = refSource;
+        r->reference = ref.what;
         *r = judgeStability(*r, model, ref.ok ? &ref.final : nullptr, ref.rest,
-                            options.accuracyThreshold);
+                            options.accuracyThreshold, held);
+        // The reference's own row is the reference: never accurate by comparison with itself.
+        if (r->model == refSpec.plugin &&
+            stabilityParams(loader, r->model, options.quick) == refSpec.params &&
+            (r->verdict == "accurate" || r->verdict == "inaccurate")) {
+          r->verdict = "unchecked";
+          r->reason = "the reference itself";
+          r->errorRatio = -1;
+        }
         if (ref.ok && model && model->rows() == ref.rest.rows()) {
-          const Box box = boundingBox(ref.rest);
-          r->relativeDisplacement =
-              std::sqrt((*model - ref.rest).rowwise().squaredNorm().mean()) / box.size().maxCoeff();
+          r->relativeDisplacement = relativeDisplacement(ref.rest, *model);
           if (c.beamTheory > 0) r->tipSag = tipSag(*model, ref.rest);
         }
         const fs::path caseFile = options.outDir / "cases" / r->model / (r->caseId + ".json");
@@ -677,6 +1010,13 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       }
       if (c.reference && anyStable && !ref.ok) referenceFailures.push_back(id + ": " + ref.message);
     }
+  }
+  // The scale group (issue 35): the same problem in other units must move alike.
+  const std::vector<std::string> scaleLines = markScaleDependent(ordered);
+  for (const StabilityRecord& r : ordered) {
+    const fs::path caseFile = options.outDir / "cases" / r.model / (r.caseId + ".json");
+    if (r.group == "scale" && fs::exists(caseFile))
+      writeFileAtomic(caseFile, recordJson(r).dump(2) + "\n");
   }
 
   Table t;
@@ -691,16 +1031,27 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
                   "phantom with needle triangles; scale: no gravity); ") +
           (options.quick ? "--quick case set." : "full case set.")};
   t.notes.push_back(
-      "verdict: the final surface against reference_fem's quasi-static answer on the same scene "
+      "verdict: the final surface against the reference's quasi-static answer on the same scene "
       "(" +
-      std::string(options.quick ? "1500" : "5000") +
-      " target tets, solved once per case, cached): accurate when error_ratio = rmse_all / the "
-      "reference's RMS displacement <= " +
+      (refSpec.problem.empty()
+           ? refSpec.plugin + " at its defaults: P" + std::to_string(refSpec.order) + ", " +
+                 std::to_string(refSpec.elements) + " target tets"
+           : refSpec.plugin + ", which does not load") +
+      ", solved once per case, cached; its error is reference_error: against beam theory on "
+      "the cantilevers, elsewhere estimated as its RMS difference from a coarser P" +
+      std::to_string(refSpec.order) + " solve (" +
+      (refSpec.coarse.contains("elements") ? refSpec.coarse["elements"].dump() : "?") +
+      " target tets, h x 1.4) over its RMS displacement): accurate when error_ratio = rmse_all "
+      "/ the reference's RMS displacement <= " +
       g(options.accuracyThreshold) +
       "; else inaccurate, frozen (moves < 10% of the reference: displacement_ratio < 0.1), "
-      "too_soft (> 2x) or wrong_shape. unchecked: no quasi-static answer (pull, invert, "
-      "flatten), no reference, or unsupported. A model still moving at the end is compared as "
-      "it is.");
+      "too_soft (> 2x), wrong_shape or scale_dependent (scale group: the model's "
+      "relative_displacement differs by over 10% across 1 cm, 10 cm and 1 m). collapsed: the "
+      "model went through its support or moved by more than its size while the reference moves "
+      "it by under 10% of its size. unchecked: no quasi-static answer (pull, invert, flatten), "
+      "no reference, unsupported, the reference itself, or reference not converged (its "
+      "reference_error above " +
+      g(options.accuracyThreshold) + "). A model still moving at the end is compared as it is.");
   t.notes.push_back(
       "poisson group: a model stiffer than the reference there (displacement_ratio well below 1) "
       "is locking; scale group: the same problem at 1 cm, 10 cm and 1 m (force x s^2, density / "
@@ -723,6 +1074,8 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
                {"relative_displacement", "rel. displacement"},
                {"tip_sag_m", "tip sag m"},
                {"beam_theory_m", "beam theory m"},
+               {"reference_error", "reference error"},
+               {"reference", "reference"},
                {"wall_s", "wall s"},
                {"message", "message"},
                {"scene", "scene"}};
@@ -741,22 +1094,27 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     row["scene"] = "scenes/" + r.model + "/" + r.caseId + ".json";
     if (r.message.rfind("killed by signal", 0) == 0) ++crashes;
     ++verdicts[r.model][r.verdict];
-    if (r.verdict == "inaccurate") inaccurate[r.model].push_back(r.caseId + " " + r.reason);
+    if (r.verdict == "inaccurate" || r.verdict == "collapsed")
+      inaccurate[r.model].push_back(r.caseId + " " +
+                                    (r.verdict == "collapsed" ? "collapsed" : r.reason));
     t.rows.push_back(row);
   }
   t.notes.push_back("Crashes (killed by a signal): " + std::to_string(crashes) + ".");
   for (const auto& [model, counts] : verdicts) {
     std::string line = "Verdicts of " + model + ":";
-    for (const char* v : {"accurate", "inaccurate", "diverged", "failed", "unchecked"})
+    for (const char* v : kStabilityVerdicts)
       line += std::string(" ") + v + " " + std::to_string(counts.count(v) ? counts.at(v) : 0);
     if (inaccurate.count(model)) {
-      line += " (inaccurate:";
+      line += " (inaccurate or collapsed:";
       for (const auto& what : inaccurate.at(model)) line += " " + what + ",";
       line.back() = ')';
     }
     t.notes.push_back(line + ".");
   }
   for (const auto& f : referenceFailures) t.notes.push_back("No reference for " + f + ".");
+  for (const auto& f : referenceLines) t.notes.push_back("Reference of " + f + ".");
+  for (const auto& f : scaleLines)
+    t.notes.push_back("scale_dependent (relative displacement over 10% apart) " + f + ".");
   writeTable(t, options.outDir);
   return ordered;
 }

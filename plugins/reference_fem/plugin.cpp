@@ -318,12 +318,7 @@ DEFORM_PLUGIN(registry) {
                        Capability::ContactReaction, Capability::RollerSupport};
   info.params = reffem::referenceFemParams();
   info.create = [] { return std::make_unique<reffem::ReferenceFemModel>(); };
-  // What the harness's sweep, bench and stability run it with (registry.h).
-  // The stability sweep keeps the linear tets it was calibrated with (its cases judge stability,
-  // and P2 at these counts would cost several times as much).
-  info.presets["stability"] = {{{"elements", 5000LL}, {"element_order", 1LL}}};
-  info.presets["stability_quick"] = {{{"elements", 1500LL}, {"element_order", 1LL}}};
-  info.presets["stability_reference"] = {{{"elements", 5000LL}, {"element_order", 1LL}}};
-  info.presets["stability_reference_quick"] = {{{"elements", 1500LL}, {"element_order", 1LL}}};
+  // No presets: every command (stability, tables, calibrate, sweep) uses the reference at its
+  // defaults, quadratic tets (issue 33), and `stability` judges against exactly those.
   registry.add(std::move(info));
 }

@@ -789,6 +789,19 @@ TEST_F(TempDir, StabilityRecordsACrashAndGoesOnAndResumeSkipsFinishedCases) {
   EXPECT_EQ(fs::last_write_time(kept), keptTime);
   EXPECT_FALSE(fs::exists(o.outDir / "runs" / "toy")) << "toy cases were not rerun";
   EXPECT_TRUE(fs::exists(removed));
+
+  // Issue 35: --retry-failed runs the failed cases again and keeps the others.
+  o.retryFailed = true;
+  for (const auto& r : runStability(loader, o, nullptr))
+    EXPECT_EQ(r.resumed, r.model == "toy") << r.model << " " << r.caseId << " " << r.status;
+  o.retryFailed = false;
+  // A case keyed by its scene's hash: the full set's case of the same id (another resolution and
+  // duration) is not the quick one, so nothing is reused.
+  EXPECT_FALSE(readJson(kept).value("scene_sha256", std::string()).empty());
+  o.quick = false;
+  for (const auto& r : runStability(loader, o, nullptr))
+    EXPECT_FALSE(r.resumed) << r.model << " " << r.caseId;
+  EXPECT_TRUE(fs::exists(o.outDir / "runs" / "toy" / "pull")) << "the toy's pull ran again";
 }
 
 TEST(Stability, ClassifiesTimeoutsSignalsAndExitCodes) {

@@ -565,6 +565,34 @@ TEST(Runner, ErrorsAgainstAnInvalidReferenceAreMarked) {
   EXPECT_TRUE(runJson(runs[0]).at("reference_valid").get<bool>());
 }
 
+// Issue 35: a model that moved by more than its size (or through its support) where the reference
+// barely moves the organ collapsed: the run is invalid, not "ok" with a large error.
+TEST(Runner, ACollapseWhereTheReferenceHoldsStillIsInvalid) {
+  const Fixture f;
+  std::vector<RunRecord> runs;
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.push_back(runWith(f, [](RigidTestModel&) {}));
+  runs.back().isReference = true;
+  runs.back().finalSurface = f.organ.surface.V;  // the reference: at rest
+  runs[0].finalSurface = f.organ.surface.V;
+  runs[0].finalSurface.col(2).array() -= 0.3;  // three times the 0.1 m tet's size, down
+  runs[1].finalSurface = f.organ.surface.V;
+  runs[1].finalSurface.col(2).array() -= 0.005;
+  ASSERT_TRUE(runs[0].valid && runs[1].valid);
+  computeRunErrors(f.scene, f.organ, runs);
+  EXPECT_FALSE(runs[0].valid);
+  EXPECT_EQ(runs[0].invalidReason.rfind("collapsed: moved by more than its size", 0), 0u)
+      << runs[0].invalidReason;
+  EXPECT_TRUE(runs[1].valid) << runs[1].invalidReason;
+  // Where the reference moves the organ as far, the same run is valid.
+  runs[2].finalSurface = runs[0].finalSurface;
+  runs[0].valid = true;
+  runs[0].invalidReason.clear();
+  computeRunErrors(f.scene, f.organ, runs);
+  EXPECT_TRUE(runs[0].valid) << runs[0].invalidReason;
+}
+
 TEST(Metrics, GraspSceneRmseKLeavesOutTheGraspedVertices) {
   // The grasp closes at the tet's apex (vertex 3, within its 5 mm radius): rmse_k is taken over
   // the vertices nearest the grasp that it does not hold (0, then 1), and results.json says so.

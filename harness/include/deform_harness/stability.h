@@ -9,16 +9,25 @@
 //   failed       the model threw, the child died from a signal, or hit the time limit
 //   unsupported  the case needs a capability the model lacks
 // and a verdict beside it: every case with a quasi-static answer (all but pull, invert and
-// flatten) gets a reference (reference_fem on the same scene, solved once per case in this process
-// and kept in the cache), and the model's final surface is compared with it:
+// flatten) gets a reference (reference_fem at its defaults, quadratic tets, on the same scene,
+// solved once per case as a child process with 5x the case's time limit and kept in the cache,
+// with a coarser quadratic solve for its error estimate), and the model's final surface is
+// compared with it:
 //   accurate     error_ratio = rmse_all / (the reference's RMS displacement) <= the threshold
 //                (20% by default)
 //   inaccurate   above it, with a reason: frozen (the model's RMS displacement is below 10% of the
-//                reference's), too_soft (above twice it) or wrong_shape
+//                reference's), too_soft (above twice it) or wrong_shape; scale_dependent (scale
+//                group: the model's relative displacements at 1 cm, 10 cm and 1 m differ by over
+//                10%)
+//   collapsed    the model moved through its support or by more than its size while the
+//                reference moves it by under 10% of its size (collapseProblem)
 //   diverged, failed   as the status
-//   unchecked    no reference (none for the case, it failed, or it does not move), or unsupported
-// Each finished case is written atomically to DIR/cases/<model>/<case>.json, so --resume skips
-// it. Output: DIR/stability.{md,csv,json} and DIR/stability_<model>.png (plot_stability.py).
+//   unchecked    no reference (none for the case, it failed, or it does not move), unsupported,
+//                the reference itself, or "reference not converged" (the reference's error, from
+//                beam theory where there is one, else its estimate, is above the threshold)
+// Each finished case is written atomically to DIR/cases/<model>/<case>.json with the hash of its
+// scenes, so --resume skips it while the case is unchanged (--retry-failed reruns failed ones).
+// Output: DIR/stability.{md,csv,json} and DIR/stability_<model>.png (plot_stability.py).
 #pragma once
 
 #include <deform/mesh.h>
@@ -64,6 +73,7 @@ std::vector<StabilityCase> stabilityCases(bool quick);
 struct StabilityOptions {
   bool quick = false;
   bool resume = false;
+  bool retryFailed = false;  ///< with resume: run the cases that failed again
   std::filesystem::path outDir;
   std::vector<std::string> models;      ///< plugin names; empty: every plugin found
   std::vector<std::string> cases;       ///< case ids to run; empty: all of the set
@@ -77,6 +87,10 @@ struct StabilityOptions {
   double accuracyThreshold = 0.2;  ///< accurate: error_ratio at most this
 };
 
+/// Every verdict, in the order the summaries count them.
+inline constexpr const char* kStabilityVerdicts[] = {"accurate", "inaccurate", "collapsed",
+                                                     "diverged", "failed",     "unchecked"};
+
 struct StabilityRecord {
   std::string model, caseId, group;
   std::string status;  ///< stable | diverged | failed | unsupported
@@ -84,20 +98,50 @@ struct StabilityRecord {
   std::string message;
   double wallS = 0;
   bool resumed = false;  ///< read back from a previous run
-  /// accurate | inaccurate | diverged | failed | unchecked ("" until judged)
+  /// accurate | inaccurate | collapsed | diverged | failed | unchecked ("" until judged)
   std::string verdict;
-  std::string reason;                ///< inaccurate: frozen | too_soft | wrong_shape
+  /// inaccurate: frozen | too_soft | wrong_shape | scale_dependent; collapsed: what moved;
+  /// unchecked: why ("reference not converged", "the reference itself", ...)
+  std::string reason;
   double errorRatio = -1;            ///< rmse_all / reference RMS displacement; < 0: none
   double displacementRatio = -1;     ///< model / reference RMS displacement; < 0: none
   double relativeDisplacement = -1;  ///< model RMS displacement / organ size; < 0: none
   double tipSag = -1;                ///< m, cantilever: mean downward displacement of the tip face
+  /// The reference's own relative error: against beam theory (cantilever), else the estimate
+  /// from a coarser solve; < 0: none.
+  double referenceError = -1;
+  std::string referenceSource;  ///< "beam theory" | "coarser solve" ("" when none)
+  std::string reference;        ///< which reference: "reference_fem P2, 1000 target tets (N tets)"
+  std::string sceneHash;        ///< sha256 of the case's scenes (--resume reuses a matching one)
 };
 
+/// Why a model's final surface `moved` is a collapse, "" when it is none: more than 10% of the
+/// free surface vertices went through the support (beyond the plane, normal to the direction
+/// from the held vertices' centre to the organ's, past the held vertex farthest back, by over 5%
+/// of the organ's size), or the RMS displacement exceeds the organ's size (its bounding box's
+/// largest side). held: the surface vertices in the fixed region (empty: the size test alone).
+/// The caller judges it only where the reference moves the organ by under 10% of its size.
+std::string collapseProblem(const MatX3& rest, const MatX3& moved, const std::vector<int>& held);
+
+/// Relative displacement: RMS displacement from rest over the largest side of rest's bounding
+/// box; -1 when the sizes differ or rest is empty.
+double relativeDisplacement(const MatX3& rest, const MatX3& moved);
+
 /// The verdict of one finished case. model: its final surface (nullptr if none); reference: the
-/// reference's final surface at the same instant (nullptr: no reference); rest: the rest surface.
-/// Fills verdict, reason, errorRatio and displacementRatio of a copy of r.
+/// reference's final surface at the same instant (nullptr: no reference); rest: the rest surface;
+/// held: the surface vertices in the fixed region (collapseProblem); r.referenceError (if >= 0)
+/// above the threshold makes the verdict "unchecked", reason "reference not converged". Fills
+/// verdict, reason, errorRatio and displacementRatio of a copy of r.
 StabilityRecord judgeStability(StabilityRecord r, const MatX3* model, const MatX3* reference,
-                               const MatX3& rest, double threshold = 0.2);
+                               const MatX3& rest, double threshold = 0.2,
+                               const std::vector<int>& held = {});
+
+/// The scale group's check (in place): for each model whose relative displacements at the three
+/// scale cases are all known and whose largest exceeds its smallest by over 10%, every scale row
+/// judged accurate, inaccurate or unchecked becomes inaccurate with reason scale_dependent (the
+/// model's own numbers: no reference needed). Returns one line
+/// per such model ("pbd: 0.17 (scale_0.01m) 0.23 (scale_0.1m) 1.8 (scale_1m)").
+std::vector<std::string> markScaleDependent(std::vector<StabilityRecord>& records);
 
 /// Runs the sweep; writes every output file. Returns every record (resumed ones included).
 std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityOptions& options,

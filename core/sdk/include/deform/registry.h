@@ -89,8 +89,8 @@ struct ModelInfo {
   ///   "bench"                 deformbench bench: the ~2.2k-vertex liver grasp and the cube poke
   ///   "bench_8k"              deformbench bench: the 8k-vertex liver of the default scene
   ///   "stability", "stability_quick"  deformbench stability (without and with --quick)
-  ///   "stability_reference", "stability_reference_quick"  the model is the stability sweep's
-  ///                           reference, with these parameters
+  /// (The stability sweep's reference is reference_fem at its defaults, quadratic tets: no preset
+  /// names or changes it.)
   using ParamSet = std::map<std::string, ParamValue>;
   std::map<std::string, std::vector<ParamSet>> presets;
   /// Optional measures that need more than a model run (a table column from the method's own
