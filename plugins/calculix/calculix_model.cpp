@@ -56,6 +56,10 @@ class CalculixModel final : public Model {
     m_fixed = fixedNodeIndices(m_model.nodes, organ.fixed, organ.surface);
     m_model.fixedDofs.assign(size_t(m_model.nodes.rows()), {false, false, false});
     for (int n : m_fixed) m_model.fixedDofs[size_t(n)] = {true, true, true};
+    // Roller boxes hold single axes (frictionless faces, plane strain); organTets never clips them.
+    for (const auto& [node, axes] : rollerNodeAxes(m_model.nodes, organ.fixed))
+      for (int k = 0; k < 3; ++k)
+        if (axes & (1 << k)) m_model.fixedDofs[size_t(node)][size_t(k)] = true;
     m_modelDeck = ccxModelDeck(m_model);
     m_restSurface = organ.surface.V;
     m_pinnedOutside = 0;
@@ -123,7 +127,7 @@ class CalculixModel final : public Model {
     return {{"nodes", (long long)m_model.nodes.rows()},
             {"elements", m_numElements},
             {"fixed_nodes", (long long)m_fixed.size()},
-            {"surface_vertices_not_nodes", m_pinnedOutside}};
+            {"isolated_clamped_nodes", m_pinnedOutside}};
   }
   PhaseTimes phaseTimes() const override { return m_phase; }
   NumericCounters numericCounters() const override {

@@ -262,6 +262,27 @@ class ReferenceFemModel final : public Model {
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
  private:
+  /// Every surface vertex becomes a node: the vertices the conforming clip left without one
+  /// (-1 in surfaceNode: inside a fixed box, or snapped onto its face, outside the meshed solid)
+  /// are appended to `mesh` as nodes of no tet. Returns them; the caller pins them (they stay at
+  /// rest with the clamped material around them).
+  static std::vector<int> addClampedSurfaceNodes(const Organ& organ, std::vector<int>& surfaceNode,
+                                                 TetMesh& mesh) {
+    std::vector<int> added;
+    for (int n : surfaceNode) added.resize(added.size() + (n < 0));
+    if (added.empty()) return added;
+    Eigen::Index next = mesh.V.rows();
+    mesh.V.conservativeResize(next + Eigen::Index(added.size()), 3);
+    added.clear();
+    for (size_t v = 0; v < surfaceNode.size(); ++v) {
+      if (surfaceNode[v] >= 0) continue;
+      mesh.V.row(next) = organ.surface.V.row(Eigen::Index(v));
+      added.push_back(int(next));
+      surfaceNode[v] = int(next++);
+    }
+    return added;
+  }
+
   void updatePositions() {
     const int n = m_system->numNodes();
     m_nodes = Eigen::Map<const MatX3>(m_x.data(), n, 3);
