@@ -124,9 +124,11 @@ class CalculixModel final : public Model {
   }
 
   Counts counts() const override {
-    return {{"nodes", (long long)m_model.nodes.rows()},
+    // Counted as reference_fem counts them: a surface vertex that the conforming clip removed is
+    // an isolated clamped node (no element, at rest), among the nodes and the fixed nodes.
+    return {{"nodes", (long long)m_model.nodes.rows() + m_pinnedOutside},
             {"elements", m_numElements},
-            {"fixed_nodes", (long long)m_fixed.size()},
+            {"fixed_nodes", (long long)m_fixed.size() + m_pinnedOutside},
             {"isolated_clamped_nodes", m_pinnedOutside}};
   }
   PhaseTimes phaseTimes() const override { return m_phase; }

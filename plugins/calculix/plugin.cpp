@@ -51,9 +51,8 @@ DEFORM_PLUGIN(registry) {
       "CalculiX: G. Dhondt, The Finite Element Method for Three-Dimensional Thermomechanical "
       "Applications, Wiley 2004, doi:10.1002/0470021217; www.calculix.de";
   info.version = "1.0";
-  info.capabilities = {Capability::Grasp,    Capability::PointForce,
-                       Capability::Gravity,  Capability::NeedsPrecompute,
-                       Capability::TetInput, Capability::QuasiStatic,
+  info.capabilities = {Capability::Grasp,           Capability::PointForce, Capability::Gravity,
+                       Capability::NeedsPrecompute, Capability::TetInput,   Capability::QuasiStatic,
                        Capability::RollerSupport};
   info.params = calculixParams();
   info.create = [] { return deform::calculix::makeCalculixModel(); };

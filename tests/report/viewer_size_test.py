@@ -108,7 +108,8 @@ def validity_marks():
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "results.json")
         with open(path, "w") as f:
-            json.dump({"scene": {"name": "marks"}, "runs": [failed, against]}, f)
+            json.dump({"format": "deformbench-results/1", "scene": {"name": "marks"},
+                       "runs": [failed, against]}, f)
         _, html = report.results_table(path)
     if "against an invalid reference" not in html:
         fails.append("report: the run table does not say 'against an invalid reference'")

@@ -41,6 +41,7 @@ void checkLoadsReachOrgan(const Scene& scene, const Organ& organ) {
   const MeshDistance distance(organ.surface);
   for (size_t i = 0; i < scene.loads.size(); ++i) {
     const LoadSpec& load = scene.loads[i];
+    if (load.type == LoadType::Traction) continue;  // a region, no point (parseScene checks it)
     // The harness spreads the load over the patch around the surface vertex nearest `at`: a
     // point farther than the patch's radius from the surface (outside or deep inside) would be
     // moved there in silence.
