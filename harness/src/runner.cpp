@@ -261,7 +261,9 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   rec.dt = scene.dt;
   rec.status = RunStatus::Ok;
 
-  rec.fixedRegion = !organ.fixed.empty();
+  // The support rules judge clamps (boxes, listed vertices); roller boxes hold single axes and
+  // are not counted in fixed_nodes.
+  rec.fixedRegion = !organ.fixed.boxes.empty() || !organ.fixed.surfaceVertices.empty();
   rec.fixedNodes = fixedNodeCount(model, organ);  // nodes() are at rest after init / reset
   const Box box = boundingBox(organ.surface.V);
   const Real halfSide = 0.5 * tol::kDivergenceBoxFactor * std::max(box.size().maxCoeff(), 1e-9);

@@ -67,7 +67,7 @@ struct RunRecord {
   std::map<std::string, double> phaseMs;  ///< median per phase over the steps after warm-up
   NumericCounters numeric;
   int fixedNodes = 0;  ///< model nodes pinned by the fixed region (fixed_nodes in results.json)
-  bool fixedRegion = false;  ///< the organ has a fixed region (set by simulate())
+  bool fixedRegion = false;  ///< the organ is clamped (fixed boxes or vertices; set by simulate())
   std::vector<int> emptyGrasps;
   /// RMS distance (m) of the grasped surface points to their targets over every step with a
   /// grasp in force (at the end of each step); -1 when no grasp was in force.
