@@ -100,13 +100,7 @@ bool writeAll(int fd, const char* p, size_t n) {
 
 RunRecord failedRecord(const ModelInfo& info, const ParamValues& params, const Scene& scene,
                        const RunOptions& options, const std::string& why) {
-  RunRecord rec;
-  rec.model = info.name;
-  rec.plugin = info.name;
-  rec.label = info.name;
-  rec.params = paramsToJson(params);
-  rec.plannedSteps =
-      options.maxSteps >= 0 ? std::min(options.maxSteps, scene.numSteps()) : scene.numSteps();
+  RunRecord rec = newRunRecord(info, params, scene, options);
   rec.status = RunStatus::Failed;
   rec.message = why;
   assessValidity(scene, rec);

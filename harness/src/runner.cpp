@@ -562,13 +562,7 @@ namespace {
 /// a surface of the wrong size) skip simulate() and with it assessValidity().
 RunRecord runModelUnguarded(const ModelInfo& info, const ParamValues& params, const Scene& scene,
                             const Organ& organ, Cache& cache, const RunOptions& options) {
-  RunRecord rec;
-  rec.model = info.name;
-  rec.plugin = info.name;
-  rec.label = info.name;
-  rec.params = paramsToJson(params);
-  rec.plannedSteps =
-      options.maxSteps >= 0 ? std::min(options.maxSteps, scene.numSteps()) : scene.numSteps();
+  RunRecord rec = newRunRecord(info, params, scene, options);
 
   const std::string why = unsupportedReason(info, scene);
   if (!why.empty()) {
@@ -631,6 +625,18 @@ RunRecord runModelUnguarded(const ModelInfo& info, const ParamValues& params, co
 }
 
 }  // namespace
+
+RunRecord newRunRecord(const ModelInfo& info, const ParamValues& params, const Scene& scene,
+                       const RunOptions& options) {
+  RunRecord rec;
+  rec.model = info.name;
+  rec.plugin = info.name;
+  rec.label = info.name;
+  rec.params = paramsToJson(params);
+  rec.plannedSteps =
+      options.maxSteps >= 0 ? std::min(options.maxSteps, scene.numSteps()) : scene.numSteps();
+  return rec;
+}
 
 RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene& scene,
                    const Organ& organ, Cache& cache, const RunOptions& options) {

@@ -165,6 +165,10 @@ std::vector<int> comparedSteps(const Scene& scene, int lastStep = -1);
 /// with dynamics without reaction_force, a load without point_force.
 std::string unsupportedReason(const ModelInfo& info, const Scene& scene);
 
+/// A record of the model's run before it starts: names, resolved params, planned steps.
+RunRecord newRunRecord(const ModelInfo& info, const ParamValues& params, const Scene& scene,
+                       const RunOptions& options);
+
 /// Runs one model from creation to the end of the scene. Fills every field but the output files
 /// and the error. Model exceptions become status Failed; NaN/Inf or a surface leaving the
 /// divergence box becomes Diverged (the run stops at that step).
