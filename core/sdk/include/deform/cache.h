@@ -96,7 +96,9 @@ class ByteReader {
       throw std::runtime_error("cache payload: column count mismatch");
     need(sizeof(typename Derived::Scalar) * size_t(r) * size_t(c));
     m.resize(r, c);
-    std::memcpy(m.data(), m_bytes.data() + m_pos, sizeof(typename Derived::Scalar) * m.size());
+    // An empty matrix has no storage (data() is null), which memcpy must not be handed.
+    if (m.size() > 0)
+      std::memcpy(m.data(), m_bytes.data() + m_pos, sizeof(typename Derived::Scalar) * m.size());
     m_pos += sizeof(typename Derived::Scalar) * m.size();
   }
   std::string string() {
