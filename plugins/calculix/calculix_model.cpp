@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <memory>
 
 namespace deform::calculix {
 
@@ -41,9 +42,11 @@ class CalculixModel final : public Model {
     m_surfaceNode = std::move(tets.surfaceNode);
     m_numElements = tets.mesh.numTets();
     if (p.integer("element_order") == 2) {
-      QuadraticTetNodes q = addMidsideNodes(tets.mesh);
-      m_model.nodes = std::move(q.V);
-      m_model.elements = q.elements.cast<int>();
+      auto q = std::make_shared<QuadraticTetNodes>(addMidsideNodes(tets.mesh));
+      m_surfaceLoad = std::make_unique<QuadraticSurfaceLoad>(
+          tets.mesh, [q](int a, int b) { return q->edgeNode(a, b); });
+      m_model.nodes = q->V;
+      m_model.elements = q->elements.cast<int>();
     } else {
       m_model.nodes = tets.mesh.V;
       m_model.elements = tets.mesh.T;
@@ -87,11 +90,16 @@ class CalculixModel final : public Model {
           held[g.nodes[k]] = g.targets.row(Eigen::Index(k)).transpose() -
                              m_model.nodes.row(g.nodes[k]).transpose();
     loads.displacements.assign(held.begin(), held.end());
-    for (const PointLoad& l : in.loads)
+    for (const PointLoad& l : in.loads) {
+      std::vector<std::pair<int, Vec3>> shares;
       for (size_t k = 0; k < l.vertices.size(); ++k) {
         const int node = m_surfaceNode[size_t(l.vertices[k])];
-        if (node >= 0) loads.forces.emplace_back(node, l.weights[k] * l.force);
+        if (node >= 0) shares.emplace_back(node, l.weights[k] * l.force);
       }
+      // C3D10: onto the quadratic faces, as reference_fem does (deform/organ_tets.h).
+      if (m_surfaceLoad) shares = m_surfaceLoad->spread(shares);
+      loads.forces.insert(loads.forces.end(), shares.begin(), shares.end());
+    }
 
     const CcxRun run =
         runCcx(m_ccx, m_modelDeck + ccxStepDeck(m_model, loads, m_increments), m_timeout);
@@ -162,6 +170,7 @@ class CalculixModel final : public Model {
   CcxModel m_model;
   std::string m_modelDeck;
   long long m_numElements = 0;
+  std::unique_ptr<QuadraticSurfaceLoad> m_surfaceLoad;  ///< C3D10: loads onto the quadratic faces
   std::vector<int> m_fixed;
   std::vector<int> m_surfaceNode;  ///< surface vertex -> node; -1: inside a fixed box, no node
   MatX3 m_restSurface;

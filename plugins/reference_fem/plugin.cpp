@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <map>
+#include <memory>
 
 namespace deform::reffem {
 
@@ -104,6 +105,12 @@ class ReferenceFemModel final : public Model {
     m_contactF.conservativeResize(rows, 3);
     m_system =
         std::make_unique<FemSystem>(std::move(mesh), organ.material, model, order, volumetric);
+    m_surfaceLoad.reset();
+    if (m_system->order() == ElementOrder::Quadratic) {
+      const FemSystem* system = m_system.get();
+      m_surfaceLoad = std::make_unique<QuadraticSurfaceLoad>(
+          system->rest(), [system](int a, int b) { return system->edgeNode(a, b); });
+    }
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
     m_fixed.insert(m_fixed.end(), isolated.begin(), isolated.end());
     std::sort(m_fixed.begin(), m_fixed.end());
@@ -167,12 +174,16 @@ class ReferenceFemModel final : public Model {
         lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
         lc.targets.bottomRows(1) = g.targets.row(Eigen::Index(k));
       }
-    for (const PointLoad& l : in.loads)
+    for (const PointLoad& l : in.loads) {
+      std::vector<std::pair<int, Vec3>> shares;
       for (size_t k = 0; k < l.vertices.size(); ++k) {
         // A load share on an isolated clamped node goes to the support (it is dropped).
         const int node = m_surfaceNode[size_t(l.vertices[k])];
-        if (node < m_meshedNodes) lc.nodeForces.emplace_back(node, l.weights[k] * l.force);
+        if (node < m_meshedNodes) shares.emplace_back(node, l.weights[k] * l.force);
       }
+      if (m_surfaceLoad) shares = m_surfaceLoad->spread(shares);  // P2: onto the quadratic faces
+      lc.nodeForces.insert(lc.nodeForces.end(), shares.begin(), shares.end());
+    }
 
     SolveReport rep;
     if (m_solveKind == SolveKind::QuasiStatic) {
@@ -304,9 +315,10 @@ class ReferenceFemModel final : public Model {
   std::vector<int> m_surfaceNode;  ///< surface vertex -> node
   MatX3 m_restSurface;             ///< reported for the pinned vertices
   std::vector<char> m_isFixed;     ///< per node: pinned by the fixed region
-  int m_meshedNodes = 0;           ///< corner nodes of the tets; isolated clamped ones follow
-  long long m_isolatedNodes = 0;   ///< surface vertices inside a clipped-off fixed box
-  MatX3i m_contactF;               ///< organ triangles as node rows (contact proxy)
+  std::unique_ptr<QuadraticSurfaceLoad> m_surfaceLoad;  ///< P2: loads onto the quadratic faces
+  int m_meshedNodes = 0;          ///< corner nodes of the tets; isolated clamped ones follow
+  long long m_isolatedNodes = 0;  ///< surface vertices inside a clipped-off fixed box
+  MatX3i m_contactF;              ///< organ triangles as node rows (contact proxy)
   VecX m_x, m_v, m_fPrev;
   MatX3 m_nodes, m_surface;
   std::vector<Vec3> m_graspForces;

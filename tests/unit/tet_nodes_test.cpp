@@ -1,8 +1,11 @@
 // Surface vertex -> tet node map and tet mesh measures (core/include/deform/tet_nodes.h): the
 // values every tet-based model (pbd, massspring, bullet_deformable) derives from a tet file.
 #include <deform/error.h>
+#include <deform/organ_tets.h>
 #include <deform/tet_nodes.h>
 #include <gtest/gtest.h>
+
+#include <map>
 
 namespace deform {
 namespace {
@@ -110,6 +113,45 @@ TEST(SurfaceVertexNodes, PrefixIdentityPermutedNodesAndAVertexOffTheMesh) {
     EXPECT_NE(w.find("cube.msh"), std::string::npos) << w;
     EXPECT_NE(w.find("vertex 1"), std::string::npos) << w;
   }
+}
+
+// A uniform traction on the cube's top face, lumped the linear way (a third of each triangle's
+// force on each corner), comes back as the quadratic faces' consistent load: nothing on the
+// corners, a third of each triangle's force on each of its midside nodes, the total kept. A
+// share on a node with no loaded triangle stays where it is.
+TEST(QuadraticSurfaceLoad, UniformTractionGoesToTheMidsideNodes) {
+  const TetMesh cube = fiveTetCube(1.0);
+  const QuadraticTetNodes q = addMidsideNodes(cube);
+  const QuadraticSurfaceLoad load(cube, [&q](int a, int b) { return q.edgeNode(a, b); });
+  const Vec3 t(0.3, 0, -1);  // Pa on the 1 m^2 top face (nodes 4..7): its two triangles
+  std::vector<std::pair<int, Vec3>> lumped;
+  const SurfaceMesh boundary = tetBoundary(cube);
+  for (int f = 0; f < boundary.numFaces(); ++f) {
+    bool top = true;
+    for (int k = 0; k < 3; ++k) top = top && boundary.F(f, k) >= 4;
+    if (!top) continue;
+    for (int k = 0; k < 3; ++k) lumped.emplace_back(boundary.F(f, k), t * 0.5 / 3);
+  }
+  ASSERT_EQ(lumped.size(), 6u);
+  lumped.emplace_back(0, Vec3(0, 0, 2));  // a bottom corner alone: no loaded triangle
+  std::map<int, Vec3> spread;
+  Vec3 total = Vec3::Zero();
+  for (const auto& [node, f] : load.spread(lumped)) {
+    spread.try_emplace(node, Vec3::Zero()).first->second += f;
+    total += f;
+  }
+  EXPECT_NEAR((total - (t + Vec3(0, 0, 2))).norm(), 0, 1e-12);
+  EXPECT_NEAR((spread[0] - Vec3(0, 0, 2)).norm(), 0, 1e-12);
+  for (int c = 4; c < 8; ++c) EXPECT_NEAR(spread[c].norm(), 0, 1e-12) << "corner " << c;
+  // The top face's diagonal is shared by both triangles; its four sides by one each.
+  int sides = 0, diagonals = 0;
+  for (const auto& [node, f] : spread) {
+    if (node < 8) continue;
+    if ((f - t / 6).norm() < 1e-12) ++sides;
+    if ((f - t / 3).norm() < 1e-12) ++diagonals;
+  }
+  EXPECT_EQ(sides, 4);
+  EXPECT_EQ(diagonals, 1);
 }
 
 }  // namespace

@@ -5,6 +5,9 @@
 #include <deform/tet_nodes.h>
 
 #include <algorithm>
+#include <array>
+#include <map>
+#include <set>
 
 namespace deform {
 
@@ -134,6 +137,78 @@ int QuadraticTetNodes::edgeNode(int a, int b) const {
   const auto it = std::lower_bound(edges.begin(), edges.end(), key);
   if (it == edges.end() || *it != key) return -1;
   return numCorners + int(it - edges.begin());
+}
+
+QuadraticSurfaceLoad::QuadraticSurfaceLoad(const TetMesh& corners,
+                                           std::function<int(int, int)> edgeNode)
+    : m_nodes(corners.V), m_edgeNode(std::move(edgeNode)) {
+  m_faces = tetBoundary(corners).F;
+  m_nodeFaces.resize(size_t(m_nodes.rows()));
+  for (int f = 0; f < int(m_faces.rows()); ++f)
+    for (int k = 0; k < 3; ++k) m_nodeFaces[size_t(m_faces(f, k))].push_back(f);
+}
+
+std::vector<std::pair<int, Vec3>> QuadraticSurfaceLoad::spread(
+    const std::vector<std::pair<int, Vec3>>& cornerForces) const {
+  std::map<int, Vec3> force;
+  for (const auto& [node, f] : cornerForces) {
+    auto it = force.try_emplace(node, Vec3::Zero()).first;
+    it->second += f;
+  }
+  // The loaded triangles: boundary faces whose three corners all carry a share.
+  std::set<int> faces;
+  for (const auto& [node, f] : force) {
+    if (node < 0 || node >= int(m_nodeFaces.size())) continue;
+    for (int t : m_nodeFaces[size_t(node)]) {
+      bool loaded = true;
+      for (int k = 0; k < 3; ++k) loaded = loaded && force.count(m_faces(t, k));
+      if (loaded) faces.insert(t);
+    }
+  }
+  std::map<int, Real> lumped;  // each node's third of its loaded triangles' areas
+  std::vector<Real> area;
+  for (int t : faces) {
+    const Vec3 X0 = m_nodes.row(m_faces(t, 0)), X1 = m_nodes.row(m_faces(t, 1)),
+               X2 = m_nodes.row(m_faces(t, 2));
+    area.push_back(0.5 * (X1 - X0).cross(X2 - X0).norm());
+    for (int k = 0; k < 3; ++k) lumped[m_faces(t, k)] += area.back() / 3;
+  }
+  std::map<int, Vec3> out;
+  auto add = [&](int node, const Vec3& f) {
+    auto it = out.try_emplace(node, Vec3::Zero()).first;
+    it->second += f;
+  };
+  for (const auto& [node, f] : force) {
+    const auto it = lumped.find(node);
+    if (it == lumped.end() || !(it->second > 0)) add(node, f);
+  }
+  // With the traction t linear on a triangle of area A, the integrals of t against the quadratic
+  // shape functions are A (t_i / 30 - (t_j + t_k) / 60) at corner i and
+  // A (2 (t_i + t_j) + t_k) / 15 at the midside node of edge ij.
+  size_t a = 0;
+  for (int t : faces) {
+    const Real A = area[a++];
+    if (!(A > 0)) continue;
+    std::array<int, 3> n{};
+    std::array<Vec3, 3> tr;
+    for (int k = 0; k < 3; ++k) {
+      n[size_t(k)] = m_faces(t, k);
+      tr[size_t(k)] = force.at(n[size_t(k)]) / lumped.at(n[size_t(k)]);
+    }
+    for (int i = 0; i < 3; ++i) {
+      const int j = (i + 1) % 3, k = (i + 2) % 3;
+      add(n[size_t(i)], A * (tr[size_t(i)] / 30 - (tr[size_t(j)] + tr[size_t(k)]) / 60));
+      const int mid = m_edgeNode(n[size_t(i)], n[size_t(j)]);
+      const Vec3 fm = A * (2 * (tr[size_t(i)] + tr[size_t(j)]) + tr[size_t(k)]) / 15;
+      if (mid >= 0) {
+        add(mid, fm);
+      } else {  // no midside node (not a quadratic edge): half to each end keeps the total
+        add(n[size_t(i)], 0.5 * fm);
+        add(n[size_t(j)], 0.5 * fm);
+      }
+    }
+  }
+  return {out.begin(), out.end()};
 }
 
 }  // namespace deform
