@@ -5,6 +5,7 @@
 #include <deform/error.h>
 #include <deform/organ_tets.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -41,8 +42,9 @@ class CalculixModel final : public Model {
     OrganTets tets = organTets(organ, meshOptions, setup.cache);
     m_surfaceNode = std::move(tets.surfaceNode);
     m_numElements = tets.mesh.numTets();
+    std::shared_ptr<QuadraticTetNodes> q;
     if (p.integer("element_order") == 2) {
-      auto q = std::make_shared<QuadraticTetNodes>(addMidsideNodes(tets.mesh));
+      q = std::make_shared<QuadraticTetNodes>(addMidsideNodes(tets.mesh));
       m_surfaceLoad = std::make_unique<QuadraticSurfaceLoad>(
           tets.mesh, [q](int a, int b) { return q->edgeNode(a, b); });
       m_model.nodes = q->V;
@@ -50,6 +52,22 @@ class CalculixModel final : public Model {
     } else {
       m_model.nodes = tets.mesh.V;
       m_model.elements = tets.mesh.T;
+    }
+    {  // the nodes a grasp holds between its vertices, as reference_fem (deform/organ_tets.h)
+      const SurfaceMesh boundary = tetBoundary(tets.mesh);
+      std::vector<int> boundaryNodes;
+      for (Eigen::Index f = 0; f < boundary.F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+          boundaryNodes.push_back(boundary.F(f, k));
+          if (q) boundaryNodes.push_back(q->edgeNode(boundary.F(f, k), boundary.F(f, (k + 1) % 3)));
+        }
+      std::sort(boundaryNodes.begin(), boundaryNodes.end());
+      boundaryNodes.erase(std::unique(boundaryNodes.begin(), boundaryNodes.end()),
+                          boundaryNodes.end());
+      if (!boundaryNodes.empty() && boundaryNodes.front() < 0)
+        boundaryNodes.erase(boundaryNodes.begin());
+      m_graspPatch = std::make_unique<GraspedPatchNodes>(organ.surface, m_surfaceNode,
+                                                         m_model.nodes, boundaryNodes);
     }
     m_model.material = p.choiceAs<CcxMaterial>(
         "material", {{"linear", CcxMaterial::Linear}, {"neo_hookean", CcxMaterial::NeoHookean}});
@@ -77,13 +95,24 @@ class CalculixModel final : public Model {
     // Grasped surface vertices: prescribed displacements (a vertex with no node, or on a node of
     // the fixed region, stays where the support holds it, as in reference_fem).
     std::map<int, Vec3> held;
-    for (const GraspInput& g : in.grasps)
+    for (const GraspInput& g : in.grasps) {
+      std::map<int, Eigen::Index> row;
       for (size_t k = 0; k < g.vertices.size(); ++k) {
+        row[g.vertices[k]] = Eigen::Index(k);
         const int node = m_surfaceNode[size_t(g.vertices[k])];
         if (node < 0 || isFixed(node)) continue;
         held[node] =
             g.targets.row(Eigen::Index(k)).transpose() - m_model.nodes.row(node).transpose();
       }
+      // The nodes on the triangles between the grasped vertices, at interpolated targets.
+      for (const GraspedPatchNodes::Held& h : m_graspPatch->held(g.vertices)) {
+        if (isFixed(h.node)) continue;
+        Vec3 target = Vec3::Zero();
+        for (int k = 0; k < 3; ++k)
+          target += h.weights(k) * g.targets.row(row.at(h.vertices[size_t(k)])).transpose();
+        held[h.node] = target - m_model.nodes.row(h.node).transpose();
+      }
+    }
     for (const NodeGrasp& g : in.nodeConstraints)
       for (size_t k = 0; k < g.nodes.size(); ++k)
         if (!isFixed(g.nodes[k]))
@@ -171,6 +200,7 @@ class CalculixModel final : public Model {
   std::string m_modelDeck;
   long long m_numElements = 0;
   std::unique_ptr<QuadraticSurfaceLoad> m_surfaceLoad;  ///< C3D10: loads onto the quadratic faces
+  std::unique_ptr<GraspedPatchNodes> m_graspPatch;      ///< nodes between a grasp's vertices
   std::vector<int> m_fixed;
   std::vector<int> m_surfaceNode;  ///< surface vertex -> node; -1: inside a fixed box, no node
   MatX3 m_restSurface;

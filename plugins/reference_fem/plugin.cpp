@@ -111,6 +111,21 @@ class ReferenceFemModel final : public Model {
       m_surfaceLoad = std::make_unique<QuadraticSurfaceLoad>(
           system->rest(), [system](int a, int b) { return system->edgeNode(a, b); });
     }
+    {  // the nodes a grasp holds on the triangles between its vertices (deform/organ_tets.h)
+      const SurfaceMesh boundary = tetBoundary(m_system->rest());
+      std::vector<int> boundaryNodes;
+      for (Eigen::Index f = 0; f < boundary.F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+          boundaryNodes.push_back(boundary.F(f, k));
+          const int mid = m_system->edgeNode(boundary.F(f, k), boundary.F(f, (k + 1) % 3));
+          if (mid >= 0) boundaryNodes.push_back(mid);
+        }
+      std::sort(boundaryNodes.begin(), boundaryNodes.end());
+      boundaryNodes.erase(std::unique(boundaryNodes.begin(), boundaryNodes.end()),
+                          boundaryNodes.end());
+      m_graspPatch = std::make_unique<GraspedPatchNodes>(organ.surface, m_surfaceNode,
+                                                         m_system->rest().V, boundaryNodes);
+    }
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
     m_fixed.insert(m_fixed.end(), isolated.begin(), isolated.end());
     std::sort(m_fixed.begin(), m_fixed.end());
@@ -159,13 +174,29 @@ class ReferenceFemModel final : public Model {
     for (int n : m_fixed) fixed[size_t(n)] = 1;
     // Every organ surface vertex is a node of the tet mesh (J a selection); those inside a
     // fixed box are pinned (fixed wins over a grasp; the support takes their load share).
-    for (const GraspInput& g : in.grasps) {
+    // With them, the nodes on the triangles between the grasped vertices, at the triangles'
+    // interpolated targets (the same held surface as every model's).
+    std::vector<std::vector<int>> patchNodes(in.grasps.size());
+    for (size_t gi = 0; gi < in.grasps.size(); ++gi) {
+      const GraspInput& g = in.grasps[gi];
+      std::map<int, Eigen::Index> row;
       for (size_t k = 0; k < g.vertices.size(); ++k) {
+        row[g.vertices[k]] = Eigen::Index(k);
         const int node = m_surfaceNode[size_t(g.vertices[k])];
         if (fixed[size_t(node)]) continue;
         lc.prescribedNodes.push_back(node);
         lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
         lc.targets.bottomRows(1) = g.targets.row(Eigen::Index(k));
+      }
+      for (const GraspedPatchNodes::Held& h : m_graspPatch->held(g.vertices)) {
+        if (fixed[size_t(h.node)]) continue;
+        Vec3 target = Vec3::Zero();
+        for (int k = 0; k < 3; ++k)
+          target += h.weights(k) * g.targets.row(row.at(h.vertices[size_t(k)])).transpose();
+        lc.prescribedNodes.push_back(h.node);
+        lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
+        lc.targets.bottomRows(1) = target.transpose();
+        patchNodes[gi].push_back(h.node);
       }
     }
     for (const NodeGrasp& g : in.nodeConstraints)  // contact, on nodes
@@ -205,12 +236,13 @@ class ReferenceFemModel final : public Model {
     if (!rep.converged) ++m_unconverged;
 
     m_graspForces.clear();
-    for (const GraspInput& g : in.grasps) {
+    for (size_t gi = 0; gi < in.grasps.size(); ++gi) {
       Vec3 f = Vec3::Zero();
-      for (int v : g.vertices) {
+      for (int v : in.grasps[gi].vertices) {
         const int n = m_surfaceNode[size_t(v)];
         if (!fixed[size_t(n)]) f -= m_solver->lastGradient().segment<3>(3 * n);
       }
+      for (int n : patchNodes[gi]) f -= m_solver->lastGradient().segment<3>(3 * n);
       m_graspForces.push_back(f);
     }
     for (const NodeGrasp& g : in.nodeConstraints) {
@@ -315,7 +347,9 @@ class ReferenceFemModel final : public Model {
   std::vector<int> m_surfaceNode;  ///< surface vertex -> node
   MatX3 m_restSurface;             ///< reported for the pinned vertices
   std::vector<char> m_isFixed;     ///< per node: pinned by the fixed region
-  std::unique_ptr<QuadraticSurfaceLoad> m_surfaceLoad;  ///< P2: loads onto the quadratic faces
+  std::unique_ptr<QuadraticSurfaceLoad> m_surfaceLoad;
+  std::unique_ptr<GraspedPatchNodes>
+      m_graspPatch;  ///< nodes between a grasp's vertices  ///< P2: loads onto the quadratic faces
   int m_meshedNodes = 0;          ///< corner nodes of the tets; isolated clamped ones follow
   long long m_isolatedNodes = 0;  ///< surface vertices inside a clipped-off fixed box
   MatX3i m_contactF;              ///< organ triangles as node rows (contact proxy)

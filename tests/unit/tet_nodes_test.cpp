@@ -154,5 +154,27 @@ TEST(QuadraticSurfaceLoad, UniformTractionGoesToTheMidsideNodes) {
   EXPECT_EQ(diagonals, 1);
 }
 
+// A grasp of the cube's four top vertices holds the five midside nodes of the top face's two
+// triangles at the midpoints of their edges; a grasp of two vertices spans no triangle and holds
+// nothing more.
+TEST(GraspedPatchNodes, HoldsTheMidsideNodesOfFullyGraspedTriangles) {
+  const TetMesh cube = fiveTetCube(1.0);
+  const QuadraticTetNodes q = addMidsideNodes(cube);
+  const SurfaceMesh surface = tetBoundary(cube);
+  std::vector<int> boundary;
+  for (int n = 0; n < int(q.V.rows()); ++n) boundary.push_back(n);  // every node a candidate
+  const GraspedPatchNodes patch(surface, {0, 1, 2, 3, 4, 5, 6, 7}, q.V, boundary);
+  const auto top = patch.held({4, 5, 6, 7});
+  ASSERT_EQ(top.size(), 5u);
+  for (const auto& h : top) {
+    EXPECT_GE(h.node, 8);
+    EXPECT_NEAR(q.V(h.node, 2), 1.0, 1e-12);  // on the top face
+    Vec3 x = Vec3::Zero();
+    for (int k = 0; k < 3; ++k) x += h.weights(k) * q.V.row(h.vertices[size_t(k)]).transpose();
+    EXPECT_NEAR((x - q.V.row(h.node).transpose()).norm(), 0, 1e-12);
+  }
+  EXPECT_TRUE(patch.held({4, 5}).empty());
+}
+
 }  // namespace
 }  // namespace deform

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
 #include <map>
 #include <set>
 
@@ -209,6 +210,79 @@ std::vector<std::pair<int, Vec3>> QuadraticSurfaceLoad::spread(
     }
   }
   return {out.begin(), out.end()};
+}
+
+GraspedPatchNodes::GraspedPatchNodes(const SurfaceMesh& surface, std::vector<int> surfaceNode,
+                                     const MatX3& nodes, std::vector<int> boundaryNodes)
+    : m_surface(surface),
+      m_surfaceNode(std::move(surfaceNode)),
+      m_nodes(nodes),
+      m_boundaryNodes(std::move(boundaryNodes)),
+      m_vertexFaces(size_t(surface.numVertices())),
+      m_isVertexNode(size_t(nodes.rows()), 0) {
+  for (int f = 0; f < surface.numFaces(); ++f)
+    for (int k = 0; k < 3; ++k) m_vertexFaces[size_t(surface.F(f, k))].push_back(f);
+  for (int n : m_surfaceNode)
+    if (n >= 0 && n < int(nodes.rows())) m_isVertexNode[size_t(n)] = 1;
+}
+
+std::vector<GraspedPatchNodes::Held> GraspedPatchNodes::held(
+    const std::vector<int>& graspedVertices) const {
+  std::vector<Held> out;
+  std::vector<int> grasped = graspedVertices;
+  std::sort(grasped.begin(), grasped.end());
+  const auto isGrasped = [&](int v) {
+    return std::binary_search(grasped.begin(), grasped.end(), v);
+  };
+  std::vector<int> faces;
+  for (int v : grasped) {
+    if (v < 0 || v >= int(m_vertexFaces.size())) continue;
+    for (int f : m_vertexFaces[size_t(v)]) {
+      bool all = true;
+      for (int k = 0; k < 3; ++k) all = all && isGrasped(m_surface.F(f, k));
+      if (all) faces.push_back(f);
+    }
+  }
+  std::sort(faces.begin(), faces.end());
+  faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+  if (faces.empty()) return out;
+  Vec3 lo = Vec3::Constant(std::numeric_limits<Real>::max()), hi = -lo;
+  Real longest = 0;
+  for (int f : faces)
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 x = m_surface.V.row(m_surface.F(f, k)).transpose();
+      lo = lo.cwiseMin(x);
+      hi = hi.cwiseMax(x);
+      longest = std::max(longest, (x - Vec3(m_surface.V.row(m_surface.F(f, (k + 1) % 3)))).norm());
+    }
+  const Real tol = 1e-6 * longest;  // on the triangle: a node of the mesh of this very surface
+  lo.array() -= tol;
+  hi.array() += tol;
+  for (int n : m_boundaryNodes) {
+    if (m_isVertexNode[size_t(n)]) continue;
+    const Vec3 x = m_nodes.row(n).transpose();
+    if ((x.array() < lo.array()).any() || (x.array() > hi.array()).any()) continue;
+    for (int f : faces) {
+      const Vec3 a = m_surface.V.row(m_surface.F(f, 0)), b = m_surface.V.row(m_surface.F(f, 1)),
+                 c = m_surface.V.row(m_surface.F(f, 2));
+      const Vec3 normal = (b - a).cross(c - a);
+      const Real twiceArea = normal.norm();
+      if (!(twiceArea > 0)) continue;
+      if (std::abs((x - a).dot(normal)) / twiceArea > tol) continue;
+      const Real wa = (b - x).cross(c - x).dot(normal) / (twiceArea * twiceArea);
+      const Real wb = (c - x).cross(a - x).dot(normal) / (twiceArea * twiceArea);
+      const Real wc = 1 - wa - wb;
+      const Real eps = tol / longest;
+      if (wa < -eps || wb < -eps || wc < -eps) continue;
+      Held h;
+      h.node = n;
+      for (int k = 0; k < 3; ++k) h.vertices[size_t(k)] = m_surface.F(f, k);
+      h.weights = Vec3(wa, wb, wc);
+      out.push_back(h);
+      break;
+    }
+  }
+  return out;
 }
 
 }  // namespace deform

@@ -7,6 +7,7 @@
 
 #include <deform/model.h>
 
+#include <array>
 #include <functional>
 #include <utility>
 #include <vector>
@@ -85,6 +86,39 @@ class QuadraticSurfaceLoad {
   MatX3i m_faces;                             ///< boundary triangles by corner node
   std::vector<std::vector<int>> m_nodeFaces;  ///< boundary triangles around each corner node
   std::function<int(int, int)> m_edgeNode;
+};
+
+/// The tet nodes a grasp holds besides the grasped vertices' own: the boundary nodes that lie on
+/// an organ surface triangle whose three vertices are all grasped (a quadratic mesh's midside
+/// nodes, and the nodes Gmsh adds where it splits long surface edges). Holding only the grasped
+/// vertices' nodes would prescribe isolated points, which a 3D solid does not resist: the
+/// surface between them would bulge by an amount that depends on the mesh, where every model
+/// holds the whole triangles spanned by the grasped vertices (its surface follows them).
+class GraspedPatchNodes {
+ public:
+  struct Held {
+    int node = -1;
+    std::array<int, 3> vertices{};  ///< the organ triangle's vertices
+    Vec3 weights = Vec3::Zero();    ///< barycentric: its target is sum weights[k] * target(k)
+  };
+
+  /// surface: the organ's surface; surfaceNode: the node of each surface vertex (-1: none);
+  /// nodes: every node's rest position; boundaryNodes: the candidates (the tet mesh's boundary
+  /// nodes, corners and midside nodes).
+  GraspedPatchNodes(const SurfaceMesh& surface, std::vector<int> surfaceNode, const MatX3& nodes,
+                    std::vector<int> boundaryNodes);
+
+  /// The nodes held by a grasp of these surface vertices (sorted or not), other than the
+  /// vertices' own nodes; each once.
+  std::vector<Held> held(const std::vector<int>& graspedVertices) const;
+
+ private:
+  SurfaceMesh m_surface;
+  std::vector<int> m_surfaceNode;
+  MatX3 m_nodes;
+  std::vector<int> m_boundaryNodes;
+  std::vector<std::vector<int>> m_vertexFaces;
+  std::vector<char> m_isVertexNode;
 };
 
 }  // namespace deform
