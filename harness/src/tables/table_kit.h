@@ -27,10 +27,11 @@ using ojson = nlohmann::ordered_json;
 inline constexpr int kReferenceOrder = 2;
 
 /// Element order of the hybrid tables' reference: linear for now. Their cases press up to 20 N
-/// on one vertex of a 5.5 kPa phantom; with quadratic tets the reference's Newton solve of the
-/// cube's 20 N downward case did not finish in 15 min at 3k tets (linear: 0.45 s at 4.5k), which
-/// would time every such case out. The tables' reference check says how far from converged
-/// the linear reference is; switch this to 2 once the solver handles those loads.
+/// on a 3 cm patch of a 5.5 kPa cube (7 kPa, above E). With quadratic tets (and consistent
+/// patch loads, 2026-11-28) the reference's 20 N upward solve ran away (a vertex 10 cube sizes
+/// out) and the downward one gave no result in 900 s, while both 2 N cases solve in seconds;
+/// the tables' reference check says how far from converged the linear reference is. Switch this
+/// to 2 once the solver handles those loads.
 inline constexpr int kHybridReferenceOrder = 1;
 
 /// Target tets of the reference (a multiple of 8: the check's coarsest level is 1/8 of it).
