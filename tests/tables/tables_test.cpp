@@ -438,17 +438,22 @@ TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) 
       EXPECT_NE(warning.find("not converged to 1%"), std::string::npos) << warning;
     }
   }
-  // Differences that shrink faster than the element order allows (p = 6): small estimate, but
-  // warned.
-  ConvergenceResult fast;
-  const auto h6 = [](double h) { return std::pow(h, 6); };
-  richardsonEstimate(h0, h1, h2, 1e6 * (h6(h0) - h6(h1)), 1e6 * (h6(h1) - h6(h2)), 0.01, fast);
-  EXPECT_NEAR(fast.order, 6.0, 1e-6);
-  EXPECT_FALSE(fast.asymptotic);
-  EXPECT_LT(fast.relativeError, 0.01);
-  EXPECT_NE(convergenceWarning(fast).find("asymptotic"), std::string::npos);
-  EXPECT_EQ(fast.reason, "not_asymptotic");
-  EXPECT_NE(fast.message.find("p = 6.00 is outside 0.5-4"), std::string::npos) << fast.message;
+  // Differences that shrink faster than order 4 (p = 6): the finest pair is extrapolated at
+  // order 2 instead, an upper estimate; converged when that is within 1%, warned when not.
+  for (const double c : {1e6, 1e12}) {
+    ConvergenceResult fast;
+    const auto h6 = [](double h) { return std::pow(h, 6); };
+    const double d12 = c * (h6(h1) - h6(h2));
+    richardsonEstimate(h0, h1, h2, c * (h6(h0) - h6(h1)), d12, 0.01, fast);
+    EXPECT_NEAR(fast.order, 6.0, 1e-6);
+    EXPECT_FALSE(fast.asymptotic);
+    EXPECT_EQ(fast.reason, "not_asymptotic");
+    EXPECT_NEAR(fast.errorEstimate, d12 * h2 * h2 / (h1 * h1 - h2 * h2), 1e-12 * d12);
+    EXPECT_GT(fast.errorEstimate, d12 * std::pow(h2, 6) / (h6(h1) - h6(h2)));  // above p = 6's
+    EXPECT_NE(fast.message.find("p = 6.00 is above 4"), std::string::npos) << fast.message;
+    EXPECT_EQ(fast.converged, fast.relativeError <= 0.01);
+    EXPECT_EQ(convergenceWarning(fast).empty(), fast.converged) << convergenceWarning(fast);
+  }
   // Levels that do not refine: no estimate, and the warning says the convergence is unknown.
   ConvergenceResult flat;
   richardsonEstimate(h0, h0, h0, 1e-3, 1e-3, 0.01, flat);
@@ -533,7 +538,18 @@ TEST(ReferenceCheck, SaysWhyRichardsonDoesNotApply) {
   EXPECT_NE(close.message.find("too close in size to extrapolate (h ratios 1.05 and"),
             std::string::npos)
       << close.message;
-  EXPECT_TRUE(std::isnan(close.relativeError));
+  // Its finest pair (1.9 apart) gives a two-level estimate at order 2 with Roache's factor 3.
+  const double h1c = h0 / 1.05;
+  EXPECT_NEAR(close.errorEstimate, 3 * 1e-5 * h2 * h2 / (h1c * h1c - h2 * h2), 1e-15);
+  EXPECT_TRUE(close.converged);
+  EXPECT_NE(convergenceSummary(close).find("at most 0.114%"), std::string::npos)
+      << convergenceSummary(close);
+  // Both pairs too close: no estimate.
+  ConvergenceResult tooClose;
+  richardsonEstimate(h0, h0 / 1.05, h0 / 1.1, 2e-5, 1e-5, peak, tooClose);
+  EXPECT_EQ(tooClose.reason, "levels_too_close");
+  EXPECT_TRUE(std::isnan(tooClose.relativeError));
+  EXPECT_FALSE(tooClose.converged);
   // Identical answers on refinement: nothing to extrapolate.
   ConvergenceResult same;
   richardsonEstimate(h0, h1, h2, 0, 0, peak, same);

@@ -19,7 +19,8 @@
 // levels that failed, levels that do not refine or are too close in h (ratio below
 // kMinLevelRatio: the organ's surface vertices, all nodes, bound the coarse levels' size),
 // answers that coincide, differences that do not shrink (d_12 >= d_01: not monotone), an order
-// outside 0.5-4 (not in the asymptotic range). Without an estimate, the largest level difference
+// below 0.5 (not in the asymptotic range). Above order 4 the finest pair is extrapolated at
+// order 2 instead (an upper estimate). Without an estimate, the largest level difference
 // is given as a bound (Roache's oscillatory case: the spread of the levels' answers).
 //
 // The study is deterministic, so its result is kept in the precomputation cache (kind
@@ -59,7 +60,8 @@ struct ConvergenceResult {
   double order = NAN;  ///< observed p
   double errorEstimate = NAN, relativeError = NAN;
   bool asymptotic = false;  ///< 0.5 <= p <= 4
-  bool converged = false;   ///< asymptotic && relativeError <= 1%
+  /// relativeError <= 1%, with asymptotic or with the upper estimate at order 2 (p > 4)
+  bool converged = false;
   /// Why Richardson does not apply (or its estimate is unreliable), "" when it does:
   /// "levels_failed", "not_refining", "levels_too_close", "coincide", "not_monotone",
   /// "not_asymptotic".
