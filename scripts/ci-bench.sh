@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # CI timing tables (.ci/run): times the `deformbench bench` case set on the Release build of
-# ./scripts/test.sh, prints the table, then compares it with the baseline kept in the repository
-# (.ci/bench-baseline.json). The comparison only warns: CI machines are noisy, so a slower case
+# ./scripts/test.sh, prints the table with each case's ratio to PBD on the same scene in this run
+# (x PBD) and the machine's load, then compares it with the baseline kept in the repository
+# (.ci/bench-baseline.json): by those ratios, and by absolute times only when the baseline's
+# machine matches (same CPU and cores, both runs idle). The comparison only warns: a slower case
 # never fails the run. Exit 1 only when the bench itself cannot run.
 #
 # Refresh the baseline (on an idle machine, after a change that moves the timings on purpose):
@@ -20,10 +22,15 @@ fi
 python3 - "$out" <<'PY'
 import json, sys
 doc = json.load(open(sys.argv[1]))
-print(f"{'case':40s} {'status':9s} {'median ms':>10s} {'min':>8s} {'max':>8s}")
+m = doc.get("machine", {})
+load = lambda k: " ".join(f"{x:.2f}" for x in m.get(k, [])) or "-"
+print(f"machine: {m.get('cpu', '?')}, {m.get('cores', '?')} cores; load average {load('load_average')}"
+      f" at the start, {load('load_average_end')} at the end")
+print(f"{'case':40s} {'status':9s} {'median ms':>10s} {'min':>8s} {'max':>8s} {'x PBD':>7s}")
 for c in doc["cases"]:
-    f = lambda k: "-" if c.get(k) is None else f"{c[k]:.3f}"
-    print(f"{c['id']:40s} {c['status']:9s} {f('ms_median'):>10s} {f('ms_min'):>8s} {f('ms_max'):>8s}")
+    f = lambda k, p=3: "-" if c.get(k) is None else f"{c[k]:.{p}f}"
+    print(f"{c['id']:40s} {c['status']:9s} {f('ms_median'):>10s} {f('ms_min'):>8s} {f('ms_max'):>8s}"
+          f" {f('x_pbd', 2):>7s}")
 PY
 if [[ -f $baseline ]]; then
   if ! "$bin" bench --compare "$baseline" "$out"; then

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <iomanip>
 #include <map>
@@ -141,6 +142,73 @@ ojson benchScene(const BenchCase& c, int steps) {
   return j;
 }
 
+/// The one-, five- and fifteen-minute load averages (empty where unavailable).
+ojson loadAverage() {
+  double l[3];
+  if (::getloadavg(l, 3) != 3) return ojson::array();
+  return ojson::array({l[0], l[1], l[2]});
+}
+
+double number(const json& c, const char* k) {
+  return c.contains(k) && c[k].is_number() ? c[k].get<double>() : NAN;
+}
+
+/// The PBD case of a case's scene in the same file ("pbd/<scene>"), or null.
+const json* pbdCase(const json& cases, const std::string& id) {
+  const size_t slash = id.rfind('/');
+  if (slash == std::string::npos) return nullptr;
+  const std::string pbd = "pbd" + id.substr(slash);
+  if (pbd == id) return nullptr;
+  for (const json& c : cases)
+    if (c.value("id", "") == pbd) return &c;
+  return nullptr;
+}
+
+/// A case's time over PBD's on its scene in the same file; NaN when either is missing.
+double xPbd(const json& doc, const json& c) {
+  const json* p = pbdCase(doc["cases"], c.value("id", ""));
+  if (!p) return NAN;
+  const double a = number(c, "ms_median"), b = number(*p, "ms_median");
+  return std::isfinite(a) && std::isfinite(b) && b > 0 ? a / b : NAN;
+}
+
+/// The relative spread (max - min) / median of a case, 0 when unknown.
+double relativeSpread(const json& c) {
+  const double med = number(c, "ms_median"), lo = number(c, "ms_min"), hi = number(c, "ms_max");
+  return std::isfinite(med) && med > 0 && std::isfinite(lo) && std::isfinite(hi) ? (hi - lo) / med
+                                                                                 : 0.0;
+}
+
+/// Whether absolute times of two bench files may be compared, and if not, why.
+bool sameIdleMachine(const json& a, const json& b, std::string& why) {
+  const auto m = [](const json& d) {
+    return d.contains("machine") ? d["machine"] : json::object();
+  };
+  const json ma = m(a), mb = m(b);
+  if (!ma.contains("load_average") || !mb.contains("load_average") || !ma.contains("cores") ||
+      !mb.contains("cores")) {
+    why = "a file does not record its machine's cores and load";
+    return false;
+  }
+  if (ma.value("cpu", "") != mb.value("cpu", "") || ma["cores"] != mb["cores"]) {
+    why = "other machines (" + ma.value("cpu", "?") + ", " + ma["cores"].dump() + " cores; " +
+          mb.value("cpu", "?") + ", " + mb["cores"].dump() + " cores)";
+    return false;
+  }
+  const double cores = ma["cores"].get<double>();
+  for (const json* d : {&ma, &mb}) {
+    const json& l = (*d)["load_average"];
+    if (!l.is_array() || l.empty() || !l[0].is_number() || l[0].get<double>() > 0.5 * cores) {
+      std::ostringstream w;
+      w << "a run on a busy machine (load average " << (l.is_array() && !l.empty() ? l[0] : l)
+        << " on " << cores << " cores)";
+      why = w.str();
+      return false;
+    }
+  }
+  return true;
+}
+
 double medianOf(std::vector<double> v) {
   if (v.empty()) return NAN;
   std::sort(v.begin(), v.end());
@@ -167,6 +235,8 @@ ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* prog
   ojson doc;
   doc["format"] = "deformbench-bench/1";
   doc["machine"] = {{"cpu", machine.cpu},
+                    {"cores", long(::sysconf(_SC_NPROCESSORS_ONLN))},
+                    {"load_average", loadAverage()},
                     {"compiler", machine.compiler},
                     {"build_type", machine.buildType},
                     {"git", machine.git},
@@ -214,6 +284,13 @@ ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* prog
     }
     doc["cases"].push_back(entry);
   }
+  doc["machine"]["load_average_end"] = loadAverage();
+  // Each case's ratio to PBD on its scene, in this run: what CI compares across machines.
+  const json plain = json::parse(doc["cases"].dump());
+  for (size_t i = 0; i < doc["cases"].size(); ++i) {
+    const double x = xPbd(plain, plain["cases"][i]);
+    doc["cases"][i]["x_pbd"] = std::isfinite(x) ? ojson(x) : ojson(nullptr);
+  }
   std::error_code ec;
   fs::remove_all(work, ec);
   writeFileAtomic(options.out, doc.dump(2) + "\n");
@@ -245,51 +322,57 @@ json readBenchFile(const std::string& path) {
 
 BenchComparison compareBench(const json& oldDoc, const json& newDoc, double threshold) {
   BenchComparison out;
-  const auto num = [](const json& c, const char* k) {
-    return c.contains(k) && c[k].is_number() ? c[k].get<double>() : NAN;
-  };
+  out.absolute = sameIdleMachine(oldDoc, newDoc, out.absoluteWhy);
   std::map<std::string, json> olds;
   for (const json& c : oldDoc["cases"]) olds[c["id"].get<std::string>()] = c;
   std::set<std::string> seen;
+  // Slower or faster than the threshold and beyond the noise (relative, for ratios).
+  const auto judge = [&](double ratio, double noise) {
+    if (ratio > 1 + threshold && ratio - 1 > noise) return "SLOWER";
+    if (ratio < 1 / (1 + threshold) && 1 - ratio > noise) return "faster";
+    return "ok";
+  };
   for (const json& c : newDoc["cases"]) {
     BenchComparison::Row row;
     row.id = c["id"];
     seen.insert(row.id);
-    row.newMs = num(c, "ms_median");
+    row.newMs = number(c, "ms_median");
     if (!olds.count(row.id)) {
       row.verdict = "new";
       out.rows.push_back(row);
       continue;
     }
     const json& o = olds.at(row.id);
-    row.oldMs = num(o, "ms_median");
+    row.oldMs = number(o, "ms_median");
     if (!std::isfinite(row.oldMs) || !std::isfinite(row.newMs) || row.oldMs <= 0) {
       row.verdict = "not timed";
       out.rows.push_back(row);
       continue;
     }
     row.ratio = row.newMs / row.oldMs;
-    const auto spread = [&](const json& d, double med) {
-      const double lo = num(d, "ms_min"), hi = num(d, "ms_max");
-      return std::isfinite(lo) && std::isfinite(hi) ? hi - lo : 0.0 * med;
-    };
-    row.noiseMs = std::max(spread(o, row.oldMs), spread(c, row.newMs));
-    const double slower = row.newMs - row.oldMs;
-    if (row.ratio > 1 + threshold && slower > row.noiseMs) {
-      row.verdict = "SLOWER";
-      ++out.regressions;
-    } else if (row.ratio < 1 / (1 + threshold) && -slower > row.noiseMs) {
-      row.verdict = "faster";
+    row.noiseMs = std::max(relativeSpread(o) * row.oldMs, relativeSpread(c) * row.newMs);
+    row.oldXPbd = xPbd(oldDoc, o);
+    row.newXPbd = xPbd(newDoc, c);
+    if (std::isfinite(row.oldXPbd) && std::isfinite(row.newXPbd) && row.oldXPbd > 0) {
+      row.xRatio = row.newXPbd / row.oldXPbd;
+      const json* po = pbdCase(oldDoc["cases"], row.id);
+      const json* pn = pbdCase(newDoc["cases"], row.id);
+      const double noise = std::max(relativeSpread(o), relativeSpread(c)) +
+                           std::max(relativeSpread(*po), relativeSpread(*pn));
+      row.verdict = judge(row.xRatio, noise);
+    } else if (out.absolute) {
+      row.verdict = judge(row.ratio, row.noiseMs / row.oldMs);
     } else {
-      row.verdict = "ok";
+      row.verdict = "not compared";
     }
+    if (row.verdict == std::string("SLOWER")) ++out.regressions;
     out.rows.push_back(row);
   }
   for (const auto& [id, o] : olds) {
     if (seen.count(id)) continue;
     BenchComparison::Row row;
     row.id = id;
-    row.oldMs = num(o, "ms_median");
+    row.oldMs = number(o, "ms_median");
     row.verdict = "missing";
     out.rows.push_back(row);
   }
@@ -305,17 +388,24 @@ void printBenchComparison(const BenchComparison& c, double threshold, std::ostre
   };
   size_t w = 4;
   for (const auto& r : c.rows) w = std::max(w, r.id.size());
+  out << (c.absolute ? "absolute times compared (same CPU and cores, both runs idle)"
+                     : "absolute times not compared: " + c.absoluteWhy)
+      << "; each case is judged by its time over PBD's on the same scene in the same run (x PBD)"
+      << "\n";
   out << std::left << std::setw(int(w)) << "case"
       << "  " << std::setw(10) << "old ms" << std::setw(10) << "new ms" << std::setw(8) << "ratio"
+      << std::setw(10) << "old xPBD" << std::setw(10) << "new xPBD" << std::setw(9) << "change"
       << std::setw(10) << "noise ms"
       << "verdict\n";
   for (const auto& r : c.rows) {
     out << std::left << std::setw(int(w)) << r.id << "  " << std::setw(10) << f(r.oldMs)
         << std::setw(10) << f(r.newMs) << std::setw(8) << f(r.ratio, 3) << std::setw(10)
-        << f(r.noiseMs, 3) << r.verdict << "\n";
+        << f(r.oldXPbd, 3) << std::setw(10) << f(r.newXPbd, 3) << std::setw(9) << f(r.xRatio, 3)
+        << std::setw(10) << f(r.noiseMs, 3) << r.verdict << "\n";
   }
   out << c.regressions << " case(s) slower by more than " << f(100 * threshold, 3)
-      << "% and the noise\n";
+      << "% and the noise (relative to PBD"
+      << (c.absolute ? "; PBD itself and cases without it: absolute" : "") << ")\n";
 }
 
 }  // namespace deform::harness

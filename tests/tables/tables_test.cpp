@@ -842,28 +842,48 @@ json benchDoc(std::vector<std::tuple<std::string, double, double, double>> cases
   return j;
 }
 
-TEST(Bench, CompareFlagsOnlySlowdownsBeyondThresholdAndNoise) {
-  const json oldDoc = benchDoc({{"a", 10, 9.9, 10.1},
-                                {"b", 10, 9.9, 10.1},
-                                {"c", 10, 9.9, 10.1},
-                                {"d", 10, 7, 13},
-                                {"gone", 1, 1, 1}});
-  const json newDoc = benchDoc({{"a", 14, 13.9, 14.1},  // 40% slower, tight: flagged
-                                {"b", 11, 10.9, 11.1},  // 10%: under the threshold
-                                {"c", 6, 5.9, 6.1},     // faster
-                                {"d", 14, 11, 17},      // 40% but within the noise (6 ms)
-                                {"new", 2, 2, 2}});
+TEST(Bench, CompareJudgesEachCaseByItsRatioToPbdInTheSameRun) {
+  const json oldDoc = benchDoc({{"pbd/s", 1, 0.99, 1.01},
+                                {"a/s", 10, 9.9, 10.1},
+                                {"b/s", 10, 9.9, 10.1},
+                                {"c/s", 10, 9.9, 10.1},
+                                {"d/s", 10, 7, 13},
+                                {"gone/s", 1, 1, 1}});
+  // The new machine runs everything 2x slower: PBD too. Only a's ratio to PBD grew.
+  const json newDoc = benchDoc({{"pbd/s", 2, 1.98, 2.02},
+                                {"a/s", 28, 27.8, 28.2},  // 40% slower than PBD's 2x, tight
+                                {"b/s", 22, 21.8, 22.2},  // 10%: under the threshold
+                                {"c/s", 12, 11.9, 12.1},  // faster against PBD
+                                {"d/s", 28, 22, 34},      // 40% but within the noise (60%)
+                                {"new/s", 2, 2, 2}});
   const BenchComparison c = compareBench(oldDoc, newDoc, 0.25);
+  EXPECT_FALSE(c.absolute) << "files without cores and load are not one machine";
   EXPECT_EQ(c.regressions, 1);
   std::map<std::string, std::string> verdict;
-  for (const auto& r : c.rows) verdict[r.id] = r.verdict;
-  EXPECT_EQ(verdict["a"], "SLOWER");
-  EXPECT_EQ(verdict["b"], "ok");
-  EXPECT_EQ(verdict["c"], "faster");
-  EXPECT_EQ(verdict["d"], "ok");
-  EXPECT_EQ(verdict["new"], "new");
-  EXPECT_EQ(verdict["gone"], "missing");
+  std::map<std::string, double> change;
+  for (const auto& r : c.rows) {
+    verdict[r.id] = r.verdict;
+    change[r.id] = r.xRatio;
+  }
+  EXPECT_EQ(verdict["a/s"], "SLOWER");
+  EXPECT_NEAR(change["a/s"], 1.4, 1e-12);
+  EXPECT_EQ(verdict["b/s"], "ok");
+  EXPECT_EQ(verdict["c/s"], "faster");
+  EXPECT_EQ(verdict["d/s"], "ok");
+  EXPECT_EQ(verdict["pbd/s"], "not compared") << "2x slower PBD on another machine says nothing";
+  EXPECT_EQ(verdict["new/s"], "new");
+  EXPECT_EQ(verdict["gone/s"], "missing");
   EXPECT_EQ(compareBench(oldDoc, newDoc, 0.5).regressions, 0) << "40% is under a 50% threshold";
+  // The same idle machine: absolute times are judged too (PBD's 2x is a regression).
+  json a = oldDoc, b = newDoc;
+  for (json* d : {&a, &b}) (*d)["machine"] = {{"cpu", "X"}, {"cores", 2}, {"load_average", {0.1}}};
+  const BenchComparison same = compareBench(a, b, 0.25);
+  EXPECT_TRUE(same.absolute) << same.absoluteWhy;
+  EXPECT_EQ(same.rows[0].verdict, "SLOWER");
+  b["machine"]["load_average"] = {1.5};  // busy: over half its cores
+  const BenchComparison busy = compareBench(a, b, 0.25);
+  EXPECT_FALSE(busy.absolute);
+  EXPECT_NE(busy.absoluteWhy.find("busy machine"), std::string::npos) << busy.absoluteWhy;
 }
 
 TEST_F(TempDir, BenchCompareExitCodes) {
@@ -871,9 +891,11 @@ TEST_F(TempDir, BenchCompareExitCodes) {
     std::ofstream(m_dir / name) << j.dump();
     return (m_dir / name).string();
   };
-  const std::string a = write("old.json", benchDoc({{"x", 10, 9.9, 10.1}}));
-  const std::string slow = write("slow.json", benchDoc({{"x", 20, 19.9, 20.1}}));
-  const std::string same = write("same.json", benchDoc({{"x", 10.5, 10.4, 10.6}}));
+  const std::string a = write("old.json", benchDoc({{"pbd/s", 1, 1, 1}, {"x/s", 10, 9.9, 10.1}}));
+  const std::string slow =
+      write("slow.json", benchDoc({{"pbd/s", 1, 1, 1}, {"x/s", 20, 19.9, 20.1}}));
+  const std::string same =
+      write("same.json", benchDoc({{"pbd/s", 1, 1, 1}, {"x/s", 10.5, 10.4, 10.6}}));
   const std::string bad = write("bad.json", json{{"format", "other"}});
   const std::string exe = std::string(DEFORMBENCH_EXE) + " bench --compare ";
   const std::string quiet = " > /dev/null 2>&1";

@@ -32,13 +32,24 @@ struct BenchComparison {
   struct Row {
     std::string id;
     double oldMs = NAN, newMs = NAN, ratio = NAN, noiseMs = NAN;
-    std::string verdict;  ///< "ok", "SLOWER", "faster", "new", "missing", "not timed"
+    /// The case's time over PBD's on the same scene in the same run (x PBD), in each file, and
+    /// new over old; NaN for PBD itself or where a file has no PBD case on that scene.
+    double oldXPbd = NAN, newXPbd = NAN, xRatio = NAN;
+    /// "ok", "SLOWER", "faster", "new", "missing", "not timed", or "not compared" (PBD itself,
+    /// or a case with no PBD beside it, when the two machines do not match)
+    std::string verdict;
   };
   std::vector<Row> rows;
   int regressions = 0;
+  /// Absolute times are judged only between matching machines (same CPU model and core count,
+  /// each run's one-minute load average at most half its cores); otherwise why not.
+  bool absolute = false;
+  std::string absoluteWhy;
 };
 
-/// Compares two bench files (InputError for a file that is not one).
+/// Compares two bench files (InputError for a file that is not one). Each case is judged by its
+/// ratio to PBD on the same scene within each run, which a slower or busier machine leaves
+/// alone; absolute milliseconds only when the machines match (BenchComparison::absolute).
 BenchComparison compareBench(const nlohmann::json& oldDoc, const nlohmann::json& newDoc,
                              double threshold);
 /// Reads a bench file; InputError naming it when unreadable or of another format.
