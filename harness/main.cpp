@@ -705,6 +705,7 @@ int cmdCalibrate(const CalibrateArgs& a) {
   for (const auto& [k, v] : doc["params"].items())
     std::cout << "  " << k << " = " << fmt(v.get<double>(), 5) << " (default "
               << fmt(doc["defaults"][k].get<double>(), 5) << ")\n";
+  for (const auto& w : doc["warnings"]) std::cout << "warning: " << w.get<std::string>() << "\n";
   for (const char* set : {"train", "validation"}) {
     for (const auto& p : doc[set]["per_scene"])
       std::cout << "  " << std::left << std::setw(11) << set << std::setw(48)

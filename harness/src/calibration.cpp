@@ -310,7 +310,8 @@ struct SceneInfo {
   ojson doc;                            ///< the scene as written
   ojson modelParams = ojson::object();  ///< the scene's params for the model, when it names it
   bool hasModel = false;
-  std::string organ;  ///< calibrationOrgan() of its organ
+  std::string organ;            ///< calibrationOrgan() of its organ
+  double smallestExtent = NAN;  ///< m: the organ's smallest bounding-box side
 };
 
 SceneInfo loadScene(const std::string& file, const std::string& plugin, const std::string& model,
@@ -326,6 +327,7 @@ SceneInfo loadScene(const std::string& file, const std::string& plugin, const st
       std::find(parsed.nearest.begin(), parsed.nearest.end(), 50) == parsed.nearest.end())
     throw InputError(file, "/samples/nearest", "--metric rmse_50 needs 50 among the nearest");
   s.organ = calibrationOrgan(parsed.organ.mesh, parsed.organ.resolution, parsed.organ.scale);
+  s.smallestExtent = boundingBox(loadOrgan(parsed).surface.V).size().minCoeff();
   std::ifstream in(file);
   s.doc = ojson::parse(in);
   for (const ojson& m : s.doc.value("models", ojson::array())) {
@@ -364,6 +366,35 @@ std::string fmtValue(double v) {
   s << std::setprecision(4) << v;
   return s.str();
 }
+
+}  // namespace
+
+std::map<std::string, std::string> limitLengthsToOrgan(std::vector<CalibDimension>& dims,
+                                                       const ModelInfo& info, double extent) {
+  std::map<std::string, std::string> notes;
+  for (CalibDimension& d : dims) {
+    const ParamSpec* p = info.param(d.key);
+    if (!p || p->unit != "m" || !std::isfinite(extent) || !(d.hi > extent) || !(extent > d.lo))
+      continue;
+    notes[d.key] = "upper bound lowered from " + fmtValue(d.hi) +
+                   " m to the training organs' smallest extent, " + fmtValue(extent) + " m";
+    d.hi = extent;
+  }
+  return notes;
+}
+
+std::map<std::string, std::string> fittedAtBound(const std::vector<CalibDimension>& dims,
+                                                 const std::vector<double>& values) {
+  std::map<std::string, std::string> out;
+  for (size_t d = 0; d < dims.size() && d < values.size(); ++d) {
+    const double u = dims[d].unit(values[d]);
+    if (u <= kAtBoundFraction) out[dims[d].key] = "min";
+    if (u >= 1 - kAtBoundFraction) out[dims[d].key] = "max";
+  }
+  return out;
+}
+
+namespace {
 
 /// One model run of a trial: its metric (NaN: failed) and why it failed.
 struct RunOutcome {
@@ -621,7 +652,23 @@ class Calibrator {
                               {"scale", m_dims[d].log ? "log" : "linear"}};
     }
     doc["defaults"] = defaultsJson;
+    for (const auto& [key, note] : m_boundNotes) space[key]["note"] = note;
     doc["space"] = space;
+    // A fit at a bound: the best value may lie beyond it (or the model cannot match the
+    // reference with this parameter); within 1% of the range, in its own scale.
+    ojson atBound = ojson::object();
+    ojson warnings = ojson::array();
+    for (const auto& [key, side] : fittedAtBound(m_dims, res.best)) {
+      atBound[key] = side;
+      const CalibDimension& d =
+          *std::find_if(m_dims.begin(), m_dims.end(), [&](const auto& x) { return x.key == key; });
+      warnings.push_back(key + " fitted at its " + (side == "max" ? "upper" : "lower") + " bound " +
+                         fmtValue(side == "max" ? d.hi : d.lo) +
+                         ": the best fit may lie beyond the range, or the model cannot match "
+                         "the reference with it");
+    }
+    doc["at_bound"] = atBound;
+    doc["warnings"] = warnings;
     doc["train"] = summary(m_train, before[0], after);
     doc["validation"] = validation;
     doc["objective"] = numberOrNull(res.bestValue);
@@ -647,6 +694,9 @@ class Calibrator {
   std::vector<double> m_worst;
   std::map<std::vector<double>, std::vector<RunOutcome>> m_history;  ///< values -> runs
   int m_trialDirs = 0;
+
+ public:
+  std::map<std::string, std::string> m_boundNotes;  ///< key -> why its range was narrowed
 };
 
 }  // namespace
@@ -688,10 +738,14 @@ ojson runCalibration(PluginLoader& loader, const CalibrateOptions& o, Progress* 
   };
   for (const std::string& f : o.train) train.push_back(load(f));
   for (const std::string& f : o.validate) validate.push_back(load(f));
+  double extent = INFINITY;
+  for (const SceneInfo& s : train) extent = std::min(extent, s.smallestExtent);
+  const std::map<std::string, std::string> boundNotes = limitLengthsToOrgan(dims, info, extent);
   std::error_code ec;
   fs::create_directories(o.outDir, ec);
   if (ec) throw InputError(o.outDir.string(), "", "cannot create the output folder");
   Calibrator c(loader, o, info, std::move(dims), std::move(train), std::move(validate));
+  c.m_boundNotes = boundNotes;
   return c.run(progress);
 }
 

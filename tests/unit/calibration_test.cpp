@@ -32,6 +32,32 @@ TEST(Calibration, HaltonPointsFillTheBox) {
     }
 }
 
+// A fit within 1% of its range (in its scale) of a bound is at that bound; a thickness (a length)
+// cannot exceed the organ's smallest extent, a dimensionless ratio is left alone.
+TEST(Calibration, AtBoundAndLengthsLimitedByTheOrgan) {
+  const std::vector<CalibDimension> dims = {
+      {"thickness", 1e-4, 0.3, true}, {"ratio", 0, 1, false}, {"damping", 0.01, 100, true}};
+  const auto at = fittedAtBound(dims, {0.3, 0.5, 0.0101});
+  EXPECT_EQ(at.size(), 2u);
+  EXPECT_EQ(at.at("thickness"), "max");
+  EXPECT_EQ(at.at("damping"), "min");
+  EXPECT_TRUE(fittedAtBound(dims, {3e-3, 0.02, 1}).empty()) << "2% into the range is inside";
+
+  ModelInfo info;
+  info.params = {ParamSpec::real("thickness", "m", 0.01, 1e-6, 10, "membrane thickness"),
+                 ParamSpec::real("ratio", "1", 0.1, 0, 10, "a ratio"),
+                 ParamSpec::real("damping", "1/s", 1, 0, 1e4, "damping")};
+  std::vector<CalibDimension> limited = dims;
+  const auto notes = limitLengthsToOrgan(limited, info, 0.05);
+  EXPECT_DOUBLE_EQ(limited[0].hi, 0.05);
+  EXPECT_DOUBLE_EQ(limited[1].hi, 1);
+  EXPECT_DOUBLE_EQ(limited[2].hi, 100);
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_NE(notes.at("thickness").find("smallest extent, 0.05 m"), std::string::npos)
+      << notes.at("thickness");
+  EXPECT_TRUE(limitLengthsToOrgan(limited, info, 1.0).empty()) << "a bound already inside";
+}
+
 // A smooth bowl in the declared scales with its minimum at known parameter values.
 double bowl(const std::vector<double>& v) {
   return std::pow(std::log10(v[0] / 3e-3), 2) + 4 * std::pow(v[1] - 0.7, 2);

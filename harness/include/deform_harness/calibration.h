@@ -25,6 +25,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -43,6 +44,19 @@ struct CalibDimension {
   double value(double u) const;
   double unit(double value) const;
 };
+
+/// A parameter fitted within this fraction of its range (in its own scale) of a bound is "at the
+/// bound": calibration.json's `at_bound` and a warning.
+inline constexpr double kAtBoundFraction = 0.01;
+
+/// The fitted parameters at a bound: key -> "min" | "max".
+std::map<std::string, std::string> fittedAtBound(const std::vector<CalibDimension>& dims,
+                                                 const std::vector<double>& values);
+
+/// A length (a parameter in m, e.g. a membrane thickness) is at most the organ's smallest
+/// extent: lowers those upper bounds to `extent` (m) and returns key -> why, for the file.
+std::map<std::string, std::string> limitLengthsToOrgan(std::vector<CalibDimension>& dims,
+                                                       const ModelInfo& info, double extent);
 
 /// Objective of many trials at once (parameter values, one vector per trial): one value each,
 /// finite (the caller scores failures).
