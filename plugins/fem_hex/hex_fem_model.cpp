@@ -323,22 +323,20 @@ void HexFemModel::applyHeld(const VecX& in, Real scale, VecX& out) const {
 
 void HexFemModel::addHeldResidual(const VecX& v0, VecX& out) const {
   const Real h = m_dt;
-  auto one = [&](int v, const Vec3& t, const Vec3& lambda) {
+  auto one = [&](int v, const Vec3& t) {
     Vec3 p = Vec3::Zero();
     for (int a = 0; a < 8; ++a) {
       const int n = m_embedding.nodeIds(v, a);
       p += m_embedding.weights(v, a) * (m_x.row(n).transpose() + h * v0.segment<3>(3 * n));
     }
-    const Vec3 g = h * (lambda + m_kp * (t - p));
+    const Vec3 g = (h * m_kp) * (t - p);
     for (int a = 0; a < 8; ++a)
       out.segment<3>(3 * m_embedding.nodeIds(v, a)) += m_embedding.weights(v, a) * g;
   };
   for (size_t k = 0; k < m_clampVerts.size(); ++k)
-    one(m_clampVerts[k], m_clampTargets.row(Eigen::Index(k)).transpose(),
-        m_clampLambda.row(Eigen::Index(k)).transpose());
+    one(m_clampVerts[k], m_clampTargets.row(Eigen::Index(k)).transpose());
   for (size_t k = 0; k < m_graspVerts.size(); ++k)
-    one(m_graspVerts[k], m_graspVertTargets.row(Eigen::Index(k)).transpose(),
-        m_graspLambda.row(Eigen::Index(k)).transpose());
+    one(m_graspVerts[k], m_graspVertTargets.row(Eigen::Index(k)).transpose());
 }
 
 void HexFemModel::assembleValues(bool rotated) {
@@ -514,9 +512,6 @@ void HexFemModel::reset() {
   m_graspVerts.clear();
   m_graspVertOwner.clear();
   m_graspVertTargets.resize(0, 3);
-  m_graspLambda.resize(0, 3);
-  m_lambdaVerts.clear();
-  m_clampLambda.setZero(Eigen::Index(m_clampVerts.size()), 3);
   m_graspForces.clear();
   m_lastIterations = 0;
   m_rotationNotConverged = m_pcgNotConverged = m_ignoredGraspNodes = m_pcgIterations = 0;
@@ -555,10 +550,6 @@ void HexFemModel::collectGrasps(const StepInput& in) {
     }
   }
   m_graspVertTargets.conservativeResize(Eigen::Index(m_graspVerts.size()), 3);
-  if (m_graspVerts != m_lambdaVerts) {  // a grasp closed or opened: its force starts from 0
-    m_lambdaVerts = m_graspVerts;
-    m_graspLambda.setZero(Eigen::Index(m_graspVerts.size()), 3);
-  }
   // The nodes carrying them (contact leaves these alone, as the grasp holds them).
   for (int v : m_graspVerts)
     for (int a = 0; a < 8; ++a) {
@@ -705,24 +696,17 @@ StepStatus HexFemModel::step(const StepInput& in) {
   // reads unconverged_steps into validity.
   if (!rotationsOk || !solveConverged) ++m_unconvergedSteps;
 
-  // Advance positions; the multipliers take the penalty's force (one Uzawa update). The reaction
-  // of a grasp on the tool is minus the force its vertices' multipliers exert on the tissue.
+  // Advance positions. The reaction of a grasp on the tool is minus the penalty force on its
+  // vertices, sum_v kp (J_v x+ - t_v).
   Eigen::Map<VecX>(m_x.data(), 3 * N) += h * m_v;
-  auto gapOf = [&](int v, const auto& t) {
+  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
+  for (size_t k = 0; k < m_graspVerts.size(); ++k) {
+    const int v = m_graspVerts[k];
     Vec3 p = Vec3::Zero();
     for (int a = 0; a < 8; ++a)
       p += m_embedding.weights(v, a) * m_x.row(m_embedding.nodeIds(v, a)).transpose();
-    return Vec3(t.transpose() - p);
-  };
-  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
-  for (size_t k = 0; k < m_graspVerts.size(); ++k) {
-    const Eigen::Index r = Eigen::Index(k);
-    m_graspLambda.row(r) += m_kp * gapOf(m_graspVerts[k], m_graspVertTargets.row(r)).transpose();
-    m_graspForces[size_t(m_graspVertOwner[k])] -= m_graspLambda.row(r).transpose();
-  }
-  for (size_t k = 0; k < m_clampVerts.size(); ++k) {
-    const Eigen::Index r = Eigen::Index(k);
-    m_clampLambda.row(r) += m_kp * gapOf(m_clampVerts[k], m_clampTargets.row(r)).transpose();
+    m_graspForces[size_t(m_graspVertOwner[k])] +=
+        m_kp * (p - m_graspVertTargets.row(Eigen::Index(k)).transpose());
   }
   if (in.contact && !penalty) {
     // Contact on the embedded surface triangles, spread to the grid nodes by the barycentric and

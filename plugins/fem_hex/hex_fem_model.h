@@ -19,11 +19,12 @@
 // of one hexahedron, so the sparsity pattern is unchanged, and it is rotation invariant, so the
 // rest-system preconditioner holds it exactly) and h kp J_H^T (t - J_H x) the right-hand side.
 // kp = holdStiffness times the largest diagonal entry of K0: the held points miss their targets
-// by their share of the reaction over kp. A multiplier per held point carries the force across
-// steps (augmented Lagrangian, one Uzawa update per step: lambda += kp (t - J x+), and the step's
-// force is lambda + kp (t - J x+)), so they miss only by the change of that force in one step over
-// kp (static holds converge to 0). Only the grasped points are held, not the cells around them.
-// The reaction of a grasp on the tool is -sum_v lambda_v over its vertices.
+// by their share of the reaction over kp (nm on the kidney and liver scenes). Only the grasped
+// points are held, not the cells around them. The reaction of a grasp on the tool is
+// sum_v kp (J_v x+ - t_v) over its vertices. (A multiplier per point carried across steps,
+// lambda += kp (t - J x+), would make the hold exact in the limit but integrates the CG solve's
+// residual at the held rows into lambda: the liver lift at 4000 hexahedra then crept near the
+// jaws by 0.07 mm per 50 ms step instead of settling.)
 #pragma once
 
 #include "cholesky_solver.h"
@@ -144,7 +145,7 @@ class HexFemModel : public Model {
   void addHeldValues(const std::vector<int>& verts, Real s);
   /// out += scale J_H^T J_H in over the held points (clamped and grasped).
   void applyHeld(const VecX& in, Real scale, VecX& out) const;
-  /// out += h J_H^T (lambda + kp (t - J_H (x + h v0))) over the held points.
+  /// out += h kp J_H^T (t - J_H (x + h v0)) over the held points.
   void addHeldResidual(const VecX& v0, VecX& out) const;
   bool precondition(const VecX& r, VecX& z);
   /// out += scale * sum_e R_e K0 (R_e^T (a in_e) - b X_e) over elements (all when elems is null).
@@ -193,7 +194,6 @@ class HexFemModel : public Model {
   Real m_kp = 0;                   // N/m, penalty per held point
   std::vector<int> m_clampVerts;   // clamped surface vertices held by the penalty
   MatX3 m_clampTargets;            // their embedded rest positions
-  MatX3 m_clampLambda;             // their multipliers (N, force on the tissue)
 
   // State.
   MatX3 m_x;
@@ -224,8 +224,6 @@ class HexFemModel : public Model {
   std::vector<int> m_graspVerts;      // grasped surface vertices of this step (grasp order)
   std::vector<int> m_graspVertOwner;  // their grasp index
   MatX3 m_graspVertTargets;           // their targets
-  MatX3 m_graspLambda;                // their multipliers (N, force of the tool on the tissue)
-  std::vector<int> m_lambdaVerts;     // grasped vertices m_graspLambda belongs to
   mutable MatX m_U, m_KU;             // 24 x E element vectors in, K0 times them out
   VecX m_v0, m_vOld, m_r, m_z, m_p, m_w, m_fext, m_rd, m_zd;
   std::vector<Vec3> m_graspForces;

@@ -168,9 +168,9 @@ TEST(HexFemModel, GraspedSurfacePointsFollowTheirTargetsAndTheTissuePullsBack) {
     const Real rise = m.nodes()(mid, 2) - rest(mid, 2);
     EXPECT_GT(rise, 0.0);
     EXPECT_LT(rise, 0.01);
-    // A rigidly lifted grasp moves its carrying nodes with the tool: no surface point rises
-    // above the lift (the minimum-norm correction alone moved some 12% farther on the kidney).
-    EXPECT_LT((m.surface() - liverLike().V).rowwise().norm().maxCoeff(), lift.norm() + 1e-9);
+    // No surface point outruns the lift by more than the hold's give (a minimum-norm
+    // prescription of the carrying nodes once moved some 12% farther on the kidney).
+    EXPECT_LT((m.surface() - liverLike().V).rowwise().norm().maxCoeff(), (1 + 1e-4) * lift.norm());
   }
 }
 
