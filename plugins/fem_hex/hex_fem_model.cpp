@@ -188,7 +188,10 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   }
 
   m_isGrasped.assign(N, 0);
+  m_carryCol.assign(N, -1);
   m_grasped.reserve(N);
+  m_touched.reserve(E);
+  m_elemMark.assign(E, 0);
   for (VecX* v : {&m_v0, &m_vOld, &m_r, &m_z, &m_p, &m_w, &m_fext}) v->setZero(3 * N);
   m_U.setZero(24, E);
   m_KU.setZero(24, E);
@@ -507,8 +510,14 @@ void HexFemModel::reset() {
   m_v.setZero(3 * m_grid.numNodes());
   std::fill(m_q.begin(), m_q.end(), Quat::Identity());
   std::fill(m_R.begin(), m_R.end(), Mat3::Identity());
-  for (int n : m_grasped) m_isGrasped[n] = 0;
+  for (int n : m_grasped) {
+    m_isGrasped[n] = 0;
+    m_carryCol[n] = -1;
+  }
   m_grasped.clear();
+  for (int e : m_touched) m_elemMark[e] = 0;
+  m_touched.clear();
+  m_touchedGrasped.clear();
   m_graspVerts.clear();
   m_graspVertOwner.clear();
   m_graspVertTargets.resize(0, 3);
@@ -525,7 +534,10 @@ void HexFemModel::reset() {
 }
 
 void HexFemModel::collectGrasps(const StepInput& in) {
-  for (int n : m_grasped) m_isGrasped[n] = 0;
+  for (int n : m_grasped) {
+    m_isGrasped[n] = 0;
+    m_carryCol[n] = -1;
+  }
   m_grasped.clear();
   // The grasped surface vertices (a vertex held by two grasps belongs to the first).
   m_graspVerts.clear();
@@ -560,6 +572,18 @@ void HexFemModel::collectGrasps(const StepInput& in) {
       }
     }
   std::sort(m_grasped.begin(), m_grasped.end());
+  // Each carrying node's share of its reaction per grasp: the grasps' weights on it.
+  for (size_t c = 0; c < m_grasped.size(); ++c) m_carryCol[m_grasped[c]] = int(c);
+  m_carryShare.setZero(Eigen::Index(m_grasped.size()), Eigen::Index(in.grasps.size()));
+  for (size_t k = 0; k < m_graspVerts.size(); ++k)
+    for (int a = 0; a < 8; ++a) {
+      const int c = m_carryCol[m_embedding.nodeIds(m_graspVerts[k], a)];
+      if (c >= 0) m_carryShare(c, m_graspVertOwner[k]) += m_embedding.weights(m_graspVerts[k], a);
+    }
+  for (Eigen::Index c = 0; c < m_carryShare.rows(); ++c) {
+    const Real sum = m_carryShare.row(c).sum();
+    if (sum > 0) m_carryShare.row(c) /= sum;
+  }
 }
 
 StepStatus HexFemModel::step(const StepInput& in) {
@@ -696,18 +720,42 @@ StepStatus HexFemModel::step(const StepInput& in) {
   // reads unconverged_steps into validity.
   if (!rotationsOk || !solveConverged) ++m_unconvergedSteps;
 
-  // Advance positions. The reaction of a grasp on the tool is minus the penalty force on its
-  // vertices, sum_v kp (J_v x+ - t_v).
-  Eigen::Map<VecX>(m_x.data(), 3 * N) += h * m_v;
+  // Reaction of each grasp on the tool: the residual of the tissue's own rows (inertia, elastic
+  // and external forces, without the penalty) at the nodes carrying its vertices,
+  // (b - A v+)_C / h, each node's share split between the grasps by their weights on it. For an
+  // exact solve this is sum_v kp (J_v x+ - t_v); computed so, the CG solve's residual at the held
+  // rows would reach the tool multiplied by kp (an ODE-driven grasper in
+  // scenes/liver_instruments.json was flung 2 m away on closing).
   m_graspForces.assign(in.grasps.size(), Vec3::Zero());
-  for (size_t k = 0; k < m_graspVerts.size(); ++k) {
-    const int v = m_graspVerts[k];
-    Vec3 p = Vec3::Zero();
-    for (int a = 0; a < 8; ++a)
-      p += m_embedding.weights(v, a) * m_x.row(m_embedding.nodeIds(v, a)).transpose();
-    m_graspForces[size_t(m_graspVertOwner[k])] +=
-        m_kp * (p - m_graspVertTargets.row(Eigen::Index(k)).transpose());
+  if (!m_grasped.empty()) {
+    if (m_grasped != m_touchedGrasped) {
+      m_touchedGrasped = m_grasped;
+      for (int e : m_touched) m_elemMark[e] = 0;
+      m_touched.clear();
+      for (int n : m_grasped)
+        for (int k = m_nodeElemStart[n]; k < m_nodeElemStart[n + 1]; ++k)
+          if (!m_elemMark[m_nodeElems[k]]) {
+            m_elemMark[m_nodeElems[k]] = 1;
+            m_touched.push_back(m_nodeElems[k]);
+          }
+      std::sort(m_touched.begin(), m_touched.end());
+    }
+    m_w = h * x + m_c2 * m_v;
+    for (int n : m_grasped) {
+      m_z.segment<3>(3 * n) = m_mass.segment<3>(3 * n).cwiseProduct(m_vOld.segment<3>(3 * n) -
+                                                                    m_c1 * m_v.segment<3>(3 * n)) +
+                              h * m_fext.segment<3>(3 * n);
+    }
+    applyElements(&m_touched, m_w, 1.0, h, -1.0, m_z);
+    for (int n : m_grasped) {
+      const int c = m_carryCol[n];
+      for (Eigen::Index g = 0; g < m_carryShare.cols(); ++g)
+        m_graspForces[size_t(g)] += m_carryShare(c, g) * m_z.segment<3>(3 * n) / h;
+    }
   }
+
+  // Advance positions.
+  Eigen::Map<VecX>(m_x.data(), 3 * N) += h * m_v;
   if (in.contact && !penalty) {
     // Contact on the embedded surface triangles, spread to the grid nodes by the barycentric and
     // trilinear weights; fixed and grasped nodes do not move.

@@ -20,11 +20,12 @@
 // rest-system preconditioner holds it exactly) and h kp J_H^T (t - J_H x) the right-hand side.
 // kp = holdStiffness times the largest diagonal entry of K0: the held points miss their targets
 // by their share of the reaction over kp (nm on the kidney and liver scenes). Only the grasped
-// points are held, not the cells around them. The reaction of a grasp on the tool is
-// sum_v kp (J_v x+ - t_v) over its vertices. (A multiplier per point carried across steps,
-// lambda += kp (t - J x+), would make the hold exact in the limit but integrates the CG solve's
-// residual at the held rows into lambda: the liver lift at 4000 hexahedra then crept near the
-// jaws by 0.07 mm per 50 ms step instead of settling.)
+// points are held, not the cells around them. The reaction of a grasp on the tool is the
+// residual of the tissue's own rows at the nodes carrying its vertices, (b - A v+)_C / h (A, b
+// without the penalty; equal to sum_v kp (J_v x+ - t_v) for an exact solve). (A multiplier per
+// point carried across steps, lambda += kp (t - J x+), would make the hold exact in the limit but
+// integrates the CG solve's residual at the held rows into lambda: the liver lift at 4000 hexahedra
+// then crept near the jaws by 0.07 mm per 50 ms step instead of settling.)
 #pragma once
 
 #include "cholesky_solver.h"
@@ -224,7 +225,12 @@ class HexFemModel : public Model {
   std::vector<int> m_graspVerts;      // grasped surface vertices of this step (grasp order)
   std::vector<int> m_graspVertOwner;  // their grasp index
   MatX3 m_graspVertTargets;           // their targets
-  mutable MatX m_U, m_KU;             // 24 x E element vectors in, K0 times them out
+  std::vector<int> m_carryCol;        // N, index of a carrying node in m_grasped or -1
+  MatX m_carryShare;                  // #carrying x #grasps: share of each node's reaction
+  std::vector<int> m_touched;         // elements touching carrying nodes
+  std::vector<int> m_touchedGrasped;  // carrying set m_touched was built for
+  std::vector<char> m_elemMark;
+  mutable MatX m_U, m_KU;  // 24 x E element vectors in, K0 times them out
   VecX m_v0, m_vOld, m_r, m_z, m_p, m_w, m_fext, m_rd, m_zd;
   std::vector<Vec3> m_graspForces;
   int m_lastIterations = 0;

@@ -52,7 +52,7 @@ std::vector<ParamSpec> paramSpecs() {
                         "cells: also pin every node of the cells carrying a clamped surface "
                         "vertex (the clamp reaches up to a cell beyond the region); nodes: only "
                         "the grid nodes inside the region"),
-      ParamSpec::real("hold_stiffness", "1", 1e6, 1.0, 1e10,
+      ParamSpec::real("hold_stiffness", "1", 1e8, 1.0, 1e10,
                       "penalty stiffness holding the grasped (and with clamp = points the "
                       "clamped) surface points on their targets through the embedding, as a "
                       "multiple of the largest diagonal entry of one hexahedron's stiffness"),
