@@ -90,23 +90,23 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   std::sort(m_fixedList.begin(), m_fixedList.end());
   m_fixedList.erase(std::unique(m_fixedList.begin(), m_fixedList.end()), m_fixedList.end());
   m_fixedInRegion = static_cast<long long>(m_fixedList.size());
-  if (config.clampCells && !organ.fixed.empty()) {
-    // The grid sticks out of the organ by up to a cell, so the nodes inside the fixed region may
-    // be few (or none) and the clamped surface vertices hang from free nodes: on the OpenHELP
-    // kidney (bottom 15 mm fixed, 967 hexahedra) that surface moved 2.1 mm under a 10 mm lift.
-    // Pin the nodes that carry those vertices, as a grasp prescribes its carrying nodes.
-    std::vector<int> held;
-    for (Eigen::Index v = 0; v < organ.surface.V.rows(); ++v) {
-      const Vec3 p = organ.surface.V.row(v).transpose();
-      for (const Box& b : organ.fixed.boxes)
-        if (b.contains(p)) {
-          held.push_back(static_cast<int>(v));
-          break;
-        }
-    }
-    for (int v : organ.fixed.surfaceVertices)
-      if (v >= 0 && v < organ.surface.numVertices()) held.push_back(v);
-    for (int v : held)
+  // The clamped surface vertices: inside a fixed box or listed by index.
+  std::vector<int> clamped;
+  for (Eigen::Index v = 0; v < organ.surface.V.rows(); ++v) {
+    const Vec3 p = organ.surface.V.row(v).transpose();
+    for (const Box& b : organ.fixed.boxes)
+      if (b.contains(p)) {
+        clamped.push_back(static_cast<int>(v));
+        break;
+      }
+  }
+  for (int v : organ.fixed.surfaceVertices)
+    if (v >= 0 && v < organ.surface.numVertices()) clamped.push_back(v);
+  std::sort(clamped.begin(), clamped.end());
+  clamped.erase(std::unique(clamped.begin(), clamped.end()), clamped.end());
+  if (config.clamp == Clamp::Cells) {
+    // Pin every node carrying a clamped vertex: the clamp reaches up to a cell beyond the region.
+    for (int v : clamped)
       for (int a = 0; a < 8; ++a)
         if (m_embedding.weights(v, a) > 1e-12) m_fixedList.push_back(m_embedding.nodeIds(v, a));
     std::sort(m_fixedList.begin(), m_fixedList.end());
@@ -126,7 +126,31 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
     }
   }
 
-  // Node -> element adjacency, for the elements a grasp touches.
+  // The grid sticks out of the organ by up to a cell, so the nodes inside the fixed region may
+  // be few (or none) and the clamped surface vertices hang from free nodes (on the OpenHELP
+  // kidney, bottom 15 mm fixed, 967 hexahedra, that surface moved 2.1 mm under a 10 mm lift).
+  // Clamp::Points holds those vertices at their embedded rest positions by the penalty, as a
+  // grasp holds its vertices (a vertex all of whose nodes are pinned needs nothing).
+  m_kp = config.holdStiffness * m_K0.diagonal().maxCoeff();
+  m_clampVerts.clear();
+  if (config.clamp == Clamp::Points) {
+    for (int v : clamped) {
+      bool free = false;
+      for (int a = 0; a < 8; ++a)
+        free = free || (m_embedding.weights(v, a) > 1e-12 && !m_isFixed[m_embedding.nodeIds(v, a)]);
+      if (free) m_clampVerts.push_back(v);
+    }
+  }
+  m_clampTargets.resize(Eigen::Index(m_clampVerts.size()), 3);
+  for (size_t k = 0; k < m_clampVerts.size(); ++k) {
+    Vec3 p = Vec3::Zero();
+    for (int a = 0; a < 8; ++a)
+      p += m_embedding.weights(m_clampVerts[k], a) *
+           m_rest.row(m_embedding.nodeIds(m_clampVerts[k], a)).transpose();
+    m_clampTargets.row(Eigen::Index(k)) = p.transpose();
+  }
+
+  // Node -> element adjacency.
   m_nodeElemStart.assign(N + 1, 0);
   for (const auto& hex : m_grid.hexes) {
     for (int a = 0; a < 8; ++a) ++m_nodeElemStart[hex[a] + 1];
@@ -168,7 +192,6 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   m_grasped.reserve(N);
   m_touched.reserve(E);
   m_elemMark.assign(E, 0);
-  m_target = MatX3::Zero(N, 3);
   for (VecX* v : {&m_v0, &m_vOld, &m_r, &m_z, &m_p, &m_w, &m_fext}) v->setZero(3 * N);
   m_U.setZero(24, E);
   m_KU.setZero(24, E);
@@ -189,6 +212,7 @@ Counts HexFemModel::counts() const {
           {"nodes", m_grid.numNodes()},
           {"fixed_nodes", m_fixedInRegion},
           {"clamped_nodes", static_cast<long long>(m_fixedList.size())},
+          {"held_clamped_vertices", static_cast<long long>(m_clampVerts.size())},
           {"dofs", m_numDofs},
           {"cholesky_factor_nonzeros", m_factorNonZeros},
           {"cholesky_flops_per_factor_nonzero", std::llround(m_flopsPerFactorNonZero)},
@@ -265,6 +289,59 @@ void HexFemModel::buildPattern() {
   }
 }
 
+int HexFemModel::valuePosition(int row, int col) const {
+  const int* begin = m_A.innerIndexPtr() + m_A.outerIndexPtr()[col];
+  const int* end = m_A.innerIndexPtr() + m_A.outerIndexPtr()[col + 1];
+  return static_cast<int>(std::lower_bound(begin, end, row) - m_A.innerIndexPtr());
+}
+
+void HexFemModel::addHeldValues(const std::vector<int>& verts, Real s) {
+  // The nodes of one vertex are the corners of one hexahedron: every pair is in the pattern.
+  Real* val = m_A.valuePtr();
+  for (int v : verts)
+    for (int a = 0; a < 8; ++a) {
+      const int da = m_dofOfNode[m_embedding.nodeIds(v, a)];
+      const Real wa = m_embedding.weights(v, a);
+      if (da < 0 || wa == 0) continue;
+      for (int b = 0; b < 8; ++b) {
+        const int db = m_dofOfNode[m_embedding.nodeIds(v, b)];
+        const Real wb = m_embedding.weights(v, b);
+        if (db < 0 || wb == 0 || da < db) continue;  // lower triangle (da == db: the diagonal)
+        for (int i = 0; i < 3; ++i) val[valuePosition(da + i, db + i)] += s * wa * wb;
+      }
+    }
+}
+
+void HexFemModel::applyHeld(const VecX& in, Real scale, VecX& out) const {
+  auto one = [&](int v) {
+    Vec3 p = Vec3::Zero();
+    for (int a = 0; a < 8; ++a)
+      p += m_embedding.weights(v, a) * in.segment<3>(3 * m_embedding.nodeIds(v, a));
+    for (int a = 0; a < 8; ++a)
+      out.segment<3>(3 * m_embedding.nodeIds(v, a)) += (scale * m_embedding.weights(v, a)) * p;
+  };
+  for (int v : m_clampVerts) one(v);
+  for (int v : m_graspVerts) one(v);
+}
+
+void HexFemModel::addHeldResidual(const VecX& v0, VecX& out) const {
+  const Real h = m_dt;
+  auto one = [&](int v, const Vec3& t) {
+    Vec3 p = Vec3::Zero();
+    for (int a = 0; a < 8; ++a) {
+      const int n = m_embedding.nodeIds(v, a);
+      p += m_embedding.weights(v, a) * (m_x.row(n).transpose() + h * v0.segment<3>(3 * n));
+    }
+    const Vec3 g = (h * m_kp) * (t - p);
+    for (int a = 0; a < 8; ++a)
+      out.segment<3>(3 * m_embedding.nodeIds(v, a)) += m_embedding.weights(v, a) * g;
+  };
+  for (size_t k = 0; k < m_clampVerts.size(); ++k)
+    one(m_clampVerts[k], m_clampTargets.row(Eigen::Index(k)).transpose());
+  for (size_t k = 0; k < m_graspVerts.size(); ++k)
+    one(m_graspVerts[k], m_graspVertTargets.row(Eigen::Index(k)).transpose());
+}
+
 void HexFemModel::assembleValues(bool rotated) {
   Real* val = m_A.valuePtr();
   std::fill(val, val + m_A.nonZeros(), 0.0);
@@ -290,32 +367,19 @@ void HexFemModel::assembleValues(bool rotated) {
       }
     }
   }
+  addHeldValues(m_clampVerts, m_dt * m_dt * m_kp);
 }
 
-void HexFemModel::constrainAndFactorize(bool constrained) {
-  // Symmetric elimination of the grasped DOFs: their rows and columns become identity, so the
-  // pattern (and CHOLMOD's symbolic analysis) never changes.
-  Real* val = m_A.valuePtr();
-  const int* outer = m_A.outerIndexPtr();
-  const int* inner = m_A.innerIndexPtr();
-  for (int c = 0; c < m_numDofs && constrained; ++c) {
-    const bool cg = m_isGrasped[m_nodeOfDof[c]];
-    for (int p = outer[c]; p < outer[c + 1]; ++p) {
-      const int r = inner[p];
-      if (cg) {
-        val[p] = (r == c) ? 1.0 : 0.0;
-      } else if (m_isGrasped[m_nodeOfDof[r]]) {
-        val[p] = 0.0;
-      }
-    }
-  }
+void HexFemModel::factorize(bool withGrasps) {
+  // The grasped points' penalty joins the values (the caller restored the grasp-free ones).
+  if (withGrasps) addHeldValues(m_graspVerts, m_dt * m_dt * m_kp);
   {
     const SerialOpenMpScope serial;
     m_chol.factorize(m_A);
   }
   m_factorOk = m_chol.info() == Eigen::Success;
   m_factorNonZeros = static_cast<long long>(m_chol.cholmod().lnz);
-  m_factorGrasped = constrained ? m_grasped : std::vector<int>{};
+  m_factorVerts = withGrasps ? m_graspVerts : std::vector<int>{};
 }
 
 bool HexFemModel::precondition(const VecX& r, VecX& z) {
@@ -327,7 +391,7 @@ bool HexFemModel::precondition(const VecX& r, VecX& z) {
   if (!m_chol.solveInto(m_rd, m_zd)) return false;
   for (int n = 0; n < N; ++n) {
     const int d = m_dofOfNode[n];
-    if (d >= 0 && !m_isGrasped[n]) {
+    if (d >= 0) {
       z.segment<3>(3 * n) = m_zd.segment<3>(d);
     } else {
       z.segment<3>(3 * n).setZero();
@@ -338,7 +402,6 @@ bool HexFemModel::precondition(const VecX& r, VecX& z) {
 
 void HexFemModel::filter(VecX& r) const {
   for (int n : m_fixedList) r.segment<3>(3 * n).setZero();
-  for (int n : m_grasped) r.segment<3>(3 * n).setZero();
 }
 
 void HexFemModel::applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b,
@@ -452,11 +515,12 @@ void HexFemModel::reset() {
     m_carryCol[n] = -1;
   }
   m_grasped.clear();
-  m_mapVerts.clear();
-  m_mapOwner.clear();
   for (int e : m_touched) m_elemMark[e] = 0;
   m_touched.clear();
   m_touchedGrasped.clear();
+  m_graspVerts.clear();
+  m_graspVertOwner.clear();
+  m_graspVertTargets.resize(0, 3);
   m_graspForces.clear();
   m_lastIterations = 0;
   m_rotationNotConverged = m_pcgNotConverged = m_ignoredGraspNodes = m_pcgIterations = 0;
@@ -464,13 +528,12 @@ void HexFemModel::reset() {
   m_msAssembly = m_msSolve = m_msSurface = 0;
   if (m_numDofs > 0) {
     Eigen::Map<VecX>(m_A.valuePtr(), m_A.nonZeros()) = m_baseValues;
-    constrainAndFactorize(false);
+    factorize(false);
   }
   evaluateEmbedding(m_embedding, m_x, m_surface);
 }
 
-void HexFemModel::prescribeGrasps(const StepInput& in) {
-  const Real h = m_dt;
+void HexFemModel::collectGrasps(const StepInput& in) {
   for (int n : m_grasped) {
     m_isGrasped[n] = 0;
     m_carryCol[n] = -1;
@@ -498,75 +561,28 @@ void HexFemModel::prescribeGrasps(const StepInput& in) {
       m_graspVertOwner.push_back(g);
     }
   }
-  if (m_graspVerts.empty()) {
-    m_mapVerts.clear();
-    m_mapOwner.clear();
-    return;
-  }
-
-  // The carrying set C: free nodes with a non-zero weight in a grasped vertex's row. J_C and its
-  // pseudo-inverse depend only on the grasped set (the embedding is fixed): rebuilt when it
-  // changes, i.e. when a grasp closes or opens.
-  constexpr Real kWeightEps = 1e-12;
+  m_graspVertTargets.conservativeResize(Eigen::Index(m_graspVerts.size()), 3);
+  // The nodes carrying them (contact leaves these alone, as the grasp holds them).
   for (int v : m_graspVerts)
     for (int a = 0; a < 8; ++a) {
       const int n = m_embedding.nodeIds(v, a);
-      if (m_embedding.weights(v, a) > kWeightEps && !m_isFixed[n] && !m_isGrasped[n]) {
+      if (m_embedding.weights(v, a) > 1e-12 && !m_isFixed[n] && !m_isGrasped[n]) {
         m_isGrasped[n] = 1;
         m_grasped.push_back(n);
       }
     }
   std::sort(m_grasped.begin(), m_grasped.end());
+  // Each carrying node's share of its reaction per grasp: the grasps' weights on it.
   for (size_t c = 0; c < m_grasped.size(); ++c) m_carryCol[m_grasped[c]] = int(c);
-  const Eigen::Index m = Eigen::Index(m_graspVerts.size()), nc = Eigen::Index(m_grasped.size());
-  if (m_graspVerts != m_mapVerts || m_graspVertOwner != m_mapOwner) {
-    m_mapVerts = m_graspVerts;
-    m_mapOwner = m_graspVertOwner;
-    m_Jc.setZero(m, nc);
-    for (Eigen::Index r = 0; r < m; ++r)
-      for (int a = 0; a < 8; ++a) {
-        const int c = m_carryCol[m_embedding.nodeIds(m_graspVerts[size_t(r)], a)];
-        if (c >= 0) m_Jc(r, c) += m_embedding.weights(m_graspVerts[size_t(r)], a);
-      }
-    m_JcPinv = nc > 0 ? MatX(Eigen::CompleteOrthogonalDecomposition<MatX>(m_Jc).pseudoInverse())
-                      : MatX(0, m);
-    m_JcColSum = m_Jc.colwise().sum().transpose();
-    m_carryShare.setZero(nc, Eigen::Index(in.grasps.size()));
-    for (Eigen::Index r = 0; r < m; ++r)
-      for (Eigen::Index c = 0; c < nc; ++c)
-        m_carryShare(c, m_graspVertOwner[size_t(r)]) += m_Jc(r, c);
-    for (Eigen::Index c = 0; c < nc; ++c) {
-      const Real sum = m_carryShare.row(c).sum();
-      if (sum > 0) m_carryShare.row(c) /= sum;
+  m_carryShare.setZero(Eigen::Index(m_grasped.size()), Eigen::Index(in.grasps.size()));
+  for (size_t k = 0; k < m_graspVerts.size(); ++k)
+    for (int a = 0; a < 8; ++a) {
+      const int c = m_carryCol[m_embedding.nodeIds(m_graspVerts[k], a)];
+      if (c >= 0) m_carryShare(c, m_graspVertOwner[k]) += m_embedding.weights(m_graspVerts[k], a);
     }
-  }
-  if (nc == 0) return;
-
-  // dq = J_C^+ (t - J q): the grasped points' distance to their targets, from the current nodes.
-  MatX3& gap = m_graspGap;
-  gap.resize(m, 3);
-  for (Eigen::Index r = 0; r < m; ++r) {
-    const int v = m_graspVerts[size_t(r)];
-    Vec3 p = Vec3::Zero();
-    for (int a = 0; a < 8; ++a)
-      p += m_embedding.weights(v, a) * m_x.row(m_embedding.nodeIds(v, a)).transpose();
-    gap.row(r) = m_graspVertTargets.row(r) - p.transpose();
-  }
-  // dq = b + J_C^+ (gap - J_C b), b the weighted mean of the gaps each node carries: a rigidly
-  // translated grasp moves its carrying nodes with it (J_C b = gap when every node of the cells is
-  // free), where the plain minimum-norm dq = J_C^+ gap moves the heavily weighted nodes farther
-  // than the tool and the lightly weighted ones less (the kidney's surface outran a 10 mm lift by
-  // 1.2 mm).
-  m_graspBase.noalias() = m_Jc.transpose() * gap;
-  for (Eigen::Index c = 0; c < nc; ++c)
-    if (m_JcColSum[c] > 0) m_graspBase.row(c) /= m_JcColSum[c];
-  gap.noalias() -= m_Jc * m_graspBase;
-  m_graspDq = m_graspBase;
-  m_graspDq.noalias() += m_JcPinv * gap;
-  for (Eigen::Index c = 0; c < nc; ++c) {
-    const int n = m_grasped[size_t(c)];
-    m_target.row(n) = m_x.row(n) + m_graspDq.row(c);
-    m_v0.segment<3>(3 * n) = m_graspDq.row(c).transpose() / h;
+  for (Eigen::Index c = 0; c < m_carryShare.rows(); ++c) {
+    const Real sum = m_carryShare.row(c).sum();
+    if (sum > 0) m_carryShare.row(c) /= sum;
   }
 }
 
@@ -582,28 +598,13 @@ StepStatus HexFemModel::step(const StepInput& in) {
     assembleValues(false);
     m_baseValues = Eigen::Map<const VecX>(m_A.valuePtr(), m_A.nonZeros());
     updateInverseDiagonal();
-    m_factorGrasped.assign(1, -1);  // force a refactorisation
+    m_factorVerts.assign(1, -1);  // force a refactorisation
     return step(in);
   }
 
   m_vOld = m_v;
   m_v0 = m_v;
-  prescribeGrasps(in);
-  if (m_grasped != m_touchedGrasped) {
-    m_touchedGrasped = m_grasped;
-    for (int e : m_touched) m_elemMark[e] = 0;
-    m_touched.clear();
-    for (int n : m_grasped) {
-      for (int k = m_nodeElemStart[n]; k < m_nodeElemStart[n + 1]; ++k) {
-        const int e = m_nodeElems[k];
-        if (!m_elemMark[e]) {
-          m_elemMark[e] = 1;
-          m_touched.push_back(e);
-        }
-      }
-    }
-    std::sort(m_touched.begin(), m_touched.end());
-  }
+  collectGrasps(in);
 
   // External forces: gravity on the lumped masses, point loads as J^T f: every per-vertex share
   // of the harness's patch through its vertex's trilinear weights (a load without a spread acts
@@ -638,11 +639,13 @@ StepStatus HexFemModel::step(const StepInput& in) {
   filter(m_z);
   const Real loadScale2 = m_z.cwiseAbs2().cwiseProduct(m_invDiag).sum();
 
-  // r = b - A v0 = M (v - c1 v0) + h f_ext - K_R (h x + c2 v0 - h X), filtered.
+  // r = b - A v0 = M (v - c1 v0) + h f_ext - K_R (h x + c2 v0 - h X)
+  //               + h kp J_H^T (t - J_H (x + h v0)), filtered.
   Eigen::Map<const VecX> x(m_x.data(), 3 * N);
   m_r = m_mass.cwiseProduct(m_vOld - m_c1 * m_v0) + h * m_fext;
   m_w = h * x + m_c2 * m_v0;
   applyElements(nullptr, m_w, 1.0, h, -1.0, m_r);
+  addHeldResidual(m_v0, m_r);
   filter(m_r);
   const bool refactorEveryStep = corot && m_config.solver == CorotationalSolver::Refactor;
   if (refactorEveryStep && m_numDofs > 0) assembleValues(true);
@@ -653,15 +656,13 @@ StepStatus HexFemModel::step(const StepInput& in) {
   m_v = m_v0;
   m_lastIterations = 0;
   if (m_numDofs > 0) {
-    // The factor must be of the constrained system except for PCG with the plain rest
-    // preconditioner, which stays valid (filtered) whatever is grasped.
-    const bool constrained =
-        !corot || refactorEveryStep || m_config.pcgPreconditioner == PcgPreconditioner::RestGrasped;
+    // The factor holds the grasped points' penalty: refactorised when the grasped set changes
+    // (a grasp closing or opening), every step by the refactoring solver.
     if (refactorEveryStep) {
-      constrainAndFactorize(true);
-    } else if (constrained ? m_grasped != m_factorGrasped : !m_factorGrasped.empty()) {
+      factorize(true);
+    } else if (m_graspVerts != m_factorVerts) {
       Eigen::Map<VecX>(m_A.valuePtr(), m_A.nonZeros()) = m_baseValues;
-      constrainAndFactorize(constrained);
+      factorize(true);
     }
     ok = m_factorOk;
     if (ok && (!corot || refactorEveryStep)) {
@@ -692,6 +693,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
         rz = rzNew;
         m_w = m_c1 * m_mass.cwiseProduct(m_p);
         applyElements(nullptr, m_p, 1.0, 0.0, m_c2, m_w);
+        applyHeld(m_p, h * h * m_kp, m_w);
         filter(m_w);
         const Real pq = m_p.dot(m_w);
         if (!(pq > 0) || !std::isfinite(pq)) {
@@ -718,10 +720,26 @@ StepStatus HexFemModel::step(const StepInput& in) {
   // reads unconverged_steps into validity.
   if (!rotationsOk || !solveConverged) ++m_unconvergedSteps;
 
-  // Reaction at the carrying nodes: (b - A v+)_C / h, from the elements touching them, each
-  // node's share to the grasps whose vertices it carries (by their weights on it).
+  // Reaction of each grasp on the tool: the residual of the tissue's own rows (inertia, elastic
+  // and external forces, without the penalty) at the nodes carrying its vertices,
+  // (b - A v+)_C / h, each node's share split between the grasps by their weights on it. For an
+  // exact solve this is sum_v kp (J_v x+ - t_v); computed so, the CG solve's residual at the held
+  // rows would reach the tool multiplied by kp (an ODE-driven grasper in
+  // scenes/liver_instruments.json was flung 2 m away on closing).
   m_graspForces.assign(in.grasps.size(), Vec3::Zero());
   if (!m_grasped.empty()) {
+    if (m_grasped != m_touchedGrasped) {
+      m_touchedGrasped = m_grasped;
+      for (int e : m_touched) m_elemMark[e] = 0;
+      m_touched.clear();
+      for (int n : m_grasped)
+        for (int k = m_nodeElemStart[n]; k < m_nodeElemStart[n + 1]; ++k)
+          if (!m_elemMark[m_nodeElems[k]]) {
+            m_elemMark[m_nodeElems[k]] = 1;
+            m_touched.push_back(m_nodeElems[k]);
+          }
+      std::sort(m_touched.begin(), m_touched.end());
+    }
     m_w = h * x + m_c2 * m_v;
     for (int n : m_grasped) {
       m_z.segment<3>(3 * n) = m_mass.segment<3>(3 * n).cwiseProduct(m_vOld.segment<3>(3 * n) -
@@ -736,9 +754,8 @@ StepStatus HexFemModel::step(const StepInput& in) {
     }
   }
 
-  // Advance positions; carrying nodes land exactly on their targets.
+  // Advance positions.
   Eigen::Map<VecX>(m_x.data(), 3 * N) += h * m_v;
-  for (int n : m_grasped) m_x.row(n) = m_target.row(n);
   if (in.contact && !penalty) {
     // Contact on the embedded surface triangles, spread to the grid nodes by the barycentric and
     // trilinear weights; fixed and grasped nodes do not move.

@@ -9,20 +9,23 @@
 // with f(x) = -K (x - X) (linear) or sum_e -R_e K0 (R_e^T x_e - X_e) and K = sum_e R_e K0 R_e^T
 // (corotational, Müller & Gross 2004; Nesme et al. 2005). All hexahedra are equal cubes, so K0
 // and the element mass are computed once. M is lumped: rho h^3 / 8 per node and element.
-// Fixed nodes are eliminated from the unknowns.
+// Fixed nodes (the grid nodes inside the fixed region) are eliminated from the unknowns.
 // Surface mapping (SOFA's Mapping): the organ's surface vertices are embedded trilinearly,
 // x_s = J q (J: the 8 weights of each vertex's hexahedron). A point force reaches the nodes as
-// J^T f (every per-vertex share through its 8 weights). A grasp holds organ surface vertices: the
-// nodes that carry them (every node with a non-zero weight in a grasped vertex's row of J, the
-// carrying set C) are prescribed at x_C + dq, the minimum-norm correction that puts the grasped
-// points on their targets t,
-//     dq = J_C^+ (t - J q)    (J_C^+ = J_C^T (J_C J_C^T)^-1 when J_C has full row rank, else the
-//                              pseudo-inverse: the least-squares fit of more vertices than nodes),
-// so J q+ = t exactly whenever the targets are reachable (they are when they move rigidly: the
-// weights of each vertex sum to 1). Prescribed nodes get the velocity (target - x) / h, imposed by
-// symmetric elimination (their rows and columns replaced by identity). The reaction of a grasp is
-// the residual of its carrying nodes' rows, f_tissue_on_tool = (b - A v+)_C / h, each node's share
-// split between the grasps by their vertices' weights on it.
+// J^T f. Held surface points (the grasped vertices, with targets t moving with the tool, and the
+// clamped ones, at rest) are held through the same mapping by a stiff penalty,
+//     E_hold = kp/2 sum_held |J_v q - t_v|^2,
+// taken implicitly in the step: h^2 kp J_H^T J_H joins the system matrix (it couples only nodes
+// of one hexahedron, so the sparsity pattern is unchanged, and it is rotation invariant, so the
+// rest-system preconditioner holds it exactly) and h kp J_H^T (t - J_H x) the right-hand side.
+// kp = holdStiffness times the largest diagonal entry of K0: the held points miss their targets
+// by their share of the reaction over kp (nm on the kidney and liver scenes). Only the grasped
+// points are held, not the cells around them. The reaction of a grasp on the tool is the
+// residual of the tissue's own rows at the nodes carrying its vertices, (b - A v+)_C / h (A, b
+// without the penalty; equal to sum_v kp (J_v x+ - t_v) for an exact solve). (A multiplier per
+// point carried across steps, lambda += kp (t - J x+), would make the hold exact in the limit but
+// integrates the CG solve's residual at the held rows into lambda: the liver lift at 4000 hexahedra
+// then crept near the jaws by 0.07 mm per 50 ms step instead of settling.)
 #pragma once
 
 #include "cholesky_solver.h"
@@ -43,7 +46,14 @@ enum class CorotationalSolver { Refactor, Pcg };
 /// PCG preconditioner: Cholesky of the rest system A0 = c1 M + c2 K0, either factored once and
 /// applied filtered (Rest: never refactorised, so a grasp closing costs nothing), or refactorised
 /// with the grasped rows and columns eliminated whenever the grasp set changes (RestGrasped).
+/// Both now include the held points' penalty and are refactorised when the grasped set changes
+/// (RestGrasped is kept as a name for scenes that set it; it behaves as Rest).
 enum class PcgPreconditioner { Rest, RestGrasped };
+/// How the fixed region holds: Points (the grid nodes inside the region are pinned and the
+/// clamped surface points are held at rest by the penalty), Cells (the grid nodes inside the
+/// region and every node of the cells carrying a clamped surface vertex are pinned: up to a cell
+/// beyond the region) or Nodes (only the grid nodes inside the region).
+enum class Clamp { Points, Cells, Nodes };
 
 /// The element stiffness: the plain trilinear hexahedron (locks in bending) or the same nodes with
 /// Wilson's condensed incompatible modes (hexStiffnessIncompatible).
@@ -75,10 +85,10 @@ struct HexFemConfig {
   int pcgMaxIterations = 50;
   PcgPreconditioner pcgPreconditioner = PcgPreconditioner::Rest;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
-  /// Also pin every node of the cells that carry a surface vertex of the organ's fixed region
-  /// (its embedding weights), so the clamped surface does not move; false: only the nodes
-  /// fixedNodesOf returns (the grid nodes inside the region).
-  bool clampCells = true;
+  Clamp clamp = Clamp::Points;
+  /// Penalty stiffness of the held surface points (grasped and clamped), as a multiple of the
+  /// largest diagonal entry of one hexahedron's stiffness K0 (dimensionless).
+  Real holdStiffness = 1e8;
   CholeskySolver::Kind cholesky = CholeskySolver::Kind::Auto;
   bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
 };
@@ -86,8 +96,9 @@ struct HexFemConfig {
 class HexFemModel : public Model {
  public:
   /// Builds grid, embedding, K0, mass, sparsity pattern and factorisation. fixedNodesOf maps the
-  /// rest node positions to the pinned node indices; with config.clampCells the nodes carrying
-  /// the surface vertices of organ.fixed are pinned too. Throws InputError for unusable input.
+  /// rest node positions to the pinned node indices; with Clamp::Cells the nodes carrying the
+  /// surface vertices of organ.fixed are pinned too, with Clamp::Points those vertices are held
+  /// by the penalty. Throws InputError for unusable input.
   void initialize(const Organ& organ, const HexFemConfig& config, Real dt,
                   const std::function<std::vector<int>(const MatX3&)>& fixedNodesOf);
 
@@ -102,6 +113,8 @@ class HexFemModel : public Model {
 
   const HexGrid& grid() const { return m_grid; }
   const VoxelGrid& voxels() const { return m_voxels; }
+  /// The surface mapping: each surface vertex's 8 nodes and trilinear weights.
+  const Embedding& embedding() const { return m_embedding; }
   const Mat24& elementStiffness() const { return m_K0; }
   /// Volume fraction of each hexahedron inside the surface (1 with fillSamples = 0).
   const std::vector<Real>& cellFill() const { return m_fill; }
@@ -111,8 +124,12 @@ class HexFemModel : public Model {
     return Eigen::Map<const MatX3>(m_v.data(), m_x.rows(), 3);
   }
   const CholeskySolver& cholesky() const { return m_chol; }
-  /// The nodes prescribed in the last step: those carrying the grasped surface vertices.
+  /// The nodes carrying the grasped surface vertices of the last step (non-zero weight).
   const std::vector<int>& graspedNodes() const { return m_grasped; }
+  /// Surface vertices of the fixed region held at rest by the penalty (Clamp::Points).
+  const std::vector<int>& heldClampVertices() const { return m_clampVerts; }
+  /// Penalty stiffness of one held point, N/m.
+  Real holdStiffnessPerPoint() const { return m_kp; }
   /// CG iterations of the last step (0 outside the pcg solver).
   int lastIterations() const { return m_lastIterations; }
 
@@ -120,7 +137,17 @@ class HexFemModel : public Model {
   using Vec24i = Eigen::Matrix<int, 24, 1>;
   void buildPattern();
   void assembleValues(bool rotated);
-  void constrainAndFactorize(bool constrained);
+  /// Adds the grasped points' penalty h^2 kp J_G^T J_G to m_A's values when withGrasps and
+  /// factorises.
+  void factorize(bool withGrasps);
+  /// Position of (row, col), row >= col, in m_A's values.
+  int valuePosition(int row, int col) const;
+  /// m_A values += s J_v^T J_v (per coordinate) for every vertex v of verts (free nodes only).
+  void addHeldValues(const std::vector<int>& verts, Real s);
+  /// out += scale J_H^T J_H in over the held points (clamped and grasped).
+  void applyHeld(const VecX& in, Real scale, VecX& out) const;
+  /// out += h kp J_H^T (t - J_H (x + h v0)) over the held points.
+  void addHeldResidual(const VecX& v0, VecX& out) const;
   bool precondition(const VecX& r, VecX& z);
   /// out += scale * sum_e R_e K0 (R_e^T (a in_e) - b X_e) over elements (all when elems is null).
   void applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b, Real scale,
@@ -129,9 +156,9 @@ class HexFemModel : public Model {
   bool updateRotations();  // false when an element's rotation did not converge
   void updateInverseDiagonal();
   void filter(VecX& r) const;
-  /// Grasped surface vertices of `in` -> prescribed carrying nodes and their targets (m_grasped,
-  /// m_target, m_v0); rebuilds J_C and its pseudo-inverse when the grasped set changes.
-  void prescribeGrasps(const StepInput& in);
+  /// Grasped surface vertices of `in` and their targets (m_graspVerts, m_graspVertTargets) and
+  /// the nodes carrying them (m_grasped, m_isGrasped).
+  void collectGrasps(const StepInput& in);
 
   HexFemConfig m_config;
   Real m_dt = 0;
@@ -164,7 +191,10 @@ class HexFemModel : public Model {
   Vec3 m_restCenter = Vec3::Zero();
   Real m_divergenceRadius = 0;
   CholeskySolver m_chol;
-  std::vector<int> m_factorGrasped;  // grasped nodes the factorisation was built for
+  std::vector<int> m_factorVerts;  // grasped vertices the factorisation holds ({-1}: stale)
+  Real m_kp = 0;                   // N/m, penalty per held point
+  std::vector<int> m_clampVerts;   // clamped surface vertices held by the penalty
+  MatX3 m_clampTargets;            // their embedded rest positions
 
   // State.
   MatX3 m_x;
@@ -190,24 +220,16 @@ class HexFemModel : public Model {
   }
 
   // Per-step work (allocated once).
-  std::vector<char> m_isGrasped;      // N
-  std::vector<int> m_grasped;         // sorted prescribed (carrying) nodes of this step
-  std::vector<int> m_carryCol;        // N, column of a carrying node in m_Jc or -1
+  std::vector<char> m_isGrasped;      // N: carries a grasped vertex (contact leaves it alone)
+  std::vector<int> m_grasped;         // sorted nodes carrying the grasped vertices
   std::vector<int> m_graspVerts;      // grasped surface vertices of this step (grasp order)
   std::vector<int> m_graspVertOwner;  // their grasp index
   MatX3 m_graspVertTargets;           // their targets
-  std::vector<int> m_mapVerts;        // grasped vertices m_Jc / m_JcPinv were built for
-  std::vector<int> m_mapOwner;        // and their owners
-  MatX m_Jc;                          // #grasped vertices x #carrying nodes: J restricted to C
-  MatX m_JcPinv;                      // its pseudo-inverse
+  std::vector<int> m_carryCol;        // N, index of a carrying node in m_grasped or -1
   MatX m_carryShare;                  // #carrying x #grasps: share of each node's reaction
-  MatX3 m_graspGap, m_graspDq;        // t - J q per grasped vertex; the carrying nodes' dq
-  MatX3 m_graspBase;                  // per carrying node: the weighted mean gap it carries
-  VecX m_JcColSum;                    // column sums of m_Jc
-  std::vector<int> m_touched;         // elements touching grasped nodes
-  std::vector<int> m_touchedGrasped;  // grasp set m_touched was built for
+  std::vector<int> m_touched;         // elements touching carrying nodes
+  std::vector<int> m_touchedGrasped;  // carrying set m_touched was built for
   std::vector<char> m_elemMark;
-  MatX3 m_target;          // N by 3, targets of prescribed nodes
   mutable MatX m_U, m_KU;  // 24 x E element vectors in, K0 times them out
   VecX m_v0, m_vOld, m_r, m_z, m_p, m_w, m_fext, m_rd, m_zd;
   std::vector<Vec3> m_graspForces;

@@ -38,18 +38,24 @@ std::vector<ParamSpec> paramSpecs() {
                       "residual, r0 the warm start's, D diagonal of the rest system); at least "
                       "one iteration per step"),
       ParamSpec::choice("pcg_preconditioner", "rest", {"rest", "rest_grasped"},
-                        "rest: Cholesky of the rest system, factored once and applied filtered; "
-                        "rest_grasped: refactorised with the grasped nodes eliminated whenever "
-                        "the grasp set changes"),
+                        "rest: Cholesky of the rest system with the held points' penalty, "
+                        "refactorised when the grasped set changes; rest_grasped: the same (kept "
+                        "for scenes that name it)"),
       ParamSpec::integer("pcg_max_iterations", 50, 1, 100000, "CG iteration cap per step"),
       ParamSpec::integer("rotation_iterations", 8, 1, 1000,
                          "cap of the warm-started Newton steps of the element rotation extraction "
                          "(1e-9 rad); past it the rotation comes from the SVD of F (numeric "
                          "rotation_svd_fallbacks)"),
-      ParamSpec::choice("clamp", "cells", {"cells", "nodes"},
-                        "cells: pin the grid nodes inside the fixed region and every node of the "
-                        "cells carrying a surface vertex of it (the clamped surface stays put); "
-                        "nodes: only the grid nodes inside the region"),
+      ParamSpec::choice("clamp", "points", {"points", "cells", "nodes"},
+                        "points: pin the grid nodes inside the fixed region and hold the clamped "
+                        "surface points at rest through the embedding (penalty hold_stiffness); "
+                        "cells: also pin every node of the cells carrying a clamped surface "
+                        "vertex (the clamp reaches up to a cell beyond the region); nodes: only "
+                        "the grid nodes inside the region"),
+      ParamSpec::real("hold_stiffness", "1", 1e8, 1.0, 1e10,
+                      "penalty stiffness holding the grasped (and with clamp = points the "
+                      "clamped) surface points on their targets through the embedding, as a "
+                      "multiple of the largest diagonal entry of one hexahedron's stiffness"),
       ParamSpec::choice("cholesky", "auto", {"auto", "simplicial", "supernodal"},
                         "CHOLMOD factorisation kind (auto: CHOLMOD picks supernodal when the "
                         "factor is dense enough)"),
@@ -77,7 +83,9 @@ HexFemConfig configFromParams(const ParamValues& p) {
       {{"rest", PcgPreconditioner::Rest}, {"rest_grasped", PcgPreconditioner::RestGrasped}});
   c.pcgMaxIterations = static_cast<int>(p.integer("pcg_max_iterations"));
   c.rotationIterations = static_cast<int>(p.integer("rotation_iterations"));
-  c.clampCells = p.choice("clamp") == "cells";
+  c.clamp = p.choiceAs<Clamp>(
+      "clamp", {{"points", Clamp::Points}, {"cells", Clamp::Cells}, {"nodes", Clamp::Nodes}});
+  c.holdStiffness = p.real("hold_stiffness");
   c.cholesky = p.choiceAs<CholeskySolver::Kind>("cholesky",
                                                 {{"auto", CholeskySolver::Kind::Auto},
                                                  {"simplicial", CholeskySolver::Kind::Simplicial},

@@ -151,10 +151,11 @@ TEST(HexFemModel, GraspedSurfacePointsFollowTheirTargetsAndTheTissuePullsBack) {
       grasp.targets = r0.rowwise() + lift.transpose() * ((s + 1) / 50.0);
       in.grasps = {grasp};
       ASSERT_EQ(m.step(in), StepStatus::Ok);
-      // The grasped surface points (not grid nodes) are on their targets, through the embedding.
+      // The grasped surface points (not grid nodes) are on their targets, through the embedding:
+      // held by the penalty, whose multipliers take the force after the grasp's first steps.
       for (size_t k = 0; k < grasp.vertices.size(); ++k)
         EXPECT_LT((m.surface().row(grasp.vertices[k]) - grasp.targets.row(Eigen::Index(k))).norm(),
-                  1e-12);
+                  (s < 2 ? 1e-4 : 1e-6) * lift.norm());
     }
     // Fixed nodes did not move; the organ is stretched upward, so it pulls the tool down.
     for (int n : m.fixedNodes()) EXPECT_EQ(m.nodes().row(n), rest.row(n));
@@ -167,39 +168,56 @@ TEST(HexFemModel, GraspedSurfacePointsFollowTheirTargetsAndTheTissuePullsBack) {
     const Real rise = m.nodes()(mid, 2) - rest(mid, 2);
     EXPECT_GT(rise, 0.0);
     EXPECT_LT(rise, 0.01);
-    // A rigidly lifted grasp moves its carrying nodes with the tool: no surface point rises
-    // above the lift (the minimum-norm correction alone moved some 12% farther on the kidney).
-    EXPECT_LT((m.surface() - liverLike().V).rowwise().norm().maxCoeff(), lift.norm() + 1e-9);
+    // No surface point outruns the lift by more than the hold's give (a minimum-norm
+    // prescription of the carrying nodes once moved some 12% farther on the kidney).
+    EXPECT_LT((m.surface() - liverLike().V).rowwise().norm().maxCoeff(), (1 + 1e-4) * lift.norm());
   }
 }
 
-// A grasper much smaller than a cell holds a single surface vertex: the nodes of its hexahedron
-// carry it to the target exactly (before the surface mapping, a grasp of grid nodes within the
-// jaw radius held nothing).
-TEST(HexFemModel, SmallGraspHoldsItsSurfaceVertex) {
+// A grasper much smaller than a cell holds a single surface vertex: it follows its target
+// through the embedding (before the surface mapping, a grasp of grid nodes within the jaw radius
+// held nothing), and only that point is held, not its hexahedron: the nodes of the cell far from
+// the vertex lag the tool (when the whole cell was prescribed, every one of its nodes moved with
+// the tool, so the held material was a whole cell and the far field moved too much).
+TEST(HexFemModel, SmallGraspHoldsItsSurfaceVertexNotItsCell) {
   TestModel m;
   m.initialize(makeOrgan(liverLike()), config(ElasticModel::Corotational), 1e-3,
                fixedBelow(2, -0.03));
   GraspInput grasp = surfaceGrasp(liverLike(), Vec3(0.02, 0.01, 0.05), 0.002, m.surface());
   ASSERT_EQ(grasp.vertices.size(), 1u);
   const MatX3 r0 = grasp.targets;
+  const Real lift = 0.01;
   for (int s = 0; s < 30; ++s) {
     StepInput in;
     in.dt = 1e-3;
-    grasp.targets = r0.rowwise() + Vec3(0.0, 0.0, 0.01).transpose() * ((s + 1) / 30.0);
+    grasp.targets = r0.rowwise() + Vec3(0.0, 0.0, lift).transpose() * ((s + 1) / 30.0);
     in.grasps = {grasp};
     ASSERT_EQ(m.step(in), StepStatus::Ok);
-    EXPECT_LT((m.surface().row(grasp.vertices[0]) - grasp.targets.row(0)).norm(), 1e-12);
+    EXPECT_LT((m.surface().row(grasp.vertices[0]) - grasp.targets.row(0)).norm(),
+              (s < 2 ? 1e-4 : 1e-6) * lift);
   }
   EXPECT_GT(m.graspedNodes().size(), 1u);  // a whole hexahedron's nodes carry the vertex
   EXPECT_LT(m.graspForces()[0].z(), 0.0);
-  // They move with the tool (minimum norm alone moved the heavier ones farther, w_a / sum w^2).
+  // The carrying nodes do not all move with the tool: the one with the least weight on the
+  // vertex moves less than 80% of the lift (every one moved exactly the lift before).
   const MatX3 rest = m.grid().nodes;
-  for (int n : m.graspedNodes()) EXPECT_NEAR((m.nodes().row(n) - rest.row(n)).norm(), 0.01, 1e-12);
+  Real least = 1, leastRise = 0, mostRise = 0;
+  const std::vector<int>& carry = m.graspedNodes();
+  for (int a = 0; a < 8; ++a) {
+    const int n = m.embedding().nodeIds(grasp.vertices[0], a);
+    if (std::find(carry.begin(), carry.end(), n) == carry.end()) continue;
+    const Real w = m.embedding().weights(grasp.vertices[0], a);
+    const Real rise = m.nodes()(n, 2) - rest(n, 2);
+    if (w < least) {
+      least = w;
+      leastRise = rise;
+    }
+    mostRise = std::max(mostRise, rise);
+  }
+  EXPECT_LT(leastRise, 0.8 * lift);
+  EXPECT_LT(leastRise, mostRise);
 }
 
-// A point force spread by the harness over a patch reaches the nodes by J^T: the patch moves along
-// the force, and the nodal forces sum to it (the static response of a pinned organ).
 TEST(HexFemModel, PatchLoadMovesThePatchAlongTheForce) {
   TestModel m;
   HexFemConfig c = config(ElasticModel::Linear);
@@ -297,7 +315,8 @@ TEST(HexFemModel, RelativeDisplacementDoesNotDependOnScale) {
 
 // Issue 35 item 2 and 4: the grid nodes inside a fixed box may be few, and the clamped surface
 // hangs from free nodes (the OpenHELP kidney's moved 2.1 mm under a 10 mm lift). With
-// clamp = cells every node carrying a clamped surface vertex is pinned: that surface stays put.
+// clamp = points (default) the clamped surface points are held at rest through the embedding,
+// with clamp = cells every node carrying one is pinned: either way that surface stays put.
 TEST(HexFemModel, ClampedSurfaceDoesNotMove) {
   Organ organ = makeOrgan(liverLike());
   const Box bb = boundingBox(liverLike().V);
@@ -310,9 +329,9 @@ TEST(HexFemModel, ClampedSurfaceDoesNotMove) {
   for (int v = 0; v < liverLike().numVertices(); ++v)
     if (clamp.contains(liverLike().V.row(v).transpose())) clamped.push_back(v);
   ASSERT_GT(clamped.size(), 10u);
-  for (bool cells : {true, false}) {
+  for (Clamp mode : {Clamp::Points, Clamp::Cells, Clamp::Nodes}) {
     HexFemConfig c = config(ElasticModel::Corotational);
-    c.clampCells = cells;
+    c.clamp = mode;
     c.elements = 250;
     TestModel m;
     m.initialize(organ, c, 1e-3, inBox);
@@ -320,7 +339,12 @@ TEST(HexFemModel, ClampedSurfaceDoesNotMove) {
     Real drift = 0;
     for (int v : clamped)
       drift = std::max(drift, (run.back().row(v) - liverLike().V.row(v)).norm());
-    if (cells) {
+    const Real largest = (run.back() - liverLike().V).rowwise().norm().maxCoeff();
+    if (mode == Clamp::Points) {
+      EXPECT_LT(drift, 1e-4 * largest);  // the penalty's give
+      EXPECT_EQ(m.counts().at("clamped_nodes"), m.counts().at("fixed_nodes"));
+      EXPECT_GT(m.counts().at("held_clamped_vertices"), 0);
+    } else if (mode == Clamp::Cells) {
       EXPECT_LT(drift, 1e-12);  // the embedding's rounding
       EXPECT_GT(m.counts().at("clamped_nodes"), m.counts().at("fixed_nodes"));
     } else {
