@@ -279,11 +279,11 @@ TEST(StabilityPlugins, StiffCantileverMovesForEveryPluginWithGravity) {
     if (fem) {
       // fem_hex at its default 967 target hexahedra: the 2.2 mm cells overhang the 10 mm beam;
       // counted whole, with trilinear elements, it sagged 1.00 mm (67% of theory). The cells'
-      // volume fractions and the incompatible modes (its defaults) fix both. Its clamp pins the
-      // whole first cell column that carries the root face (clamp = cells: a root between two
-      // node layers can only be held so), which shortens the beam by up to a cell: 79% of
-      // theory (94% in fem_hex's own test, which pins only the grid nodes behind the root face
-      // and lets that face move).
+      // volume fractions and the incompatible modes (its defaults) fix both. Its clamp (clamp =
+      // points: the grid nodes inside the box pinned, the clamped surface points held through
+      // the embedding) holds the cells that carry the root face, which shortens the beam by up
+      // to a cell: 79% of theory (94% in fem_hex's own test, which pins only the grid nodes
+      // behind the root face and lets that face move).
       const double margin = plugin == "fem_hex" ? 0.25 : 0.2;
       EXPECT_NEAR(sag, theory, margin * theory) << plugin;
     }
