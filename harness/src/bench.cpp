@@ -286,7 +286,7 @@ ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* prog
   }
   doc["machine"]["load_average_end"] = loadAverage();
   // Each case's ratio to PBD on its scene, in this run: what CI compares across machines.
-  const json plain = json::parse(doc["cases"].dump());
+  const json plain = json::parse(doc.dump());
   for (size_t i = 0; i < doc["cases"].size(); ++i) {
     const double x = xPbd(plain, plain["cases"][i]);
     doc["cases"][i]["x_pbd"] = std::isfinite(x) ? ojson(x) : ojson(nullptr);
