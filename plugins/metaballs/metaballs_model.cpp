@@ -185,14 +185,15 @@ void MetaballsModel::init(const ModelSetup& setup) {
   // surface as grasps are, the sphere carrying most of each surface vertex inside it: the centres
   // lie deep in the organ, and a thin fixed slab along the surface contains none of them (the
   // organ then fell freely under gravity).
+  // Every sphere that carries a clamped surface vertex is held (at rest, unrotated, its rest
+  // radius): holding only the main carrier let the free ones drag the clamped skin along (6.2 of
+  // an 11.2 mm lift in the conformance grasp).
   m_fixedList = fixedNodeIndices(m_x0, organ.fixed, organ.surface);
   for (int v : fixedNodeIndices(organ.surface.V, organ.fixed, organ.surface)) {
     const size_t base = size_t(v) * size_t(m_skin.slots);
-    int best = -1;
     for (int k = 0; k < m_skin.count[size_t(v)]; ++k)
-      if (best < 0 || m_skin.weight[base + size_t(k)] > m_skin.weight[base + size_t(best)])
-        best = k;
-    if (best >= 0) m_fixedList.push_back(m_skin.sphere[base + size_t(best)]);
+      if (m_skin.weight[base + size_t(k)] > 0)
+        m_fixedList.push_back(m_skin.sphere[base + size_t(k)]);
   }
   std::sort(m_fixedList.begin(), m_fixedList.end());
   m_fixedList.erase(std::unique(m_fixedList.begin(), m_fixedList.end()), m_fixedList.end());
@@ -513,7 +514,8 @@ StepStatus MetaballsModel::step(const StepInput& in) {
       for (int k = m_adjStart[size_t(c)] - 1; k < m_adjStart[size_t(c) + 1]; ++k) {
         const int i = k < m_adjStart[size_t(c)] ? c : m_adj[size_t(k)];
         if (m_volCount[size_t(i)] == 0) continue;
-        m_r(i) = m_mb.spheres.radii(i) * m_volFactorSum[size_t(i)] / m_volCount[size_t(i)];
+        if (!m_fixed[size_t(i)])
+          m_r(i) = m_mb.spheres.radii(i) * m_volFactorSum[size_t(i)] / m_volCount[size_t(i)];
         m_volFactorSum[size_t(i)] = 0;
         m_volCount[size_t(i)] = 0;
       }
@@ -529,6 +531,8 @@ StepStatus MetaballsModel::step(const StepInput& in) {
       for (size_t k = 0; k < m_carry.size(); ++k)
         std::copy_n(m_carryRot.begin() + 9 * std::ptrdiff_t(k), 9,
                     m_rot.begin() + 9 * std::ptrdiff_t(m_carry[k]));
+    for (int i : m_fixedList)  // held spheres do not turn
+      for (int q = 0; q < 9; ++q) m_rot[9 * size_t(i) + size_t(q)] = (q % 4 == 0) ? 1.0 : 0.0;
   }
   const double tRot = msSince(ts);
   ts = Clock::now();
