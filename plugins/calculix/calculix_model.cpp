@@ -4,6 +4,7 @@
 
 #include <deform/error.h>
 #include <deform/organ_tets.h>
+#include <deform/tet_embedding.h>
 
 #include <chrono>
 #include <cmath>
@@ -40,8 +41,11 @@ class CalculixModel final : public Model {
     OrganTets tets = organTets(organ, meshOptions, setup.cache);
     m_surfaceNode = std::move(tets.surfaceNode);
     m_numElements = tets.mesh.numTets();
+    m_cornerTets = tets.mesh.T;
+    m_midside.clear();
     if (p.integer("element_order") == 2) {
       QuadraticTetNodes q = addMidsideNodes(tets.mesh);
+      for (size_t e = 0; e < q.edges.size(); ++e) m_midside[q.edges[e]] = q.numCorners + int(e);
       m_model.nodes = std::move(q.V);
       m_model.elements = q.elements.cast<int>();
     } else {
@@ -81,6 +85,7 @@ class CalculixModel final : public Model {
         held[node] =
             g.targets.row(Eigen::Index(k)).transpose() - m_model.nodes.row(node).transpose();
       }
+    holdGraspedMidsideNodes(held);
     for (const NodeGrasp& g : in.nodeConstraints)
       for (size_t k = 0; k < g.nodes.size(); ++k)
         if (!isFixed(g.nodes[k]))
@@ -132,6 +137,34 @@ class CalculixModel final : public Model {
             {"isolated_clamped_nodes", m_pinnedOutside}};
   }
   PhaseTimes phaseTimes() const override { return m_phase; }
+
+  /// 10-node tets: the midside node of every edge whose two corners are held follows them (the
+  /// mean of their displacements: straight sides), as reference_fem does, so that a held patch
+  /// (a bonded plate) moves as a whole.
+  void holdGraspedMidsideNodes(std::map<int, Vec3>& held) const {
+    if (m_midside.empty() || held.size() < 2) return;
+    std::vector<std::pair<int, Vec3>> add;
+    for (auto a = held.begin(); a != held.end(); ++a)
+      for (auto b = std::next(a); b != held.end(); ++b) {
+        const auto it = m_midside.find({a->first, b->first});  // a < b: map order
+        if (it == m_midside.end() || held.count(it->second) || isFixed(it->second)) continue;
+        add.emplace_back(it->second, 0.5 * (a->second + b->second));
+      }
+    for (const auto& [node, u] : add) held.emplace(node, u);
+  }
+
+  // Markers: barycentric coordinates in the containing corner tet (deform/tet_embedding.h),
+  // through the quadratic shape functions when the elements have 10 nodes.
+  void bindMarkers(const MatX3& rest) override {
+    m_markerEmbedding = embedInTets(m_model.nodes, m_cornerTets, rest);
+  }
+  MatX3 markers() const override {
+    if (m_model.elements.cols() == 10)
+      return embeddedPositionsQuadratic(m_markerEmbedding, m_nodes,
+                                        [this](int t, int a) { return m_model.elements(t, a); });
+    return embeddedPositions(m_markerEmbedding, m_nodes, m_cornerTets);
+  }
+
   NumericCounters numericCounters() const override {
     // Totals over the run; CPU time is the ccx child processes' (user + system, their rusage).
     return {{"ccx_runs", m_runs},
@@ -162,6 +195,9 @@ class CalculixModel final : public Model {
   CcxModel m_model;
   std::string m_modelDeck;
   long long m_numElements = 0;
+  MatX4i m_cornerTets;                           ///< the corner tets (marker embedding)
+  std::map<std::pair<int, int>, int> m_midside;  ///< 10-node tets: corner pair -> midside node
+  TetEmbedding m_markerEmbedding;
   std::vector<int> m_fixed;
   std::vector<int> m_surfaceNode;  ///< surface vertex -> node; -1: inside a fixed box, no node
   MatX3 m_restSurface;

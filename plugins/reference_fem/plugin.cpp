@@ -5,6 +5,7 @@
 #include <deform/contact.h>
 #include <deform/organ_tets.h>
 #include <deform/registry.h>
+#include <deform/tet_embedding.h>
 
 #include <algorithm>
 #include <chrono>
@@ -161,6 +162,7 @@ class ReferenceFemModel final : public Model {
         lc.targets.bottomRows(1) = g.targets.row(Eigen::Index(k));
       }
     }
+    holdGraspedMidsideNodes(lc, fixed);
     for (const NodeGrasp& g : in.nodeConstraints)  // contact, on nodes
       for (size_t k = 0; k < g.nodes.size(); ++k) {
         lc.prescribedNodes.push_back(g.nodes[k]);
@@ -261,6 +263,44 @@ class ReferenceFemModel final : public Model {
   }
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
+  /// P2: the midside node of every edge whose two corners are held by the grasps follows them
+  /// (the mean of their targets: straight sides), so that a held patch (a bonded plate) moves as
+  /// a whole instead of pillowing between its held vertices. Appended to lc's prescribed nodes.
+  void holdGraspedMidsideNodes(LoadCase& lc, const std::vector<char>& fixed) const {
+    if (m_system->order() != ElementOrder::Quadratic || lc.prescribedNodes.size() < 2) return;
+    const size_t n = lc.prescribedNodes.size();
+    std::vector<char> held(size_t(m_system->numNodes()), 0);
+    for (int node : lc.prescribedNodes) held[size_t(node)] = 1;
+    std::vector<std::pair<int, Vec3>> add;
+    for (size_t i = 0; i < n; ++i)
+      for (size_t j = i + 1; j < n; ++j) {
+        const int mid = m_system->edgeNode(lc.prescribedNodes[i], lc.prescribedNodes[j]);
+        if (mid < 0 || held[size_t(mid)] || fixed[size_t(mid)]) continue;
+        held[size_t(mid)] = 1;
+        add.emplace_back(
+            mid,
+            0.5 * (lc.targets.row(Eigen::Index(i)) + lc.targets.row(Eigen::Index(j))).transpose());
+      }
+    if (add.empty()) return;
+    lc.targets.conservativeResize(Eigen::Index(n + add.size()), 3);
+    for (size_t k = 0; k < add.size(); ++k) {
+      lc.prescribedNodes.push_back(add[k].first);
+      lc.targets.row(Eigen::Index(n + k)) = add[k].second.transpose();
+    }
+  }
+
+  // Markers: barycentric coordinates in the containing corner tet (deform/tet_embedding.h),
+  // through the quadratic shape functions for P2 elements.
+  void bindMarkers(const MatX3& rest) override {
+    m_markerEmbedding = embedInTets(m_system->rest().V, m_system->rest().T, rest);
+  }
+  MatX3 markers() const override {
+    if (m_system->order() == ElementOrder::Quadratic)
+      return embeddedPositionsQuadratic(
+          m_markerEmbedding, m_nodes, [this](int t, int a) { return m_system->elementNode(t, a); });
+    return embeddedPositions(m_markerEmbedding, m_nodes, m_system->rest().T);
+  }
+
  private:
   /// Every surface vertex becomes a node: the vertices the conforming clip left without one
   /// (-1 in surfaceNode: inside a fixed box, or snapped onto its face, outside the meshed solid)
@@ -310,6 +350,7 @@ class ReferenceFemModel final : public Model {
   VecX m_x, m_v, m_fPrev;
   MatX3 m_nodes, m_surface;
   std::vector<Vec3> m_graspForces;
+  TetEmbedding m_markerEmbedding;
   long long m_unconverged = 0, m_spdFallbacks = 0, m_projectedSteps = 0, m_lastIterations = 0,
             m_lastLoadSteps = 0;
   long long m_newtonIterations = 0, m_factorizations = 0, m_pcgIterations = 0,
@@ -332,11 +373,11 @@ DEFORM_PLUGIN(registry) {
       "Gross, Graphics Interface 2004; Neo-Hookean (isochoric/volumetric split): Bonet & Wood, "
       "Nonlinear Continuum Mechanics for FEA, 2nd ed. 2008, doi:10.1017/CBO9780511755446";
   info.version = "1.0";
-  info.capabilities = {Capability::Grasp,           Capability::PointForce,
-                       Capability::Gravity,         Capability::ReactionForce,
-                       Capability::NeedsPrecompute, Capability::TetInput,
-                       Capability::QuasiStatic,     Capability::Contact,
-                       Capability::ContactReaction, Capability::RollerSupport};
+  info.capabilities = {
+      Capability::Grasp,         Capability::PointForce,      Capability::Gravity,
+      Capability::ReactionForce, Capability::NeedsPrecompute, Capability::TetInput,
+      Capability::QuasiStatic,   Capability::Contact,         Capability::ContactReaction,
+      Capability::RollerSupport, Capability::Markers};
   info.params = reffem::referenceFemParams();
   info.create = [] { return std::make_unique<reffem::ReferenceFemModel>(); };
   // No presets: every command (stability, tables, calibrate, sweep) uses the reference at its

@@ -1,6 +1,8 @@
 // Surface vertex -> tet node map and tet mesh measures (core/include/deform/tet_nodes.h): the
 // values every tet-based model (pbd, massspring, bullet_deformable) derives from a tet file.
 #include <deform/error.h>
+#include <deform/organ_tets.h>
+#include <deform/tet_embedding.h>
 #include <deform/tet_nodes.h>
 #include <gtest/gtest.h>
 
@@ -110,6 +112,48 @@ TEST(SurfaceVertexNodes, PrefixIdentityPermutedNodesAndAVertexOffTheMesh) {
     EXPECT_NE(w.find("cube.msh"), std::string::npos) << w;
     EXPECT_NE(w.find("vertex 1"), std::string::npos) << w;
   }
+}
+
+TEST(TetEmbedding, PointsFollowAnAffineMapExactlyLinearAndQuadratic) {
+  const TetMesh m = fiveTetCube(0.02);
+  MatX3 pts(4, 3);
+  pts << 0.005, 0.006, 0.007,  //
+      0.019, 0.001, 0.0185,    //
+      0.01, 0.01, 0.01,        //
+      0.03, 0.01, 0.01;        // outside the cube: extrapolated from the nearest tet
+  const TetEmbedding e = embedInTets(m.V, m.T, pts);
+  EXPECT_EQ(e.numOutside(), 1);
+  EXPECT_GT(e.outside[3], 0);
+  for (int p = 0; p < 3; ++p) {
+    Real sum = 0;
+    for (Real w : e.weights[size_t(p)]) {
+      EXPECT_GE(w, -1e-9);
+      sum += w;
+    }
+    EXPECT_NEAR(sum, 1, 1e-12);
+  }
+  // An affine deformation x -> A x + b moves every embedded point (outside ones too) exactly.
+  Mat3 A;
+  A << 1.1, 0.2, 0, -0.1, 0.9, 0.05, 0, 0.3, 1.2;
+  const Vec3 b(0.001, -0.002, 0.003);
+  const auto affine = [&](const MatX3& X) {
+    MatX3 Y = (X * A.transpose()).rowwise() + b.transpose();
+    return Y;
+  };
+  EXPECT_TRUE(embeddedPositions(e, affine(m.V), m.T).isApprox(affine(pts), 1e-12));
+  // 10-node tets with straight sides: the midside nodes at the edge midpoints; a quadratic map
+  // of the nodes is reproduced at the points as well.
+  const QuadraticTetNodes q = addMidsideNodes(m);
+  const auto quadratic = [](const MatX3& X) {
+    MatX3 Y = X;
+    for (Eigen::Index i = 0; i < X.rows(); ++i)
+      Y(i, 2) += 3 * X(i, 0) * X(i, 1) + X(i, 0) * X(i, 0);
+    return Y;
+  };
+  const MatX3 moved =
+      embeddedPositionsQuadratic(e, quadratic(q.V), [&](int t, int a) { return q.elements(t, a); });
+  EXPECT_TRUE(moved.topRows(3).isApprox(quadratic(pts).topRows(3), 1e-12));
+  EXPECT_THROW(embedInTets(m.V, MatX4i(0, 4), pts), InputError);
 }
 
 }  // namespace
