@@ -813,6 +813,27 @@ TEST_F(TempDir, QuickTruthCubeTableWithoutTheSolversSaysWhy) {
   EXPECT_NEAR(s.plates[0].trajectory.back().pos.z(), -0.010, 1e-12);
 }
 
+TEST_F(TempDir, TruthCubeRunsADynamicModelOnItsVolumeNetworkInASettlingScenePerLevel) {
+  PluginLoader probe({DEFORM_BUILD_PLUGIN_DIR});
+  const auto found = probe.discover();
+  if (std::find(found.begin(), found.end(), std::string("pbd")) == found.end())
+    GTEST_SKIP() << "pbd is not built";
+  PluginLoader loader({pluginSubset(m_dir / "plugins", {"pbd"}).string()});
+  TablesOptions o;
+  o.quick = true;
+  const tables::TableDef t = tables::truthCube(o, loader);
+  ASSERT_EQ(t.cases.size(), 3u) << "the quasi-static scene and one settling scene per level";
+  EXPECT_EQ(t.cases[1].id, "truth-cube/dynamic_1");
+  const Scene s = parseScene(json::parse(t.cases[2].scene.dump()), "dynamic_2.json");
+  EXPECT_TRUE(s.compareAtEquilibrium);
+  EXPECT_EQ(s.dt, 1e-3);
+  ASSERT_EQ(s.models.size(), 1u);
+  EXPECT_EQ(s.models[0].plugin, "pbd");
+  EXPECT_EQ(s.models[0].params["network"], "volume");
+  EXPECT_NEAR(s.plates[0].trajectory.back().pos.z(), -0.010, 1e-12);
+  EXPECT_EQ(s.markers.points.rows(), 343);
+}
+
 TEST(Tables, UnknownTableIsAnInputError) {
   PluginLoader loader({DEFORM_TEST_FIXTURE_PLUGIN_DIR});
   TablesOptions o;

@@ -248,6 +248,25 @@ ojson truthCubeScene(const TruthCubeData& d, const std::vector<ojson>& models) {
   return j;
 }
 
+/// The compression scene for dynamic models at one level: the plate moves down over the first
+/// second and holds; each model is compared once it settles (the duration is the cap).
+ojson truthCubeDynamicScene(const TruthCubeData& d, size_t level, const std::vector<ojson>& models,
+                            double duration) {
+  ojson j = truthCubeScene(d, models);
+  j["name"] = "truth-cube-dynamic-" + std::to_string(level + 1);
+  j["description"] = "Truth Cube, dynamic models: the plate moves down by " +
+                     number(1e3 * d.strains[level] * kSide) +
+                     " mm over 1 s and holds; compared at equilibrium.";
+  j["dt"] = 1e-3;
+  j["duration"] = duration;
+  j["plates"][0]["trajectory"] =
+      ojson::array({{{"t", 0.0}, {"offset", vec(Vec3::Zero())}},
+                    {{"t", 1.0}, {"offset", vec(Vec3(0, 0, -d.strains[level] * kSide))}}});
+  j["markers"].erase("measured");  // measured positions need a compared instant given in time
+  j["compare_at"] = "equilibrium";
+  return j;
+}
+
 /// The markers of run `label` at each compared instant, read from the case's results.json.
 std::vector<MatX3> markersOf(const CaseResult& c, const std::string& label, std::string& why) {
   std::vector<MatX3> out;
@@ -282,6 +301,13 @@ std::vector<MatX3> markersOf(const CaseResult& c, const std::string& label, std:
   }
   return out;
 }
+
+/// A model's runs in the table's cases: its label, plugin, and per level the case and the index
+/// of the compared instant that holds that level.
+struct Source {
+  std::string label, plugin;
+  std::vector<std::pair<std::string, size_t>> levels;
+};
 
 std::string layersMm(const std::vector<double>& v) {
   std::string s;
@@ -331,9 +357,11 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
   std::vector<ojson> models = {model("reference_fem", "reference_fem", femParams),
                                model("reference_fem", kDisplacementLabel, displacementParams)};
   if (withCalculix) models.push_back(model(kCalculix, kCalculix, femParams));
-  // The other models run here once they map markers and solve quasi-statically; until then their
-  // rows say why they have no figure.
+  // The other models: the quasi-static ones in the same scene, the dynamic ones (with their
+  // volume network where they have one) in a settling scene per level; the others get a row
+  // saying why they have no figure.
   std::vector<std::pair<std::string, std::string>> absent;
+  std::vector<ojson> dynamic;
   for (const std::string& name : kOtherModels) {
     const std::string problem = pluginProblem(loader, name);
     if (!problem.empty()) {
@@ -345,9 +373,9 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
       absent.emplace_back(
           name, "unsupported: " + name + " has no markers capability (no interior mapping yet)");
     } else if (!info.has(Capability::QuasiStatic)) {
-      absent.emplace_back(name,
-                          "not run: a dynamic model needs a settling scene, which this "
-                          "table does not build yet");
+      ojson params = ojson::object();
+      if (info.param("network")) params["network"] = "volume";
+      dynamic.push_back(model(name, name, params));
     } else {
       models.push_back(model(name, name));
     }
@@ -377,25 +405,59 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
   if (!withCalculix) t.notes.push_back("CalculiX: not available: " + calculixProblem + ".");
   const std::string id = "truth-cube/cube";
   t.cases.push_back({id, truthCubeScene(data, models)});
-  std::vector<std::pair<std::string, std::string>> labels;  // (label, plugin)
-  for (const ojson& m : models)
-    labels.emplace_back(m["label"].get<std::string>(), m["plugin"].get<std::string>());
-  t.rows = [data, labels, absent, id](const Results& res, const fs::path& dir) {
+  // Where each model's markers at each level are: (case, index of the compared instant).
+  std::vector<Source> sources;
+  for (const ojson& m : models) {
+    Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
+    for (size_t l = 0; l < data.strains.size(); ++l) src.levels.emplace_back(id, l);
+    sources.push_back(src);
+  }
+  if (!dynamic.empty()) {
+    t.notes.push_back(
+        "Dynamic models (their volume network where they have one, default parameters): one "
+        "scene per level (scenes/truth-cube/dynamic_N.json, dt 1 ms), the plate moved over 1 s "
+        "and held, compared once settled (\"compare_at\": \"equilibrium\", capped at " +
+        number(o.quick ? 3.0 : 5.0) + " s).");
+    for (size_t l = 0; l < data.strains.size(); ++l) {
+      const std::string dyn = "truth-cube/dynamic_" + std::to_string(l + 1);
+      t.cases.push_back({dyn, truthCubeDynamicScene(data, l, dynamic, o.quick ? 3.0 : 5.0)});
+    }
+    for (const ojson& m : dynamic) {
+      Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
+      for (size_t l = 0; l < data.strains.size(); ++l)
+        src.levels.emplace_back("truth-cube/dynamic_" + std::to_string(l + 1), 0);
+      sources.push_back(src);
+    }
+  }
+  t.rows = [data, sources, absent](const Results& res, const fs::path& dir) {
     std::vector<ojson> out;
     const MatX3 rest = truthCubeSceneFrame(data, 0);
     // CalculiX's figures, for the reference's comparison column.
     std::map<std::pair<std::string, size_t>, double> calculix;
+    // Each source's markers per level (empty when absent) and why not; each case read once.
+    std::map<std::pair<std::string, std::string>, std::pair<std::vector<MatX3>, std::string>> read;
     struct Computed {
       std::string label, plugin;
-      std::vector<MatX3> markers;
-      std::string why;
+      std::vector<const CaseResult*> cases;
+      std::vector<MatX3> markers;  ///< per level; 0 rows when absent
+      std::vector<std::string> why;
     };
     std::vector<Computed> computed;
-    const CaseResult* c = nullptr;
-    if (res.count(id)) c = &res.at(id);
-    for (const auto& [label, plugin] : labels) {
-      Computed k{label, plugin, {}, ""};
-      if (c) k.markers = markersOf(*c, label, k.why);
+    for (const Source& src : sources) {
+      Computed k{src.label, src.plugin, {}, {}, {}};
+      for (const auto& [caseId, index] : src.levels) {
+        const CaseResult* c = res.count(caseId) ? &res.at(caseId) : nullptr;
+        const auto key = std::make_pair(caseId, src.label);
+        if (c && !read.count(key)) {
+          std::string why;
+          std::vector<MatX3> m = markersOf(*c, src.label, why);
+          read[key] = {std::move(m), why};
+        }
+        const auto* m = c ? &read[key] : nullptr;
+        k.cases.push_back(c);
+        k.markers.push_back(m && index < m->first.size() ? m->first[index] : MatX3());
+        k.why.push_back(m ? m->second : std::string());
+      }
       computed.push_back(std::move(k));
     }
     for (const char* reg : {"translation", "bottom_layer"}) {
@@ -408,8 +470,9 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
           row["plate_mm"] = 1e3 * data.strains[l] * kSide;
           row["registration"] = reg;
           row["calibrated"] = false;
+          const CaseResult* c = k.cases[l];
           const RunRecord* r = c ? c->run(k.label) : nullptr;
-          const bool ok = r && r->status == RunStatus::Ok && r->valid && l < k.markers.size();
+          const bool ok = r && r->status == RunStatus::Ok && r->valid && k.markers[l].rows() > 0;
           if (ok) {
             const TruthCubeFigures f =
                 truthCubeFigures(data, rest, k.markers[l], int(l + 1), bottom);
@@ -452,9 +515,9 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
             row["scene"] = "";
             row["note"] = "";
           }
-          if (!k.why.empty()) {
+          if (!k.why[l].empty()) {
             std::string note = row["note"].get<std::string>();
-            appendTo(note, k.why);
+            appendTo(note, k.why[l]);
             row["note"] = note;
             if (row["status"] == "ok") row["status"] = "no bead figures";
           }
