@@ -520,6 +520,7 @@ struct TablesArgs {
   bool inProcess = false;
   bool noReferenceCheck = false;
   bool surfaceBaselines = false;
+  std::string truthCubeData;
   DispatchArgs dispatch;
   std::vector<std::string> calibrations;
 };
@@ -534,6 +535,7 @@ int cmdTables(const std::vector<std::string>& names, const TablesArgs& ta) {
   o.referenceElements = ta.referenceElements;
   o.referenceCheck = !ta.noReferenceCheck;
   o.surfaceBaselines = ta.surfaceBaselines;
+  o.truthCubeData = ta.truthCubeData;
   o.calibrations = readCalibrations(ta.calibrations);
   if (ta.resume && ta.inProcess)
     throw InputError("--resume", "", "needs the cases in child processes (drop --in-process)");
@@ -1053,7 +1055,8 @@ int realMain(int argc, char** argv) {
   CLI::App* tables = app.add_subcommand(
       "tables",
       "regenerate the papers' tables (metaballs-construction, method-comparison, "
-      "bem-timing, bem-accuracy, hybrid-accuracy, hybrid-timing, verification, or all)");
+      "bem-timing, bem-accuracy, hybrid-accuracy, hybrid-timing, verification, truth-cube, "
+      "or all)");
   tables->add_option("name", tableNamesArg, "table name(s) or all")->required();
   tables->add_option("--out", ta.common.out, "output folder")->required();
   tables
@@ -1066,6 +1069,10 @@ int realMain(int argc, char** argv) {
   tables->add_flag("--surface-baselines", ta.surfaceBaselines,
                    "hybrid tables: PBD and mass-spring on the organ's surface mesh alone, as the "
                    "paper ran them (default: on its volume, network = volume)");
+  tables->add_option(
+      "--data", ta.truthCubeData,
+      "truth-cube: a bead file of the layout of data/truth-cube/uniaxial_positions.csv "
+      "(default: that file)");
   tables->add_flag("--explain", ta.common.explain,
                    "say what each case loaded, built, cached, skipped");
   tables

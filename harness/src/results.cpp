@@ -259,6 +259,35 @@ json runJson(const RunRecord& run) {
     for (const auto& s : run.compared) at.push_back(s.time);
     j["compared_at"] = at;
   }
+  // Plates: the force the tissue exerts on each, at the last compared instant.
+  if (!run.compared.empty() && !run.compared.back().plateForces.empty()) {
+    json forces = json::array();
+    for (const Vec3& f : run.compared.back().plateForces)
+      forces.push_back({finite(f.x()), finite(f.y()), finite(f.z())});
+    j["plate_force_N"] = forces;
+  }
+  if (!run.markerStatus.empty()) {
+    json m;
+    m["status"] = run.markerStatus;
+    if (!run.markerReason.empty()) m["reason"] = run.markerReason;
+    if (run.markerStatus == "ok") {
+      json at = json::array();
+      for (const SurfaceSnapshot& s : run.compared) {
+        json pts = json::array();
+        for (Eigen::Index i = 0; i < s.markers.rows(); ++i)
+          pts.push_back(
+              {finite(s.markers(i, 0)), finite(s.markers(i, 1)), finite(s.markers(i, 2))});
+        json one = {{"t", s.time}, {"positions_m", pts}};
+        if (s.markerRms >= 0) {
+          one["rms_error_m"] = finite(s.markerRms);
+          one["max_error_m"] = finite(s.markerMax);
+        }
+        at.push_back(one);
+      }
+      m["at"] = at;
+    }
+    j["markers"] = m;
+  }
   if (!run.emptyGrasps.empty()) j["empty_grasps"] = run.emptyGrasps;
   if (run.graspResidual >= 0) j["grasp_residual_m"] = finite(run.graspResidual);
   if (run.settledAt) {

@@ -19,7 +19,7 @@ namespace {
 
 // Every field of RunRecord is either carried below or documented as not filled by runModel();
 // a new field changes the size and stops the build here until it is carried too.
-static_assert(sizeof(RunRecord) == 1128,
+static_assert(sizeof(RunRecord) == 1192,
               "RunRecord changed: carry the new field in serializeRunRecord/deserializeRunRecord "
               "(run_isolation.cpp), then update this size");
 
@@ -68,22 +68,12 @@ std::vector<std::string> getStrings(ByteReader& r) {
 
 void putSnapshots(ByteWriter& w, const std::vector<SurfaceSnapshot>& v) {
   w.pod(static_cast<long long>(v.size()));
-  for (const SurfaceSnapshot& s : v) {
-    w.pod(s.step);
-    w.pod(s.time);
-    w.matrix(s.positions);
-  }
+  for (const SurfaceSnapshot& s : v) putSnapshotExtras(w, s);
 }
 
 std::vector<SurfaceSnapshot> getSnapshots(ByteReader& r) {
   std::vector<SurfaceSnapshot> v;
-  for (long long i = 0, n = r.pod<long long>(); i < n; ++i) {
-    SurfaceSnapshot s;
-    s.step = r.pod<int>();
-    s.time = r.pod<Real>();
-    r.matrix(s.positions);
-    v.push_back(std::move(s));
-  }
+  for (long long i = 0, n = r.pod<long long>(); i < n; ++i) v.push_back(getSnapshotExtras(r));
   return v;
 }
 
@@ -179,6 +169,8 @@ std::vector<char> serializeRunRecord(const RunRecord& r) {
   for (const Vec3& p : r.objectsFinal) putVec3(w, p);
   w.pod(r.contactPairs);
   w.pod(r.contacts);
+  w.string(r.markerStatus);
+  w.string(r.markerReason);
   // Not carried (runModel() does not fill them): error, referenceModel, referenceValid and
   // referenceInvalidReason (markReferenceValidity() sets them after every run) and the output
   // files.
@@ -269,6 +261,8 @@ RunRecord deserializeRunRecord(const std::vector<char>& bytes) {
   for (long long i = 0, n = b.pod<long long>(); i < n; ++i) r.objectsFinal.push_back(getVec3(b));
   r.contactPairs = b.pod<long long>();
   r.contacts = b.pod<long long>();
+  r.markerStatus = b.string();
+  r.markerReason = b.string();
   if (!b.atEnd()) throw std::runtime_error("run record: trailing bytes");
   return r;
 }

@@ -87,6 +87,39 @@ Real interactionSteadyTime(const Scene& scene) {
 
 }  // namespace
 
+void putSnapshotExtras(ByteWriter& w, const SurfaceSnapshot& s) {
+  w.pod(s.step);
+  w.pod(s.time);
+  w.matrix(s.positions);
+  w.pod(static_cast<long long>(s.plateForces.size()));
+  for (const Vec3& f : s.plateForces) {
+    w.pod(f.x());
+    w.pod(f.y());
+    w.pod(f.z());
+  }
+  w.matrix(s.markers);
+  w.pod(s.markerRms);
+  w.pod(s.markerMax);
+}
+
+SurfaceSnapshot getSnapshotExtras(ByteReader& r) {
+  SurfaceSnapshot s;
+  s.step = r.pod<int>();
+  s.time = r.pod<Real>();
+  r.matrix(s.positions);
+  for (long long i = 0, n = r.pod<long long>(); i < n; ++i) {
+    Vec3 f;
+    f.x() = r.pod<double>();
+    f.y() = r.pod<double>();
+    f.z() = r.pod<double>();
+    s.plateForces.push_back(f);
+  }
+  r.matrix(s.markers);
+  s.markerRms = r.pod<double>();
+  s.markerMax = r.pod<double>();
+  return s;
+}
+
 bool solveOnlyAtComparedInstants(const ModelInfo& info, const ParamValues& params) {
   if (!info.has(Capability::QuasiStatic)) return false;
   const auto it = params.all().find("solve");
@@ -130,6 +163,9 @@ std::string unsupportedReason(const ModelInfo& info, const Scene& scene) {
       return lacks(name + " (a grasper with dynamics: the hand feels the grasp force)",
                    Capability::ReactionForce);
   }
+  if (!scene.plates.empty() && !info.has(Capability::Grasp))
+    return lacks("the scene's plates (held as grasps of their surface vertices)",
+                 Capability::Grasp);
   if (!scene.objects.empty() && !info.has(Capability::Contact))
     return lacks("the scene's rigid objects", Capability::Contact);
   // A free object is held up only by the reaction the model reports: without it the object falls
@@ -292,6 +328,33 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   rec.equilibrium = equilibrium;
   double residual2 = 0;
   long long residualCount = 0;
+  const bool withMarkers = rec.markerStatus == "ok";
+  // A compared instant: the surface, the plates' reaction forces, the markers and their errors.
+  const auto snapshot = [&](int step, Real time, const MatX3& surface, const StepInput& in) {
+    SurfaceSnapshot snap{step, time, surface};
+    if (!scene.plates.empty()) {
+      const std::vector<Vec3> forces = model.graspForces();
+      if (forces.size() >= in.grasps.size()) {
+        snap.plateForces.assign(scene.plates.size(), Vec3::Zero());
+        for (size_t g = 0; g < in.grasps.size(); ++g) {
+          const int p = in.grasps[g].tool - static_cast<int>(scene.tools.size());
+          if (p >= 0 && p < static_cast<int>(scene.plates.size()))
+            snap.plateForces[size_t(p)] = forces[g];
+        }
+      }
+    }
+    if (withMarkers) {
+      snap.markers = model.markers();
+      for (const MarkerFrame& m : scene.markers.measured) {
+        if (std::fabs(m.t - time) > 0.5 * scene.dt || snap.markers.rows() != m.points.rows())
+          continue;
+        const VecX d = (snap.markers - m.points).rowwise().norm();
+        snap.markerRms = d.size() ? std::sqrt(d.squaredNorm() / double(d.size())) : 0.0;
+        snap.markerMax = d.size() ? d.maxCoeff() : 0.0;
+      }
+    }
+    return snap;
+  };
 
   for (int k = 0; k < n; ++k) {
     if (options.onStep && k > 0 && (k & 4095) == 0) options.onStep(k, n);
@@ -383,14 +446,14 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
           tEnd > steadyTime + 0.5 * scene.dt && speed < scene.settleSpeed ? quietSteps + 1 : 0;
       if (quietSteps >= scene.settleSteps) {
         rec.settledAt = tEnd;
-        rec.compared.push_back({k + 1, tEnd, surface});
+        rec.compared.push_back(snapshot(k + 1, tEnd, surface, in));
         break;
       }
-      if (k + 1 == n) rec.compared.push_back({k + 1, tEnd, surface});  // the cap: not settled
+      if (k + 1 == n) rec.compared.push_back(snapshot(k + 1, tEnd, surface, in));  // the cap
       continue;
     }
     if (std::binary_search(compareSteps.begin(), compareSteps.end(), k + 1)) {
-      rec.compared.push_back({k + 1, tEnd, surface});
+      rec.compared.push_back(snapshot(k + 1, tEnd, surface, in));
       if (equilibrium) rec.settledAt = tEnd;
     }
   }
@@ -558,6 +621,29 @@ void invalidateIfNotOk(RunRecord& rec) {
 
 namespace {
 
+/// Binds the scene's markers to the model (Model::bindMarkers) and says whether it could.
+void bindSceneMarkers(const ModelInfo& info, Model& model, const Scene& scene, RunRecord& rec) {
+  rec.markerStatus.clear();
+  rec.markerReason.clear();
+  if (scene.markers.points.rows() == 0) return;
+  rec.markerStatus = "unsupported";
+  if (!info.has(Capability::Markers)) {
+    rec.markerReason = info.name + " does not have the markers capability (no interior mapping)";
+    return;
+  }
+  try {
+    model.bindMarkers(scene.markers.points);
+    if (model.markers().rows() != scene.markers.points.rows()) {
+      rec.markerReason = "markers() returned " + std::to_string(model.markers().rows()) +
+                         " rows for " + std::to_string(scene.markers.points.rows()) + " markers";
+      return;
+    }
+    rec.markerStatus = "ok";
+  } catch (const std::exception& e) {
+    rec.markerReason = e.what();
+  }
+}
+
 /// runModel() without the final validity guard: its early returns (unsupported, init threw,
 /// a surface of the wrong size) skip simulate() and with it assessValidity().
 RunRecord runModelUnguarded(const ModelInfo& info, const ParamValues& params, const Scene& scene,
@@ -610,6 +696,7 @@ RunRecord runModelUnguarded(const ModelInfo& info, const ParamValues& params, co
                     " vertices";
       return rec;
     }
+    bindSceneMarkers(info, *model, scene, rec);
     RunOptions o = options;
     if (!o.quasiStaticAtComparedInstants)
       o.quasiStaticAtComparedInstants = solveOnlyAtComparedInstants(info, params);
@@ -873,7 +960,7 @@ CacheKey solveKey(const std::string& sceneFile, const Scene& scene, const Organ&
   }
   CacheKey key;
   // /3: the validity rules of wave 3 (supports, instruments) changed what a stored valid means.
-  key.add("harness.reference_run/3").add(doc.dump());
+  key.add("harness.reference_run/4").add(doc.dump());
   key.add(organ.surface.V).add(organ.surface.F);
   key.add(sha256File(loader.locate(p.spec.plugin))).add(p.info->name).add(p.info->version);
   key.add(paramsToJson(p.params).dump());
@@ -918,11 +1005,9 @@ void storeCachedSolve(Cache& cache, const CacheKey& key, const RunRecord& r) {
   w.matrix(r.finalSurface);
   w.matrix(r.finalFaces);
   w.pod(static_cast<int>(r.compared.size()));
-  for (const SurfaceSnapshot& s : r.compared) {
-    w.pod(s.step);
-    w.pod(s.time);
-    w.matrix(s.positions);
-  }
+  for (const SurfaceSnapshot& s : r.compared) putSnapshotExtras(w, s);
+  w.string(r.markerStatus);
+  w.string(r.markerReason);
   cache.put(kReferenceRunKind, key, w.bytes());
 }
 
@@ -962,13 +1047,9 @@ bool readCachedSolve(Cache& cache, const CacheKey& key, bool reference, RunRecor
     b.matrix(r.finalSurface);
     b.matrix(r.finalFaces);
     const int n = b.pod<int>();
-    for (int i = 0; i < n; ++i) {
-      SurfaceSnapshot s;
-      s.step = b.pod<int>();
-      s.time = b.pod<Real>();
-      b.matrix(s.positions);
-      r.compared.push_back(std::move(s));
-    }
+    for (int i = 0; i < n; ++i) r.compared.push_back(getSnapshotExtras(b));
+    r.markerStatus = b.string();
+    r.markerReason = b.string();
     if (!b.atEnd()) throw std::runtime_error("trailing bytes");
   } catch (const std::exception&) {
     r = RunRecord();

@@ -4,6 +4,7 @@
 
 #include <deform/error.h>
 #include <deform/organ_tets.h>
+#include <deform/tet_embedding.h>
 
 #include <algorithm>
 #include <chrono>
@@ -42,6 +43,7 @@ class CalculixModel final : public Model {
     OrganTets tets = organTets(organ, meshOptions, setup.cache);
     m_surfaceNode = std::move(tets.surfaceNode);
     m_numElements = tets.mesh.numTets();
+    m_cornerTets = tets.mesh.T;
     std::shared_ptr<QuadraticTetNodes> q;
     if (p.integer("element_order") == 2) {
       q = std::make_shared<QuadraticTetNodes>(addMidsideNodes(tets.mesh));
@@ -169,6 +171,23 @@ class CalculixModel final : public Model {
             {"isolated_clamped_nodes", m_pinnedOutside}};
   }
   PhaseTimes phaseTimes() const override { return m_phase; }
+
+  /// 10-node tets: the midside node of every edge whose two corners are held follows them (the
+  /// mean of their displacements: straight sides), as reference_fem does, so that a held patch
+  /// (a bonded plate) moves as a whole.
+
+  // Markers: barycentric coordinates in the containing corner tet (deform/tet_embedding.h),
+  // through the quadratic shape functions when the elements have 10 nodes.
+  void bindMarkers(const MatX3& rest) override {
+    m_markerEmbedding = embedInTets(m_model.nodes, m_cornerTets, rest);
+  }
+  MatX3 markers() const override {
+    if (m_model.elements.cols() == 10)
+      return embeddedPositionsQuadratic(m_markerEmbedding, m_nodes,
+                                        [this](int t, int a) { return m_model.elements(t, a); });
+    return embeddedPositions(m_markerEmbedding, m_nodes, m_cornerTets);
+  }
+
   NumericCounters numericCounters() const override {
     // Totals over the run; CPU time is the ccx child processes' (user + system, their rusage).
     return {{"ccx_runs", m_runs},
@@ -201,6 +220,8 @@ class CalculixModel final : public Model {
   long long m_numElements = 0;
   std::unique_ptr<QuadraticSurfaceLoad> m_surfaceLoad;  ///< C3D10: loads onto the quadratic faces
   std::unique_ptr<GraspedPatchNodes> m_graspPatch;      ///< nodes between a grasp's vertices
+  MatX4i m_cornerTets;                                  ///< the corner tets (marker embedding)
+  TetEmbedding m_markerEmbedding;
   std::vector<int> m_fixed;
   std::vector<int> m_surfaceNode;  ///< surface vertex -> node; -1: inside a fixed box, no node
   MatX3 m_restSurface;

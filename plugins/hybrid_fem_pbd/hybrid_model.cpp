@@ -295,6 +295,9 @@ StepStatus HybridModel::step(const StepInput& in) {
   // Only the control nodes (MV's rows 0..#Vc-1) are computed; the interior rows stay at rest.
   const Eigen::Index nc = m_mesh.coarseSurface.numVertices();
   m_volumeX.topRows(nc) = m_mesh.volume.V.topRows(nc) + m_volumeU.topRows(nc);
+  // With markers, every node is solved (bindMarkers) and kept.
+  if (m_markersBound && m_volumeU.rows() == m_volumeX.rows())
+    m_volumeX = m_mesh.volume.V + m_volumeU;
   // Newton's third law: the multipliers are the forces the grasps apply to the tissue.
   m_graspForces.assign(in.grasps.size(), Vec3::Zero());
   for (size_t e = 0; e < m_prescribed.size(); ++e)
@@ -424,6 +427,16 @@ Counts HybridModel::counts() const {
   c["control_nodes"] = control;
   c["faces"] = static_cast<long long>(m_surf.F.size());
   return c;
+}
+
+void HybridModel::bindMarkers(const MatX3& rest) {
+  m_markerEmbedding = embedInTets(m_mesh.volume.V, m_mesh.volume.T, rest);
+  m_fem.setOutputNodes(-1);
+  m_markersBound = true;
+}
+
+MatX3 HybridModel::markers() const {
+  return embeddedPositions(m_markerEmbedding, m_volumeX, m_mesh.volume.T);
 }
 
 }  // namespace deform::hybrid

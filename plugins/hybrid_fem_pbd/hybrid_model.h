@@ -19,6 +19,7 @@
 
 #include <deform/model.h>
 #include <deform/params.h>
+#include <deform/tet_embedding.h>
 
 #include <map>
 #include <string>
@@ -103,6 +104,10 @@ class HybridModel final : public Model {
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
   void cut(const CutPath& path) override;
   MatX3i surfaceFaces() const override;
+  /// Markers: barycentric coordinates in the containing coarse tet (MV, deform/tet_embedding.h);
+  /// binding makes the coarse FEM compute its interior nodes every step too.
+  void bindMarkers(const MatX3& rest) override;
+  MatX3 markers() const override;
 
   // Introspection for tests and benchmarks.
   const HybridMesh& hybridMesh() const { return m_mesh; }
@@ -150,6 +155,8 @@ class HybridModel final : public Model {
 
   PhaseTimes m_phase;
   NumericCounters m_numeric;
+  TetEmbedding m_markerEmbedding;
+  bool m_markersBound = false;  ///< every MV node is solved and kept in m_volumeX
 
   // Per-step scratch (kept to avoid allocations in step()).
   std::vector<CoarseLinearFem::NodalForce> m_nodal;

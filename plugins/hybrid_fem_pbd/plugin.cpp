@@ -15,7 +15,7 @@ DEFORM_PLUGIN(registry) {
   info.version = "1.0";
   using C = deform::Capability;
   info.capabilities = {C::Grasp, C::PointForce,      C::Gravity, C::ReactionForce,
-                       C::Cut,   C::NeedsPrecompute, C::Contact};
+                       C::Cut,   C::NeedsPrecompute, C::Contact, C::Markers};
   info.params = deform::hybrid::paramSpecs();
   info.create = [] { return std::make_unique<deform::hybrid::HybridModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).

@@ -16,6 +16,7 @@
 #include <deform/model.h>
 #include <deform/params.h>
 #include <deform/sparse.h>
+#include <deform/tet_embedding.h>
 
 #include <array>
 #include <memory>
@@ -79,6 +80,14 @@ class MassSpringModel final : public Model {
   PhaseTimes phaseTimes() const override { return m_phase; }
   NumericCounters numericCounters() const override;
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
+  /// Markers: barycentric coordinates in the containing tet of the volume network
+  /// (deform/tet_embedding.h); a surface network has no interior.
+  void bindMarkers(const MatX3& rest) override {
+    if (m_tets.rows() == 0)
+      throw UnsupportedError("no interior: surface network (network = volume maps markers)");
+    m_markerEmbedding = embedInTets(m_rest, m_tets, rest);
+  }
+  MatX3 markers() const override { return embeddedPositions(m_markerEmbedding, m_x, m_tets); }
 
   const MassSpringConfig& config() const { return m_config; }
   const VecX& masses() const { return m_mass; }
@@ -122,7 +131,8 @@ class MassSpringModel final : public Model {
 
   MassSpringConfig m_config;
   MatX3 m_rest, m_x, m_v, m_f, m_xOld;
-  MatX4i m_tets;           // tet input: the tets (for inverted_tets)
+  MatX4i m_tets;  // tet input: the tets (for inverted_tets)
+  TetEmbedding m_markerEmbedding;
   VecX m_mass, m_invMass;  // invMass 0 for fixed or massless nodes
   VecX m_contactInvMass;   // invMass with grasped nodes 0 too (contact response)
   std::vector<int> m_fixed;

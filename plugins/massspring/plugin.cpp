@@ -20,7 +20,7 @@ DEFORM_PLUGIN(registry) {
   info.version = "1.0";
   using C = deform::Capability;
   info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,        C::ReactionForce,
-                       C::TetInput, C::Contact,    C::ContactReaction};
+                       C::TetInput, C::Contact,    C::ContactReaction, C::Markers};
   info.params = deform::massspring::paramSpecs();
   info.create = [] { return std::make_unique<deform::massspring::MassSpringModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).

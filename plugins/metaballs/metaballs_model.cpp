@@ -84,7 +84,8 @@ ModelInfo metaballsModelInfo() {
   info.version = "1.0";
   info.capabilities = {Capability::Grasp,   Capability::PointForce,
                        Capability::Gravity, Capability::NeedsPrecompute,
-                       Capability::Contact, Capability::ContactReaction};
+                       Capability::Contact, Capability::ContactReaction,
+                       Capability::Markers};
   info.params = metaballsParams();
   info.create = [] { return std::make_unique<MetaballsModel>(); };
   return info;
@@ -131,8 +132,9 @@ void MetaballsModel::init(const ModelSetup& setup) {
   const int nl = int(L.rows());
   m_x0 = s.centers;
   m_restSurface = organ.surface.V;
-  m_skin = buildSkinning(organ.surface.V, s, p.real("skin_threshold"),
-                         int(p.integer("skin_max_spheres")));
+  m_skinThreshold = p.real("skin_threshold");
+  m_skinMaxSpheres = int(p.integer("skin_max_spheres"));
+  m_skin = buildSkinning(organ.surface.V, s, m_skinThreshold, m_skinMaxSpheres);
 
   // Mass: the organ's mass rho V shared in proportion to sphere volume.
   const Real E = organ.material.young, rho = organ.material.density;
@@ -606,6 +608,20 @@ NumericCounters MetaballsModel::numericCounters() const {
   for (int i = 0; i < 6; ++i)
     c[std::string("construction_us_") + stages[i]] = (long long)std::llround(r.seconds[i] * 1e6);
   return c;
+}
+
+void MetaballsModel::bindMarkers(const MatX3& rest) {
+  m_markerSkin = buildSkinning(rest, m_mb.spheres, m_skinThreshold, m_skinMaxSpheres);
+}
+
+MatX3 MetaballsModel::markers() const {
+  // The current frames (the grasp correction may have moved spheres since the step packed them).
+  const bool rotate = m_skinFrame == Frame::Rotated;
+  std::vector<Real> frames(size_t(m_x.rows()) * kFrameStride, 0);
+  packSphereFrames(m_x, m_r, rotate ? m_rot.data() : nullptr, frames);
+  MatX3 out(Eigen::Index(m_markerSkin.numVertices), 3);
+  applySkinningFrames(m_markerSkin, frames.data(), rotate, out, false);
+  return out;
 }
 
 }  // namespace deform::metaballs

@@ -54,6 +54,10 @@ class MetaballsModel final : public Model {
   Counts counts() const override;
   PhaseTimes phaseTimes() const override;
   NumericCounters numericCounters() const override;
+  /// Markers through the spheres' skinning (eqs. 13-16, as the surface): each point attached to
+  /// the spheres whose field reaches it, with its offset from their weighted centre.
+  void bindMarkers(const MatX3& rest) override;
+  MatX3 markers() const override;
 
   const Metaballs& metaballs() const { return m_mb; }
   const VecX& radii() const { return m_r; }
@@ -120,6 +124,9 @@ class MetaballsModel final : public Model {
   LaplacianStepData m_ldata;
   Real m_alphaDt = -1;         // dt the alpha~ arrays were computed for
   std::vector<Real> m_frames;  // #S*16 sphere records for the skinning
+  Real m_skinThreshold = 0.2;
+  int m_skinMaxSpheres = 4;
+  Skinning m_markerSkin;  // bindMarkers(): the markers' skinning
   std::vector<Real> m_volFactorSum;
   std::vector<int> m_volCount, m_contacted;
   MatX3 m_surface;

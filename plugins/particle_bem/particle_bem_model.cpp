@@ -123,8 +123,8 @@ ModelInfo ParticleBemModel::info() {
       "in Real-Time Surgical Simulation (Image Guided Surgery and Therapy Lab, Shanghai Jiao Tong "
       "University; no DOI given in the paper)";
   i.version = "1.0";
-  i.capabilities = {Capability::Grasp, Capability::PointForce, Capability::Gravity,
-                    Capability::NeedsPrecompute, Capability::Contact};
+  i.capabilities = {Capability::Grasp,           Capability::PointForce, Capability::Gravity,
+                    Capability::NeedsPrecompute, Capability::Contact,    Capability::Markers};
   i.params = paramSpecs();
   i.create = [] { return std::make_unique<ParticleBemModel>(); };
   return i;
@@ -326,6 +326,29 @@ void ParticleBemModel::initParticles(const ModelSetup& setup, const SignedDistan
     nearest8(m_rest, S.V.row(v).transpose(), m_skinNodes[v], dist);
     m_skinWeights[v] = shepard(m_skinNodes[v], dist, 1e-6 * m_spacing);
   }
+}
+
+void ParticleBemModel::bindMarkers(const MatX3& rest) {
+  m_markerRest = rest;
+  m_markerNodes.resize(size_t(rest.rows()));
+  m_markerWeights.resize(size_t(rest.rows()));
+  const Real eps = 1e-6 * std::max<Real>(boundingBox(m_rest).diagonal(), 1e-30);
+  for (Eigen::Index q = 0; q < rest.rows(); ++q) {
+    std::array<Real, 8> dist;
+    nearest8(m_rest, rest.row(q).transpose(), m_markerNodes[size_t(q)], dist);
+    m_markerWeights[size_t(q)] = shepard(m_markerNodes[size_t(q)], dist, eps);
+  }
+}
+
+MatX3 ParticleBemModel::markers() const {
+  MatX3 out = m_markerRest;
+  for (Eigen::Index q = 0; q < out.rows(); ++q)
+    for (int a = 0; a < 8; ++a) {
+      const int j = m_markerNodes[size_t(q)][size_t(a)];
+      if (j >= 0)
+        out.row(q) += m_markerWeights[size_t(q)][size_t(a)] * (m_x.row(j) - m_rest.row(j));
+    }
+  return out;
 }
 
 void ParticleBemModel::reset() {

@@ -38,6 +38,8 @@
 #include <deform/model.h>
 #include <deform/registry.h>
 
+#include <array>
+
 #include <map>
 #include <memory>
 
@@ -56,6 +58,10 @@ class ParticleBemModel final : public Model {
   Counts counts() const override;
   PhaseTimes phaseTimes() const override { return m_times; }
   NumericCounters numericCounters() const override { return m_numeric; }
+  /// Markers: each follows the inverse-distance (Shepard) weighted displacement of its 8
+  /// nearest particles at rest, the rule the guided model's interior particles follow.
+  void bindMarkers(const MatX3& rest) override;
+  MatX3 markers() const override;
 
   // For tests, benchmarks and tables.
   bool guided() const { return m_guided; }
@@ -92,6 +98,9 @@ class ParticleBemModel final : public Model {
   Real m_dt = 1e-3;
   Material m_material;
   MatX3 m_rest, m_x, m_v, m_target, m_surface;
+  MatX3 m_markerRest;                             ///< bindMarkers()
+  std::vector<std::array<int, 8>> m_markerNodes;  ///< their 8 nearest particles at rest
+  std::vector<std::array<Real, 8>> m_markerWeights;
   std::vector<int> m_fixed;
   std::vector<char> m_fixedMask, m_kinematic;
   Real m_spacing = 0;

@@ -13,6 +13,7 @@
 #include <deform/isometric_bending.h>
 #include <deform/model.h>
 #include <deform/params.h>
+#include <deform/tet_embedding.h>
 
 #include <vector>
 
@@ -72,6 +73,14 @@ class PbdModel final : public Model {
   PhaseTimes phaseTimes() const override { return m_phase; }
   NumericCounters numericCounters() const override;
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
+  /// Markers: barycentric coordinates in the containing tet of the volume network
+  /// (deform/tet_embedding.h); a surface network has no interior.
+  void bindMarkers(const MatX3& rest) override {
+    if (m_tets.rows() == 0)
+      throw UnsupportedError("no interior: surface network (network = volume maps markers)");
+    m_markerEmbedding = embedInTets(m_rest, m_tets, rest);
+  }
+  MatX3 markers() const override { return embeddedPositions(m_markerEmbedding, m_x, m_tets); }
 
   const PbdConfig& config() const { return m_config; }
   const VecX& masses() const { return m_mass; }
@@ -133,6 +142,7 @@ class PbdModel final : public Model {
   std::vector<int> m_graspIso;
   std::vector<TetVolumeConstraint> m_tet;
   MatX4i m_tets;  // tet input: the tets (for inverted_tets)
+  TetEmbedding m_markerEmbedding;
   bool m_hasVolume = false;
   Real m_restVolume = 0, m_volumeCompliance = 0;
   long long m_elements = 0;

@@ -5,6 +5,7 @@
 #include <deform/contact.h>
 #include <deform/organ_tets.h>
 #include <deform/registry.h>
+#include <deform/tet_embedding.h>
 
 #include <algorithm>
 #include <chrono>
@@ -304,6 +305,18 @@ class ReferenceFemModel final : public Model {
   }
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
+  // Markers: barycentric coordinates in the containing corner tet (deform/tet_embedding.h),
+  // through the quadratic shape functions for P2 elements.
+  void bindMarkers(const MatX3& rest) override {
+    m_markerEmbedding = embedInTets(m_system->rest().V, m_system->rest().T, rest);
+  }
+  MatX3 markers() const override {
+    if (m_system->order() == ElementOrder::Quadratic)
+      return embeddedPositionsQuadratic(
+          m_markerEmbedding, m_nodes, [this](int t, int a) { return m_system->elementNode(t, a); });
+    return embeddedPositions(m_markerEmbedding, m_nodes, m_system->rest().T);
+  }
+
  private:
   /// Every surface vertex becomes a node: the vertices the conforming clip left without one
   /// (-1 in surfaceNode: inside a fixed box, or snapped onto its face, outside the meshed solid)
@@ -356,6 +369,7 @@ class ReferenceFemModel final : public Model {
   VecX m_x, m_v, m_fPrev;
   MatX3 m_nodes, m_surface;
   std::vector<Vec3> m_graspForces;
+  TetEmbedding m_markerEmbedding;
   long long m_unconverged = 0, m_spdFallbacks = 0, m_projectedSteps = 0, m_lastIterations = 0,
             m_lastLoadSteps = 0;
   long long m_newtonIterations = 0, m_factorizations = 0, m_pcgIterations = 0,
@@ -378,11 +392,11 @@ DEFORM_PLUGIN(registry) {
       "Gross, Graphics Interface 2004; Neo-Hookean (isochoric/volumetric split): Bonet & Wood, "
       "Nonlinear Continuum Mechanics for FEA, 2nd ed. 2008, doi:10.1017/CBO9780511755446";
   info.version = "1.0";
-  info.capabilities = {Capability::Grasp,           Capability::PointForce,
-                       Capability::Gravity,         Capability::ReactionForce,
-                       Capability::NeedsPrecompute, Capability::TetInput,
-                       Capability::QuasiStatic,     Capability::Contact,
-                       Capability::ContactReaction, Capability::RollerSupport};
+  info.capabilities = {
+      Capability::Grasp,         Capability::PointForce,      Capability::Gravity,
+      Capability::ReactionForce, Capability::NeedsPrecompute, Capability::TetInput,
+      Capability::QuasiStatic,   Capability::Contact,         Capability::ContactReaction,
+      Capability::RollerSupport, Capability::Markers};
   info.params = reffem::referenceFemParams();
   info.create = [] { return std::make_unique<reffem::ReferenceFemModel>(); };
   // No presets: every command (stability, tables, calibrate, sweep) uses the reference at its

@@ -197,4 +197,54 @@ TEST(Calculix, DatTableIsRead) {
   EXPECT_THROW(calculix::ccxLastDisplacements(dat, 3, t), std::runtime_error);
 }
 
+// Plates and markers through the harness (runner.cpp): a cube of nu = 0, bonded to its base and
+// pressed 1 mm by a bonded plate, is in uniaxial strain, so the markers' displacement is linear
+// in their height; both solvers report it, with the measured positions' errors, and
+// reference_fem the plate's force E A strain.
+TEST(Calculix, PlateAndMarkersThroughTheHarnessMatchUniaxialStrain) {
+  if (calculix::findCcx().empty()) GTEST_SKIP() << "ccx not installed";
+  const double a = 0.05, press = 0.001, E = 5500;
+  const nlohmann::json j = nlohmann::json::parse(R"({
+    "organ": {"mesh": "phantom:cube", "resolution": 0.3,
+              "material": {"young": 5500, "poisson": 0.0, "density": 1000},
+              "fixed": {"box": [[-0.06, -0.06, -0.06], [0.06, 0.06, -0.049999]]}},
+    "gravity": [0, 0, 0], "dt": 1.0, "duration": 1.0,
+    "plates": [{"region": {"box": [[-0.06, -0.06, 0.049999], [0.06, 0.06, 0.06]]},
+                "trajectory": [{"t": 0, "offset": [0, 0, 0]}, {"t": 1, "offset": [0, 0, -0.001]}]}],
+    "markers": {"points": [[0.01, -0.02, 0.0], [-0.03, 0.025, 0.03]],
+                "measured": [{"t": 1.0, "points": [[0.01, -0.02, -0.0005], [-0.03, 0.025, -0.0]]}]},
+    "models": [{"plugin": "calculix"}], "reference": {"plugin": "reference_fem"}})");
+  const Scene scene = parseScene(j, "plates.json");
+  const Organ organ = loadOrgan(scene);
+  for (const char* plugin : {"reference_fem", "calculix"}) {
+    const ModelInfo& info = loader().load(plugin);
+    const ParamValues p = resolveParams(
+        info.params, {{"elements", 300}, {"element_order", 1}, {"material", "linear"}}, "test",
+        "/params");
+    const harness::RunRecord r = harness::runModel(info, p, scene, organ, cache());
+    ASSERT_EQ(r.status, harness::RunStatus::Ok) << plugin << ": " << r.message;
+    EXPECT_TRUE(r.valid) << plugin << ": " << r.invalidReason;
+    EXPECT_EQ(r.markerStatus, "ok") << plugin << ": " << r.markerReason;
+    ASSERT_EQ(r.compared.size(), 1u);
+    const MatX3& x = r.compared[0].markers;
+    ASSERT_EQ(x.rows(), 2);
+    for (Eigen::Index i = 0; i < 2; ++i) {
+      const double z = scene.markers.points(i, 2);
+      EXPECT_NEAR(x(i, 2) - z, -press * (z + a) / (2 * a), 1e-7) << plugin << " marker " << i;
+      EXPECT_NEAR(x(i, 0), scene.markers.points(i, 0), 1e-7) << plugin;
+    }
+    // Against the scene's "measured" positions: marker 0's is exact, marker 1's is put at
+    // z = 0 (its true place is 0.03 - 0.0008), so the error is that distance.
+    const double d1 = std::abs(x(1, 2) - 0.0);
+    EXPECT_NEAR(r.compared[0].markerMax, d1, 1e-7) << plugin;
+    EXPECT_NEAR(r.compared[0].markerRms, std::sqrt(0.5 * d1 * d1), 1e-6) << plugin;
+    if (std::string(plugin) == "reference_fem") {
+      ASSERT_EQ(r.compared[0].plateForces.size(), 1u);
+      EXPECT_NEAR(r.compared[0].plateForces[0].z(), E * 2 * a * press, 1e-4);
+    } else {
+      EXPECT_TRUE(r.compared[0].plateForces.empty()) << "calculix reports no grasp forces";
+    }
+  }
+}
+
 }  // namespace

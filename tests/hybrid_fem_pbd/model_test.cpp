@@ -160,6 +160,32 @@ TEST_F(HybridModelTest, GravitySagsTheOrganAsABodyForce) {
   EXPECT_LT((u2 - 2 * u1).norm(), 1e-9 * u2.norm());
 }
 
+// Markers through the coarse tets (MV): binding makes the FEM solve its interior nodes too; a
+// marker on an interior node follows that node, and the linear FEM scales with the load.
+TEST_F(HybridModelTest, MarkersFollowTheCoarseVolumeInsideIt) {
+  const HybridMesh& mesh = model.hybridMesh();
+  const int nc = mesh.coarseSurface.numVertices();
+  ASSERT_GT(mesh.volume.numVertices(), nc) << "MV has interior nodes";
+  MatX3 pts(2, 3);
+  pts.row(0) = mesh.volume.V.row(nc);
+  pts.row(1) = boundingBox(organ.surface.V).center().transpose();
+  model.bindMarkers(pts);
+  EXPECT_LT(maxDistance(model.markers(), pts), 1e-12);
+  StepInput in = input();
+  in.gravity = Vec3(0, 0, -9.81);
+  ASSERT_EQ(model.step(in), StepStatus::Ok);
+  const MatX3 u1 = model.markers() - pts;
+  EXPECT_LT(u1(1, 2), -1e-6) << "the centre sags";
+  EXPECT_LT((model.markers().row(0) - model.volumePositions().row(nc)).norm(), 1e-12);
+  EXPECT_GT((model.volumePositions().row(nc) - mesh.volume.V.row(nc)).norm(), 1e-7)
+      << "the interior node is solved";
+  model.reset();
+  in.gravity *= 2;
+  ASSERT_EQ(model.step(in), StepStatus::Ok);
+  const MatX3 u2 = model.markers() - pts;
+  EXPECT_LT((u2 - 2 * u1).norm(), 1e-9 * u2.norm());
+}
+
 TEST_F(HybridModelTest, GraspMovesTheGraspedRegion) {
   const int top = topVertex(organ.surface);
   GraspInput g;

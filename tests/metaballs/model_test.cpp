@@ -125,6 +125,33 @@ TEST(MetaballsModel, GraspedVertexFollowsTargetAndResetReproduces) {
   EXPECT_TRUE(first == second);  // bit for bit
 }
 
+// Markers through the spheres' skinning, as the surface: at rest they are the points; a marker on
+// a surface vertex's spot follows that vertex, and after a reset the markers are back at rest.
+TEST(MetaballsModel, MarkersAreSkinnedAsTheSurface) {
+  const SurfaceMesh s = test::banana(0.16, 0.035, 0.08, 4);
+  Rig rig(s, {});
+  Eigen::Index g = 0;
+  s.V.col(0).maxCoeff(&g);
+  MatX3 pts(2, 3);
+  pts.row(0) = s.V.row(g);                             // on the grasped vertex
+  pts.row(1) = boundingBox(s.V).center().transpose();  // inside
+  rig.model.bindMarkers(pts);
+  EXPECT_LE((rig.model.markers() - pts).cwiseAbs().maxCoeff(), 1e-12);
+  StepInput in;
+  in.dt = 1e-3;
+  GraspInput grasp;
+  grasp.vertices = {int(g)};
+  grasp.targets = s.V.row(g);
+  grasp.targets(0, 2) += 0.01;
+  in.grasps = {grasp};
+  for (int i = 0; i < 50; ++i) ASSERT_EQ(rig.model.step(in), StepStatus::Ok);
+  const MatX3 moved = rig.model.markers();
+  EXPECT_LE((moved.row(0) - rig.model.surface().row(g)).norm(), 1e-9);
+  EXPECT_GT(moved(0, 2) - pts(0, 2), 0.005);
+  rig.model.reset();
+  EXPECT_LE((rig.model.markers() - pts).cwiseAbs().maxCoeff(), 1e-12);
+}
+
 // A grasper smaller than the spheres (4 mm jaws on the liver) holds the surface vertices it
 // closes on: before the skinning mapping it attached the sphere centres within its radius, and
 // there were none. Grasp and lift 2 cm with gravity: the grasped vertices stay on their targets.

@@ -249,6 +249,29 @@ TEST(GuidedModel, GravitySagsAndCacheHits) {
   std::filesystem::remove_all(dir);
 }
 
+// Markers: the Shepard-weighted displacement of their 8 nearest particles. At rest they are the
+// points; one on a particle follows it; under gravity an interior one sags.
+TEST(GuidedModel, MarkersFollowTheirNearestParticles) {
+  Fixture fx(true, 150, 60);
+  auto m = fx.make();
+  const int k = m->surfaceParticles();  // the first interior particle
+  ASSERT_LT(k, m->nodes().rows());
+  MatX3 pts(2, 3);
+  pts.row(0) = m->nodes().row(k);
+  pts.row(1) = Vec3(0.0, 0.0, 0.01).transpose();
+  m->bindMarkers(pts);
+  EXPECT_LE((m->markers() - pts).cwiseAbs().maxCoeff(), 1e-15);
+  for (int s = 0; s < 300; ++s) {
+    StepInput in = input(s);
+    in.gravity = Vec3(0, 0, -9.81);
+    ASSERT_EQ(m->step(in), StepStatus::Ok);
+  }
+  const MatX3 x = m->markers();
+  EXPECT_LT((x.row(0) - m->nodes().row(k)).norm(),
+            1e-6 * (m->nodes().row(k) - pts.row(0)).norm() + 1e-12);
+  EXPECT_LT(x(1, 2), pts(1, 2) - 1e-6) << "the interior sags";
+}
+
 TEST(ParticleModel, RestStaysAtRestAndGravitySagsStably) {
   Fixture fx(false, 250, 300);
   auto m = fx.make();

@@ -8,6 +8,7 @@
 #include <deform/model.h>
 #include <deform/phantom.h>
 #include <deform/plugin_loader.h>
+#include <deform/scene.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -99,6 +100,60 @@ TEST(ReferenceFemRollers, FrictionlessCubeCompressesHomogeneously) {
   }
   EXPECT_EQ(worstHeld, 0.0) << "a roller let its held axis move";
   EXPECT_NEAR(slid, (b - 1) * 2 * a, 0.02 * (b - 1) * 2 * a) << "the bottom did not slide";
+}
+
+// A bonded plate (scene "plates", handed over as a grasp by the interaction) pressing a cube
+// with nu = 0 bonded to its base: every point moves down in proportion to its height (no lateral
+// strain, so the bonded faces do not constrain anything) and the plate feels E A strain. Linear
+// elasticity, linear tets: exact (but for the 1 um slab that conform_fixed clips off with the
+// fixed box), at the interior markers too.
+TEST(ReferenceFemPlates, BondedPlateOnANuZeroCubeIsUniaxialAtTheMarkers) {
+  const Real a = 0.05, e = 1e-6, m = 0.06, E = 5500, press = 0.001;
+  Organ o;
+  o.source = "phantom:cube";
+  o.surface = makePhantom("cube", 0.3);
+  o.material.young = E;
+  o.material.poisson = 0.0;
+  o.fixed.boxes = {Box{Vec3(-m, -m, -m), Vec3(m, m, -a + e)}};
+  Scene scene;
+  scene.dt = 1.0;
+  scene.duration = 1.0;
+  scene.gravity = Vec3::Zero();
+  PlateSpec plate;
+  plate.region = Box{Vec3(-m, -m, a - e), Vec3(m, m, m)};
+  plate.trajectory = {KeyFrame{0.0, Vec3::Zero(), false}, KeyFrame{1.0, Vec3(0, 0, -press), false}};
+  scene.plates.push_back(plate);
+  Interaction interaction(scene, o.surface);
+
+  const ModelInfo& info = loader().load("reference_fem");
+  ASSERT_TRUE(info.has(Capability::Markers));
+  ParamValues p = ParamValues::defaults(info.params);
+  p.set("elements", (long long)300);
+  p.set("element_order", (long long)1);
+  p.set("material", std::string("linear"));
+  std::unique_ptr<Model> model = info.create();
+  model->init(ModelSetup{o, p, cache(), 1.0, Vec3::Zero()});
+  MatX3 markers(3, 3);
+  markers << 0.01, -0.02, 0.0,  //
+      -0.03, 0.025, 0.03,       //
+      0.0, 0.0, -0.045;
+  model->bindMarkers(markers);
+  EXPECT_TRUE(model->markers().isApprox(markers, 1e-12)) << "at rest, the markers are the points";
+  const StepInput in = interaction.prepare(0.0, 1.0, *model);
+  ASSERT_EQ(in.grasps.size(), 1u);
+  ASSERT_EQ(model->step(in), StepStatus::Ok);
+  const MatX3 x = model->markers();
+  for (Eigen::Index i = 0; i < markers.rows(); ++i) {
+    const Vec3 want(0, 0, -press * (markers(i, 2) + a) / (2 * a));
+    const Vec3 got = (x.row(i) - markers.row(i)).transpose();
+    // 1e-4 of the travel: conform_fixed clips the 1 um slab of the fixed box off the cube.
+    EXPECT_LT((got - want).norm(), 1e-4 * press) << "marker " << i << ": " << got.transpose();
+  }
+  const std::vector<Vec3> f = model->graspForces();
+  ASSERT_EQ(f.size(), 1u);
+  // The tissue pushes the plate up with E A strain = E (2a)^2 press / (2a).
+  EXPECT_NEAR(f[0].z(), E * 2 * a * press, 1e-4 * E * 2 * a * press);
+  EXPECT_LT(std::hypot(f[0].x(), f[0].y()), 1e-9);
 }
 
 }  // namespace

@@ -747,12 +747,115 @@ TEST_F(TempDir, QuickVerificationTableListsEveryRowWithItsValue) {
   }
 }
 
+// ------------------------------------------------------------------------------ truth-cube
+
+TEST(TruthCube, TheShippedDataReadsWithItsLevelsAndFiguresRegisterRigidShifts) {
+  const tables::TruthCubeData d = tables::readTruthCubeData(
+      std::string(DEFORM_SOURCE_DIR) + "/data/truth-cube/uniaxial_positions.csv");
+  ASSERT_EQ(d.beads.size(), 343u);
+  ASSERT_EQ(d.strains.size(), 2u);
+  EXPECT_DOUBLE_EQ(d.strains[0], 0.05);
+  EXPECT_DOUBLE_EQ(d.strains[1], 0.125);
+  const MatX3 rest = tables::truthCubeSceneFrame(d, 0);
+  // Scene frame: z up (the bottom layer k = 1 lowest, 10 mm above the base at z = -0.04).
+  double bottom = 0, top = 0;
+  for (size_t i = 0; i < d.beads.size(); ++i) {
+    if (d.beads[i].ijk[2] == 1) bottom += rest(Eigen::Index(i), 2) / 49;
+    if (d.beads[i].ijk[2] == 7) top += rest(Eigen::Index(i), 2) / 49;
+  }
+  EXPECT_NEAR(bottom, -0.03, 1e-9);
+  EXPECT_GT(top, 0.025);
+  EXPECT_LT(top, 0.035);
+  for (int level : {1, 2}) {
+    const MatX3 scan = tables::truthCubeSceneFrame(d, level);
+    // The measured RMS bead displacements the issue quotes: 2.98 and 6.83 mm.
+    const tables::TruthCubeFigures exact = tables::truthCubeFigures(d, rest, scan, level, false);
+    EXPECT_NEAR(exact.measuredRms, level == 1 ? 2.977e-3 : 6.832e-3, 2e-6);
+    EXPECT_NEAR(exact.rms, 0, 1e-15);
+    EXPECT_NEAR(exact.bulge, exact.measuredBulge, 1e-15);
+    // A model that matches the beads up to a rigid shift: no error after either registration.
+    const MatX3 shifted = scan.rowwise() + Eigen::RowVector3d(0.001, -0.002, 0.0005);
+    EXPECT_NEAR(tables::truthCubeFigures(d, rest, shifted, level, false).rms, 0, 1e-15);
+    EXPECT_NEAR(tables::truthCubeFigures(d, rest, shifted, level, true).rms, 0, 1e-15);
+    // A model that does not move: its error is the measured displacement less its mean.
+    const tables::TruthCubeFigures still = tables::truthCubeFigures(d, rest, rest, level, false);
+    EXPECT_GT(still.rms, 0.5 * exact.measuredRms);
+    EXPECT_LT(still.rms, exact.measuredRms);
+    EXPECT_EQ(still.layerRms.size(), 7u);
+    EXPECT_GT(still.measuredBulge, 0) << "the beads' outer columns bulge out";
+  }
+}
+
+TEST_F(TempDir, TruthCubeDataErrorsNameTheFileAndLine) {
+  const fs::path f = m_dir / "beads.csv";
+  std::ofstream(f)
+      << "Truth Cube\nno strain,,,5% strain,,\ni,j,k,x0,y0,z0,x1,y1,z1\n1,1,1,0,0,0,1\n";
+  try {
+    tables::readTruthCubeData(f.string());
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.place(), "line 4") << e.what();
+    EXPECT_NE(std::string(e.what()).find("expected 9 numbers"), std::string::npos) << e.what();
+  }
+  std::ofstream(f) << "x\nno strain,,,five,,\ni,j,k,x0,y0,z0,x1,y1,z1\n";
+  EXPECT_THROW(tables::readTruthCubeData(f.string()), InputError);
+}
+
+TEST_F(TempDir, QuickTruthCubeTableWithoutTheSolversSaysWhy) {
+  PluginLoader loader({DEFORM_TEST_FIXTURE_PLUGIN_DIR});
+  TablesOptions o;
+  o.quick = true;
+  o.outDir = m_dir / "out";
+  o.cases.cacheDir = fs::path();
+  buildTables({"truth-cube"}, loader, o, nullptr);
+  const json doc = readJson(o.outDir / "truth-cube.json");
+  // reference_fem (two volumetric terms) at 2 levels x 2 registrations, one row per other model.
+  ASSERT_EQ(doc["rows"].size(), 8u + 6u);
+  for (const auto& row : doc["rows"]) {
+    for (const char* k : {"model", "level", "rms_error_m", "max_error_m", "measured_rms_m",
+                          "registration", "calibrated"})
+      EXPECT_TRUE(row.contains(k)) << k << " in " << row.dump();
+    EXPECT_TRUE(row["rms_error_m"].is_null());
+    EXPECT_NE(row["status"].get<std::string>().find("missing plugin"), std::string::npos)
+        << row.dump();
+  }
+  EXPECT_EQ(doc["rows"][0]["registration"], "translation");
+  EXPECT_EQ(doc["rows"][4]["registration"], "bottom_layer");
+  // The generated scene parses and holds the plate and the 343 markers.
+  const Scene s = parseSceneFile((o.outDir / "scenes/truth-cube/cube.json").string());
+  ASSERT_EQ(s.plates.size(), 1u);
+  EXPECT_EQ(s.markers.points.rows(), 343);
+  EXPECT_EQ(s.markers.measured.size(), 2u);
+  EXPECT_NEAR(s.plates[0].trajectory.back().pos.z(), -0.010, 1e-12);
+}
+
+TEST_F(TempDir, TruthCubeRunsADynamicModelOnItsVolumeNetworkInASettlingScenePerLevel) {
+  PluginLoader probe({DEFORM_BUILD_PLUGIN_DIR});
+  const auto found = probe.discover();
+  if (std::find(found.begin(), found.end(), std::string("pbd")) == found.end())
+    GTEST_SKIP() << "pbd is not built";
+  PluginLoader loader({pluginSubset(m_dir / "plugins", {"pbd"}).string()});
+  TablesOptions o;
+  o.quick = true;
+  const tables::TableDef t = tables::truthCube(o, loader);
+  ASSERT_EQ(t.cases.size(), 3u) << "the quasi-static scene and one settling scene per level";
+  EXPECT_EQ(t.cases[1].id, "truth-cube/dynamic_1");
+  const Scene s = parseScene(json::parse(t.cases[2].scene.dump()), "dynamic_2.json");
+  EXPECT_TRUE(s.compareAtEquilibrium);
+  EXPECT_EQ(s.dt, 1e-3);
+  ASSERT_EQ(s.models.size(), 1u);
+  EXPECT_EQ(s.models[0].plugin, "pbd");
+  EXPECT_EQ(s.models[0].params["network"], "volume");
+  EXPECT_NEAR(s.plates[0].trajectory.back().pos.z(), -0.010, 1e-12);
+  EXPECT_EQ(s.markers.points.rows(), 343);
+}
+
 TEST(Tables, UnknownTableIsAnInputError) {
   PluginLoader loader({DEFORM_TEST_FIXTURE_PLUGIN_DIR});
   TablesOptions o;
   o.outDir = fs::temp_directory_path() / "deform_tables_unknown";
   EXPECT_THROW(buildTables({"nonsense"}, loader, o, nullptr), InputError);
-  EXPECT_EQ(tableNames().size(), 7u);
+  EXPECT_EQ(tableNames().size(), 8u);
 }
 
 // ---------------------------------------------------------------------------------- stability

@@ -13,7 +13,7 @@ namespace {
 
 TEST(Capability, EveryNameParsesBackToItsCapabilityAndNamesAreUnique) {
   std::set<std::string> names;
-  for (int i = 0; i <= static_cast<int>(Capability::RollerSupport); ++i) {
+  for (int i = 0; i <= static_cast<int>(Capability::Markers); ++i) {
     const auto c = static_cast<Capability>(i);
     const std::string name = capabilityName(c);
     EXPECT_TRUE(names.insert(name).second) << "duplicate name " << name;
@@ -36,6 +36,8 @@ TEST(Capability, AppendedEnumeratorsKeepTheValuesOldPluginsWereBuiltWith) {
   EXPECT_EQ(static_cast<int>(Capability::ContactReaction), 9);
   EXPECT_EQ(static_cast<int>(Capability::RollerSupport), 10);
   EXPECT_STREQ(capabilityName(Capability::RollerSupport), "roller_support");
+  EXPECT_EQ(static_cast<int>(Capability::Markers), 11);
+  EXPECT_STREQ(capabilityName(Capability::Markers), "markers");
 }
 
 TEST(Capability, RollerSupportsNeedRollerSupportNeverAFullPin) {

@@ -474,6 +474,34 @@ TEST(Runner, MissingCapabilityIsUnsupportedWithoutRunning) {
   EXPECT_TRUE(r.stepMs.empty());
 }
 
+TEST(Runner, APlateMovesTheModelAndMarkersWithoutTheCapabilityAreUnsupported) {
+  Fixture f;
+  f.scene.tools.clear();
+  PlateSpec plate;  // holds the apex (0, 0, 0.1) and lifts it 1 cm
+  plate.region = Box{Vec3(-1, -1, 0.05), Vec3(1, 1, 1)};
+  plate.trajectory = {KeyFrame{0.0, Vec3::Zero(), false}, KeyFrame{1.0, Vec3(0, 0, 0.01), false}};
+  f.scene.plates.push_back(plate);
+  f.scene.markers.points = MatX3::Constant(1, 3, 0.01);
+  const RunRecord r = runWith(f, [](RigidTestModel&) {});
+  ASSERT_EQ(r.status, RunStatus::Ok) << r.message;
+  EXPECT_TRUE(r.valid) << r.invalidReason;
+  EXPECT_NEAR(r.finalSurface(3, 2), 0.11, 1e-12) << "the plate's vertex followed its offset";
+  EXPECT_NEAR(r.graspTravel, 0.01, 1e-15) << "the plate's travel scales the residual test";
+  EXPECT_EQ(r.markerStatus, "unsupported");
+  EXPECT_NE(r.markerReason.find("does not have the markers capability"), std::string::npos)
+      << r.markerReason;
+  ASSERT_EQ(r.compared.size(), 2u);
+  EXPECT_EQ(r.compared[1].markers.rows(), 0);
+  // The results document says so, per run.
+  const auto j = runJson(r);
+  EXPECT_EQ(j["markers"]["status"], "unsupported");
+  // A model without the grasp capability cannot hold a plate.
+  const RunRecord no = runWith(
+      f, [](RigidTestModel&) {}, /*grasp=*/false);
+  EXPECT_EQ(no.status, RunStatus::Unsupported);
+  EXPECT_NE(no.message.find("plates"), std::string::npos) << no.message;
+}
+
 TEST(Runner, ResetThenRerunReproducesBitForBit) {
   const Fixture f;
   RigidTestModel model;

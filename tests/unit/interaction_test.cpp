@@ -111,6 +111,33 @@ TEST(Interaction, GraspHoldsRestSurfaceVerticesWithinRadiusFollowsAndReleases) {
   EXPECT_EQ(inter.graspTravel(), (std::vector<Real>{0.02}));
 }
 
+TEST(Interaction, APlateIsAGraspOfItsBoxsRestVerticesOnRestPlusOffset) {
+  Scene scene;
+  scene.dt = 0.01;
+  scene.duration = 1.0;
+  PlateSpec plate;
+  plate.region.lo = Vec3(0.0035, -1, -1);
+  plate.region.hi = Vec3(1, 1, 1);
+  plate.trajectory = {kf(0.0, Vec3::Zero(), false), kf(1.0, Vec3(0, 0, -0.01), false)};
+  scene.plates.push_back(plate);
+  const SurfaceMesh rest = lineSurface();
+  Interaction inter(scene, rest);
+  ASSERT_EQ(inter.plateVertices().size(), 1u);
+  EXPECT_EQ(inter.plateVertices()[0], (std::vector<int>{1, 2}));
+  FixedNodesModel model(rest.V);
+  // Bonded from the start, whatever the model's surface did: targets are rest + offset(t + dt).
+  model.m_x.row(1) = Vec3(5, 5, 5).transpose();
+  const StepInput in = inter.prepare(0.49, 0.01, model);
+  ASSERT_EQ(in.grasps.size(), 1u);
+  EXPECT_EQ(in.grasps[0].tool, 0) << "plates come after the scene's tools (none here)";
+  EXPECT_EQ(in.grasps[0].vertices, (std::vector<int>{1, 2}));
+  EXPECT_NEAR(in.grasps[0].targets(0, 0), 0.004, 1e-15);
+  EXPECT_NEAR(in.grasps[0].targets(0, 2), -0.005, 1e-12);
+  EXPECT_NEAR(in.grasps[0].targets(1, 0), 0.006, 1e-15);
+  EXPECT_EQ(inter.graspTravel(), (std::vector<Real>{0.01}));
+  EXPECT_TRUE(plateSurfaceVertices(rest.V, Box{Vec3::Constant(2), Vec3::Constant(3)}).empty());
+}
+
 TEST(Interaction, SmallJawsHoldAtLeastTheNearestVertexAndResetForgets) {
   // No vertex within 0.1 mm of the closing point (the origin): the nearest one is held, so a
   // grasp that reaches the surface is never empty.

@@ -490,6 +490,99 @@ TEST(Organ, PhantomIsValidAndScaled) {
   EXPECT_NEAR(boundingBox(b.surface.V).diagonal(), 2 * boundingBox(a.surface.V).diagonal(), 1e-12);
 }
 
+TEST(Scene, PlatesAreBondedBoxesWithAnOffsetTrajectory) {
+  json j = minimalScene();
+  // The phantom cube spans [-0.05, 0.05]^3 (minimalScene's organ).
+  j["plates"] =
+      json::parse(R"([{"region": {"box": [[-1, -1, 0.049], [1, 1, 1]]}, "contact": "bonded",
+                                 "trajectory": [{"t": 0, "offset": [0, 0, 0]},
+                                                {"t": 1, "offset": [0, 0, -0.004]}]}])");
+  const Scene s = parseScene(j, "scene.json");
+  ASSERT_EQ(s.plates.size(), 1u);
+  EXPECT_EQ(s.plates[0].contact, PlateContact::Bonded);
+  ASSERT_EQ(s.plates[0].trajectory.size(), 2u);
+  EXPECT_EQ(s.plates[0].trajectory[1].pos, Vec3(0, 0, -0.004));
+  EXPECT_EQ(s.plates[0].region.lo.z(), 0.049);
+  EXPECT_NO_THROW(loadOrgan(s));
+
+  json bad = j;
+  bad["plates"][0]["contact"] = "glued";
+  expectError(bad, "/plates/0/contact", "expected \"bonded\" or \"sliding\"");
+  bad["plates"][0]["contact"] = "sliding";
+  expectError(bad, "/plates/0/contact", "not yet supported");
+  bad = j;
+  bad["plates"][0]["trajectory"] = json::array();
+  expectError(bad, "/plates/0/trajectory", "needs at least one keyframe");
+  bad = j;
+  bad["plates"][0]["trajectory"][1]["pos"] = {0, 0, 0};
+  expectError(bad, "/plates/0/trajectory/1/pos", "unknown key 'pos'");
+  bad = j;
+  bad["plates"][0]["trajectory"][1]["t"] = 0;
+  expectError(bad, "/plates/0/trajectory/1/t", "strictly increasing");
+  bad = j;
+  bad["plates"][0].erase("region");
+  expectError(bad, "/plates/0/region", "required key is missing");
+  // An empty region: one error naming the box, when the organ is loaded.
+  bad = j;
+  bad["plates"][0]["region"]["box"] = {{-1, -1, 0.2}, {1, 1, 1}};
+  try {
+    loadOrgan(parseScene(bad, "scene.json"));
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), "scene.json");
+    EXPECT_EQ(e.place(), "/plates/0/region/box");
+    EXPECT_NE(std::string(e.what()).find("hold nothing"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(SceneFiles, MarkersFromAListOrAFileWithMeasuredPositions) {
+  json j = minimalScene();
+  j["duration"] = 1.0;
+  j["markers"] = json::parse(R"({"points": [[0, 0, 0], [0.01, 0, 0]],
+                                 "measured": [{"t": 1.0, "points": [[0, 0, -0.001], [0.01, 0, 0]]}]})");
+  Scene s = parseScene(j, "scene.json");
+  ASSERT_EQ(s.markers.points.rows(), 2);
+  EXPECT_EQ(s.markers.points(1, 0), 0.01);
+  ASSERT_EQ(s.markers.measured.size(), 1u);
+  EXPECT_EQ(s.markers.measured[0].points(0, 2), -0.001);
+
+  // A file beside the scene: comma or space separated, '#' comments.
+  {
+    std::ofstream f(m_dir / "beads.csv");
+    f << "# x, y, z in m\n0, 0, 0\n\n0.01 0.0 0.0\n";
+  }
+  json jf = minimalScene();
+  jf["markers"] = {{"file", "beads.csv"}};
+  s = parseScene(jf, (m_dir / "scene.json").string());
+  ASSERT_EQ(s.markers.points.rows(), 2);
+  EXPECT_EQ(s.markers.points(1, 0), 0.01);
+  {
+    std::ofstream f(m_dir / "bad.csv");
+    f << "0, 0, 0\n1, 2\n";
+  }
+  jf["markers"] = {{"file", "bad.csv"}};
+  try {
+    parseScene(jf, (m_dir / "scene.json").string());
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.place(), "line 2") << e.what();
+    EXPECT_NE(std::string(e.what()).find("three numbers"), std::string::npos) << e.what();
+  }
+
+  json bad = j;
+  bad["markers"]["measured"][0]["t"] = 0.5;
+  expectError(bad, "/markers/measured/0/t", "compared instants");
+  bad = j;
+  bad["markers"]["measured"][0]["points"] = {{0, 0, 0}};
+  expectError(bad, "/markers/measured/0", "1 measured positions for 2 markers");
+  bad = j;
+  bad["markers"]["file"] = "beads.csv";
+  expectError(bad, "/markers", "exactly one of");
+  bad = j;
+  bad["markers"]["points"] = json::array();
+  expectError(bad, "/markers/points", "at least one point");
+}
+
 }  // namespace
 }  // namespace deform
 

@@ -2,6 +2,7 @@
 // values every tet-based model (pbd, massspring, bullet_deformable) derives from a tet file.
 #include <deform/error.h>
 #include <deform/organ_tets.h>
+#include <deform/tet_embedding.h>
 #include <deform/tet_nodes.h>
 #include <gtest/gtest.h>
 
@@ -155,9 +156,8 @@ TEST(QuadraticSurfaceLoad, UniformTractionGoesToTheMidsideNodes) {
 }
 
 // A grasp of the cube's four top vertices holds the five midside nodes of the top face's two
-// triangles at the midpoints of their edges; a grasp of two vertices spans no triangle and holds
-// nothing more.
-TEST(GraspedPatchNodes, HoldsTheMidsideNodesOfFullyGraspedTriangles) {
+// triangles at the midpoints of their edges; a grasp of the two ends of an edge, its midside.
+TEST(GraspedPatchNodes, HoldsTheMidsideNodesOfGraspedTrianglesAndEdges) {
   const TetMesh cube = fiveTetCube(1.0);
   const QuadraticTetNodes q = addMidsideNodes(cube);
   const SurfaceMesh surface = tetBoundary(cube);
@@ -173,7 +173,54 @@ TEST(GraspedPatchNodes, HoldsTheMidsideNodesOfFullyGraspedTriangles) {
     for (int k = 0; k < 3; ++k) x += h.weights(k) * q.V.row(h.vertices[size_t(k)]).transpose();
     EXPECT_NEAR((x - q.V.row(h.node).transpose()).norm(), 0, 1e-12);
   }
-  EXPECT_TRUE(patch.held({4, 5}).empty());
+  // Two grasped vertices of a surface edge hold its midside node; two that share no edge,
+  // nothing.
+  const auto edge = patch.held({4, 5});
+  ASSERT_EQ(edge.size(), 1u);
+  EXPECT_NEAR((q.V.row(edge[0].node) - 0.5 * (q.V.row(4) + q.V.row(5))).norm(), 0, 1e-12);
+  EXPECT_TRUE(patch.held({5, 6}).empty());
+}
+
+TEST(TetEmbedding, PointsFollowAnAffineMapExactlyLinearAndQuadratic) {
+  const TetMesh m = fiveTetCube(0.02);
+  MatX3 pts(4, 3);
+  pts << 0.005, 0.006, 0.007,  //
+      0.019, 0.001, 0.0185,    //
+      0.01, 0.01, 0.01,        //
+      0.03, 0.01, 0.01;        // outside the cube: extrapolated from the nearest tet
+  const TetEmbedding e = embedInTets(m.V, m.T, pts);
+  EXPECT_EQ(e.numOutside(), 1);
+  EXPECT_GT(e.outside[3], 0);
+  for (int p = 0; p < 3; ++p) {
+    Real sum = 0;
+    for (Real w : e.weights[size_t(p)]) {
+      EXPECT_GE(w, -1e-9);
+      sum += w;
+    }
+    EXPECT_NEAR(sum, 1, 1e-12);
+  }
+  // An affine deformation x -> A x + b moves every embedded point (outside ones too) exactly.
+  Mat3 A;
+  A << 1.1, 0.2, 0, -0.1, 0.9, 0.05, 0, 0.3, 1.2;
+  const Vec3 b(0.001, -0.002, 0.003);
+  const auto affine = [&](const MatX3& X) {
+    MatX3 Y = (X * A.transpose()).rowwise() + b.transpose();
+    return Y;
+  };
+  EXPECT_TRUE(embeddedPositions(e, affine(m.V), m.T).isApprox(affine(pts), 1e-12));
+  // 10-node tets with straight sides: the midside nodes at the edge midpoints; a quadratic map
+  // of the nodes is reproduced at the points as well.
+  const QuadraticTetNodes q = addMidsideNodes(m);
+  const auto quadratic = [](const MatX3& X) {
+    MatX3 Y = X;
+    for (Eigen::Index i = 0; i < X.rows(); ++i)
+      Y(i, 2) += 3 * X(i, 0) * X(i, 1) + X(i, 0) * X(i, 0);
+    return Y;
+  };
+  const MatX3 moved =
+      embeddedPositionsQuadratic(e, quadratic(q.V), [&](int t, int a) { return q.elements(t, a); });
+  EXPECT_TRUE(moved.topRows(3).isApprox(quadratic(pts).topRows(3), 1e-12));
+  EXPECT_THROW(embedInTets(m.V, MatX4i(0, 4), pts), InputError);
 }
 
 }  // namespace

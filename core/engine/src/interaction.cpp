@@ -51,6 +51,8 @@ Interaction::Interaction(const Scene& scene, const SurfaceMesh& restSurface)
     m_loadVertices.push_back(nearestVertex(m_rest.V, load.at));
     m_loadPatches.push_back(pressurePatch(m_rest, m_loadVertices.back(), load.radius));
   }
+  for (const PlateSpec& plate : scene.plates)
+    m_plateVertices.push_back(plateSurfaceVertices(m_rest.V, plate.region));
   buildWorlds();
 }
 
@@ -303,6 +305,20 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
     }
     // Probes act through the contact world (set above), not through the grasp input.
   }
+  // Plates: grasps of the surface vertices in their boxes, bonded from the start to rest +
+  // offset(t + dt).
+  for (size_t p = 0; p < m_scene.plates.size(); ++p) {
+    const std::vector<int>& held = m_plateVertices[p];
+    if (held.empty()) continue;
+    GraspInput g;
+    g.tool = static_cast<int>(m_scene.tools.size() + p);
+    g.vertices = held;
+    const Vec3 offset = toolPosition(m_scene.plates[p].trajectory, t + dt);
+    g.targets.resize(Eigen::Index(held.size()), 3);
+    for (size_t k = 0; k < held.size(); ++k)
+      g.targets.row(Eigen::Index(k)) = m_rest.V.row(held[k]) + offset.transpose();
+    in.grasps.push_back(std::move(g));
+  }
 
   for (size_t l = 0; l < m_scene.loads.size(); ++l) {
     const LoadSpec& load = m_scene.loads[l];
@@ -350,6 +366,18 @@ std::vector<Real> Interaction::graspTravel() const {
       was = k.jawClosed;
     }
   }
+  for (const PlateSpec& plate : m_scene.plates) {
+    Real travel = 0;
+    for (const KeyFrame& k : plate.trajectory) travel = std::max(travel, k.pos.norm());
+    out.push_back(travel);
+  }
+  return out;
+}
+
+std::vector<int> plateSurfaceVertices(const MatX3& rest, const Box& region) {
+  std::vector<int> out;
+  for (Eigen::Index v = 0; v < rest.rows(); ++v)
+    if (region.contains(rest.row(v).transpose())) out.push_back(int(v));
   return out;
 }
 

@@ -519,6 +519,103 @@ LoadSpec parseLoad(const Ctx& c, const json& j, const std::string& path) {
   return l;
 }
 
+PlateSpec parsePlate(const Ctx& c, const json& j, const std::string& path) {
+  ObjectReader r(j, path, c.file, {"region", "contact", "trajectory"});
+  PlateSpec p;
+  ObjectReader region(r.required("region"), r.child("region"), c.file, {"box"});
+  p.region = c.box(region.required("box"), region.child("box"));
+  if (const json* v = r.optional("contact")) {
+    const std::string s = c.string(*v, r.child("contact"));
+    if (s == "sliding")
+      c.fail(r.child("contact"),
+             "\"sliding\" (normal component only) is not yet supported; use \"bonded\"");
+    if (s != "bonded")
+      c.fail(r.child("contact"), "expected \"bonded\" or \"sliding\", got \"" + s + "\"");
+  }
+  const std::string tp = r.child("trajectory");
+  const json& frames = c.array(r.required("trajectory"), tp);
+  if (frames.empty()) c.fail(tp, "needs at least one keyframe");
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const std::string fp = tp + "/" + std::to_string(i);
+    ObjectReader f(frames[i], fp, c.file, {"t", "offset"});
+    KeyFrame k;
+    k.t = c.number(f.required("t"), f.child("t"));
+    if (k.t < 0) c.fail(f.child("t"), "must be >= 0, got " + num(k.t));
+    if (!p.trajectory.empty() && !(k.t > p.trajectory.back().t))
+      c.fail(f.child("t"), "keyframe times must be strictly increasing, got " + num(k.t) +
+                               " after " + num(p.trajectory.back().t));
+    k.pos = c.vec3(f.required("offset"), f.child("offset"));
+    p.trajectory.push_back(k);
+  }
+  return p;
+}
+
+/// Points as [[x, y, z], ...] (at least one), or read from a text file: one point per line,
+/// three numbers separated by commas or white space; blank lines and lines starting with '#'
+/// are skipped. The file is resolved relative to the scene file.
+MatX3 parsePoints(const Ctx& c, const ObjectReader& r, const std::string& what) {
+  const bool hasPoints = r.has("points"), hasFile = r.has("file");
+  if (hasPoints == hasFile)
+    c.fail(r.path(), "needs exactly one of \"points\" and \"file\" (the " + what + ")");
+  std::vector<Vec3> pts;
+  if (hasPoints) {
+    const std::string pp = r.child("points");
+    const json& a = c.array(r.required("points"), pp);
+    for (size_t i = 0; i < a.size(); ++i) pts.push_back(c.vec3(a[i], pp + "/" + std::to_string(i)));
+    if (pts.empty()) c.fail(pp, "needs at least one point");
+  } else {
+    const std::string name = c.string(r.required("file"), r.child("file"));
+    fs::path path(name);
+    if (path.is_relative() && !c.file.empty()) path = fs::path(c.file).parent_path() / path;
+    std::ifstream in(path);
+    if (!in) c.fail(r.child("file"), "cannot open the points file " + path.string());
+    std::string line;
+    for (int n = 1; std::getline(in, line); ++n) {
+      std::replace(line.begin(), line.end(), ',', ' ');
+      std::istringstream ls(line);
+      std::string first;
+      if (!(ls >> first) || first[0] == '#') continue;
+      ls.clear();
+      ls.str(line);
+      Vec3 v;
+      std::string rest;
+      if (!(ls >> v.x() >> v.y() >> v.z()) || (ls >> rest) || !v.allFinite())
+        throw InputError(path.string(), "line " + std::to_string(n),
+                         "expected three numbers x, y, z (m), got \"" + line + "\"");
+      pts.push_back(v);
+    }
+    if (pts.empty()) c.fail(r.child("file"), path.string() + " holds no point");
+  }
+  MatX3 m(Eigen::Index(pts.size()), 3);
+  for (size_t i = 0; i < pts.size(); ++i) m.row(Eigen::Index(i)) = pts[i].transpose();
+  return m;
+}
+
+MarkerSpec parseMarkers(const Ctx& c, const json& j, const std::string& path) {
+  ObjectReader r(j, path, c.file, {"points", "file", "measured"});
+  MarkerSpec m;
+  m.points = parsePoints(c, r, "markers' rest positions, m");
+  if (const json* v = r.optional("measured")) {
+    const std::string mp = r.child("measured");
+    c.array(*v, mp);
+    for (size_t i = 0; i < v->size(); ++i) {
+      const std::string fp = mp + "/" + std::to_string(i);
+      ObjectReader f((*v)[i], fp, c.file, {"t", "points", "file"});
+      MarkerFrame frame;
+      frame.t = c.number(f.required("t"), f.child("t"));
+      if (!m.measured.empty() && !(frame.t > m.measured.back().t))
+        c.fail(f.child("t"), "instants must be strictly increasing, got " + num(frame.t) +
+                                 " after " + num(m.measured.back().t));
+      frame.points = parsePoints(c, f, "measured positions, m");
+      if (frame.points.rows() != m.points.rows())
+        c.fail(fp, std::to_string(frame.points.rows()) + " measured positions for " +
+                       std::to_string(m.points.rows()) + " markers");
+      m.measured.push_back(std::move(frame));
+    }
+  }
+  return m;
+}
+
 }  // namespace
 
 int Scene::numSteps() const {
@@ -538,9 +635,10 @@ bool Scene::needsDynamics() const {
 
 Scene parseScene(const nlohmann::json& j, const std::string& file) {
   const Ctx c{file};
-  ObjectReader r(j, "", file,
-                 {"name", "description", "organ", "gravity", "dt", "duration", "tools", "objects",
-                  "contact", "loads", "models", "reference", "samples", "compare_at", "output"});
+  ObjectReader r(
+      j, "", file,
+      {"name", "description", "organ", "gravity", "dt", "duration", "tools", "objects", "contact",
+       "loads", "plates", "markers", "models", "reference", "samples", "compare_at", "output"});
   Scene s;
   s.file = file;
   if (const json* v = r.optional("name")) {
@@ -577,6 +675,12 @@ Scene parseScene(const nlohmann::json& j, const std::string& file) {
     for (size_t i = 0; i < v->size(); ++i)
       s.loads.push_back(parseLoad(c, (*v)[i], "/loads/" + std::to_string(i)));
   }
+  if (const json* v = r.optional("plates")) {
+    c.array(*v, "/plates");
+    for (size_t i = 0; i < v->size(); ++i)
+      s.plates.push_back(parsePlate(c, (*v)[i], "/plates/" + std::to_string(i)));
+  }
+  if (const json* v = r.optional("markers")) s.markers = parseMarkers(c, *v, "/markers");
   checkCouplingStability(s);
   const json& models = c.array(r.required("models"), "/models");
   if (models.empty()) c.fail("/models", "needs at least one model");
@@ -623,6 +727,18 @@ Scene parseScene(const nlohmann::json& j, const std::string& file) {
                       num(s.compareAt.back()));
       s.compareAt.push_back(t);
     }
+  }
+  for (size_t i = 0; i < s.markers.measured.size(); ++i) {
+    const Real t = s.markers.measured[i].t;
+    const std::vector<Real> instants =
+        s.compareAt.empty() ? std::vector<Real>{s.duration} : s.compareAt;
+    const bool found = !s.compareAtEquilibrium &&
+                       std::any_of(instants.begin(), instants.end(),
+                                   [&](Real x) { return std::fabs(x - t) <= 0.5 * s.dt; });
+    if (!found)
+      c.fail("/markers/measured/" + std::to_string(i) + "/t",
+             "must be one of the compared instants (compare_at, or the duration " +
+                 num(s.duration) + " s without it), got " + num(t));
   }
   if (const json* v = r.optional("output")) {
     ObjectReader o(*v, "/output", file, {"surfaces"});
@@ -939,6 +1055,7 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog) {
       organ.fixed.surfaceVertices.end());
   checkGraspsReachOrgan(scene, organ);
   checkLoadsReachOrgan(scene, organ);
+  checkPlatesReachOrgan(scene, organ);
   // A traction whose region holds no surface triangle would load nothing.
   for (size_t i = 0; i < scene.loads.size(); ++i) {
     const LoadSpec& l = scene.loads[i];
@@ -948,6 +1065,14 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog) {
                        "vertices inside): the traction would load nothing");
   }
   return organ;
+}
+
+void checkPlatesReachOrgan(const Scene& scene, const Organ& organ) {
+  for (size_t i = 0; i < scene.plates.size(); ++i)
+    if (plateSurfaceVertices(organ.surface.V, scene.plates[i].region).empty())
+      throw InputError(scene.file, "/plates/" + std::to_string(i) + "/region/box",
+                       "no surface vertex of the organ lies inside this box: the plate would "
+                       "hold nothing");
 }
 
 nlohmann::json paramsToJson(const ParamValues& values) {

@@ -235,26 +235,32 @@ std::vector<GraspedPatchNodes::Held> GraspedPatchNodes::held(
     return std::binary_search(grasped.begin(), grasped.end(), v);
   };
   std::vector<int> faces;
+  std::vector<std::pair<int, int>> edges;  // surface edges with both ends grasped
   for (int v : grasped) {
     if (v < 0 || v >= int(m_vertexFaces.size())) continue;
     for (int f : m_vertexFaces[size_t(v)]) {
       bool all = true;
-      for (int k = 0; k < 3; ++k) all = all && isGrasped(m_surface.F(f, k));
+      for (int k = 0; k < 3; ++k) {
+        const int a = m_surface.F(f, k), b = m_surface.F(f, (k + 1) % 3);
+        all = all && isGrasped(a);
+        if (isGrasped(a) && isGrasped(b)) edges.emplace_back(std::min(a, b), std::max(a, b));
+      }
       if (all) faces.push_back(f);
     }
   }
   std::sort(faces.begin(), faces.end());
   faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
-  if (faces.empty()) return out;
+  std::sort(edges.begin(), edges.end());
+  edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+  if (edges.empty()) return out;
   Vec3 lo = Vec3::Constant(std::numeric_limits<Real>::max()), hi = -lo;
   Real longest = 0;
-  for (int f : faces)
-    for (int k = 0; k < 3; ++k) {
-      const Vec3 x = m_surface.V.row(m_surface.F(f, k)).transpose();
-      lo = lo.cwiseMin(x);
-      hi = hi.cwiseMax(x);
-      longest = std::max(longest, (x - Vec3(m_surface.V.row(m_surface.F(f, (k + 1) % 3)))).norm());
-    }
+  for (const auto& [a, b] : edges) {
+    const Vec3 xa = m_surface.V.row(a).transpose(), xb = m_surface.V.row(b).transpose();
+    lo = lo.cwiseMin(xa).cwiseMin(xb);
+    hi = hi.cwiseMax(xa).cwiseMax(xb);
+    longest = std::max(longest, (xa - xb).norm());
+  }
   const Real tol = 1e-6 * longest;  // on the triangle: a node of the mesh of this very surface
   lo.array() -= tol;
   hi.array() += tol;
@@ -262,6 +268,7 @@ std::vector<GraspedPatchNodes::Held> GraspedPatchNodes::held(
     if (m_isVertexNode[size_t(n)]) continue;
     const Vec3 x = m_nodes.row(n).transpose();
     if ((x.array() < lo.array()).any() || (x.array() > hi.array()).any()) continue;
+    bool found = false;
     for (int f : faces) {
       const Vec3 a = m_surface.V.row(m_surface.F(f, 0)), b = m_surface.V.row(m_surface.F(f, 1)),
                  c = m_surface.V.row(m_surface.F(f, 2));
@@ -279,7 +286,23 @@ std::vector<GraspedPatchNodes::Held> GraspedPatchNodes::held(
       for (int k = 0; k < 3; ++k) h.vertices[size_t(k)] = m_surface.F(f, k);
       h.weights = Vec3(wa, wb, wc);
       out.push_back(h);
+      found = true;
       break;
+    }
+    // On an edge between two grasped vertices (held by every model's surface along the edge).
+    for (size_t e = 0; e < edges.size() && !found; ++e) {
+      const Vec3 a = m_surface.V.row(edges[e].first), b = m_surface.V.row(edges[e].second);
+      const Real len2 = (b - a).squaredNorm();
+      if (!(len2 > 0)) continue;
+      const Real t = (x - a).dot(b - a) / len2;
+      if (t < -tol / longest || t > 1 + tol / longest) continue;
+      if ((a + t * (b - a) - x).norm() > tol) continue;
+      Held h;
+      h.node = n;
+      h.vertices = {edges[e].first, edges[e].second, edges[e].first};
+      h.weights = Vec3(1 - t, t, 0);
+      out.push_back(h);
+      found = true;
     }
   }
   return out;

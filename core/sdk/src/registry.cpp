@@ -31,13 +31,15 @@ const char* capabilityName(Capability c) {
       return "contact_reaction";
     case Capability::RollerSupport:
       return "roller_support";
+    case Capability::Markers:
+      return "markers";
   }
   assert(false && "unknown Capability");
   return "unknown";
 }
 
 // The last enumerator: capabilities are only ever appended (registry.h), so move this with them.
-constexpr Capability kLastCapability = Capability::RollerSupport;
+constexpr Capability kLastCapability = Capability::Markers;
 
 bool capabilityFromName(const std::string& name, Capability& out) {
   for (int i = 0; i <= static_cast<int>(kLastCapability); ++i) {

@@ -28,7 +28,20 @@ struct SurfaceSnapshot {
   int step = 0;   ///< steps completed
   Real time = 0;  ///< s
   MatX3 positions;
+  /// Compared instants only (else empty): the force (N) the tissue exerts on each plate of the
+  /// scene, in scene order, when the model reports grasp forces (reaction_force).
+  std::vector<Vec3> plateForces;
+  /// Compared instants only, when the run's markers are bound (RunRecord::markerStatus "ok"):
+  /// the markers' positions (#markers by 3, m).
+  MatX3 markers;
+  /// With measured marker positions at this instant: RMS and largest distance (m) of the
+  /// model's markers to them; -1 otherwise.
+  double markerRms = -1, markerMax = -1;
 };
+
+/// A snapshot in the byte records of run isolation and the solve cache (all its fields).
+void putSnapshotExtras(ByteWriter& w, const SurfaceSnapshot& s);
+SurfaceSnapshot getSnapshotExtras(ByteReader& r);
 
 /// One grasp reaction force reported by a model.
 struct GraspForceSample {
@@ -113,6 +126,10 @@ struct RunRecord {
   std::vector<SurfaceSnapshot> compared;  ///< at the scene's compared instants, in order
   std::vector<SurfaceSnapshot> series;    ///< every N steps ("output": "every:N")
   std::vector<GraspForceSample> graspForces;
+  /// The scene's markers for this run: "" (the scene has none), "ok" (bound: positions in
+  /// compared[].markers) or "unsupported" (markerReason says why; the run itself goes on).
+  std::string markerStatus;
+  std::string markerReason;
   std::vector<std::string> worlds;       ///< Bullet / ODE worlds the run created (--explain)
   std::vector<std::string> instruments;  ///< dynamic instruments ("tools/0"), hand force order
   std::vector<HandForceSample> handForces;

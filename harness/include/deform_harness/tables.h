@@ -54,9 +54,12 @@ struct TablesOptions {
   /// --surface-baselines: the hybrid tables run PBD and mass-spring on the organ's surface mesh
   /// alone, as the hybrid paper did, instead of on its volume (`network = volume`).
   bool surfaceBaselines = false;
+  /// --data of truth-cube: the bead file ("": data/truth-cube/uniaxial_positions.csv of the
+  /// source tree).
+  std::string truthCubeData;
 };
 
-/// Names of the seven tables, in DESIGN.md's order.
+/// Names of the tables, in DESIGN.md's order.
 std::vector<std::string> tableNames();
 
 /// Builds the named tables ("all" expands to every one; an unknown name is an InputError),

@@ -11,6 +11,7 @@
 #include <deform_harness/progress.h>
 #include <deform_harness/tables.h>
 
+#include <array>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -165,5 +166,35 @@ TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing)
 /// verification: reference_fem at its defaults (and CalculiX when its plugin loads) against
 /// analytic and published solutions.
 TableDef verification(const TablesOptions& o, PluginLoader& loader);
+
+/// The Truth Cube's bead file (data/truth-cube/README.md): i, j, k and the positions (m, the
+/// scanner frame, -z up) at rest and at each compression level, whose nominal strains come from
+/// the "N% strain" labels of the line above the "i,j,k,..." header. Throws InputError naming the
+/// file and line.
+struct TruthCubeData {
+  struct Bead {
+    std::array<int, 3> ijk{};
+    std::vector<Vec3> positions;  ///< rest, then one per level
+  };
+  std::string file;
+  std::vector<double> strains;  ///< per level, e.g. 0.05
+  std::vector<Bead> beads;
+};
+TruthCubeData readTruthCubeData(const std::string& file);
+/// The beads at `level` (0: rest) in the scene's frame (z up, the 80 mm cube centred at the
+/// origin), #beads by 3, m.
+MatX3 truthCubeSceneFrame(const TruthCubeData& d, int level);
+/// A model's bead figures at `level` against the scan, after a rigid translation registration
+/// (least squares over all beads, or the bottom layer's mean). m.
+struct TruthCubeFigures {
+  double rms = 0, maxError = 0, measuredRms = 0;
+  std::vector<double> layerRms;  ///< per bead layer k, bottom to top
+  double bulge = 0, measuredBulge = 0;
+};
+TruthCubeFigures truthCubeFigures(const TruthCubeData& d, const MatX3& modelRest,
+                                  const MatX3& model, int level, bool bottomLayer);
+/// truth-cube: the Truth Cube experiment replayed (reference_fem, CalculiX where it loads, and a
+/// row per other model saying why it has no bead figures yet).
+TableDef truthCube(const TablesOptions& o, PluginLoader& loader);
 
 }  // namespace deform::harness::tables

@@ -100,8 +100,8 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
 }  // namespace
 
 std::vector<std::string> tableNames() {
-  return {"metaballs-construction", "method-comparison", "bem-timing",  "bem-accuracy",
-          "hybrid-accuracy",        "hybrid-timing",     "verification"};
+  return {"metaballs-construction", "method-comparison", "bem-timing",   "bem-accuracy",
+          "hybrid-accuracy",        "hybrid-timing",     "verification", "truth-cube"};
 }
 
 std::vector<std::string> tableWarnings(const std::vector<Table>& tables) {
@@ -218,7 +218,8 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       {"bem-accuracy", [&] { return bemAccuracy(options, loader, progress); }},
       {"hybrid-accuracy", [&] { return hybridTable(options, refElements, false); }},
       {"hybrid-timing", [&] { return hybridTable(options, refElements, true); }},
-      {"verification", [&] { return verification(options, loader); }}};
+      {"verification", [&] { return verification(options, loader); }},
+      {"truth-cube", [&] { return truthCube(options, loader); }}};
   std::vector<TableDef> defs;
   std::set<std::string> seen;
   for (const std::string& n : wanted)

@@ -42,6 +42,10 @@ inline std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Ve
   return graspedSurfaceVertices(rest.V, p, r);
 }
 
+/// The organ surface vertices a plate holds: every rest-surface vertex inside its box (sorted;
+/// empty when none is, which loadOrgan() refuses). The one definition of the plate's set.
+std::vector<int> plateSurfaceVertices(const MatX3& rest, const Box& region);
+
 /// A point force read as a pressure patch of radius R around surface vertex c:
 ///     t(x) = F k(|x - x_c|) / integral k dA,   k(rho) = 1 - (rho / R)^2 for rho < R, else 0,
 /// a paraboloid profile (the support and shape of the Hertz pressure under a rigid sphere tip),
@@ -108,8 +112,11 @@ class Interaction {
   const std::vector<SurfacePatch>& loadPatches() const { return m_loadPatches; }
   /// Tool travel while grasping: for each grasper, the largest distance its position reaches
   /// from the closing point over its closed phases (m; 0 for other tools). The scale of the
-  /// grasp-residual validity test.
+  /// grasp-residual validity test. Plates follow the tools (index = tools + plate): the largest
+  /// norm of their offset.
   std::vector<Real> graspTravel() const;
+  /// The surface vertices each plate holds (plateSurfaceVertices), in scene order.
+  const std::vector<std::vector<int>>& plateVertices() const { return m_plateVertices; }
 
  private:
   struct Attachment {
@@ -129,6 +136,7 @@ class Interaction {
   std::vector<SurfacePatch> m_loadPatches;
   std::vector<Attachment> m_attach;
   std::vector<int> m_emptyGrasps;
+  std::vector<std::vector<int>> m_plateVertices;
 
   std::unique_ptr<ContactWorld> m_contact;
   std::unique_ptr<InstrumentWorld> m_dynamics;

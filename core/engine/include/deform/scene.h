@@ -92,6 +92,31 @@ struct OrganSpec {
   FixedRegion fixed;
 };
 
+/// "plates": a rigid plate bonded to the organ surface vertices inside `region` (picked by the
+/// harness on the rest surface, the same set for every model), which it moves by a prescribed
+/// rigid offset: those vertices' targets are rest + offset(t) (piecewise linear between frames,
+/// held before the first and after the last). The harness hands each plate to the models as a
+/// grasp (GraspInput::tool = number of tools + plate index), so every model follows it through
+/// its surface mapping and the reference solvers take it as Dirichlet conditions.
+enum class PlateContact { Bonded, Sliding };
+struct PlateSpec {
+  Box region;
+  PlateContact contact = PlateContact::Bonded;  ///< sliding is refused for now
+  std::vector<KeyFrame> trajectory;             ///< pos = the offset, m; times increasing
+};
+
+/// "markers": interior points (rest positions, m) whose current positions every model reports
+/// through its own interior mapping (Model::bindMarkers), with optional measured positions at
+/// compared instants (then results.json gets their errors).
+struct MarkerFrame {
+  Real t = 0;    ///< s, one of the compared instants
+  MatX3 points;  ///< #markers by 3, m
+};
+struct MarkerSpec {
+  MatX3 points;                       ///< #markers by 3, m; empty: no markers
+  std::vector<MarkerFrame> measured;  ///< in time order
+};
+
 enum class SurfaceOutput { Final, Every, None };
 
 struct Scene {
@@ -106,6 +131,8 @@ struct Scene {
   std::vector<ObjectSpec> objects;
   ContactParams contact;  ///< "contact": the same for every model
   std::vector<LoadSpec> loads;
+  std::vector<PlateSpec> plates;
+  MarkerSpec markers;
   std::vector<ModelSpec> models;
   std::optional<ModelSpec> reference;
   std::vector<int> nearest = {10, 50};
@@ -148,6 +175,10 @@ Organ loadOrgan(const Scene& scene, std::vector<std::string>* repairLog = nullpt
 /// organ farther than the tool's radius from its surface: that grasp would attach nothing.
 /// Closing inside the organ is allowed (volumetric models grasp interior nodes).
 void checkGraspsReachOrgan(const Scene& scene, const Organ& organ);
+
+/// Throws InputError(scene.file, "/plates/I/region/box", ...) when a plate's box holds no
+/// surface vertex of the organ (it would hold nothing). Called by loadOrgan().
+void checkPlatesReachOrgan(const Scene& scene, const Organ& organ);
 
 /// Throws InputError(scene.file, "/loads/I/at", ...) when a load's point lies farther than its
 /// patch radius from the organ's surface (outside or inside): the harness would apply it at the

@@ -89,8 +89,9 @@ class QuadraticSurfaceLoad {
 };
 
 /// The tet nodes a grasp holds besides the grasped vertices' own: the boundary nodes that lie on
-/// an organ surface triangle whose three vertices are all grasped (a quadratic mesh's midside
-/// nodes, and the nodes Gmsh adds where it splits long surface edges). Holding only the grasped
+/// an organ surface triangle whose three vertices are all grasped, or on a surface edge whose two
+/// vertices are (a quadratic mesh's midside nodes, and the nodes Gmsh adds where it splits long
+/// surface edges). Holding only the grasped
 /// vertices' nodes would prescribe isolated points, which a 3D solid does not resist: the
 /// surface between them would bulge by an amount that depends on the mesh, where every model
 /// holds the whole triangles spanned by the grasped vertices (its surface follows them).

@@ -228,6 +228,18 @@ class DEFORM_VISIBLE Model {
   /// StepInput::grasps; empty when the model cannot tell (no reaction_force capability).
   virtual std::vector<Vec3> graspForces() const { return {}; }
 
+  /// Interior markers (capability "markers"): binds points given at rest (#M by 3, m, inside the
+  /// organ) to the model's own interior mapping (the containing tet's barycentric coordinates,
+  /// a hex cell's trilinear ones, ...); markers() then returns their current positions (#M by
+  /// 3, m), also after reset(). A point outside the model's interior is bound to the nearest
+  /// element (extrapolated). The default, for a model with no interior, throws UnsupportedError
+  /// with the reason; a model with the capability may still throw it for a configuration
+  /// without one (e.g. a surface-only network), saying why.
+  virtual void bindMarkers(const MatX3& /*rest*/) {
+    throw UnsupportedError("this model has no interior mapping for markers");
+  }
+  virtual MatX3 markers() const { return {}; }
+
   /// Cuts the surface (capability "cut"). New surface vertices are appended; original indices
   /// stay valid. Triangles of the current surface after cuts are given by surfaceFaces().
   virtual void cut(const CutPath& /*path*/) { throw UnsupportedError("this model cannot cut"); }

@@ -38,7 +38,9 @@
 // (issue G6): plugins with the contact capability port their calls.
 // 6: FixedRegion gains `rollers` (roller supports: boxes holding some axes only) and Capability
 // gains RollerSupport (issue 33): plugin sources compile unchanged, binaries must be rebuilt.
-#define DEFORM_ABI_VERSION 6
+// 7: Model gains bindMarkers() and markers() (interior markers, issue 34) and Capability gains
+// Markers: the vtable changed, binaries must be rebuilt; plugin sources compile unchanged.
+#define DEFORM_ABI_VERSION 7
 
 namespace deform {
 
@@ -59,6 +61,10 @@ enum class Capability {
   /// "roller_support": honours FixedRegion::rollers (boxes holding some axes only); required by
   /// scenes with a fixed region that has "axes".
   RollerSupport,
+  /// "markers": implements Model::bindMarkers() / markers() (interior points through the
+  /// model's own interior mapping). Without it a scene's markers are reported unsupported for
+  /// the model (its run goes on).
+  Markers,
 };
 
 /// The capability named `name` (the spelling capabilityName() gives); false when unknown.

@@ -1,0 +1,566 @@
+// truth-cube: the Truth Cube experiment (Kerdok et al. 2003) replayed. A silicone cube of 80 mm,
+// bonded to a rigid base, compressed by a bonded rigid plate; 343 beads tracked by CT. Every
+// model that maps interior markers is measured against the beads, after a rigid registration of
+// each scan. Data: data/truth-cube/ (README.md there: source, license, frame).
+#include "table_kit.h"
+
+#include <deform/error.h>
+#include <deform/registry.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#ifndef DEFORM_SOURCE_DIR
+#define DEFORM_SOURCE_DIR ""
+#endif
+
+namespace deform::harness::tables {
+
+namespace {
+
+constexpr double kSide = 0.08;        ///< m, the cube's edge
+constexpr double kBeadMargin = 0.01;  ///< m, from the base to the bottom bead layer
+constexpr const char* kCalculix = "calculix";
+/// reference_fem with the volumetric term per quadrature point, CalculiX's C3D10 formulation.
+constexpr const char* kDisplacementLabel = "reference_fem(volumetric=displacement)";
+/// The other models of the project: rows for them say why they have no bead figures.
+const std::vector<std::string> kOtherModels = {
+    "fem_hex", "hybrid_fem_pbd", "particle_bem", "metaballs", "pbd", "massspring"};
+
+}  // namespace
+
+TruthCubeData readTruthCubeData(const std::string& file) {
+  std::ifstream in(file);
+  if (!in) throw InputError(file, "", "cannot open the Truth Cube data file");
+  TruthCubeData d;
+  d.file = file;
+  std::string line, previous;
+  bool header = false;
+  int lineNo = 0;
+  const auto cells = [](const std::string& s) {
+    std::vector<std::string> out;
+    std::stringstream ss(s);
+    std::string c;
+    while (std::getline(ss, c, ',')) {
+      c.erase(0, c.find_first_not_of(" \t\r"));
+      c.erase(c.find_last_not_of(" \t\r") + 1);
+      out.push_back(c);
+    }
+    return out;
+  };
+  size_t levels = 0;
+  while (std::getline(in, line)) {
+    ++lineNo;
+    const std::vector<std::string> c = cells(line);
+    if (!header) {
+      if (c.size() >= 6 && c[0] == "i" && c[1] == "j" && c[2] == "k") {
+        header = true;
+        if ((c.size() - 3) % 3 != 0 || c.size() < 9)
+          throw InputError(file, "line " + std::to_string(lineNo),
+                           "expected i, j, k and x, y, z column triples (rest and at least one "
+                           "compression level), got " +
+                               std::to_string(c.size()) + " columns");
+        levels = (c.size() - 6) / 3;
+        // The strains: the "N% strain" cells of the line above, in order.
+        for (const std::string& p : cells(previous)) {
+          const size_t pct = p.find('%');
+          if (pct == std::string::npos) continue;
+          try {
+            d.strains.push_back(std::stod(p.substr(0, pct)) / 100);
+          } catch (const std::exception&) {
+            throw InputError(file, "line " + std::to_string(lineNo - 1),
+                             "cannot read a strain from \"" + p + "\"");
+          }
+        }
+        if (d.strains.size() != levels)
+          throw InputError(file, "line " + std::to_string(lineNo - 1),
+                           "expected one \"N% strain\" label per compression level (" +
+                               std::to_string(levels) + "), found " +
+                               std::to_string(d.strains.size()));
+      }
+      previous = line;
+      continue;
+    }
+    if (c.empty() || (c.size() == 1 && c[0].empty())) continue;
+    if (c.size() < 6 + 3 * levels)
+      throw InputError(file, "line " + std::to_string(lineNo),
+                       "expected " + std::to_string(6 + 3 * levels) + " numbers, got " +
+                           std::to_string(c.size()));
+    TruthCubeData::Bead b;
+    try {
+      for (int k = 0; k < 3; ++k) b.ijk[size_t(k)] = std::stoi(c[size_t(k)]);
+      for (size_t l = 0; l <= levels; ++l) {
+        Vec3 p;
+        for (int k = 0; k < 3; ++k) p[k] = 1e-3 * std::stod(c[3 + 3 * l + size_t(k)]);
+        b.positions.push_back(p);
+      }
+    } catch (const std::exception&) {
+      throw InputError(file, "line " + std::to_string(lineNo),
+                       "expected numbers, got \"" + line + "\"");
+    }
+    d.beads.push_back(b);
+  }
+  if (!header) throw InputError(file, "", "no \"i,j,k,x0,y0,z0,...\" header line");
+  if (d.beads.empty()) throw InputError(file, "", "no bead rows after the header");
+  return d;
+}
+
+MatX3 truthCubeSceneFrame(const TruthCubeData& d, int level) {
+  // Scanner frame: -z up. The scene's: z up, a rotation of 180 degrees about x (y and z flip),
+  // centred on the cube: x, y on the beads' mean; the base kBeadMargin below the bottom layer.
+  Vec3 mean = Vec3::Zero();
+  double bottom = 0;
+  int nBottom = 0;
+  int kMin = 1 << 30;
+  for (const auto& b : d.beads) kMin = std::min(kMin, b.ijk[2]);
+  for (const auto& b : d.beads) {
+    mean += b.positions[0];
+    if (b.ijk[2] == kMin) {
+      bottom += b.positions[0].z();
+      ++nBottom;
+    }
+  }
+  mean /= double(d.beads.size());
+  bottom /= std::max(nBottom, 1);
+  // Scanner z of the centre: the base lies at bottom + margin (larger z is lower).
+  const Vec3 centre(mean.x(), mean.y(), bottom + kBeadMargin - 0.5 * kSide);
+  MatX3 out(Eigen::Index(d.beads.size()), 3);
+  for (size_t i = 0; i < d.beads.size(); ++i) {
+    const Vec3 p = d.beads[i].positions[size_t(level)] - centre;
+    out.row(Eigen::Index(i)) = Vec3(p.x(), -p.y(), -p.z()).transpose();
+  }
+  return out;
+}
+
+TruthCubeFigures truthCubeFigures(const TruthCubeData& d, const MatX3& modelRest,
+                                  const MatX3& model, int level, bool bottomLayer) {
+  const MatX3 rest = truthCubeSceneFrame(d, 0), scan = truthCubeSceneFrame(d, level);
+  const Eigen::Index n = rest.rows();
+  const MatX3 um = model - modelRest, ub = scan - rest;
+  TruthCubeFigures f;
+  int kMin = 1 << 30, kMax = -(1 << 30), iMin = kMin, iMax = kMax, jMin = kMin, jMax = kMax;
+  for (const auto& b : d.beads) {
+    kMin = std::min(kMin, b.ijk[2]);
+    kMax = std::max(kMax, b.ijk[2]);
+    iMin = std::min(iMin, b.ijk[0]);
+    iMax = std::max(iMax, b.ijk[0]);
+    jMin = std::min(jMin, b.ijk[1]);
+    jMax = std::max(jMax, b.ijk[1]);
+  }
+  // Registration: the translation that the least-squares fit (or the bottom layer's mean)
+  // takes the measured displacements by.
+  Vec3 shift = Vec3::Zero();
+  int count = 0;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (bottomLayer && d.beads[size_t(i)].ijk[2] != kMin) continue;
+    shift += (um.row(i) - ub.row(i)).transpose();
+    ++count;
+  }
+  shift /= std::max(count, 1);
+  double sum2 = 0, measured2 = 0;
+  std::map<int, std::pair<double, int>> layers;
+  const Vec3 centre = rest.colwise().mean().transpose();
+  double bulge = 0, measuredBulge = 0;
+  int bulgeCount = 0;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Vec3 a = um.row(i).transpose(), b = ub.row(i).transpose() + shift;
+    const double e2 = (a - b).squaredNorm();
+    sum2 += e2;
+    measured2 += ub.row(i).squaredNorm();
+    f.maxError = std::max(f.maxError, std::sqrt(e2));
+    auto& layer = layers[d.beads[size_t(i)].ijk[2]];
+    layer.first += e2;
+    ++layer.second;
+    // Outer columns (an extreme i or j): their outward lateral displacement, on each side they
+    // face, in the middle layers (the top and bottom ones are held by the plate and the base).
+    const auto& ijk = d.beads[size_t(i)].ijk;
+    if (ijk[2] == kMin || ijk[2] == kMax) continue;
+    for (int axis = 0; axis < 2; ++axis) {
+      const int v = ijk[size_t(axis)];
+      const bool outer = axis == 0 ? (v == iMin || v == iMax) : (v == jMin || v == jMax);
+      if (!outer) continue;
+      const double out = rest(i, axis) > centre[axis] ? 1.0 : -1.0;
+      bulge += out * a[axis];
+      measuredBulge += out * b[axis];
+      ++bulgeCount;
+    }
+  }
+  f.rms = std::sqrt(sum2 / double(n));
+  f.measuredRms = std::sqrt(measured2 / double(n));
+  for (const auto& [k, v] : layers) f.layerRms.push_back(std::sqrt(v.first / v.second));
+  f.bulge = bulgeCount ? bulge / bulgeCount : std::nan("");
+  f.measuredBulge = bulgeCount ? measuredBulge / bulgeCount : std::nan("");
+  return f;
+}
+
+namespace {
+
+std::string defaultDataFile() {
+  return (fs::path(DEFORM_SOURCE_DIR) / "data" / "truth-cube" / "uniaxial_positions.csv").string();
+}
+
+ojson pointsJson(const MatX3& p) {
+  ojson a = ojson::array();
+  for (Eigen::Index i = 0; i < p.rows(); ++i) a.push_back({p(i, 0), p(i, 1), p(i, 2)});
+  return a;
+}
+
+/// The compression scene: the phantom cube scaled to 80 mm, its bottom face bonded (fixed), its
+/// top face bonded to a plate moved down by each level's strain times the height (one compared
+/// instant per level, t = level), the beads as markers with their measured positions.
+ojson truthCubeScene(const TruthCubeData& d, const std::vector<ojson>& models) {
+  const double h = 0.5 * kSide, e = 1e-6, m = h + 0.01;
+  ojson j;
+  j["name"] = "truth-cube";
+  j["description"] =
+      "Truth Cube (Kerdok et al. 2003): 80 mm silicone cube, E 15.3 kPa, nu 0.499, rho 980; "
+      "base bonded, top plate bonded and displacement-controlled; 343 beads as markers.";
+  j["organ"] = {
+      {"mesh", "phantom:cube"},
+      {"scale", kSide / 0.1},
+      {"material", {{"young", 15300}, {"poisson", 0.499}, {"density", 980}}},
+      {"fixed", {{"box", ojson::array({vec(Vec3(-m, -m, -m)), vec(Vec3(m, m, -h + e))})}}}};
+  j["gravity"] = vec(Vec3::Zero());
+  j["dt"] = 1.0;
+  const size_t levels = d.strains.size();
+  j["duration"] = double(levels);
+  ojson traj = ojson::array({{{"t", 0.0}, {"offset", vec(Vec3::Zero())}}});
+  ojson compare = ojson::array();
+  ojson measured = ojson::array();
+  for (size_t l = 0; l < levels; ++l) {
+    const double t = double(l + 1);
+    traj.push_back({{"t", t}, {"offset", vec(Vec3(0, 0, -d.strains[l] * kSide))}});
+    compare.push_back(t);
+    measured.push_back({{"t", t}, {"points", pointsJson(truthCubeSceneFrame(d, int(l + 1)))}});
+  }
+  j["plates"] = ojson::array(
+      {{{"region", {{"box", ojson::array({vec(Vec3(-m, -m, h - e)), vec(Vec3(m, m, m))})}}},
+        {"contact", "bonded"},
+        {"trajectory", traj}}});
+  j["markers"] = {{"points", pointsJson(truthCubeSceneFrame(d, 0))}, {"measured", measured}};
+  j["models"] = models;
+  j["compare_at"] = compare;
+  j["output"] = {{"surfaces", "final"}};
+  return j;
+}
+
+/// The compression scene for dynamic models at one level: the plate moves down over the first
+/// second and holds; each model is compared once it settles (the duration is the cap).
+ojson truthCubeDynamicScene(const TruthCubeData& d, size_t level, const std::vector<ojson>& models,
+                            double duration) {
+  ojson j = truthCubeScene(d, models);
+  j["name"] = "truth-cube-dynamic-" + std::to_string(level + 1);
+  j["description"] = "Truth Cube, dynamic models: the plate moves down by " +
+                     number(1e3 * d.strains[level] * kSide) +
+                     " mm over 1 s and holds; compared at equilibrium.";
+  j["dt"] = 1e-3;
+  j["duration"] = duration;
+  j["plates"][0]["trajectory"] =
+      ojson::array({{{"t", 0.0}, {"offset", vec(Vec3::Zero())}},
+                    {{"t", 1.0}, {"offset", vec(Vec3(0, 0, -d.strains[level] * kSide))}}});
+  j["markers"].erase("measured");  // measured positions need a compared instant given in time
+  j["compare_at"] = "equilibrium";
+  return j;
+}
+
+/// The markers of run `label` at each compared instant, read from the case's results.json.
+std::vector<MatX3> markersOf(const CaseResult& c, const std::string& label, std::string& why) {
+  std::vector<MatX3> out;
+  try {
+    std::ifstream in(c.outDir / "results.json");
+    const nlohmann::json doc = nlohmann::json::parse(in);
+    for (const auto& r : doc.at("runs")) {
+      if (r.value("label", "") != label) continue;
+      if (!r.contains("markers")) {
+        why = "no markers in results.json";
+        return out;
+      }
+      const auto& m = r["markers"];
+      if (m.value("status", "") != "ok") {
+        why = "markers unsupported: " + m.value("reason", std::string("?"));
+        return out;
+      }
+      for (const auto& at : m.at("at")) {
+        const auto& p = at.at("positions_m");
+        MatX3 x(Eigen::Index(p.size()), 3);
+        for (size_t i = 0; i < p.size(); ++i)
+          for (int k = 0; k < 3; ++k)
+            x(Eigen::Index(i), k) =
+                p[i][size_t(k)].is_number() ? p[i][size_t(k)].get<double>() : NAN;
+        out.push_back(std::move(x));
+      }
+      return out;
+    }
+    why = "no run " + label + " in results.json";
+  } catch (const std::exception& e) {
+    why = std::string("cannot read results.json: ") + e.what();
+  }
+  return out;
+}
+
+/// A model's runs in the table's cases: its label, plugin, and per level the case and the index
+/// of the compared instant that holds that level.
+struct Source {
+  std::string label, plugin;
+  std::vector<std::pair<std::string, size_t>> levels;
+};
+
+std::string layersMm(const std::vector<double>& v) {
+  std::string s;
+  for (double x : v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.2f", 1e3 * x);
+    s += (s.empty() ? "" : " ") + std::string(buf);
+  }
+  return s;
+}
+
+}  // namespace
+
+TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
+  TableDef t = tableDef(
+      "truth-cube", "Every model against the Truth Cube's 343 beads (a physical experiment)",
+      "Kerdok, Cotin, Ottensmeyer, Galea, Howe, Dawson 2003, Medical Image Analysis 7:283-291 "
+      "(data: simquest/opensurgsim, Apache-2.0; data/truth-cube/README.md)",
+      {{"model", "model"},
+       {"level", "strain"},
+       {"plate_mm", "plate mm"},
+       {"registration", "registration"},
+       {"rms_error_mm", "bead RMS error mm"},
+       {"relative_error", "RMS error / measured RMS"},
+       {"max_error_mm", "max error mm"},
+       {"measured_rms_mm", "measured RMS mm"},
+       {"layer_rms_mm", "RMS per layer mm (bottom to top)"},
+       {"bulge_mm", "outer columns bulge mm"},
+       {"measured_bulge_mm", "measured bulge mm"},
+       {"vs_calculix_pct", "vs CalculiX %"},
+       {"calibrated", "calibrated"},
+       {"run_s", "run s"},
+       {"status", "status"},
+       {"scene", "scene"},
+       {"note", "note"}});
+  const std::string file = o.truthCubeData.empty() ? defaultDataFile() : o.truthCubeData;
+  const TruthCubeData data = readTruthCubeData(file);
+  const std::string calculixProblem = pluginProblem(loader, kCalculix);
+  const bool withCalculix = calculixProblem.empty();
+  // Reference and CalculiX on one quadratic tet mesh (deform/organ_tets.h): the same Gmsh tets,
+  // whose surface nodes are the organ's vertices (refine_surface off: the plate and the base
+  // hold every surface node of their faces, the midside nodes following).
+  const long long elements = o.quick ? 1000 : 6000;
+  const ojson femParams = {{"element_order", 2}, {"elements", elements}, {"refine_surface", false}};
+  ojson displacementParams = femParams;
+  displacementParams["volumetric"] = "displacement";
+  std::vector<ojson> models = {model("reference_fem", "reference_fem", femParams),
+                               model("reference_fem", kDisplacementLabel, displacementParams)};
+  if (withCalculix) models.push_back(model(kCalculix, kCalculix, femParams));
+  // The other models: the quasi-static ones in the same scene, the dynamic ones (with their
+  // volume network where they have one) in a settling scene per level; the others get a row
+  // saying why they have no figure.
+  std::vector<std::pair<std::string, std::string>> absent;
+  std::vector<ojson> dynamic;
+  for (const std::string& name : kOtherModels) {
+    const std::string problem = pluginProblem(loader, name);
+    if (!problem.empty()) {
+      absent.emplace_back(name, "missing plugin " + name + ": " + problem);
+      continue;
+    }
+    const ModelInfo& info = loader.load(name, name);
+    if (!info.has(Capability::Markers)) {
+      absent.emplace_back(
+          name, "unsupported: " + name + " has no markers capability (no interior mapping yet)");
+    } else if (!info.has(Capability::QuasiStatic)) {
+      ojson params = ojson::object();
+      if (info.param("network")) params["network"] = "volume";
+      dynamic.push_back(model(name, name, params));
+    } else {
+      models.push_back(model(name, name));
+    }
+  }
+  t.notes = {
+      "Data: " + file + " (" + std::to_string(data.beads.size()) + " beads, " +
+          std::to_string(data.strains.size()) +
+          " compression levels). Scanner frame (-z up) turned 180 degrees about x into the "
+          "scene's (z up), centred on the beads in x and y, the base 10 mm under the bottom "
+          "layer.",
+      "Scene (scenes/truth-cube/cube.json): the phantom cube scaled to 80 mm; E 15.3 kPa, nu "
+      "0.499, rho 980, no gravity (the rest scan is the reference state); the bottom face "
+      "fixed (bonded base); the top face held by a bonded plate moved down by strain x 80 mm; "
+      "one compared instant per level. reference_fem and CalculiX solve the same " +
+          std::to_string(elements) +
+          "-target quadratic tet mesh: reference_fem with its default volumetric term at nu "
+          "0.499 (mean dilatation, constant per element), and again with the volumetric term "
+          "per quadrature point (volumetric = displacement, CalculiX's C3D10 formulation).",
+      "Registration: \"translation\" removes the least-squares rigid translation between the "
+      "model's and the measured bead displacements of each scan (the scans were not registered "
+      "to one another); \"bottom_layer\" the mean difference of the bottom bead layer. RMS and "
+      "max over all beads; the measured RMS is the beads' own RMS displacement. The bulge is "
+      "the mean outward lateral displacement of the outer columns' middle layers.",
+      "For orientation, the issue's CalculiX figures from 8 x 8 x 8 20-node hexes: 0.60 / 0.80 "
+      "mm (translation), 0.90 / 1.18 mm (bottom layer) at 5% / 12.5%.",
+      "Not calibrated: every row is at the published material (calibrated = false)."};
+  if (!withCalculix) t.notes.push_back("CalculiX: not available: " + calculixProblem + ".");
+  const std::string id = "truth-cube/cube";
+  t.cases.push_back({id, truthCubeScene(data, models)});
+  // Where each model's markers at each level are: (case, index of the compared instant).
+  std::vector<Source> sources;
+  for (const ojson& m : models) {
+    Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
+    for (size_t l = 0; l < data.strains.size(); ++l) src.levels.emplace_back(id, l);
+    sources.push_back(src);
+  }
+  if (!dynamic.empty()) {
+    t.notes.push_back(
+        "Dynamic models (their volume network where they have one, default parameters): one "
+        "scene per level (scenes/truth-cube/dynamic_N.json, dt 1 ms), the plate moved over 1 s "
+        "and held, compared once settled (\"compare_at\": \"equilibrium\", capped at " +
+        number(o.quick ? 3.0 : 5.0) + " s).");
+    for (size_t l = 0; l < data.strains.size(); ++l) {
+      const std::string dyn = "truth-cube/dynamic_" + std::to_string(l + 1);
+      t.cases.push_back({dyn, truthCubeDynamicScene(data, l, dynamic, o.quick ? 3.0 : 5.0)});
+    }
+    for (const ojson& m : dynamic) {
+      Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
+      for (size_t l = 0; l < data.strains.size(); ++l)
+        src.levels.emplace_back("truth-cube/dynamic_" + std::to_string(l + 1), 0);
+      sources.push_back(src);
+    }
+  }
+  t.rows = [data, sources, absent](const Results& res, const fs::path& dir) {
+    std::vector<ojson> out;
+    const MatX3 rest = truthCubeSceneFrame(data, 0);
+    // CalculiX's figures, for the reference's comparison column.
+    std::map<std::pair<std::string, size_t>, double> calculix;
+    // Each source's markers per level (empty when absent) and why not; each case read once.
+    std::map<std::pair<std::string, std::string>, std::pair<std::vector<MatX3>, std::string>> read;
+    struct Computed {
+      std::string label, plugin;
+      std::vector<const CaseResult*> cases;
+      std::vector<MatX3> markers;  ///< per level; 0 rows when absent
+      std::vector<std::string> why;
+    };
+    std::vector<Computed> computed;
+    for (const Source& src : sources) {
+      Computed k{src.label, src.plugin, {}, {}, {}};
+      for (const auto& [caseId, index] : src.levels) {
+        const CaseResult* c = res.count(caseId) ? &res.at(caseId) : nullptr;
+        const auto key = std::make_pair(caseId, src.label);
+        if (c && !read.count(key)) {
+          std::string why;
+          std::vector<MatX3> m = markersOf(*c, src.label, why);
+          read[key] = {std::move(m), why};
+        }
+        const auto* m = c ? &read[key] : nullptr;
+        k.cases.push_back(c);
+        k.markers.push_back(m && index < m->first.size() ? m->first[index] : MatX3());
+        k.why.push_back(m ? m->second : std::string());
+      }
+      computed.push_back(std::move(k));
+    }
+    for (const char* reg : {"translation", "bottom_layer"}) {
+      const bool bottom = std::string(reg) == "bottom_layer";
+      for (const Computed& k : computed) {
+        for (size_t l = 0; l < data.strains.size(); ++l) {
+          ojson row;
+          row["model"] = k.label;
+          row["level"] = data.strains[l];
+          row["plate_mm"] = 1e3 * data.strains[l] * kSide;
+          row["registration"] = reg;
+          row["calibrated"] = false;
+          const CaseResult* c = k.cases[l];
+          const RunRecord* r = c ? c->run(k.label) : nullptr;
+          const bool ok = r && r->status == RunStatus::Ok && r->valid && k.markers[l].rows() > 0;
+          if (ok) {
+            const TruthCubeFigures f =
+                truthCubeFigures(data, rest, k.markers[l], int(l + 1), bottom);
+            row["rms_error_m"] = numberOrNull(f.rms);
+            row["max_error_m"] = numberOrNull(f.maxError);
+            row["measured_rms_m"] = numberOrNull(f.measuredRms);
+            row["rms_error_mm"] = numberOrNull(1e3 * f.rms);
+            row["relative_error"] = numberOrNull(f.rms / f.measuredRms);
+            row["max_error_mm"] = numberOrNull(1e3 * f.maxError);
+            row["measured_rms_mm"] = numberOrNull(1e3 * f.measuredRms);
+            row["layer_rms_mm"] = layersMm(f.layerRms);
+            ojson layers = ojson::array();
+            for (double v : f.layerRms) layers.push_back(v);
+            row["layer_rms_error_m"] = layers;
+            row["bulge_mm"] = numberOrNull(1e3 * f.bulge);
+            row["measured_bulge_mm"] = numberOrNull(1e3 * f.measuredBulge);
+            if (k.label == kCalculix) calculix[{reg, l}] = f.rms;
+          } else {
+            for (const char* key :
+                 {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm", "relative_error",
+                  "max_error_mm", "measured_rms_mm", "bulge_mm", "measured_bulge_mm"})
+              row[key] = nullptr;
+            row["layer_rms_mm"] = "";
+          }
+          // init plus the solves (a run read back from results.json keeps the statistics only).
+          double seconds = NAN;
+          if (r) {
+            seconds = r->precomputeS;
+            if (!r->stepMs.empty()) {
+              for (double ms : r->stepMs) seconds += 1e-3 * ms;
+            } else {
+              seconds += 1e-3 * r->stepStats.mean * r->stepStats.samples;
+            }
+          }
+          row["run_s"] = numberOrNull(seconds);
+          if (c) {
+            caseCells(row, *c, k.plugin, r, dir, false);
+          } else {
+            row["status"] = "not run";
+            row["scene"] = "";
+            row["note"] = "";
+          }
+          if (!k.why[l].empty()) {
+            std::string note = row["note"].get<std::string>();
+            appendTo(note, k.why[l]);
+            row["note"] = note;
+            if (row["status"] == "ok") row["status"] = "no bead figures";
+          }
+          out.push_back(row);
+        }
+      }
+    }
+    // The reference against CalculiX on the same registration (done when within 10%).
+    for (ojson& row : out) {
+      row["vs_calculix_pct"] = nullptr;
+      const std::string label = row["model"].get<std::string>();
+      if (label.rfind("reference_fem", 0) != 0 || !row["rms_error_m"].is_number()) continue;
+      size_t l = 0;
+      while (l < data.strains.size() && data.strains[l] != row["level"].get<double>()) ++l;
+      const auto it = calculix.find({row["registration"].get<std::string>(), l});
+      if (it == calculix.end() || !(it->second > 0)) continue;
+      const double pct = 100 * (row["rms_error_m"].get<double>() - it->second) / it->second;
+      row["vs_calculix_pct"] = pct;
+      if (std::abs(pct) > 10 && label == "reference_fem") {
+        std::string status = row["status"].get<std::string>();
+        appendTo(status, "bead error over 10% from CalculiX's");
+        row["status"] = status;
+      }
+    }
+    for (const auto& [name, why] : absent) {
+      ojson row = {{"model", name},
+                   {"level", nullptr},
+                   {"plate_mm", nullptr},
+                   {"registration", nullptr},
+                   {"calibrated", false}};
+      for (const char* key : {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm",
+                              "relative_error", "max_error_mm", "measured_rms_mm", "bulge_mm",
+                              "measured_bulge_mm", "vs_calculix_pct", "run_s"})
+        row[key] = nullptr;
+      row["layer_rms_mm"] = "";
+      row["status"] = why;
+      row["scene"] = "";
+      row["note"] = "";
+      out.push_back(row);
+    }
+    return out;
+  };
+  return t;
+}
+
+}  // namespace deform::harness::tables
