@@ -115,6 +115,17 @@ class HexFemModel : public Model {
   const VoxelGrid& voxels() const { return m_voxels; }
   /// The surface mapping: each surface vertex's 8 nodes and trilinear weights.
   const Embedding& embedding() const { return m_embedding; }
+
+  /// Markers: embedded trilinearly in the active cells, as the surface vertices are (a point
+  /// outside every active cell is clamped into the nearest one).
+  void bindMarkers(const MatX3& rest) override {
+    m_markerEmbedding = embedPoints(m_grid, m_voxels, rest);
+  }
+  MatX3 markers() const override {
+    MatX3 out(m_markerEmbedding.nodeIds.rows(), 3);
+    evaluateEmbedding(m_markerEmbedding, m_x, out);
+    return out;
+  }
   const Mat24& elementStiffness() const { return m_K0; }
   /// Volume fraction of each hexahedron inside the surface (1 with fillSamples = 0).
   const std::vector<Real>& cellFill() const { return m_fill; }
@@ -166,6 +177,7 @@ class HexFemModel : public Model {
   VoxelGrid m_voxels;
   HexGrid m_grid;
   Embedding m_embedding;
+  Embedding m_markerEmbedding;  ///< bindMarkers()
   Mat24 m_K0;
   std::vector<Real> m_fill;  ///< per hexahedron, scales its K0 and its mass
   VecX m_mass;               // 3N, lumped, per DOF

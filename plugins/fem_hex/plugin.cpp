@@ -123,7 +123,8 @@ DEFORM_PLUGIN(registry) {
   info.version = "1.0";
   info.capabilities = {Capability::Grasp,   Capability::PointForce,
                        Capability::Gravity, Capability::ReactionForce,
-                       Capability::Contact, Capability::ContactReaction};
+                       Capability::Contact, Capability::ContactReaction,
+                       Capability::Markers};
   info.params = deform::fem_hex::paramSpecs();
   info.create = [] { return std::make_unique<deform::fem_hex::FemHexModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).

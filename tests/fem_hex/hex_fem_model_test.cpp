@@ -187,6 +187,13 @@ TEST(HexFemModel, SmallGraspHoldsItsSurfaceVertexNotItsCell) {
   ASSERT_EQ(grasp.vertices.size(), 1u);
   const MatX3 r0 = grasp.targets;
   const Real lift = 0.01;
+  // Markers (interior points) follow the same trilinear embedding: one on the grasped vertex,
+  // one deep inside.
+  MatX3 markers(2, 3);
+  markers.row(0) = liverLike().V.row(grasp.vertices[0]);
+  markers.row(1) = boundingBox(liverLike().V).center().transpose();
+  m.bindMarkers(markers);
+  EXPECT_LE((m.markers() - markers).cwiseAbs().maxCoeff(), 1e-12);
   for (int s = 0; s < 30; ++s) {
     StepInput in;
     in.dt = 1e-3;
@@ -216,6 +223,10 @@ TEST(HexFemModel, SmallGraspHoldsItsSurfaceVertexNotItsCell) {
   }
   EXPECT_LT(leastRise, 0.8 * lift);
   EXPECT_LT(leastRise, mostRise);
+  const MatX3 moved = m.markers();
+  EXPECT_LE((moved.row(0) - m.surface().row(grasp.vertices[0])).norm(), 1e-12);
+  EXPECT_GT(moved(1, 2) - markers(1, 2), 0.0);  // the interior rises, less than the tool
+  EXPECT_LT(moved(1, 2) - markers(1, 2), lift);
 }
 
 TEST(HexFemModel, PatchLoadMovesThePatchAlongTheForce) {
