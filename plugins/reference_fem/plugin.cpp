@@ -112,7 +112,7 @@ class ReferenceFemModel final : public Model {
       m_surfaceLoad = std::make_unique<QuadraticSurfaceLoad>(
           system->rest(), [system](int a, int b) { return system->edgeNode(a, b); });
     }
-    {  // the nodes a grasp holds on the triangles between its vertices (deform/organ_tets.h)
+    {  // the nodes a grasp holds on the triangles and edges between its vertices (organ_tets.h)
       const SurfaceMesh boundary = tetBoundary(m_system->rest());
       std::vector<int> boundaryNodes;
       for (Eigen::Index f = 0; f < boundary.F.rows(); ++f)
@@ -175,7 +175,7 @@ class ReferenceFemModel final : public Model {
     for (int n : m_fixed) fixed[size_t(n)] = 1;
     // Every organ surface vertex is a node of the tet mesh (J a selection); those inside a
     // fixed box are pinned (fixed wins over a grasp; the support takes their load share).
-    // With them, the nodes on the triangles between the grasped vertices, at the triangles'
+    // With them, the nodes on the triangles and edges between the grasped vertices, at the
     // interpolated targets (the same held surface as every model's).
     std::vector<std::vector<int>> patchNodes(in.grasps.size());
     for (size_t gi = 0; gi < in.grasps.size(); ++gi) {
@@ -360,9 +360,8 @@ class ReferenceFemModel final : public Model {
   std::vector<int> m_surfaceNode;  ///< surface vertex -> node
   MatX3 m_restSurface;             ///< reported for the pinned vertices
   std::vector<char> m_isFixed;     ///< per node: pinned by the fixed region
-  std::unique_ptr<QuadraticSurfaceLoad> m_surfaceLoad;
-  std::unique_ptr<GraspedPatchNodes>
-      m_graspPatch;  ///< nodes between a grasp's vertices  ///< P2: loads onto the quadratic faces
+  std::unique_ptr<QuadraticSurfaceLoad> m_surfaceLoad;  ///< P2: loads onto the quadratic faces
+  std::unique_ptr<GraspedPatchNodes> m_graspPatch;      ///< nodes between a grasp's vertices
   int m_meshedNodes = 0;          ///< corner nodes of the tets; isolated clamped ones follow
   long long m_isolatedNodes = 0;  ///< surface vertices inside a clipped-off fixed box
   MatX3i m_contactF;              ///< organ triangles as node rows (contact proxy)
