@@ -143,6 +143,9 @@ if [[ $quick -eq 0 && ${#built_plugins[@]} -gt 0 ]]; then
   xfail=()
   while read -r entry _; do
     [[ -z $entry || $entry == \#* ]] && continue
+    # --ci runs the "scenes" check on a subset of the scenes, where a scene's known failure
+    # may not be: it would pass and read as an unexpected pass.
+    [[ $ci -eq 1 && $entry == */scenes ]] && continue
     xfail+=(--expect-fail "$entry")
   done <tests/conformance/expected_failures.txt
   # --ci: the "scenes" check runs one shipped scene (SANITIZE_CI_SCENES), not all of them: under
