@@ -19,7 +19,7 @@ DEFORM_PLUGIN(registry) {
       "dynamics, ACM TOG 34(6) 246";
   info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,        C::ReactionForce,
+  info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,         C::ReactionForce,
                        C::TetInput, C::Contact,    C::ContactReaction, C::Markers};
   info.params = deform::massspring::paramSpecs();
   info.create = [] { return std::make_unique<deform::massspring::MassSpringModel>(); };
