@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <memory>
 
@@ -55,22 +56,11 @@ class CalculixModel final : public Model {
       m_model.nodes = tets.mesh.V;
       m_model.elements = tets.mesh.T;
     }
-    {  // the nodes a grasp holds between its vertices, as reference_fem (deform/organ_tets.h)
-      const SurfaceMesh boundary = tetBoundary(tets.mesh);
-      std::vector<int> boundaryNodes;
-      for (Eigen::Index f = 0; f < boundary.F.rows(); ++f)
-        for (int k = 0; k < 3; ++k) {
-          boundaryNodes.push_back(boundary.F(f, k));
-          if (q) boundaryNodes.push_back(q->edgeNode(boundary.F(f, k), boundary.F(f, (k + 1) % 3)));
-        }
-      std::sort(boundaryNodes.begin(), boundaryNodes.end());
-      boundaryNodes.erase(std::unique(boundaryNodes.begin(), boundaryNodes.end()),
-                          boundaryNodes.end());
-      if (!boundaryNodes.empty() && boundaryNodes.front() < 0)
-        boundaryNodes.erase(boundaryNodes.begin());
-      m_graspPatch = std::make_unique<GraspedPatchNodes>(organ.surface, m_surfaceNode,
-                                                         m_model.nodes, boundaryNodes);
-    }
+    // The nodes a grasp holds between its vertices, as reference_fem (deform/organ_tets.h).
+    std::function<int(int, int)> edgeNode;
+    if (q) edgeNode = [q](int a, int b) { return q->edgeNode(a, b); };
+    m_graspPatch = std::make_unique<GraspedPatchNodes>(organ.surface, m_surfaceNode, m_model.nodes,
+                                                       tetBoundaryNodes(tets.mesh, edgeNode));
     m_model.material = p.choiceAs<CcxMaterial>(
         "material", {{"linear", CcxMaterial::Linear}, {"neo_hookean", CcxMaterial::NeoHookean}});
     m_model.young = organ.material.young;

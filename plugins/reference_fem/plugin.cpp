@@ -113,19 +113,11 @@ class ReferenceFemModel final : public Model {
           system->rest(), [system](int a, int b) { return system->edgeNode(a, b); });
     }
     {  // the nodes a grasp holds on the triangles and edges between its vertices (organ_tets.h)
-      const SurfaceMesh boundary = tetBoundary(m_system->rest());
-      std::vector<int> boundaryNodes;
-      for (Eigen::Index f = 0; f < boundary.F.rows(); ++f)
-        for (int k = 0; k < 3; ++k) {
-          boundaryNodes.push_back(boundary.F(f, k));
-          const int mid = m_system->edgeNode(boundary.F(f, k), boundary.F(f, (k + 1) % 3));
-          if (mid >= 0) boundaryNodes.push_back(mid);
-        }
-      std::sort(boundaryNodes.begin(), boundaryNodes.end());
-      boundaryNodes.erase(std::unique(boundaryNodes.begin(), boundaryNodes.end()),
-                          boundaryNodes.end());
-      m_graspPatch = std::make_unique<GraspedPatchNodes>(organ.surface, m_surfaceNode,
-                                                         m_system->rest().V, boundaryNodes);
+      const FemSystem* system = m_system.get();
+      m_graspPatch = std::make_unique<GraspedPatchNodes>(
+          organ.surface, m_surfaceNode, system->rest().V,
+          tetBoundaryNodes(system->rest(),
+                           [system](int a, int b) { return system->edgeNode(a, b); }));
     }
     m_fixed = fixedNodeIndices(m_system->rest().V, organ.fixed, organ.surface);
     m_fixed.insert(m_fixed.end(), isolated.begin(), isolated.end());

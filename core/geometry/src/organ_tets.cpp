@@ -212,6 +212,21 @@ std::vector<std::pair<int, Vec3>> QuadraticSurfaceLoad::spread(
   return {out.begin(), out.end()};
 }
 
+std::vector<int> tetBoundaryNodes(const TetMesh& corners,
+                                  const std::function<int(int, int)>& edgeNode) {
+  const SurfaceMesh boundary = tetBoundary(corners);
+  std::vector<int> out;
+  for (Eigen::Index f = 0; f < boundary.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      out.push_back(boundary.F(f, k));
+      const int mid = edgeNode ? edgeNode(boundary.F(f, k), boundary.F(f, (k + 1) % 3)) : -1;
+      if (mid >= 0) out.push_back(mid);
+    }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
 GraspedPatchNodes::GraspedPatchNodes(const SurfaceMesh& surface, std::vector<int> surfaceNode,
                                      const MatX3& nodes, std::vector<int> boundaryNodes)
     : m_surface(surface),

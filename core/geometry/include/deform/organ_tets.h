@@ -88,6 +88,12 @@ class QuadraticSurfaceLoad {
   std::function<int(int, int)> m_edgeNode;
 };
 
+/// The nodes on a tet mesh's boundary, sorted: the corners of its boundary triangles and, with
+/// edgeNode (corner nodes -> midside node or -1; empty for corner tets), their edges' midside
+/// nodes.
+std::vector<int> tetBoundaryNodes(const TetMesh& corners,
+                                  const std::function<int(int, int)>& edgeNode = {});
+
 /// The tet nodes a grasp holds besides the grasped vertices' own: the boundary nodes that lie on
 /// an organ surface triangle whose three vertices are all grasped, or on a surface edge whose two
 /// vertices are (a quadratic mesh's midside nodes, and the nodes Gmsh adds where it splits long
