@@ -1,16 +1,16 @@
 // Google Benchmark of the bending kernels alone: one Gauss-Seidel sweep over every hinge of the
 // 8,122-vertex liver phantom (24k hinges, greedy-coloured so that a colour shares no particle),
-// on padded positions as the solvers keep them. Isometric (deform/isometric_bending.h) in float
-// and double, vectorised (AVX2 where the CPU has it) and scalar; the dihedral angle
-// (deform/pbd_kernels.h, projectDihedral) one hinge at a time as the PBD plugin projects it.
-// The isometric sweeps also run with two vertices in three immovable and the movable-slot
+// on padded positions as the solvers keep them. Isometric (deform/kernels/isometric_bending.h) in
+// float and double, vectorised (AVX2 where the CPU has it) and scalar; the dihedral angle
+// (deform/kernels/pbd_kernels.h, projectDihedral) one hinge at a time as the PBD plugin projects
+// it. The isometric sweeps also run with two vertices in three immovable and the movable-slot
 // pattern passed (fixed:1), as the hybrid model projects them.
 // Time per sweep; the per-hinge cost is in the "ns_per_hinge" counter.
 #include <benchmark/benchmark.h>
-#include <deform/isometric_bending.h>
-#include <deform/mesh.h>
-#include <deform/pbd_kernels.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
+#include <deform/kernels/isometric_bending.h>
+#include <deform/kernels/pbd_kernels.h>
+#include <deform/sdk/mesh.h>
 
 #include <algorithm>
 #include <bit>

@@ -2,9 +2,9 @@
 // 4 mm into its top: vertex spheres (ContactWorld::query) against surface triangles
 // (queryTriangles, pooled btTriangleShapes), and one respondToContact() projection on the surface.
 #include <benchmark/benchmark.h>
-#include <deform/contact.h>
-#include <deform/mesh.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/contact.h>
+#include <deform/sdk/mesh.h>
 
 namespace {
 

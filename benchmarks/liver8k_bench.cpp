@@ -6,11 +6,11 @@
 //   liver8k_bench [--benchmark_filter=...]   (the repetitions' median is the headline)
 // A plugin that is not built is skipped with a message.
 #include <benchmark/benchmark.h>
-#include <deform/cache.h>
-#include <deform/interaction.h>
-#include <deform/mesh.h>
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/interaction.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/mesh.h>
 
 #include <cstdio>
 #include <map>

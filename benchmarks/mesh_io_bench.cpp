@@ -1,8 +1,8 @@
 // Mesh reading and validation speed: a 32768-triangle sphere written as binary STL (always), and
 // eval-data's Liver.stl (30726 triangles) when ../shared/eval-data is present.
 #include <benchmark/benchmark.h>
-#include <deform/mesh_check.h>
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/mesh_io.h>
 #include <unistd.h>
 
 #include <filesystem>

@@ -1,6 +1,6 @@
 // Time to build each built-in phantom at resolution 1 (target: liver well under 100 ms).
 #include <benchmark/benchmark.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
 
 namespace {
 

@@ -2,9 +2,9 @@
 // default resolution (8122 vertices) and the cube phantom, and eval-data's Liver.stl (30726
 // triangles) and liver-smooth.obj when ../shared/eval-data is present.
 #include <benchmark/benchmark.h>
-#include <deform/mesh_check.h>
-#include <deform/mesh_io.h>
-#include <deform/phantom.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/geometry/phantom.h>
 
 #include <filesystem>
 

@@ -3,10 +3,10 @@
 // "deformbench: FILE: PLACE: PROBLEM" on stderr and exit code 2; an unexpected internal error
 // exits 3. `run
 // --strict` exits 1 when a model failed (results.json is still written whole).
-#include <deform/mesh_io.h>
-#include <deform/phantom.h>
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/geometry/phantom.h>
 #include <deform_harness/bench.h>
 #include <deform_harness/calibration.h>
 #include <deform_harness/child_process.h>

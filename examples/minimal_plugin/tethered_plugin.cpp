@@ -17,7 +17,7 @@
 // Grasped particles follow their targets; pinned particles stay at rest. The model's nodes are
 // the surface vertices themselves (identity mapping), so surface() is nodes(), and the harness's
 // grasps and loads (given on the surface) act on the nodes directly.
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 #include <cmath>
 #include <memory>

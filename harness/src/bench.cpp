@@ -1,7 +1,8 @@
 // CI timing tables (see bench.h).
-#include <deform/cache.h>
-#include <deform/mesh.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/mesh.h>
 #include <deform_harness/bench.h>
 #include <deform_harness/results.h>
 

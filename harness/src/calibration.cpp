@@ -1,5 +1,6 @@
 // Calibrating a model's calibratable parameters to the reference (see calibration.h).
-#include <deform/scene.h>
+#include <deform/engine/scene.h>
+#include <deform/internal/atomic_file.h>
 #include <deform_harness/calibration.h>
 
 #include <algorithm>

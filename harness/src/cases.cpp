@@ -1,5 +1,6 @@
 // Generated scenes run through the loader and runner, and the table writers (see cases.h).
-#include <deform/cache.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/cache.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/dispatch.h>

@@ -1,9 +1,9 @@
 // The conformance suite (see conformance.h). Every check builds its scene in memory on the cube
 // phantom (coarse, a slab at the bottom fixed) so that a plugin's whole suite takes seconds.
-#include <deform/interaction.h>
-#include <deform/mesh.h>
-#include <deform/phantom.h>
-#include <deform/scene.h>
+#include <deform/engine/interaction.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/mesh.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/conformance.h>
 #include <deform_harness/metrics.h>

@@ -1,7 +1,8 @@
 // The reference's mesh convergence from three runs of the reference plugin (see convergence.h).
-#include <deform/cache.h>
-#include <deform/interaction.h>
-#include <deform/tet_mesher.h>
+#include <deform/engine/interaction.h>
+#include <deform/geometry/tet_mesher.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/cache.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/convergence.h>
 

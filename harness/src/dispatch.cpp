@@ -1,6 +1,7 @@
 // Tasks, the local and Slurm dispatchers (see dispatch.h); the MPI one is in mpi/.
-#include <deform/cache.h>
-#include <deform/error.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/error.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/dispatch.h>

@@ -1,6 +1,6 @@
 // Error metrics and step-time statistics (see metrics.h for the definitions).
-#include <deform/interaction.h>
-#include <deform/mesh.h>
+#include <deform/engine/interaction.h>
+#include <deform/sdk/mesh.h>
 #include <deform_harness/metrics.h>
 
 #include <algorithm>

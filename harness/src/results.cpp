@@ -1,6 +1,7 @@
 // results.json, the surfaces written beside it, and where they were produced.
-#include <deform/cache.h>
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/cache.h>
 #include <deform_harness/results.h>
 
 #include <array>

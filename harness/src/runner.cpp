@@ -1,7 +1,8 @@
 // The runner: one model through one scene with timing and divergence checks, and the whole
 // `deformbench run` pipeline around it.
-#include <deform/contact.h>
-#include <deform/interaction.h>
+#include <deform/engine/interaction.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/contact.h>
 #include <deform_harness/results.h>
 #include <deform_harness/run_isolation.h>
 #include <deform_harness/runner.h>

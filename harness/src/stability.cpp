@@ -1,8 +1,9 @@
 // The stiff and extreme sweep, one child process per case (see stability.h).
-#include <deform/cache.h>
-#include <deform/mesh.h>
-#include <deform/mesh_io.h>
-#include <deform/phantom.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/geometry/phantom.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/mesh.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/dispatch.h>
 #include <deform_harness/runner.h>

@@ -1,5 +1,6 @@
 // Error against run time: sweeping each model over its accuracy knob (see sweep.h).
-#include <deform/cache.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/cache.h>
 #include <deform_harness/sweep.h>
 
 #include <cmath>

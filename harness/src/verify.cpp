@@ -1,7 +1,8 @@
 // `deformbench verify`: reference_fem against CalculiX on one mesh (verify.h).
-#include <deform/cache.h>
-#include <deform/error.h>
-#include <deform/scene.h>
+#include <deform/engine/scene.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/error.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/metrics.h>
 #include <deform_harness/runner.h>

@@ -8,8 +8,8 @@
 // After the step (finishBulletStep):
 //   1. grasped nodes are put exactly on their targets;
 //   2. contact with the scene's rigid instruments (StepInput::contact) by the SDK's shared
-//      response, the same for every model (deform/contact.h, respondToContact()): each node is a
-//      sphere of the contact thickness; a penetrating node i with inverse mass w_i > 0 moves out,
+//      response, the same for every model (deform/sdk/contact.h, respondToContact()): each node is
+//      a sphere of the contact thickness; a penetrating node i with inverse mass w_i > 0 moves out,
 //        x_i += d n,   v_i -= min(v_i . n, 0) n
 //      (Mueller et al. 2007, "Position based dynamics", Sec. 3.5, Eq. (9)-(10), static collider,
 //      plus an inelastic normal velocity), and -m_i (dx_i / dt + dv_i) / dt is reported to the
@@ -21,8 +21,8 @@
 #pragma once
 
 #include <BulletSoftBody/btSoftBody.h>
-#include <deform/contact.h>
-#include <deform/model.h>
+#include <deform/sdk/contact.h>
+#include <deform/sdk/model.h>
 
 #include <chrono>
 #include <vector>

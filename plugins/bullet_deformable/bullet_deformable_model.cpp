@@ -9,9 +9,9 @@
 #include <BulletSoftBody/btSoftBody.h>
 #include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 #include <btBulletDynamicsCommon.h>
-#include <deform/cache.h>
-#include <deform/tet_mesher.h>
-#include <deform/tet_nodes.h>
+#include <deform/geometry/tet_mesher.h>
+#include <deform/geometry/tet_nodes.h>
+#include <deform/sdk/cache.h>
 
 #include <algorithm>
 #include <array>

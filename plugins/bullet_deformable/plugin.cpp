@@ -1,7 +1,7 @@
 // The "bullet_deformable" plugin: registers BulletDeformableModel (bullet_deformable_model.h).
 #include "bullet_deformable_model.h"
 
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 DEFORM_PLUGIN(registry) {
   deform::ModelInfo info;

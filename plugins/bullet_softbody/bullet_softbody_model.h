@@ -29,8 +29,8 @@
 #pragma once
 
 #include <bullet_peer_step.h>
-#include <deform/model.h>
-#include <deform/params.h>
+#include <deform/sdk/model.h>
+#include <deform/sdk/params.h>
 
 #include <memory>
 #include <vector>

@@ -1,7 +1,7 @@
 // The "bullet_softbody" plugin: registers BulletSoftBodyModel (bullet_softbody_model.h).
 #include "bullet_softbody_model.h"
 
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 DEFORM_PLUGIN(registry) {
   deform::ModelInfo info;

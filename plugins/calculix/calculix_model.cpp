@@ -2,9 +2,9 @@
 
 #include "ccx_process.h"
 
-#include <deform/error.h>
-#include <deform/organ_tets.h>
-#include <deform/tet_embedding.h>
+#include <deform/geometry/organ_tets.h>
+#include <deform/geometry/tet_embedding.h>
+#include <deform/sdk/error.h>
 
 #include <algorithm>
 #include <chrono>
@@ -56,7 +56,8 @@ class CalculixModel final : public Model {
       m_model.nodes = tets.mesh.V;
       m_model.elements = tets.mesh.T;
     }
-    // The nodes a grasp holds between its vertices, as reference_fem (deform/organ_tets.h).
+    // The nodes a grasp holds between its vertices, as reference_fem
+    // (deform/geometry/organ_tets.h).
     std::function<int(int, int)> edgeNode;
     if (q) edgeNode = [q](int a, int b) { return q->edgeNode(a, b); };
     m_graspPatch = std::make_unique<GraspedPatchNodes>(organ.surface, m_surfaceNode, m_model.nodes,
@@ -117,7 +118,7 @@ class CalculixModel final : public Model {
         const int node = m_surfaceNode[size_t(l.vertices[k])];
         if (node >= 0) shares.emplace_back(node, l.weights[k] * l.force);
       }
-      // C3D10: onto the quadratic faces, as reference_fem does (deform/organ_tets.h).
+      // C3D10: onto the quadratic faces, as reference_fem does (deform/geometry/organ_tets.h).
       if (m_surfaceLoad) shares = m_surfaceLoad->spread(shares);
       loads.forces.insert(loads.forces.end(), shares.begin(), shares.end());
     }
@@ -166,8 +167,9 @@ class CalculixModel final : public Model {
   /// mean of their displacements: straight sides), as reference_fem does, so that a held patch
   /// (a bonded plate) moves as a whole.
 
-  // Markers: barycentric coordinates in the containing corner tet (deform/tet_embedding.h),
-  // through the quadratic shape functions when the elements have 10 nodes.
+  // Markers: barycentric coordinates in the containing corner tet
+  // (deform/geometry/tet_embedding.h), through the quadratic shape functions when the elements have
+  // 10 nodes.
   void bindMarkers(const MatX3& rest) override {
     m_markerEmbedding = embedInTets(m_model.nodes, m_cornerTets, rest);
   }

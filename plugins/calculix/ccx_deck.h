@@ -4,14 +4,14 @@
 // Elements: C3D4 (4-node) or C3D10 (10-node) tets. CalculiX orders a C3D10's midside nodes as
 // the edges (1,2), (2,3), (3,1), (1,4), (2,4), (3,4) of its corners (CalculiX User's Manual,
 // element C3D10), deformbench's 10-node rows as (0,1), (0,2), (0,3), (1,2), (1,3), (2,3)
-// (deform/organ_tets.h): kCcxC3D10Order maps one onto the other. Corners 1-2-3 are counter-
-// clockwise seen from corner 4, i.e. the tet's signed volume is positive.
-// Materials: `*HYPERELASTIC, NEO HOOKE` with C10 = mu / 2, D1 = 2 / kappa, whose energy
-// U = C10 (J^{-2/3} I1 - 3) + (J - 1)^2 / D1 is deform/fem_tet.h's NeoHookeanMaterial; or
+// (deform/geometry/organ_tets.h): kCcxC3D10Order maps one onto the other. Corners 1-2-3 are
+// counter- clockwise seen from corner 4, i.e. the tet's signed volume is positive. Materials:
+// `*HYPERELASTIC, NEO HOOKE` with C10 = mu / 2, D1 = 2 / kappa, whose energy U = C10 (J^{-2/3} I1 -
+// 3) + (J - 1)^2 / D1 is deform/kernels/fem_tet.h's NeoHookeanMaterial; or
 // `*ELASTIC` (E, nu) solved without NLGEOM, the small-strain LinearMaterial.
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <array>
 #include <string>

@@ -2,7 +2,7 @@
 // See README.md for the method, the parameters and the limits.
 #include "calculix_model.h"
 
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 namespace {
 

@@ -2,7 +2,7 @@
 // (cholmod_solve2 with workspaces kept between calls), for the per-step loop.
 #pragma once
 
-#include <deform/sparse.h>
+#include <deform/kernels/sparse.h>
 
 namespace deform::fem_hex {
 

@@ -15,7 +15,7 @@
 // centre, F = sum_a x_a (grad N_a(0))^T.
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <Eigen/Geometry>
 

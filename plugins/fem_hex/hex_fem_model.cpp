@@ -1,8 +1,8 @@
 #include "hex_fem_model.h"
 
-#include <deform/contact.h>
+#include <deform/sdk/contact.h>
 
-#include <deform/error.h>
+#include <deform/sdk/error.h>
 
 #include <Eigen/QR>
 

@@ -32,8 +32,8 @@
 #include "hex_element.h"
 #include "hex_grid.h"
 
-#include <deform/contact.h>
-#include <deform/model.h>
+#include <deform/sdk/contact.h>
+#include <deform/sdk/model.h>
 
 #include <functional>
 #include <string>
@@ -219,7 +219,7 @@ class HexFemModel : public Model {
   MatX3 m_stepStart;  // nodes at the step's start (contact friction)
 
   /// The collision proxy: the organ's triangles, embedded in the grid nodes by the trilinear
-  /// weights (deform/contact.h).
+  /// weights (deform/sdk/contact.h).
   ContactProxy contactProxy() {
     ContactProxy p;
     p.nodes = &m_x;

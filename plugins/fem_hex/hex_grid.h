@@ -2,7 +2,7 @@
 // trilinear embedding of surface points in it.
 #pragma once
 
-#include <deform/voxelize.h>
+#include <deform/geometry/voxelize.h>
 
 #include <array>
 #include <vector>

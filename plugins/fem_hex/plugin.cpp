@@ -2,7 +2,7 @@
 // (see hex_fem_model.h for the method and README.md for every choice).
 #include "hex_fem_model.h"
 
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 namespace deform::fem_hex {
 namespace {

@@ -1,7 +1,7 @@
 #include "batched_projection.h"
 
-#include <deform/isometric_bending.h>
-#include <deform/pbd_kernels.h>
+#include <deform/kernels/isometric_bending.h>
+#include <deform/kernels/pbd_kernels.h>
 
 #include <algorithm>
 #include <cmath>

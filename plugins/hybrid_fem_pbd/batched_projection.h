@@ -12,7 +12,7 @@
 // isometric bending) in float relative to the organ's centre.
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <vector>
 
@@ -34,9 +34,9 @@ struct SurfaceBatches {
   std::vector<int> hColourStart;
   bool sLastColourShared = false, hLastColourShared = false;  ///< colour overflow: sequential
   Real kStretch = 0, kBending = 0;                            ///< per-iteration stiffnesses
-  // Isometric bending (deform/isometric_bending.h), set by addIsometricBending(): the same hinges
-  // in the same order as hp, with the stencil weights of their rest shape; when set, the bending
-  // pass projects these instead of the dihedral angles.
+  // Isometric bending (deform/kernels/isometric_bending.h), set by addIsometricBending(): the same
+  // hinges in the same order as hp, with the stencil weights of their rest shape; when set, the
+  // bending pass projects these instead of the dihedral angles.
   bool isometric = false;
   std::vector<int> isoP[4];  ///< 4 * particle index (row offsets in x4)
   std::vector<Real> isoK[4], isoWK[4], isoRest, isoAlphaTilde, isoScale;
@@ -79,7 +79,7 @@ long long projectSurfaceBatches(Real* x4, const SurfaceBatches& b, int iteration
 
 /// projectSurfaceBatches() in single precision (b from addSinglePrecision()): x4 holds the
 /// positions minus b.origin as floats (#V by 4). Stretch eight constraints at a time (AVX2), the
-/// isometric hinges by the shared float kernel of deform/isometric_bending.h.
+/// isometric hinges by the shared float kernel of deform/kernels/isometric_bending.h.
 long long projectSurfaceBatchesF(float* x4, const SurfaceBatches& b, int iterations, bool simd);
 
 /// Whether projectSurfaceBatches(..., simd = true) runs four constraints at a time here.

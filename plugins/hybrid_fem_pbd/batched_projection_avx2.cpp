@@ -1,8 +1,8 @@
 // AVX2 lanes for batched_projection_math.h: four constraints per __m256d, eight per __m256
 // (single-precision stretch), and the blocked float x double product of response_product.h.
 // Compiled with -mavx2 -mfma; includes nothing but the intrinsics, the row gathers of
-// deform/simd_rows_avx2.h and the internal-linkage math header.
-#include <deform/simd_rows_avx2.h>
+// deform/kernels/simd_rows_avx2.h and the internal-linkage math header.
+#include <deform/kernels/simd_rows_avx2.h>
 #include <immintrin.h>
 
 #include "batched_projection_avx2.h"
@@ -30,8 +30,8 @@ struct Avx2Lanes {
   static int count(M m) { return __builtin_popcount(_mm256_movemask_pd(m)); }
   static unsigned orBytes(const unsigned char* m) { return m[0] | m[1] | m[2] | m[3]; }
   static bool anyByte(const unsigned char* m) { return (m[0] | m[1] | m[2] | m[3]) != 0; }
-  // The points idx[0..3] of the padded array <-> x, y, z lanes (deform/simd_rows_avx2.h); the
-  // four points of an add are distinct or immovable (their lanes are then exactly zero).
+  // The points idx[0..3] of the padded array <-> x, y, z lanes (deform/kernels/simd_rows_avx2.h);
+  // the four points of an add are distinct or immovable (their lanes are then exactly zero).
   static void loadPoints(const double* x4, const int* idx, V& x, V& y, V& z) {
     simd::gatherRows4([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, x, y, z);
   }

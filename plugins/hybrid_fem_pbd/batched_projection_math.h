@@ -11,7 +11,7 @@
 // stiffness k:  d = x_a - x_b,  s = (l - |d|) / |d|,  x_a += k w_a/(w_a+w_b) s d,
 //               x_b -= k w_b/(w_a+w_b) s d   (the two scales precomputed per constraint).
 // Bending (paper Eqs. (10)-(11)), C = theta - theta0 wrapped to (-pi, pi] with the gradients of
-// Bridson et al. 2003 (see deform/pbd_kernels.h, DihedralConstraint): dx_i = -k C w_i g_i /
+// Bridson et al. 2003 (see deform/kernels/pbd_kernels.h, DihedralConstraint): dx_i = -k C w_i g_i /
 // sum_j w_j |g_j|^2. The wrapped difference is evaluated directly as
 //   C = atan2(s cos theta0 - c sin theta0, c cos theta0 + s sin theta0),
 //   s = ((nB x nA) . e),  c = |e| (nA . nB)      (atan2 is scale invariant, so the common factor

@@ -1,7 +1,7 @@
 #include "coarse_fem.h"
 
-#include <deform/error.h>
-#include <deform/fem_tet.h>
+#include <deform/kernels/fem_tet.h>
+#include <deform/sdk/error.h>
 
 #include <algorithm>
 

@@ -1,8 +1,8 @@
 // Hybrid FEM+PBD, the coarse volume mesh MV by linear finite elements (paper Sec. 3, Eqs. (1)-(5),
 // Sec. 6.2): 4-node tetrahedra with linear shape functions, element stiffness
-// K_e = V_e B^T D B (Eq. (4), evaluated by the shared kernel deform/fem_tet.h's LinearMaterial),
-// assembled into K once, the fixed nodes eliminated, and K factorised once (CHOLMOD supernodal
-// LL^T). Each step solves the quasi-static equilibrium K u = f (Eq. (5)).
+// K_e = V_e B^T D B (Eq. (4), evaluated by the shared kernel deform/kernels/fem_tet.h's
+// LinearMaterial), assembled into K once, the fixed nodes eliminated, and K factorised once
+// (CHOLMOD supernodal LL^T). Each step solves the quasi-static equilibrium K u = f (Eq. (5)).
 //
 // Because K never changes, each step uses superposition instead of a full solve: the columns of
 // K^-1 for the three dofs of every loaded node are solved once and cached, and the response to a
@@ -21,9 +21,9 @@
 // (/work/shared/papers/hybrid-fem-pbd-incision.md).
 #pragma once
 
-#include <deform/mesh.h>
-#include <deform/model.h>
-#include <deform/sparse.h>
+#include <deform/kernels/sparse.h>
+#include <deform/sdk/mesh.h>
+#include <deform/sdk/model.h>
 
 #include <Eigen/Dense>
 #include <array>

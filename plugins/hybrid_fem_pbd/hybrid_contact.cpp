@@ -1,13 +1,13 @@
-// Contact for the hybrid model (deform/contact.h): surface vertices that penetrate an instrument
-// are prescribed onto its surface like grasped vertices (the coarse FEM and the surface PBD both
-// see them). The step is re-run from the same start state up to 3 times, adding the vertices the
-// previous run left inside (control vertices follow the coarse FEM and can be carried in by it);
-// then the surface triangles still within the contact thickness are projected out (their inward
-// normal velocity removed, Coulomb friction from the step's start): this also catches a tool
+// Contact for the hybrid model (deform/sdk/contact.h): surface vertices that penetrate an
+// instrument are prescribed onto its surface like grasped vertices (the coarse FEM and the surface
+// PBD both see them). The step is re-run from the same start state up to 3 times, adding the
+// vertices the previous run left inside (control vertices follow the coarse FEM and can be carried
+// in by it); then the surface triangles still within the contact thickness are projected out (their
+// inward normal velocity removed, Coulomb friction from the step's start): this also catches a tool
 // thinner than the vertex spacing, which no vertex would report.
 #include "hybrid_model.h"
 
-#include <deform/contact.h>
+#include <deform/sdk/contact.h>
 
 namespace deform::hybrid {
 

@@ -1,8 +1,8 @@
 #include "hybrid_model.h"
 
-#include <deform/cache.h>
-#include <deform/error.h>
-#include <deform/tet_mesher.h>
+#include <deform/geometry/tet_mesher.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/error.h>
 
 #include <chrono>
 #include <cmath>

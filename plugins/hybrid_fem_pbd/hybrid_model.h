@@ -17,9 +17,9 @@
 // See README.md.
 #pragma once
 
-#include <deform/model.h>
-#include <deform/params.h>
-#include <deform/tet_embedding.h>
+#include <deform/geometry/tet_embedding.h>
+#include <deform/sdk/model.h>
+#include <deform/sdk/params.h>
 
 #include <map>
 #include <string>
@@ -42,8 +42,8 @@ enum class SurfaceProjection {
   Batched,        ///< projectSurfaceBatches(), four at a time where the CPU has AVX2
 };
 
-/// The bending constraint of the fine surface: the isometric hinge of deform/isometric_bending.h
-/// (default) or the paper's dihedral angle (Eqs. (10)-(11)).
+/// The bending constraint of the fine surface: the isometric hinge of
+/// deform/kernels/isometric_bending.h (default) or the paper's dihedral angle (Eqs. (10)-(11)).
 enum class HybridBending { Isometric, Dihedral };
 
 /// Number type of the two per-step kernels that dominate the step on large organs: the surface
@@ -104,8 +104,9 @@ class HybridModel final : public Model {
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
   void cut(const CutPath& path) override;
   MatX3i surfaceFaces() const override;
-  /// Markers: barycentric coordinates in the containing coarse tet (MV, deform/tet_embedding.h);
-  /// binding makes the coarse FEM compute its interior nodes every step too.
+  /// Markers: barycentric coordinates in the containing coarse tet (MV,
+  /// deform/geometry/tet_embedding.h); binding makes the coarse FEM compute its interior nodes
+  /// every step too.
   void bindMarkers(const MatX3& rest) override;
   MatX3 markers() const override;
 

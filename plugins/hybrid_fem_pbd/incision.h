@@ -32,8 +32,8 @@
 // (/work/shared/papers/hybrid-fem-pbd-incision.md).
 #pragma once
 
-#include <deform/mesh.h>
-#include <deform/model.h>
+#include <deform/sdk/mesh.h>
+#include <deform/sdk/model.h>
 
 #include <array>
 #include <string>

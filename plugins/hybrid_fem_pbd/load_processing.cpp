@@ -1,6 +1,6 @@
 #include "load_processing.h"
 
-#include <deform/distance.h>
+#include <deform/geometry/distance.h>
 
 #include <limits>
 

@@ -14,7 +14,7 @@
 // (/work/shared/papers/hybrid-fem-pbd-incision.md).
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <array>
 

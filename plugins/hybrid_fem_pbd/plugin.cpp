@@ -1,5 +1,5 @@
 // The "hybrid_fem_pbd" plugin: registers HybridModel (hybrid_model.h) with the harness.
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 #include "hybrid_model.h"
 

@@ -7,7 +7,7 @@
 // once, contiguously; the sums are accumulated in double.
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <vector>
 

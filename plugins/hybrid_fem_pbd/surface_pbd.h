@@ -2,14 +2,14 @@
 // stretch constraints C = |p1 - p2| - l on every surface edge (paper Eq. (8)-(9)) and bending
 // constraints C = angle(n1, n2) - phi across every interior edge (paper Eq. (10)-(11)), projected
 // Gauss-Seidel with the classic per-iteration stiffness. The projections themselves are the
-// shared kernels of deform/pbd_kernels.h (the bending kernel evaluates the dihedral angle with
-// atan2 and the gradients of Bridson et al. 2003, equivalent to the paper's acos form away from
-// flat hinges and finite at them). Control nodes (shared with the coarse volume mesh) have
+// shared kernels of deform/kernels/pbd_kernels.h (the bending kernel evaluates the dihedral angle
+// with atan2 and the gradients of Bridson et al. 2003, equivalent to the paper's acos form away
+// from flat hinges and finite at them). Control nodes (shared with the coarse volume mesh) have
 // inverse mass 0 and take their positions from the FEM solution (paper Step 4).
 #pragma once
 
-#include <deform/mesh.h>
-#include <deform/pbd_kernels.h>
+#include <deform/kernels/pbd_kernels.h>
+#include <deform/sdk/mesh.h>
 
 #include <vector>
 

@@ -1,7 +1,7 @@
 #include "vertex_cover_simplification.h"
 
-#include <deform/error.h>
-#include <deform/mesh_check.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/sdk/error.h>
 
 #include <algorithm>
 #include <cmath>

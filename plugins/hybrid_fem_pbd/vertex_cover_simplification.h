@@ -26,7 +26,7 @@
 //    q < minQuality.
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <vector>
 

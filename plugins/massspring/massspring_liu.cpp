@@ -30,7 +30,7 @@
 // approximation of implicit Euler that converges to it as the iterations grow.
 #include "massspring_model.h"
 
-#include <deform/contact.h>
+#include <deform/sdk/contact.h>
 
 #include <algorithm>
 #include <chrono>

@@ -1,11 +1,11 @@
 #include "massspring_model.h"
 
-#include <deform/tet_nodes.h>
+#include <deform/geometry/tet_nodes.h>
 
-#include <deform/contact.h>
+#include <deform/sdk/contact.h>
 
-#include <deform/mesh.h>
-#include <deform/tet_mesher.h>
+#include <deform/geometry/tet_mesher.h>
+#include <deform/sdk/mesh.h>
 
 #include <Eigen/IterativeLinearSolvers>
 

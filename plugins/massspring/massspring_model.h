@@ -13,10 +13,10 @@
 #include "node_cholesky.h"
 #include "spring_kernels.h"
 
-#include <deform/model.h>
-#include <deform/params.h>
-#include <deform/sparse.h>
-#include <deform/tet_embedding.h>
+#include <deform/geometry/tet_embedding.h>
+#include <deform/kernels/sparse.h>
+#include <deform/sdk/model.h>
+#include <deform/sdk/params.h>
 
 #include <array>
 #include <memory>
@@ -81,7 +81,7 @@ class MassSpringModel final : public Model {
   NumericCounters numericCounters() const override;
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
   /// Markers: barycentric coordinates in the containing tet of the volume network
-  /// (deform/tet_embedding.h); a surface network has no interior.
+  /// (deform/geometry/tet_embedding.h); a surface network has no interior.
   void bindMarkers(const MatX3& rest) override {
     if (m_tets.rows() == 0)
       throw UnsupportedError("no interior: surface network (network = volume maps markers)");

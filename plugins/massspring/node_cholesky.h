@@ -8,7 +8,7 @@
 // entry updating a node's 4-vector (x, y, z, padding): one AVX2 operation in double.
 #pragma once
 
-#include <deform/sparse.h>
+#include <deform/kernels/sparse.h>
 
 #include <memory>
 #include <string>

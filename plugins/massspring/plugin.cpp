@@ -1,7 +1,7 @@
 // The "massspring" plugin: registers MassSpringModel (massspring_model.h) with the harness.
 #include "massspring_model.h"
 
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 DEFORM_PLUGIN(registry) {
   deform::ModelInfo info;

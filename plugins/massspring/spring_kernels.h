@@ -14,7 +14,7 @@
 // responsive cloth", Sec. 4, discuss this instability of the exact Jacobian).
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <algorithm>
 #include <cmath>

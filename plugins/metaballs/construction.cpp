@@ -7,7 +7,7 @@
 #include "vacant_space_filling.h"
 #include "voxel_grid.h"
 
-#include <deform/distance.h>
+#include <deform/geometry/distance.h>
 
 #include <algorithm>
 #include <chrono>

@@ -11,8 +11,8 @@
 #include "sphere_set.h"
 #include "topology.h"
 
-#include <deform/cache.h>
-#include <deform/mesh.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/mesh.h>
 
 #include <string>
 #include <vector>

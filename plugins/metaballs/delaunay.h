@@ -4,7 +4,7 @@
 // so that Qhull's macros stay out of the rest of the plugin.
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <array>
 #include <vector>

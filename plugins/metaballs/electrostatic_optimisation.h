@@ -20,7 +20,7 @@
 #include "sphere_set.h"
 #include "voxel_grid.h"
 
-#include <deform/distance.h>
+#include <deform/geometry/distance.h>
 
 namespace deform::metaballs {
 

@@ -1,6 +1,6 @@
 #include "metaballs_model.h"
 
-#include <deform/contact.h>
+#include <deform/sdk/contact.h>
 #include "pbd_constraints.h"
 
 #include <Eigen/SVD>

@@ -29,8 +29,8 @@
 #include "skinning.h"
 #include "solver_kernels.h"
 
-#include <deform/model.h>
-#include <deform/registry.h>
+#include <deform/sdk/model.h>
+#include <deform/sdk/registry.h>
 
 #include <vector>
 

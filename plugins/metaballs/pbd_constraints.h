@@ -3,7 +3,7 @@
 // each returns false (and changes nothing) when the configuration is degenerate.
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <cmath>
 

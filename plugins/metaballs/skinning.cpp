@@ -1,6 +1,6 @@
 #include "skinning.h"
 
-#include <deform/kdtree.h>
+#include <deform/geometry/kdtree.h>
 
 #include <algorithm>
 #include <cstdint>

@@ -1,6 +1,6 @@
 #include "solver_kernels.h"
 
-#include <deform/simd_rows.h>
+#include <deform/kernels/simd_rows.h>
 
 #include <algorithm>
 #include <cmath>

@@ -20,7 +20,7 @@
 //   per-step constants (generalised inverse mass W, rotated R L_m) hoisted out of the iterations.
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <vector>
 

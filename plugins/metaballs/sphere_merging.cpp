@@ -1,6 +1,6 @@
 #include "sphere_merging.h"
 
-#include <deform/kdtree.h>
+#include <deform/geometry/kdtree.h>
 
 #include <algorithm>
 #include <tuple>

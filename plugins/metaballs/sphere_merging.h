@@ -9,7 +9,7 @@
 
 #include "sphere_set.h"
 
-#include <deform/distance.h>
+#include <deform/geometry/distance.h>
 
 namespace deform::metaballs {
 

@@ -1,7 +1,7 @@
 #include "sphere_packing.h"
 
-#include <deform/error.h>
-#include <deform/kdtree.h>
+#include <deform/geometry/kdtree.h>
+#include <deform/sdk/error.h>
 
 #include "delaunay.h"
 

@@ -3,7 +3,7 @@
 // for virtual surgery", The Visual Computer 31, doi:10.1007/s00371-015-1092-2.
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 namespace deform::metaballs {
 

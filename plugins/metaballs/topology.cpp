@@ -1,6 +1,6 @@
 #include "topology.h"
 
-#include <deform/kdtree.h>
+#include <deform/geometry/kdtree.h>
 
 #include <algorithm>
 #include <limits>

@@ -1,6 +1,6 @@
 #include "vacant_space_filling.h"
 
-#include <deform/kdtree.h>
+#include <deform/geometry/kdtree.h>
 
 #include <vector>
 

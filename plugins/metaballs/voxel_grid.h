@@ -1,12 +1,12 @@
 // Metaballs plugin: the organ's voxelisation for stage 1 (inside voxel centres as packing samples)
-// and stage 5 (Algorithm 2, "voxelize model"), on the shared voxeliser (deform/voxelize.h).
-// Grid: `resolution` voxels along the longest side of the surface's bounding box, one voxel of
-// margin on each side, centred on the box. A voxel is "inside" when its centre is
-// (VoxelGrid::centreInside, winding number), whether or not the surface crosses the voxel: the
-// electrostatic model counts hollow space by voxel centres.
+// and stage 5 (Algorithm 2, "voxelize model"), on the shared voxeliser
+// (deform/geometry/voxelize.h). Grid: `resolution` voxels along the longest side of the surface's
+// bounding box, one voxel of margin on each side, centred on the box. A voxel is "inside" when its
+// centre is (VoxelGrid::centreInside, winding number), whether or not the surface crosses the
+// voxel: the electrostatic model counts hollow space by voxel centres.
 #pragma once
 
-#include <deform/voxelize.h>
+#include <deform/geometry/voxelize.h>
 
 namespace deform::metaballs {
 

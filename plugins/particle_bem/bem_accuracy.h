@@ -19,8 +19,8 @@
 #include "bem_assembly.h"
 #include "guided_particles.h"
 
-#include <deform/mesh.h>
-#include <deform/model.h>
+#include <deform/sdk/mesh.h>
+#include <deform/sdk/model.h>
 
 namespace deform::particle_bem {
 

@@ -25,7 +25,7 @@
 
 #include "bem_kelvin.h"
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <functional>
 #include <vector>

@@ -15,7 +15,7 @@
 //   c_ij(x) u_j(x) + int_Gamma T*_ij u_j dGamma = int_Gamma U*_ij p_j dGamma.
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <array>
 #include <vector>

@@ -12,7 +12,7 @@
 // partition (surface_decimation.h), so coarse and fine surfaces clamp the same region.
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <vector>
 

@@ -30,7 +30,7 @@
 
 #include "triangle_distance.h"
 
-#include <deform/sparse.h>
+#include <deform/kernels/sparse.h>
 
 #include <Eigen/LU>
 #include <Eigen/SparseCholesky>

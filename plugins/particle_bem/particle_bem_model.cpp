@@ -1,6 +1,6 @@
 #include "particle_bem_model.h"
 
-#include <deform/contact.h>
+#include <deform/sdk/contact.h>
 #include "conforming_surface.h"
 #include "distance_field.h"
 #include "physics_points.h"

@@ -35,8 +35,8 @@
 #include "spatial_hash.h"
 #include "sph_elasticity.h"
 
-#include <deform/model.h>
-#include <deform/registry.h>
+#include <deform/sdk/model.h>
+#include <deform/sdk/registry.h>
 
 #include <array>
 
@@ -87,7 +87,7 @@ class ParticleBemModel final : public Model {
   void prescribeGrasps(const StepInput& in);
   /// The displacement response (3N x 3, m/N) of a load's J^T-mapped forces, cached per spread.
   const MatX& loadResponse(const PointLoad& load);
-  /// Contact (deform/contact.h) on every particle, after the correction.
+  /// Contact (deform/sdk/contact.h) on every particle, after the correction.
   void resolveParticleContacts(const StepInput& in);
   /// Display level: the surface follows particles already out of the instruments (no force).
   void projectSurfaceOut(const StepInput& in);

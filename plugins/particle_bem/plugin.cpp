@@ -3,7 +3,7 @@
 #include "particle_bem_model.h"
 #include "static_accuracy.h"
 
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 DEFORM_PLUGIN(registry) {
   deform::ModelInfo info = deform::particle_bem::ParticleBemModel::info();

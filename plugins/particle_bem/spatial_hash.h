@@ -5,7 +5,7 @@
 // points into buckets by counting sort (O(N), no allocation after the first build of a given size).
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 #include <cmath>
 #include <vector>

@@ -17,8 +17,8 @@
 // Time integration: symplectic Euler with mass-proportional damping (see model).
 #pragma once
 
-#include <deform/model.h>
-#include <deform/types.h>
+#include <deform/sdk/model.h>
+#include <deform/sdk/types.h>
 
 #include <vector>
 

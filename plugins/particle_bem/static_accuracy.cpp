@@ -5,9 +5,9 @@
 #include "conforming_surface.h"
 #include "surface_decimation.h"
 
-#include <deform/cache.h>
-#include <deform/error.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/error.h>
 
 #include <chrono>
 #include <map>

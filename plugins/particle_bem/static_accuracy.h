@@ -9,7 +9,7 @@
 // singular reaction, gradient transfer; one assembly and one solve per mesh.
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <nlohmann/json.hpp>
 

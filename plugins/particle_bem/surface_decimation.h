@@ -21,7 +21,7 @@
 // The boundary curve stays a closed polyline on the box faces, coarser but exact to round-off.
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <vector>
 

@@ -1,12 +1,12 @@
 // particle_bem: exact point-to-triangle-mesh distance with a uniform bucket grid, and the sign
 // of the distance from angle-weighted pseudo-normals (Baerentzen & Aanaes 2005). The closest
 // point on one triangle (and its barycentrics) is core's deform::closestPointOnTriangle
-// (deform/distance.h); the grid is kept because the plugin queries many points near one small
-// surface and returns the barycentrics the interpolation needs.
+// (deform/geometry/distance.h); the grid is kept because the plugin queries many points near one
+// small surface and returns the barycentrics the interpolation needs.
 #pragma once
 
-#include <deform/distance.h>
-#include <deform/mesh.h>
+#include <deform/geometry/distance.h>
+#include <deform/sdk/mesh.h>
 
 #include <vector>
 

@@ -6,7 +6,7 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
 
-#include <deform/simd_rows.h>
+#include <deform/kernels/simd_rows.h>
 
 #include <algorithm>
 #include <type_traits>

@@ -1,12 +1,12 @@
 // PBD / XPBD constraint kernels of the PBD plugin. The update rule, the distance (stretch) and the
-// dihedral (bending) kernels live in the shared core header deform/pbd_kernels.h (used by the
-// hybrid FEM+PBD plugin too; see its header comment for the update rule and references); this
+// dihedral (bending) kernels live in the shared core header deform/kernels/pbd_kernels.h (used by
+// the hybrid FEM+PBD plugin too; see its header comment for the update rule and references); this
 // file adds the plugin's own batched distance projection, the tetrahedron volume constraint and
 // the global surface volume constraint.
 #pragma once
 
-#include <deform/pbd_kernels.h>
-#include <deform/types.h>
+#include <deform/kernels/pbd_kernels.h>
+#include <deform/sdk/types.h>
 
 #include <cmath>
 #include <numbers>

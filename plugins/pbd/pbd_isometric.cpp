@@ -1,4 +1,4 @@
-// PbdModel's isometric bending (deform/isometric_bending.h): the hinges in colour order as
+// PbdModel's isometric bending (deform/kernels/isometric_bending.h): the hinges in colour order as
 // structure of arrays, projected colour by colour on the solver's packed positions (float or
 // double, like the distance constraints), so a sweep needs no unpacking for them.
 #include "pbd_model.h"

@@ -10,10 +10,10 @@
 
 #include "pbd_constraints.h"
 
-#include <deform/isometric_bending.h>
-#include <deform/model.h>
-#include <deform/params.h>
-#include <deform/tet_embedding.h>
+#include <deform/geometry/tet_embedding.h>
+#include <deform/kernels/isometric_bending.h>
+#include <deform/sdk/model.h>
+#include <deform/sdk/params.h>
 
 #include <vector>
 
@@ -24,7 +24,7 @@ enum class StiffnessMode { Classic, Xpbd };
 /// "Precision"); the interface, the state between steps and the other constraints stay double.
 enum class Precision { Float32, Float64 };
 /// The bending constraint of `bending = true`: the isometric (Bergou et al. 2006) hinge of
-/// deform/isometric_bending.h, or the dihedral angle of deform/pbd_kernels.h.
+/// deform/kernels/isometric_bending.h, or the dihedral angle of deform/kernels/pbd_kernels.h.
 enum class BendingModel { Isometric, Dihedral };
 
 /// Resolved parameters (see paramSpecs() for units, ranges and meaning).
@@ -55,7 +55,7 @@ PbdConfig configFromParams(const ParamValues& params);
 Real surfaceEdgeCompliance(Real young, Real thickness, Real restLength, Real adjacentArea);
 /// Dihedral hinge: alpha = (A1 + A2) / (3 D |e|^2), D = E t^3 / (12 (1 - nu^2))  (1/(N m)).
 Real hingeCompliance(const Material& m, Real thickness, Real edgeLength, Real adjacentArea);
-/// Isometric hinge: alpha = (A1 + A2) / (3 D) (m/N), see deform/isometric_bending.h.
+/// Isometric hinge: alpha = (A1 + A2) / (3 D) (m/N), see deform/kernels/isometric_bending.h.
 /// Bulk modulus K = E / (3 (1 - 2 nu)), Pa (infinite for nu = 0.5).
 Real bulkModulus(const Material& m);
 
@@ -74,7 +74,7 @@ class PbdModel final : public Model {
   NumericCounters numericCounters() const override;
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
   /// Markers: barycentric coordinates in the containing tet of the volume network
-  /// (deform/tet_embedding.h); a surface network has no interior.
+  /// (deform/geometry/tet_embedding.h); a surface network has no interior.
   void bindMarkers(const MatX3& rest) override {
     if (m_tets.rows() == 0)
       throw UnsupportedError("no interior: surface network (network = volume maps markers)");

@@ -1,7 +1,7 @@
 // The "pbd" plugin: registers PbdModel (pbd_model.h) with the harness.
 #include "pbd_model.h"
 
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 DEFORM_PLUGIN(registry) {
   deform::ModelInfo info;
@@ -15,7 +15,7 @@ DEFORM_PLUGIN(registry) {
       "XPBD, MIG '16, doi:10.1145/2994258.2994272";
   info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,        C::ReactionForce,
+  info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,         C::ReactionForce,
                        C::TetInput, C::Contact,    C::ContactReaction, C::Markers};
   info.params = deform::pbd::paramSpecs();
   info.create = [] { return std::make_unique<deform::pbd::PbdModel>(); };

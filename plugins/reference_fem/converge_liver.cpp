@@ -8,7 +8,7 @@
 #include "convergence.h"
 #include "liver_poke_case.h"
 
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
 
 #include <cstdio>
 #include <cstdlib>

@@ -14,7 +14,7 @@
 
 #include "fem_solver.h"
 
-#include <deform/tet_mesher.h>
+#include <deform/geometry/tet_mesher.h>
 
 #include <functional>
 #include <string>

@@ -8,8 +8,8 @@
 #include "fem_solver.h"
 #include "liver_poke_case.h"
 
-#include <deform/phantom.h>
-#include <deform/tet_mesher.h>
+#include <deform/geometry/phantom.h>
+#include <deform/geometry/tet_mesher.h>
 
 #include <Eigen/Eigenvalues>
 

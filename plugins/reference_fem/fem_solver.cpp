@@ -1,7 +1,7 @@
 #include "fem_solver.h"
 
-#include <deform/error.h>
-#include <deform/organ_tets.h>
+#include <deform/geometry/organ_tets.h>
+#include <deform/sdk/error.h>
 
 #include <algorithm>
 #include <chrono>
@@ -193,7 +193,7 @@ FemSystem::FemSystem(TetMesh rest, const Material& material, MaterialModel model
 }
 
 void FemSystem::addMidsideNodes() {
-  QuadraticTetNodes q = deform::addMidsideNodes(m_rest);  // deform/organ_tets.h
+  QuadraticTetNodes q = deform::addMidsideNodes(m_rest);  // deform/geometry/organ_tets.h
   m_edges = std::move(q.edges);
   m_rest.V = std::move(q.V);
   for (int t = 0; t < m_rest.numTets(); ++t)

@@ -1,6 +1,6 @@
 // Reference FEM kernels: assembly of linear (4-node) or quadratic (10-node, quadratic_tet.h) tet
-// hyperelasticity (material points of deform/fem_tet.h) and its quasi-static and implicit-Euler
-// solves by Newton's method.
+// hyperelasticity (material points of deform/kernels/fem_tet.h) and its quasi-static and
+// implicit-Euler solves by Newton's method.
 //
 // Quadratic elements are built from the corner (P1) mesh by adding one node at the midpoint of
 // every edge (straight sides, so the polyhedral geometry is unchanged). The corner nodes keep
@@ -55,10 +55,10 @@
 #include "mean_dilatation_tet.h"
 #include "quadratic_tet.h"
 
-#include <deform/fem_tet.h>
-#include <deform/mesh.h>
-#include <deform/model.h>
-#include <deform/sparse.h>
+#include <deform/kernels/fem_tet.h>
+#include <deform/kernels/sparse.h>
+#include <deform/sdk/mesh.h>
+#include <deform/sdk/model.h>
 
 #include <array>
 #include <functional>

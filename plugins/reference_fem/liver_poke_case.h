@@ -7,7 +7,7 @@
 
 #include "fem_solver.h"
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <array>
 

@@ -35,7 +35,7 @@
 
 #include "quadratic_tet.h"
 
-#include <deform/fem_tet.h>
+#include <deform/kernels/fem_tet.h>
 
 namespace deform::reffem {
 

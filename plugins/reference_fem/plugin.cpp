@@ -2,10 +2,10 @@
 // README.md for the method, the parameters and the reasons behind each choice.
 #include "fem_solver.h"
 
-#include <deform/contact.h>
-#include <deform/organ_tets.h>
-#include <deform/registry.h>
-#include <deform/tet_embedding.h>
+#include <deform/geometry/organ_tets.h>
+#include <deform/geometry/tet_embedding.h>
+#include <deform/sdk/contact.h>
+#include <deform/sdk/registry.h>
 
 #include <algorithm>
 #include <chrono>
@@ -76,7 +76,7 @@ class ReferenceFemModel final : public Model {
     m_dt = setup.dt;
     const Organ& organ = setup.organ;
 
-    OrganTetOptions meshOptions;  // deform/organ_tets.h (calculix meshes the same way)
+    OrganTetOptions meshOptions;  // deform/geometry/organ_tets.h (calculix meshes the same way)
     meshOptions.edgeLength = p.real("edge_length");
     meshOptions.targetElements = p.integer("elements");
     meshOptions.refineSurface = p.flag("refine_surface");
@@ -297,8 +297,8 @@ class ReferenceFemModel final : public Model {
   }
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
-  // Markers: barycentric coordinates in the containing corner tet (deform/tet_embedding.h),
-  // through the quadratic shape functions for P2 elements.
+  // Markers: barycentric coordinates in the containing corner tet
+  // (deform/geometry/tet_embedding.h), through the quadratic shape functions for P2 elements.
   void bindMarkers(const MatX3& rest) override {
     m_markerEmbedding = embedInTets(m_system->rest().V, m_system->rest().T, rest);
   }

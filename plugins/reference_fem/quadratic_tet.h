@@ -7,7 +7,7 @@
 // (Zienkiewicz, Taylor & Zhu, "The Finite Element Method: Its Basis and Fundamentals", 7th ed.
 // 2013, sec. 6.6, doi:10.1016/C2009-0-24909-9). The sides are straight (midside nodes at the edge
 // midpoints at rest), so the map from L to X is affine, grad L_a = g_a is the constant P1
-// gradient of deform/fem_tet.h, and
+// gradient of deform/kernels/fem_tet.h, and
 //     grad N_a = (4 L_a - 1) g_a,   grad N_ab = 4 (L_a g_b + L_b g_a).
 // The deformation gradient F(X) = sum_i x_i grad N_i^T is linear in X. The element energy
 //     W = integral_T psi(F) dV ~= V sum_q w_q psi(F(X_q))
@@ -24,12 +24,12 @@
 // dP/dF per point keeps the element stiffness PSD), which the degree-3 5-point rule (weight
 // -4/5) would break.
 //
-// The gradient and stiffness reuse the material point evaluation of deform/fem_tet.h: at each
-// point, dW/dx_i = w_q V P grad N_i and d^2W/dx_i dx_j = w_q V G_i^T (dP/dF) G_j.
+// The gradient and stiffness reuse the material point evaluation of deform/kernels/fem_tet.h: at
+// each point, dW/dx_i = w_q V P grad N_i and d^2W/dx_i dx_j = w_q V G_i^T (dP/dF) G_j.
 #pragma once
 
-#include <deform/fem_tet.h>
-#include <deform/organ_tets.h>
+#include <deform/geometry/organ_tets.h>
+#include <deform/kernels/fem_tet.h>
 
 #include <array>
 #include <cmath>
@@ -41,7 +41,7 @@ using Vec30 = Eigen::Matrix<Real, 30, 1>;
 using Mat30 = Eigen::Matrix<Real, 30, 30>;
 using Mat3x10 = Eigen::Matrix<Real, 3, 10>;
 
-/// Corner pairs of the midside nodes 4..9 (deform/organ_tets.h).
+/// Corner pairs of the midside nodes 4..9 (deform/geometry/organ_tets.h).
 inline constexpr const int (&kQuadraticEdges)[6][2] = kQuadraticTetEdges;
 
 /// Barycentric coordinates of the 4-point degree-2 rule (weights 1/4 each).

@@ -2,7 +2,7 @@
 // structured Kuhn tet meshes of boxes and their boundary surfaces (icospheres: tests/support).
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <array>
 #include <map>

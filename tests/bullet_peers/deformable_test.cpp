@@ -3,7 +3,7 @@
 #include "bullet_deformable_model.h"
 #include "test_support.h"
 
-#include <deform/tet_mesher.h>
+#include <deform/geometry/tet_mesher.h>
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -3,9 +3,9 @@
 // the shared contact world.
 #pragma once
 
-#include <deform/contact.h>
-#include <deform/model.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/contact.h>
+#include <deform/sdk/model.h>
 
 #include <algorithm>
 #include <cmath>

@@ -1,12 +1,12 @@
 // The calculix plugin (CalculiX's ccx as a child process) against reference_fem on one mesh, and
 // how it reports a missing or failing ccx. ccx is installed by scripts/install-deps.sh; where it
 // is missing the comparison tests are skipped (the missing-ccx test runs everywhere).
-#include <deform/cache.h>
-#include <deform/error.h>
-#include <deform/model.h>
-#include <deform/phantom.h>
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/error.h>
+#include <deform/sdk/model.h>
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
 

@@ -3,9 +3,9 @@
 // and one precomputation cache.
 #pragma once
 
-#include <deform/cache.h>
-#include <deform/mesh.h>
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/mesh.h>
 
 #include <nlohmann/json.hpp>
 

@@ -3,12 +3,12 @@
 // (harness/src/conformance.cpp). The dynamic grasper and a resting rigid object run on every model
 // that supports them; a rigid object needs the "contact_reaction" capability (the organ holds it up
 // by the reported reaction).
-#include <deform/contact.h>
-#include <deform/distance.h>
-#include <deform/interaction.h>
-#include <deform/phantom.h>
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/interaction.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/distance.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/contact.h>
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
 

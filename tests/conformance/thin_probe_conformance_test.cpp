@@ -2,12 +2,12 @@
 // probe whose tip is much thinner than the surface's edges, pressed into the middle of a coarse
 // triangle, meets no vertex; every model whose collision proxy is its surface must still leave no
 // point of its surface triangles inside the tip after any step.
-#include <deform/contact.h>
-#include <deform/distance.h>
-#include <deform/interaction.h>
-#include <deform/phantom.h>
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/interaction.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/distance.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/contact.h>
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
 

@@ -2,8 +2,8 @@
 #include "../support/grasp.h"
 #include "test_meshes.h"
 
-#include <deform/interaction.h>
-#include <deform/phantom.h>
+#include <deform/engine/interaction.h>
+#include <deform/geometry/phantom.h>
 
 #include <gtest/gtest.h>
 

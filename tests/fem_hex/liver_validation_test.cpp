@@ -21,9 +21,9 @@
 // (~1/(load spread)), set by each model's own local mesh size, so near the load the models need
 // not agree and fem_hex's displacement there grows with refinement; away from the load they must
 // agree, better with refinement.
-#include <deform/cache.h>
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
+#include <deform/sdk/cache.h>
 #include <deform_harness/runner.h>
 
 #include <gtest/gtest.h>

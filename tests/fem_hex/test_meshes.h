@@ -1,7 +1,7 @@
 // Closed test surfaces for the fem_hex tests (until the phantoms land on main).
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <cmath>
 #include <map>

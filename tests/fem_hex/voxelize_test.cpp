@@ -1,8 +1,8 @@
 #include "test_meshes.h"
 
-#include <deform/error.h>
-#include <deform/phantom.h>
-#include <deform/voxelize.h>
+#include <deform/geometry/phantom.h>
+#include <deform/geometry/voxelize.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 namespace deform {

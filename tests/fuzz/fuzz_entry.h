@@ -8,10 +8,10 @@
 // as a bug, as do crashes, sanitizer reports, hangs and leaks.
 #pragma once
 
-#include <deform/error.h>
-#include <deform/mesh_check.h>
-#include <deform/mesh_io.h>
-#include <deform/scene.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/sdk/error.h>
 #include <unistd.h>
 
 #include <cstdio>

@@ -1,6 +1,6 @@
 // Hybrid FEM+PBD kernels: vertex-cover simplification, load processing, incision, rest data.
-#include <deform/mesh_check.h>
-#include <deform/phantom.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/phantom.h>
 #include <gtest/gtest.h>
 
 #include <cstdio>

@@ -1,7 +1,7 @@
 // Hybrid FEM+PBD model: rest state, control nodes, loads, linearity, grasp, cut, reset.
-#include <deform/fem_tet.h>
-#include <deform/mesh_check.h>
-#include <deform/phantom.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/phantom.h>
+#include <deform/kernels/fem_tet.h>
 #include <gtest/gtest.h>
 
 #include <Eigen/SparseCholesky>

@@ -7,8 +7,8 @@
 #include "../support/meshes.h"
 #include "../support/press.h"
 
-#include <deform/mesh_io.h>
-#include <deform/phantom.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/geometry/phantom.h>
 
 #include <gtest/gtest.h>
 

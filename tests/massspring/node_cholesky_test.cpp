@@ -5,7 +5,7 @@
 #include "../support/meshes.h"
 #include "massspring_model.h"
 
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
 
 #include <gtest/gtest.h>
 #include <Eigen/SparseCholesky>

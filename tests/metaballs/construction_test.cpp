@@ -8,8 +8,8 @@
 #include "vacant_space_filling.h"
 #include "voxel_grid.h"
 
-#include <deform/error.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 namespace deform::metaballs {

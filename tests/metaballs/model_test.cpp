@@ -5,8 +5,8 @@
 #include "metaballs_model.h"
 #include "test_meshes.h"
 
-#include <deform/interaction.h>
-#include <deform/phantom.h>
+#include <deform/engine/interaction.h>
+#include <deform/geometry/phantom.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>

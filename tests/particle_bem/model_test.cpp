@@ -4,7 +4,7 @@
 #include "conforming_surface.h"
 #include "particle_bem_model.h"
 
-#include <deform/interaction.h>
+#include <deform/engine/interaction.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>

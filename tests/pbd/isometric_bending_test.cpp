@@ -1,8 +1,8 @@
-// The isometric bending constraint (deform/isometric_bending.h): its gradient against central
-// finite differences, zero at a flat and at a curved rest shape, invariance to rigid motions, the
-// flat-rest energy equals Bergou et al.'s quadratic form for an isometric fold, and the batched
-// projection (scalar and AVX2, float and double) equals the one-by-one projection.
-#include <deform/isometric_bending.h>
+// The isometric bending constraint (deform/kernels/isometric_bending.h): its gradient against
+// central finite differences, zero at a flat and at a curved rest shape, invariance to rigid
+// motions, the flat-rest energy equals Bergou et al.'s quadratic form for an isometric fold, and
+// the batched projection (scalar and AVX2, float and double) equals the one-by-one projection.
+#include <deform/kernels/isometric_bending.h>
 
 #include <gtest/gtest.h>
 

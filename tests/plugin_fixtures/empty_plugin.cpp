@@ -1,5 +1,5 @@
 // Fixture: a well-formed plugin that registers no model.
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 DEFORM_PLUGIN(registry) {
   (void)registry;

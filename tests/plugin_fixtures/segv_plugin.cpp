@@ -1,7 +1,7 @@
 // Fixture: a model that dies of SIGSEGV in init() or at its first step() (parameter "at"), for
 // the run isolation tests: its run must become a failed row and the other models' results must
 // be written.
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 #include <csignal>
 

@@ -1,5 +1,5 @@
 // Fixture: deform_register throws (after registering one model, which must be discarded).
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 #include <stdexcept>
 

@@ -4,7 +4,7 @@
 // working Model.
 #pragma once
 
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 #include <limits>
 #include <memory>

@@ -1,6 +1,6 @@
 // Fixture: a working plugin with two models ("toy" and "toy_rigid"), or, built with
 // TOY_PREFIXED, one model "prefixed" (file libdeform_prefixed.so).
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 #include "toy_model.h"
 

@@ -1,5 +1,5 @@
 // Fixture: claims ABI version 99 (never a real one). Its deform_register must never be called.
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 #include <cstdlib>
 

@@ -4,11 +4,11 @@
 // (zero displacement after a loaded solve, P1 and P2), the surface vertices inside the box report
 // their rest positions, a point load there is taken by the support; and conform_fixed = false
 // keeps the old mesh (surface vertex i is node i, the nodes inside the box pinned).
-#include <deform/cache.h>
-#include <deform/error.h>
-#include <deform/model.h>
-#include <deform/phantom.h>
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/error.h>
+#include <deform/sdk/model.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>

@@ -4,10 +4,10 @@
 // built-in "beam" phantom). Tip sag = Euler-Bernoulli q L^4 / (8 E I) + Timoshenko shear
 // q L^2 / (2 kappa G A), with q = rho g A, I = b h^3 / 12, kappa = 10 (1 + nu) / (12 + 11 nu)
 // (rectangle, Cowper 1966): 1.4715 + 0.0150 = 1.4865 mm (1.4868 mm with kappa = 5/6).
-#include <deform/cache.h>
-#include <deform/model.h>
-#include <deform/phantom.h>
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/model.h>
 #include <gtest/gtest.h>
 
 #include <cmath>

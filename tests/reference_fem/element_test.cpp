@@ -1,6 +1,6 @@
 // Element kernels: forces against finite differences of the energy, stiffness against finite
 // differences of the forces, rigid-motion invariance, rest equilibrium, patch tests.
-#include <deform/fem_tet.h>
+#include <deform/kernels/fem_tet.h>
 
 #include "../support/finite_difference.h"
 

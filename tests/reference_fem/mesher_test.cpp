@@ -3,8 +3,8 @@
 #include "../support/meshes.h"
 #include "test_shapes.h"
 
-#include <deform/error.h>
-#include <deform/tet_mesher.h>
+#include <deform/geometry/tet_mesher.h>
+#include <deform/sdk/error.h>
 
 #include <gtest/gtest.h>
 

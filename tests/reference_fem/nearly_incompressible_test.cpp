@@ -14,10 +14,10 @@
 #include "mean_dilatation_tet.h"
 #include "test_shapes.h"
 
-#include <deform/cache.h>
-#include <deform/model.h>
-#include <deform/phantom.h>
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/model.h>
 
 #include <gtest/gtest.h>
 #include <Eigen/Eigenvalues>

@@ -3,8 +3,8 @@
 // tables' largest load), which must converge and stay far inside the harness's divergence box.
 #include "fem_solver.h"
 
-#include <deform/phantom.h>
-#include <deform/tet_mesher.h>
+#include <deform/geometry/phantom.h>
+#include <deform/geometry/tet_mesher.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -9,7 +9,7 @@
 #include "quadratic_tet.h"
 #include "test_shapes.h"
 
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
 
 #include <gtest/gtest.h>
 #include <Eigen/Eigenvalues>

@@ -3,12 +3,12 @@
 // (interaction.h regionPatch) is compressed homogeneously, as the closed-form Neo-Hookean
 // answer says; the roller nodes keep their held coordinate and slide along the others, and
 // none of the roller boxes is clipped away by conform_fixed (they hold nodes).
-#include <deform/cache.h>
-#include <deform/interaction.h>
-#include <deform/model.h>
-#include <deform/phantom.h>
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/interaction.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/model.h>
 #include <gtest/gtest.h>
 
 #include <cmath>

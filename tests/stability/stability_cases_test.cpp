@@ -3,10 +3,10 @@
 // the harness's runner: the stiff gravity cantilever must move (and the FEM models agree with beam
 // theory), and a plugin with no fixed length parameter must give the same relative displacement
 // at 1 cm, 10 cm and 1 m.
-#include <deform/mesh.h>
-#include <deform/mesh_check.h>
-#include <deform/phantom.h>
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/mesh.h>
 #include <deform_harness/runner.h>
 #include <deform_harness/stability.h>
 

@@ -3,7 +3,7 @@
 // "../support/finite_difference.h".
 #pragma once
 
-#include <deform/types.h>
+#include <deform/sdk/types.h>
 
 namespace deform::testing {
 

@@ -2,8 +2,8 @@
 // (without the runner). Include as "../support/grasp.h".
 #pragma once
 
-#include <deform/interaction.h>
-#include <deform/model.h>
+#include <deform/engine/interaction.h>
+#include <deform/sdk/model.h>
 
 #include <algorithm>
 #include <cmath>

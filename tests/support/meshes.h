@@ -4,7 +4,7 @@
 // the benchmarks as "support/meshes.h" (with tests/ on their include path).
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <algorithm>
 #include <cmath>

@@ -5,9 +5,9 @@
 // a shell or membrane of the surface alone does not behave like that.
 #pragma once
 
-#include <deform/mesh.h>
-#include <deform/model.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/mesh.h>
+#include <deform/sdk/model.h>
 
 #include <limits>
 #include <vector>

@@ -1,6 +1,6 @@
 // Test-only plugin for the stability sweep: a model that crashes (SIGSEGV raised at its second
 // step), hangs, or runs, so the sweep's child-process isolation can be tested. Never installed.
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 #include <csignal>
 #include <thread>

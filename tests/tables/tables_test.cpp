@@ -1,9 +1,9 @@
 // The long harness verbs end to end: a quick table with a missing plugin, the stability sweep with
 // a crashing model and --resume, bench --compare verdicts and exit codes, the HTML report, and
 // progress lines.
-#include <deform/cache.h>
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
+#include <deform/sdk/cache.h>
 #include <deform_harness/analytic.h>
 #include <deform_harness/bench.h>
 #include <deform_harness/calibration.h>

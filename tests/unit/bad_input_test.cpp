@@ -3,9 +3,9 @@
 // naming the input and the place (the line, byte or element of the bad record). The same valid
 // octahedron is written in each format by hand here (independently of the project's writers),
 // then broken in one known place.
-#include <deform/error.h>
-#include <deform/mesh_check.h>
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -5,9 +5,9 @@
 // output by heap addresses, so before the clip canonicalised it, a second clip after other
 // allocations gave a different cap (a different vertex count) and the mesh cache held whichever
 // mesh the first run happened to build.
-#include <deform/box_clip.h>
-#include <deform/phantom.h>
-#include <deform/tet_mesher.h>
+#include <deform/geometry/box_clip.h>
+#include <deform/geometry/phantom.h>
+#include <deform/geometry/tet_mesher.h>
 #include <gtest/gtest.h>
 
 #include <cstdint>

@@ -2,10 +2,10 @@
 // surface whose volume is the analytic difference, with the outside vertices kept bit for bit
 // and every cap vertex exactly on its box plane; the edge cases (disjoint box, box around the
 // whole organ, overlapping boxes, box planes through vertices and along faces) behave as stated.
-#include <deform/box_clip.h>
-#include <deform/error.h>
-#include <deform/mesh_check.h>
-#include <deform/phantom.h>
+#include <deform/geometry/box_clip.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -1,5 +1,5 @@
-#include <deform/cache.h>
-#include <deform/error.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>

@@ -1,7 +1,7 @@
 // Capability names (registry.h) and the capabilities the harness derives from a scene's rigid
 // objects (issue F8: contact_reaction).
-#include <deform/registry.h>
-#include <deform/scene.h>
+#include <deform/engine/scene.h>
+#include <deform/sdk/registry.h>
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
-// installCholmodAllocator (deform/sparse.h): CHOLMOD's allocation hooks keep their malloc
+// installCholmodAllocator (deform/kernels/sparse.h): CHOLMOD's allocation hooks keep their malloc
 // contract (zeroed calloc, content-preserving realloc, frees of memory obtained before the
 // hooks were installed) and a factorisation through them gives the same factor.
-#include <deform/sparse.h>
+#include <deform/kernels/sparse.h>
 
 #include <SuiteSparse_config.h>
 #include <gtest/gtest.h>

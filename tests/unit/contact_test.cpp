@@ -1,11 +1,11 @@
 // Contact (Bullet collision world) and instrument dynamics (ODE): what the world reports for
 // points against spheres, capsule shafts and boxes, the shared contact response, the virtual
 // coupling's spring law, and that worlds exist only when the scene asks for them.
-#include <deform/contact.h>
-#include <deform/instruments.h>
-#include <deform/interaction.h>
-#include <deform/registry.h>
-#include <deform/scene.h>
+#include <deform/engine/instruments.h>
+#include <deform/engine/interaction.h>
+#include <deform/engine/scene.h>
+#include <deform/sdk/contact.h>
+#include <deform/sdk/registry.h>
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
 

@@ -1,8 +1,8 @@
 // Real organ meshes from ../shared/eval-data (see its SOURCES.md for where each comes from and
 // the counts checked here). Skipped when the folder is absent, as on a fresh clone.
-#include <deform/error.h>
-#include <deform/mesh_check.h>
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>

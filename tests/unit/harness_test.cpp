@@ -1,6 +1,6 @@
 // The harness: error metrics on hand-made arrays, step statistics, the runner (status, timing
 // records, divergence, failures, unsupported scenes, reset reproducibility) and results.json.
-#include <deform/interaction.h>
+#include <deform/engine/interaction.h>
 #include <deform_harness/metrics.h>
 #include <deform_harness/results.h>
 #include <deform_harness/runner.h>

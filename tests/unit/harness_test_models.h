@@ -1,8 +1,8 @@
 // Tiny in-test models for the interaction and runner tests (no plugin involved).
 #pragma once
 
-#include <deform/model.h>
-#include <deform/registry.h>
+#include <deform/sdk/model.h>
+#include <deform/sdk/registry.h>
 
 #include <limits>
 #include <stdexcept>

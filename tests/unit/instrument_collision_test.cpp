@@ -1,8 +1,8 @@
 // Rigid bodies with shapes collide with each other in ODE (issue F8 follow-up): an object resting
 // on another does not fall through it, a grasper's jaws push an object, and bodies without shapes
 // pass through each other as before.
-#include <deform/contact.h>
-#include <deform/instruments.h>
+#include <deform/engine/instruments.h>
+#include <deform/sdk/contact.h>
 #include <gtest/gtest.h>
 
 namespace deform {

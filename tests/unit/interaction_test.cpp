@@ -1,8 +1,8 @@
 // Interaction: keyframe interpolation, jaw state, grasp attach/follow/release, point forces and
 // pin heads, probes, the focus point and the fixed region.
-#include <deform/contact.h>
-#include <deform/interaction.h>
-#include <deform/phantom.h>
+#include <deform/engine/interaction.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/contact.h>
 #include <gtest/gtest.h>
 
 #include "harness_test_models.h"

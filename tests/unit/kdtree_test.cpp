@@ -1,5 +1,5 @@
-#include <deform/kdtree.h>
-#include <deform/mesh.h>
+#include <deform/geometry/kdtree.h>
+#include <deform/sdk/mesh.h>
 #include <gtest/gtest.h>
 
 #include <random>

@@ -1,4 +1,4 @@
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 #include <gtest/gtest.h>
 
 namespace deform {

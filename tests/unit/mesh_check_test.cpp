@@ -1,5 +1,5 @@
-#include <deform/error.h>
-#include <deform/mesh_check.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>

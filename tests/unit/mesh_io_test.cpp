@@ -1,6 +1,6 @@
-#include <deform/error.h>
-#include <deform/mesh_check.h>
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>

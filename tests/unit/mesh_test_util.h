@@ -1,7 +1,7 @@
 // Small meshes and a scratch folder shared by the mesh I/O and validation tests.
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 #include <unistd.h>
 
 #include <algorithm>

@@ -1,8 +1,8 @@
 // Issue F9 item 1 through the organ loader (what `deformbench run` does with a scene): every
 // surface defect is refused naming the mesh file, and a grasp that closes away from the organ is
 // refused naming the scene file and the keyframe's JSON path.
-#include <deform/error.h>
-#include <deform/scene.h>
+#include <deform/engine/scene.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 #include <fstream>

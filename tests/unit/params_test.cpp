@@ -1,5 +1,5 @@
-#include <deform/params.h>
-#include <deform/registry.h>
+#include <deform/sdk/params.h>
+#include <deform/sdk/registry.h>
 #include <gtest/gtest.h>
 
 #include <stdexcept>

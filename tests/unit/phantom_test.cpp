@@ -1,8 +1,8 @@
 // Properties every built-in phantom must have, checked over every phantom and several
 // resolutions with mesh.h primitives only (independent of mesh_check's validator).
-#include <deform/error.h>
-#include <deform/mesh.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/error.h>
+#include <deform/sdk/mesh.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>

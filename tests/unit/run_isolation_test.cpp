@@ -2,8 +2,8 @@
 // (run_isolation.h) gives the same record as in process, a SIGSEGV in init() or step() is that
 // run's failed row, and a plugin that crashes while registering is a PluginError naming the
 // signal. Also the progress callback of long runs and the --retry-failed rule of child tasks.
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
 #include <deform_harness/dispatch.h>
 #include <deform_harness/run_isolation.h>
 #include <gtest/gtest.h>

@@ -1,7 +1,7 @@
 // Scene parsing: strict validation with the JSON path in every message, defaults, relative mesh
 // paths, malformed JSON with line/column, parameter resolution and organ loading.
-#include <deform/mesh_io.h>
-#include <deform/scene.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/mesh_io.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>

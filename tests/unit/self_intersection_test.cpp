@@ -1,10 +1,10 @@
 // findSelfIntersections / requireNoSelfIntersections (mesh_check.h) and the refusal of a
 // self-intersecting surface by tetrahedralize() before Gmsh runs.
-#include <deform/error.h>
-#include <deform/mesh_check.h>
-#include <deform/mesh_io.h>
-#include <deform/phantom.h>
-#include <deform/tet_mesher.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/geometry/phantom.h>
+#include <deform/geometry/tet_mesher.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>

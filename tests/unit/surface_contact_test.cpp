@@ -2,10 +2,10 @@
 // than the vertex spacing is found on the triangle and pushed out through its vertices by the
 // barycentric weights; the penalty force and Coulomb friction use the same triangles; the scene
 // keys of the contact method are parsed strictly.
-#include <deform/contact.h>
-#include <deform/distance.h>
-#include <deform/error.h>
-#include <deform/scene.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/distance.h>
+#include <deform/sdk/contact.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 namespace deform {

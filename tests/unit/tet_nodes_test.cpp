@@ -1,9 +1,9 @@
-// Surface vertex -> tet node map and tet mesh measures (core/include/deform/tet_nodes.h): the
-// values every tet-based model (pbd, massspring, bullet_deformable) derives from a tet file.
-#include <deform/error.h>
-#include <deform/organ_tets.h>
-#include <deform/tet_embedding.h>
-#include <deform/tet_nodes.h>
+// Surface vertex -> tet node map and tet mesh measures (core/include/deform/geometry/tet_nodes.h):
+// the values every tet-based model (pbd, massspring, bullet_deformable) derives from a tet file.
+#include <deform/geometry/organ_tets.h>
+#include <deform/geometry/tet_embedding.h>
+#include <deform/geometry/tet_nodes.h>
+#include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
 #include <map>

@@ -2,7 +2,7 @@
 // jaws, free objects. Its own shared object, loaded by InstrumentWorld on first use.
 #include "instruments_backend.h"
 
-#include <deform/error.h>
+#include <deform/sdk/error.h>
 
 #include <cmath>
 #include <memory>

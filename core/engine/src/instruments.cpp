@@ -2,9 +2,9 @@
 // (instruments_backend.h), loaded from its own shared object when the first world is built.
 #include "instruments_backend.h"
 
-#include <deform/component.h>
-#include <deform/error.h>
-#include <deform/instruments.h>
+#include <deform/engine/instruments.h>
+#include <deform/internal/component.h>
+#include <deform/sdk/error.h>
 
 #include <cmath>
 

@@ -3,7 +3,7 @@
 // shared object when a scene first asks for dynamics, so that other runs never map ODE.
 #pragma once
 
-#include <deform/instruments.h>
+#include <deform/engine/instruments.h>
 
 namespace deform {
 

@@ -1,6 +1,6 @@
 // Interaction resolved identically for every model: keyframed tools, grasp attachment and
 // release, point forces and pin-head springs, and the fixed region in terms of a model's nodes.
-#include <deform/interaction.h>
+#include <deform/engine/interaction.h>
 
 #include <algorithm>
 #include <array>

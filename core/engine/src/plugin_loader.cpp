@@ -1,4 +1,4 @@
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
 #include <dlfcn.h>
 #include <sys/wait.h>
 #include <unistd.h>

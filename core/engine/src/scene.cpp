@@ -1,11 +1,11 @@
 // Scene files: strict parsing and validation (DESIGN.md "Scene file"), parameter resolution
 // against a model's declarations, and loading the organ the scene describes.
-#include <deform/cache.h>
-#include <deform/interaction.h>
-#include <deform/mesh_check.h>
-#include <deform/mesh_io.h>
-#include <deform/phantom.h>
-#include <deform/scene.h>
+#include <deform/engine/interaction.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/cache.h>
 
 #include <algorithm>
 #include <charconv>

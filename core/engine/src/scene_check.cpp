@@ -1,6 +1,6 @@
-#include <deform/distance.h>
-#include <deform/error.h>
-#include <deform/scene.h>
+#include <deform/engine/scene.h>
+#include <deform/geometry/distance.h>
+#include <deform/sdk/error.h>
 
 #include <cmath>
 #include <cstdio>

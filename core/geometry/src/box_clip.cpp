@@ -1,6 +1,6 @@
 // The only translation unit that includes CGAL (it compiles slowly): see box_clip.h.
-#include <deform/box_clip.h>
-#include <deform/error.h>
+#include <deform/geometry/box_clip.h>
+#include <deform/sdk/error.h>
 
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>

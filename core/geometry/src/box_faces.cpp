@@ -1,5 +1,5 @@
 // facesOnBoxFaces (box_clip.h), kept out of box_clip.cpp so that it does not need CGAL.
-#include <deform/box_clip.h>
+#include <deform/geometry/box_clip.h>
 
 namespace deform {
 

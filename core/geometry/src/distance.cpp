@@ -1,4 +1,4 @@
-#include <deform/distance.h>
+#include <deform/geometry/distance.h>
 
 #include <algorithm>
 #include <cmath>

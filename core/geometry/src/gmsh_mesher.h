@@ -3,7 +3,7 @@
 // never meshes never maps Gmsh (and OpenCASCADE, FLTK and the rest of its dependencies).
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <string>
 

@@ -1,4 +1,4 @@
-#include <deform/kdtree.h>
+#include <deform/geometry/kdtree.h>
 
 #include <algorithm>
 #include <nanoflann.hpp>

@@ -2,7 +2,7 @@
 // Elements used: tetrahedra (type 4; type 11, the 10-node tet, by its 4 corners) and triangles
 // (type 2; type 9 by its 3 corners); other element types and sections are skipped. Node tags may
 // be arbitrary positive numbers; nodes are numbered 0.. in file order.
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
 
 #include <unordered_map>
 

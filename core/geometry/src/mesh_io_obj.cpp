@@ -1,6 +1,6 @@
 // Wavefront OBJ reader: `v` and `f` lines only; every other statement (vn, vt, mtllib, usemtl,
 // g, o, s, l, p, ...) is ignored.
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
 
 #include <cmath>
 

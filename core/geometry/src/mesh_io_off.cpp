@@ -1,6 +1,6 @@
 // Object File Format reader (OFF and its ST/C/N variants; extra per-vertex or per-face values
 // such as colours are ignored). One vertex or face per line, '#' starts a comment.
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
 
 #include "mesh_io_util.h"
 

@@ -1,7 +1,7 @@
 // PLY reader: ascii, binary_little_endian and binary_big_endian. Uses the `vertex` element's x, y,
 // z and the `face` element's vertex_indices (or vertex_index) list; every other element and
 // property is read past according to its declared type.
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
 
 #include <cmath>
 #include <optional>

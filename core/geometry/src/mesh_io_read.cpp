@@ -1,5 +1,5 @@
 // readMesh and readMeshFromMemory: dispatch on the file extension.
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
 
 #include "mesh_io_util.h"
 

@@ -1,6 +1,6 @@
 // STL reader (ASCII and binary). Corners are merged into shared vertices by exact coordinate, in
 // first-seen order; stored facet normals are ignored (orientation comes from the winding).
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
 
 #include <array>
 #include <cmath>

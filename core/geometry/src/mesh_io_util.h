@@ -3,9 +3,9 @@
 // little-endian binary values, and reports failures as InputError with "line N" or "byte N".
 #pragma once
 
-#include <deform/error.h>
-#include <deform/mesh.h>
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/sdk/error.h>
+#include <deform/sdk/mesh.h>
 
 #include <cstdint>
 #include <cstring>

@@ -4,7 +4,7 @@
 // BINARY (big-endian), with the classic cell layout (count, ids...) or the 5.x OFFSETS /
 // CONNECTIVITY layout. Attribute data (POINT_DATA, CELL_DATA, FIELD) is not needed and ends the
 // parse.
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
 
 #include <algorithm>
 #include <cmath>

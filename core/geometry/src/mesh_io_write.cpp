@@ -1,7 +1,7 @@
 // Mesh writers. Each builds the whole file in memory and then writes it atomically: a temporary
 // file in the destination folder, renamed over the target, so a reader never sees half a file.
-#include <deform/error.h>
-#include <deform/mesh_io.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/sdk/error.h>
 
 #include <unistd.h>
 

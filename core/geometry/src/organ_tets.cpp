@@ -1,8 +1,8 @@
-#include <deform/box_clip.h>
-#include <deform/cache.h>
-#include <deform/organ_tets.h>
-#include <deform/tet_mesher.h>
-#include <deform/tet_nodes.h>
+#include <deform/geometry/box_clip.h>
+#include <deform/geometry/organ_tets.h>
+#include <deform/geometry/tet_mesher.h>
+#include <deform/geometry/tet_nodes.h>
+#include <deform/sdk/cache.h>
 
 #include <algorithm>
 #include <array>

@@ -1,5 +1,5 @@
-#include <deform/error.h>
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
+#include <deform/sdk/error.h>
 
 #include "phantom_builders.h"
 

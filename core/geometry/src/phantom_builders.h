@@ -8,7 +8,7 @@
 //    into two right triangles, mapped through a point function (cube, beam, steak).
 #pragma once
 
-#include <deform/mesh.h>
+#include <deform/sdk/mesh.h>
 
 #include <functional>
 #include <vector>

@@ -1,6 +1,6 @@
 // Points embedded in a tet mesh by barycentric coordinates (tet_embedding.h).
-#include <deform/error.h>
-#include <deform/tet_embedding.h>
+#include <deform/geometry/tet_embedding.h>
+#include <deform/sdk/error.h>
 
 #include <algorithm>
 #include <cmath>

@@ -1,10 +1,10 @@
 #include "gmsh_mesher.h"
 
-#include <deform/cache.h>
-#include <deform/component.h>
-#include <deform/error.h>
-#include <deform/mesh_check.h>
-#include <deform/tet_mesher.h>
+#include <deform/geometry/mesh_check.h>
+#include <deform/geometry/tet_mesher.h>
+#include <deform/internal/component.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/error.h>
 
 #include <fcntl.h>
 #include <poll.h>

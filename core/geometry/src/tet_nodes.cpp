@@ -1,6 +1,6 @@
-#include <deform/error.h>
-#include <deform/kdtree.h>
-#include <deform/tet_nodes.h>
+#include <deform/geometry/kdtree.h>
+#include <deform/geometry/tet_nodes.h>
+#include <deform/sdk/error.h>
 
 #include <algorithm>
 #include <map>

@@ -1,5 +1,5 @@
-#include <deform/error.h>
-#include <deform/voxelize.h>
+#include <deform/geometry/voxelize.h>
+#include <deform/sdk/error.h>
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include <deform/fem_tet.h>
+#include <deform/kernels/fem_tet.h>
 
 #include <Eigen/Dense>
 #include <Eigen/SVD>

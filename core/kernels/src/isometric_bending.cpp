@@ -1,4 +1,4 @@
-#include <deform/isometric_bending.h>
+#include <deform/kernels/isometric_bending.h>
 
 #include <algorithm>
 #include <cmath>

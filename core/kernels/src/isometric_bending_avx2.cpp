@@ -1,9 +1,9 @@
 // AVX2 lanes for isometric_bending_math.h: eight hinges per __m256 (float) or four per __m256d
 // (double). Compiled with -mavx2 -ffp-contract=off (core/CMakeLists.txt) and called only after a
 // run-time CPU check (isometric_bending.cpp); includes nothing but the intrinsics, the row
-// gathers of deform/simd_rows_avx2.h and the internal-linkage math header.
+// gathers of deform/kernels/simd_rows_avx2.h and the internal-linkage math header.
 #if defined(__x86_64__) && defined(__GNUC__)
-#include <deform/simd_rows_avx2.h>
+#include <deform/kernels/simd_rows_avx2.h>
 #include <immintrin.h>
 
 #include "isometric_bending_avx2.h"
@@ -30,7 +30,7 @@ struct Float8 {
   static M notMask(M a) { return _mm256_xor_ps(a, _mm256_castsi256_ps(_mm256_set1_epi32(-1))); }
   static V select(M m, V a, V b) { return _mm256_blendv_ps(b, a, m); }
   static int count(M m) { return __builtin_popcount(_mm256_movemask_ps(m)); }
-  // Rows (x, y, z, 0) at x4 + off[0..7] <-> columns x, y, z (deform/simd_rows_avx2.h).
+  // Rows (x, y, z, 0) at x4 + off[0..7] <-> columns x, y, z (deform/kernels/simd_rows_avx2.h).
   static void loadRows(const float* x4, const int* off, V& x, V& y, V& z) {
     simd::gatherRows8([&](int k) { return x4 + off[k]; }, x, y, z);
   }

@@ -1,10 +1,11 @@
 // Internal: the arithmetic of the batched isometric bending projection
-// (deform/isometric_bending.h), written once over a "lanes" policy L so that the same operations,
-// in the same order, run one hinge at a time (isometric_bending.cpp) and eight floats / four
-// doubles at a time (isometric_bending_avx2.cpp, compiled with -mavx2). Both files are compiled
-// with -ffp-contract=off, so that no multiply-add is fused on one path and not on the other: the
-// two give identical results. Plain pointers and builtin types only (this header is compiled with
-// and without -mavx2, so it includes no library header) and internal linkage throughout.
+// (deform/kernels/isometric_bending.h), written once over a "lanes" policy L so that the same
+// operations, in the same order, run one hinge at a time (isometric_bending.cpp) and eight floats /
+// four doubles at a time (isometric_bending_avx2.cpp, compiled with -mavx2). Both files are
+// compiled with -ffp-contract=off, so that no multiply-add is fused on one path and not on the
+// other: the two give identical results. Plain pointers and builtin types only (this header is
+// compiled with and without -mavx2, so it includes no library header) and internal linkage
+// throughout.
 #pragma once
 
 #include <cstddef>

@@ -1,4 +1,4 @@
-#include <deform/sparse.h>
+#include <deform/kernels/sparse.h>
 
 #include <SuiteSparse_config.h>
 #include <dlfcn.h>

@@ -1,5 +1,6 @@
-#include <deform/cache.h>
-#include <deform/error.h>
+#include <deform/internal/atomic_file.h>
+#include <deform/sdk/cache.h>
+#include <deform/sdk/error.h>
 #include <fcntl.h>
 #include <openssl/evp.h>
 #include <sys/stat.h>

@@ -1,6 +1,6 @@
 // Loading the core's optional back ends (component.h).
-#include <deform/component.h>
-#include <deform/error.h>
+#include <deform/internal/component.h>
+#include <deform/sdk/error.h>
 
 #include <dlfcn.h>
 

@@ -2,8 +2,8 @@
 // respondToContact() (projection of spheres, embedded spheres and surfaces, penalty forces,
 // display-level projection) and solveWithContactConstraints() (prescribed positions). The world
 // itself is in contact_world.cpp.
-#include <deform/contact.h>
-#include <deform/error.h>
+#include <deform/sdk/contact.h>
+#include <deform/sdk/error.h>
 
 #include <algorithm>
 #include <cmath>

@@ -5,7 +5,7 @@
 // process that never collides never maps Bullet.
 #pragma once
 
-#include <deform/contact.h>
+#include <deform/sdk/contact.h>
 
 #include <vector>
 

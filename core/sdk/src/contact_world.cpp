@@ -3,9 +3,9 @@
 // loaded from its own shared object when the first world is built.
 #include "contact_backend.h"
 
-#include <deform/component.h>
-#include <deform/contact.h>
-#include <deform/error.h>
+#include <deform/internal/component.h>
+#include <deform/sdk/contact.h>
+#include <deform/sdk/error.h>
 
 #include <algorithm>
 #include <cmath>

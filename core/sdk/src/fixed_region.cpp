@@ -1,5 +1,5 @@
 // The fixed region's nodes (model.h).
-#include <deform/model.h>
+#include <deform/sdk/model.h>
 
 #include <algorithm>
 

@@ -1,4 +1,4 @@
-#include <deform/params.h>
+#include <deform/sdk/params.h>
 
 #include <cassert>
 #include <cmath>

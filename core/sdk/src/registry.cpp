@@ -1,4 +1,4 @@
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 
 #include <cassert>
 #include <cmath>

@@ -19,7 +19,7 @@
 // is not run again.
 #pragma once
 
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/progress.h>
 

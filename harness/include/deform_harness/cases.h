@@ -7,7 +7,7 @@
 // rows instead of failing.
 #pragma once
 
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
 #include <deform_harness/runner.h>
 
 #include <filesystem>

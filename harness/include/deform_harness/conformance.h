@@ -4,8 +4,8 @@
 // model's capabilities say it does not apply). docs/writing-a-plugin.md lists the checks.
 #pragma once
 
-#include <deform/cache.h>
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/sdk/cache.h>
 
 #include <filesystem>
 #include <functional>

@@ -29,7 +29,7 @@
 // shared object (and of the organ's mesh file): a rebuilt plugin or a changed scene recomputes.
 #pragma once
 
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/progress.h>
 

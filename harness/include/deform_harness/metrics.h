@@ -16,8 +16,8 @@
 // Over several compared instants the sums run over every (instant, vertex) pair.
 #pragma once
 
-#include <deform/scene.h>
-#include <deform/types.h>
+#include <deform/engine/scene.h>
+#include <deform/sdk/types.h>
 
 #include <string>
 

@@ -5,9 +5,9 @@
 // program before any output exists.
 #pragma once
 
-#include <deform/cache.h>
-#include <deform/plugin_loader.h>
-#include <deform/scene.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/engine/scene.h>
+#include <deform/sdk/cache.h>
 #include <deform_harness/metrics.h>
 
 #include <filesystem>

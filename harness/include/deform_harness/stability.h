@@ -30,8 +30,8 @@
 // Output: DIR/stability.{md,csv,json} and DIR/stability_<model>.png (plot_stability.py).
 #pragma once
 
-#include <deform/mesh.h>
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/sdk/mesh.h>
 #include <deform_harness/analytic.h>  // cantileverSag
 #include <deform_harness/cases.h>
 #include <deform_harness/progress.h>

@@ -6,7 +6,7 @@
 // (harness/scripts/plot_sweep.py) is DIR/sweep.png.
 #pragma once
 
-#include <deform/registry.h>
+#include <deform/sdk/registry.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/progress.h>
 

@@ -4,16 +4,16 @@
 //
 // Both solvers get the mesh parameters of the scene's reference (elements, edge_length,
 // refine_surface, conform_fixed, element_order, material), so they solve on the same tets
-// (deform/organ_tets.h, one cache entry), with the same fixed nodes, grasped nodes and per-vertex
-// forces. At each compared instant, over the compared vertices V (every surface vertex no grasp
-// holds: the held ones are prescribed alike in both),
+// (deform/geometry/organ_tets.h, one cache entry), with the same fixed nodes, grasped nodes and
+// per-vertex forces. At each compared instant, over the compared vertices V (every surface vertex
+// no grasp holds: the held ones are prescribed alike in both),
 //     rms_relative = sqrt(mean_V |x_ccx - x_ref|^2) / sqrt(mean_V |x_ref - X|^2),
 //     max_relative = max_V |x_ccx - x_ref|          / sqrt(mean_V |x_ref - X|^2),
 // x_ref reference_fem's positions, X the rest surface. The goal is rms_relative <= 1%.
 // Times: wall and CPU (this process and its children: user + system, getrusage) of each solve.
 #pragma once
 
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
 
 #include <filesystem>
 #include <nlohmann/json.hpp>

@@ -1,7 +1,7 @@
 // The tables' shared kit (table_kit.h).
 #include "table_kit.h"
 
-#include <deform/phantom.h>
+#include <deform/geometry/phantom.h>
 
 #include <algorithm>
 #include <cmath>

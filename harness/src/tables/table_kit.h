@@ -5,8 +5,8 @@
 // even when two tables share it), checks the references and writes the tables.
 #pragma once
 
-#include <deform/mesh.h>
-#include <deform/plugin_loader.h>
+#include <deform/engine/plugin_loader.h>
+#include <deform/sdk/mesh.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/progress.h>
 #include <deform_harness/tables.h>

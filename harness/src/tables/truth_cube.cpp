@@ -4,8 +4,8 @@
 // each scan. Data: data/truth-cube/ (README.md there: source, license, frame).
 #include "table_kit.h"
 
-#include <deform/error.h>
-#include <deform/registry.h>
+#include <deform/sdk/error.h>
+#include <deform/sdk/registry.h>
 
 #include <algorithm>
 #include <cmath>
@@ -347,8 +347,8 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
   const TruthCubeData data = readTruthCubeData(file);
   const std::string calculixProblem = pluginProblem(loader, kCalculix);
   const bool withCalculix = calculixProblem.empty();
-  // Reference and CalculiX on one quadratic tet mesh (deform/organ_tets.h): the same Gmsh tets,
-  // whose surface nodes are the organ's vertices (refine_surface off: the plate and the base
+  // Reference and CalculiX on one quadratic tet mesh (deform/geometry/organ_tets.h): the same Gmsh
+  // tets, whose surface nodes are the organ's vertices (refine_surface off: the plate and the base
   // hold every surface node of their faces, the midside nodes following).
   const long long elements = o.quick ? 1000 : 6000;
   const ojson femParams = {{"element_order", 2}, {"elements", elements}, {"refine_surface", false}};

@@ -4,8 +4,8 @@
 #include "paper_figures.h"
 #include "table_kit.h"
 
-#include <deform/mesh_io.h>
-#include <deform/phantom.h>
+#include <deform/geometry/mesh_io.h>
+#include <deform/geometry/phantom.h>
 #include <deform_harness/analytic.h>
 
 #include <algorithm>

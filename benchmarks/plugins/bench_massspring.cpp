@@ -1,0 +1,129 @@
+// Google Benchmark: one mass-spring step on a liver-sized closed surface (~2.2k nodes, ~6.6k edge
+// springs, as in the metaballs paper's Table 2 row with 6427 springs), under gravity with a grasp.
+#include "massspring_model.h"
+#include "node_cholesky.h"
+#include "support/meshes.h"
+
+#include <deform/geometry/phantom.h>
+
+#include <benchmark/benchmark.h>
+
+#include <vector>
+
+namespace {
+
+using namespace deform;
+
+void runMassSpring(benchmark::State& state, massspring::MassSpringConfig cfg) {
+  Organ o;
+  o.source = "bench:liver-sized ellipsoid";
+  o.surface = testing::liverSizedSurface();
+  massspring::MassSpringModel m;
+  m.init(o, cfg);
+  StepInput in;
+  in.dt = 1e-4;
+  in.gravity = Vec3(0, 0, -9.81);
+  GraspInput g;
+  g.vertices = nearestVertices(o.surface.V, Vec3(0, 0, 0.04), 5);
+  g.targets.resize(static_cast<Eigen::Index>(g.vertices.size()), 3);
+  for (size_t k = 0; k < g.vertices.size(); ++k) g.targets.row(k) = o.surface.V.row(g.vertices[k]);
+  in.grasps.push_back(g);
+  for (int s = 0; s < 20; ++s) m.step(in);
+  for (auto _ : state) {
+    in.grasps[0].targets.col(2).array() += 1e-7;
+    benchmark::DoNotOptimize(m.step(in));
+  }
+  state.counters["springs"] = static_cast<double>(m.counts().at("springs"));
+}
+
+void BM_MassSpringExplicitEdgesOnly(benchmark::State& s) {
+  massspring::MassSpringConfig c;
+  c.integrator = massspring::Integrator::ExplicitEuler;
+  c.bendingRatio = 0.0;
+  runMassSpring(s, c);
+}
+void BM_MassSpringExplicitWithBending(benchmark::State& s) {
+  massspring::MassSpringConfig c;
+  c.integrator = massspring::Integrator::ExplicitEuler;
+  runMassSpring(s, c);
+}
+void BM_MassSpringSymplecticWithBending(benchmark::State& s) {
+  runMassSpring(s, massspring::MassSpringConfig{});
+}
+void BM_MassSpringImplicitWithBending(benchmark::State& s) {
+  massspring::MassSpringConfig c;
+  c.integrator = massspring::Integrator::ImplicitEuler;
+  runMassSpring(s, c);
+}
+
+// The local/global integrator's global step alone: A X = B with A = M + h^2 L of the 8,122-node
+// liver phantom's springs (edge + bending, h = 1 ms, no constrained nodes) and three right-hand
+// sides, by NodeCholesky (node_cholesky.h) and by CHOLMOD's supernodal solve.
+SparseMatrix liverSystemMatrix() {
+  Organ o;
+  o.source = "phantom:liver";
+  o.surface = makePhantom("liver");
+  massspring::MassSpringModel m;
+  m.init(o, massspring::MassSpringConfig{});
+  const Real h2 = 1e-6;
+  std::vector<Triplet> t;
+  for (Eigen::Index i = 0; i < m.masses().size(); ++i) t.emplace_back(i, i, m.masses()[i]);
+  for (const massspring::Spring& s : m.springs()) {
+    t.emplace_back(s.a, s.a, h2 * s.k);
+    t.emplace_back(s.b, s.b, h2 * s.k);
+    t.emplace_back(s.a, s.b, -h2 * s.k);
+    t.emplace_back(s.b, s.a, -h2 * s.k);
+  }
+  SparseMatrix A(m.masses().size(), m.masses().size());
+  A.setFromTriplets(t.begin(), t.end());
+  return A;
+}
+
+MatX liverRightHandSides(Eigen::Index n) {
+  MatX B(n, 3);
+  for (Eigen::Index i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) B(i, c) = std::sin(0.37 * double(i) + 1.3 * c);
+  return B;
+}
+
+void BM_LiverGlobalSolveNodeCholesky(benchmark::State& state) {
+  const SparseMatrix A = liverSystemMatrix();
+  massspring::NodeCholesky chol;
+  chol.factor(A);
+  const MatX B = liverRightHandSides(A.rows());
+  std::vector<massspring::Row4> Z(A.rows());
+  for (auto _ : state) {
+    for (Eigen::Index k = 0; k < A.rows(); ++k) {
+      const int i = chol.perm()[k];
+      Z[k] = {{B(i, 0), B(i, 1), B(i, 2), 0.0}};
+    }
+    chol.solveInPlace(Z.data());
+    benchmark::DoNotOptimize(Z.data());
+  }
+  state.counters["nnz_L"] = double(chol.factorNonZeros());
+  state.SetLabel("ordering " + chol.ordering());
+}
+
+void BM_LiverGlobalSolveCholmodSupernodal(benchmark::State& state) {
+  const SparseMatrix A = liverSystemMatrix();
+  installCholmodAllocator();
+  SparseCholesky chol;
+  chol.compute(A);
+  const MatX B = liverRightHandSides(A.rows());
+  MatX X;
+  for (auto _ : state) {
+    X = chol.solve(B);
+    benchmark::DoNotOptimize(X.data());
+  }
+}
+
+BENCHMARK(BM_LiverGlobalSolveNodeCholesky)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_LiverGlobalSolveCholmodSupernodal)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MassSpringExplicitEdgesOnly)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MassSpringExplicitWithBending)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MassSpringSymplecticWithBending)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MassSpringImplicitWithBending)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
