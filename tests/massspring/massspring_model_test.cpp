@@ -357,21 +357,7 @@ TEST(MassSpringModel, VolumeNetworkIsPressedLikeASolid) {
   EXPECT_GT(c.at("nodes"), press.organ.surface.numVertices());
   EXPECT_GT(c.at("elements"), 100);
   EXPECT_EQ(c.at("bending_springs"), 0);
-  EXPECT_EQ(maxDistance(m.surface(), press.organ.surface.V), 0.0);
-  // Markers through the tets: at rest where bound; pressed, the centre drops about half as far
-  // as the top (the bottom is fixed), the lateral ones stay at their height within the drop.
-  MatX3 markers(2, 3);
-  markers << 0, 0, 0, 0.02, -0.02, 0.0;
-  m.bindMarkers(markers);
-  EXPECT_LT(maxDistance(m.markers(), markers), 1e-12);
-  const Real drop = testing::pressedDrop(m, press, 1000);
-  const MatX3 moved = m.markers();
-  EXPECT_NEAR(markers(0, 2) - moved(0, 2), 0.5 * drop, 0.2 * drop);
-  EXPECT_NEAR(markers(1, 2) - moved(1, 2), 0.5 * drop, 0.2 * drop);
-  std::printf("volume mass-spring: top drops %.3f mm, F L / (E A) = %.3f mm\n", 1e3 * drop,
-              1e3 * press.expectedDrop);
-  EXPECT_NEAR(drop, press.expectedDrop, 0.25 * press.expectedDrop);
-  EXPECT_EQ(m.numericCounters().at("inverted_tets"), 0);
+  testing::expectPressedLikeASolidWithMarkers(m, press, "volume mass-spring");
 }
 
 TEST(MassSpringModel, ASurfaceNetworkHasNoInteriorForMarkers) {
@@ -380,12 +366,7 @@ TEST(MassSpringModel, ASurfaceNetworkHasNoInteriorForMarkers) {
   Cache cache{std::filesystem::path()};
   MassSpringModel m;
   m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
-  try {
-    m.bindMarkers(MatX3::Zero(1, 3));
-    ADD_FAILURE() << "no error";
-  } catch (const UnsupportedError& e) {
-    EXPECT_NE(std::string(e.what()).find("surface network"), std::string::npos) << e.what();
-  }
+  testing::expectNoMarkersOnASurfaceNetwork(m);
 }
 
 }  // namespace

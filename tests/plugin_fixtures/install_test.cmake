@@ -1,6 +1,7 @@
 # cmake -P script run by CTest (test plugin_sdk_install_export), the steps of README "Install" and
 # examples/minimal_plugin/README.md as an author runs them:
-#  1. install BUILD_DIR into WORK_DIR/prefix (cmake --install BUILD --prefix P),
+#  1. install BUILD_DIR into WORK_DIR/prefix (cmake --install BUILD --prefix P): no engine target
+#     exported, no engine or internal header installed, the former header names forwarding,
 #  2. configure, build and install examples/minimal_plugin out of tree with find_package(deformbench),
 #  3. load the built deform_tethered.so with this build's loader (InstalledPlugin.LoadsByPath),
 #  4. load it again through the installed core, found only by the relocated-install search path
@@ -36,6 +37,25 @@ if(NOT config OR NOT core)
 endif()
 get_filename_component(libdir ${core} DIRECTORY)
 get_filename_component(config_dir ${config} DIRECTORY)
+
+# The package gives plugins the SDK and never the engine: no engine target is exported, no
+# engine or internal header installed; the headers' former names still forward.
+file(GLOB targets_files ${config_dir}/deformbenchTargets*.cmake)
+foreach(f ${targets_files})
+  file(READ ${f} text)
+  if(text MATCHES "deform_engine|deform_core_internal")
+    message(FATAL_ERROR "${f} exports an engine or internal target")
+  endif()
+endforeach()
+file(GLOB_RECURSE engine_headers ${prefix}/include/deform/engine/*.h ${prefix}/include/deform/internal/*.h)
+if(engine_headers)
+  message(FATAL_ERROR "engine or internal headers installed: ${engine_headers}")
+endif()
+foreach(h sdk/model.h geometry/mesh_io.h kernels/sparse.h model.h)
+  if(NOT EXISTS ${prefix}/include/deform/${h})
+    message(FATAL_ERROR "the install lacks include/deform/${h}")
+  endif()
+endforeach()
 
 set(compiler_arg)
 if(CXX_COMPILER)

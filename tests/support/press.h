@@ -6,10 +6,14 @@
 #pragma once
 
 #include <deform/geometry/phantom.h>
+#include <deform/sdk/error.h>
 #include <deform/sdk/mesh.h>
 #include <deform/sdk/model.h>
+#include <gtest/gtest.h>
 
+#include <cstdio>
 #include <limits>
+#include <string>
 #include <vector>
 
 namespace deform::testing {
@@ -65,6 +69,39 @@ inline Real pressedDrop(Model& model, const CubePress& p, int steps) {
   Real sum = 0;
   for (int v : p.top) sum += p.organ.surface.V(v, 2) - model.surface()(v, 2);
   return sum / static_cast<Real>(p.top.size());
+}
+
+/// The volume network's press and markers, for `model` initialised on p.organ with the network's
+/// tets: its surface is the input surface at rest; markers through the tets are at rest where
+/// bound; pressed, the centre drops about half as far as the top (the bottom is fixed) and the
+/// lateral ones stay at their height within the drop; the top drops as a solid does (within 25%
+/// of F L / (E A)) without an inverted tet.
+inline void expectPressedLikeASolidWithMarkers(Model& model, const CubePress& press,
+                                               const char* label) {
+  const MatX3 rest = press.organ.surface.V;
+  EXPECT_EQ((model.surface() - rest).cwiseAbs().maxCoeff(), 0.0);
+  MatX3 markers(2, 3);
+  markers << 0, 0, 0, 0.02, -0.02, 0.0;
+  model.bindMarkers(markers);
+  EXPECT_LT((model.markers() - markers).cwiseAbs().maxCoeff(), 1e-12);
+  const Real drop = pressedDrop(model, press, 1000);
+  const MatX3 moved = model.markers();
+  EXPECT_NEAR(markers(0, 2) - moved(0, 2), 0.5 * drop, 0.2 * drop);
+  EXPECT_NEAR(markers(1, 2) - moved(1, 2), 0.5 * drop, 0.2 * drop);
+  std::printf("%s: top drops %.3f mm, F L / (E A) = %.3f mm\n", label, 1e3 * drop,
+              1e3 * press.expectedDrop);
+  EXPECT_NEAR(drop, press.expectedDrop, 0.25 * press.expectedDrop);
+  EXPECT_EQ(model.numericCounters().at("inverted_tets"), 0);
+}
+
+/// A surface network has no interior: binding a marker is an UnsupportedError that says so.
+inline void expectNoMarkersOnASurfaceNetwork(Model& model) {
+  try {
+    model.bindMarkers(MatX3::Zero(1, 3));
+    ADD_FAILURE() << "no error";
+  } catch (const UnsupportedError& e) {
+    EXPECT_NE(std::string(e.what()).find("surface network"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace deform::testing

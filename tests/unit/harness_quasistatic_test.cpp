@@ -1,6 +1,6 @@
 // The runner solves a quasi-static model only at the compared instants (and where a grasp closes),
 // while the interaction is still prepared every step.
-#include "harness_test_models.h"
+#include "tet_lift_scene.h"
 
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
@@ -11,23 +11,8 @@ namespace {
 using deform::testing::RigidTestModel;
 namespace fs = std::filesystem;
 
-/// A 1 s tet scene at 10 ms: the grasper closes at 0.1 s and lifts 2 cm by 0.6 s.
-struct QuasiStaticFixture {
-  Scene scene;
-  Organ organ;
-  QuasiStaticFixture() {
-    scene.dt = 0.01;
-    scene.duration = 1.0;
-    scene.gravity = Vec3::Zero();
-    ToolSpec t;
-    t.radius = 0.005;
-    t.trajectory = {KeyFrame{0.0, Vec3(0, 0, 0.1), false}, KeyFrame{0.1, Vec3(0, 0, 0.1), true},
-                    KeyFrame{0.6, Vec3(0, 0, 0.12), true}};
-    scene.tools.push_back(t);
-    organ.source = "test:tet";
-    organ.surface = deform::testing::tetSurface();
-  }
-};
+/// The tet lift, compared at its default instants.
+using QuasiStaticFixture = deform::testing::TetLiftScene;
 
 /// Runs the rigid test model declared with the given capabilities; returns the record and the
 /// step() inputs the model received.

@@ -10,7 +10,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "harness_test_models.h"
+#include "tet_lift_scene.h"
 
 namespace deform::harness {
 namespace {
@@ -113,23 +113,11 @@ TEST(StepStats, WarmUpExcludedMedianP95) {
 
 // ----------------------------------------------------------------------------------- runner
 
-struct Fixture {
-  Scene scene;
-  Organ organ;
+struct Fixture : deform::testing::TetLiftScene {
   Fixture() {
     scene.name = "tet-lift";
-    scene.dt = 0.01;
-    scene.duration = 1.0;
-    scene.gravity = Vec3::Zero();
-    ToolSpec t;
-    t.radius = 0.005;
-    t.trajectory = {KeyFrame{0.0, Vec3(0, 0, 0.1), false}, KeyFrame{0.1, Vec3(0, 0, 0.1), true},
-                    KeyFrame{0.6, Vec3(0, 0, 0.12), true}};
-    scene.tools.push_back(t);
     scene.compareAt = {0.5, 1.0};
     scene.nearest = {1, 2};
-    organ.source = "test:tet";
-    organ.surface = deform::testing::tetSurface();
   }
   /// A fixed box around vertex 0 (the rigid test model does not hold it).
   void fixCorner() { organ.fixed.boxes.push_back(Box{Vec3(-1, -1, -1), Vec3(0.01, 0.01, 0.01)}); }

@@ -12,7 +12,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "harness_test_models.h"
+#include "tet_lift_scene.h"
 
 namespace deform::harness {
 namespace {
@@ -20,22 +20,10 @@ namespace {
 namespace fs = std::filesystem;
 using deform::testing::RigidTestModel;
 
-struct LiftScene {
-  Scene scene;
-  Organ organ;
+struct LiftScene : deform::testing::TetLiftScene {
   LiftScene() {
-    scene.dt = 0.01;
-    scene.duration = 1.0;
-    scene.gravity = Vec3::Zero();
-    ToolSpec t;
-    t.radius = 0.005;
-    t.trajectory = {KeyFrame{0.0, Vec3(0, 0, 0.1), false}, KeyFrame{0.1, Vec3(0, 0, 0.1), true},
-                    KeyFrame{0.6, Vec3(0, 0, 0.12), true}};
-    scene.tools.push_back(t);
     scene.compareAt = {0.5, 1.0};
     scene.nearest = {1, 2};
-    organ.source = "test:tet";
-    organ.surface = deform::testing::tetSurface();
   }
 };
 
