@@ -34,13 +34,7 @@ Vec3 toolPosition(const std::vector<KeyFrame>& trajectory, Real t);
 /// Jaw state at time t: that of the last keyframe with t_k <= t (open before the first).
 bool jawClosed(const std::vector<KeyFrame>& trajectory, Real t);
 
-/// The organ surface vertices a grasp closing at p with jaw radius r holds: every rest-surface
-/// vertex (rest: #V by 3) within r of p (sorted), or the nearest vertex alone when none is. The
-/// one definition of the grasped set (the runner, rmse_k's exclusion and conformance use it).
-std::vector<int> graspedSurfaceVertices(const MatX3& rest, const Vec3& p, Real r);
-inline std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Vec3& p, Real r) {
-  return graspedSurfaceVertices(rest.V, p, r);
-}
+// graspedSurfaceVertices(), the one definition of the grasped set, is in deform/sdk/model.h.
 
 /// The organ surface vertices a plate holds: every rest-surface vertex inside its box (sorted;
 /// empty when none is, which loadOrgan() refuses). The one definition of the plate's set.

@@ -143,6 +143,15 @@ inline void graspsOnNodes(const std::vector<GraspInput>& grasps, const std::vect
   }
 }
 
+/// The organ surface vertices a grasp closing at p with jaw radius r holds: every rest-surface
+/// vertex (rest: #V by 3) within r of p (sorted), or the nearest vertex alone when none is. The
+/// one definition of the grasped set (the harness's interaction, rmse_k's exclusion and
+/// conformance use it; models and their tests may too).
+std::vector<int> graspedSurfaceVertices(const MatX3& rest, const Vec3& p, Real r);
+inline std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Vec3& p, Real r) {
+  return graspedSurfaceVertices(rest.V, p, r);
+}
+
 /// The nodes held by any of the grasps, sorted and without repeats (capacity of out kept).
 inline void graspedNodeSet(const std::vector<NodeGrasp>& grasps, std::vector<int>& out) {
   out.clear();
