@@ -1,6 +1,7 @@
 #include "fem_solver.h"
 
 #include <deform/geometry/organ_tets.h>
+#include <deform/geometry/pressure_patch.h>
 #include <deform/sdk/error.h>
 
 #include <algorithm>
@@ -1224,51 +1225,21 @@ PointLoadPatch PointLoadSpreader::quadraticPatch(PointLoadPatch p) const {
     for (int f : m_nodeFaces[size_t(i)]) faces.push_back(f);
   std::sort(faces.begin(), faces.end());
   faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
-  // 6-point degree-4 rule on the triangle (Strang & Fix 1973, table 4.1): barycentric
-  // (a, a, 1 - 2a) with weight wa and (b, b, 1 - 2b) with weight wb, and their permutations.
-  constexpr Real a = 0.445948490915965, wa = 0.223381589678011;
-  constexpr Real b = 0.091576213509771, wb = 0.109951743655322;
-  const std::array<std::pair<Vec3, Real>, 6> rule = {{{Vec3(a, a, 1 - 2 * a), wa},
-                                                      {Vec3(a, 1 - 2 * a, a), wa},
-                                                      {Vec3(1 - 2 * a, a, a), wa},
-                                                      {Vec3(b, b, 1 - 2 * b), wb},
-                                                      {Vec3(b, 1 - 2 * b, b), wb},
-                                                      {Vec3(1 - 2 * b, b, b), wb}}};
   constexpr int kSub = 4;  // sub-triangles per edge: k is clamped at the circle rho = R
   std::map<int, Real> load;
   Real total = 0;
   for (int f : faces) {
     const auto& n = m_quadFaces[size_t(f)];
     const Vec3 X0 = m_rest.row(n[0]), X1 = m_rest.row(n[1]), X2 = m_rest.row(n[2]);
-    const Real area = 0.5 * (X1 - X0).cross(X2 - X0).norm();
-    const Real subArea = area / (kSub * kSub);
     std::array<Real, 6> fi{};
-    // Sub-triangles of the barycentric grid with spacing 1/kSub: upward (i, j), (i+1, j),
-    // (i, j+1) and downward (i+1, j), (i+1, j+1), (i, j+1) in (l1, l2) grid coordinates.
-    for (int i = 0; i < kSub; ++i)
-      for (int j = 0; i + j < kSub; ++j)
-        for (int down = 0; down < 2; ++down) {
-          if (down && i + j + 2 > kSub) continue;
-          std::array<Eigen::Vector2d, 3> c;
-          if (!down) {
-            c = {Eigen::Vector2d(i, j), Eigen::Vector2d(i + 1, j), Eigen::Vector2d(i, j + 1)};
-          } else {
-            c = {Eigen::Vector2d(i + 1, j), Eigen::Vector2d(i + 1, j + 1),
-                 Eigen::Vector2d(i, j + 1)};
-          }
-          for (const auto& [l, w] : rule) {
-            const Eigen::Vector2d s = (l(0) * c[0] + l(1) * c[1] + l(2) * c[2]) / kSub;
-            const Real L1 = s(0), L2 = s(1), L0 = 1 - L1 - L2;
-            const Vec3 X = L0 * X0 + L1 * X1 + L2 * X2;
-            const Real rho = (X - centre).norm() / p.radius;
-            const Real k = std::max<Real>(0, 1 - rho * rho) * w * subArea;
-            if (k == 0) continue;
-            const std::array<Real, 6> N = {L0 * (2 * L0 - 1), L1 * (2 * L1 - 1), L2 * (2 * L2 - 1),
-                                           4 * L0 * L1,       4 * L1 * L2,       4 * L2 * L0};
-            for (int q = 0; q < 6; ++q) fi[size_t(q)] += N[size_t(q)] * k;
-            total += k;
-          }
-        }
+    pressureKernelQuadrature(X0, X1, X2, centre, p.radius, kSub, [&](const Vec3& L, Real k) {
+      if (k == 0) return;
+      const Real L0 = L(0), L1 = L(1), L2 = L(2);
+      const std::array<Real, 6> N = {L0 * (2 * L0 - 1), L1 * (2 * L1 - 1), L2 * (2 * L2 - 1),
+                                     4 * L0 * L1,       4 * L1 * L2,       4 * L2 * L0};
+      for (int q = 0; q < 6; ++q) fi[size_t(q)] += N[size_t(q)] * k;
+      total += k;
+    });
     for (int q = 0; q < 6; ++q) load[n[size_t(q)]] += fi[size_t(q)];
   }
   PointLoadPatch out;
