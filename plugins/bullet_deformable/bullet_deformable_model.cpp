@@ -126,11 +126,7 @@ void BulletDeformableModel::init(const ModelSetup& setup) {
   std::vector<int> surfaceNode(size_t(organ.surface.numVertices()));
   if (organ.volume) {
     mesh = *organ.volume;
-    for (int t = 0; t < mesh.numTets(); ++t) {
-      const auto r = mesh.T.row(t);
-      if (tetVolume(mesh.V.row(r(0)), mesh.V.row(r(1)), mesh.V.row(r(2)), mesh.V.row(r(3))) < 0)
-        std::swap(mesh.T(t, 2), mesh.T(t, 3));
-    }
+    orientTetsPositive(mesh);
     // The loader's surface of a tet file is the boundary over the same nodes: match by position.
     surfaceNode = surfaceVertexNodes(organ, mesh.V);
   } else {
