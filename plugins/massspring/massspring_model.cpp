@@ -1,5 +1,6 @@
 #include "massspring_model.h"
 
+#include <deform/geometry/surface_mass.h>
 #include <deform/geometry/tet_nodes.h>
 
 #include <deform/sdk/contact.h>
@@ -91,14 +92,7 @@ MassSpringConfig configFromParams(const ParamValues& p) {
   return c;
 }
 
-namespace {
-
-Real triangleArea(const MatX3& V, const MatX3i& F, Eigen::Index f) {
-  const Vec3 a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
-  return 0.5 * (b - a).cross(c - a).norm();
-}
-
-}  // namespace
+namespace {}  // namespace
 
 void MassSpringModel::init(const ModelSetup& setup) {
   const MassSpringConfig config = configFromParams(setup.params);
@@ -216,19 +210,10 @@ void MassSpringModel::buildSurface(const Organ& organ) {
   m_elements = S.numFaces();
   const Material& mat = organ.material;
 
-  VecX area = VecX::Zero(N), faceArea(S.numFaces());
-  for (int f = 0; f < S.numFaces(); ++f) {
-    faceArea[f] = triangleArea(S.V, S.F, f);
-    for (int k = 0; k < 3; ++k) area[S.F(f, k)] += faceArea[f] / 3.0;
-  }
-  const Real totalArea = faceArea.sum();
-  const MatX2i E = uniqueEdges(S.F);
-  const MatX2i EF = edgeFaces(S.F, E);
-  const bool closed = (EF.array() >= 0).all();
-  const Real enclosed = std::abs(signedVolume(S.V, S.F));
-  const Real totalMass =
-      mat.density * (closed && enclosed > 0 ? enclosed : totalArea * m_config.thickness);
-  m_mass = area * (totalMass / totalArea);
+  const LumpedSurface lumped = lumpSurface(S, mat.density, m_config.thickness);
+  const MatX2i& E = lumped.edges;
+  const MatX2i& EF = lumped.edgeFaces;
+  m_mass = lumped.mass;
 
   std::vector<Real> edgeK(E.rows());
   for (Eigen::Index e = 0; e < E.rows(); ++e) {
@@ -236,12 +221,9 @@ void MassSpringModel::buildSurface(const Organ& organ) {
     s.a = E(e, 0);
     s.b = E(e, 1);
     s.rest = (S.V.row(s.a) - S.V.row(s.b)).norm();
-    Real adj = 0;
-    for (int k = 0; k < 2; ++k)
-      if (EF(e, k) >= 0) adj += faceArea[EF(e, k)];
     if (s.rest <= tol::kDegenerateLength)
       throw InputError(organ.source, "organ.surface edge " + std::to_string(e), "zero-length edge");
-    s.k = membraneSpringStiffness(mat.young, m_config.thickness, s.rest, adj);
+    s.k = membraneSpringStiffness(mat.young, m_config.thickness, s.rest, lumped.edgeArea(e));
     edgeK[e] = s.k;
     m_springs.push_back(s);
   }

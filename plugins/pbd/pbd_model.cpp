@@ -1,5 +1,6 @@
 #include "pbd_model.h"
 
+#include <deform/geometry/surface_mass.h>
 #include <deform/geometry/tet_nodes.h>
 
 #include <deform/geometry/tet_mesher.h>
@@ -131,11 +132,6 @@ std::vector<size_t> orderByColour(std::vector<C>& cs, int numNodes, NodesOf node
   starts.push_back(cs.size());
   cs.swap(out);
   return starts;
-}
-
-Real triangleArea(const MatX3& V, const MatX3i& F, Eigen::Index f) {
-  const Vec3 a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
-  return 0.5 * (b - a).cross(c - a).norm();
 }
 
 }  // namespace
@@ -270,31 +266,20 @@ void PbdModel::buildSurface(const Organ& organ) {
   const bool xpbd = m_config.mode == StiffnessMode::Xpbd;
 
   // Mass: the enclosed volume's mass, distributed by vertex area (a third of each triangle).
-  VecX area = VecX::Zero(N);
-  VecX faceArea(S.numFaces());
-  for (int f = 0; f < S.numFaces(); ++f) {
-    faceArea[f] = triangleArea(S.V, S.F, f);
-    for (int k = 0; k < 3; ++k) area[S.F(f, k)] += faceArea[f] / 3.0;
-  }
-  const Real totalArea = faceArea.sum();
-  const MatX2i E = uniqueEdges(S.F);
-  const MatX2i EF = edgeFaces(S.F, E);
-  const bool closed = (EF.array() >= 0).all();
-  const Real enclosed = std::abs(signedVolume(S.V, S.F));
-  // An open surface has no enclosed volume: give it the shell's mass instead.
-  const Real totalMass =
-      mat.density * (closed && enclosed > 0 ? enclosed : totalArea * m_config.thickness);
-  m_mass = area * (totalMass / totalArea);
+  const LumpedSurface lumped = lumpSurface(S, mat.density, m_config.thickness);
+  const VecX& faceArea = lumped.faceArea;
+  const MatX2i& E = lumped.edges;
+  const MatX2i& EF = lumped.edgeFaces;
+  m_mass = lumped.mass;
 
   for (Eigen::Index e = 0; e < E.rows(); ++e) {
     DistanceConstraint c;
     c.a = E(e, 0);
     c.b = E(e, 1);
     c.rest = (S.V.row(c.a) - S.V.row(c.b)).norm();
-    Real adj = 0;
-    for (int s = 0; s < 2; ++s)
-      if (EF(e, s) >= 0) adj += faceArea[EF(e, s)];
-    c.compliance = xpbd ? surfaceEdgeCompliance(mat.young, m_config.thickness, c.rest, adj) : 0.0;
+    c.compliance =
+        xpbd ? surfaceEdgeCompliance(mat.young, m_config.thickness, c.rest, lumped.edgeArea(e))
+             : 0.0;
     m_distance.push_back(c);
   }
 
