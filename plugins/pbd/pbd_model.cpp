@@ -326,7 +326,7 @@ void PbdModel::buildSurface(const Organ& organ) {
     }
   }
 
-  if (m_config.volume && closed) {
+  if (m_config.volume && lumped.closed) {
     m_hasVolume = true;
     m_restVolume = signedVolume(S.V, S.F);
     const Real K = bulkModulus(mat);

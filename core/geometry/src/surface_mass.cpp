@@ -25,10 +25,11 @@ LumpedSurface lumpSurface(const SurfaceMesh& S, Real density, Real thickness) {
   out.totalArea = out.faceArea.sum();
   out.edges = uniqueEdges(S.F);
   out.edgeFaces = edgeFaces(S.F, out.edges);
-  const bool closed = (out.edgeFaces.array() >= 0).all();
+  out.closed = (out.edgeFaces.array() >= 0).all();
   const Real enclosed = std::abs(signedVolume(S.V, S.F));
   // An open surface has no enclosed volume: give it the shell's mass instead.
-  const Real totalMass = density * (closed && enclosed > 0 ? enclosed : out.totalArea * thickness);
+  const Real totalMass =
+      density * (out.closed && enclosed > 0 ? enclosed : out.totalArea * thickness);
   out.mass = area * (totalMass / out.totalArea);
   return out;
 }

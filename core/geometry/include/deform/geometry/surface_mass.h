@@ -10,11 +10,12 @@ namespace deform {
 /// |signedVolume|) for a closed surface, or of a shell of the given thickness over the area for
 /// an open one, spread by vertex area (a third of each triangle).
 struct LumpedSurface {
-  VecX faceArea;       ///< #F, m^2
-  Real totalArea = 0;  ///< m^2
-  VecX mass;           ///< #V, kg
-  MatX2i edges;        ///< uniqueEdges(F)
-  MatX2i edgeFaces;    ///< edgeFaces(F, edges): the one or two faces beside each edge
+  VecX faceArea;        ///< #F, m^2
+  Real totalArea = 0;   ///< m^2
+  VecX mass;            ///< #V, kg
+  MatX2i edges;         ///< uniqueEdges(F)
+  MatX2i edgeFaces;     ///< edgeFaces(F, edges): the one or two faces beside each edge
+  bool closed = false;  ///< every edge has two faces
   /// The area of the faces beside edge e, m^2.
   Real edgeArea(Eigen::Index e) const {
     Real adj = 0;
