@@ -43,6 +43,14 @@ std::vector<Real> cellFillFractions(const SurfaceMesh& surface, const VoxelGrid&
   return fill;
 }
 
+void HexFemModel::init(const ModelSetup& setup) {
+  const Organ& organ = setup.organ;
+  initialize(organ, configFromParams(setup.params), setup.dt, [&](const MatX3& nodes) {
+    return organ.fixed.empty() ? std::vector<int>{}
+                               : fixedNodeIndices(nodes, organ.fixed, organ.surface);
+  });
+}
+
 void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Real dt,
                              const std::function<std::vector<int>(const MatX3&)>& fixedNodesOf) {
   const std::string where = organ.source.empty() ? std::string("<organ>") : organ.source;

@@ -93,8 +93,14 @@ struct HexFemConfig {
   bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
 };
 
+std::vector<ParamSpec> paramSpecs();  ///< plugin.cpp
+HexFemConfig configFromParams(const ParamValues& params);
+
 class HexFemModel : public Model {
  public:
+  /// initialize() with the config of setup.params and the nodes inside the organ's fixed region
+  /// pinned.
+  void init(const ModelSetup& setup) override;
   /// Builds grid, embedding, K0, mass, sparsity pattern and factorisation. fixedNodesOf maps the
   /// rest node positions to the pinned node indices; with Clamp::Cells the nodes carrying the
   /// surface vertices of organ.fixed are pinned too, with Clamp::Points those vertices are held

@@ -11,7 +11,7 @@
 #include "batched_projection_avx2.h"
 #endif
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 namespace {
 
@@ -327,4 +327,4 @@ Real atan2Polynomial(Real y, Real x) {
   return batched::atan2Poly<ScalarLanes>(y, x);
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

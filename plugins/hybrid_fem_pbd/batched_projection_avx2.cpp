@@ -7,7 +7,7 @@
 
 #include "batched_projection_avx2.h"
 
-namespace deform::hybrid::batched {
+namespace deform::hybrid_fem_pbd::batched {
 
 std::size_t stretchRangeAvx2(float* x4, const StretchViewF& s, std::size_t begin, std::size_t end,
                              float* measure, long long* degenerate) {
@@ -57,4 +57,4 @@ std::size_t bendRangeAvx2(double* x4, const BendView& h, std::size_t begin, std:
   return i - begin;
 }
 
-}  // namespace deform::hybrid::batched
+}  // namespace deform::hybrid_fem_pbd::batched

@@ -7,7 +7,7 @@
 
 #include "load_processing.h"
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 CuttableSurface CuttableSurface::fromMesh(const MatX3& x, const MatX3& rest, const MatX3i& F) {
   CuttableSurface s;
@@ -449,4 +449,4 @@ SurfaceConstraints constraintsAfterCut(const CuttableSurface& s,
   return out;
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

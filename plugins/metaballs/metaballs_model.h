@@ -40,7 +40,6 @@ enum class StiffnessMode { Classic, Xpbd };
 enum class Frame { Rotated, Fixed };
 
 std::vector<ParamSpec> metaballsParams();
-ModelInfo metaballsModelInfo();
 /// Construction parameters from resolved plugin parameters.
 ConstructionParams constructionParams(const ParamValues& p);
 

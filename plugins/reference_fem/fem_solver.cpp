@@ -13,7 +13,7 @@
 #include <map>
 #include <string>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 namespace {
 
@@ -1255,4 +1255,4 @@ PointLoadPatch PointLoadSpreader::quadraticPatch(PointLoadPatch p) const {
   return out;
 }
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

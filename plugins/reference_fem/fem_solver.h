@@ -66,7 +66,7 @@
 #include <string>
 #include <vector>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 enum class MaterialModel { Linear, Corotational, NeoHookean };
 
@@ -401,4 +401,4 @@ std::vector<std::pair<int, Vec3>> tractionForces(const TetMesh& mesh, const Vec3
 std::vector<std::pair<int, Vec3>> tractionForces(const FemSystem& system, const Vec3& traction,
                                                  const std::function<bool(const Vec3&)>& select);
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem
