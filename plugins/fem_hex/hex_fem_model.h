@@ -176,6 +176,10 @@ class HexFemModel : public Model {
   /// Grasped surface vertices of `in` and their targets (m_graspVerts, m_graspVertTargets) and
   /// the nodes carrying them (m_grasped, m_isGrasped).
   void collectGrasps(const StepInput& in);
+  /// step()'s parts: m_fext = gravity on the lumped masses plus the point loads as J^T f; after
+  /// the solve, the reaction of each grasp on its tool (m_graspForces, see step()).
+  void applyLoads(const StepInput& in);
+  void graspReactions(const StepInput& in, Real h);
 
   HexFemConfig m_config;
   Real m_dt = 0;
