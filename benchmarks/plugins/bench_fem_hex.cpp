@@ -7,8 +7,8 @@
 //   bench_fem_hex --benchmark_filter=Scaling
 #include "hex_fem_model.h"
 
-#include <deform/engine/interaction.h>
 #include <deform/geometry/phantom.h>
+#include <deform/sdk/model.h>
 
 #include <benchmark/benchmark.h>
 

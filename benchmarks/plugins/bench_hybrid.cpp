@@ -38,8 +38,8 @@ Organ liverOrgan() {
 void BM_HybridConstruction(benchmark::State& state) {
   const Organ organ = liverOrgan();
   for (auto _ : state) {
-    hybrid::HybridModel m;
-    m.init(organ, hybrid::HybridConfig(), nullptr);  // no cache: the full construction
+    hybrid_fem_pbd::HybridModel m;
+    m.init(organ, hybrid_fem_pbd::HybridConfig(), nullptr);  // no cache: the full construction
     benchmark::DoNotOptimize(m.surface().data());
     state.counters["fine_vertices"] = double(m.counts().at("nodes"));
     state.counters["coarse_vertices"] = double(m.counts().at("coarse_vertices"));
@@ -51,11 +51,11 @@ BENCHMARK(BM_HybridConstruction)->Unit(benchmark::kMillisecond)->Iterations(3);
 
 void BM_HybridStep(benchmark::State& state) {
   const Organ organ = liverOrgan();
-  hybrid::HybridModel m;
-  hybrid::HybridConfig cfg;
+  hybrid_fem_pbd::HybridModel m;
+  hybrid_fem_pbd::HybridConfig cfg;
   cfg.iterations = static_cast<int>(state.range(0));
-  cfg.projection = static_cast<hybrid::SurfaceProjection>(state.range(1));
-  cfg.precision = static_cast<hybrid::HybridPrecision>(state.range(2));
+  cfg.projection = static_cast<hybrid_fem_pbd::SurfaceProjection>(state.range(1));
+  cfg.precision = static_cast<hybrid_fem_pbd::HybridPrecision>(state.range(2));
   m.init(organ, cfg, nullptr);
   const Box b = boundingBox(organ.surface.V);
   StepInput in;
@@ -102,7 +102,7 @@ BENCHMARK(BM_HybridStep)
 // start each time.
 struct SweepSetup {
   int n = 0;
-  hybrid::SurfaceBatches batches;
+  hybrid_fem_pbd::SurfaceBatches batches;
   MatX3 start;
   Vec3 origin;
 };
@@ -112,16 +112,18 @@ const SweepSetup& sweepSetup(bool simd, bool skipImmovable) {
   SweepSetup& out = s[(simd ? 1 : 0) + (skipImmovable ? 2 : 0)];
   if (out.n > 0) return out;
   const SurfaceMesh mesh = makePhantom("liver");
-  const hybrid::SurfaceConstraints c = hybrid::buildSurfaceConstraints(mesh.V, mesh.F);
+  const hybrid_fem_pbd::SurfaceConstraints c =
+      hybrid_fem_pbd::buildSurfaceConstraints(mesh.V, mesh.F);
   out.n = mesh.numVertices();
   VecX w(out.n);
   for (int i = 0; i < out.n; ++i) w[i] = (i % 3 == 0) ? 1.0 : 0.0;
-  out.batches = hybrid::buildSurfaceBatches(c, hybrid::activeConstraints(c, w), w, 1.0, 0.5, 10);
+  out.batches = hybrid_fem_pbd::buildSurfaceBatches(c, hybrid_fem_pbd::activeConstraints(c, w), w,
+                                                    1.0, 0.5, 10);
   // Without the skipping (the isometric kernel before it could skip): every slot marked movable.
   if (!skipImmovable) out.batches.hMovable.assign(out.batches.hMovable.size(), 0xF);
-  hybrid::addIsometricBending(out.batches, mesh.V);
+  hybrid_fem_pbd::addIsometricBending(out.batches, mesh.V);
   out.origin = boundingBox(mesh.V).center();
-  hybrid::addSinglePrecision(out.batches, mesh.V, out.origin, simd);
+  hybrid_fem_pbd::addSinglePrecision(out.batches, mesh.V, out.origin, simd);
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(-1, 1);
   const Real h = 0.3 * std::sqrt(surfaceArea(mesh.V, mesh.F) / mesh.numFaces());
@@ -144,10 +146,12 @@ void BM_SurfaceSweeps(benchmark::State& state) {
   for (auto _ : state) {
     if (f32) {
       x4f = start4f;
-      benchmark::DoNotOptimize(hybrid::projectSurfaceBatchesF(x4f.data(), s.batches, 10, simd));
+      benchmark::DoNotOptimize(
+          hybrid_fem_pbd::projectSurfaceBatchesF(x4f.data(), s.batches, 10, simd));
     } else {
       x4d = start4d;
-      benchmark::DoNotOptimize(hybrid::projectSurfaceBatches(x4d.data(), s.batches, 10, simd));
+      benchmark::DoNotOptimize(
+          hybrid_fem_pbd::projectSurfaceBatches(x4d.data(), s.batches, 10, simd));
     }
   }
   state.counters["stretch"] = double(s.batches.sa.size());
@@ -178,7 +182,7 @@ void BM_GraspResponse(benchmark::State& state) {
     lambda[j] = u(rng);
     for (int r = 0; r < kRows; ++r) Z(r, j) = 1e-4 * u(rng);
   }
-  hybrid::BlockedResponse b;
+  hybrid_fem_pbd::BlockedResponse b;
   b.assign(Z);
   VecX y(b.paddedRows());
   const int kind = static_cast<int>(state.range(0));

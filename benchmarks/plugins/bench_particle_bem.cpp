@@ -6,8 +6,9 @@
 #include "surface_decimation.h"
 
 #include <benchmark/benchmark.h>
-#include <deform/engine/interaction.h>
 #include <deform/geometry/phantom.h>
+#include <deform/geometry/pressure_patch.h>
+#include <deform/sdk/model.h>
 
 #include <map>
 #include <memory>

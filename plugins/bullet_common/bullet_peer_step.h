@@ -27,7 +27,7 @@
 #include <chrono>
 #include <vector>
 
-namespace deform::bullet_peers {
+namespace deform::bullet_common {
 
 /// Per-model state of the shared step tail. Scratch members keep their capacity across steps.
 struct PeerStepState {
@@ -123,4 +123,4 @@ inline StepStatus finishBulletStep(btSoftBody& b, const StepInput& in, Real dt, 
   return StepStatus::Ok;
 }
 
-}  // namespace deform::bullet_peers
+}  // namespace deform::bullet_common

@@ -21,49 +21,6 @@ namespace deform::bullet_deformable {
 
 static_assert(sizeof(btScalar) == sizeof(double), "the Bullet peers use double-precision Bullet");
 
-std::vector<ParamSpec> paramSpecs() {
-  return {
-      ParamSpec::choice("force", "neo_hookean", {"neo_hookean", "linear_elasticity"},
-                        "Bullet's elastic force: btDeformableNeoHookeanForce (stable Neo-Hookean) "
-                        "or btDeformableLinearElasticityForce (small strain)"),
-      ParamSpec::integer("tets", 6000, 10, 5000000,
-                         "target tetrahedron count of the shared Gmsh mesher (organs without a "
-                         "volume mesh)"),
-      ParamSpec::real("damping_alpha", "1/s", 0.01, 0.0, 1e4,
-                      "mass-proportional damping alpha M (linear_elasticity only; Bullet's "
-                      "default)")
-          .calibrate(0.0001, 100, ParamScale::Log),
-      ParamSpec::real("damping_beta", "s", 0.01, 0.0, 10.0,
-                      "stiffness-proportional damping beta K (Bullet's default for "
-                      "linear_elasticity)")
-          .calibrate(0.0001, 1, ParamScale::Log),
-      ParamSpec::integer("newton_iterations", 1, 1, 1000,
-                         "Newton iterations of Bullet's implicit solver per step (Bullet's "
-                         "default 1: linearly implicit)"),
-      ParamSpec::integer("krylov_iterations", 300, 1, 100000,
-                         "iteration cap of Bullet's conjugate gradient solver per Newton "
-                         "iteration (Bullet's default 300)"),
-      ParamSpec::real("krylov_tolerance", "1", 1.1920928955078125e-07, 1e-30, 1.0,
-                      "CG stops when r^T M^-1 r < tol min(1, b^T M^-1 b); default FLT_EPSILON, "
-                      "the value of Bullet's single-precision build (its double build uses "
-                      "DBL_EPSILON and then always runs to the cap)"),
-  };
-}
-
-DeformableConfig configFromParams(const ParamValues& p) {
-  DeformableConfig c;
-  c.force =
-      p.choiceAs<ElasticForce>("force", {{"neo_hookean", ElasticForce::NeoHookean},
-                                         {"linear_elasticity", ElasticForce::LinearElasticity}});
-  c.targetTets = p.integer("tets");
-  c.dampingAlpha = p.real("damping_alpha");
-  c.dampingBeta = p.real("damping_beta");
-  c.newtonIterations = static_cast<int>(p.integer("newton_iterations"));
-  c.krylovIterations = static_cast<int>(p.integer("krylov_iterations"));
-  c.krylovTolerance = p.real("krylov_tolerance");
-  return c;
-}
-
 std::pair<Real, Real> lameParameters(const Material& m) {
   const Real mu = m.young / (2.0 * (1.0 + m.poisson));
   const Real lambda = m.young * m.poisson / ((1.0 + m.poisson) * (1.0 - 2.0 * m.poisson));
@@ -126,11 +83,7 @@ void BulletDeformableModel::init(const ModelSetup& setup) {
   std::vector<int> surfaceNode(size_t(organ.surface.numVertices()));
   if (organ.volume) {
     mesh = *organ.volume;
-    for (int t = 0; t < mesh.numTets(); ++t) {
-      const auto r = mesh.T.row(t);
-      if (tetVolume(mesh.V.row(r(0)), mesh.V.row(r(1)), mesh.V.row(r(2)), mesh.V.row(r(3))) < 0)
-        std::swap(mesh.T(t, 2), mesh.T(t, 3));
-    }
+    orientTetsPositive(mesh);
     // The loader's surface of a tet file is the boundary over the same nodes: match by position.
     surfaceNode = surfaceVertexNodes(organ, mesh.V);
   } else {
@@ -244,7 +197,7 @@ void BulletDeformableModel::build() {
                                m_config.krylovTolerance);
 
   m_tail.grasped.clear();
-  bullet_peers::copyNodes(b, m_x);
+  bullet_common::copyNodes(b, m_x);
   m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
   for (size_t i = 0; i < m_surfaceNode.size(); ++i)
     m_surface.row(Eigen::Index(i)) = m_x.row(m_surfaceNode[i]);
@@ -258,7 +211,7 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
   w.gravity->m_gravity = g;
   w.world->getWorldInfo().m_gravity = g;
 
-  bullet_peers::beginBulletStep(b, w.inverseMass, in.grasps, m_surfaceNode, m_tail);
+  bullet_common::beginBulletStep(b, w.inverseMass, in.grasps, m_surfaceNode, m_tail);
   for (const PointLoad& l : in.loads)
     for (size_t k = 0; k < l.vertices.size(); ++k) {
       btSoftBody::Node& node = b.m_nodes[m_surfaceNode[size_t(l.vertices[k])]];
@@ -274,8 +227,8 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
     }
 
   w.world->stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
-  return bullet_peers::finishBulletStep(b, in, dt, m_tail, m_x, m_phase, &m_surfaceNode,
-                                        &m_surface);
+  return bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase, &m_surfaceNode,
+                                         &m_surface);
 }
 
 void BulletDeformableModel::reset() {

@@ -92,7 +92,7 @@ class BulletDeformableModel final : public Model {
   std::vector<int> m_fixed;
 
   std::unique_ptr<World> m_world;
-  bullet_peers::PeerStepState m_tail;  // grasped set, divergence box, contact scratch
+  bullet_common::PeerStepState m_tail;  // grasped set, divergence box, contact scratch
   MatX3 m_x;
   MatX3 m_surface;
   PhaseTimes m_phase;

@@ -1,7 +1,55 @@
-// The "bullet_deformable" plugin: registers BulletDeformableModel (bullet_deformable_model.h).
+// The "bullet_deformable" plugin: its parameters, their config (DeformableConfig) and the
+// registration of BulletDeformableModel (bullet_deformable_model.h).
 #include "bullet_deformable_model.h"
 
 #include <deform/sdk/registry.h>
+
+namespace deform::bullet_deformable {
+
+std::vector<ParamSpec> paramSpecs() {
+  return {
+      ParamSpec::choice("force", "neo_hookean", {"neo_hookean", "linear_elasticity"},
+                        "Bullet's elastic force: btDeformableNeoHookeanForce (stable Neo-Hookean) "
+                        "or btDeformableLinearElasticityForce (small strain)"),
+      ParamSpec::integer("tets", 6000, 10, 5000000,
+                         "target tetrahedron count of the shared Gmsh mesher (organs without a "
+                         "volume mesh)"),
+      ParamSpec::real("damping_alpha", "1/s", 0.01, 0.0, 1e4,
+                      "mass-proportional damping alpha M (linear_elasticity only; Bullet's "
+                      "default)")
+          .calibrate(0.0001, 100, ParamScale::Log),
+      ParamSpec::real("damping_beta", "s", 0.01, 0.0, 10.0,
+                      "stiffness-proportional damping beta K (Bullet's default for "
+                      "linear_elasticity)")
+          .calibrate(0.0001, 1, ParamScale::Log),
+      ParamSpec::integer("newton_iterations", 1, 1, 1000,
+                         "Newton iterations of Bullet's implicit solver per step (Bullet's "
+                         "default 1: linearly implicit)"),
+      ParamSpec::integer("krylov_iterations", 300, 1, 100000,
+                         "iteration cap of Bullet's conjugate gradient solver per Newton "
+                         "iteration (Bullet's default 300)"),
+      ParamSpec::real("krylov_tolerance", "1", 1.1920928955078125e-07, 1e-30, 1.0,
+                      "CG stops when r^T M^-1 r < tol min(1, b^T M^-1 b); default FLT_EPSILON, "
+                      "the value of Bullet's single-precision build (its double build uses "
+                      "DBL_EPSILON and then always runs to the cap)"),
+  };
+}
+
+DeformableConfig configFromParams(const ParamValues& p) {
+  DeformableConfig c;
+  c.force =
+      p.choiceAs<ElasticForce>("force", {{"neo_hookean", ElasticForce::NeoHookean},
+                                         {"linear_elasticity", ElasticForce::LinearElasticity}});
+  c.targetTets = p.integer("tets");
+  c.dampingAlpha = p.real("damping_alpha");
+  c.dampingBeta = p.real("damping_beta");
+  c.newtonIterations = static_cast<int>(p.integer("newton_iterations"));
+  c.krylovIterations = static_cast<int>(p.integer("krylov_iterations"));
+  c.krylovTolerance = p.real("krylov_tolerance");
+  return c;
+}
+
+}  // namespace deform::bullet_deformable
 
 DEFORM_PLUGIN(registry) {
   deform::ModelInfo info;

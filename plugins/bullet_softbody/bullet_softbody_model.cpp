@@ -12,50 +12,6 @@ namespace deform::bullet_softbody {
 
 static_assert(sizeof(btScalar) == sizeof(double), "the Bullet peers use double-precision Bullet");
 
-std::vector<ParamSpec> paramSpecs() {
-  return {
-      ParamSpec::integer("iterations", 10, 1, 100000,
-                         "position solver sweeps per step (btSoftBody m_cfg.piterations)"),
-      ParamSpec::choice("stiffness_mapping", "xpbd", {"xpbd", "fixed"},
-                        "link stiffness kLST: xpbd = per link from E (one XPBD projection's "
-                        "fraction, see README); fixed = link_stiffness for every link"),
-      ParamSpec::real("link_stiffness", "1", 0.5, 1e-6, 1.0,
-                      "kLST of every structural link when stiffness_mapping is fixed")
-          .calibrate(0.001, 1, ParamScale::Log),
-      ParamSpec::real("thickness", "m", 0.01, 1e-6, 1.0,
-                      "shell thickness t of the xpbd mapping (alpha = L^2 / (E t A_e))")
-          .calibrate(0.0001, 0.3, ParamScale::Log),
-      ParamSpec::flag("bending", false,
-                      "add Bullet's bending links between nodes two edges apart "
-                      "(generateBendingConstraints(2))"),
-      ParamSpec::real("bending_stiffness", "1", 0.1, 1e-6, 1.0, "kLST of the bending links")
-          .calibrate(0.001, 1, ParamScale::Log),
-      ParamSpec::flag("volume", true,
-                      "Bullet's volume conservation force with kVC = volume_scale K / V0"),
-      ParamSpec::real("volume_scale", "1", 1.0, 0.0, 1e6,
-                      "multiplier on the physical volume coefficient K / V0")
-          .calibrate(0.001, 1000.0, ParamScale::Log),
-      ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
-                      "velocity damping rate c: Bullet kDP = 1 - exp(-c dt)")
-          .calibrate(0.01, 1000, ParamScale::Log),
-  };
-}
-
-SoftBodyConfig configFromParams(const ParamValues& p) {
-  SoftBodyConfig c;
-  c.iterations = static_cast<int>(p.integer("iterations"));
-  c.mapping = p.choiceAs<StiffnessMapping>(
-      "stiffness_mapping", {{"xpbd", StiffnessMapping::Xpbd}, {"fixed", StiffnessMapping::Fixed}});
-  c.linkStiffness = p.real("link_stiffness");
-  c.thickness = p.real("thickness");
-  c.bending = p.flag("bending");
-  c.bendingStiffness = p.real("bending_stiffness");
-  c.volume = p.flag("volume");
-  c.volumeScale = p.real("volume_scale");
-  c.damping = p.real("damping");
-  return c;
-}
-
 Real xpbdLinkStiffness(Real young, Real thickness, Real restLength, Real adjacentArea, Real wa,
                        Real wb, Real dt) {
   const Real w = wa + wb;
@@ -209,7 +165,7 @@ void BulletSoftBodyModel::build() {
   w.world.addSoftBody(&b);
 
   m_tail.grasped.clear();
-  bullet_peers::copyNodes(b, m_x);
+  bullet_common::copyNodes(b, m_x);
 }
 
 StepStatus BulletSoftBodyModel::step(const StepInput& in) {
@@ -220,7 +176,7 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
 
   // Kinematic grasped nodes (the surface vertices are the body's nodes): inverse mass 0 and
   // the velocity that lands them on the target.
-  if (bullet_peers::beginBulletStep(b, w.inverseMass, in.grasps, {}, m_tail))
+  if (bullet_common::beginBulletStep(b, w.inverseMass, in.grasps, {}, m_tail))
     b.updateLinkConstants();  // link c0 = (w_a + w_b) / kLST
   for (const NodeGrasp& g : m_tail.nodeGrasps)
     for (size_t k = 0; k < g.nodes.size(); ++k) {
@@ -235,7 +191,7 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
     }
 
   w.world.stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
-  return bullet_peers::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);
+  return bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);
 }
 
 void BulletSoftBodyModel::reset() {

@@ -108,7 +108,7 @@ class BulletSoftBodyModel final : public Model {
   Real m_restVolume = 0;
 
   std::unique_ptr<World> m_world;
-  bullet_peers::PeerStepState m_tail;  // grasped set, divergence box, contact scratch
+  bullet_common::PeerStepState m_tail;  // grasped set, divergence box, contact scratch
   MatX3 m_x;
   PhaseTimes m_phase;
 };

@@ -1,7 +1,56 @@
-// The "bullet_softbody" plugin: registers BulletSoftBodyModel (bullet_softbody_model.h).
+// The "bullet_softbody" plugin: its parameters, their config (SoftBodyConfig) and the
+// registration of BulletSoftBodyModel (bullet_softbody_model.h).
 #include "bullet_softbody_model.h"
 
 #include <deform/sdk/registry.h>
+
+namespace deform::bullet_softbody {
+
+std::vector<ParamSpec> paramSpecs() {
+  return {
+      ParamSpec::integer("iterations", 10, 1, 100000,
+                         "position solver sweeps per step (btSoftBody m_cfg.piterations)"),
+      ParamSpec::choice("stiffness_mapping", "xpbd", {"xpbd", "fixed"},
+                        "link stiffness kLST: xpbd = per link from E (one XPBD projection's "
+                        "fraction, see README); fixed = link_stiffness for every link"),
+      ParamSpec::real("link_stiffness", "1", 0.5, 1e-6, 1.0,
+                      "kLST of every structural link when stiffness_mapping is fixed")
+          .calibrate(0.001, 1, ParamScale::Log),
+      ParamSpec::real("thickness", "m", 0.01, 1e-6, 1.0,
+                      "shell thickness t of the xpbd mapping (alpha = L^2 / (E t A_e))")
+          .calibrate(0.0001, 0.3, ParamScale::Log),
+      ParamSpec::flag("bending", false,
+                      "add Bullet's bending links between nodes two edges apart "
+                      "(generateBendingConstraints(2))"),
+      ParamSpec::real("bending_stiffness", "1", 0.1, 1e-6, 1.0, "kLST of the bending links")
+          .calibrate(0.001, 1, ParamScale::Log),
+      ParamSpec::flag("volume", true,
+                      "Bullet's volume conservation force with kVC = volume_scale K / V0"),
+      ParamSpec::real("volume_scale", "1", 1.0, 0.0, 1e6,
+                      "multiplier on the physical volume coefficient K / V0")
+          .calibrate(0.001, 1000.0, ParamScale::Log),
+      ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
+                      "velocity damping rate c: Bullet kDP = 1 - exp(-c dt)")
+          .calibrate(0.01, 1000, ParamScale::Log),
+  };
+}
+
+SoftBodyConfig configFromParams(const ParamValues& p) {
+  SoftBodyConfig c;
+  c.iterations = static_cast<int>(p.integer("iterations"));
+  c.mapping = p.choiceAs<StiffnessMapping>(
+      "stiffness_mapping", {{"xpbd", StiffnessMapping::Xpbd}, {"fixed", StiffnessMapping::Fixed}});
+  c.linkStiffness = p.real("link_stiffness");
+  c.thickness = p.real("thickness");
+  c.bending = p.flag("bending");
+  c.bendingStiffness = p.real("bending_stiffness");
+  c.volume = p.flag("volume");
+  c.volumeScale = p.real("volume_scale");
+  c.damping = p.real("damping");
+  return c;
+}
+
+}  // namespace deform::bullet_softbody
 
 DEFORM_PLUGIN(registry) {
   deform::ModelInfo info;

@@ -43,9 +43,10 @@ std::vector<Real> cellFillFractions(const SurfaceMesh& surface, const VoxelGrid&
   return fill;
 }
 
-void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Real dt,
-                             const std::function<std::vector<int>(const MatX3&)>& fixedNodesOf) {
-  const std::string where = organ.source.empty() ? std::string("<organ>") : organ.source;
+namespace {
+
+// InputError for unusable input (where: the organ's source).
+void checkInput(const std::string& where, const Organ& organ, const HexFemConfig& config, Real dt) {
   const Material& mat = organ.material;
   if (!(dt > 0)) throw InputError(where, "dt", "time step must be positive");
   if (!(mat.young > 0)) throw InputError(where, "material.young", "must be positive");
@@ -59,6 +60,41 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   if (config.cellSize <= 0 && config.elements < 1) {
     throw InputError(where, "params.elements", "must be >= 1 when cell_size is 0");
   }
+}
+
+// The clamped surface vertices: inside a fixed box or listed by index (sorted, once each).
+std::vector<int> clampedSurfaceVertices(const Organ& organ) {
+  std::vector<int> clamped;
+  for (Eigen::Index v = 0; v < organ.surface.V.rows(); ++v) {
+    const Vec3 p = organ.surface.V.row(v).transpose();
+    for (const Box& b : organ.fixed.boxes)
+      if (b.contains(p)) {
+        clamped.push_back(static_cast<int>(v));
+        break;
+      }
+  }
+  for (int v : organ.fixed.surfaceVertices)
+    if (v >= 0 && v < organ.surface.numVertices()) clamped.push_back(v);
+  std::sort(clamped.begin(), clamped.end());
+  clamped.erase(std::unique(clamped.begin(), clamped.end()), clamped.end());
+  return clamped;
+}
+
+}  // namespace
+
+void HexFemModel::init(const ModelSetup& setup) {
+  const Organ& organ = setup.organ;
+  initialize(organ, configFromParams(setup.params), setup.dt, [&](const MatX3& nodes) {
+    return organ.fixed.empty() ? std::vector<int>{}
+                               : fixedNodeIndices(nodes, organ.fixed, organ.surface);
+  });
+}
+
+void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Real dt,
+                             const std::function<std::vector<int>(const MatX3&)>& fixedNodesOf) {
+  const std::string where = organ.source.empty() ? std::string("<organ>") : organ.source;
+  const Material& mat = organ.material;
+  checkInput(where, organ, config, dt);
   m_config = config;
   m_dt = dt;
 
@@ -90,20 +126,7 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   std::sort(m_fixedList.begin(), m_fixedList.end());
   m_fixedList.erase(std::unique(m_fixedList.begin(), m_fixedList.end()), m_fixedList.end());
   m_fixedInRegion = static_cast<long long>(m_fixedList.size());
-  // The clamped surface vertices: inside a fixed box or listed by index.
-  std::vector<int> clamped;
-  for (Eigen::Index v = 0; v < organ.surface.V.rows(); ++v) {
-    const Vec3 p = organ.surface.V.row(v).transpose();
-    for (const Box& b : organ.fixed.boxes)
-      if (b.contains(p)) {
-        clamped.push_back(static_cast<int>(v));
-        break;
-      }
-  }
-  for (int v : organ.fixed.surfaceVertices)
-    if (v >= 0 && v < organ.surface.numVertices()) clamped.push_back(v);
-  std::sort(clamped.begin(), clamped.end());
-  clamped.erase(std::unique(clamped.begin(), clamped.end()), clamped.end());
+  const std::vector<int> clamped = clampedSurfaceVertices(organ);
   if (config.clamp == Clamp::Cells) {
     // Pin every node carrying a clamped vertex: the clamp reaches up to a cell beyond the region.
     for (int v : clamped)
@@ -586,6 +609,66 @@ void HexFemModel::collectGrasps(const StepInput& in) {
   }
 }
 
+void HexFemModel::applyLoads(const StepInput& in) {
+  const int N = m_grid.numNodes();
+  // External forces: gravity on the lumped masses, point loads as J^T f: every per-vertex share
+  // of the harness's patch through its vertex's trilinear weights (a load without a spread acts
+  // on its vertex alone).
+  for (int n = 0; n < N; ++n) m_fext.segment<3>(3 * n) = m_mass[3 * n] * in.gravity;
+  const Eigen::Index numVerts = m_embedding.nodeIds.rows();
+  auto addVertexForce = [&](int v, const Vec3& f) {
+    if (v < 0 || v >= numVerts) return;
+    for (int a = 0; a < 8; ++a)
+      m_fext.segment<3>(3 * m_embedding.nodeIds(v, a)) += m_embedding.weights(v, a) * f;
+  };
+  for (const PointLoad& load : in.loads) {
+    if (load.vertices.empty()) {
+      addVertexForce(load.surfaceVertex, load.force);
+      continue;
+    }
+    for (size_t k = 0; k < load.vertices.size() && k < load.weights.size(); ++k)
+      addVertexForce(load.vertices[k], load.weights[k] * load.force);
+  }
+}
+
+void HexFemModel::graspReactions(const StepInput& in, Real h) {
+  const int N = m_grid.numNodes();
+  Eigen::Map<const VecX> x(m_x.data(), 3 * N);
+  // Reaction of each grasp on the tool: the residual of the tissue's own rows (inertia, elastic
+  // and external forces, without the penalty) at the nodes carrying its vertices,
+  // (b - A v+)_C / h, each node's share split between the grasps by their weights on it. For an
+  // exact solve this is sum_v kp (J_v x+ - t_v); computed so, the CG solve's residual at the held
+  // rows would reach the tool multiplied by kp (an ODE-driven grasper in
+  // scenes/liver_instruments.json was flung 2 m away on closing).
+  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
+  if (!m_grasped.empty()) {
+    if (m_grasped != m_touchedGrasped) {
+      m_touchedGrasped = m_grasped;
+      for (int e : m_touched) m_elemMark[e] = 0;
+      m_touched.clear();
+      for (int n : m_grasped)
+        for (int k = m_nodeElemStart[n]; k < m_nodeElemStart[n + 1]; ++k)
+          if (!m_elemMark[m_nodeElems[k]]) {
+            m_elemMark[m_nodeElems[k]] = 1;
+            m_touched.push_back(m_nodeElems[k]);
+          }
+      std::sort(m_touched.begin(), m_touched.end());
+    }
+    m_w = h * x + m_c2 * m_v;
+    for (int n : m_grasped) {
+      m_z.segment<3>(3 * n) = m_mass.segment<3>(3 * n).cwiseProduct(m_vOld.segment<3>(3 * n) -
+                                                                    m_c1 * m_v.segment<3>(3 * n)) +
+                              h * m_fext.segment<3>(3 * n);
+    }
+    applyElements(&m_touched, m_w, 1.0, h, -1.0, m_z);
+    for (int n : m_grasped) {
+      const int c = m_carryCol[n];
+      for (Eigen::Index g = 0; g < m_carryShare.cols(); ++g)
+        m_graspForces[size_t(g)] += m_carryShare(c, g) * m_z.segment<3>(3 * n) / h;
+    }
+  }
+}
+
 StepStatus HexFemModel::step(const StepInput& in) {
   const auto t0 = Clock::now();
   const int N = m_grid.numNodes();
@@ -606,24 +689,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
   m_v0 = m_v;
   collectGrasps(in);
 
-  // External forces: gravity on the lumped masses, point loads as J^T f: every per-vertex share
-  // of the harness's patch through its vertex's trilinear weights (a load without a spread acts
-  // on its vertex alone).
-  for (int n = 0; n < N; ++n) m_fext.segment<3>(3 * n) = m_mass[3 * n] * in.gravity;
-  const Eigen::Index numVerts = m_embedding.nodeIds.rows();
-  auto addVertexForce = [&](int v, const Vec3& f) {
-    if (v < 0 || v >= numVerts) return;
-    for (int a = 0; a < 8; ++a)
-      m_fext.segment<3>(3 * m_embedding.nodeIds(v, a)) += m_embedding.weights(v, a) * f;
-  };
-  for (const PointLoad& load : in.loads) {
-    if (load.vertices.empty()) {
-      addVertexForce(load.surfaceVertex, load.force);
-      continue;
-    }
-    for (size_t k = 0; k < load.vertices.size() && k < load.weights.size(); ++k)
-      addVertexForce(load.vertices[k], load.weights[k] * load.force);
-  }
+  applyLoads(in);
 
   const bool penalty = in.contact && in.contact->params().method == ContactMethod::Penalty;
   if (penalty)
@@ -720,39 +786,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
   // reads unconverged_steps into validity.
   if (!rotationsOk || !solveConverged) ++m_unconvergedSteps;
 
-  // Reaction of each grasp on the tool: the residual of the tissue's own rows (inertia, elastic
-  // and external forces, without the penalty) at the nodes carrying its vertices,
-  // (b - A v+)_C / h, each node's share split between the grasps by their weights on it. For an
-  // exact solve this is sum_v kp (J_v x+ - t_v); computed so, the CG solve's residual at the held
-  // rows would reach the tool multiplied by kp (an ODE-driven grasper in
-  // scenes/liver_instruments.json was flung 2 m away on closing).
-  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
-  if (!m_grasped.empty()) {
-    if (m_grasped != m_touchedGrasped) {
-      m_touchedGrasped = m_grasped;
-      for (int e : m_touched) m_elemMark[e] = 0;
-      m_touched.clear();
-      for (int n : m_grasped)
-        for (int k = m_nodeElemStart[n]; k < m_nodeElemStart[n + 1]; ++k)
-          if (!m_elemMark[m_nodeElems[k]]) {
-            m_elemMark[m_nodeElems[k]] = 1;
-            m_touched.push_back(m_nodeElems[k]);
-          }
-      std::sort(m_touched.begin(), m_touched.end());
-    }
-    m_w = h * x + m_c2 * m_v;
-    for (int n : m_grasped) {
-      m_z.segment<3>(3 * n) = m_mass.segment<3>(3 * n).cwiseProduct(m_vOld.segment<3>(3 * n) -
-                                                                    m_c1 * m_v.segment<3>(3 * n)) +
-                              h * m_fext.segment<3>(3 * n);
-    }
-    applyElements(&m_touched, m_w, 1.0, h, -1.0, m_z);
-    for (int n : m_grasped) {
-      const int c = m_carryCol[n];
-      for (Eigen::Index g = 0; g < m_carryShare.cols(); ++g)
-        m_graspForces[size_t(g)] += m_carryShare(c, g) * m_z.segment<3>(3 * n) / h;
-    }
-  }
+  graspReactions(in, h);
 
   // Advance positions.
   Eigen::Map<VecX>(m_x.data(), 3 * N) += h * m_v;

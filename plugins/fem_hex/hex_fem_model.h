@@ -93,8 +93,14 @@ struct HexFemConfig {
   bool tryAllOrderings = true;  ///< CHOLMOD nmethods = 9 (else its default AMD/METIS choice)
 };
 
+std::vector<ParamSpec> paramSpecs();  ///< plugin.cpp
+HexFemConfig configFromParams(const ParamValues& params);
+
 class HexFemModel : public Model {
  public:
+  /// initialize() with the config of setup.params and the nodes inside the organ's fixed region
+  /// pinned.
+  void init(const ModelSetup& setup) override;
   /// Builds grid, embedding, K0, mass, sparsity pattern and factorisation. fixedNodesOf maps the
   /// rest node positions to the pinned node indices; with Clamp::Cells the nodes carrying the
   /// surface vertices of organ.fixed are pinned too, with Clamp::Points those vertices are held
@@ -170,6 +176,10 @@ class HexFemModel : public Model {
   /// Grasped surface vertices of `in` and their targets (m_graspVerts, m_graspVertTargets) and
   /// the nodes carrying them (m_grasped, m_isGrasped).
   void collectGrasps(const StepInput& in);
+  /// step()'s parts: m_fext = gravity on the lumped masses plus the point loads as J^T f; after
+  /// the solve, the reaction of each grasp on its tool (m_graspForces, see step()).
+  void applyLoads(const StepInput& in);
+  void graspReactions(const StepInput& in, Real h);
 
   HexFemConfig m_config;
   Real m_dt = 0;

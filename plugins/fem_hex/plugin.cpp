@@ -1,11 +1,10 @@
-// fem_hex plugin: registration and parameter parsing for the hexahedral FEM baseline
-// (see hex_fem_model.h for the method and README.md for every choice).
+// The "fem_hex" plugin: its parameters, their config (HexFemConfig) and the registration of
+// HexFemModel (hex_fem_model.h gives the method, README.md every choice).
 #include "hex_fem_model.h"
 
 #include <deform/sdk/registry.h>
 
 namespace deform::fem_hex {
-namespace {
 
 std::vector<ParamSpec> paramSpecs() {
   return {
@@ -93,18 +92,6 @@ HexFemConfig configFromParams(const ParamValues& p) {
   return c;
 }
 
-class FemHexModel final : public HexFemModel {
- public:
-  void init(const ModelSetup& setup) override {
-    const Organ& organ = setup.organ;
-    initialize(organ, configFromParams(setup.params), setup.dt, [&](const MatX3& nodes) {
-      return organ.fixed.empty() ? std::vector<int>{}
-                                 : fixedNodeIndices(nodes, organ.fixed, organ.surface);
-    });
-  }
-};
-
-}  // namespace
 }  // namespace deform::fem_hex
 
 DEFORM_PLUGIN(registry) {
@@ -126,7 +113,7 @@ DEFORM_PLUGIN(registry) {
                        Capability::Contact, Capability::ContactReaction,
                        Capability::Markers};
   info.params = deform::fem_hex::paramSpecs();
-  info.create = [] { return std::make_unique<deform::fem_hex::FemHexModel>(); };
+  info.create = [] { return std::make_unique<deform::fem_hex::HexFemModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).
   info.knob = {"elements", {100LL, 300LL, 967LL, 2500LL}, {100LL, 500LL}};
   info.presets["bench"] = {{}};

@@ -2,6 +2,7 @@
 
 #include <deform/kernels/isometric_bending.h>
 #include <deform/kernels/pbd_kernels.h>
+#include <deform/kernels/simd_lanes.h>
 
 #include <algorithm>
 #include <cmath>
@@ -10,46 +11,13 @@
 #include "batched_projection_avx2.h"
 #endif
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 namespace {
 
 // One constraint at a time: the reference for the AVX2 lanes and the tail of each colour.
-template <class Scalar>
-struct ScalarLanesT {
-  using T = Scalar;
-  using V = Scalar;
-  using M = bool;
-  static constexpr int kWidth = 1;
-  static V set1(T v) { return v; }
-  static V load(const T* p) { return *p; }
-  static void store(T* p, V v) { *p = v; }
-  static V sqrt(V a) { return std::sqrt(a); }
-  static V min(V a, V b) { return a < b ? a : b; }
-  static V max(V a, V b) { return a > b ? a : b; }
-  static V abs(V a) { return std::fabs(a); }
-  static M gt(V a, V b) { return a > b; }
-  static M lt(V a, V b) { return a < b; }
-  static M band(M a, M b) { return a && b; }
-  static V select(M m, V a, V b) { return m ? a : b; }
-  static int count(M m) { return m ? 1 : 0; }
-  static unsigned orBytes(const unsigned char* m) { return *m; }
-  static bool anyByte(const unsigned char* m) { return *m != 0; }
-  static void loadPoints(const T* x4, const int* idx, V& x, V& y, V& z) {
-    const T* p = x4 + 4 * static_cast<long>(*idx);
-    x = p[0];
-    y = p[1];
-    z = p[2];
-  }
-  static void addPoints(T* x4, const int* idx, V dx, V dy, V dz) {
-    T* p = x4 + 4 * static_cast<long>(*idx);
-    p[0] += dx;
-    p[1] += dy;
-    p[2] += dz;
-  }
-};
-using ScalarLanes = ScalarLanesT<double>;
-using ScalarLanesF = ScalarLanesT<float>;
+using ScalarLanes = simd::ScalarLanes<double>;
+using ScalarLanesF = simd::ScalarLanes<float>;
 
 bool avx2Supported() {
 #ifdef DEFORM_HYBRID_AVX2
@@ -359,4 +327,4 @@ Real atan2Polynomial(Real y, Real x) {
   return batched::atan2Poly<ScalarLanes>(y, x);
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

@@ -19,7 +19,7 @@
 #include "batched_projection_math.h"
 #include "surface_pbd.h"
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 struct SurfaceBatches {
   // Stretch, in ActiveConstraints colour order (sorted by pattern within a colour; a movable).
@@ -88,4 +88,4 @@ bool surfaceSimdAvailable();
 /// Scalar atan2 by the same polynomial as the batched bending kernel (for tests).
 Real atan2Polynomial(Real y, Real x);
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

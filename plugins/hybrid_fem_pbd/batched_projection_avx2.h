@@ -9,7 +9,7 @@
 
 #include "batched_projection_math.h"
 
-namespace deform::hybrid::batched {
+namespace deform::hybrid_fem_pbd::batched {
 
 std::size_t stretchRangeAvx2(double* x4, const StretchView& s, std::size_t begin, std::size_t end,
                              long long* degenerate);
@@ -23,4 +23,4 @@ std::size_t stretchRangeAvx2(float* x4, const StretchViewF& s, std::size_t begin
 /// lambda[j] for blocks b < blocks, accumulated in double.
 void blockedResponseAvx2(const float* data, int blocks, int cols, const double* lambda, double* y);
 
-}  // namespace deform::hybrid::batched
+}  // namespace deform::hybrid_fem_pbd::batched

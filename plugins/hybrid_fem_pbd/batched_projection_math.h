@@ -22,7 +22,7 @@
 
 #include <cstddef>
 
-namespace deform::hybrid::batched {
+namespace deform::hybrid_fem_pbd::batched {
 
 /// Structure-of-arrays views of one constraint list (built by SurfaceBatches). Positions are a
 /// padded #V by 4 array (x, y, z, 0) so that a point is one aligned-size load.
@@ -197,4 +197,4 @@ inline int bendGroup(double* x4, const BendView& h, std::size_t i) {
 
 }  // namespace
 
-}  // namespace deform::hybrid::batched
+}  // namespace deform::hybrid_fem_pbd::batched

@@ -5,7 +5,7 @@
 
 #include <algorithm>
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 void CoarseLinearFem::init(const TetMesh& mesh, const Material& material,
                            const std::vector<int>& fixed, const std::string& source) {
@@ -222,4 +222,4 @@ void CoarseLinearFem::buildPrescribedRows(const std::vector<Prescribed>& prescri
   }
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

@@ -34,7 +34,7 @@
 #include "load_processing.h"
 #include "response_product.h"
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 class CoarseLinearFem {
  public:
@@ -114,4 +114,4 @@ class CoarseLinearFem {
   std::vector<std::array<Real, 7>> m_keyScratch;
 };
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

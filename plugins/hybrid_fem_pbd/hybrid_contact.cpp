@@ -9,7 +9,7 @@
 
 #include <deform/sdk/contact.h>
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 StepStatus HybridModel::stepWithContact(const StepInput& in) {
   const MatX3 x0 = m_surf.x, v0 = m_v;
@@ -44,4 +44,4 @@ StepStatus HybridModel::stepWithContact(const StepInput& in) {
   return m_surf.x.allFinite() ? StepStatus::Ok : StepStatus::Diverged;
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

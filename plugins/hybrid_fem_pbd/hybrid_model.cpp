@@ -7,63 +7,7 @@
 #include <chrono>
 #include <cmath>
 
-namespace deform::hybrid {
-
-std::vector<ParamSpec> paramSpecs() {
-  return {
-      ParamSpec::integer("iterations", 10, 1, 10000,
-                         "Gauss-Seidel sweeps over the surface constraints"),
-      ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
-                      "stretch constraint stiffness (classic PBD)")
-          .calibrate(0.01, 1, ParamScale::Log),
-      ParamSpec::real("bending_stiffness", "1", 0.5, 0.0, 1.0,
-                      "bending constraint stiffness (classic PBD)")
-          .calibrate(0.01, 1, ParamScale::Log),
-      ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
-                        "surface bending constraint: isometric (Bergou et al. 2006, a constant "
-                        "stencil per hinge) or the paper's dihedral angle (Eqs. (10)-(11))"),
-      ParamSpec::real("damping", "1/s", 20.0, 0.0, 1e4,
-                      "surface velocity damping rate: v <- v exp(-damping dt) each step")
-          .calibrate(0.1, 1000, ParamScale::Log),
-      ParamSpec::flag("surface_load", true,
-                      "the point force also moves its own fine node in the PBD prediction "
-                      "(paper Sec. 6.3) besides loading the coarse FEM"),
-      ParamSpec::integer(
-          "simplification_levels", 1, 1, 4,
-          "vertex-cover simplification passes building the coarse surface (paper: 1)"),
-      ParamSpec::real("min_collapse_quality", "1", 0.1, 0.0, 0.9,
-                      "reject vertex merges leaving a triangle of lower quality "
-                      "4 sqrt(3) A / sum l^2"),
-      ParamSpec::real("tet_edge_factor", "1", 1.0, 0.25, 8.0,
-                      "interior tet edge length of the coarse volume mesh, relative to the coarse "
-                      "surface's mean edge length"),
-      ParamSpec::real("cut_snap", "1", 0.1, 0.0, 0.3,
-                      "incision: intersection points within this barycentric distance of a "
-                      "vertex or edge snap to it"),
-      ParamSpec::choice("precision", "float32", {"float32", "float64"},
-                        "number type of the surface projection (isometric bending; positions "
-                        "relative to the organ's centre) and of the stored grasp response of "
-                        "the coarse FEM; state between steps and the FEM solve stay double"),
-  };
-}
-
-HybridConfig configFromParams(const ParamValues& p) {
-  HybridConfig c;
-  c.iterations = static_cast<int>(p.integer("iterations"));
-  c.stretchStiffness = p.real("stretch_stiffness");
-  c.bendingStiffness = p.real("bending_stiffness");
-  c.bending = p.choiceAs<HybridBending>("bending_model", {{"isometric", HybridBending::Isometric},
-                                                          {"dihedral", HybridBending::Dihedral}});
-  c.damping = p.real("damping");
-  c.surfaceLoad = p.flag("surface_load");
-  c.simplificationLevels = static_cast<int>(p.integer("simplification_levels"));
-  c.minCollapseQuality = p.real("min_collapse_quality");
-  c.tetEdgeFactor = p.real("tet_edge_factor");
-  c.cutSnap = p.real("cut_snap");
-  c.precision = p.choiceAs<HybridPrecision>(
-      "precision", {{"float32", HybridPrecision::Float32}, {"float64", HybridPrecision::Float64}});
-  return c;
-}
+namespace deform::hybrid_fem_pbd {
 
 namespace {
 
@@ -439,4 +383,4 @@ MatX3 HybridModel::markers() const {
   return embeddedPositions(m_markerEmbedding, m_volumeX, m_mesh.volume.T);
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

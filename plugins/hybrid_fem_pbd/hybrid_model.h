@@ -31,7 +31,7 @@
 #include "surface_pbd.h"
 #include "vertex_cover_simplification.h"
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 /// How the surface constraints are projected (identical constraints, order and stiffness; see
 /// batched_projection.h). Not a scene parameter: the reference path is kept for tests and the
@@ -171,4 +171,4 @@ class HybridModel final : public Model {
   Vec3 m_origin = Vec3::Zero();  ///< centre of the rest surface's bounding box, m
 };
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

@@ -7,7 +7,7 @@
 
 #include "load_processing.h"
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 CuttableSurface CuttableSurface::fromMesh(const MatX3& x, const MatX3& rest, const MatX3i& F) {
   CuttableSurface s;
@@ -231,6 +231,38 @@ struct Editor {
   }
 };
 
+// The triangle around vertex c whose wedge at c holds the direction to `target` (projected
+// into the triangle's plane, as dir): the one maximising the smaller of the two sines between
+// dir and the triangle's edges from c (face kNone when no triangle qualifies).
+struct Wedge {
+  int face = kNone, u = kNone, v = kNone;
+  Vec3 dir = Vec3::Zero();
+};
+Wedge exitWedge(const Editor& ed, int c, const Vec3& target) {
+  const Vec3 xc = ed.pos(c);
+  Wedge w;
+  Real bestScore = -std::numeric_limits<Real>::infinity();
+  for (int g : ed.vf[c]) {
+    const Vec3i& t = ed.s.F[g];
+    int kc = 0;
+    while (t[kc] != c) ++kc;
+    const int u = t[(kc + 1) % 3], v = t[(kc + 2) % 3];
+    const Vec3 eu = ed.pos(u) - xc, ev = ed.pos(v) - xc;
+    const Vec3 n = eu.cross(ev).normalized();
+    Vec3 d = target - xc;
+    d -= d.dot(n) * n;
+    const Real dn = d.norm(), un = eu.norm(), vn = ev.norm();
+    if (!(dn > 0) || !(un > 0) || !(vn > 0)) continue;
+    const Real s1 = eu.cross(d).dot(n) / (un * dn), s2 = d.cross(ev).dot(n) / (dn * vn);
+    const Real score = std::min(s1, s2);
+    if (score > bestScore) {
+      bestScore = score;
+      w = {g, u, v, d};
+    }
+  }
+  return w;
+}
+
 }  // namespace
 
 CutReport cutSurface(CuttableSurface& surface, const CutPath& path, const CutOptions& options) {
@@ -287,30 +319,9 @@ CutReport cutSurface(CuttableSurface& surface, const CutPath& path, const CutOpt
         break;
       }
       // Otherwise leave c through the triangle whose wedge contains the direction to the target.
-      int best = kNone, bu = kNone, bv = kNone;
-      Real bestScore = -std::numeric_limits<Real>::infinity();
-      Vec3 bestDir = Vec3::Zero();
-      for (int g : ed.vf[c]) {
-        const Vec3i& t = s.F[g];
-        int kc = 0;
-        while (t[kc] != c) ++kc;
-        const int u = t[(kc + 1) % 3], v = t[(kc + 2) % 3];
-        const Vec3 eu = ed.pos(u) - xc, ev = ed.pos(v) - xc;
-        const Vec3 n = eu.cross(ev).normalized();
-        Vec3 d = target - xc;
-        d -= d.dot(n) * n;
-        const Real dn = d.norm(), un = eu.norm(), vn = ev.norm();
-        if (!(dn > 0) || !(un > 0) || !(vn > 0)) continue;
-        const Real s1 = eu.cross(d).dot(n) / (un * dn), s2 = d.cross(ev).dot(n) / (dn * vn);
-        const Real score = std::min(s1, s2);
-        if (score > bestScore) {
-          bestScore = score;
-          best = g;
-          bu = u;
-          bv = v;
-          bestDir = d;
-        }
-      }
+      const Wedge w = exitWedge(ed, c, target);
+      const int best = w.face, bu = w.u, bv = w.v;
+      const Vec3 bestDir = w.dir;
       if (best == kNone) {
         rep.reason = "the cut reached a degenerate neighbourhood";
         return rep;
@@ -449,4 +460,4 @@ SurfaceConstraints constraintsAfterCut(const CuttableSurface& s,
   return out;
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

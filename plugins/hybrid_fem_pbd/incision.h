@@ -42,7 +42,7 @@
 
 #include "surface_pbd.h"
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 /// A vertex as a barycentric combination of (up to three) original vertices.
 struct VertexOrigin {
@@ -98,4 +98,4 @@ Real restDistanceInTriangle(Real lAB, Real lBC, Real lCA, const Vec3& bp, const 
 SurfaceConstraints constraintsAfterCut(const CuttableSurface& s,
                                        const SurfaceConstraints& original);
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

@@ -4,7 +4,7 @@
 
 #include <limits>
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c,
                             Vec3& bary) {
@@ -48,4 +48,4 @@ std::array<Vec3, 3> equivalentNodalForces(const CoarseAttachment& a, const Vec3&
   return out;
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

@@ -18,7 +18,7 @@
 
 #include <array>
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 /// Closest point on triangle (a, b, c) to p, with its barycentric coordinates (sum 1, each >= 0):
 /// core's deform::closestPointOnTriangle (a degenerate triangle gives the closest point on its
@@ -43,4 +43,4 @@ CoarseAttachment attachToCoarseSurface(const Vec3& p, const MatX3& V, const MatX
 /// Equivalent nodal forces f_k = N_k f on the attachment's coarse vertices.
 std::array<Vec3, 3> equivalentNodalForces(const CoarseAttachment& a, const Vec3& f);
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

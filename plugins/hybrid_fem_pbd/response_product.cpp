@@ -6,7 +6,7 @@
 #include "batched_projection_avx2.h"
 #endif
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 void BlockedResponse::assign(const MatX& Z) {
   rows = static_cast<int>(Z.rows());
@@ -46,4 +46,4 @@ bool responseSimdAvailable() {
 #endif
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

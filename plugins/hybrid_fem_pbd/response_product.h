@@ -11,7 +11,7 @@
 
 #include <vector>
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 struct BlockedResponse {
   static constexpr int kRows = 16;  ///< rows per block (two cache lines of floats per column)
@@ -32,4 +32,4 @@ struct BlockedResponse {
 /// Whether BlockedResponse::multiply(simd = true) uses AVX2 on this CPU.
 bool responseSimdAvailable();
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

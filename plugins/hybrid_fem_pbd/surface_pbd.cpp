@@ -5,7 +5,7 @@
 #include <bit>
 #include <cstdint>
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 bool orderHinge(const MatX3i& F, int fa, int fb, int a, int b, pbd::DihedralConstraint& h) {
   int s = -1, t = -1, wingA = -1, wingB = -1;
@@ -180,4 +180,4 @@ long long projectSurfaceConstraints(MatX3& p, const VecX& w, const SurfaceConstr
   return degenerate;
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

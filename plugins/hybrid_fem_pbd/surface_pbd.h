@@ -13,7 +13,7 @@
 
 #include <vector>
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 struct SurfaceConstraints {
   std::vector<pbd::DistanceConstraint> stretch;  ///< one per unique edge, rest length l (m)
@@ -70,4 +70,4 @@ long long projectSurfaceConstraints(MatX3& p, const VecX& w, const SurfaceConstr
                                     const ActiveConstraints& active, Real kStretch, Real kBending,
                                     int iterations);
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

@@ -9,7 +9,7 @@
 #include <numeric>
 #include <queue>
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 std::vector<char> vertexCoverFromIndependentSet(const MatX2i& E, int n) {
   std::vector<std::vector<int>> adj(n);
@@ -232,4 +232,4 @@ SimplificationResult simplifyByVertexCover(const SurfaceMesh& fine,
   return out;
 }
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

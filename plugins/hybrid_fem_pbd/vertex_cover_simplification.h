@@ -30,7 +30,7 @@
 
 #include <vector>
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 
 /// Vertex cover of a graph from the minimum-degree greedy maximal independent set I: cover = all
 /// vertices not in I. E: #E by 2 edges over vertices [0, n). Returns #n flags (1 = in cover).
@@ -63,4 +63,4 @@ struct SimplificationResult {
 SimplificationResult simplifyByVertexCover(const SurfaceMesh& fine,
                                            const SimplificationOptions& options = {});
 
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

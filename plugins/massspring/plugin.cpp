@@ -1,7 +1,86 @@
-// The "massspring" plugin: registers MassSpringModel (massspring_model.h) with the harness.
+// The "massspring" plugin: its parameters, their config (MassSpringConfig) and the registration
+// of MassSpringModel (massspring_model.h).
 #include "massspring_model.h"
 
 #include <deform/sdk/registry.h>
+
+namespace deform::massspring {
+
+std::vector<ParamSpec> paramSpecs() {
+  return {
+      ParamSpec::choice("integrator", "symplectic_euler",
+                        {"explicit_euler", "symplectic_euler", "implicit_euler", "local_global"},
+                        "time integration: explicit Euler (the papers' baseline), symplectic "
+                        "Euler, implicit Euler with one Newton step (Baraff & Witkin 1998), or "
+                        "implicit Euler by local/global iterations with a prefactored matrix "
+                        "(Liu et al. 2013)"),
+      ParamSpec::choice("network", "surface", {"surface", "volume"},
+                        "surface: springs on the organ's surface mesh (the papers' baselines); "
+                        "volume: on the tet edges of the surface tetrahedralised with about "
+                        "volume_elements tets (a mesh file with tets is used as given either "
+                        "way)"),
+      ParamSpec::integer("volume_elements", 4000, 100, 10000000,
+                         "network = volume: target number of tets"),
+      ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
+                      "surface input: membrane thickness t in the spring rule k = E t sum|T|/L^2")
+          .calibrate(0.0001, 0.3, ParamScale::Log),
+      ParamSpec::real("bending_ratio", "1", 0.1, 0.0, 100.0,
+                      "bending spring stiffness relative to the spring on the hinge edge")
+          .calibrate(0.001, 10, ParamScale::Log),
+      ParamSpec::real("damping_ratio", "1", 0.1, 0.0, 100.0,
+                      "damping ratio of each spring's axial dashpot, c = 2 zeta sqrt(k mu)")
+          .calibrate(0.001, 10, ParamScale::Log),
+      ParamSpec::real("mass_damping", "1/s", 1.0, 0.0, 1e4,
+                      "mass-proportional damping: force -mass_damping * m * v on every node")
+          .calibrate(0.01, 1000, ParamScale::Log),
+      ParamSpec::real("cg_tolerance", "1", 1e-6, 1e-14, 1.0,
+                      "implicit Euler: relative residual of the conjugate gradient solve"),
+      ParamSpec::integer("cg_max_iterations", 200, 1, 100000,
+                         "implicit Euler: conjugate gradient iteration cap"),
+      ParamSpec::integer("substeps", 0, 0, kMaxSubsteps,
+                         "explicit and symplectic Euler: substeps per time step; 0 = automatic, "
+                         "enough to stay below the estimated stability limit; 1 = none (the "
+                         "papers' experiments, which may diverge)"),
+      ParamSpec::integer("local_global_iterations", 5, 1, 10000,
+                         "local_global: local/global iterations per step"),
+      ParamSpec::choice("local_global_acceleration", "chebyshev", {"chebyshev", "none"},
+                        "local_global: Chebyshev semi-iterative acceleration of the iterations "
+                        "(Wang 2015) or none (Liu et al. 2013's plain alternation)"),
+      ParamSpec::real("local_global_rho", "1", 0.0, 0.0, 0.9999,
+                      "local_global with chebyshev: spectral radius of the plain iteration; 0 = "
+                      "estimated whenever the system matrix is factorised"),
+      ParamSpec::flag("local_global_warm_start", true,
+                      "local_global: start the iterations from the inertial prediction plus the "
+                      "previous step's correction (false: from the inertial prediction)"),
+  };
+}
+
+MassSpringConfig configFromParams(const ParamValues& p) {
+  MassSpringConfig c;
+  c.integrator =
+      p.choiceAs<Integrator>("integrator", {{"explicit_euler", Integrator::ExplicitEuler},
+                                            {"symplectic_euler", Integrator::SymplecticEuler},
+                                            {"implicit_euler", Integrator::ImplicitEuler},
+                                            {"local_global", Integrator::LocalGlobal}});
+  c.volumeNetwork = p.choice("network") == "volume";
+  c.volumeElements = p.integer("volume_elements");
+  c.thickness = p.real("thickness");
+  c.bendingRatio = p.real("bending_ratio");
+  c.dampingRatio = p.real("damping_ratio");
+  c.massDamping = p.real("mass_damping");
+  c.cgTolerance = p.real("cg_tolerance");
+  c.cgMaxIterations = static_cast<int>(p.integer("cg_max_iterations"));
+  c.substeps = static_cast<int>(p.integer("substeps"));
+  c.localGlobalIterations = static_cast<int>(p.integer("local_global_iterations"));
+  c.localGlobalAcceleration = p.choiceAs<LocalGlobalAcceleration>(
+      "local_global_acceleration",
+      {{"chebyshev", LocalGlobalAcceleration::Chebyshev}, {"none", LocalGlobalAcceleration::None}});
+  c.localGlobalRho = p.real("local_global_rho");
+  c.localGlobalWarmStart = p.flag("local_global_warm_start");
+  return c;
+}
+
+}  // namespace deform::massspring
 
 DEFORM_PLUGIN(registry) {
   deform::ModelInfo info;

@@ -35,74 +35,6 @@ double msSince(Clock::time_point t) {
 }
 }  // namespace
 
-std::vector<ParamSpec> metaballsParams() {
-  return {
-      ParamSpec::integer("spheres", 900, 8, 20000,
-                         "sphere budget of the medial-axis packing (stage 1); the final count "
-                         "changes by filling and merging"),
-      ParamSpec::integer("voxel_resolution", 48, 8, 256,
-                         "voxels along the organ's longest side (packing samples, Algorithm 2)"),
-      ParamSpec::integer("fill_neighbours", 6, 1, 32, "k nearest neighbours of Algorithm 1"),
-      ParamSpec::real("fill_min_radius", "1", 0.5, 0.0, 1.0,
-                      "smallest filling sphere, as a fraction of the median radius"),
-      ParamSpec::real("attraction_range", "1", 2.0, 0.5, 10.0,
-                      "Algorithm 2: reach of a hollow voxel beyond a sphere's surface, in voxels"),
-      ParamSpec::integer("optimisation_max_moves", 20000, 0, 10000000,
-                         "Algorithm 2: most accepted one-voxel moves"),
-      ParamSpec::integer("topology_neighbours", 9, 1, 64, "N of eq. (5)"),
-      ParamSpec::integer("iterations", 10, 1, 1000, "PBD solver iterations per step"),
-      ParamSpec::choice("stiffness_mode", "xpbd", {"xpbd", "classic"},
-                        "xpbd: compliance from Young's modulus; classic: stiffness coefficient"),
-      ParamSpec::real("stiffness", "1", 1.0, 0.0, 1.0, "classic PBD stretching stiffness")
-          .calibrate(0.01, 1, ParamScale::Log),
-      ParamSpec::flag("laplacian", true, "Laplacian coordinate constraints (eqs. 9-11)"),
-      ParamSpec::real("laplacian_stiffness", "1", 0.5, 0.0, 1.0,
-                      "classic: coefficient; xpbd: fraction of E r_m used as stiffness (N/m)")
-          .calibrate(0.01, 1, ParamScale::Log),
-      ParamSpec::choice("laplacian_frame", "rotated", {"rotated", "fixed"},
-                        "rotated: L_m follows the local rotation; fixed: the paper's world frame"),
-      ParamSpec::flag("volume_preservation", true, "local volume preservation by radii (eq. 12)"),
-      ParamSpec::choice("skinning_frame", "rotated", {"rotated", "fixed"},
-                        "rotated: disp follows the blended sphere rotations; fixed: eq. (16)"),
-      ParamSpec::real("skin_threshold", "1", 0.2, 1e-6, 1.0,
-                      "T: a sphere is attached when f(d, r) >= T (eq. 13, c = 1)"),
-      ParamSpec::integer("skin_max_spheres", 6, 1, 16, "most attached spheres per vertex"),
-      ParamSpec::real("damping", "1/s", 5.0, 0.0, 1000.0, "velocity damping rate")
-          .calibrate(0.1, 1000, ParamScale::Log),
-  };
-}
-
-ModelInfo metaballsModelInfo() {
-  ModelInfo info;
-  info.name = "metaballs";
-  info.description =
-      "Metaballs (overlapping spheres) + PBD with Laplacian and local volume constraints, "
-      "skinned surface";
-  info.citation =
-      "Pan, Zhao, Zhao, Hao, Qin 2015, Metaballs-based physical modeling and deformation of "
-      "organs for virtual surgery, The Visual Computer 31, doi:10.1007/s00371-015-1092-2";
-  info.version = "1.0";
-  info.capabilities = {Capability::Grasp,   Capability::PointForce,
-                       Capability::Gravity, Capability::NeedsPrecompute,
-                       Capability::Contact, Capability::ContactReaction,
-                       Capability::Markers};
-  info.params = metaballsParams();
-  info.create = [] { return std::make_unique<MetaballsModel>(); };
-  return info;
-}
-
-ConstructionParams constructionParams(const ParamValues& p) {
-  ConstructionParams c;
-  c.targetSpheres = int(p.integer("spheres"));
-  c.voxelResolution = int(p.integer("voxel_resolution"));
-  c.fillNeighbours = int(p.integer("fill_neighbours"));
-  c.fillMinRadiusRatio = p.real("fill_min_radius");
-  c.attractionRangeVoxels = p.real("attraction_range");
-  c.maxOptimisationMoves = int(p.integer("optimisation_max_moves"));
-  c.topologyNeighbours = int(p.integer("topology_neighbours"));
-  return c;
-}
-
 void MetaballsModel::init(const ModelSetup& setup) {
   const ParamValues& p = setup.params;
   const Organ& organ = setup.organ;
@@ -235,24 +167,7 @@ void MetaballsModel::init(const ModelSetup& setup) {
   m_rotBatch.resize(n);
   m_frames.assign(size_t(n) * kFrameStride, 0);
   m_contacted.reserve(size_t(n));
-  // Sphere -> the vertices it skins (the transpose of W), for W dc after a grasp correction.
-  m_vertStart.assign(size_t(n) + 1, 0);
-  for (int v = 0; v < m_skin.numVertices; ++v)
-    for (int k = 0; k < m_skin.count[size_t(v)]; ++k)
-      ++m_vertStart[size_t(m_skin.sphere[size_t(v) * size_t(m_skin.slots) + size_t(k)]) + 1];
-  for (int i = 0; i < n; ++i) m_vertStart[size_t(i) + 1] += m_vertStart[size_t(i)];
-  m_vertOf.assign(size_t(m_vertStart[size_t(n)]), 0);
-  m_vertW.assign(m_vertOf.size(), 0);
-  {
-    std::vector<int> at(m_vertStart.begin(), m_vertStart.end() - 1);
-    for (int v = 0; v < m_skin.numVertices; ++v)
-      for (int k = 0; k < m_skin.count[size_t(v)]; ++k) {
-        const size_t slot = size_t(v) * size_t(m_skin.slots) + size_t(k);
-        const int pos = at[size_t(m_skin.sphere[slot])]++;
-        m_vertOf[size_t(pos)] = v;
-        m_vertW[size_t(pos)] = m_skin.weight[slot];
-      }
-  }
+  buildSkinTranspose();
   reset();
 }
 
@@ -302,19 +217,7 @@ PhaseTimes MetaballsModel::phaseTimes() const {
 }
 
 void MetaballsModel::collectGrasps(const StepInput& in) {
-  m_graspVerts.clear();
-  Eigen::Index rows = 0;
-  for (const GraspInput& g : in.grasps) rows += Eigen::Index(g.vertices.size());
-  m_graspTargets.resize(rows, 3);
-  for (const GraspInput& g : in.grasps)
-    for (size_t k = 0; k < g.vertices.size(); ++k) {
-      const int v = g.vertices[k];
-      if (v < 0 || v >= m_skin.numVertices || Eigen::Index(k) >= g.targets.rows() ||
-          std::find(m_graspVerts.begin(), m_graspVerts.end(), v) != m_graspVerts.end())
-        continue;
-      m_graspTargets.row(Eigen::Index(m_graspVerts.size())) = g.targets.row(Eigen::Index(k));
-      m_graspVerts.push_back(v);
-    }
+  flattenGrasps(in.grasps, m_skin.numVertices, m_graspVerts, m_graspTargets);
   if (m_graspVerts == m_mapVerts) return;
   // The grasped set changed (a grasp closed or opened): carrying spheres and W_C^+.
   m_mapVerts = m_graspVerts;
@@ -363,14 +266,7 @@ void MetaballsModel::graspCorrection() {
   m_graspDc.noalias() = m_WcPinv * m_graspGap;
 }
 
-StepStatus MetaballsModel::step(const StepInput& in) {
-  const int n = m_mb.spheres.size();
-  const Real dt = in.dt;
-  if (!(dt > 0)) return StepStatus::Ok;
-  auto t0 = Clock::now();
-
-  // External forces: W^T f, every per-vertex share of the harness's patch over the vertex's
-  // spheres by skinning weight (a load without a spread acts on its vertex alone).
+void MetaballsModel::applyLoads(const StepInput& in) {
   m_f.setZero();
   m_contacted.clear();
   const int K = m_skin.slots;
@@ -388,33 +284,10 @@ StepStatus MetaballsModel::step(const StepInput& in) {
     for (size_t k = 0; k < load.vertices.size() && k < load.weights.size(); ++k)
       addVertexForce(load.vertices[k], load.weights[k] * load.force);
   }
-  // Kinematic spheres: fixed ones stay at rest; the carrying spheres of the grasped vertices move
-  // by dc_C = W_C^+ (t - v), from the surface at the step's start.
-  Real* P = m_p4.data();
-  std::copy(m_fixed.begin(), m_fixed.end(), m_kin.begin());
-  for (int i : m_fixedList)
-    for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x0(i, c);
-  collectGrasps(in);
-  if (!m_graspVerts.empty()) {
-    graspCorrection();
-    for (size_t k = 0; k < m_carry.size(); ++k) {
-      const int i = m_carry[k];
-      m_kin[size_t(i)] = 1;
-      for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x(i, c) + m_graspDc(Eigen::Index(k), c);
-      m_contacted.push_back(i);
-    }
-  }
-  // Algorithm 3, lines 8-13: prediction with damping.
-  const Real keep = std::max(Real(0), 1 - m_damping * dt);
-  for (int i = 0; i < n; ++i) {
-    if (m_kin[size_t(i)]) {
-      m_wEff[size_t(i)] = 0;
-      continue;
-    }
-    m_wEff[size_t(i)] = m_invMass(i);
-    m_v.row(i) = keep * (m_v.row(i) + dt * (in.gravity.transpose() + m_invMass(i) * m_f.row(i)));
-    for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x(i, c) + dt * m_v(i, c);
-  }
+}
+
+void MetaballsModel::prepareConstraints(Real dt) {
+  const int n = m_mb.spheres.size();
   const Real dt2 = dt * dt;
   const bool xpbd = m_mode == StiffnessMode::Xpbd;
   // Per-step constants of the constraints.
@@ -453,6 +326,100 @@ StepStatus MetaballsModel::step(const StepInput& in) {
     }
     std::fill(m_ldata.lambda.begin(), m_ldata.lambda.end(), 0.0);
   }
+}
+
+void MetaballsModel::updateRadii() {
+  m_r = m_mb.spheres.radii;
+  if (m_volume && !m_contacted.empty()) {
+    std::sort(m_contacted.begin(), m_contacted.end());
+    m_contacted.erase(std::unique(m_contacted.begin(), m_contacted.end()), m_contacted.end());
+    for (int c : m_contacted) {
+      const int b = m_adjStart[size_t(c)], e = m_adjStart[size_t(c) + 1];
+      Real sum = 0;
+      for (int k = b; k < e; ++k) sum += (m_x.row(c) - m_x.row(m_adj[size_t(k)])).norm();
+      const Real f = volumeRadiusScale(m_restSumD(c), sum);
+      m_volFactorSum[size_t(c)] += f;
+      ++m_volCount[size_t(c)];
+      for (int k = b; k < e; ++k) {
+        m_volFactorSum[size_t(m_adj[size_t(k)])] += f;
+        ++m_volCount[size_t(m_adj[size_t(k)])];
+      }
+    }
+    // A sphere in several interaction areas takes the mean of their factors.
+    for (int c : m_contacted) {
+      for (int k = m_adjStart[size_t(c)] - 1; k < m_adjStart[size_t(c) + 1]; ++k) {
+        const int i = k < m_adjStart[size_t(c)] ? c : m_adj[size_t(k)];
+        if (m_volCount[size_t(i)] == 0) continue;
+        if (!m_fixed[size_t(i)])
+          m_r(i) = m_mb.spheres.radii(i) * m_volFactorSum[size_t(i)] / m_volCount[size_t(i)];
+        m_volFactorSum[size_t(i)] = 0;
+        m_volCount[size_t(i)] = 0;
+      }
+    }
+  }
+  for (size_t k = 0; k < m_carry.size(); ++k) m_r(m_carry[k]) = m_carryR[k];
+}
+
+void MetaballsModel::buildSkinTranspose() {
+  const int n = m_mb.spheres.size();
+  // Sphere -> the vertices it skins (the transpose of W), for W dc after a grasp correction.
+  m_vertStart.assign(size_t(n) + 1, 0);
+  for (int v = 0; v < m_skin.numVertices; ++v)
+    for (int k = 0; k < m_skin.count[size_t(v)]; ++k)
+      ++m_vertStart[size_t(m_skin.sphere[size_t(v) * size_t(m_skin.slots) + size_t(k)]) + 1];
+  for (int i = 0; i < n; ++i) m_vertStart[size_t(i) + 1] += m_vertStart[size_t(i)];
+  m_vertOf.assign(size_t(m_vertStart[size_t(n)]), 0);
+  m_vertW.assign(m_vertOf.size(), 0);
+  {
+    std::vector<int> at(m_vertStart.begin(), m_vertStart.end() - 1);
+    for (int v = 0; v < m_skin.numVertices; ++v)
+      for (int k = 0; k < m_skin.count[size_t(v)]; ++k) {
+        const size_t slot = size_t(v) * size_t(m_skin.slots) + size_t(k);
+        const int pos = at[size_t(m_skin.sphere[slot])]++;
+        m_vertOf[size_t(pos)] = v;
+        m_vertW[size_t(pos)] = m_skin.weight[slot];
+      }
+  }
+}
+
+StepStatus MetaballsModel::step(const StepInput& in) {
+  const int n = m_mb.spheres.size();
+  const Real dt = in.dt;
+  if (!(dt > 0)) return StepStatus::Ok;
+  auto t0 = Clock::now();
+
+  // External forces: W^T f, every per-vertex share of the harness's patch over the vertex's
+  // spheres by skinning weight (a load without a spread acts on its vertex alone).
+  applyLoads(in);
+  // Kinematic spheres: fixed ones stay at rest; the carrying spheres of the grasped vertices move
+  // by dc_C = W_C^+ (t - v), from the surface at the step's start.
+  Real* P = m_p4.data();
+  std::copy(m_fixed.begin(), m_fixed.end(), m_kin.begin());
+  for (int i : m_fixedList)
+    for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x0(i, c);
+  collectGrasps(in);
+  if (!m_graspVerts.empty()) {
+    graspCorrection();
+    for (size_t k = 0; k < m_carry.size(); ++k) {
+      const int i = m_carry[k];
+      m_kin[size_t(i)] = 1;
+      for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x(i, c) + m_graspDc(Eigen::Index(k), c);
+      m_contacted.push_back(i);
+    }
+  }
+  // Algorithm 3, lines 8-13: prediction with damping.
+  const Real keep = std::max(Real(0), 1 - m_damping * dt);
+  for (int i = 0; i < n; ++i) {
+    if (m_kin[size_t(i)]) {
+      m_wEff[size_t(i)] = 0;
+      continue;
+    }
+    m_wEff[size_t(i)] = m_invMass(i);
+    m_v.row(i) = keep * (m_v.row(i) + dt * (in.gravity.transpose() + m_invMass(i) * m_f.row(i)));
+    for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x(i, c) + dt * m_v(i, c);
+  }
+  const bool xpbd = m_mode == StiffnessMode::Xpbd;
+  prepareConstraints(dt);
   double tStretch = msSince(t0), tLap = 0;
   long long degenerate = 0;
   const Real kStretch = xpbd ? 1.0 : m_stiffness, kLap = xpbd ? 1.0 : m_lapStiffness;
@@ -495,35 +462,7 @@ StepStatus MetaballsModel::step(const StepInput& in) {
 
   // Eq. (12) on the spheres under interaction and their linked spheres.
   ts = Clock::now();
-  m_r = m_mb.spheres.radii;
-  if (m_volume && !m_contacted.empty()) {
-    std::sort(m_contacted.begin(), m_contacted.end());
-    m_contacted.erase(std::unique(m_contacted.begin(), m_contacted.end()), m_contacted.end());
-    for (int c : m_contacted) {
-      const int b = m_adjStart[size_t(c)], e = m_adjStart[size_t(c) + 1];
-      Real sum = 0;
-      for (int k = b; k < e; ++k) sum += (m_x.row(c) - m_x.row(m_adj[size_t(k)])).norm();
-      const Real f = volumeRadiusScale(m_restSumD(c), sum);
-      m_volFactorSum[size_t(c)] += f;
-      ++m_volCount[size_t(c)];
-      for (int k = b; k < e; ++k) {
-        m_volFactorSum[size_t(m_adj[size_t(k)])] += f;
-        ++m_volCount[size_t(m_adj[size_t(k)])];
-      }
-    }
-    // A sphere in several interaction areas takes the mean of their factors.
-    for (int c : m_contacted) {
-      for (int k = m_adjStart[size_t(c)] - 1; k < m_adjStart[size_t(c) + 1]; ++k) {
-        const int i = k < m_adjStart[size_t(c)] ? c : m_adj[size_t(k)];
-        if (m_volCount[size_t(i)] == 0) continue;
-        if (!m_fixed[size_t(i)])
-          m_r(i) = m_mb.spheres.radii(i) * m_volFactorSum[size_t(i)] / m_volCount[size_t(i)];
-        m_volFactorSum[size_t(i)] = 0;
-        m_volCount[size_t(i)] = 0;
-      }
-    }
-  }
-  for (size_t k = 0; k < m_carry.size(); ++k) m_r(m_carry[k]) = m_carryR[k];
+  updateRadii();
   const double tVol = msSince(ts);
 
   ts = Clock::now();

@@ -40,7 +40,6 @@ enum class StiffnessMode { Classic, Xpbd };
 enum class Frame { Rotated, Fixed };
 
 std::vector<ParamSpec> metaballsParams();
-ModelInfo metaballsModelInfo();
 /// Construction parameters from resolved plugin parameters.
 ConstructionParams constructionParams(const ParamValues& p);
 
@@ -80,6 +79,14 @@ class MetaballsModel final : public Model {
   void collectGrasps(const StepInput& in);
   /// dc_C = W_C^+ (t - v) for the current m_surface (into m_graspDc).
   void graspCorrection();
+  /// The step's parts (step() calls them in this order): the loads as sphere forces W^T f
+  /// (m_f; the spheres they touch in m_contacted); the constraints' per-step constants and
+  /// Laplacian targets; after the sweeps, the radii of eq. (12).
+  void applyLoads(const StepInput& in);
+  void prepareConstraints(Real dt);
+  void updateRadii();
+  /// m_vertStart / m_vertOf / m_vertW: the vertices each sphere skins (the transpose of W).
+  void buildSkinTranspose();
 
   Metaballs m_mb;
   Skinning m_skin;

@@ -402,19 +402,7 @@ std::vector<std::pair<int, Real>> ParticleBemModel::surfaceRow(int v) const {
 }
 
 void ParticleBemModel::prescribeGrasps(const StepInput& in) {
-  m_graspVerts.clear();
-  Eigen::Index rows = 0;
-  for (const GraspInput& g : in.grasps) rows += Eigen::Index(g.vertices.size());
-  m_graspTargets.resize(rows, 3);
-  for (const GraspInput& g : in.grasps)
-    for (size_t k = 0; k < g.vertices.size(); ++k) {
-      const int v = g.vertices[k];
-      if (v < 0 || v >= m_fineRest.rows() || Eigen::Index(k) >= g.targets.rows() ||
-          std::find(m_graspVerts.begin(), m_graspVerts.end(), v) != m_graspVerts.end())
-        continue;
-      m_graspTargets.row(Eigen::Index(m_graspVerts.size())) = g.targets.row(Eigen::Index(k));
-      m_graspVerts.push_back(v);
-    }
+  flattenGrasps(in.grasps, m_fineRest.rows(), m_graspVerts, m_graspTargets);
   if (m_graspVerts != m_mapVerts) {
     // The grasped set changed (a grasp closed or opened): the carrying set and J_C^+.
     m_mapVerts = m_graspVerts;

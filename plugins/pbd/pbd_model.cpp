@@ -1,5 +1,6 @@
 #include "pbd_model.h"
 
+#include <deform/geometry/surface_mass.h>
 #include <deform/geometry/tet_nodes.h>
 
 #include <deform/geometry/tet_mesher.h>
@@ -16,71 +17,6 @@
 #include <numeric>
 
 namespace deform::pbd {
-
-std::vector<ParamSpec> paramSpecs() {
-  return {
-      ParamSpec::integer("iterations", 10, 1, 10000, "Gauss-Seidel sweeps over all constraints"),
-      ParamSpec::choice("network", "surface", {"surface", "volume"},
-                        "surface: constraints on the organ's surface mesh (the papers' "
-                        "baselines); volume: on the tets of the surface tetrahedralised with "
-                        "about volume_elements tets (a mesh file with tets is used as given "
-                        "either way)"),
-      ParamSpec::integer("volume_elements", 4000, 100, 10000000,
-                         "network = volume: target number of tets"),
-      ParamSpec::choice("stiffness_mode", "xpbd", {"classic", "xpbd"},
-                        "classic: [0,1] stiffness with k' = 1-(1-k)^(1/n); xpbd: compliances "
-                        "from E, nu, thickness"),
-      ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
-                      "classic mode: distance constraint stiffness")
-          .calibrate(0.01, 1, ParamScale::Log),
-      ParamSpec::real("bending_stiffness", "1", 0.1, 0.0, 1.0,
-                      "classic mode: dihedral bending constraint stiffness")
-          .calibrate(0.001, 1, ParamScale::Log),
-      ParamSpec::real("volume_stiffness", "1", 1.0, 0.0, 1.0,
-                      "classic mode: volume constraint stiffness (global or per tet)")
-          .calibrate(0.01, 1, ParamScale::Log),
-      ParamSpec::flag("bending", false, "bending constraints on interior surface edges"),
-      ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
-                        "bending constraint: isometric (Bergou et al. 2006, a constant stencil "
-                        "per hinge) or dihedral angle (Mueller et al. 2007)"),
-      ParamSpec::flag("volume", true, "global volume constraint on a closed surface"),
-      ParamSpec::flag("volume_every_sweep", false,
-                      "project the global volume constraint in every sweep (default: last sweep "
-                      "only; it costs a pass over all triangles)"),
-      ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
-                      "xpbd mode, surface input: shell thickness for stretch/bending compliance")
-          .calibrate(0.0001, 0.3, ParamScale::Log),
-      ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
-                      "velocity damping rate: v <- v exp(-damping dt) each step")
-          .calibrate(0.01, 1000, ParamScale::Log),
-      ParamSpec::choice("precision", "float32", {"float32", "float64"},
-                        "number type of the distance and global volume projections (positions "
-                        "relative to the organ's centre); state between steps stays double"),
-  };
-}
-
-PbdConfig configFromParams(const ParamValues& p) {
-  PbdConfig c;
-  c.iterations = static_cast<int>(p.integer("iterations"));
-  c.volumeNetwork = p.choice("network") == "volume";
-  c.volumeElements = p.integer("volume_elements");
-  c.mode = p.choiceAs<StiffnessMode>(
-      "stiffness_mode", {{"classic", StiffnessMode::Classic}, {"xpbd", StiffnessMode::Xpbd}});
-  c.stretchStiffness = p.real("stretch_stiffness");
-  c.bendingStiffness = p.real("bending_stiffness");
-  c.volumeStiffness = p.real("volume_stiffness");
-  c.bending = p.flag("bending");
-  c.bendingModel = p.choiceAs<BendingModel>(
-      "bending_model",
-      {{"isometric", BendingModel::Isometric}, {"dihedral", BendingModel::Dihedral}});
-  c.volume = p.flag("volume");
-  c.volumeEverySweep = p.flag("volume_every_sweep");
-  c.thickness = p.real("thickness");
-  c.damping = p.real("damping");
-  c.precision = p.choiceAs<Precision>(
-      "precision", {{"float32", Precision::Float32}, {"float64", Precision::Float64}});
-  return c;
-}
 
 Real surfaceEdgeCompliance(Real young, Real thickness, Real restLength, Real adjacentArea) {
   return restLength * restLength / (young * thickness * adjacentArea);
@@ -131,11 +67,6 @@ std::vector<size_t> orderByColour(std::vector<C>& cs, int numNodes, NodesOf node
   starts.push_back(cs.size());
   cs.swap(out);
   return starts;
-}
-
-Real triangleArea(const MatX3& V, const MatX3i& F, Eigen::Index f) {
-  const Vec3 a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
-  return 0.5 * (b - a).cross(c - a).norm();
 }
 
 }  // namespace
@@ -270,31 +201,20 @@ void PbdModel::buildSurface(const Organ& organ) {
   const bool xpbd = m_config.mode == StiffnessMode::Xpbd;
 
   // Mass: the enclosed volume's mass, distributed by vertex area (a third of each triangle).
-  VecX area = VecX::Zero(N);
-  VecX faceArea(S.numFaces());
-  for (int f = 0; f < S.numFaces(); ++f) {
-    faceArea[f] = triangleArea(S.V, S.F, f);
-    for (int k = 0; k < 3; ++k) area[S.F(f, k)] += faceArea[f] / 3.0;
-  }
-  const Real totalArea = faceArea.sum();
-  const MatX2i E = uniqueEdges(S.F);
-  const MatX2i EF = edgeFaces(S.F, E);
-  const bool closed = (EF.array() >= 0).all();
-  const Real enclosed = std::abs(signedVolume(S.V, S.F));
-  // An open surface has no enclosed volume: give it the shell's mass instead.
-  const Real totalMass =
-      mat.density * (closed && enclosed > 0 ? enclosed : totalArea * m_config.thickness);
-  m_mass = area * (totalMass / totalArea);
+  const LumpedSurface lumped = lumpSurface(S, mat.density, m_config.thickness);
+  const VecX& faceArea = lumped.faceArea;
+  const MatX2i& E = lumped.edges;
+  const MatX2i& EF = lumped.edgeFaces;
+  m_mass = lumped.mass;
 
   for (Eigen::Index e = 0; e < E.rows(); ++e) {
     DistanceConstraint c;
     c.a = E(e, 0);
     c.b = E(e, 1);
     c.rest = (S.V.row(c.a) - S.V.row(c.b)).norm();
-    Real adj = 0;
-    for (int s = 0; s < 2; ++s)
-      if (EF(e, s) >= 0) adj += faceArea[EF(e, s)];
-    c.compliance = xpbd ? surfaceEdgeCompliance(mat.young, m_config.thickness, c.rest, adj) : 0.0;
+    c.compliance =
+        xpbd ? surfaceEdgeCompliance(mat.young, m_config.thickness, c.rest, lumped.edgeArea(e))
+             : 0.0;
     m_distance.push_back(c);
   }
 
@@ -341,7 +261,7 @@ void PbdModel::buildSurface(const Organ& organ) {
     }
   }
 
-  if (m_config.volume && closed) {
+  if (m_config.volume && lumped.closed) {
     m_hasVolume = true;
     m_restVolume = signedVolume(S.V, S.F);
     const Real K = bulkModulus(mat);

@@ -1,7 +1,77 @@
-// The "pbd" plugin: registers PbdModel (pbd_model.h) with the harness.
+// The "pbd" plugin: its parameters, their config (PbdConfig) and the registration of PbdModel
+// (pbd_model.h).
 #include "pbd_model.h"
 
 #include <deform/sdk/registry.h>
+
+namespace deform::pbd {
+
+std::vector<ParamSpec> paramSpecs() {
+  return {
+      ParamSpec::integer("iterations", 10, 1, 10000, "Gauss-Seidel sweeps over all constraints"),
+      ParamSpec::choice("network", "surface", {"surface", "volume"},
+                        "surface: constraints on the organ's surface mesh (the papers' "
+                        "baselines); volume: on the tets of the surface tetrahedralised with "
+                        "about volume_elements tets (a mesh file with tets is used as given "
+                        "either way)"),
+      ParamSpec::integer("volume_elements", 4000, 100, 10000000,
+                         "network = volume: target number of tets"),
+      ParamSpec::choice("stiffness_mode", "xpbd", {"classic", "xpbd"},
+                        "classic: [0,1] stiffness with k' = 1-(1-k)^(1/n); xpbd: compliances "
+                        "from E, nu, thickness"),
+      ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
+                      "classic mode: distance constraint stiffness")
+          .calibrate(0.01, 1, ParamScale::Log),
+      ParamSpec::real("bending_stiffness", "1", 0.1, 0.0, 1.0,
+                      "classic mode: dihedral bending constraint stiffness")
+          .calibrate(0.001, 1, ParamScale::Log),
+      ParamSpec::real("volume_stiffness", "1", 1.0, 0.0, 1.0,
+                      "classic mode: volume constraint stiffness (global or per tet)")
+          .calibrate(0.01, 1, ParamScale::Log),
+      ParamSpec::flag("bending", false, "bending constraints on interior surface edges"),
+      ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
+                        "bending constraint: isometric (Bergou et al. 2006, a constant stencil "
+                        "per hinge) or dihedral angle (Mueller et al. 2007)"),
+      ParamSpec::flag("volume", true, "global volume constraint on a closed surface"),
+      ParamSpec::flag("volume_every_sweep", false,
+                      "project the global volume constraint in every sweep (default: last sweep "
+                      "only; it costs a pass over all triangles)"),
+      ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
+                      "xpbd mode, surface input: shell thickness for stretch/bending compliance")
+          .calibrate(0.0001, 0.3, ParamScale::Log),
+      ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
+                      "velocity damping rate: v <- v exp(-damping dt) each step")
+          .calibrate(0.01, 1000, ParamScale::Log),
+      ParamSpec::choice("precision", "float32", {"float32", "float64"},
+                        "number type of the distance and global volume projections (positions "
+                        "relative to the organ's centre); state between steps stays double"),
+  };
+}
+
+PbdConfig configFromParams(const ParamValues& p) {
+  PbdConfig c;
+  c.iterations = static_cast<int>(p.integer("iterations"));
+  c.volumeNetwork = p.choice("network") == "volume";
+  c.volumeElements = p.integer("volume_elements");
+  c.mode = p.choiceAs<StiffnessMode>(
+      "stiffness_mode", {{"classic", StiffnessMode::Classic}, {"xpbd", StiffnessMode::Xpbd}});
+  c.stretchStiffness = p.real("stretch_stiffness");
+  c.bendingStiffness = p.real("bending_stiffness");
+  c.volumeStiffness = p.real("volume_stiffness");
+  c.bending = p.flag("bending");
+  c.bendingModel = p.choiceAs<BendingModel>(
+      "bending_model",
+      {{"isometric", BendingModel::Isometric}, {"dihedral", BendingModel::Dihedral}});
+  c.volume = p.flag("volume");
+  c.volumeEverySweep = p.flag("volume_every_sweep");
+  c.thickness = p.real("thickness");
+  c.damping = p.real("damping");
+  c.precision = p.choiceAs<Precision>(
+      "precision", {{"float32", Precision::Float32}, {"float64", Precision::Float64}});
+  return c;
+}
+
+}  // namespace deform::pbd
 
 DEFORM_PLUGIN(registry) {
   deform::ModelInfo info;

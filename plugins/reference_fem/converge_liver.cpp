@@ -15,7 +15,7 @@
 #include <string>
 
 using namespace deform;
-using namespace deform::reffem;
+using namespace deform::reference_fem;
 
 int main(int argc, char** argv) {
   if (argc < 6 || argc > 8) {

@@ -4,7 +4,7 @@
 #include <chrono>
 #include <cmath>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 namespace {
 
@@ -130,4 +130,4 @@ ConvergenceStudy runConvergenceStudy(const SurfaceMesh& surface, const Material&
   return s;
 }
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

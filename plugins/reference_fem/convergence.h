@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 struct ConvergenceLevel {
   long long elements = 0;
@@ -73,4 +73,4 @@ ConvergenceStudy runConvergenceStudyOnMeshes(const std::vector<TetMesh>& meshes,
                                              const SolveOptions& solve = {},
                                              ElementOrder order = ElementOrder::Linear);
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

@@ -19,7 +19,7 @@
 #include <string>
 
 using namespace deform;
-using namespace deform::reffem;
+using namespace deform::reference_fem;
 
 namespace {
 

@@ -66,7 +66,7 @@
 #include <string>
 #include <vector>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 enum class MaterialModel { Linear, Corotational, NeoHookean };
 
@@ -267,8 +267,8 @@ class EquilibriumSolver {
  private:
   SolveReport solve(const LoadCase& loads, VecX& x, const VecX& fStart, const InertiaTerms* inertia,
                     const SolveOptions& options);
-  // The pieces of solve() (fem_solver.cpp): the constrained dofs, load stepping, and in each
-  // load step Newton iterations (an inexact Newton direction, then the Dirichlet lift or a
+  // The pieces of solve() (equilibrium_solver.cpp): the constrained dofs, load stepping, and in
+  // each load step Newton iterations (an inexact Newton direction, then the Dirichlet lift or a
   // line search).
   struct Newton;  ///< one solve's state
   enum class NewtonOutcome { Continue, Converged, Failed };
@@ -401,4 +401,4 @@ std::vector<std::pair<int, Vec3>> tractionForces(const TetMesh& mesh, const Vec3
 std::vector<std::pair<int, Vec3>> tractionForces(const FemSystem& system, const Vec3& traction,
                                                  const std::function<bool(const Vec3&)>& select);
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

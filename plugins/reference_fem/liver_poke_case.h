@@ -11,7 +11,7 @@
 
 #include <array>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 /// The scene's fixed boxes (m): the phantom's back and its underside.
 inline std::array<Box, 2> liverPokeFixedBoxes() {
@@ -46,4 +46,4 @@ inline LoadCase liverPokeLoads(const FemSystem& sys, int pokeVertex) {
   return lc;
 }
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

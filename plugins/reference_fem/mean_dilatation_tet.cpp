@@ -5,7 +5,7 @@
 
 #include <limits>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 namespace {
 
@@ -104,4 +104,4 @@ void evaluateMeanDilatationTet(const MeanDilatationNeoHookean& material,
     out.stiffness.noalias() += (rest.volume * material.kappa) * b * b.transpose();
 }
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

@@ -37,7 +37,7 @@
 
 #include <deform/kernels/fem_tet.h>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 /// Neo-Hookean with the mean-dilatation volumetric term (see the file comment).
 struct MeanDilatationNeoHookean {
@@ -53,4 +53,4 @@ void evaluateMeanDilatationTet(const MeanDilatationNeoHookean& material,
                                const QuadraticTetRest& rest, const Mat3x10& x, TetEvalMode mode,
                                QuadraticTetEvaluation& out, bool projectSpd = false);
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

@@ -1,6 +1,6 @@
 #include "quadratic_tet.h"
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 std::array<Vec4, 4> quadraticTetQuadrature() {
   const Real a = (5.0 + 3.0 * std::sqrt(5.0)) / 20.0, b = (5.0 - std::sqrt(5.0)) / 20.0;
@@ -34,4 +34,4 @@ QuadraticTetRest makeQuadraticTetRest(const TetRest& linear) {
   return r;
 }
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

@@ -35,7 +35,7 @@
 #include <cmath>
 #include <limits>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 using Vec30 = Eigen::Matrix<Real, 30, 1>;
 using Mat30 = Eigen::Matrix<Real, 30, 30>;
@@ -113,4 +113,4 @@ void evaluateQuadraticTet(const Material& material, const QuadraticTetRest& rest
   }
 }
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

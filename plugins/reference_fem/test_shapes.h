@@ -7,7 +7,7 @@
 #include <array>
 #include <map>
 
-namespace deform::reffem {
+namespace deform::reference_fem {
 
 /// Structured tet mesh of the box [lo, hi] with n = (nx, ny, nz) cells, each cell split into six
 /// tets around its main diagonal (Kuhn), conforming across cells. Nodes in lexicographic order
@@ -76,4 +76,4 @@ inline SurfaceMesh boxSurface(const Vec3& lo, const Vec3& hi, const Vec3i& n) {
   return boundaryFirst(m);
 }
 
-}  // namespace deform::reffem
+}  // namespace deform::reference_fem

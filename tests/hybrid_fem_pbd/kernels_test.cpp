@@ -17,7 +17,7 @@
 #include "surface_pbd.h"
 #include "vertex_cover_simplification.h"
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 namespace {
 
 // ---------------------------------------------------------------- vertex cover simplification
@@ -516,4 +516,4 @@ TEST(GraspResponse, BlockedFloatProductMatchesTheDoubleProduct) {
 }
 
 }  // namespace
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

@@ -10,7 +10,7 @@
 
 #include "hybrid_model.h"
 
-namespace deform::hybrid {
+namespace deform::hybrid_fem_pbd {
 namespace {
 
 Cache& testCache() {
@@ -530,4 +530,4 @@ TEST(HybridModelReaction, LiftedTopFaceMatchesAnEliminatedLinearFemReaction) {
 }
 
 }  // namespace
-}  // namespace deform::hybrid
+}  // namespace deform::hybrid_fem_pbd

@@ -12,7 +12,7 @@
 #include <array>
 
 using namespace deform;
-using namespace deform::reffem;
+using namespace deform::reference_fem;
 using deform::testing::icosphere;
 
 namespace {

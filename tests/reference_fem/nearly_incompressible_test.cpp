@@ -27,7 +27,7 @@
 #include <filesystem>
 
 using namespace deform;
-using namespace deform::reffem;
+using namespace deform::reference_fem;
 using deform::testing::centralDifferences;
 using deform::testing::numericGradient;
 

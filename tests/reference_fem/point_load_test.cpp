@@ -12,7 +12,7 @@
 #include <set>
 
 using namespace deform;
-using namespace deform::reffem;
+using namespace deform::reference_fem;
 
 namespace {
 

@@ -19,7 +19,7 @@
 #include <set>
 
 using namespace deform;
-using namespace deform::reffem;
+using namespace deform::reference_fem;
 using deform::testing::centralDifferences;
 using deform::testing::numericGradient;
 

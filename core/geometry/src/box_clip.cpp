@@ -98,6 +98,94 @@ struct CoordHash {
 
 }  // namespace
 
+namespace {
+
+// The surface with every vertex a small fraction (snapFraction) of its shortest edge away from
+// a face of one of the boxes snapped onto that face; snappedInput counts the vertices moved.
+SurfaceMesh snapToBoxFaces(const SurfaceMesh& surface, const std::vector<Box>& used,
+                           Real snapFraction, int& snappedInput) {
+  SurfaceMesh snapped = surface;
+  if (!(snapFraction > 0) || used.empty()) return snapped;
+  std::vector<Real> shortest(size_t(surface.numVertices()), std::numeric_limits<Real>::max());
+  const MatX2i E = uniqueEdges(surface.F);
+  for (Eigen::Index e = 0; e < E.rows(); ++e) {
+    const Real l = (surface.V.row(E(e, 0)) - surface.V.row(E(e, 1))).norm();
+    for (int k = 0; k < 2; ++k) shortest[size_t(E(e, k))] = std::min(shortest[size_t(E(e, k))], l);
+  }
+  for (int i = 0; i < surface.numVertices(); ++i) {
+    const Real tol = snapFraction * shortest[size_t(i)];
+    bool moved = false;
+    for (const Box& b : used) {
+      for (int k = 0; k < 3; ++k) {
+        bool over = true;
+        for (int j = 0; j < 3; ++j)
+          if (j != k && (snapped.V(i, j) < b.lo[j] - tol || snapped.V(i, j) > b.hi[j] + tol))
+            over = false;
+        if (!over) continue;
+        for (const Real v : {b.lo[k], b.hi[k]}) {
+          const Real d = std::abs(snapped.V(i, k) - v);
+          if (d > 0 && d < tol) {
+            snapped.V(i, k) = v;
+            moved = true;
+          }
+        }
+      }
+    }
+    snappedInput += moved;
+  }
+  return snapped;
+}
+
+// organ in doubles, in a canonical order (see clipSurfaceByBoxes), into the empty mesh; each face
+// on a box plane gets that plane's id in planeId (from 1) as its patch, the others 0.
+void canonicalMesh(const ExactMesh& organ, const std::vector<Box>& used, const std::string& src,
+                   Mesh& mesh, Mesh::Property_map<Mesh::Face_index, int>& patch,
+                   std::map<Plane, int>& planeId) {
+  std::vector<ExactMesh::Vertex_index> order(organ.vertices().begin(), organ.vertices().end());
+  std::vector<std::array<double, 3>> x(organ.number_of_vertices() +
+                                       organ.number_of_removed_vertices());
+  for (ExactMesh::Vertex_index v : order) {
+    const EK::Point_3& p = organ.point(v);
+    x[size_t(v)] = {CGAL::to_double(CGAL::exact(p.x())), CGAL::to_double(CGAL::exact(p.y())),
+                    CGAL::to_double(CGAL::exact(p.z()))};
+  }
+  std::sort(order.begin(), order.end(), [&](ExactMesh::Vertex_index a, ExactMesh::Vertex_index b) {
+    if (x[size_t(a)] != x[size_t(b)]) return x[size_t(a)] < x[size_t(b)];
+    return CGAL::compare_xyz(organ.point(a), organ.point(b)) == CGAL::SMALLER;
+  });
+  std::vector<int> rank(x.size(), -1);
+  std::vector<Mesh::Vertex_index> vmap;
+  vmap.reserve(order.size());
+  for (size_t i = 0; i < order.size(); ++i) {
+    rank[size_t(order[i])] = int(i);
+    const auto& c = x[size_t(order[i])];
+    vmap.push_back(mesh.add_vertex(IK::Point_3(c[0], c[1], c[2])));
+  }
+  std::vector<std::array<int, 3>> faces;
+  faces.reserve(organ.number_of_faces());
+  for (ExactMesh::Face_index f : organ.faces()) {
+    std::array<int, 3> t;
+    int k = 0;
+    for (ExactMesh::Vertex_index u : CGAL::vertices_around_face(organ.halfedge(f), organ))
+      t[size_t(k++)] = rank[size_t(u)];
+    std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
+    faces.push_back(t);
+  }
+  std::sort(faces.begin(), faces.end());
+  for (const auto& t : faces) {
+    const Mesh::Face_index g =
+        mesh.add_face(vmap[size_t(t[0])], vmap[size_t(t[1])], vmap[size_t(t[2])]);
+    if (g == Mesh::null_face())
+      throw InputError(src, "fixed boxes", "the clipped surface is not manifold");
+    std::array<EK::Point_3, 3> p;
+    for (int k = 0; k < 3; ++k) p[size_t(k)] = organ.point(order[size_t(t[size_t(k)])]);
+    const Plane pl = capPlane(p, used);
+    if (pl.axis >= 0) patch[g] = planeId.emplace(pl, int(planeId.size()) + 1).first->second;
+  }
+}
+
+}  // namespace
+
 BoxClipResult clipSurfaceByBoxes(const SurfaceMesh& surface, const std::vector<Box>& boxes,
                                  const BoxClipOptions& options) {
   const std::string& src = options.source;
@@ -107,37 +195,7 @@ BoxClipResult clipSurfaceByBoxes(const SurfaceMesh& surface, const std::vector<B
   for (const Box& b : boxes)
     if (!(b.hi.array() <= b.lo.array()).any() && overlapsOpen(b, organBox)) used.push_back(b);
   // Snap vertices a small fraction of an edge away from a box face onto it (see the header).
-  SurfaceMesh snapped = surface;
-  if (options.snapFraction > 0 && !used.empty()) {
-    std::vector<Real> shortest(size_t(surface.numVertices()), std::numeric_limits<Real>::max());
-    const MatX2i E = uniqueEdges(surface.F);
-    for (Eigen::Index e = 0; e < E.rows(); ++e) {
-      const Real l = (surface.V.row(E(e, 0)) - surface.V.row(E(e, 1))).norm();
-      for (int k = 0; k < 2; ++k)
-        shortest[size_t(E(e, k))] = std::min(shortest[size_t(E(e, k))], l);
-    }
-    for (int i = 0; i < surface.numVertices(); ++i) {
-      const Real tol = options.snapFraction * shortest[size_t(i)];
-      bool moved = false;
-      for (const Box& b : used) {
-        for (int k = 0; k < 3; ++k) {
-          bool over = true;
-          for (int j = 0; j < 3; ++j)
-            if (j != k && (snapped.V(i, j) < b.lo[j] - tol || snapped.V(i, j) > b.hi[j] + tol))
-              over = false;
-          if (!over) continue;
-          for (const Real v : {b.lo[k], b.hi[k]}) {
-            const Real d = std::abs(snapped.V(i, k) - v);
-            if (d > 0 && d < tol) {
-              snapped.V(i, k) = v;
-              moved = true;
-            }
-          }
-        }
-      }
-      out.snappedInput += moved;
-    }
-  }
+  const SurfaceMesh snapped = snapToBoxFaces(surface, used, options.snapFraction, out.snappedInput);
   used.clear();
   ExactMesh organ = exactSurface(snapped, src);
   for (size_t i = 0; i < boxes.size(); ++i) {
@@ -172,50 +230,7 @@ BoxClipResult clipSurfaceByBoxes(const SurfaceMesh& surface, const std::vector<B
   Mesh mesh;
   std::map<Plane, int> planeId;
   auto patch = mesh.add_property_map<Mesh::Face_index, int>("f:patch", 0).first;
-  {
-    std::vector<ExactMesh::Vertex_index> order(organ.vertices().begin(), organ.vertices().end());
-    std::vector<std::array<double, 3>> x(organ.number_of_vertices() +
-                                         organ.number_of_removed_vertices());
-    for (ExactMesh::Vertex_index v : order) {
-      const EK::Point_3& p = organ.point(v);
-      x[size_t(v)] = {CGAL::to_double(CGAL::exact(p.x())), CGAL::to_double(CGAL::exact(p.y())),
-                      CGAL::to_double(CGAL::exact(p.z()))};
-    }
-    std::sort(order.begin(), order.end(),
-              [&](ExactMesh::Vertex_index a, ExactMesh::Vertex_index b) {
-                if (x[size_t(a)] != x[size_t(b)]) return x[size_t(a)] < x[size_t(b)];
-                return CGAL::compare_xyz(organ.point(a), organ.point(b)) == CGAL::SMALLER;
-              });
-    std::vector<int> rank(x.size(), -1);
-    std::vector<Mesh::Vertex_index> vmap;
-    vmap.reserve(order.size());
-    for (size_t i = 0; i < order.size(); ++i) {
-      rank[size_t(order[i])] = int(i);
-      const auto& c = x[size_t(order[i])];
-      vmap.push_back(mesh.add_vertex(IK::Point_3(c[0], c[1], c[2])));
-    }
-    std::vector<std::array<int, 3>> faces;
-    faces.reserve(organ.number_of_faces());
-    for (ExactMesh::Face_index f : organ.faces()) {
-      std::array<int, 3> t;
-      int k = 0;
-      for (ExactMesh::Vertex_index u : CGAL::vertices_around_face(organ.halfedge(f), organ))
-        t[size_t(k++)] = rank[size_t(u)];
-      std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
-      faces.push_back(t);
-    }
-    std::sort(faces.begin(), faces.end());
-    for (const auto& t : faces) {
-      const Mesh::Face_index g =
-          mesh.add_face(vmap[size_t(t[0])], vmap[size_t(t[1])], vmap[size_t(t[2])]);
-      if (g == Mesh::null_face())
-        throw InputError(src, "fixed boxes", "the clipped surface is not manifold");
-      std::array<EK::Point_3, 3> p;
-      for (int k = 0; k < 3; ++k) p[size_t(k)] = organ.point(order[size_t(t[size_t(k)])]);
-      const Plane pl = capPlane(p, used);
-      if (pl.axis >= 0) patch[g] = planeId.emplace(pl, int(planeId.size()) + 1).first->second;
-    }
-  }
+  canonicalMesh(organ, used, src, mesh, patch, planeId);
   if (!CGAL::is_closed(mesh))
     throw InputError(src, "fixed boxes", "the organ minus the fixed boxes is not a closed surface");
 

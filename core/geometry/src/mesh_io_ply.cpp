@@ -43,16 +43,19 @@ bool isIntegerType(io::ScalarType t) {
 
 enum class PlyFormat { Ascii, BinaryLittle, BinaryBig };
 
-}  // namespace
+struct PlyHeader {
+  std::optional<PlyFormat> format;  ///< set (a header without one is refused)
+  std::vector<PlyElement> elements;
+};
 
-SurfaceMesh io::readPlyData(std::string_view data, const std::string& path) {
-  io::Cursor cur(data, path);
+// The header from "ply" to end_header; cur is then at the first element's data.
+PlyHeader readPlyHeader(io::Cursor& cur) {
   std::vector<std::string_view> tok;
   std::string_view line;
-
+  PlyHeader header;
+  std::optional<PlyFormat>& format = header.format;
+  std::vector<PlyElement>& elements = header.elements;
   if (!cur.nextLine(line) || line != "ply") cur.fail("not a PLY file (first line is not 'ply')");
-  std::optional<PlyFormat> format;
-  std::vector<PlyElement> elements;
   bool ended = false;
   while (!ended && cur.nextLine(line)) {
     io::splitTokens(line, tok);
@@ -108,6 +111,17 @@ SurfaceMesh io::readPlyData(std::string_view data, const std::string& path) {
   }
   if (!ended) cur.fail("truncated file: no end_header");
   if (!format) cur.fail("PLY header has no format line");
+
+  return header;
+}
+
+}  // namespace
+
+SurfaceMesh io::readPlyData(std::string_view data, const std::string& path) {
+  io::Cursor cur(data, path);
+  const PlyHeader header = readPlyHeader(cur);
+  const std::optional<PlyFormat>& format = header.format;
+  const std::vector<PlyElement>& elements = header.elements;
 
   const PlyElement* vertexEl = nullptr;
   const PlyElement* faceEl = nullptr;

@@ -91,13 +91,8 @@ OrganTets organTets(const Organ& organ, const OrganTetOptions& options, Cache& c
   OrganTets out;
   if (organ.volume) {
     out.mesh = *organ.volume;
-    TetMesh& mesh = out.mesh;
-    for (int t = 0; t < mesh.numTets(); ++t) {
-      const auto r = mesh.T.row(t);
-      if (tetVolume(mesh.V.row(r(0)), mesh.V.row(r(1)), mesh.V.row(r(2)), mesh.V.row(r(3))) < 0)
-        std::swap(mesh.T(t, 2), mesh.T(t, 3));
-    }
-    out.surfaceNode = surfaceVertexNodes(organ, mesh.V);
+    orientTetsPositive(out.mesh);
+    out.surfaceNode = surfaceVertexNodes(organ, out.mesh.V);
   } else {
     out.surfaceNode = meshSurface(organ, options, cache, out.mesh);
   }

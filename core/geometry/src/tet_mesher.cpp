@@ -396,14 +396,7 @@ TetMeshResult tetrahedralize(const SurfaceMesh& input, const TetMeshOptions& opt
 
   result.mesh.V = std::move(g.V);
   result.mesh.T = std::move(g.T);
-  // Positive orientation for every tet.
-  for (int t = 0; t < result.mesh.numTets(); ++t) {
-    const auto r = result.mesh.T.row(t);
-    if (tetVolume(result.mesh.V.row(r(0)), result.mesh.V.row(r(1)), result.mesh.V.row(r(2)),
-                  result.mesh.V.row(r(3))) < 0) {
-      std::swap(result.mesh.T(t, 2), result.mesh.T(t, 3));
-    }
-  }
+  orientTetsPositive(result.mesh);
   // The tets' boundary must be exactly the surface we gave Gmsh (no Steiner points on it).
   const SurfaceMesh b = tetBoundary(result.mesh);
   if (sortedTriangles(b.F) != sortedTriangles(result.boundary.F))

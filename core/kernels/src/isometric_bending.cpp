@@ -1,4 +1,5 @@
 #include <deform/kernels/isometric_bending.h>
+#include <deform/kernels/simd_lanes.h>
 
 #include <algorithm>
 #include <cmath>
@@ -27,38 +28,6 @@ bool stencil(const Vec3 x[4], const Real K[4], Vec3& v, Real& len) {
   return len * len > tol::kDegenerateLength * tol::kDegenerateLength;
 }
 
-template <class Scalar>
-struct ScalarLanes {
-  using T = Scalar;
-  using V = Scalar;
-  using M = bool;
-  static constexpr int kWidth = 1;
-  static V set1(T v) { return v; }
-  static V load(const T* p) { return *p; }
-  static void store(T* p, V v) { *p = v; }
-  static V sqrt(V a) { return std::sqrt(a); }
-  static V max(V a, V b) { return a > b ? a : b; }
-  static M gt(V a, V b) { return a > b; }
-  static M lt(V a, V b) { return a < b; }
-  static M ne(V a, V b) { return a != b; }
-  static M band(M a, M b) { return a && b; }
-  static M notMask(M a) { return !a; }
-  static V select(M m, V a, V b) { return m ? a : b; }
-  static int count(M m) { return m ? 1 : 0; }
-  static void loadRows(const T* x4, const int* off, V& x, V& y, V& z) {
-    const T* p = x4 + *off;
-    x = p[0];
-    y = p[1];
-    z = p[2];
-  }
-  static void addRows(T* x4, const int* off, V dx, V dy, V dz) {
-    T* p = x4 + *off;
-    p[0] += dx;
-    p[1] += dy;
-    p[2] += dz;
-  }
-};
-
 template <class T>
 isobatch::View<T> view(const IsometricBatch<T>& b) {
   return {{b.p[0], b.p[1], b.p[2], b.p[3]},
@@ -82,7 +51,7 @@ long long run(T* x4, const IsometricBatch<T>& b, size_t begin, size_t end, T* me
 #else
   (void)simd;
 #endif
-  for (; i < end; ++i) degenerate += isobatch::hingeGroup<ScalarLanes<T>>(x4, v, i, measure);
+  for (; i < end; ++i) degenerate += isobatch::hingeGroup<simd::ScalarLanes<T>>(x4, v, i, measure);
   return degenerate;
 }
 

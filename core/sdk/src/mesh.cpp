@@ -93,6 +93,14 @@ Real tetVolume(const Vec3& x0, const Vec3& x1, const Vec3& x2, const Vec3& x3) {
   return (x1 - x0).dot((x2 - x0).cross(x3 - x0)) / 6.0;
 }
 
+void orientTetsPositive(TetMesh& mesh) {
+  for (int t = 0; t < mesh.numTets(); ++t) {
+    const auto r = mesh.T.row(t);
+    if (tetVolume(mesh.V.row(r(0)), mesh.V.row(r(1)), mesh.V.row(r(2)), mesh.V.row(r(3))) < 0)
+      std::swap(mesh.T(t, 2), mesh.T(t, 3));
+  }
+}
+
 SurfaceMesh tetBoundary(const TetMesh& tets) {
   // Faces of a positively oriented tet (0,1,2,3), each counter-clockwise seen from outside.
   static constexpr int kFaces[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};

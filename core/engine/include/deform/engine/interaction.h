@@ -19,6 +19,7 @@
 
 #include <deform/engine/instruments.h>
 #include <deform/engine/scene.h>
+#include <deform/geometry/pressure_patch.h>
 #include <deform/sdk/contact.h>
 #include <deform/sdk/model.h>
 
@@ -34,34 +35,14 @@ Vec3 toolPosition(const std::vector<KeyFrame>& trajectory, Real t);
 /// Jaw state at time t: that of the last keyframe with t_k <= t (open before the first).
 bool jawClosed(const std::vector<KeyFrame>& trajectory, Real t);
 
-/// The organ surface vertices a grasp closing at p with jaw radius r holds: every rest-surface
-/// vertex (rest: #V by 3) within r of p (sorted), or the nearest vertex alone when none is. The
-/// one definition of the grasped set (the runner, rmse_k's exclusion and conformance use it).
-std::vector<int> graspedSurfaceVertices(const MatX3& rest, const Vec3& p, Real r);
-inline std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Vec3& p, Real r) {
-  return graspedSurfaceVertices(rest.V, p, r);
-}
+// graspedSurfaceVertices(), the one definition of the grasped set, is in deform/sdk/model.h.
 
 /// The organ surface vertices a plate holds: every rest-surface vertex inside its box (sorted;
 /// empty when none is, which loadOrgan() refuses). The one definition of the plate's set.
 std::vector<int> plateSurfaceVertices(const MatX3& rest, const Box& region);
 
-/// A point force read as a pressure patch of radius R around surface vertex c:
-///     t(x) = F k(|x - x_c|) / integral k dA,   k(rho) = 1 - (rho / R)^2 for rho < R, else 0,
-/// a paraboloid profile (the support and shape of the Hertz pressure under a rigid sphere tip),
-/// turned into consistent nodal forces on the linear surface triangles,
-///     f_i = F integral N_i k dA / integral k dA,
-/// integrated on 8 x 8 sub-triangles per triangle with the 6-point degree-4 rule over the
-/// triangles around the vertices reachable from c through edges that stay inside the disc (so a
-/// thin organ's far side is never loaded). Distances are taken at rest (a dead load with a fixed
-/// distribution); the weights sum to 1. A patch too small for the quadrature to see (R far below
-/// the edge length) puts the whole force on c.
-struct SurfacePatch {
-  std::vector<int> vertices;  ///< the centre first, then ascending
-  std::vector<Real> weights;  ///< sums to 1
-  Real radius = 0;            ///< R, m
-};
-SurfacePatch pressurePatch(const SurfaceMesh& rest, int c, Real radius);
+// SurfacePatch and pressurePatch(), the point force read as a pressure patch, are in
+// deform/geometry/pressure_patch.h.
 
 /// A uniform traction over the rest surface triangles whose three vertices lie inside `box`, as
 /// consistent nodal forces of linear triangles: each vertex gets a third of the area of its

@@ -64,6 +64,9 @@ MatX3 vertexNormals(const MatX3& V, const MatX3i& F);
 /// Signed volume of one tetrahedron: (x1-x0)·((x2-x0)×(x3-x0)) / 6.
 Real tetVolume(const Vec3& x0, const Vec3& x1, const Vec3& x2, const Vec3& x3);
 
+/// Positive orientation for every tet: the last two nodes of each tet with tetVolume < 0 swap.
+void orientTetsPositive(TetMesh& mesh);
+
 /// Boundary triangles of a tetrahedral mesh (faces used by exactly one tet), outward oriented.
 /// The result indexes T's nodes; unreferenced interior nodes are kept, so V is T.V unchanged.
 SurfaceMesh tetBoundary(const TetMesh& tets);

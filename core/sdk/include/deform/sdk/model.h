@@ -143,6 +143,36 @@ inline void graspsOnNodes(const std::vector<GraspInput>& grasps, const std::vect
   }
 }
 
+/// The organ surface vertices a grasp closing at p with jaw radius r holds: every rest-surface
+/// vertex (rest: #V by 3) within r of p (sorted), or the nearest vertex alone when none is. The
+/// one definition of the grasped set (the harness's interaction, rmse_k's exclusion and
+/// conformance use it; models and their tests may too).
+std::vector<int> graspedSurfaceVertices(const MatX3& rest, const Vec3& p, Real r);
+inline std::vector<int> graspedSurfaceVertices(const SurfaceMesh& rest, const Vec3& p, Real r) {
+  return graspedSurfaceVertices(rest.V, p, r);
+}
+
+/// The grasps' vertices and targets as one list, for models that hold every grasped vertex the
+/// same way: grasp by grasp, each vertex once (its first grasp's target wins), skipping vertices
+/// outside [0, numVertices) and those without a target row. targets is sized for all the grasps'
+/// vertices; its first verts.size() rows are the targets of verts (capacity of verts kept).
+inline void flattenGrasps(const std::vector<GraspInput>& grasps, Eigen::Index numVertices,
+                          std::vector<int>& verts, MatX3& targets) {
+  verts.clear();
+  Eigen::Index rows = 0;
+  for (const GraspInput& g : grasps) rows += Eigen::Index(g.vertices.size());
+  targets.resize(rows, 3);
+  for (const GraspInput& g : grasps)
+    for (size_t k = 0; k < g.vertices.size(); ++k) {
+      const int v = g.vertices[k];
+      if (v < 0 || v >= numVertices || Eigen::Index(k) >= g.targets.rows() ||
+          std::find(verts.begin(), verts.end(), v) != verts.end())
+        continue;
+      targets.row(Eigen::Index(verts.size())) = g.targets.row(Eigen::Index(k));
+      verts.push_back(v);
+    }
+}
+
 /// The nodes held by any of the grasps, sorted and without repeats (capacity of out kept).
 inline void graspedNodeSet(const std::vector<NodeGrasp>& grasps, std::vector<int>& out) {
   out.clear();

@@ -124,8 +124,18 @@ class Registry {
 #define DEFORM_PLUGIN_EXPORT extern "C" __attribute__((visibility("default")))
 
 /// Defines the two exported symbols. Usage: DEFORM_PLUGIN(registry) { registry.add({...}); }
+///
+/// A plugin's plugin.cpp (its parameters, config and registration) may also be compiled into the
+/// static library its tests link, so that they reach the parameters and the config: that library
+/// defines DEFORM_PLUGIN_STATIC, and the registration there is an unused internal function (no
+/// entry point, so that a program linking several such libraries has no clash).
+#ifdef DEFORM_PLUGIN_STATIC
+#define DEFORM_PLUGIN(registryName) \
+  [[maybe_unused]] static void deformRegisterUnused(deform::Registry& registryName)
+#else
 #define DEFORM_PLUGIN(registryName)               \
   DEFORM_PLUGIN_EXPORT int deform_abi_version() { \
     return DEFORM_ABI_VERSION;                    \
   }                                               \
   DEFORM_PLUGIN_EXPORT void deform_register(deform::Registry& registryName)
+#endif
