@@ -3,6 +3,7 @@
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
 #include <deform_harness/results.h>
+#include <deform_harness/runner.h>
 
 #include <array>
 #include <chrono>
