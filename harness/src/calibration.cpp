@@ -2,6 +2,7 @@
 #include <deform/engine/scene.h>
 #include <deform/internal/atomic_file.h>
 #include <deform_harness/calibration.h>
+#include <deform_harness/json_file.h>
 
 #include <algorithm>
 #include <chrono>
@@ -237,14 +238,7 @@ std::string calibrationDifferenceNote(const CalibrationParams& c, const json& re
 }
 
 CalibrationParams readCalibrationFile(const std::string& file) {
-  std::ifstream in(file);
-  if (!in) throw InputError(file, "", "cannot read the calibration file");
-  json doc;
-  try {
-    doc = json::parse(in);
-  } catch (const std::exception& e) {
-    throw InputError(file, "", "not JSON: " + std::string(e.what()));
-  }
+  json doc = readJsonFile<json>(file, "calibration file");
   if (!doc.is_object() || doc.value("format", "") != "deformbench-calibration/1")
     throw InputError(file, "/format", "not a calibration file (format deformbench-calibration/1)");
   CalibrationParams c;

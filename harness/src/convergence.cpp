@@ -5,6 +5,7 @@
 #include <deform/sdk/cache.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/convergence.h>
+#include <deform_harness/json_file.h>
 
 #include <chrono>
 #include <cmath>
@@ -295,14 +296,7 @@ std::string convergenceWarning(const ConvergenceResult& r) {
 
 ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loader,
                                  const ConvergeOptions& options, Progress* progress) {
-  std::ifstream in(sceneFile);
-  if (!in) throw InputError(sceneFile, "", "cannot read the scene");
-  ojson scene;
-  try {
-    scene = ojson::parse(in);
-  } catch (const nlohmann::json::exception& e) {
-    throw InputError(sceneFile, "", std::string("not JSON: ") + e.what());
-  }
+  const ojson scene = readJsonFile(sceneFile, "scene");
   return runConvergence(scene, sceneFile, loader, options, progress);
 }
 

@@ -6,6 +6,7 @@
 #include <deform/sdk/mesh.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/dispatch.h>
+#include <deform_harness/format.h>
 #include <deform_harness/runner.h>
 #include <deform_harness/stability.h>
 
@@ -24,16 +25,6 @@ namespace fs = std::filesystem;
 using ojson = nlohmann::ordered_json;
 
 namespace {
-
-std::string g(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-
-ojson vec(const Vec3& v) {
-  return ojson::array({v.x(), v.y(), v.z()});
-}
 
 /// The first parameter set of a plugin's preset `name` (ModelInfo::presets) as scene JSON, or
 /// nullopt when the plugin does not load or has no such preset.
@@ -142,56 +133,58 @@ std::vector<StabilityCase> stabilityCases(bool quick) {
   for (double e : youngs) {
     for (double dt : dts) {
       StabilityCase c;
-      c.id = "E";  // piecewise: GCC 12 warns falsely (-Wrestrict) on "E" + g(e) + ...
-      c.id += g(e);
+      c.id = "E";  // piecewise: GCC 12 warns falsely (-Wrestrict) on "E" + formatG(e) + ...
+      c.id += formatG(e);
       c.id += "_dt";
-      c.id += g(std::round(dt * 1e4) / 1e4);
+      c.id += formatG(std::round(dt * 1e4) / 1e4);
       c.group = "stiffness_dt";
       c.young = e;
       c.dt = dt;
       c.force = 1.0;
-      c.description = "E = " + g(e) + " Pa, dt = " + g(dt) + " s, 1 N down at the top, gravity";
+      c.description =
+          "E = " + formatG(e) + " Pa, dt = " + formatG(dt) + " s, 1 N down at the top, gravity";
       cases.push_back(c);
     }
   }
   for (double nu : quick ? std::vector<double>{0.499} : std::vector<double>{0.45, 0.49, 0.499}) {
     StabilityCase c;
-    c.id = "nu" + g(nu);
+    c.id = "nu" + formatG(nu);
     c.group = "poisson";
     c.young = 1e4;
     c.poisson = nu;
     c.force = 1.0;
-    c.description = "nu = " + g(nu) + ", E = 10 kPa, 1 N down at the top, gravity";
+    c.description = "nu = " + formatG(nu) + ", E = 10 kPa, 1 N down at the top, gravity";
     cases.push_back(c);
   }
   for (double f : quick ? std::vector<double>{200} : std::vector<double>{20, 200}) {
     StabilityCase c;
-    c.id = "force" + g(f) + "N";
+    c.id = "force" + formatG(f) + "N";
     c.group = "force";
     c.force = f;
-    c.description = g(f) + " N down at the top (E = 5.5 kPa), gravity";
+    c.description = formatG(f) + " N down at the top (E = 5.5 kPa), gravity";
     cases.push_back(c);
   }
   for (double e : quick ? std::vector<double>{1e7} : std::vector<double>{1e4, 1e6, 1e7}) {
     StabilityCase c;
-    c.id = "cantilever_E" + g(e);
+    c.id = "cantilever_E" + formatG(e);
     c.group = "cantilever";
     c.organ = "beam";
     c.young = e;
     c.beamTheory = cantileverSag(e, c.poisson, c.density, 9.81, 0.1, 0.01);
-    c.description = "cantilever 0.1 m, 10 mm square, clamped at x = 0, under gravity, E = " + g(e) +
-                    " Pa (beam theory: tip sag " + g(c.beamTheory) + " m)";
+    c.description =
+        "cantilever 0.1 m, 10 mm square, clamped at x = 0, under gravity, E = " + formatG(e) +
+        " Pa (beam theory: tip sag " + formatG(c.beamTheory) + " m)";
     cases.push_back(c);
   }
   for (double scale : {0.1, 1.0, 10.0}) {
     StabilityCase c;
-    c.id = "scale_" + g(0.1 * scale) + "m";
+    c.id = "scale_" + formatG(0.1 * scale) + "m";
     c.group = "scale";
     c.scale = scale;
     c.gravity = false;
     c.force = scale * scale;
-    c.description = "the cube scaled to " + g(0.1 * scale) + " m, " + g(c.force) +
-                    " N down at the top, density " + g(c.density / (scale * scale)) +
+    c.description = "the cube scaled to " + formatG(0.1 * scale) + " m, " + formatG(c.force) +
+                    " N down at the top, density " + formatG(c.density / (scale * scale)) +
                     " kg/m^3, no gravity (the same problem in other units: the relative "
                     "displacement must not change)";
     cases.push_back(c);
@@ -251,17 +244,17 @@ ojson stabilityScene(const StabilityCase& c, const std::string& plugin, const oj
   ojson fixed;
   if (c.organ == "beam") {  // the root face x = 0
     fixed = {{"box",
-              {vec(b.lo - m),
-               vec(Vec3(b.lo.x() + 1e-3 * b.size().x(), b.hi.y() + m.y(), b.hi.z() + m.z()))}}};
+              {vecJson(b.lo - m),
+               vecJson(Vec3(b.lo.x() + 1e-3 * b.size().x(), b.hi.y() + m.y(), b.hi.z() + m.z()))}}};
   } else {  // the bottom tenth
     fixed = {{"box",
-              {vec(b.lo - m),
-               vec(Vec3(b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.1 * b.size().z()))}}};
+              {vecJson(b.lo - m),
+               vecJson(Vec3(b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.1 * b.size().z()))}}};
   }
   const std::string what = c.organ == "beam" ? "beam phantom, root face fixed"
                            : c.organ == "slivers"
                                ? "liver phantom with slivers, bottom tenth fixed"
-                               : "cube phantom (" + g(size) + " m), bottom tenth fixed";
+                               : "cube phantom (" + formatG(size) + " m), bottom tenth fixed";
   ojson j;
   j["name"] = "stability-" + c.id;
   j["description"] = "Stability case " + c.id + ": " + c.description + "; " + what + ".";
@@ -277,7 +270,7 @@ ojson stabilityScene(const StabilityCase& c, const std::string& plugin, const oj
   j["duration"] = std::max(duration, 3 * c.dt);
   if (c.force > 0) {
     j["loads"] = ojson::array({{{"type", "point_force"},
-                                {"at", vec(top)},
+                                {"at", vecJson(top)},
                                 {"force", {0, 0, -c.force}},
                                 {"radius", 0.01 * c.scale},  // the patch scales with the organ
                                 {"start", 0.0},
@@ -291,17 +284,17 @@ ojson stabilityScene(const StabilityCase& c, const std::string& plugin, const oj
     j["tools"] = ojson::array({{{"type", "grasper"},
                                 {"radius", radius},
                                 {"trajectory",
-                                 {{{"t", 0.0}, {"pos", vec(grip)}, {"jaw", "closed"}},
-                                  {{"t", 0.8 * duration}, {"pos", vec(to)}}}}}});
+                                 {{{"t", 0.0}, {"pos", vecJson(grip)}, {"jaw", "closed"}},
+                                  {{"t", 0.8 * duration}, {"pos", vecJson(to)}}}}}});
   } else if (c.extra == "flatten") {
     const double r = 0.6 * size;
     const Vec3 start(b.center().x(), b.center().y(), b.hi.z() + r);
     const Vec3 end(b.center().x(), b.center().y(), b.lo.z() + 0.1 * b.size().z() + r);
-    j["tools"] = ojson::array(
-        {{{"type", "probe"},
-          {"radius", r},
-          {"trajectory",
-           {{{"t", 0.0}, {"pos", vec(start)}}, {{"t", 0.8 * duration}, {"pos", vec(end)}}}}}});
+    j["tools"] = ojson::array({{{"type", "probe"},
+                                {"radius", r},
+                                {"trajectory",
+                                 {{{"t", 0.0}, {"pos", vecJson(start)}},
+                                  {{"t", 0.8 * duration}, {"pos", vecJson(end)}}}}}});
   }
   j["models"] = ojson::array({{{"plugin", plugin}, {"label", plugin}, {"params", params}}});
   j["samples"] = {{"nearest", {10}}};
@@ -457,7 +450,7 @@ std::vector<std::string> markScaleDependent(std::vector<StabilityRecord>& record
     std::ostringstream line;
     line << model << ":";
     for (StabilityRecord* r : rows) {
-      line << " " << g(r->relativeDisplacement) << " (" << r->caseId << ")";
+      line << " " << formatG(r->relativeDisplacement) << " (" << r->caseId << ")";
       // The model's own relative displacements, whatever the reference's precision.
       if (r->verdict == "accurate" || r->verdict == "unchecked") {
         r->verdict = "inaccurate";
@@ -966,10 +959,10 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       }
       if (ref.ok) {
         std::string line = id + ": " + ref.what;
-        if (c.beamTheory > 0) line += ", tip sag " + g(tipSag(ref.final, ref.rest)) + " m";
-        if (refError >= 0) line += ", error " + g(100 * refError) + "% (" + refSource + ")";
+        if (c.beamTheory > 0) line += ", tip sag " + formatG(tipSag(ref.final, ref.rest)) + " m";
+        if (refError >= 0) line += ", error " + formatG(100 * refError) + "% (" + refSource + ")";
         if (c.beamTheory > 0 && ref.estimate >= 0)
-          line += ", coarser-solve estimate " + g(100 * ref.estimate) + "%";
+          line += ", coarser-solve estimate " + formatG(100 * ref.estimate) + "%";
         if (refError < 0 && !ref.estimateNote.empty()) line += ", " + ref.estimateNote;
         referenceLines.push_back(line);
       }
@@ -1026,7 +1019,7 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
   t.notes = {
       "Each case ran in its own process (`deformbench run` on scenes/<model>/<case>.json) "
       "with a " +
-          g(timeout) + " s limit; failed = threw, crashed (signal) or timed out.",
+          formatG(timeout) + " s limit; failed = threw, crashed (signal) or timed out.",
       std::string("Organ: the cube phantom, bottom tenth fixed, gravity, unless the case says "
                   "otherwise (cantilever: the beam phantom, root face fixed; slivers: the liver "
                   "phantom with needle triangles; scale: no gravity); ") +
@@ -1044,7 +1037,7 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       (refSpec.coarse.contains("elements") ? refSpec.coarse["elements"].dump() : "?") +
       " target tets, h x 1.4) over its RMS displacement): accurate when error_ratio = rmse_all "
       "/ the reference's RMS displacement <= " +
-      g(options.accuracyThreshold) +
+      formatG(options.accuracyThreshold) +
       "; else inaccurate, frozen (moves < 10% of the reference: displacement_ratio < 0.1), "
       "too_soft (> 2x), wrong_shape or scale_dependent (scale group: the model's "
       "relative_displacement differs by over 10% across 1 cm, 10 cm and 1 m). collapsed: the "
@@ -1052,7 +1045,8 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       "it by under 10% of its size. unchecked: no quasi-static answer (pull, invert, flatten), "
       "no reference, unsupported, the reference itself, or reference not converged (its "
       "reference_error above " +
-      g(options.accuracyThreshold) + "). A model still moving at the end is compared as it is.");
+      formatG(options.accuracyThreshold) +
+      "). A model still moving at the end is compared as it is.");
   t.notes.push_back(
       "poisson group: a model stiffer than the reference there (displacement_ratio well below 1) "
       "is locking; scale group: the same problem at 1 cm, 10 cm and 1 m (force x s^2, density / "

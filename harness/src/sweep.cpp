@@ -1,6 +1,7 @@
 // Error against run time: sweeping each model over its accuracy knob (see sweep.h).
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
+#include <deform_harness/json_file.h>
 #include <deform_harness/sweep.h>
 
 #include <cmath>
@@ -57,14 +58,7 @@ ojson num(double v) {
 
 std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loader,
                                  const SweepOptions& options, Progress* progress) {
-  std::ifstream in(sceneFile);
-  if (!in) throw InputError(sceneFile, "", "cannot read the scene file");
-  ojson scene;
-  try {
-    scene = ojson::parse(in);
-  } catch (const std::exception& e) {
-    throw InputError(sceneFile, "", std::string("not JSON: ") + e.what());
-  }
+  ojson scene = readJsonFile(sceneFile, "scene file");
   // Validate the scene as given (unknown keys, ranges) before anything runs.
   const Scene parsed = parseSceneFile(sceneFile);
   if (!parsed.reference)

@@ -223,22 +223,22 @@ ojson truthCubeScene(const TruthCubeData& d, const std::vector<ojson>& models) {
       {"mesh", "phantom:cube"},
       {"scale", kSide / 0.1},
       {"material", {{"young", 15300}, {"poisson", 0.499}, {"density", 980}}},
-      {"fixed", {{"box", ojson::array({vec(Vec3(-m, -m, -m)), vec(Vec3(m, m, -h + e))})}}}};
-  j["gravity"] = vec(Vec3::Zero());
+      {"fixed", {{"box", ojson::array({vecJson(Vec3(-m, -m, -m)), vecJson(Vec3(m, m, -h + e))})}}}};
+  j["gravity"] = vecJson(Vec3::Zero());
   j["dt"] = 1.0;
   const size_t levels = d.strains.size();
   j["duration"] = double(levels);
-  ojson traj = ojson::array({{{"t", 0.0}, {"offset", vec(Vec3::Zero())}}});
+  ojson traj = ojson::array({{{"t", 0.0}, {"offset", vecJson(Vec3::Zero())}}});
   ojson compare = ojson::array();
   ojson measured = ojson::array();
   for (size_t l = 0; l < levels; ++l) {
     const double t = double(l + 1);
-    traj.push_back({{"t", t}, {"offset", vec(Vec3(0, 0, -d.strains[l] * kSide))}});
+    traj.push_back({{"t", t}, {"offset", vecJson(Vec3(0, 0, -d.strains[l] * kSide))}});
     compare.push_back(t);
     measured.push_back({{"t", t}, {"points", pointsJson(truthCubeSceneFrame(d, int(l + 1)))}});
   }
   j["plates"] = ojson::array(
-      {{{"region", {{"box", ojson::array({vec(Vec3(-m, -m, h - e)), vec(Vec3(m, m, m))})}}},
+      {{{"region", {{"box", ojson::array({vecJson(Vec3(-m, -m, h - e)), vecJson(Vec3(m, m, m))})}}},
         {"contact", "bonded"},
         {"trajectory", traj}}});
   j["markers"] = {{"points", pointsJson(truthCubeSceneFrame(d, 0))}, {"measured", measured}};
@@ -255,13 +255,13 @@ ojson truthCubeDynamicScene(const TruthCubeData& d, size_t level, const std::vec
   ojson j = truthCubeScene(d, models);
   j["name"] = "truth-cube-dynamic-" + std::to_string(level + 1);
   j["description"] = "Truth Cube, dynamic models: the plate moves down by " +
-                     number(1e3 * d.strains[level] * kSide) +
+                     formatG(1e3 * d.strains[level] * kSide) +
                      " mm over 1 s and holds; compared at equilibrium.";
   j["dt"] = 1e-3;
   j["duration"] = duration;
   j["plates"][0]["trajectory"] =
-      ojson::array({{{"t", 0.0}, {"offset", vec(Vec3::Zero())}},
-                    {{"t", 1.0}, {"offset", vec(Vec3(0, 0, -d.strains[level] * kSide))}}});
+      ojson::array({{{"t", 0.0}, {"offset", vecJson(Vec3::Zero())}},
+                    {{"t", 1.0}, {"offset", vecJson(Vec3(0, 0, -d.strains[level] * kSide))}}});
   j["markers"].erase("measured");  // measured positions need a compared instant given in time
   j["compare_at"] = "equilibrium";
   return j;
@@ -417,7 +417,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
         "Dynamic models (their volume network where they have one, default parameters): one "
         "scene per level (scenes/truth-cube/dynamic_N.json, dt 1 ms), the plate moved over 1 s "
         "and held, compared once settled (\"compare_at\": \"equilibrium\", capped at " +
-        number(o.quick ? 3.0 : 5.0) + " s).");
+        formatG(o.quick ? 3.0 : 5.0) + " s).");
     for (size_t l = 0; l < data.strains.size(); ++l) {
       const std::string dyn = "truth-cube/dynamic_" + std::to_string(l + 1);
       t.cases.push_back({dyn, truthCubeDynamicScene(data, l, dynamic, o.quick ? 3.0 : 5.0)});
