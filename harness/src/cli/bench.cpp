@@ -20,6 +20,33 @@ struct BenchArgs {
   std::vector<std::string> only;
 };
 
+int cmdBench(const BenchArgs& a);
+
+}  // namespace
+
+Verb addBench(CLI::App& app) {
+  auto args = std::make_shared<BenchArgs>();
+  BenchArgs& ba = *args;
+  CLI::App* bench = app.add_subcommand(
+      "bench", "time a fixed set of model x scene cases, or compare two such files");
+  bench->add_option("--out", ba.common.out, "bench file to write (JSON)");
+  bench->add_option("--compare", ba.compare, "OLD.json NEW.json: print ratios, exit 1 on slowdown")
+      ->expected(2);
+  bench->add_option("--threshold", ba.threshold, "slowdown flagged above this fraction (0.25)")
+      ->check(CLI::NonNegativeNumber);
+  bench->add_option("--repeat", ba.repeat, "runs per case (median taken)")
+      ->check(positiveValue(true));
+  bench->add_option("--steps", ba.steps, "steps per run")->check(positiveValue(true));
+  bench->add_option("--only", ba.only, "case id or plugin (repeatable)");
+  addCommon(bench, ba.common, false);
+  return {bench, [args](const std::vector<std::string>& pluginDirs) {
+            args->common.pluginDirs = pluginDirs;
+            return cmdBench(*args);
+          }};
+}
+
+namespace {
+
 int cmdBench(const BenchArgs& a) {
   if (!a.compare.empty()) {
     if (a.compare.size() != 2) throw InputError("--compare", "", "give OLD.json NEW.json");
@@ -47,26 +74,5 @@ int cmdBench(const BenchArgs& a) {
 }
 
 }  // namespace
-
-Verb addBench(CLI::App& app) {
-  auto args = std::make_shared<BenchArgs>();
-  BenchArgs& ba = *args;
-  CLI::App* bench = app.add_subcommand(
-      "bench", "time a fixed set of model x scene cases, or compare two such files");
-  bench->add_option("--out", ba.common.out, "bench file to write (JSON)");
-  bench->add_option("--compare", ba.compare, "OLD.json NEW.json: print ratios, exit 1 on slowdown")
-      ->expected(2);
-  bench->add_option("--threshold", ba.threshold, "slowdown flagged above this fraction (0.25)")
-      ->check(CLI::NonNegativeNumber);
-  bench->add_option("--repeat", ba.repeat, "runs per case (median taken)")
-      ->check(positiveValue(true));
-  bench->add_option("--steps", ba.steps, "steps per run")->check(positiveValue(true));
-  bench->add_option("--only", ba.only, "case id or plugin (repeatable)");
-  addCommon(bench, ba.common, false);
-  return {bench, [args](const std::vector<std::string>& pluginDirs) {
-            args->common.pluginDirs = pluginDirs;
-            return cmdBench(*args);
-          }};
-}
 
 }  // namespace deform::harness::cli

@@ -22,6 +22,41 @@ struct CalibrateArgs {
   DispatchArgs dispatch;
 };
 
+int cmdCalibrate(const CalibrateArgs& a);
+
+}  // namespace
+
+Verb addCalibrate(CLI::App& app) {
+  auto args = std::make_shared<CalibrateArgs>();
+  CalibrateArgs& cal = *args;
+  CLI::App* calibrate = app.add_subcommand(
+      "calibrate", "fit a model's calibratable parameters to the reference of training scenes");
+  calibrate->add_option("scenes", cal.train, "training scene files (with a reference)")->required();
+  calibrate->add_option("--model", cal.model, "plugin to calibrate")->required();
+  calibrate->add_option("--out", cal.common.out, "output folder (calibration.json)")->required();
+  calibrate->add_option("--validate", cal.validate, "held-out scene (repeatable)")
+      ->allow_extra_args(false);
+  calibrate->add_option("--metric", cal.metric, "rmse_all (default), rmse_50 or loss_ratio");
+  calibrate->add_option("--budget", cal.budget, "trials at most (default 40)");
+  calibrate->add_option("--label", cal.label, "free text kept in calibration.json");
+  calibrate
+      ->add_option("--param", cal.params, "calibrate only this calibratable parameter (repeatable)")
+      ->allow_extra_args(false);
+  calibrate
+      ->add_option("--timeout", cal.timeout,
+                   "seconds per model run, each in its own process "
+                   "(default 900)")
+      ->check(positiveValue(false));
+  addDispatch(calibrate, cal.dispatch);
+  addCommon(calibrate, cal.common, false);
+  return {calibrate, [args](const std::vector<std::string>& pluginDirs) {
+            args->common.pluginDirs = pluginDirs;
+            return cmdCalibrate(*args);
+          }};
+}
+
+namespace {
+
 int cmdCalibrate(const CalibrateArgs& a) {
   PluginLoader loader(searchPath(a.common.pluginDirs));
   CalibrateOptions o;
@@ -84,34 +119,5 @@ int cmdCalibrate(const CalibrateArgs& a) {
 }
 
 }  // namespace
-
-Verb addCalibrate(CLI::App& app) {
-  auto args = std::make_shared<CalibrateArgs>();
-  CalibrateArgs& cal = *args;
-  CLI::App* calibrate = app.add_subcommand(
-      "calibrate", "fit a model's calibratable parameters to the reference of training scenes");
-  calibrate->add_option("scenes", cal.train, "training scene files (with a reference)")->required();
-  calibrate->add_option("--model", cal.model, "plugin to calibrate")->required();
-  calibrate->add_option("--out", cal.common.out, "output folder (calibration.json)")->required();
-  calibrate->add_option("--validate", cal.validate, "held-out scene (repeatable)")
-      ->allow_extra_args(false);
-  calibrate->add_option("--metric", cal.metric, "rmse_all (default), rmse_50 or loss_ratio");
-  calibrate->add_option("--budget", cal.budget, "trials at most (default 40)");
-  calibrate->add_option("--label", cal.label, "free text kept in calibration.json");
-  calibrate
-      ->add_option("--param", cal.params, "calibrate only this calibratable parameter (repeatable)")
-      ->allow_extra_args(false);
-  calibrate
-      ->add_option("--timeout", cal.timeout,
-                   "seconds per model run, each in its own process "
-                   "(default 900)")
-      ->check(positiveValue(false));
-  addDispatch(calibrate, cal.dispatch);
-  addCommon(calibrate, cal.common, false);
-  return {calibrate, [args](const std::vector<std::string>& pluginDirs) {
-            args->common.pluginDirs = pluginDirs;
-            return cmdCalibrate(*args);
-          }};
-}
 
 }  // namespace deform::harness::cli

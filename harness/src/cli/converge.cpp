@@ -22,6 +22,44 @@ struct ConvergeArgs {
 };
 
 int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements,
+                double edgeLength, bool ofReference, const ChildArgs& ch);
+
+}  // namespace
+
+Verb addConverge(CLI::App& app) {
+  auto args = std::make_shared<ConvergeArgs>();
+  CLI::App* converge = app.add_subcommand(
+      "converge", "is the scene's reference converged? three mesh sizes + Richardson");
+  converge->add_option("scene", args->scene, "scene file with a reference")->required();
+  converge->add_option("--out", args->common.out, "output folder")->required();
+  converge
+      ->add_option("--edge-length", args->edgeLength,
+                   "coarsest level's edge length h in m (levels h, h/1.4, h/2; default: the "
+                   "reference's own)")
+      ->check(positiveValue(false));
+  converge
+      ->add_option("--elements", args->elements,
+                   "coarsest level's h as the edge length of about this many tets")
+      ->check(positiveValue(true));
+  converge->add_flag("--of-reference", args->ofReference,
+                     "levels 2h, 1.4h and h of the reference's own size h: the estimate is the "
+                     "error of the reference as the scene runs it (cached; `run` then prints it)");
+  addCommon(converge, args->common, false);
+  addChildArgs(converge, args->child, "level");
+  return {converge, [args, converge](const std::vector<std::string>& pluginDirs) {
+            ConvergeArgs& a = *args;
+            a.common.pluginDirs = pluginDirs;
+            a.child.given = childArgsGiven(converge);
+            if (a.elements > 0 && a.edgeLength > 0)
+              throw InputError("converge", "--elements",
+                               "give --elements or --edge-length, not both");
+            return cmdConverge(a.scene, a.common, a.elements, a.edgeLength, a.ofReference, a.child);
+          }};
+}
+
+namespace {
+
+int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements,
                 double edgeLength, bool ofReference, const ChildArgs& ch) {
   PluginLoader loader(searchPath(a.pluginDirs));
   ConvergeOptions o;
@@ -92,36 +130,5 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
 }
 
 }  // namespace
-
-Verb addConverge(CLI::App& app) {
-  auto args = std::make_shared<ConvergeArgs>();
-  CLI::App* converge = app.add_subcommand(
-      "converge", "is the scene's reference converged? three mesh sizes + Richardson");
-  converge->add_option("scene", args->scene, "scene file with a reference")->required();
-  converge->add_option("--out", args->common.out, "output folder")->required();
-  converge
-      ->add_option("--edge-length", args->edgeLength,
-                   "coarsest level's edge length h in m (levels h, h/1.4, h/2; default: the "
-                   "reference's own)")
-      ->check(positiveValue(false));
-  converge
-      ->add_option("--elements", args->elements,
-                   "coarsest level's h as the edge length of about this many tets")
-      ->check(positiveValue(true));
-  converge->add_flag("--of-reference", args->ofReference,
-                     "levels 2h, 1.4h and h of the reference's own size h: the estimate is the "
-                     "error of the reference as the scene runs it (cached; `run` then prints it)");
-  addCommon(converge, args->common, false);
-  addChildArgs(converge, args->child, "level");
-  return {converge, [args, converge](const std::vector<std::string>& pluginDirs) {
-            ConvergeArgs& a = *args;
-            a.common.pluginDirs = pluginDirs;
-            a.child.given = childArgsGiven(converge);
-            if (a.elements > 0 && a.edgeLength > 0)
-              throw InputError("converge", "--elements",
-                               "give --elements or --edge-length, not both");
-            return cmdConverge(a.scene, a.common, a.elements, a.edgeLength, a.ofReference, a.child);
-          }};
-}
 
 }  // namespace deform::harness::cli

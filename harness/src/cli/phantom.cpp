@@ -18,6 +18,25 @@ struct PhantomArgs {
   bool list = false;
 };
 
+int cmdPhantom(const std::string& name, const std::string& out, double resolution, bool list);
+
+}  // namespace
+
+Verb addPhantom(CLI::App& app) {
+  auto args = std::make_shared<PhantomArgs>();
+  CLI::App* phantom = app.add_subcommand("phantom", "write a built-in organ phantom mesh");
+  phantom->add_option("name", args->name, "phantom name (see --list)");
+  phantom->add_option("--out", args->out, "output mesh file (.obj, .off, .stl, .vtp)");
+  phantom->add_option("--resolution", args->resolution, "vertex-count scale (1 = default)")
+      ->check(positiveValue(false));
+  phantom->add_flag("--list", args->list, "list the phantoms");
+  return {phantom, [args](const std::vector<std::string>&) {
+            return cmdPhantom(args->name, args->out, args->resolution, args->list);
+          }};
+}
+
+namespace {
+
 int cmdPhantom(const std::string& name, const std::string& out, double resolution, bool list) {
   if (list) {
     for (const std::string& n : phantomNames()) std::cout << phantomDescription(n) << "\n";
@@ -47,18 +66,5 @@ int cmdPhantom(const std::string& name, const std::string& out, double resolutio
 }
 
 }  // namespace
-
-Verb addPhantom(CLI::App& app) {
-  auto args = std::make_shared<PhantomArgs>();
-  CLI::App* phantom = app.add_subcommand("phantom", "write a built-in organ phantom mesh");
-  phantom->add_option("name", args->name, "phantom name (see --list)");
-  phantom->add_option("--out", args->out, "output mesh file (.obj, .off, .stl, .vtp)");
-  phantom->add_option("--resolution", args->resolution, "vertex-count scale (1 = default)")
-      ->check(positiveValue(false));
-  phantom->add_flag("--list", args->list, "list the phantoms");
-  return {phantom, [args](const std::vector<std::string>&) {
-            return cmdPhantom(args->name, args->out, args->resolution, args->list);
-          }};
-}
 
 }  // namespace deform::harness::cli

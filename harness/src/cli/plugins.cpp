@@ -15,6 +15,21 @@ struct PluginsArgs {
   bool json = false;
 };
 
+int cmdPlugins(bool asJson, const std::vector<std::string>& pluginDirs);
+
+}  // namespace
+
+Verb addPlugins(CLI::App& app) {
+  auto args = std::make_shared<PluginsArgs>();
+  CLI::App* plugins = app.add_subcommand("plugins", "list every plugin found, with its parameters");
+  plugins->add_flag("--json", args->json, "print JSON");
+  return {plugins, [args](const std::vector<std::string>& pluginDirs) {
+            return cmdPlugins(args->json, pluginDirs);
+          }};
+}
+
+namespace {
+
 std::string valueText(const json& v) {
   if (v.is_null()) return "";
   if (v.is_string()) return v.get<std::string>();
@@ -108,14 +123,5 @@ int cmdPlugins(bool asJson, const std::vector<std::string>& pluginDirs) {
 }
 
 }  // namespace
-
-Verb addPlugins(CLI::App& app) {
-  auto args = std::make_shared<PluginsArgs>();
-  CLI::App* plugins = app.add_subcommand("plugins", "list every plugin found, with its parameters");
-  plugins->add_flag("--json", args->json, "print JSON");
-  return {plugins, [args](const std::vector<std::string>& pluginDirs) {
-            return cmdPlugins(args->json, pluginDirs);
-          }};
-}
 
 }  // namespace deform::harness::cli

@@ -13,6 +13,72 @@ namespace deform::harness::cli {
 
 namespace {
 
+struct RunArgs {
+  std::string scene;
+  std::string out;
+  bool explain = false;
+  std::vector<std::string> only;
+  bool noReference = false;
+  std::string cacheDir;
+  bool noCache = false;
+  int steps = -1;
+  bool strict = false;
+  std::vector<std::string> pluginDirs;
+  std::vector<std::string> calibrations;
+  bool reuseReference = false;
+  bool reuseModelSolves = false;
+  bool writeCompared = false;
+  bool inProcess = false;
+};
+
+int cmdRun(const RunArgs& a);
+
+}  // namespace
+
+Verb addRun(CLI::App& app) {
+  auto args = std::make_shared<RunArgs>();
+  RunArgs& ra = *args;
+  CLI::App* run = app.add_subcommand("run", "run every model of a scene and write results.json");
+  run->add_option("scene", ra.scene, "scene file (JSON)")->required();
+  run->add_option("--out", ra.out, "output folder")->required();
+  run->add_flag(
+      "--explain", ra.explain,
+      "say which plugins were loaded, which models built, cache use and what was skipped");
+  run->add_option("--only", ra.only,
+                  "run only this model (label, model or plugin name; repeatable)");
+  run->add_flag("--no-reference", ra.noReference, "do not run the scene's reference");
+  auto* cacheOpt = run->add_option("--cache-dir", ra.cacheDir, "precomputation cache folder");
+  auto* noCacheOpt = run->add_flag("--no-cache", ra.noCache, "do not read or write the cache");
+  cacheOpt->excludes(noCacheOpt);
+  run->add_option("--steps", ra.steps, "stop every run after this many steps (quick tries)")
+      ->check(positiveValue(true));
+  run->add_option("--calibration", ra.calibrations,
+                  "calibration.json of `deformbench calibrate`: its model takes those parameters "
+                  "where the scene writes none (repeatable, one file per model)")
+      ->allow_extra_args(false);
+  run->add_flag("--reuse-reference", ra.reuseReference,
+                "read the reference from the cache when an earlier run with this flag solved "
+                "the same problem (calibration trials, the tables; its timings are that run's)")
+      ->group("");
+  run->add_flag("--reuse-model-solves", ra.reuseModelSolves,
+                "with --reuse-reference: quasi-static models too (the tables' reference checks)")
+      ->group("");
+  run->add_flag("--write-compared", ra.writeCompared,
+                "also write each run's surface at its last compared instant (converge's levels)")
+      ->group("");
+  run->add_flag("--in-process", ra.inProcess,
+                "run the models in this process (a crash of one ends the command; debuggers)")
+      ->group("");
+  run->add_flag("--strict", ra.strict,
+                "exit 1 when a model failed (one stderr line each; results.json still written)");
+  return {run, [args](const std::vector<std::string>& pluginDirs) {
+            args->pluginDirs = pluginDirs;
+            return cmdRun(*args);
+          }};
+}
+
+namespace {
+
 void printTable(const BenchmarkResult& r) {
   const bool anyError = std::any_of(r.runs.begin(), r.runs.end(),
                                     [](const RunRecord& run) { return run.error.has_value(); });
@@ -91,24 +157,6 @@ void printTable(const BenchmarkResult& r) {
   }
 }
 
-struct RunArgs {
-  std::string scene;
-  std::string out;
-  bool explain = false;
-  std::vector<std::string> only;
-  bool noReference = false;
-  std::string cacheDir;
-  bool noCache = false;
-  int steps = -1;
-  bool strict = false;
-  std::vector<std::string> pluginDirs;
-  std::vector<std::string> calibrations;
-  bool reuseReference = false;
-  bool reuseModelSolves = false;
-  bool writeCompared = false;
-  bool inProcess = false;
-};
-
 /// Validity (DESIGN "Metrics") of each run that did not do what the scene asked, and the
 /// reference's estimated discretisation error when a check of it is in the cache.
 void printReferenceCheck(const std::string& sceneFile, const BenchmarkResult& result,
@@ -175,47 +223,5 @@ int cmdRun(const RunArgs& a) {
 }
 
 }  // namespace
-
-Verb addRun(CLI::App& app) {
-  auto args = std::make_shared<RunArgs>();
-  RunArgs& ra = *args;
-  CLI::App* run = app.add_subcommand("run", "run every model of a scene and write results.json");
-  run->add_option("scene", ra.scene, "scene file (JSON)")->required();
-  run->add_option("--out", ra.out, "output folder")->required();
-  run->add_flag(
-      "--explain", ra.explain,
-      "say which plugins were loaded, which models built, cache use and what was skipped");
-  run->add_option("--only", ra.only,
-                  "run only this model (label, model or plugin name; repeatable)");
-  run->add_flag("--no-reference", ra.noReference, "do not run the scene's reference");
-  auto* cacheOpt = run->add_option("--cache-dir", ra.cacheDir, "precomputation cache folder");
-  auto* noCacheOpt = run->add_flag("--no-cache", ra.noCache, "do not read or write the cache");
-  cacheOpt->excludes(noCacheOpt);
-  run->add_option("--steps", ra.steps, "stop every run after this many steps (quick tries)")
-      ->check(positiveValue(true));
-  run->add_option("--calibration", ra.calibrations,
-                  "calibration.json of `deformbench calibrate`: its model takes those parameters "
-                  "where the scene writes none (repeatable, one file per model)")
-      ->allow_extra_args(false);
-  run->add_flag("--reuse-reference", ra.reuseReference,
-                "read the reference from the cache when an earlier run with this flag solved "
-                "the same problem (calibration trials, the tables; its timings are that run's)")
-      ->group("");
-  run->add_flag("--reuse-model-solves", ra.reuseModelSolves,
-                "with --reuse-reference: quasi-static models too (the tables' reference checks)")
-      ->group("");
-  run->add_flag("--write-compared", ra.writeCompared,
-                "also write each run's surface at its last compared instant (converge's levels)")
-      ->group("");
-  run->add_flag("--in-process", ra.inProcess,
-                "run the models in this process (a crash of one ends the command; debuggers)")
-      ->group("");
-  run->add_flag("--strict", ra.strict,
-                "exit 1 when a model failed (one stderr line each; results.json still written)");
-  return {run, [args](const std::vector<std::string>& pluginDirs) {
-            args->pluginDirs = pluginDirs;
-            return cmdRun(*args);
-          }};
-}
 
 }  // namespace deform::harness::cli

@@ -22,6 +22,35 @@ struct StabilityArgs {
   bool noPlot = false;
 };
 
+int cmdStability(const StabilityArgs& a);
+
+}  // namespace
+
+Verb addStability(CLI::App& app) {
+  auto args = std::make_shared<StabilityArgs>();
+  StabilityArgs& st = *args;
+  CLI::App* stability = app.add_subcommand(
+      "stability", "every model over stiff and extreme cases, each in its own process");
+  stability->add_option("--out", st.common.out, "output folder")->required();
+  stability->add_flag("--resume", st.resume,
+                      "skip the cases already finished in --out (with the same scenes)");
+  stability->add_flag("--retry-failed", st.retryFailed,
+                      "with --resume (implied): run the cases that failed again");
+  stability->add_option("--model", st.models, "plugin to test (repeatable; default: all found)");
+  stability->add_option("--case", st.cases, "case id to run (repeatable; default: the set)");
+  stability->add_option("--timeout", st.timeout, "seconds per case (default 120, 60 with --quick)")
+      ->check(positiveValue(false));
+  addDispatch(stability, st.dispatch);
+  stability->add_flag("--no-plot", st.noPlot, "write the data only");
+  addCommon(stability, st.common, true);
+  return {stability, [args](const std::vector<std::string>& pluginDirs) {
+            args->common.pluginDirs = pluginDirs;
+            return cmdStability(*args);
+          }};
+}
+
+namespace {
+
 int cmdStability(const StabilityArgs& a) {
   for (const std::string& m : a.models) requirePluginName("--model", m);
   PluginLoader loader(searchPath(a.common.pluginDirs));
@@ -65,28 +94,5 @@ int cmdStability(const StabilityArgs& a) {
 }
 
 }  // namespace
-
-Verb addStability(CLI::App& app) {
-  auto args = std::make_shared<StabilityArgs>();
-  StabilityArgs& st = *args;
-  CLI::App* stability = app.add_subcommand(
-      "stability", "every model over stiff and extreme cases, each in its own process");
-  stability->add_option("--out", st.common.out, "output folder")->required();
-  stability->add_flag("--resume", st.resume,
-                      "skip the cases already finished in --out (with the same scenes)");
-  stability->add_flag("--retry-failed", st.retryFailed,
-                      "with --resume (implied): run the cases that failed again");
-  stability->add_option("--model", st.models, "plugin to test (repeatable; default: all found)");
-  stability->add_option("--case", st.cases, "case id to run (repeatable; default: the set)");
-  stability->add_option("--timeout", st.timeout, "seconds per case (default 120, 60 with --quick)")
-      ->check(positiveValue(false));
-  addDispatch(stability, st.dispatch);
-  stability->add_flag("--no-plot", st.noPlot, "write the data only");
-  addCommon(stability, st.common, true);
-  return {stability, [args](const std::vector<std::string>& pluginDirs) {
-            args->common.pluginDirs = pluginDirs;
-            return cmdStability(*args);
-          }};
-}
 
 }  // namespace deform::harness::cli

@@ -23,6 +23,36 @@ struct SweepArgs {
 };
 
 int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
+             const std::vector<std::string>& calibrations, const ChildArgs& ch);
+
+}  // namespace
+
+Verb addSweep(CLI::App& app) {
+  auto args = std::make_shared<SweepArgs>();
+  CLI::App* sweep = app.add_subcommand(
+      "sweep", "error against run time: each model over its accuracy knob, with a plot");
+  sweep->add_option("scene", args->scene, "scene file with a reference")->required();
+  sweep->add_option("--out", args->common.out, "output folder")->required();
+  sweep->add_flag("--no-plot", args->noPlot, "write the data only");
+  sweep
+      ->add_option("--calibration", args->calibrations,
+                   "calibration.json: its model is swept at its defaults and calibrated "
+                   "(repeatable)")
+      ->allow_extra_args(false);
+  sweep->add_flag("--explain", args->common.explain, "say what was loaded, built, cached, skipped");
+  addCommon(sweep, args->common, true);
+  addChildArgs(sweep, args->child, "point");
+  return {sweep, [args, sweep](const std::vector<std::string>& pluginDirs) {
+            SweepArgs& a = *args;
+            a.common.pluginDirs = pluginDirs;
+            a.child.given = childArgsGiven(sweep);
+            return cmdSweep(a.scene, a.common, a.noPlot, a.calibrations, a.child);
+          }};
+}
+
+namespace {
+
+int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
              const std::vector<std::string>& calibrations, const ChildArgs& ch) {
   PluginLoader loader(searchPath(a.pluginDirs));
   SweepOptions o;
@@ -61,28 +91,5 @@ int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
 }
 
 }  // namespace
-
-Verb addSweep(CLI::App& app) {
-  auto args = std::make_shared<SweepArgs>();
-  CLI::App* sweep = app.add_subcommand(
-      "sweep", "error against run time: each model over its accuracy knob, with a plot");
-  sweep->add_option("scene", args->scene, "scene file with a reference")->required();
-  sweep->add_option("--out", args->common.out, "output folder")->required();
-  sweep->add_flag("--no-plot", args->noPlot, "write the data only");
-  sweep
-      ->add_option("--calibration", args->calibrations,
-                   "calibration.json: its model is swept at its defaults and calibrated "
-                   "(repeatable)")
-      ->allow_extra_args(false);
-  sweep->add_flag("--explain", args->common.explain, "say what was loaded, built, cached, skipped");
-  addCommon(sweep, args->common, true);
-  addChildArgs(sweep, args->child, "point");
-  return {sweep, [args, sweep](const std::vector<std::string>& pluginDirs) {
-            SweepArgs& a = *args;
-            a.common.pluginDirs = pluginDirs;
-            a.child.given = childArgsGiven(sweep);
-            return cmdSweep(a.scene, a.common, a.noPlot, a.calibrations, a.child);
-          }};
-}
 
 }  // namespace deform::harness::cli

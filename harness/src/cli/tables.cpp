@@ -28,52 +28,7 @@ struct TablesArgs {
   std::vector<std::string> calibrations;
 };
 
-int cmdTables(const TablesArgs& ta) {
-  const CommonArgs& a = ta.common;
-  PluginLoader loader(searchPath(a.pluginDirs));
-  TablesOptions o;
-  o.quick = a.quick;
-  o.outDir = makeOutDir(a.out);
-  o.cases = caseOptions(a);
-  o.referenceElements = ta.referenceElements;
-  o.referenceCheck = !ta.noReferenceCheck;
-  o.surfaceBaselines = ta.surfaceBaselines;
-  o.truthCubeData = ta.truthCubeData;
-  o.calibrations = readCalibrations(ta.calibrations);
-  if (ta.resume && ta.inProcess)
-    throw InputError("--resume", "", "needs the cases in child processes (drop --in-process)");
-  const bool dispatched = ta.dispatch.jobs > 1 || ta.dispatch.mpi || !ta.dispatch.slurm.empty();
-  if (dispatched && ta.inProcess)
-    throw InputError("--in-process", "", "--jobs, --mpi and --slurm need child processes");
-  const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(ta.dispatch);
-  o.cases.dispatcher = dispatcher.get();
-  if (!ta.inProcess) {
-    ChildCaseOptions child;
-    child.executable = selfExecutable();
-    child.pluginArgs = pluginDirArgs(loader.searchPath());
-    if (ta.timeout > 0) child.timeoutS = ta.timeout;
-    child.resume = ta.resume;
-    child.retryFailed = ta.retryFailed;
-    o.cases.child = child;
-  }
-  std::vector<Table> tables;
-  {
-    Progress progress(0, "tables");
-    tables = buildTables(ta.names, loader, o, &progress);
-  }
-  if (a.explain) {
-    for (const auto& f : loader.loadedFiles()) std::cout << "explain: loaded plugin " << f << "\n";
-  }
-  for (const Table& t : tables) {
-    std::ifstream md(o.outDir / (t.name + ".md"));
-    std::cout << "\n" << md.rdbuf();
-  }
-  std::cout << "\ntables: " << o.outDir.string() << " (<table>.md/.csv/.json; scenes/ to rerun "
-            << "any row with deformbench run)\n";
-  // The reference checks' warnings again at the end, where they are seen.
-  for (const std::string& w : tableWarnings(tables)) std::cout << w << "\n";
-  return 0;
-}
+int cmdTables(const TablesArgs& ta);
 
 }  // namespace
 
@@ -127,5 +82,56 @@ Verb addTables(CLI::App& app) {
             return cmdTables(*args);
           }};
 }
+
+namespace {
+
+int cmdTables(const TablesArgs& ta) {
+  const CommonArgs& a = ta.common;
+  PluginLoader loader(searchPath(a.pluginDirs));
+  TablesOptions o;
+  o.quick = a.quick;
+  o.outDir = makeOutDir(a.out);
+  o.cases = caseOptions(a);
+  o.referenceElements = ta.referenceElements;
+  o.referenceCheck = !ta.noReferenceCheck;
+  o.surfaceBaselines = ta.surfaceBaselines;
+  o.truthCubeData = ta.truthCubeData;
+  o.calibrations = readCalibrations(ta.calibrations);
+  if (ta.resume && ta.inProcess)
+    throw InputError("--resume", "", "needs the cases in child processes (drop --in-process)");
+  const bool dispatched = ta.dispatch.jobs > 1 || ta.dispatch.mpi || !ta.dispatch.slurm.empty();
+  if (dispatched && ta.inProcess)
+    throw InputError("--in-process", "", "--jobs, --mpi and --slurm need child processes");
+  const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(ta.dispatch);
+  o.cases.dispatcher = dispatcher.get();
+  if (!ta.inProcess) {
+    ChildCaseOptions child;
+    child.executable = selfExecutable();
+    child.pluginArgs = pluginDirArgs(loader.searchPath());
+    if (ta.timeout > 0) child.timeoutS = ta.timeout;
+    child.resume = ta.resume;
+    child.retryFailed = ta.retryFailed;
+    o.cases.child = child;
+  }
+  std::vector<Table> tables;
+  {
+    Progress progress(0, "tables");
+    tables = buildTables(ta.names, loader, o, &progress);
+  }
+  if (a.explain) {
+    for (const auto& f : loader.loadedFiles()) std::cout << "explain: loaded plugin " << f << "\n";
+  }
+  for (const Table& t : tables) {
+    std::ifstream md(o.outDir / (t.name + ".md"));
+    std::cout << "\n" << md.rdbuf();
+  }
+  std::cout << "\ntables: " << o.outDir.string() << " (<table>.md/.csv/.json; scenes/ to rerun "
+            << "any row with deformbench run)\n";
+  // The reference checks' warnings again at the end, where they are seen.
+  for (const std::string& w : tableWarnings(tables)) std::cout << w << "\n";
+  return 0;
+}
+
+}  // namespace
 
 }  // namespace deform::harness::cli

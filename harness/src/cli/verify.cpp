@@ -16,6 +16,27 @@ struct VerifyArgs {
   int steps = -1;
 };
 
+int cmdVerify(const std::string& scene, const CommonArgs& a, int steps);
+
+}  // namespace
+
+Verb addVerify(CLI::App& app) {
+  auto args = std::make_shared<VerifyArgs>();
+  CLI::App* verify = app.add_subcommand(
+      "verify", "the scene's reference solved by reference_fem and by CalculiX (ccx) on one mesh");
+  verify->add_option("scene", args->scene, "scene file with a reference")->required();
+  verify->add_option("--out", args->common.out, "output folder (verify.json)")->required();
+  verify->add_option("--steps", args->steps, "stop after this many steps")
+      ->check(CLI::PositiveNumber);
+  addCommon(verify, args->common, false);
+  return {verify, [args](const std::vector<std::string>& pluginDirs) {
+            args->common.pluginDirs = pluginDirs;
+            return cmdVerify(args->scene, args->common, args->steps);
+          }};
+}
+
+namespace {
+
 int cmdVerify(const std::string& scene, const CommonArgs& a, int steps) {
   PluginLoader loader(searchPath(a.pluginDirs));
   VerifyOptions o;
@@ -43,20 +64,5 @@ int cmdVerify(const std::string& scene, const CommonArgs& a, int steps) {
 }
 
 }  // namespace
-
-Verb addVerify(CLI::App& app) {
-  auto args = std::make_shared<VerifyArgs>();
-  CLI::App* verify = app.add_subcommand(
-      "verify", "the scene's reference solved by reference_fem and by CalculiX (ccx) on one mesh");
-  verify->add_option("scene", args->scene, "scene file with a reference")->required();
-  verify->add_option("--out", args->common.out, "output folder (verify.json)")->required();
-  verify->add_option("--steps", args->steps, "stop after this many steps")
-      ->check(CLI::PositiveNumber);
-  addCommon(verify, args->common, false);
-  return {verify, [args](const std::vector<std::string>& pluginDirs) {
-            args->common.pluginDirs = pluginDirs;
-            return cmdVerify(args->scene, args->common, args->steps);
-          }};
-}
 
 }  // namespace deform::harness::cli

@@ -12,6 +12,21 @@ struct WorkArgs {
   std::vector<std::string> tasks;
 };
 
+int cmdWork(const WorkArgs& a);
+
+}  // namespace
+
+Verb addWork(CLI::App& app) {
+  auto args = std::make_shared<WorkArgs>();
+  CLI::App* work =
+      app.add_subcommand("work", "run task files written by --slurm (one array task each)");
+  work->group("");  // internal: the Slurm array's command
+  work->add_option("task", args->tasks, "task file (JSON)")->required();
+  return {work, [args](const std::vector<std::string>&) { return cmdWork(*args); }};
+}
+
+namespace {
+
 int cmdWork(const WorkArgs& a) {
   for (const std::string& f : a.tasks) {
     std::ifstream in(f);
@@ -32,14 +47,5 @@ int cmdWork(const WorkArgs& a) {
 }
 
 }  // namespace
-
-Verb addWork(CLI::App& app) {
-  auto args = std::make_shared<WorkArgs>();
-  CLI::App* work =
-      app.add_subcommand("work", "run task files written by --slurm (one array task each)");
-  work->group("");  // internal: the Slurm array's command
-  work->add_option("task", args->tasks, "task file (JSON)")->required();
-  return {work, [args](const std::vector<std::string>&) { return cmdWork(*args); }};
-}
 
 }  // namespace deform::harness::cli
