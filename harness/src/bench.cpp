@@ -4,6 +4,8 @@
 #include <deform/sdk/cache.h>
 #include <deform/sdk/mesh.h>
 #include <deform_harness/bench.h>
+#include <deform_harness/format.h>
+#include <deform_harness/json_file.h>
 #include <deform_harness/results.h>
 
 #include <unistd.h>
@@ -25,10 +27,6 @@ using ojson = nlohmann::ordered_json;
 using json = nlohmann::json;
 
 namespace {
-
-ojson vec(const Vec3& v) {
-  return ojson::array({v.x(), v.y(), v.z()});
-}
 
 struct BenchCase {
   std::string id, plugin;
@@ -97,8 +95,8 @@ ojson defaultLiverScene(const BenchCase& c, int steps) {
       {{{"type", "grasper"},
         {"radius", 0.008},
         {"trajectory",
-         {{{"t", 0.0}, {"pos", vec(p)}, {"jaw", "closed"}},
-          {{"t", steps * 0.001}, {"pos", vec(p + Vec3(0, 0, 0.05 * steps * 0.001))}}}}}});
+         {{{"t", 0.0}, {"pos", vecJson(p)}, {"jaw", "closed"}},
+          {{"t", steps * 0.001}, {"pos", vecJson(p + Vec3(0, 0, 0.05 * steps * 0.001))}}}}}});
   j["models"] = ojson::array({{{"plugin", c.plugin}, {"label", c.plugin}, {"params", c.params}}});
   j["output"] = {{"surfaces", "none"}};
   return j;
@@ -122,21 +120,22 @@ ojson benchScene(const BenchCase& c, int steps) {
                 {"material", {{"young", 5500}, {"poisson", 0.3}, {"density", 1000}}},
                 {"fixed",
                  {{"box",
-                   {vec(b.lo - m), vec(Vec3(b.hi.x() + m.x(), b.hi.y() + m.y(),
-                                            b.lo.z() + 0.15 * b.size().z()))}}}}};
+                   {vecJson(b.lo - m), vecJson(Vec3(b.hi.x() + m.x(), b.hi.y() + m.y(),
+                                                    b.lo.z() + 0.15 * b.size().z()))}}}}};
   j["gravity"] = {0, 0, -9.81};
   j["dt"] = 0.001;
   j["duration"] = steps * 0.001;
   if (liver) {
     const Vec3 p = top - Vec3(0, 0, 0.2 * b.size().z());
-    j["tools"] = ojson::array({{{"type", "grasper"},
-                                {"radius", 0.25 * b.size().z()},
-                                {"trajectory",
-                                 {{{"t", 0.0}, {"pos", vec(p)}, {"jaw", "closed"}},
-                                  {{"t", steps * 0.001}, {"pos", vec(p + Vec3(0, 0, 0.01))}}}}}});
+    j["tools"] =
+        ojson::array({{{"type", "grasper"},
+                       {"radius", 0.25 * b.size().z()},
+                       {"trajectory",
+                        {{{"t", 0.0}, {"pos", vecJson(p)}, {"jaw", "closed"}},
+                         {{"t", steps * 0.001}, {"pos", vecJson(p + Vec3(0, 0, 0.01))}}}}}});
   } else {
     j["loads"] = ojson::array(
-        {{{"type", "point_force"}, {"at", vec(top)}, {"force", {0, 0, -1.0}}, {"start", 0.0}}});
+        {{{"type", "point_force"}, {"at", vecJson(top)}, {"force", {0, 0, -1.0}}, {"start", 0.0}}});
   }
   j["models"] = ojson::array({{{"plugin", c.plugin}, {"label", c.plugin}, {"params", c.params}}});
   j["output"] = {{"surfaces", "none"}};
@@ -299,14 +298,7 @@ ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* prog
 }
 
 json readBenchFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path, "", "cannot read the bench file");
-  json j;
-  try {
-    j = json::parse(in);
-  } catch (const std::exception& e) {
-    throw InputError(path, "", std::string("not JSON: ") + e.what());
-  }
+  json j = readJsonFile<json>(path, "bench file");
   if (!j.is_object() || j.value("format", "") != "deformbench-bench/1" || !j.contains("cases") ||
       !j["cases"].is_array())
     throw InputError(path, "/format", "not a deformbench-bench/1 file");

@@ -2,6 +2,7 @@
 #include <deform/engine/scene.h>
 #include <deform/internal/atomic_file.h>
 #include <deform_harness/calibration.h>
+#include <deform_harness/json_file.h>
 
 #include <algorithm>
 #include <chrono>
@@ -237,14 +238,7 @@ std::string calibrationDifferenceNote(const CalibrationParams& c, const json& re
 }
 
 CalibrationParams readCalibrationFile(const std::string& file) {
-  std::ifstream in(file);
-  if (!in) throw InputError(file, "", "cannot read the calibration file");
-  json doc;
-  try {
-    doc = json::parse(in);
-  } catch (const std::exception& e) {
-    throw InputError(file, "", "not JSON: " + std::string(e.what()));
-  }
+  json doc = readJsonFile<json>(file, "calibration file");
   if (!doc.is_object() || doc.value("format", "") != "deformbench-calibration/1")
     throw InputError(file, "/format", "not a calibration file (format deformbench-calibration/1)");
   CalibrationParams c;
@@ -498,6 +492,76 @@ class Calibrator {
     return std::isfinite(r.value) ? std::min(r.value, worst) : worst;
   }
 
+  /// The start of the search: each dimension's default (the first training scene's own value
+  /// where it writes one).
+  std::vector<double> defaultValues() const {
+    std::vector<double> defaults;
+    for (const CalibDimension& d : m_dims) {
+      double v = d.lo;
+      const ParamSpec* ps = m_info.param(d.key);
+      if (ps) v = std::get<double>(ps->defaultValue);
+      // A training scene that writes the value starts there instead.
+      if (m_train[0].modelParams.contains(d.key) && m_train[0].modelParams[d.key].is_number())
+        v = m_train[0].modelParams[d.key].get<double>();
+      defaults.push_back(v);
+    }
+    return defaults;
+  }
+
+  /// "before", "after" and "per_scene" of a set of scenes (train or validation).
+  static ojson setSummary(const std::vector<SceneInfo>& scenes, const std::vector<RunOutcome>& b,
+                          const std::vector<RunOutcome>& a) {
+    ojson per = ojson::array();
+    double sb = 0, sa = 0;
+    bool okB = true, okA = true;
+    for (size_t s = 0; s < scenes.size(); ++s) {
+      per.push_back({{"scene", scenes[s].file},
+                     {"before", numberOrNull(b[s].value)},
+                     {"after", numberOrNull(a[s].value)},
+                     {"status_before", b[s].status},
+                     {"status_after", a[s].status}});
+      sb += b[s].value;
+      sa += a[s].value;
+      okB = okB && std::isfinite(b[s].value);
+      okA = okA && std::isfinite(a[s].value);
+    }
+    const double n = double(std::max<size_t>(1, scenes.size()));
+    return ojson{{"before", okB && !scenes.empty() ? numberOrNull(sb / n) : ojson(nullptr)},
+                 {"after", okA && !scenes.empty() ? numberOrNull(sa / n) : ojson(nullptr)},
+                 {"per_scene", per}};
+  }
+
+  /// "defaults", "space", "at_bound" and "warnings" of calibration.json.
+  void describeSpace(ojson& doc, const std::vector<double>& defaults,
+                     const std::vector<double>& best) const {
+    ojson defaultsJson = ojson::object();
+    ojson space = ojson::object();
+    for (size_t d = 0; d < m_dims.size(); ++d) {
+      defaultsJson[m_dims[d].key] = defaults[d];
+      space[m_dims[d].key] = {{"min", m_dims[d].lo},
+                              {"max", m_dims[d].hi},
+                              {"scale", m_dims[d].log ? "log" : "linear"}};
+    }
+    doc["defaults"] = defaultsJson;
+    for (const auto& [key, note] : m_boundNotes) space[key]["note"] = note;
+    doc["space"] = space;
+    // A fit at a bound: the best value may lie beyond it (or the model cannot match the
+    // reference with this parameter); within 1% of the range, in its own scale.
+    ojson atBound = ojson::object();
+    ojson warnings = ojson::array();
+    for (const auto& [key, side] : fittedAtBound(m_dims, best)) {
+      atBound[key] = side;
+      const CalibDimension& d =
+          *std::find_if(m_dims.begin(), m_dims.end(), [&](const auto& x) { return x.key == key; });
+      warnings.push_back(key + " fitted at its " + (side == "max" ? "upper" : "lower") + " bound " +
+                         fmtValue(side == "max" ? d.hi : d.lo) +
+                         ": the best fit may lie beyond the range, or the model cannot match "
+                         "the reference with it");
+    }
+    doc["at_bound"] = atBound;
+    doc["warnings"] = warnings;
+  }
+
   ojson run(Progress* progress) {
     const auto start = Clock::now();
     const auto elapsed = [&] {
@@ -517,16 +581,7 @@ class Calibrator {
     const double fallback = m_o.metric == CalibMetric::LossRatio ? 100.0 : 1.0;
     for (size_t s = 0; s < m_train.size(); ++s)
       m_worst[s] = std::isfinite(before[0][s].value) ? 10 * before[0][s].value : fallback;
-    std::vector<double> defaults;
-    for (const CalibDimension& d : m_dims) {
-      double v = d.lo;
-      const ParamSpec* ps = m_info.param(d.key);
-      if (ps) v = std::get<double>(ps->defaultValue);
-      // A training scene that writes the value starts there instead.
-      if (m_train[0].modelParams.contains(d.key) && m_train[0].modelParams[d.key].is_number())
-        v = m_train[0].modelParams[d.key].get<double>();
-      defaults.push_back(v);
-    }
+    const std::vector<double> defaults = defaultValues();
     int trialNo = 0;
     double best = INFINITY;
     int failedRuns = 0;
@@ -597,27 +652,6 @@ class Calibrator {
     const ojson calibrated = pointParams(res.best);
 
     // Validation (and the per-scene values of the best trial): defaults and calibrated.
-    const auto summary = [&](const std::vector<SceneInfo>& scenes, const std::vector<RunOutcome>& b,
-                             const std::vector<RunOutcome>& a) {
-      ojson per = ojson::array();
-      double sb = 0, sa = 0;
-      bool okB = true, okA = true;
-      for (size_t s = 0; s < scenes.size(); ++s) {
-        per.push_back({{"scene", scenes[s].file},
-                       {"before", numberOrNull(b[s].value)},
-                       {"after", numberOrNull(a[s].value)},
-                       {"status_before", b[s].status},
-                       {"status_after", a[s].status}});
-        sb += b[s].value;
-        sa += a[s].value;
-        okB = okB && std::isfinite(b[s].value);
-        okA = okA && std::isfinite(a[s].value);
-      }
-      const double n = double(std::max<size_t>(1, scenes.size()));
-      return ojson{{"before", okB && !scenes.empty() ? numberOrNull(sb / n) : ojson(nullptr)},
-                   {"after", okA && !scenes.empty() ? numberOrNull(sa / n) : ojson(nullptr)},
-                   {"per_scene", per}};
-    };
     const auto known = m_history.find(res.best);
     const auto after = known != m_history.end()
                            ? known->second
@@ -627,7 +661,7 @@ class Calibrator {
     if (!m_validate.empty()) {
       const auto vb = runBatch({ojson::object()}, m_validate, "validation_defaults")[0];
       const auto va = runBatch({calibrated}, m_validate, "validation_calibrated")[0];
-      validation = summary(m_validate, vb, va);
+      validation = setSummary(m_validate, vb, va);
     }
 
     ojson doc;
@@ -644,33 +678,8 @@ class Calibrator {
         organs.push_back(sc.organ);
     doc["organs"] = organs;
     doc["held"] = heldParams();
-    ojson defaultsJson = ojson::object();
-    ojson space = ojson::object();
-    for (size_t d = 0; d < m_dims.size(); ++d) {
-      defaultsJson[m_dims[d].key] = defaults[d];
-      space[m_dims[d].key] = {{"min", m_dims[d].lo},
-                              {"max", m_dims[d].hi},
-                              {"scale", m_dims[d].log ? "log" : "linear"}};
-    }
-    doc["defaults"] = defaultsJson;
-    for (const auto& [key, note] : m_boundNotes) space[key]["note"] = note;
-    doc["space"] = space;
-    // A fit at a bound: the best value may lie beyond it (or the model cannot match the
-    // reference with this parameter); within 1% of the range, in its own scale.
-    ojson atBound = ojson::object();
-    ojson warnings = ojson::array();
-    for (const auto& [key, side] : fittedAtBound(m_dims, res.best)) {
-      atBound[key] = side;
-      const CalibDimension& d =
-          *std::find_if(m_dims.begin(), m_dims.end(), [&](const auto& x) { return x.key == key; });
-      warnings.push_back(key + " fitted at its " + (side == "max" ? "upper" : "lower") + " bound " +
-                         fmtValue(side == "max" ? d.hi : d.lo) +
-                         ": the best fit may lie beyond the range, or the model cannot match "
-                         "the reference with it");
-    }
-    doc["at_bound"] = atBound;
-    doc["warnings"] = warnings;
-    doc["train"] = summary(m_train, before[0], after);
+    describeSpace(doc, defaults, res.best);
+    doc["train"] = setSummary(m_train, before[0], after);
     doc["validation"] = validation;
     doc["objective"] = numberOrNull(res.bestValue);
     doc["evaluations"] = res.evaluations;

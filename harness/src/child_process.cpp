@@ -1,5 +1,6 @@
 // Children with a time limit for the long commands (see child_process.h).
 #include <deform_harness/child_process.h>
+#include <deform_harness/format.h>
 
 #include <fcntl.h>
 #include <signal.h>
@@ -22,12 +23,6 @@ namespace deform::harness {
 namespace fs = std::filesystem;
 
 namespace {
-
-std::string g(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
 
 pid_t spawn(const std::vector<std::string>& argv, const fs::path& log) {
   // Everything the child needs is built before fork(): another thread of this process may hold
@@ -135,7 +130,7 @@ std::string signalText(int sig) {
 
 std::string childFailure(const ChildOutcome& o, double timeoutS, const std::string& logTail) {
   if (!o.spawnError.empty()) return o.spawnError;
-  if (o.timedOut) return "timeout: no result after " + g(timeoutS) + " s (killed)";
+  if (o.timedOut) return "timeout: no result after " + formatG(timeoutS) + " s (killed)";
   if (WIFSIGNALED(o.waitStatus)) return signalText(WTERMSIG(o.waitStatus));
   const int code = WIFEXITED(o.waitStatus) ? WEXITSTATUS(o.waitStatus) : -1;
   if (code == 0) return "";

@@ -5,6 +5,7 @@
 #include <deform/sdk/cache.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/convergence.h>
+#include <deform_harness/json_file.h>
 
 #include <chrono>
 #include <cmath>
@@ -295,14 +296,7 @@ std::string convergenceWarning(const ConvergenceResult& r) {
 
 ConvergenceResult runConvergence(const std::string& sceneFile, PluginLoader& loader,
                                  const ConvergeOptions& options, Progress* progress) {
-  std::ifstream in(sceneFile);
-  if (!in) throw InputError(sceneFile, "", "cannot read the scene");
-  ojson scene;
-  try {
-    scene = ojson::parse(in);
-  } catch (const nlohmann::json::exception& e) {
-    throw InputError(sceneFile, "", std::string("not JSON: ") + e.what());
-  }
+  const ojson scene = readJsonFile(sceneFile, "scene");
   return runConvergence(scene, sceneFile, loader, options, progress);
 }
 
@@ -432,37 +426,11 @@ std::optional<ConvergenceResult> cachedReferenceCheck(const std::string& sceneFi
   }
 }
 
-ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFile,
-                                 PluginLoader& loader, const ConvergeOptions& options,
-                                 Progress* progress) {
-  PreparedStudy prepared = prepareStudy(scene, sceneFile, loader, options);
-  const ojson& base = prepared.base;
-  const ojson& ref = prepared.ref;
-  const Scene& parsed = prepared.parsed;
-  const Organ& organ = prepared.organ;
-  const double volume = prepared.volume, exclude = prepared.exclude;
-  const std::optional<CacheKey>& key = prepared.key;
-  const fs::path cacheDir = options.cacheDir ? *options.cacheDir : Cache::defaultDir();
-  Cache cache(cacheDir);
-  if (key) {
-    if (auto hit = cache.get(kCacheKind, *key)) {
-      try {
-        ByteReader r(*hit);
-        ConvergenceResult out = fromJson(ojson::parse(r.string()));
-        out.cached = true;
-        fs::create_directories(options.outDir);
-        writeFileAtomic(options.outDir / "convergence.json", toJson(out, sceneFile).dump(2) + "\n");
-        return out;
-      } catch (const std::exception&) {
-        // An entry of another layout: recompute and overwrite it.
-      }
-    }
-  }
-
+/// The surface vertices the study compares (1) and leaves out (0): those within `exclude` of a
+/// point load (singular) or of where a grasp closes (the nodes a grasp attaches are those of each
+/// mesh within its radius, so the boundary condition itself changes with the mesh there).
+std::vector<char> comparedVertices(const Scene& parsed, const Organ& organ, double exclude) {
   const Interaction interaction(parsed, organ.surface);
-  // Left out: vertices near a point load (singular) and near where a grasp closes (the nodes
-  // a grasp attaches are those of each mesh within its radius, so the boundary condition
-  // itself changes with the mesh there).
   std::vector<Vec3> centres;
   for (int v : interaction.loadVertices()) centres.push_back(organ.surface.V.row(v).transpose());
   for (const ToolSpec& tool : parsed.tools)
@@ -475,16 +443,19 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
   for (const Vec3& c : centres)
     for (int i = 0; i < organ.surface.numVertices(); ++i)
       if ((organ.surface.V.row(i).transpose() - c).norm() < exclude) include[size_t(i)] = 0;
+  return include;
+}
 
-  ConvergenceResult out;
-  std::vector<MatX3> displacement;
+/// The level cases (one per ratio of options.hRatios) and their ids; out gets a level each.
+std::vector<SceneCase> levelCases(const PreparedStudy& prepared, const ConvergeOptions& options,
+                                  ConvergenceResult& out, std::vector<std::string>& ids) {
+  const ojson& base = prepared.base;
+  const ojson& ref = prepared.ref;
   const std::vector<double>& factors = options.hRatios;
-  if (progress) progress->addTotal(int(factors.size()));
+  std::vector<SceneCase> cases;
   // The level scenes: the reference plugin alone, as a model, at the level's size: its
   // `edge_length` (Gmsh's size field), or for a plugin without one `elements` scaled by r^-3. A
   // level at ratio 1 of the reference's own size is the reference as the scene runs it.
-  std::vector<SceneCase> cases;
-  std::vector<std::string> ids;
   for (size_t k = 0; k < factors.size(); ++k) {
     ConvergenceLevelResult level;
     const double ratio = factors[k];
@@ -520,6 +491,69 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
     ids.push_back(id);
     out.levels.push_back(level);
   }
+  return cases;
+}
+
+/// The Richardson estimates from the three levels' displacements, over the compared vertices.
+void estimateFromLevels(const std::vector<MatX3>& displacement, const std::vector<char>& include,
+                        ConvergenceResult& out) {
+  const auto maxDiff = [&](const MatX3& a, const MatX3& b) {
+    double m = 0;
+    for (Eigen::Index i = 0; i < a.rows(); ++i)
+      if (include[size_t(i)]) m = std::max(m, (a.row(i) - b.row(i)).norm());
+    return m;
+  };
+  const auto rmsDiff = [&](const MatX3& a, const MatX3& b) {
+    double sum = 0;
+    long long counted = 0;
+    for (Eigen::Index i = 0; i < a.rows(); ++i)
+      if (include[size_t(i)]) {
+        sum += (a.row(i) - b.row(i)).squaredNorm();
+        ++counted;
+      }
+    return counted > 0 ? std::sqrt(sum / double(counted)) : NAN;
+  };
+  const double h0 = out.levels[0].h, h1 = out.levels[1].h, h2 = out.levels[2].h;
+  const double peak = out.levels[2].peakDisplacement;
+  richardsonEstimate(h0, h1, h2, maxDiff(displacement[0], displacement[1]),
+                     maxDiff(displacement[1], displacement[2]), peak, out);
+  out.rms01 = rmsDiff(displacement[0], displacement[1]);
+  out.rms12 = rmsDiff(displacement[1], displacement[2]);
+  richardsonRms(h0, h1, h2, out.rms01, out.rms12, peak, out);
+}
+
+ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFile,
+                                 PluginLoader& loader, const ConvergeOptions& options,
+                                 Progress* progress) {
+  PreparedStudy prepared = prepareStudy(scene, sceneFile, loader, options);
+  const Scene& parsed = prepared.parsed;
+  const Organ& organ = prepared.organ;
+  const double volume = prepared.volume, exclude = prepared.exclude;
+  const std::optional<CacheKey>& key = prepared.key;
+  const fs::path cacheDir = options.cacheDir ? *options.cacheDir : Cache::defaultDir();
+  Cache cache(cacheDir);
+  if (key) {
+    if (auto hit = cache.get(kCacheKind, *key)) {
+      try {
+        ByteReader r(*hit);
+        ConvergenceResult out = fromJson(ojson::parse(r.string()));
+        out.cached = true;
+        fs::create_directories(options.outDir);
+        writeFileAtomic(options.outDir / "convergence.json", toJson(out, sceneFile).dump(2) + "\n");
+        return out;
+      } catch (const std::exception&) {
+        // An entry of another layout: recompute and overwrite it.
+      }
+    }
+  }
+
+  const std::vector<char> include = comparedVertices(parsed, organ, exclude);
+  ConvergenceResult out;
+  std::vector<MatX3> displacement;
+  const std::vector<double>& factors = options.hRatios;
+  if (progress) progress->addTotal(int(factors.size()));
+  std::vector<std::string> ids;
+  std::vector<SceneCase> cases = levelCases(prepared, options, out, ids);
   const auto started = [&](size_t k) {
     if (progress)
       progress->start(ids[k] +
@@ -577,29 +611,7 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
     out.reason = "levels_failed";
     out.message = "no estimate: not every level ran to its compared instant";
   } else {
-    const auto maxDiff = [&](const MatX3& a, const MatX3& b) {
-      double m = 0;
-      for (Eigen::Index i = 0; i < a.rows(); ++i)
-        if (include[size_t(i)]) m = std::max(m, (a.row(i) - b.row(i)).norm());
-      return m;
-    };
-    const auto rmsDiff = [&](const MatX3& a, const MatX3& b) {
-      double sum = 0;
-      long long counted = 0;
-      for (Eigen::Index i = 0; i < a.rows(); ++i)
-        if (include[size_t(i)]) {
-          sum += (a.row(i) - b.row(i)).squaredNorm();
-          ++counted;
-        }
-      return counted > 0 ? std::sqrt(sum / double(counted)) : NAN;
-    };
-    const double h0 = out.levels[0].h, h1 = out.levels[1].h, h2 = out.levels[2].h;
-    const double peak = out.levels[2].peakDisplacement;
-    richardsonEstimate(h0, h1, h2, maxDiff(displacement[0], displacement[1]),
-                       maxDiff(displacement[1], displacement[2]), peak, out);
-    out.rms01 = rmsDiff(displacement[0], displacement[1]);
-    out.rms12 = rmsDiff(displacement[1], displacement[2]);
-    richardsonRms(h0, h1, h2, out.rms01, out.rms12, peak, out);
+    estimateFromLevels(displacement, include, out);
   }
   const ojson doc = toJson(out, sceneFile);
   writeFileAtomic(options.outDir / "convergence.json", doc.dump(2) + "\n");

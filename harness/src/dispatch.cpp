@@ -101,6 +101,20 @@ std::vector<std::vector<size_t>> byStage(const std::vector<ojson>& tasks,
   return out;
 }
 
+std::vector<size_t> tasksToRun(const std::vector<ojson>& tasks,
+                               const std::function<void(size_t, const ojson&)>& onDone) {
+  std::vector<size_t> todo;
+  for (size_t i = 0; i < tasks.size(); ++i) {
+    const ojson r = resumedTaskResult(tasks[i]);
+    if (r.is_null()) {
+      todo.push_back(i);
+    } else if (onDone) {
+      onDone(i, r);
+    }
+  }
+  return todo;
+}
+
 namespace {
 
 ojson executeCaught(const ojson& task) {
@@ -118,15 +132,7 @@ class LocalDispatcher : public Dispatcher {
 
   void run(const std::vector<ojson>& tasks, const std::function<void(size_t)>& onStart,
            const std::function<void(size_t, const ojson&)>& onDone) override {
-    std::vector<size_t> todo;
-    for (size_t i = 0; i < tasks.size(); ++i) {
-      const ojson r = resumedTaskResult(tasks[i]);
-      if (r.is_null()) {
-        todo.push_back(i);
-      } else if (onDone) {
-        onDone(i, r);
-      }
-    }
+    const std::vector<size_t> todo = tasksToRun(tasks, onDone);
     for (const std::vector<size_t>& stage : byStage(tasks, todo))
       runStage(tasks, stage, onStart, onDone);
   }
@@ -187,15 +193,7 @@ class SlurmDispatcher : public Dispatcher {
 
   void run(const std::vector<ojson>& tasks, const std::function<void(size_t)>&,
            const std::function<void(size_t, const ojson&)>& onDone) override {
-    std::vector<size_t> todo;
-    for (size_t i = 0; i < tasks.size(); ++i) {
-      const ojson r = resumedTaskResult(tasks[i]);
-      if (r.is_null()) {
-        todo.push_back(i);
-      } else if (onDone) {
-        onDone(i, r);
-      }
-    }
+    const std::vector<size_t> todo = tasksToRun(tasks, onDone);
     std::error_code ec;
     fs::create_directories(m_dir / "tasks", ec);
     fs::create_directories(m_dir / "logs", ec);

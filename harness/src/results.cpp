@@ -3,6 +3,7 @@
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
 #include <deform_harness/results.h>
+#include <deform_harness/runner.h>
 
 #include <array>
 #include <chrono>
@@ -183,6 +184,81 @@ void writeRunSurfaces(const fs::path& outDir, const Scene& scene, const Organ& o
   }
 }
 
+namespace {
+
+/// "cache" of a run: its cache events counted by what happened.
+json cacheJson(const std::vector<Cache::Event>& events) {
+  json c = {{"hits", 0}, {"misses", 0}, {"stored", 0}, {"corrupt", 0}};
+  for (const auto& e : events) {
+    switch (e.what) {
+      case Cache::EventKind::Hit:
+        c["hits"] = c["hits"].get<int>() + 1;
+        break;
+      case Cache::EventKind::Miss:
+      case Cache::EventKind::Disabled:
+        c["misses"] = c["misses"].get<int>() + 1;
+        break;
+      case Cache::EventKind::Stored:
+        c["stored"] = c["stored"].get<int>() + 1;
+        break;
+      case Cache::EventKind::Corrupt:
+        c["corrupt"] = c["corrupt"].get<int>() + 1;
+        break;
+      case Cache::EventKind::StoreFailed:
+        c["store_failed"] = c.value("store_failed", 0) + 1;
+        break;
+    }
+  }
+  return c;
+}
+
+/// "markers" of a run: status, reason, and with bound markers their positions at each compared
+/// instant (and their errors where measured).
+json markersJson(const RunRecord& run) {
+  json m;
+  m["status"] = run.markerStatus;
+  if (!run.markerReason.empty()) m["reason"] = run.markerReason;
+  if (run.markerStatus == "ok") {
+    json at = json::array();
+    for (const SurfaceSnapshot& s : run.compared) {
+      json pts = json::array();
+      for (Eigen::Index i = 0; i < s.markers.rows(); ++i)
+        pts.push_back({finite(s.markers(i, 0)), finite(s.markers(i, 1)), finite(s.markers(i, 2))});
+      json one = {{"t", s.time}, {"positions_m", pts}};
+      if (s.markerRms >= 0) {
+        one["rms_error_m"] = finite(s.markerRms);
+        one["max_error_m"] = finite(s.markerMax);
+      }
+      at.push_back(one);
+    }
+    m["at"] = at;
+  }
+  return m;
+}
+
+/// "hand_forces": the force the hand exerts on each dynamic instrument, per step (the hand feels
+/// minus it).
+json handForcesJson(const RunRecord& run) {
+  json hands = json::array();
+  for (size_t i = 0; i < run.instruments.size(); ++i) {
+    json t = json::array(), f = json::array(), x = json::array();
+    for (const HandForceSample& h : run.handForces) {
+      if (h.instrument != static_cast<int>(i)) continue;
+      t.push_back(h.step * run.dt);
+      f.push_back({finite(h.force.x()), finite(h.force.y()), finite(h.force.z())});
+      x.push_back({finite(h.position.x()), finite(h.position.y()), finite(h.position.z())});
+    }
+    hands.push_back({{"instrument", run.instruments[i]},
+                     {"unit", "N"},
+                     {"t_s", t},
+                     {"force_N", f},
+                     {"position_m", x}});
+  }
+  return hands;
+}
+
+}  // namespace
+
 json runJson(const RunRecord& run) {
   json j;
   j["model"] = run.model;
@@ -215,30 +291,7 @@ json runJson(const RunRecord& run) {
   j["numeric"] = json::object();
   for (const auto& [k, v] : run.numeric) j["numeric"][k] = v;
   j["fixed_nodes"] = run.fixedNodes;
-  if (!run.cacheEvents.empty()) {
-    json c = {{"hits", 0}, {"misses", 0}, {"stored", 0}, {"corrupt", 0}};
-    for (const auto& e : run.cacheEvents) {
-      switch (e.what) {
-        case Cache::EventKind::Hit:
-          c["hits"] = c["hits"].get<int>() + 1;
-          break;
-        case Cache::EventKind::Miss:
-        case Cache::EventKind::Disabled:
-          c["misses"] = c["misses"].get<int>() + 1;
-          break;
-        case Cache::EventKind::Stored:
-          c["stored"] = c["stored"].get<int>() + 1;
-          break;
-        case Cache::EventKind::Corrupt:
-          c["corrupt"] = c["corrupt"].get<int>() + 1;
-          break;
-        case Cache::EventKind::StoreFailed:
-          c["store_failed"] = c.value("store_failed", 0) + 1;
-          break;
-      }
-    }
-    j["cache"] = c;
-  }
+  if (!run.cacheEvents.empty()) j["cache"] = cacheJson(run.cacheEvents);
   if (run.error) {
     const ErrorMetrics& e = *run.error;
     json err;
@@ -267,28 +320,7 @@ json runJson(const RunRecord& run) {
       forces.push_back({finite(f.x()), finite(f.y()), finite(f.z())});
     j["plate_force_N"] = forces;
   }
-  if (!run.markerStatus.empty()) {
-    json m;
-    m["status"] = run.markerStatus;
-    if (!run.markerReason.empty()) m["reason"] = run.markerReason;
-    if (run.markerStatus == "ok") {
-      json at = json::array();
-      for (const SurfaceSnapshot& s : run.compared) {
-        json pts = json::array();
-        for (Eigen::Index i = 0; i < s.markers.rows(); ++i)
-          pts.push_back(
-              {finite(s.markers(i, 0)), finite(s.markers(i, 1)), finite(s.markers(i, 2))});
-        json one = {{"t", s.time}, {"positions_m", pts}};
-        if (s.markerRms >= 0) {
-          one["rms_error_m"] = finite(s.markerRms);
-          one["max_error_m"] = finite(s.markerMax);
-        }
-        at.push_back(one);
-      }
-      m["at"] = at;
-    }
-    j["markers"] = m;
-  }
+  if (!run.markerStatus.empty()) j["markers"] = markersJson(run);
   if (!run.emptyGrasps.empty()) j["empty_grasps"] = run.emptyGrasps;
   if (run.graspResidual >= 0) j["grasp_residual_m"] = finite(run.graspResidual);
   if (run.settledAt) {
@@ -311,25 +343,7 @@ json runJson(const RunRecord& run) {
   if (!run.worlds.empty()) j["worlds"] = run.worlds;
   if (run.contactPairs >= 0)
     j["contact"] = {{"pairs_tested", run.contactPairs}, {"contacts", run.contacts}};
-  if (!run.instruments.empty()) {
-    // The force the hand exerts on each dynamic instrument, per step (the hand feels minus it).
-    json hands = json::array();
-    for (size_t i = 0; i < run.instruments.size(); ++i) {
-      json t = json::array(), f = json::array(), x = json::array();
-      for (const HandForceSample& h : run.handForces) {
-        if (h.instrument != static_cast<int>(i)) continue;
-        t.push_back(h.step * run.dt);
-        f.push_back({finite(h.force.x()), finite(h.force.y()), finite(h.force.z())});
-        x.push_back({finite(h.position.x()), finite(h.position.y()), finite(h.position.z())});
-      }
-      hands.push_back({{"instrument", run.instruments[i]},
-                       {"unit", "N"},
-                       {"t_s", t},
-                       {"force_N", f},
-                       {"position_m", x}});
-    }
-    j["hand_forces"] = hands;
-  }
+  if (!run.instruments.empty()) j["hand_forces"] = handForcesJson(run);
   if (!run.objectsFinal.empty()) {
     json o = json::array();
     for (const Vec3& p : run.objectsFinal) o.push_back({p.x(), p.y(), p.z()});

@@ -1,5 +1,6 @@
-// The runner: one model through one scene with timing and divergence checks, and the whole
-// `deformbench run` pipeline around it.
+// The runner: one model through one scene, the step loop with its timing and divergence checks,
+// and the validity of the run. Planning a scene's runs: run_plan.cpp; the solve cache:
+// solve_cache.cpp; the `deformbench run` pipeline around them: pipeline.cpp.
 #include <deform/engine/interaction.h>
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/contact.h>
@@ -283,10 +284,10 @@ int fixedNodeCount(const Model& model, const Organ& organ) {
 
 }  // namespace
 
-void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOptions& options,
-              RunRecord& rec) {
-  const int n =
-      options.maxSteps >= 0 ? std::min(options.maxSteps, scene.numSteps()) : scene.numSteps();
+namespace {
+
+/// simulate()'s record before the first step: planned steps, no results yet.
+void startRecord(const Scene& scene, int n, RunRecord& rec) {
   rec.plannedSteps = n;
   rec.steps = 0;
   rec.stepMs.clear();
@@ -297,6 +298,113 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   rec.handForces.clear();
   rec.dt = scene.dt;
   rec.status = RunStatus::Ok;
+}
+
+/// A compared instant: the surface, the plates' reaction forces, the markers and their errors.
+SurfaceSnapshot comparedSnapshot(Model& model, const Scene& scene, bool withMarkers, int step,
+                                 Real time, const MatX3& surface, const StepInput& in) {
+  SurfaceSnapshot snap{step, time, surface};
+  if (!scene.plates.empty()) {
+    const std::vector<Vec3> forces = model.graspForces();
+    if (forces.size() >= in.grasps.size()) {
+      snap.plateForces.assign(scene.plates.size(), Vec3::Zero());
+      for (size_t g = 0; g < in.grasps.size(); ++g) {
+        const int p = in.grasps[g].tool - static_cast<int>(scene.tools.size());
+        if (p >= 0 && p < static_cast<int>(scene.plates.size()))
+          snap.plateForces[size_t(p)] = forces[g];
+      }
+    }
+  }
+  if (withMarkers) {
+    snap.markers = model.markers();
+    for (const MarkerFrame& m : scene.markers.measured) {
+      if (std::fabs(m.t - time) > 0.5 * scene.dt || snap.markers.rows() != m.points.rows())
+        continue;
+      const VecX d = (snap.markers - m.points).rowwise().norm();
+      snap.markerRms = d.size() ? std::sqrt(d.squaredNorm() / double(d.size())) : 0.0;
+      snap.markerMax = d.size() ? d.maxCoeff() : 0.0;
+    }
+  }
+  return snap;
+}
+
+/// The motion measures after the run: peak displacement, the motion floor, the fixed region's
+/// drift, the prescribed motion, and the support and outrun notes.
+void measureMotion(const Scene& scene, const Organ& organ, RunRecord& rec) {
+  const MatX3& rest = organ.surface.V;
+  auto peak = [&](const MatX3& x) {
+    return x.rows() >= rest.rows() && rest.rows() > 0
+               ? (x.topRows(rest.rows()) - rest).rowwise().norm().maxCoeff()
+               : Real(0);
+  };
+  rec.peakDisplacement = peak(rec.finalSurface);
+  for (const SurfaceSnapshot& c : rec.compared)
+    rec.peakDisplacement = std::max<double>(rec.peakDisplacement, peak(c.positions));
+  const bool loaded =
+      scene.gravity.squaredNorm() > 0 || !scene.loads.empty() || rec.graspTravel > 0;
+  rec.motionFloor = loaded && rest.rows() > 0 ? 1e-6 * boundingBox(rest).diagonal() : 0.0;
+  // The organ's own surface inside the fixed region must stay (however the model holds it).
+  rec.fixedDrift = 0;
+  if (!organ.fixed.empty() && rest.rows() > 0) {
+    const std::vector<int> held = fixedNodeIndices(rest, organ.fixed, organ.surface);
+    const auto drift = [&](const MatX3& x) {
+      Real d = 0;
+      for (int v : held)
+        if (v < x.rows()) d = std::max(d, (x.row(v) - rest.row(v)).norm());
+      return d;
+    };
+    Real d = drift(rec.finalSurface);
+    for (const SurfaceSnapshot& c : rec.compared) d = std::max(d, drift(c.positions));
+    if (d > 1e-6 * boundingBox(rest).diagonal()) rec.fixedDrift = d;
+  }
+  if (const std::string p = supportProblem(scene, rec); !p.empty()) rec.notes.push_back(p);
+  rec.prescribedMotion = std::max<double>(rec.graspTravel, prescribedMotionBesidesGrasps(scene));
+  if (const std::string note = outrunNote(scene, rec); !note.empty()) rec.notes.push_back(note);
+}
+
+/// simulate()'s record after the last step: grasp residual and travel, timings, the model's
+/// counters and final surface, the interaction's leftovers, notes and the motion measures.
+void finishRecord(Model& model, const Scene& scene, const Organ& organ, Interaction& interaction,
+                  const RunOptions& options, bool sparse,
+                  const std::map<std::string, std::vector<double>>& phases, double residual2,
+                  long long residualCount, RunRecord& rec) {
+  const bool equilibrium = scene.compareAtEquilibrium;
+  rec.graspResidual = residualCount > 0 ? std::sqrt(residual2 / double(residualCount)) : -1.0;
+  {
+    const std::vector<Real> travel = interaction.graspTravel();
+    rec.graspTravel = travel.empty() ? 0.0 : *std::max_element(travel.begin(), travel.end());
+  }
+
+  rec.stepStats = stepStatistics(rec.stepMs, sparse ? 0.0 : options.warmupFraction);
+  rec.phaseMs.clear();
+  for (auto& [phase, v] : phases) rec.phaseMs[phase] = median(v);
+  rec.numeric = model.numericCounters();
+  rec.finalSurface = model.surface();
+  const MatX3i faces = model.surfaceFaces();
+  rec.finalFaces = faces.rows() > 0 ? faces : organ.surface.F;
+  rec.emptyGrasps = interaction.emptyGrasps();
+  rec.objectsFinal = interaction.objectPositions();
+  if (const ContactWorld* cw = interaction.contactWorld()) {
+    rec.contactPairs = cw->pairsTested();
+    rec.contacts = cw->contactsFound();
+  }
+  for (int tool : rec.emptyGrasps) {
+    rec.notes.push_back("the grasp of tool " + std::to_string(tool) +
+                        " closed on no surface vertex");
+  }
+  if (equilibrium && rec.status == RunStatus::Ok && !rec.settledAt)
+    rec.notes.push_back("did not settle by the end of the run (largest surface speed above " +
+                        std::to_string(scene.settleSpeed) + " m/s)");
+  measureMotion(scene, organ, rec);
+}
+
+}  // namespace
+
+void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOptions& options,
+              RunRecord& rec) {
+  const int n =
+      options.maxSteps >= 0 ? std::min(options.maxSteps, scene.numSteps()) : scene.numSteps();
+  startRecord(scene, n, rec);
 
   // The support rules judge clamps (boxes, listed vertices); roller boxes hold single axes and
   // are not counted in fixed_nodes.
@@ -330,31 +438,8 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   double residual2 = 0;
   long long residualCount = 0;
   const bool withMarkers = rec.markerStatus == "ok";
-  // A compared instant: the surface, the plates' reaction forces, the markers and their errors.
   const auto snapshot = [&](int step, Real time, const MatX3& surface, const StepInput& in) {
-    SurfaceSnapshot snap{step, time, surface};
-    if (!scene.plates.empty()) {
-      const std::vector<Vec3> forces = model.graspForces();
-      if (forces.size() >= in.grasps.size()) {
-        snap.plateForces.assign(scene.plates.size(), Vec3::Zero());
-        for (size_t g = 0; g < in.grasps.size(); ++g) {
-          const int p = in.grasps[g].tool - static_cast<int>(scene.tools.size());
-          if (p >= 0 && p < static_cast<int>(scene.plates.size()))
-            snap.plateForces[size_t(p)] = forces[g];
-        }
-      }
-    }
-    if (withMarkers) {
-      snap.markers = model.markers();
-      for (const MarkerFrame& m : scene.markers.measured) {
-        if (std::fabs(m.t - time) > 0.5 * scene.dt || snap.markers.rows() != m.points.rows())
-          continue;
-        const VecX d = (snap.markers - m.points).rowwise().norm();
-        snap.markerRms = d.size() ? std::sqrt(d.squaredNorm() / double(d.size())) : 0.0;
-        snap.markerMax = d.size() ? d.maxCoeff() : 0.0;
-      }
-    }
-    return snap;
+    return comparedSnapshot(model, scene, withMarkers, step, time, surface, in);
   };
 
   for (int k = 0; k < n; ++k) {
@@ -458,63 +543,8 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
       if (equilibrium) rec.settledAt = tEnd;
     }
   }
-  rec.graspResidual = residualCount > 0 ? std::sqrt(residual2 / double(residualCount)) : -1.0;
-  {
-    const std::vector<Real> travel = interaction.graspTravel();
-    rec.graspTravel = travel.empty() ? 0.0 : *std::max_element(travel.begin(), travel.end());
-  }
-
-  rec.stepStats = stepStatistics(rec.stepMs, sparse ? 0.0 : options.warmupFraction);
-  rec.phaseMs.clear();
-  for (auto& [phase, v] : phases) rec.phaseMs[phase] = median(v);
-  rec.numeric = model.numericCounters();
-  rec.finalSurface = model.surface();
-  const MatX3i faces = model.surfaceFaces();
-  rec.finalFaces = faces.rows() > 0 ? faces : organ.surface.F;
-  rec.emptyGrasps = interaction.emptyGrasps();
-  rec.objectsFinal = interaction.objectPositions();
-  if (const ContactWorld* cw = interaction.contactWorld()) {
-    rec.contactPairs = cw->pairsTested();
-    rec.contacts = cw->contactsFound();
-  }
-  for (int tool : rec.emptyGrasps) {
-    rec.notes.push_back("the grasp of tool " + std::to_string(tool) +
-                        " closed on no surface vertex");
-  }
-  if (equilibrium && rec.status == RunStatus::Ok && !rec.settledAt)
-    rec.notes.push_back("did not settle by the end of the run (largest surface speed above " +
-                        std::to_string(scene.settleSpeed) + " m/s)");
-  {
-    const MatX3& rest = organ.surface.V;
-    auto peak = [&](const MatX3& x) {
-      return x.rows() >= rest.rows() && rest.rows() > 0
-                 ? (x.topRows(rest.rows()) - rest).rowwise().norm().maxCoeff()
-                 : Real(0);
-    };
-    rec.peakDisplacement = peak(rec.finalSurface);
-    for (const SurfaceSnapshot& c : rec.compared)
-      rec.peakDisplacement = std::max<double>(rec.peakDisplacement, peak(c.positions));
-    const bool loaded =
-        scene.gravity.squaredNorm() > 0 || !scene.loads.empty() || rec.graspTravel > 0;
-    rec.motionFloor = loaded && rest.rows() > 0 ? 1e-6 * boundingBox(rest).diagonal() : 0.0;
-    // The organ's own surface inside the fixed region must stay (however the model holds it).
-    rec.fixedDrift = 0;
-    if (!organ.fixed.empty() && rest.rows() > 0) {
-      const std::vector<int> held = fixedNodeIndices(rest, organ.fixed, organ.surface);
-      const auto drift = [&](const MatX3& x) {
-        Real d = 0;
-        for (int v : held)
-          if (v < x.rows()) d = std::max(d, (x.row(v) - rest.row(v)).norm());
-        return d;
-      };
-      Real d = drift(rec.finalSurface);
-      for (const SurfaceSnapshot& c : rec.compared) d = std::max(d, drift(c.positions));
-      if (d > 1e-6 * boundingBox(rest).diagonal()) rec.fixedDrift = d;
-    }
-    if (const std::string p = supportProblem(scene, rec); !p.empty()) rec.notes.push_back(p);
-    rec.prescribedMotion = std::max<double>(rec.graspTravel, prescribedMotionBesidesGrasps(scene));
-    if (const std::string note = outrunNote(scene, rec); !note.empty()) rec.notes.push_back(note);
-  }
+  finishRecord(model, scene, organ, interaction, options, sparse, phases, residual2, residualCount,
+               rec);
   assessValidity(scene, rec);
 }
 
@@ -731,581 +761,6 @@ RunRecord runModel(const ModelInfo& info, const ParamValues& params, const Scene
   RunRecord rec = runModelUnguarded(info, params, scene, organ, cache, options);
   invalidateIfNotOk(rec);  // every early return too: a failed or unsupported run is never valid
   return rec;
-}
-
-namespace {
-
-bool matchesOnly(const BenchmarkOptions& options, const PlannedRun& run) {
-  if (options.only.empty()) return true;
-  for (const std::string& o : options.only) {
-    if (o == run.label || o == run.spec.model || o == run.spec.plugin) return true;
-  }
-  return false;
-}
-
-std::string eventName(Cache::EventKind k) {
-  switch (k) {
-    case Cache::EventKind::Hit:
-      return "hit";
-    case Cache::EventKind::Miss:
-      return "miss";
-    case Cache::EventKind::Corrupt:
-      return "corrupt (deleted)";
-    case Cache::EventKind::Stored:
-      return "stored";
-    case Cache::EventKind::Disabled:
-      return "disabled";
-    case Cache::EventKind::StoreFailed:
-      return "store failed";
-  }
-  return "?";
-}
-
-}  // namespace
-
-std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
-                                 const BenchmarkOptions& options) {
-  const auto explain = [&](const std::string& s) {
-    if (options.explain) options.explain(s);
-  };
-  std::vector<const ModelSpec*> specs;
-  for (const ModelSpec& m : scene.models) specs.push_back(&m);
-  if (scene.reference) {
-    if (options.noReference) {
-      explain("skipped the reference " + scene.reference->model + ": --no-reference");
-    } else {
-      specs.push_back(&*scene.reference);
-    }
-  }
-  std::vector<PlannedRun> planned;
-  std::set<std::string> labels;
-  const std::string organ =
-      calibrationOrgan(scene.organ.mesh, scene.organ.resolution, scene.organ.scale);
-  for (const ModelSpec* spec : specs) {
-    PlannedRun run;
-    run.spec = *spec;
-    run.isReference = scene.reference && spec == &*scene.reference;
-    run.info = &loader.load(spec->plugin, spec->model);
-    nlohmann::json given = spec->params;
-    const CalibrationParams* calibration =
-        run.isReference
-            ? nullptr
-            : calibrationFor(options.calibrations, spec->plugin, run.info->name, organ, false);
-    if (calibration) {
-      nlohmann::json merged = calibration->params;
-      for (const auto& [k, v] : spec->params.items()) merged[k] = v;
-      given = merged;
-    }
-    run.params = resolveParams(run.info->params, given, scene.file, spec->jsonPath + "/params");
-    if (calibration)
-      run.calibrationNote = calibrationDifferenceNote(*calibration, paramsToJson(run.params));
-    if (options.explain) {
-      // Where each parameter came from: the scene, a calibration file, or the default.
-      std::string from;
-      for (const ParamSpec& ps : run.info->params) {
-        std::string source = "default";
-        if (spec->params.contains(ps.key)) {
-          source = "scene";
-          if (calibration && calibration->params.contains(ps.key))
-            source += ", over calibration " + calibration->file;
-        } else if (calibration && calibration->params.contains(ps.key)) {
-          source = "calibration " + calibration->file;
-        }
-        if (source == "default") continue;
-        from += (from.empty() ? "" : "; ") + ps.key + " from " + source;
-      }
-      explain("params of " + spec->plugin + "/" + run.info->name + " at " + spec->jsonPath + ": " +
-              (from.empty() ? std::string("all defaults") : from + "; the rest defaults"));
-    }
-    if (!spec->label.empty()) {
-      run.label = spec->label;
-    } else {
-      const std::string nd = formatNonDefault(run.params, run.info->params);
-      run.label = nd.empty() ? spec->model : spec->model + "(" + nd + ")";
-      if (labels.count(run.label)) {
-        int i = 2;
-        while (labels.count(run.label + " #" + std::to_string(i))) ++i;
-        run.label += " #" + std::to_string(i);
-      }
-    }
-    labels.insert(run.label);
-    planned.push_back(std::move(run));
-  }
-  std::vector<PlannedRun> kept;
-  for (PlannedRun& run : planned) {
-    if (!matchesOnly(options, run) && !run.isReference) {
-      explain("skipped " + run.label + ": not selected by --only");
-      continue;
-    }
-    kept.push_back(std::move(run));
-  }
-  if (!options.only.empty()) {
-    const bool any =
-        std::any_of(kept.begin(), kept.end(), [](const PlannedRun& r) { return !r.isReference; });
-    if (!any) {
-      std::string names;
-      for (const PlannedRun& r : planned) names += (names.empty() ? "" : ", ") + r.label;
-      std::string given;
-      for (const auto& o : options.only) given += (given.empty() ? "" : ", ") + o;
-      throw InputError(
-          "--only", "",
-          "no model of the scene matches '" + given + "' (the scene has: " + names + ")");
-    }
-  }
-  for (const std::string& f : loader.loadedFiles()) explain("loaded plugin " + f);
-  for (const PlannedRun& r : kept) {
-    explain(std::string("built ") + (r.isReference ? "reference " : "model ") + r.label + " = " +
-            r.spec.plugin + "/" + r.info->name + " " + paramsToJson(r.params).dump());
-  }
-  return kept;
-}
-
-namespace {
-
-/// Marks every model run with whether its reference is valid (DESIGN "Metrics": reference_valid
-/// false marks every error computed against a reference that is invalid, failed or not
-/// converged; a reference whose solver gave up on a solve is invalid by assessValidity()).
-void markReferenceValidity(const RunRecord& ref, std::vector<RunRecord>& runs) {
-  const bool ok = ref.status == RunStatus::Ok && ref.valid;
-  std::string why;
-  if (!ok) {
-    why = "the reference " + ref.label + " is " +
-          (ref.status == RunStatus::Ok ? "invalid: " + ref.invalidReason : notRunReason(ref));
-  }
-  for (RunRecord& r : runs) {
-    if (r.isReference) continue;
-    r.referenceValid = ok;
-    r.referenceInvalidReason = why;
-  }
-}
-
-}  // namespace
-
-void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs) {
-  const auto ref =
-      std::find_if(runs.begin(), runs.end(), [](const RunRecord& r) { return r.isReference; });
-  if (ref == runs.end()) return;
-  markReferenceValidity(*ref, runs);
-  if (ref->status != RunStatus::Ok) {
-    for (RunRecord& r : runs) {
-      if (!r.isReference) r.notes.push_back("no error: the reference run is " + notRunReason(*ref));
-    }
-    return;
-  }
-  // A collapse (issue 35, as stability's verdict "collapsed"): where the reference moves the
-  // organ by under 10% of its size, a model that went through its support or moved by more than
-  // its size did not model the scene.
-  if (ref->valid && relativeDisplacement(organ.surface.V, ref->finalSurface) >= 0 &&
-      relativeDisplacement(organ.surface.V, ref->finalSurface) < 0.1) {
-    const std::vector<int> held =
-        organ.fixed.empty() ? std::vector<int>{}
-                            : fixedNodeIndices(organ.surface.V, organ.fixed, organ.surface);
-    for (RunRecord& r : runs) {
-      if (r.isReference || r.status != RunStatus::Ok || !r.valid) continue;
-      const std::string why = collapseProblem(
-          organ.surface.V,
-          r.finalSurface.topRows(std::min(r.finalSurface.rows(), organ.surface.V.rows())), held);
-      if (why.empty()) continue;
-      r.valid = false;
-      r.invalidReason =
-          "collapsed: " + why + ", while the reference moves the organ by under 10% of its size";
-    }
-  }
-  const Interaction interaction(scene, organ.surface);
-  const Vec3 focus = interaction.focusPoint();
-  if (ref->compared.empty()) {
-    for (RunRecord& r : runs) {
-      if (!r.isReference)
-        r.notes.push_back("no error: the run ended before every compared instant");
-    }
-    return;
-  }
-  std::vector<MatX3> refSurfaces;
-  for (const auto& s : ref->compared) refSurfaces.push_back(s.positions);
-  const std::vector<int> excluded = rmseExcludedVertices(scene, organ.surface.V);
-  for (RunRecord& r : runs) {
-    if (r.isReference || r.status != RunStatus::Ok) continue;
-    if (r.compared.size() != refSurfaces.size()) {
-      r.notes.push_back("no error: the run has surfaces at different instants than the reference");
-      continue;
-    }
-    std::vector<MatX3> mine;
-    for (const auto& s : r.compared) mine.push_back(s.positions);
-    r.error = computeErrors(mine, refSurfaces, organ.surface.V, focus, scene.nearest, excluded);
-    r.referenceModel = ref->model;
-  }
-}
-
-namespace {
-
-constexpr const char* kReferenceRunKind = "harness.reference_run";
-
-/// The key of a solve that BenchmarkOptions::reuseReference may share: the problem (the scene
-/// without its models, reference, name, description and output, a mesh file's path made
-/// absolute, and the organ as loaded), the plugin file (SHA-256), model and resolved parameters,
-/// and the step limit. Neither the run's label nor whether it runs as the reference or as a model
-/// enters: a convergence level at the reference's own parameters is the same solve.
-CacheKey solveKey(const std::string& sceneFile, const Scene& scene, const Organ& organ,
-                  PluginLoader& loader, const PlannedRun& p, const RunOptions& run) {
-  nlohmann::json doc;
-  {
-    std::ifstream in(sceneFile);
-    doc = nlohmann::json::parse(in);
-  }
-  for (const char* k : {"models", "reference", "name", "description", "output"}) doc.erase(k);
-  if (doc.contains("organ") && doc["organ"].contains("mesh") && doc["organ"]["mesh"].is_string()) {
-    const std::string mesh = doc["organ"]["mesh"];
-    if (mesh.rfind("phantom:", 0) != 0 && !fs::path(mesh).is_absolute())
-      doc["organ"]["mesh"] =
-          fs::absolute(fs::path(sceneFile).parent_path() / mesh).lexically_normal().string();
-  }
-  CacheKey key;
-  // /3: the validity rules of wave 3 (supports, instruments) changed what a stored valid means.
-  key.add("harness.reference_run/4").add(doc.dump());
-  key.add(organ.surface.V).add(organ.surface.F);
-  key.add(sha256File(loader.locate(p.spec.plugin))).add(p.info->name).add(p.info->version);
-  key.add(paramsToJson(p.params).dump());
-  key.add(static_cast<long long>(run.maxSteps < 0 ? scene.numSteps() : run.maxSteps));
-  key.add(run.quasiStaticAtComparedInstants ? (*run.quasiStaticAtComparedInstants ? 1 : 0) : -1);
-  return key;
-}
-
-/// What a later run needs of a solve: its surfaces, counts, timings and the checks' inputs.
-void storeCachedSolve(Cache& cache, const CacheKey& key, const RunRecord& r) {
-  ByteWriter w;
-  w.pod(static_cast<int>(r.steps));
-  w.pod(static_cast<int>(r.plannedSteps));
-  w.pod(static_cast<int>(r.solvedSteps));
-  w.pod(static_cast<int>(r.fixedNodes));
-  w.pod(static_cast<int>(r.fixedRegion));
-  w.pod(r.graspResidual);
-  w.pod(r.graspTravel);
-  w.pod(static_cast<int>(r.equilibrium));
-  w.pod(static_cast<int>(r.settledAt.has_value()));
-  w.pod(r.settledAt.value_or(0.0));
-  w.pod(static_cast<int>(r.valid));
-  w.string(r.invalidReason);
-  w.pod(r.peakDisplacement);
-  w.pod(r.motionFloor);
-  w.pod(r.fixedDrift);
-  w.pod(r.precomputeS);
-  w.pod(r.stepStats);
-  w.pod(static_cast<int>(r.counts.size()));
-  for (const auto& [k, v] : r.counts) {
-    w.string(k);
-    w.pod(v);
-  }
-  w.pod(static_cast<int>(r.phaseMs.size()));
-  for (const auto& [k, v] : r.phaseMs) {
-    w.string(k);
-    w.pod(v);
-  }
-  w.pod(static_cast<int>(r.notes.size()));
-  for (const std::string& n : r.notes) w.string(n);
-  w.pod(r.dt);
-  w.matrix(r.finalSurface);
-  w.matrix(r.finalFaces);
-  w.pod(static_cast<int>(r.compared.size()));
-  for (const SurfaceSnapshot& s : r.compared) putSnapshotExtras(w, s);
-  w.string(r.markerStatus);
-  w.string(r.markerReason);
-  cache.put(kReferenceRunKind, key, w.bytes());
-}
-
-bool readCachedSolve(Cache& cache, const CacheKey& key, bool reference, RunRecord& r) {
-  const auto hit = cache.get(kReferenceRunKind, key);
-  if (!hit) return false;
-  try {
-    ByteReader b(*hit);
-    r.steps = b.pod<int>();
-    r.plannedSteps = b.pod<int>();
-    r.solvedSteps = b.pod<int>();
-    r.fixedNodes = b.pod<int>();
-    r.fixedRegion = b.pod<int>() != 0;
-    r.graspResidual = b.pod<double>();
-    r.graspTravel = b.pod<double>();
-    r.equilibrium = b.pod<int>() != 0;
-    const bool settled = b.pod<int>() != 0;
-    const double at = b.pod<double>();
-    if (settled) r.settledAt = at;
-    r.valid = b.pod<int>() != 0;
-    r.invalidReason = b.string();
-    r.peakDisplacement = b.pod<double>();
-    r.motionFloor = b.pod<double>();
-    r.fixedDrift = b.pod<double>();
-    r.precomputeS = b.pod<double>();
-    r.stepStats = b.pod<StepStats>();
-    for (int i = 0, n = b.pod<int>(); i < n; ++i) {
-      std::string k = b.string();
-      r.counts[k] = b.pod<long long>();
-    }
-    for (int i = 0, n = b.pod<int>(); i < n; ++i) {
-      std::string k = b.string();
-      r.phaseMs[k] = b.pod<double>();
-    }
-    for (int i = 0, n = b.pod<int>(); i < n; ++i) r.notes.push_back(b.string());
-    r.dt = b.pod<Real>();
-    b.matrix(r.finalSurface);
-    b.matrix(r.finalFaces);
-    const int n = b.pod<int>();
-    for (int i = 0; i < n; ++i) r.compared.push_back(getSnapshotExtras(b));
-    r.markerStatus = b.string();
-    r.markerReason = b.string();
-    if (!b.atEnd()) throw std::runtime_error("trailing bytes");
-  } catch (const std::exception&) {
-    r = RunRecord();
-    cache.reject(kReferenceRunKind, key);
-    return false;  // unreadable: solve again
-  }
-  r.status = RunStatus::Ok;
-  r.notes.push_back(std::string(reference ? "reference" : "model solve") +
-                    " read from the cache (an earlier run solved the same problem with the same "
-                    "plugin and parameters): its timings are that run's");
-  return true;
-}
-
-/// The note a run gets for each cache entry it could not store (once per kind).
-void noteCacheStoreFailures(RunRecord& rec) {
-  std::set<std::string> kinds;
-  for (const Cache::Event& e : rec.cacheEvents) {
-    if (e.what != Cache::EventKind::StoreFailed || !kinds.insert(e.kind).second) continue;
-    rec.notes.push_back("warning: the cache entry " + e.kind + " could not be stored (" + e.detail +
-                        "); the run went on without the cache");
-  }
-}
-
-/// Runs longer than this many steps get a warning before they start and progress lines.
-constexpr long long kLongRunSteps = 1000000;
-
-std::string longRunWarning(const Scene& scene, const RunOptions& run) {
-  const long long n =
-      run.maxSteps >= 0 ? std::min(run.maxSteps, scene.numSteps()) : scene.numSteps();
-  if (n <= kLongRunSteps) return "";
-  std::ostringstream s;
-  s << "warning: " << n << " steps per run (dt " << scene.dt << " s over " << scene.duration
-    << " s): each model steps that many times; progress is printed as it goes";
-  return s.str();
-}
-
-/// Prints "LABEL: step K of N (P%)" at most every 10 s (and never for short runs).
-std::function<void(int, int)> stepProgress(const std::string& label,
-                                           const std::function<void(const std::string&)>& out) {
-  auto last =
-      std::make_shared<std::chrono::steady_clock::time_point>(std::chrono::steady_clock::now());
-  return [label, out, last](int done, int total) {
-    const auto now = std::chrono::steady_clock::now();
-    if (now - *last < std::chrono::seconds(total > kLongRunSteps ? 2 : 10)) return;
-    *last = now;
-    std::ostringstream s;
-    s << "  " << label << ": step " << done << " of " << total << " (" << std::setprecision(3)
-      << 100.0 * done / std::max(total, 1) << "%)";
-    out(s.str());
-  };
-}
-
-/// The SHA-256 and vertex count of each written final surface, in results.json beside its path,
-/// so that `report` can refuse a surface that is not the one this results.json describes.
-void signSurfaces(const fs::path& dir, const std::vector<RunRecord>& runs,
-                  nlohmann::ordered_json& doc) {
-  for (size_t i = 0; i < runs.size() && i < doc["runs"].size(); ++i) {
-    if (runs[i].finalSurfaceFile.empty()) continue;
-    auto& j = doc["runs"][i];
-    j["final_surface_vertices"] = runs[i].finalSurface.rows();
-    j["final_surface_sha256"] = sha256File((dir / runs[i].finalSurfaceFile).string());
-  }
-}
-
-/// The top-level entries of outDir that its results.json names (run folders, the rest surface,
-/// .compared.bin files): what a new results.json replaces.
-std::set<std::string> namedEntries(const fs::path& outDir) {
-  std::set<std::string> out;
-  std::error_code ec;
-  for (fs::directory_iterator it(outDir, ec), end; !ec && it != end; it.increment(ec))
-    if (it->path().filename().string().size() > 13 &&
-        it->path().filename().string().rfind(".compared.bin") ==
-            it->path().filename().string().size() - 13)
-      out.insert(it->path().filename().string());
-  try {
-    std::ifstream in(outDir / "results.json");
-    if (!in) return out;
-    const nlohmann::json doc = nlohmann::json::parse(in);
-    const auto add = [&](const nlohmann::json& v) {
-      if (!v.is_string()) return;
-      const fs::path p = fs::path(v.get<std::string>()).lexically_normal();
-      if (p.empty() || p.is_absolute()) return;
-      const std::string first = p.begin()->string();
-      if (first != ".." && first != "." && first.rfind(".staging.", 0) != 0) out.insert(first);
-    };
-    if (doc.contains("organ") && doc["organ"].is_object())
-      add(doc["organ"].value("rest_surface", nlohmann::json()));
-    for (const auto& r : doc.value("runs", nlohmann::json::array()))
-      if (r.is_object())
-        for (const char* k : {"final_surface", "surface_series", "grasp_forces"})
-          if (r.contains(k)) add(r[k]);
-  } catch (const std::exception&) {
-    // unreadable: only its results.json goes
-  }
-  return out;
-}
-
-/// Moves what `staging` holds into outDir: the old results.json first out, then the entries it
-/// named, then the new entries in, results.json last.
-void swapInResults(const fs::path& staging, const fs::path& outDir) {
-  const std::set<std::string> stale = namedEntries(outDir);
-  fs::remove(outDir / "results.json");
-  for (const std::string& e : stale) fs::remove_all(outDir / e);
-  for (const auto& entry : fs::directory_iterator(staging)) {
-    const std::string name = entry.path().filename().string();
-    if (name == "results.json") continue;
-    fs::remove_all(outDir / name);
-    fs::rename(entry.path(), outDir / name);
-  }
-  fs::rename(staging / "results.json", outDir / "results.json");
-  fs::remove_all(staging);
-}
-
-}  // namespace
-
-fs::path comparedSurfaceFile(const fs::path& outDir, const std::string& label) {
-  return outDir / (sanitizeLabel(label) + ".compared.bin");
-}
-
-bool readComparedSurface(const fs::path& file, MatX3& positions) {
-  std::ifstream in(file, std::ios::binary);
-  if (!in) return false;
-  const std::vector<char> bytes((std::istreambuf_iterator<char>(in)),
-                                std::istreambuf_iterator<char>());
-  try {
-    ByteReader r(bytes);
-    r.matrix(positions);
-    return r.atEnd();
-  } catch (const std::exception&) {
-    return false;
-  }
-}
-
-BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
-                             const BenchmarkOptions& options) {
-  const auto explain = [&](const std::string& s) {
-    if (options.explain) options.explain(s);
-  };
-  const auto progress = [&](const std::string& s) {
-    if (options.progress) options.progress(s);
-  };
-  BenchmarkResult result;
-  result.scene = parseSceneFile(sceneFile);
-  const Scene& scene = result.scene;
-  result.organ = loadOrgan(scene, &result.organLog);
-  for (const auto& line : result.organLog) explain("organ: " + line);
-  explain("organ " + result.organ.source + ": " +
-          std::to_string(result.organ.surface.numVertices()) + " vertices, " +
-          std::to_string(result.organ.surface.numFaces()) + " triangles");
-
-  const std::vector<PlannedRun> planned = planRuns(scene, loader, options);
-  forceSingleThreadedNumerics();
-
-  const fs::path cacheDir = options.cacheDir ? *options.cacheDir : Cache::defaultDir();
-  Cache cache(cacheDir);
-  explain(cacheDir.empty() ? std::string("cache disabled") : "cache folder " + cacheDir.string());
-
-  // Output folder must be writable before hours of runs, not after.
-  std::error_code ec;
-  fs::create_directories(options.outDir, ec);
-  if (ec || !fs::is_directory(options.outDir))
-    throw InputError(options.outDir.string(), "", "cannot create the output folder");
-  if (const std::string w = longRunWarning(scene, options.run); !w.empty()) progress(w);
-
-  for (const PlannedRun& p : planned) {
-    progress("running " + p.label + " ...");
-    std::optional<CacheKey> refKey;
-    RunRecord rec;
-    bool fromCache = false;
-    const bool shared = options.reuseReference && !cacheDir.empty() &&
-                        (p.isReference || (options.reuseModelSolves &&
-                                           solveOnlyAtComparedInstants(*p.info, p.params)));
-    if (shared) {
-      refKey = solveKey(sceneFile, scene, result.organ, loader, p, options.run);
-      fromCache = readCachedSolve(cache, *refKey, p.isReference, rec);
-      if (fromCache) {
-        rec.model = p.info->name;
-        rec.params = paramsToJson(p.params);
-        explain((p.isReference ? "reference " : "model ") + p.label + " read from the cache " +
-                kReferenceRunKind);
-      }
-    }
-    if (!fromCache) {
-      RunOptions ro = options.run;
-      if (!ro.onStep && options.progress) ro.onStep = stepProgress(p.label, options.progress);
-      rec = options.isolateRuns
-                ? runModelIsolated(*p.info, p.params, scene, result.organ, cache, ro)
-                : runModel(*p.info, p.params, scene, result.organ, cache, ro);
-      if (refKey && rec.status == RunStatus::Ok) {
-        cache.clearEvents();
-        storeCachedSolve(cache, *refKey, rec);
-        for (const auto& e : cache.events()) rec.cacheEvents.push_back(e);
-      }
-    }
-    noteCacheStoreFailures(rec);
-    rec.plugin = p.spec.plugin;
-    rec.label = p.label;
-    rec.jsonPath = p.spec.jsonPath;
-    rec.isReference = p.isReference;
-    for (const auto& e : rec.cacheEvents)
-      explain("cache " + eventName(e.what) + ": " + p.label + " " + e.kind + " " + e.key);
-    if (rec.status == RunStatus::Unsupported) explain("skipped " + p.label + ": " + rec.message);
-    if (rec.status != RunStatus::Unsupported) {
-      if (rec.worlds.empty()) {
-        explain(p.label + ": no Bullet or ODE world (the scene's tools are kinematic)");
-      } else {
-        for (const auto& w : rec.worlds) explain(p.label + ": created " + w);
-      }
-      if (rec.contactPairs >= 0)
-        explain(p.label + ": contact: " + std::to_string(rec.contactPairs) +
-                " broadphase pairs tested, " + std::to_string(rec.contacts) +
-                " penetrating proxies resolved");
-    }
-    if (rec.solvedSteps >= 0) {
-      explain(p.label + ": quasi-static, solved at " + std::to_string(rec.solvedSteps) + " of " +
-              std::to_string(rec.steps) +
-              " steps (the compared instants and the grasp closings; the interaction was "
-              "prepared every step)");
-    }
-    if (!p.calibrationNote.empty()) rec.notes.push_back(p.calibrationNote);
-    for (const auto& note : rec.notes) explain(p.label + ": " + note);
-    progress(p.label + ": " + statusName(rec.status) +
-             (rec.message.empty() ? "" : " (" + rec.message + ")"));
-    result.runs.push_back(std::move(rec));
-  }
-  computeRunErrors(scene, result.organ, result.runs);
-
-  // Everything is written into a staging folder first and swapped in whole: a rerun that fails
-  // while writing (a full disk) leaves the previous results as they were, never a results.json
-  // beside surfaces of another run (docs/results-format.md, "Writing").
-  const fs::path staging = options.outDir / (".staging." + std::to_string(::getpid()));
-  fs::remove_all(staging, ec);
-  try {
-    fs::create_directories(staging);
-    writeRunSurfaces(staging, scene, result.organ, result.runs);
-    if (options.writeComparedSurface)
-      for (const RunRecord& r : result.runs)
-        if (r.status == RunStatus::Ok && !r.compared.empty()) {
-          ByteWriter w;
-          w.matrix(r.compared.back().positions);
-          writeFileAtomic(comparedSurfaceFile(staging, r.label),
-                          std::string_view(w.bytes().data(), w.bytes().size()));
-        }
-    auto doc = resultsJson(scene, result.organ, result.organLog, result.runs, machineInfo());
-    signSurfaces(staging, result.runs, doc);
-    writeResults(staging, doc);
-    swapInResults(staging, options.outDir);
-  } catch (const std::exception& e) {
-    fs::remove_all(staging, ec);
-    if (dynamic_cast<const InputError*>(&e)) throw;
-    throw InputError(options.outDir.string(), "",
-                     std::string("cannot write the results: ") + e.what());
-  }
-  result.resultsPath = options.outDir / "results.json";
-  return result;
 }
 
 }  // namespace deform::harness

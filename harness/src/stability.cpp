@@ -6,6 +6,7 @@
 #include <deform/sdk/mesh.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/dispatch.h>
+#include <deform_harness/format.h>
 #include <deform_harness/runner.h>
 #include <deform_harness/stability.h>
 
@@ -24,16 +25,6 @@ namespace fs = std::filesystem;
 using ojson = nlohmann::ordered_json;
 
 namespace {
-
-std::string g(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-
-ojson vec(const Vec3& v) {
-  return ojson::array({v.x(), v.y(), v.z()});
-}
 
 /// The first parameter set of a plugin's preset `name` (ModelInfo::presets) as scene JSON, or
 /// nullopt when the plugin does not load or has no such preset.
@@ -142,56 +133,58 @@ std::vector<StabilityCase> stabilityCases(bool quick) {
   for (double e : youngs) {
     for (double dt : dts) {
       StabilityCase c;
-      c.id = "E";  // piecewise: GCC 12 warns falsely (-Wrestrict) on "E" + g(e) + ...
-      c.id += g(e);
+      c.id = "E";  // piecewise: GCC 12 warns falsely (-Wrestrict) on "E" + formatG(e) + ...
+      c.id += formatG(e);
       c.id += "_dt";
-      c.id += g(std::round(dt * 1e4) / 1e4);
+      c.id += formatG(std::round(dt * 1e4) / 1e4);
       c.group = "stiffness_dt";
       c.young = e;
       c.dt = dt;
       c.force = 1.0;
-      c.description = "E = " + g(e) + " Pa, dt = " + g(dt) + " s, 1 N down at the top, gravity";
+      c.description =
+          "E = " + formatG(e) + " Pa, dt = " + formatG(dt) + " s, 1 N down at the top, gravity";
       cases.push_back(c);
     }
   }
   for (double nu : quick ? std::vector<double>{0.499} : std::vector<double>{0.45, 0.49, 0.499}) {
     StabilityCase c;
-    c.id = "nu" + g(nu);
+    c.id = "nu" + formatG(nu);
     c.group = "poisson";
     c.young = 1e4;
     c.poisson = nu;
     c.force = 1.0;
-    c.description = "nu = " + g(nu) + ", E = 10 kPa, 1 N down at the top, gravity";
+    c.description = "nu = " + formatG(nu) + ", E = 10 kPa, 1 N down at the top, gravity";
     cases.push_back(c);
   }
   for (double f : quick ? std::vector<double>{200} : std::vector<double>{20, 200}) {
     StabilityCase c;
-    c.id = "force" + g(f) + "N";
+    c.id = "force" + formatG(f) + "N";
     c.group = "force";
     c.force = f;
-    c.description = g(f) + " N down at the top (E = 5.5 kPa), gravity";
+    c.description = formatG(f) + " N down at the top (E = 5.5 kPa), gravity";
     cases.push_back(c);
   }
   for (double e : quick ? std::vector<double>{1e7} : std::vector<double>{1e4, 1e6, 1e7}) {
     StabilityCase c;
-    c.id = "cantilever_E" + g(e);
+    c.id = "cantilever_E" + formatG(e);
     c.group = "cantilever";
     c.organ = "beam";
     c.young = e;
     c.beamTheory = cantileverSag(e, c.poisson, c.density, 9.81, 0.1, 0.01);
-    c.description = "cantilever 0.1 m, 10 mm square, clamped at x = 0, under gravity, E = " + g(e) +
-                    " Pa (beam theory: tip sag " + g(c.beamTheory) + " m)";
+    c.description =
+        "cantilever 0.1 m, 10 mm square, clamped at x = 0, under gravity, E = " + formatG(e) +
+        " Pa (beam theory: tip sag " + formatG(c.beamTheory) + " m)";
     cases.push_back(c);
   }
   for (double scale : {0.1, 1.0, 10.0}) {
     StabilityCase c;
-    c.id = "scale_" + g(0.1 * scale) + "m";
+    c.id = "scale_" + formatG(0.1 * scale) + "m";
     c.group = "scale";
     c.scale = scale;
     c.gravity = false;
     c.force = scale * scale;
-    c.description = "the cube scaled to " + g(0.1 * scale) + " m, " + g(c.force) +
-                    " N down at the top, density " + g(c.density / (scale * scale)) +
+    c.description = "the cube scaled to " + formatG(0.1 * scale) + " m, " + formatG(c.force) +
+                    " N down at the top, density " + formatG(c.density / (scale * scale)) +
                     " kg/m^3, no gravity (the same problem in other units: the relative "
                     "displacement must not change)";
     cases.push_back(c);
@@ -251,17 +244,17 @@ ojson stabilityScene(const StabilityCase& c, const std::string& plugin, const oj
   ojson fixed;
   if (c.organ == "beam") {  // the root face x = 0
     fixed = {{"box",
-              {vec(b.lo - m),
-               vec(Vec3(b.lo.x() + 1e-3 * b.size().x(), b.hi.y() + m.y(), b.hi.z() + m.z()))}}};
+              {vecJson(b.lo - m),
+               vecJson(Vec3(b.lo.x() + 1e-3 * b.size().x(), b.hi.y() + m.y(), b.hi.z() + m.z()))}}};
   } else {  // the bottom tenth
     fixed = {{"box",
-              {vec(b.lo - m),
-               vec(Vec3(b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.1 * b.size().z()))}}};
+              {vecJson(b.lo - m),
+               vecJson(Vec3(b.hi.x() + m.x(), b.hi.y() + m.y(), b.lo.z() + 0.1 * b.size().z()))}}};
   }
   const std::string what = c.organ == "beam" ? "beam phantom, root face fixed"
                            : c.organ == "slivers"
                                ? "liver phantom with slivers, bottom tenth fixed"
-                               : "cube phantom (" + g(size) + " m), bottom tenth fixed";
+                               : "cube phantom (" + formatG(size) + " m), bottom tenth fixed";
   ojson j;
   j["name"] = "stability-" + c.id;
   j["description"] = "Stability case " + c.id + ": " + c.description + "; " + what + ".";
@@ -277,7 +270,7 @@ ojson stabilityScene(const StabilityCase& c, const std::string& plugin, const oj
   j["duration"] = std::max(duration, 3 * c.dt);
   if (c.force > 0) {
     j["loads"] = ojson::array({{{"type", "point_force"},
-                                {"at", vec(top)},
+                                {"at", vecJson(top)},
                                 {"force", {0, 0, -c.force}},
                                 {"radius", 0.01 * c.scale},  // the patch scales with the organ
                                 {"start", 0.0},
@@ -291,17 +284,17 @@ ojson stabilityScene(const StabilityCase& c, const std::string& plugin, const oj
     j["tools"] = ojson::array({{{"type", "grasper"},
                                 {"radius", radius},
                                 {"trajectory",
-                                 {{{"t", 0.0}, {"pos", vec(grip)}, {"jaw", "closed"}},
-                                  {{"t", 0.8 * duration}, {"pos", vec(to)}}}}}});
+                                 {{{"t", 0.0}, {"pos", vecJson(grip)}, {"jaw", "closed"}},
+                                  {{"t", 0.8 * duration}, {"pos", vecJson(to)}}}}}});
   } else if (c.extra == "flatten") {
     const double r = 0.6 * size;
     const Vec3 start(b.center().x(), b.center().y(), b.hi.z() + r);
     const Vec3 end(b.center().x(), b.center().y(), b.lo.z() + 0.1 * b.size().z() + r);
-    j["tools"] = ojson::array(
-        {{{"type", "probe"},
-          {"radius", r},
-          {"trajectory",
-           {{{"t", 0.0}, {"pos", vec(start)}}, {{"t", 0.8 * duration}, {"pos", vec(end)}}}}}});
+    j["tools"] = ojson::array({{{"type", "probe"},
+                                {"radius", r},
+                                {"trajectory",
+                                 {{{"t", 0.0}, {"pos", vecJson(start)}},
+                                  {{"t", 0.8 * duration}, {"pos", vecJson(end)}}}}}});
   }
   j["models"] = ojson::array({{{"plugin", plugin}, {"label", plugin}, {"params", params}}});
   j["samples"] = {{"nearest", {10}}};
@@ -457,7 +450,7 @@ std::vector<std::string> markScaleDependent(std::vector<StabilityRecord>& record
     std::ostringstream line;
     line << model << ":";
     for (StabilityRecord* r : rows) {
-      line << " " << g(r->relativeDisplacement) << " (" << r->caseId << ")";
+      line << " " << formatG(r->relativeDisplacement) << " (" << r->caseId << ")";
       // The model's own relative displacements, whatever the reference's precision.
       if (r->verdict == "accurate" || r->verdict == "unchecked") {
         r->verdict = "inaccurate";
@@ -642,10 +635,10 @@ double tipSag(const MatX3& surface, const MatX3& rest) {
 
 }  // namespace
 
-std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityOptions& options,
-                                          Progress* progress) {
-  std::vector<std::string> models = options.models;
-  if (models.empty()) models = loader.discover();
+namespace {
+
+/// The case set, or the --case ones of it (InputError names an unknown one).
+std::vector<StabilityCase> selectedCases(const StabilityOptions& options) {
   std::vector<StabilityCase> cases = stabilityCases(options.quick);
   if (!options.cases.empty()) {
     std::vector<StabilityCase> kept;
@@ -662,27 +655,60 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     }
     cases = kept;
   }
-  const double timeout = options.timeoutS > 0 ? options.timeoutS : (options.quick ? 60.0 : 120.0);
-  const std::string exe = options.executable.empty() ? selfExecutable() : options.executable;
-  fs::create_directories(options.outDir);
+  return cases;
+}
 
-  if (std::any_of(cases.begin(), cases.end(),
-                  [](const StabilityCase& c) { return c.organ == "slivers"; })) {
-    fs::create_directories(options.outDir / "meshes");
-    writeObj((options.outDir / "meshes" / "slivers.obj").string(),
-             sliverMesh(options.quick ? 0.4 : 0.7));
+/// A (model, case) to run: its record (status set when there is nothing to run).
+struct Pending {
+  StabilityRecord record;
+  fs::path dir, caseFile;
+  std::string label;
+  bool rerun = false;  ///< its finished case was stale or failed: run it, whatever is on disk
+};
+
+/// The record a finished case left in caseFile while it stands (the same scenes; with
+/// --retry-failed, not failed); nullopt: run the case again.
+std::optional<StabilityRecord> resumedRecord(const fs::path& caseFile, const std::string& plugin,
+                                             const StabilityCase& c, const std::string& hash,
+                                             const StabilityOptions& options) {
+  try {
+    std::ifstream in(caseFile);
+    const ojson j = ojson::parse(in);
+    StabilityRecord r;
+    r.model = plugin;
+    r.caseId = c.id;
+    r.group = c.group;
+    r.status = j.at("status");
+    r.step = j["step"].is_null() ? -1 : j["step"].get<int>();
+    r.message = j.value("message", "");
+    r.wallS = j.value("wall_s", 0.0);
+    r.verdict = j.value("verdict", "");
+    r.reason = j.value("reason", "");
+    r.referenceSource = j.value("reference_error_source", "");
+    r.reference = j.value("reference", "");
+    r.sceneHash = j.value("scene_sha256", "");
+    for (auto [key, v] : {std::pair{"error_ratio", &r.errorRatio},
+                          {"displacement_ratio", &r.displacementRatio},
+                          {"relative_displacement", &r.relativeDisplacement},
+                          {"tip_sag_m", &r.tipSag},
+                          {"reference_error", &r.referenceError}})
+      *v = j.contains(key) && j[key].is_number() ? j[key].get<double>() : -1.0;
+    r.resumed = true;
+    // A case whose scene changed (another case set, reference or model parameters) or,
+    // with --retry-failed, that failed is run again.
+    if (r.sceneHash == hash && !(options.retryFailed && r.status == "failed")) return r;
+  } catch (const std::exception&) {
+    // unreadable: run it again
   }
+  return std::nullopt;
+}
 
-  /// A (model, case) to run: its record (status set when there is nothing to run).
-  struct Pending {
-    StabilityRecord record;
-    fs::path dir, caseFile;
-    std::string label;
-    bool rerun = false;  ///< its finished case was stale or failed: run it, whatever is on disk
-  };
-  std::vector<StabilityRecord> records;
-  std::vector<Pending> pending;
-  const ReferenceSpec refSpec = stabilityReference(loader);
+/// Every (model, case): the resumed records that stand into records, the others (their scenes
+/// written) into pending.
+void planCases(PluginLoader& loader, const StabilityOptions& options,
+               const std::vector<std::string>& models, const std::vector<StabilityCase>& cases,
+               const ReferenceSpec& refSpec, std::vector<StabilityRecord>& records,
+               std::vector<Pending>& pending) {
   const std::string sliverHash =
       fs::exists(options.outDir / "meshes" / "slivers.obj")
           ? sha256File((options.outDir / "meshes" / "slivers.obj").string())
@@ -701,37 +727,9 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       if (c.organ == "slivers") identity += sliverHash;
       const std::string hash = sha256Hex(identity.data(), identity.size());
       if (options.resume && fs::exists(caseFile)) {
-        try {
-          std::ifstream in(caseFile);
-          const ojson j = ojson::parse(in);
-          StabilityRecord r;
-          r.model = plugin;
-          r.caseId = c.id;
-          r.group = c.group;
-          r.status = j.at("status");
-          r.step = j["step"].is_null() ? -1 : j["step"].get<int>();
-          r.message = j.value("message", "");
-          r.wallS = j.value("wall_s", 0.0);
-          r.verdict = j.value("verdict", "");
-          r.reason = j.value("reason", "");
-          r.referenceSource = j.value("reference_error_source", "");
-          r.reference = j.value("reference", "");
-          r.sceneHash = j.value("scene_sha256", "");
-          for (auto [key, v] : {std::pair{"error_ratio", &r.errorRatio},
-                                {"displacement_ratio", &r.displacementRatio},
-                                {"relative_displacement", &r.relativeDisplacement},
-                                {"tip_sag_m", &r.tipSag},
-                                {"reference_error", &r.referenceError}})
-            *v = j.contains(key) && j[key].is_number() ? j[key].get<double>() : -1.0;
-          r.resumed = true;
-          // A case whose scene changed (another case set, reference or model parameters) or,
-          // with --retry-failed, that failed is run again.
-          if (r.sceneHash == hash && !(options.retryFailed && r.status == "failed")) {
-            records.push_back(r);
-            continue;
-          }
-        } catch (const std::exception&) {
-          // unreadable: run it again
+        if (std::optional<StabilityRecord> r = resumedRecord(caseFile, plugin, c, hash, options)) {
+          records.push_back(*r);
+          continue;
         }
       }
       Pending p;
@@ -753,177 +751,134 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       pending.push_back(p);
     }
   }
-  if (progress) progress->addTotal(int(pending.size()));
+}
 
-  const auto finishCase = [&](const Pending& p) {
-    fs::create_directories(p.caseFile.parent_path());
-    writeFileAtomic(p.caseFile, recordJson(p.record).dump(2) + "\n");
-    std::string result = p.record.status;
-    if (p.record.step >= 0) result += " at step " + std::to_string(p.record.step);
-    if (p.record.status == "failed") result += " (" + p.record.message + ")";
-    if (progress) progress->finish(p.label, result);
-    records.push_back(p.record);
-  };
+/// `deformbench run` of sceneFile into dir as a "child" task (dispatch.h).
+ojson childRunTask(const std::string& exe, const StabilityOptions& options,
+                   const fs::path& sceneFile, const fs::path& dir, double timeoutS, bool resume) {
+  std::vector<std::string> argv = {exe};
+  for (const auto& a : pluginDirArgs(options.pluginDirs)) argv.push_back(a);
+  argv.insert(argv.end(),
+              {"run", fs::absolute(sceneFile).string(), "--out", fs::absolute(dir).string()});
+  if (!options.cacheDir.empty())
+    argv.insert(argv.end(), {"--cache-dir", fs::absolute(options.cacheDir).string()});
+  return {{"kind", "child"},
+          {"argv", argv},
+          {"log", fs::absolute(dir / "log.txt").string()},
+          {"timeout_s", timeoutS},
+          {"fresh_dir", fs::absolute(dir).string()},
+          {"outcome", fs::absolute(dir / "outcome.json").string()},
+          {"resume", resume}};
+}
 
-  // Each (model, case) is a "child" task (dispatch.h): here with --jobs, on MPI ranks, or in a
-  // Slurm array whose outcome.json files a later --resume reads.
-  std::vector<ojson> tasks;
-  std::vector<Pending*> jobCase;
-  for (Pending& p : pending) {
-    if (!p.record.status.empty()) {  // plugin did not load: nothing to run
-      finishCase(p);
-      continue;
-    }
-    std::vector<std::string> argv = {exe};
-    for (const auto& a : pluginDirArgs(options.pluginDirs)) argv.push_back(a);
-    const fs::path scene = options.outDir / "scenes" / p.record.model / (p.record.caseId + ".json");
-    argv.insert(argv.end(),
-                {"run", fs::absolute(scene).string(), "--out", fs::absolute(p.dir).string()});
-    if (!options.cacheDir.empty())
-      argv.insert(argv.end(), {"--cache-dir", fs::absolute(options.cacheDir).string()});
-    tasks.push_back({{"kind", "child"},
-                     {"argv", argv},
-                     {"log", fs::absolute(p.dir / "log.txt").string()},
-                     {"timeout_s", timeout},
-                     {"fresh_dir", fs::absolute(p.dir).string()},
-                     {"outcome", fs::absolute(p.dir / "outcome.json").string()},
-                     {"resume", options.resume && !p.rerun}});
-    jobCase.push_back(&p);
-  }
-  // Each case's reference (at the defaults and the coarser level): from the cache, else a
-  // "child" task beside the models' (its own time limit, so a reference that takes too long
-  // leaves its case unchecked instead of stopping the sweep).
-  const double refTimeout = 5 * timeout;
-  Cache cache(options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir));
-  struct RefJob {
-    std::string caseId, tag;
-    CacheKey key;
-    fs::path dir;
-    ReferenceSolve solve;
-    std::string hex;  ///< the key's digest
-    int twin = -1;    ///< the job with the same scene whose solve this one takes
-  };
+/// A reference solve of one case (tag "": at the defaults, "coarse": the coarser level).
+struct RefJob {
+  std::string caseId, tag;
+  CacheKey key;
+  fs::path dir;
+  ReferenceSolve solve;
+  std::string hex;  ///< the key's digest
+  int twin = -1;    ///< the job with the same scene whose solve this one takes
+};
+
+/// Each judged case's reference (at the defaults and the coarser level): from the cache, else a
+/// "child" task appended to tasks (its own time limit, so a reference that takes too long leaves
+/// its case unchecked instead of stopping the command); refJobOfTask maps the task to its job.
+std::vector<RefJob> planReferenceJobs(
+    const StabilityOptions& options, const std::vector<StabilityCase>& cases,
+    const ReferenceSpec& refSpec, const std::vector<Pending>& pending,
+    const std::vector<StabilityRecord>& records, Cache& cache, const std::string& exe,
+    double refTimeout, std::vector<ojson>& tasks, std::map<size_t, size_t>& refJobOfTask) {
   std::vector<RefJob> refJobs;
-  std::map<size_t, size_t> refJobOfTask;  ///< task index -> refJobs index
-  {
-    std::set<std::string> judged;
-    for (const Pending& p : pending) judged.insert(p.record.caseId);
-    for (const StabilityRecord& r : records)  // resumed before they were judged
-      if (r.verdict.empty()) judged.insert(r.caseId);
-    for (const StabilityCase& c : cases) {
-      if (!c.reference || !judged.count(c.id)) continue;
-      for (const std::string tag : {"", "coarse"}) {
-        RefJob job;
-        job.caseId = c.id;
-        job.tag = tag;
-        if (!refSpec.problem.empty()) {
-          job.solve.message = "reference: " + refSpec.plugin + " does not load: " + refSpec.problem;
-          refJobs.push_back(job);
-          continue;
-        }
-        const ojson scene = referenceScene(
-            c, refSpec, tag.empty() ? refSpec.params : refSpec.coarse, options.quick);
-        job.key = referenceKey(c, scene, options.outDir);
-        if (auto hit = cachedReference(cache, job.key)) {
-          job.solve = *hit;
-          refJobs.push_back(job);
-          continue;
-        }
-        if (const auto twin = std::find_if(refJobs.begin(), refJobs.end(),
-                                           [&](const RefJob& j) { return j.hex == job.key.hex(); });
-            twin != refJobs.end()) {  // the same scene (one E at two time steps): solved once
-          job.twin = int(twin - refJobs.begin());
-          job.hex = job.key.hex();
-          refJobs.push_back(job);
-          continue;
-        }
-        job.hex = job.key.hex();
-        const std::string name = tag.empty() ? c.id : c.id + "_" + tag;
-        const fs::path sceneFile = options.outDir / "reference" / "scenes" / (name + ".json");
-        fs::create_directories(sceneFile.parent_path());
-        writeFileAtomic(sceneFile, scene.dump(2) + "\n");
-        // The folder names the scene's hash: a --resume never reads another scene's outcome.
-        job.dir = options.outDir / "reference" / "runs" / (name + "_" + job.hex.substr(0, 8));
-        std::vector<std::string> argv = {exe};
-        for (const auto& a : pluginDirArgs(options.pluginDirs)) argv.push_back(a);
-        argv.insert(argv.end(), {"run", fs::absolute(sceneFile).string(), "--out",
-                                 fs::absolute(job.dir).string()});
-        if (!options.cacheDir.empty())
-          argv.insert(argv.end(), {"--cache-dir", fs::absolute(options.cacheDir).string()});
-        refJobOfTask[tasks.size()] = refJobs.size();
-        tasks.push_back({{"kind", "child"},
-                         {"argv", argv},
-                         {"log", fs::absolute(job.dir / "log.txt").string()},
-                         {"timeout_s", refTimeout},
-                         {"fresh_dir", fs::absolute(job.dir).string()},
-                         {"outcome", fs::absolute(job.dir / "outcome.json").string()},
-                         {"resume", options.resume}});
+  std::set<std::string> judged;
+  for (const Pending& p : pending) judged.insert(p.record.caseId);
+  for (const StabilityRecord& r : records)  // resumed before they were judged
+    if (r.verdict.empty()) judged.insert(r.caseId);
+  for (const StabilityCase& c : cases) {
+    if (!c.reference || !judged.count(c.id)) continue;
+    for (const std::string tag : {"", "coarse"}) {
+      RefJob job;
+      job.caseId = c.id;
+      job.tag = tag;
+      if (!refSpec.problem.empty()) {
+        job.solve.message = "reference: " + refSpec.plugin + " does not load: " + refSpec.problem;
         refJobs.push_back(job);
+        continue;
       }
+      const ojson scene =
+          referenceScene(c, refSpec, tag.empty() ? refSpec.params : refSpec.coarse, options.quick);
+      job.key = referenceKey(c, scene, options.outDir);
+      if (auto hit = cachedReference(cache, job.key)) {
+        job.solve = *hit;
+        refJobs.push_back(job);
+        continue;
+      }
+      if (const auto twin = std::find_if(refJobs.begin(), refJobs.end(),
+                                         [&](const RefJob& j) { return j.hex == job.key.hex(); });
+          twin != refJobs.end()) {  // the same scene (one E at two time steps): solved once
+        job.twin = int(twin - refJobs.begin());
+        job.hex = job.key.hex();
+        refJobs.push_back(job);
+        continue;
+      }
+      job.hex = job.key.hex();
+      const std::string name = tag.empty() ? c.id : c.id + "_" + tag;
+      const fs::path sceneFile = options.outDir / "reference" / "scenes" / (name + ".json");
+      fs::create_directories(sceneFile.parent_path());
+      writeFileAtomic(sceneFile, scene.dump(2) + "\n");
+      // The folder names the scene's hash: a --resume never reads another scene's outcome.
+      job.dir = options.outDir / "reference" / "runs" / (name + "_" + job.hex.substr(0, 8));
+      refJobOfTask[tasks.size()] = refJobs.size();
+      tasks.push_back(childRunTask(exe, options, sceneFile, job.dir, refTimeout, options.resume));
+      refJobs.push_back(job);
     }
   }
-  if (progress) progress->addTotal(int(refJobOfTask.size()));
-  const auto refLabel = [&](const RefJob& j) {
-    return "reference " + j.caseId + (j.tag.empty() ? "" : " (" + j.tag + ")");
-  };
+  return refJobs;
+}
 
-  std::unique_ptr<Dispatcher> local;
-  Dispatcher* dispatcher = options.dispatcher;
-  if (!dispatcher) {
-    local = localDispatcher(options.jobs);
-    dispatcher = local.get();
+/// A reference task's outcome into its job, and into the cache when it solved.
+void finishReferenceJob(RefJob& job, const ojson& o, double refTimeout, Cache& cache) {
+  ChildOutcome outcome;
+  outcome.waitStatus = o.value("wait_status", 0);
+  outcome.timedOut = o.value("timed_out", false);
+  std::string failure = o.value("spawn_error", "");
+  if (failure.empty())
+    failure = childFailure(outcome, refTimeout, lastLogLine(job.dir / "log.txt", 300));
+  if (!failure.empty()) {
+    job.solve.message = "reference failed: " + failure;
+  } else {
+    job.solve = readReferenceRun(job.dir);
+    if (job.solve.ok) {
+      ByteWriter w;
+      w.matrix(job.solve.rest);
+      w.matrix(job.solve.final);
+      w.pod(job.solve.tets);
+      cache.put("harness.stability_reference", job.key, w.bytes());
+    }
   }
-  dispatcher->run(
-      tasks,
-      [&](size_t i) {
-        if (!progress) return;
-        if (refJobOfTask.count(i))
-          progress->start(refLabel(refJobs[refJobOfTask.at(i)]));
-        else
-          progress->start(jobCase[i]->label);
-      },
-      [&](size_t i, const ojson& o) {
-        if (refJobOfTask.count(i)) {
-          RefJob& job = refJobs[refJobOfTask.at(i)];
-          ChildOutcome outcome;
-          outcome.waitStatus = o.value("wait_status", 0);
-          outcome.timedOut = o.value("timed_out", false);
-          std::string failure = o.value("spawn_error", "");
-          if (failure.empty())
-            failure = childFailure(outcome, refTimeout, lastLogLine(job.dir / "log.txt", 300));
-          if (!failure.empty()) {
-            job.solve.message = "reference failed: " + failure;
-          } else {
-            job.solve = readReferenceRun(job.dir);
-            if (job.solve.ok) {
-              ByteWriter w;
-              w.matrix(job.solve.rest);
-              w.matrix(job.solve.final);
-              w.pod(job.solve.tets);
-              cache.put("harness.stability_reference", job.key, w.bytes());
-            }
-          }
-          if (progress) progress->finish(refLabel(job), job.solve.ok ? "ok" : job.solve.message);
-          return;
-        }
-        Pending& p = *jobCase[i];
-        StabilityRecord r;
-        const std::string spawnError = o.value("spawn_error", "");
-        if (!spawnError.empty()) {
-          r.status = "failed";
-          r.message = spawnError;
-        } else {
-          r = classifyStabilityRun(o.value("wait_status", 0), o.value("timed_out", false), timeout,
-                                   p.dir / "results.json", lastLogLine(p.dir / "log.txt", 300));
-        }
-        p.record.status = r.status;
-        p.record.step = r.step;
-        p.record.message = r.message;
-        p.record.wallS = o.value("wall_s", 0.0);
-        finishCase(p);
-      });
+}
 
-  // Records in (model, case) order whatever order the children finished in.
+/// A case task's outcome into its record: status, step, message, wall time.
+void recordCaseOutcome(Pending& p, const ojson& o, double timeout) {
+  StabilityRecord r;
+  const std::string spawnError = o.value("spawn_error", "");
+  if (!spawnError.empty()) {
+    r.status = "failed";
+    r.message = spawnError;
+  } else {
+    r = classifyStabilityRun(o.value("wait_status", 0), o.value("timed_out", false), timeout,
+                             p.dir / "results.json", lastLogLine(p.dir / "log.txt", 300));
+  }
+  p.record.status = r.status;
+  p.record.step = r.step;
+  p.record.message = r.message;
+  p.record.wallS = o.value("wall_s", 0.0);
+}
+
+/// Records in (model, case) order whatever order the children finished in.
+std::vector<StabilityRecord> orderedRecords(const std::vector<StabilityRecord>& records,
+                                            const std::vector<std::string>& models,
+                                            const std::vector<StabilityCase>& cases) {
   std::map<std::pair<std::string, std::string>, StabilityRecord> byKey;
   for (const auto& r : records) byKey[{r.model, r.caseId}] = r;
   std::vector<StabilityRecord> ordered;
@@ -931,102 +886,107 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
     for (const auto& c : cases)
       if (byKey.count({plugin, c.id})) ordered.push_back(byKey.at({plugin, c.id}));
 
-  std::vector<std::string> referenceFailures, referenceLines;
-  // Verdicts: each case's reference solved once (or read from the cache), then every finished
-  // run compared with it (resumed records keep theirs).
-  std::map<std::string, StabilityCase> caseById;
-  for (const auto& c : cases) caseById[c.id] = c;
-  {
-    std::map<std::string, std::vector<StabilityRecord*>> toJudge;
-    for (auto& r : ordered)
-      if (r.verdict.empty()) toJudge[r.caseId].push_back(&r);
-    for (RefJob& j : refJobs)
-      if (j.twin >= 0) j.solve = refJobs[size_t(j.twin)].solve;
-    for (auto& [id, recs] : toJudge) {
-      const StabilityCase& c = caseById.at(id);
-      const bool anyStable = std::any_of(
-          recs.begin(), recs.end(), [](const StabilityRecord* r) { return r->status == "stable"; });
-      CaseReference ref;
-      if (c.reference) {
-        ReferenceSolve fine, coarse;
-        fine.message = coarse.message = "reference not run";
-        for (const RefJob& j : refJobs)
-          if (j.caseId == id) (j.tag.empty() ? fine : coarse) = j.solve;
-        ref = combineReference(refSpec, fine, coarse);
-      }
-      // The reference's own error: against beam theory where there is one, else its estimate.
-      double refError = -1;
-      std::string refSource;
-      if (ref.ok && c.beamTheory > 0) {
-        refError = std::abs(tipSag(ref.final, ref.rest) - c.beamTheory) / c.beamTheory;
-        refSource = "beam theory";
-      } else if (ref.ok && ref.estimate >= 0) {
-        refError = ref.estimate;
-        refSource = "coarser solve";
-      }
-      if (ref.ok) {
-        std::string line = id + ": " + ref.what;
-        if (c.beamTheory > 0) line += ", tip sag " + g(tipSag(ref.final, ref.rest)) + " m";
-        if (refError >= 0) line += ", error " + g(100 * refError) + "% (" + refSource + ")";
-        if (c.beamTheory > 0 && ref.estimate >= 0)
-          line += ", coarser-solve estimate " + g(100 * ref.estimate) + "%";
-        if (refError < 0 && !ref.estimateNote.empty()) line += ", " + ref.estimateNote;
-        referenceLines.push_back(line);
-      }
-      // The surface vertices in the case's fixed box (the support of the collapse test).
-      std::vector<int> held;
-      if (ref.ok) {
-        const ojson box =
-            stabilityScene(c, "", ojson::object(), options.quick)["organ"]["fixed"]["box"];
-        const Vec3 lo(box[0][0], box[0][1], box[0][2]), hi(box[1][0], box[1][1], box[1][2]);
-        for (Eigen::Index i = 0; i < ref.rest.rows(); ++i)
-          if ((ref.rest.row(i).transpose().array() >= lo.array()).all() &&
-              (ref.rest.row(i).transpose().array() <= hi.array()).all())
-            held.push_back(int(i));
-      }
-      for (StabilityRecord* r : recs) {
-        const fs::path runDir = options.outDir / "runs" / r->model / r->caseId;
-        const std::optional<MatX3> final =
-            r->status == "stable" ? finalSurfaceOf(runDir) : std::nullopt;
-        const MatX3* model = final ? &*final : nullptr;
-        r->referenceError = refError;
-        r->referenceSource = refSource;
-        r->reference = ref.what;
-        *r = judgeStability(*r, model, ref.ok ? &ref.final : nullptr, ref.rest,
-                            options.accuracyThreshold, held);
-        // The reference's own row is the reference: never accurate by comparison with itself.
-        if (r->model == refSpec.plugin &&
-            stabilityParams(loader, r->model, options.quick) == refSpec.params &&
-            (r->verdict == "accurate" || r->verdict == "inaccurate")) {
-          r->verdict = "unchecked";
-          r->reason = "the reference itself";
-          r->errorRatio = -1;
-        }
-        if (ref.ok && model && model->rows() == ref.rest.rows()) {
-          r->relativeDisplacement = relativeDisplacement(ref.rest, *model);
-          if (c.beamTheory > 0) r->tipSag = tipSag(*model, ref.rest);
-        }
-        const fs::path caseFile = options.outDir / "cases" / r->model / (r->caseId + ".json");
-        if (fs::exists(caseFile)) writeFileAtomic(caseFile, recordJson(*r).dump(2) + "\n");
-      }
-      if (c.reference && anyStable && !ref.ok) referenceFailures.push_back(id + ": " + ref.message);
-    }
-  }
-  // The scale group (issue 35): the same problem in other units must move alike.
-  const std::vector<std::string> scaleLines = markScaleDependent(ordered);
-  for (const StabilityRecord& r : ordered) {
-    const fs::path caseFile = options.outDir / "cases" / r.model / (r.caseId + ".json");
-    if (r.group == "scale" && fs::exists(caseFile))
-      writeFileAtomic(caseFile, recordJson(r).dump(2) + "\n");
-  }
+  return ordered;
+}
 
+/// Verdicts: each case's reference (solved once or read from the cache), then every finished
+/// run compared with it (resumed records keep theirs); the reference lines of the notes.
+void judgeRecords(PluginLoader& loader, const StabilityOptions& options,
+                  const ReferenceSpec& refSpec,
+                  const std::map<std::string, StabilityCase>& caseById,
+                  std::vector<RefJob>& refJobs, std::vector<StabilityRecord>& ordered,
+                  std::vector<std::string>& referenceFailures,
+                  std::vector<std::string>& referenceLines) {
+  std::map<std::string, std::vector<StabilityRecord*>> toJudge;
+  for (auto& r : ordered)
+    if (r.verdict.empty()) toJudge[r.caseId].push_back(&r);
+  for (RefJob& j : refJobs)
+    if (j.twin >= 0) j.solve = refJobs[size_t(j.twin)].solve;
+  for (auto& [id, recs] : toJudge) {
+    const StabilityCase& c = caseById.at(id);
+    const bool anyStable = std::any_of(
+        recs.begin(), recs.end(), [](const StabilityRecord* r) { return r->status == "stable"; });
+    CaseReference ref;
+    if (c.reference) {
+      ReferenceSolve fine, coarse;
+      fine.message = coarse.message = "reference not run";
+      for (const RefJob& j : refJobs)
+        if (j.caseId == id) (j.tag.empty() ? fine : coarse) = j.solve;
+      ref = combineReference(refSpec, fine, coarse);
+    }
+    // The reference's own error: against beam theory where there is one, else its estimate.
+    double refError = -1;
+    std::string refSource;
+    if (ref.ok && c.beamTheory > 0) {
+      refError = std::abs(tipSag(ref.final, ref.rest) - c.beamTheory) / c.beamTheory;
+      refSource = "beam theory";
+    } else if (ref.ok && ref.estimate >= 0) {
+      refError = ref.estimate;
+      refSource = "coarser solve";
+    }
+    if (ref.ok) {
+      std::string line = id + ": " + ref.what;
+      if (c.beamTheory > 0) line += ", tip sag " + formatG(tipSag(ref.final, ref.rest)) + " m";
+      if (refError >= 0) line += ", error " + formatG(100 * refError) + "% (" + refSource + ")";
+      if (c.beamTheory > 0 && ref.estimate >= 0)
+        line += ", coarser-solve estimate " + formatG(100 * ref.estimate) + "%";
+      if (refError < 0 && !ref.estimateNote.empty()) line += ", " + ref.estimateNote;
+      referenceLines.push_back(line);
+    }
+    // The surface vertices in the case's fixed box (the support of the collapse test).
+    std::vector<int> held;
+    if (ref.ok) {
+      const ojson box =
+          stabilityScene(c, "", ojson::object(), options.quick)["organ"]["fixed"]["box"];
+      const Vec3 lo(box[0][0], box[0][1], box[0][2]), hi(box[1][0], box[1][1], box[1][2]);
+      for (Eigen::Index i = 0; i < ref.rest.rows(); ++i)
+        if ((ref.rest.row(i).transpose().array() >= lo.array()).all() &&
+            (ref.rest.row(i).transpose().array() <= hi.array()).all())
+          held.push_back(int(i));
+    }
+    for (StabilityRecord* r : recs) {
+      const fs::path runDir = options.outDir / "runs" / r->model / r->caseId;
+      const std::optional<MatX3> final =
+          r->status == "stable" ? finalSurfaceOf(runDir) : std::nullopt;
+      const MatX3* model = final ? &*final : nullptr;
+      r->referenceError = refError;
+      r->referenceSource = refSource;
+      r->reference = ref.what;
+      *r = judgeStability(*r, model, ref.ok ? &ref.final : nullptr, ref.rest,
+                          options.accuracyThreshold, held);
+      // The reference's own row is the reference: never accurate by comparison with itself.
+      if (r->model == refSpec.plugin &&
+          stabilityParams(loader, r->model, options.quick) == refSpec.params &&
+          (r->verdict == "accurate" || r->verdict == "inaccurate")) {
+        r->verdict = "unchecked";
+        r->reason = "the reference itself";
+        r->errorRatio = -1;
+      }
+      if (ref.ok && model && model->rows() == ref.rest.rows()) {
+        r->relativeDisplacement = relativeDisplacement(ref.rest, *model);
+        if (c.beamTheory > 0) r->tipSag = tipSag(*model, ref.rest);
+      }
+      const fs::path caseFile = options.outDir / "cases" / r->model / (r->caseId + ".json");
+      if (fs::exists(caseFile)) writeFileAtomic(caseFile, recordJson(*r).dump(2) + "\n");
+    }
+    if (c.reference && anyStable && !ref.ok) referenceFailures.push_back(id + ": " + ref.message);
+  }
+}
+
+/// stability.md / .csv / .json: a row per record and the notes.
+void writeStabilityTable(const std::vector<StabilityRecord>& ordered,
+                         const std::map<std::string, StabilityCase>& caseById,
+                         const ReferenceSpec& refSpec, const StabilityOptions& options,
+                         double timeout, const std::vector<std::string>& referenceFailures,
+                         const std::vector<std::string>& referenceLines,
+                         const std::vector<std::string>& scaleLines) {
   Table t;
   t.name = "stability";
   t.title = "every model over stiff, large-step and extreme cases";
   t.notes = {
       "Each case ran in its own process (`deformbench run` on scenes/<model>/<case>.json) "
       "with a " +
-          g(timeout) + " s limit; failed = threw, crashed (signal) or timed out.",
+          formatG(timeout) + " s limit; failed = threw, crashed (signal) or timed out.",
       std::string("Organ: the cube phantom, bottom tenth fixed, gravity, unless the case says "
                   "otherwise (cantilever: the beam phantom, root face fixed; slivers: the liver "
                   "phantom with needle triangles; scale: no gravity); ") +
@@ -1044,7 +1004,7 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       (refSpec.coarse.contains("elements") ? refSpec.coarse["elements"].dump() : "?") +
       " target tets, h x 1.4) over its RMS displacement): accurate when error_ratio = rmse_all "
       "/ the reference's RMS displacement <= " +
-      g(options.accuracyThreshold) +
+      formatG(options.accuracyThreshold) +
       "; else inaccurate, frozen (moves < 10% of the reference: displacement_ratio < 0.1), "
       "too_soft (> 2x), wrong_shape or scale_dependent (scale group: the model's "
       "relative_displacement differs by over 10% across 1 cm, 10 cm and 1 m). collapsed: the "
@@ -1052,7 +1012,8 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
       "it by under 10% of its size. unchecked: no quasi-static answer (pull, invert, flatten), "
       "no reference, unsupported, the reference itself, or reference not converged (its "
       "reference_error above " +
-      g(options.accuracyThreshold) + "). A model still moving at the end is compared as it is.");
+      formatG(options.accuracyThreshold) +
+      "). A model still moving at the end is compared as it is.");
   t.notes.push_back(
       "poisson group: a model stiffer than the reference there (displacement_ratio well below 1) "
       "is locking; scale group: the same problem at 1 cm, 10 cm and 1 m (force x s^2, density / "
@@ -1117,6 +1078,109 @@ std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityO
   for (const auto& f : scaleLines)
     t.notes.push_back("scale_dependent (relative displacement over 10% apart) " + f + ".");
   writeTable(t, options.outDir);
+}
+
+}  // namespace
+
+std::vector<StabilityRecord> runStability(PluginLoader& loader, const StabilityOptions& options,
+                                          Progress* progress) {
+  std::vector<std::string> models = options.models;
+  if (models.empty()) models = loader.discover();
+  const std::vector<StabilityCase> cases = selectedCases(options);
+  const double timeout = options.timeoutS > 0 ? options.timeoutS : (options.quick ? 60.0 : 120.0);
+  const std::string exe = options.executable.empty() ? selfExecutable() : options.executable;
+  fs::create_directories(options.outDir);
+
+  if (std::any_of(cases.begin(), cases.end(),
+                  [](const StabilityCase& c) { return c.organ == "slivers"; })) {
+    fs::create_directories(options.outDir / "meshes");
+    writeObj((options.outDir / "meshes" / "slivers.obj").string(),
+             sliverMesh(options.quick ? 0.4 : 0.7));
+  }
+
+  std::vector<StabilityRecord> records;
+  std::vector<Pending> pending;
+  const ReferenceSpec refSpec = stabilityReference(loader);
+  planCases(loader, options, models, cases, refSpec, records, pending);
+  if (progress) progress->addTotal(int(pending.size()));
+
+  const auto finishCase = [&](const Pending& p) {
+    fs::create_directories(p.caseFile.parent_path());
+    writeFileAtomic(p.caseFile, recordJson(p.record).dump(2) + "\n");
+    std::string result = p.record.status;
+    if (p.record.step >= 0) result += " at step " + std::to_string(p.record.step);
+    if (p.record.status == "failed") result += " (" + p.record.message + ")";
+    if (progress) progress->finish(p.label, result);
+    records.push_back(p.record);
+  };
+
+  // Each (model, case) is a "child" task (dispatch.h): here with --jobs, on MPI ranks, or in a
+  // Slurm array whose outcome.json files a later --resume reads.
+  std::vector<ojson> tasks;
+  std::vector<Pending*> jobCase;
+  for (Pending& p : pending) {
+    if (!p.record.status.empty()) {  // plugin did not load: nothing to run
+      finishCase(p);
+      continue;
+    }
+    const fs::path scene = options.outDir / "scenes" / p.record.model / (p.record.caseId + ".json");
+    tasks.push_back(childRunTask(exe, options, scene, p.dir, timeout, options.resume && !p.rerun));
+    jobCase.push_back(&p);
+  }
+  // Each case's reference: from the cache, else a "child" task beside the models'.
+  const double refTimeout = 5 * timeout;
+  Cache cache(options.cacheDir.empty() ? Cache::defaultDir() : fs::path(options.cacheDir));
+  std::map<size_t, size_t> refJobOfTask;  ///< task index -> refJobs index
+  std::vector<RefJob> refJobs = planReferenceJobs(options, cases, refSpec, pending, records, cache,
+                                                  exe, refTimeout, tasks, refJobOfTask);
+  if (progress) progress->addTotal(int(refJobOfTask.size()));
+  const auto refLabel = [&](const RefJob& j) {
+    return "reference " + j.caseId + (j.tag.empty() ? "" : " (" + j.tag + ")");
+  };
+
+  std::unique_ptr<Dispatcher> local;
+  Dispatcher* dispatcher = options.dispatcher;
+  if (!dispatcher) {
+    local = localDispatcher(options.jobs);
+    dispatcher = local.get();
+  }
+  dispatcher->run(
+      tasks,
+      [&](size_t i) {
+        if (!progress) return;
+        if (refJobOfTask.count(i))
+          progress->start(refLabel(refJobs[refJobOfTask.at(i)]));
+        else
+          progress->start(jobCase[i]->label);
+      },
+      [&](size_t i, const ojson& o) {
+        if (refJobOfTask.count(i)) {
+          RefJob& job = refJobs[refJobOfTask.at(i)];
+          finishReferenceJob(job, o, refTimeout, cache);
+          if (progress) progress->finish(refLabel(job), job.solve.ok ? "ok" : job.solve.message);
+          return;
+        }
+        Pending& p = *jobCase[i];
+        recordCaseOutcome(p, o, timeout);
+        finishCase(p);
+      });
+
+  std::vector<StabilityRecord> ordered = orderedRecords(records, models, cases);
+  std::vector<std::string> referenceFailures, referenceLines;
+  std::map<std::string, StabilityCase> caseById;
+  for (const auto& c : cases) caseById[c.id] = c;
+  judgeRecords(loader, options, refSpec, caseById, refJobs, ordered, referenceFailures,
+               referenceLines);
+  // The scale group (issue 35): the same problem in other units must move alike.
+  const std::vector<std::string> scaleLines = markScaleDependent(ordered);
+  for (const StabilityRecord& r : ordered) {
+    const fs::path caseFile = options.outDir / "cases" / r.model / (r.caseId + ".json");
+    if (r.group == "scale" && fs::exists(caseFile))
+      writeFileAtomic(caseFile, recordJson(r).dump(2) + "\n");
+  }
+
+  writeStabilityTable(ordered, caseById, refSpec, options, timeout, referenceFailures,
+                      referenceLines, scaleLines);
   return ordered;
 }
 

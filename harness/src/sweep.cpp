@@ -1,6 +1,7 @@
 // Error against run time: sweeping each model over its accuracy knob (see sweep.h).
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
+#include <deform_harness/json_file.h>
 #include <deform_harness/sweep.h>
 
 #include <cmath>
@@ -53,38 +54,17 @@ ojson num(double v) {
   return std::isfinite(v) ? ojson(v) : ojson(nullptr);
 }
 
-}  // namespace
+/// A point of the sweep: a model at one value of its knob (at its calibration for "+cal").
+struct Planned {
+  std::string model, plugin, label, param;
+  json value;
+  const CalibrationParams* calibration = nullptr;  ///< the "+cal" points'
+};
 
-std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loader,
-                                 const SweepOptions& options, Progress* progress) {
-  std::ifstream in(sceneFile);
-  if (!in) throw InputError(sceneFile, "", "cannot read the scene file");
-  ojson scene;
-  try {
-    scene = ojson::parse(in);
-  } catch (const std::exception& e) {
-    throw InputError(sceneFile, "", std::string("not JSON: ") + e.what());
-  }
-  // Validate the scene as given (unknown keys, ranges) before anything runs.
-  const Scene parsed = parseSceneFile(sceneFile);
-  if (!parsed.reference)
-    throw InputError(sceneFile, "/reference",
-                     "a sweep needs a reference (error against run time); add \"reference\": "
-                     "{\"plugin\": \"reference_fem\", \"params\": {}}");
-  // Mesh paths are relative to the scene file; the generated scene lives in DIR.
-  if (scene.contains("organ") && scene["organ"].contains("mesh")) {
-    const std::string mesh = scene["organ"]["mesh"];
-    if (mesh.rfind("phantom:", 0) != 0 && !fs::path(mesh).is_absolute())
-      scene["organ"]["mesh"] =
-          fs::absolute(fs::path(sceneFile).parent_path() / mesh).lexically_normal().string();
-  }
-
-  struct Planned {
-    std::string model, plugin, label, param;
-    json value;
-    const CalibrationParams* calibration = nullptr;  ///< the "+cal" points'
-  };
-  std::vector<Planned> planned;
+/// The scene's models, each once per value of its knob (and once more per value at its
+/// calibration): the scene's new "models" and the planned points, in the same order.
+ojson plannedModels(ojson& scene, PluginLoader& loader, const SweepOptions& options,
+                    std::vector<Planned>& planned) {
   ojson models = ojson::array();
   const std::string organ = calibrationOrgan(scene.value("organ", ojson::object()));
   for (const auto& m : scene["models"]) {
@@ -125,124 +105,51 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
       }
     }
   }
-  scene["models"] = models;
-  // The points' outcomes (fillPoint), the reference's status, the results files.
-  std::vector<SweepPoint> points;
-  for (const Planned& p : planned) {
-    SweepPoint s;
-    s.model = p.model;
-    s.plugin = p.plugin;
-    s.label = p.label;
-    s.param = p.param;
-    s.value = p.value;
-    s.calibrated = p.calibration != nullptr;
-    points.push_back(s);
-  }
-  const auto fillPoint = [&](size_t i, const CaseResult& c) {
-    SweepPoint& s = points[i];
-    const RunRecord* r = c.run(s.label);
-    // A calibrated point whose other parameters differ from those of the fit (the knob apart).
-    const CalibrationParams* calibration = planned[i].calibration;
-    if (r && calibration) s.note = calibrationDifferenceNote(*calibration, r->params, s.param);
-    if (c.missing.count(s.plugin)) {
-      s.status = "missing plugin: " + c.missing.at(s.plugin);
-    } else if (!r) {
-      s.status = c.error.empty() ? "not run" : "not run: " + c.error;
-    } else {
-      s.status = statusName(r->status);
-      s.valid = r->valid;
-      s.invalidReason = r->invalidReason;
-      if (r->stepStats.samples > 0) {
-        s.msMedian = r->stepStats.median;
-        s.msP95 = r->stepStats.p95;
-      }
-      if (r->error) {
-        s.rmseNearest = r->error->rmseNearest.empty() ? NAN : r->error->rmseNearest.back().second;
-        for (const auto& [k, v] : r->error->rmseNearest)
-          if (k == 50) s.rmseNearest = v;
-        s.rmseAll = r->error->rmseAll;
-        s.max = r->error->max;
-        s.lossRatio = r->error->lossRatio;
-      }
-    }
-  };
-  const auto referenceStatus = [&](const CaseResult& c) -> std::string {
-    if (c.result)
-      for (const RunRecord& r : c.result->runs)
-        if (r.isReference) return statusName(r.status);
-    return c.missing.count(parsed.reference->plugin) ? "missing" : "not run";
-  };
-  std::string refStatus = "not run";
-  std::string results = "runs/results.json";
-  std::vector<std::string> pointResults(points.size(), results);
+  return models;
+}
 
-  CaseOptions co = options.cases;
-  if (!co.child) {
-    // One scene with every point; the reference is solved once, only at the compared instants.
-    // The runner reports each run started and finished: that is the progress.
-    if (progress) progress->addTotal(int(planned.size()) + 1);
-    co.progress = [progress](const std::string& line) {
-      if (!progress) return;
-      const std::string prefix = "running ";
-      if (line.rfind(prefix, 0) == 0) {
-        std::string label = line.substr(prefix.size());
-        if (label.size() > 4 && label.compare(label.size() - 4, 4, " ...") == 0)
-          label.resize(label.size() - 4);
-        progress->start(label);
-      } else {
-        const auto colon = line.find(": ");
-        progress->finish(line.substr(0, colon),
-                         colon == std::string::npos ? line : line.substr(colon + 2));
-      }
-    };
-    const CaseResult c = runSceneCase(scene, options.outDir / "sweep_scene.json",
-                                      options.outDir / "runs", loader, co);
-    for (size_t i = 0; i < points.size(); ++i) fillPoint(i, c);
-    refStatus = referenceStatus(c);
+/// A point's outcome from the case that ran it.
+void fillPoint(SweepPoint& s, const Planned& planned, const CaseResult& c) {
+  const RunRecord* r = c.run(s.label);
+  // A calibrated point whose other parameters differ from those of the fit (the knob apart).
+  const CalibrationParams* calibration = planned.calibration;
+  if (r && calibration) s.note = calibrationDifferenceNote(*calibration, r->params, s.param);
+  if (c.missing.count(s.plugin)) {
+    s.status = "missing plugin: " + c.missing.at(s.plugin);
+  } else if (!r) {
+    s.status = c.error.empty() ? "not run" : "not run: " + c.error;
   } else {
-    // One child case per point (scenes/point_<i>.json, runs/point_<i>/), handed to the
-    // dispatcher. The first point whose plugin loads solves the reference (stage 0) and leaves
-    // it in the cache; the others (stage 1) read it from there (`run --reuse-reference`), so
-    // it is solved once and every point's error is against the same surfaces.
-    std::error_code ec;
-    fs::create_directories(options.outDir, ec);
-    writeFileAtomic(options.outDir / "sweep_scene.json", scene.dump(2) + "\n");
-    // --no-cache: the reference still goes through a cache, the sweep's own.
-    if (co.cacheDir && co.cacheDir->empty()) co.cacheDir = options.outDir / "cache";
-    co.child->runArgs.push_back("--reuse-reference");
-    std::optional<size_t> first;
-    for (size_t i = 0; i < planned.size() && !first; ++i)
-      if (pluginProblem(loader, planned[i].plugin).empty()) first = i;
-    std::vector<SceneCase> cases;
-    for (size_t i = 0; i < planned.size(); ++i) {
-      SceneCase c;
-      c.scene = scene;
-      c.scene["models"] = ojson::array({models[i]});
-      const std::string id = "point_" + std::to_string(i);
-      c.sceneFile = options.outDir / "scenes" / (id + ".json");
-      c.outDir = options.outDir / "runs" / id;
-      c.options = co;
-      c.options.stage = first && i == *first ? 0 : 1;
-      cases.push_back(std::move(c));
-      pointResults[i] = "runs/" + id + "/results.json";
+    s.status = statusName(r->status);
+    s.valid = r->valid;
+    s.invalidReason = r->invalidReason;
+    if (r->stepStats.samples > 0) {
+      s.msMedian = r->stepStats.median;
+      s.msP95 = r->stepStats.p95;
     }
-    if (first) results = pointResults[*first];
-    if (progress) progress->addTotal(int(planned.size()));
-    runSceneCases(
-        cases, loader, co.dispatcher,
-        [&](size_t i) {
-          if (progress) progress->start(points[i].label);
-        },
-        [&](size_t i, CaseResult&& c) {
-          fillPoint(i, c);
-          if (first && i == *first) refStatus = referenceStatus(c);
-          if (progress) progress->finish(points[i].label, points[i].status);
-        });
-    if (!first)
-      refStatus = pluginProblem(loader, parsed.reference->plugin).empty() ? "not run" : "missing";
+    if (r->error) {
+      s.rmseNearest = r->error->rmseNearest.empty() ? NAN : r->error->rmseNearest.back().second;
+      for (const auto& [k, v] : r->error->rmseNearest)
+        if (k == 50) s.rmseNearest = v;
+      s.rmseAll = r->error->rmseAll;
+      s.max = r->error->max;
+      s.lossRatio = r->error->lossRatio;
+    }
   }
-  markPareto(points);
+}
 
+/// The reference's status in the case that solved it.
+std::string referenceStatus(const CaseResult& c, const Scene& parsed) {
+  if (c.result)
+    for (const RunRecord& r : c.result->runs)
+      if (r.isReference) return statusName(r.status);
+  return c.missing.count(parsed.reference->plugin) ? "missing" : "not run";
+}
+
+/// sweep.json and sweep.csv.
+void writeSweepFiles(const std::vector<SweepPoint>& points,
+                     const std::vector<std::string>& pointResults, const std::string& sceneFile,
+                     const Scene& parsed, const std::string& refStatus, const std::string& results,
+                     const SweepOptions& options) {
   ojson doc;
   doc["format"] = "deformbench-sweep/1";
   doc["scene"] = {{"name", parsed.name}, {"file", sceneFile}, {"sha256", parsed.sha256}};
@@ -290,6 +197,117 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   }
   writeFileAtomic(options.outDir / "sweep.json", doc.dump(2) + "\n");
   writeFileAtomic(options.outDir / "sweep.csv", csv.str());
+}
+
+}  // namespace
+
+std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loader,
+                                 const SweepOptions& options, Progress* progress) {
+  ojson scene = readJsonFile(sceneFile, "scene file");
+  // Validate the scene as given (unknown keys, ranges) before anything runs.
+  const Scene parsed = parseSceneFile(sceneFile);
+  if (!parsed.reference)
+    throw InputError(sceneFile, "/reference",
+                     "a sweep needs a reference (error against run time); add \"reference\": "
+                     "{\"plugin\": \"reference_fem\", \"params\": {}}");
+  // Mesh paths are relative to the scene file; the generated scene lives in DIR.
+  if (scene.contains("organ") && scene["organ"].contains("mesh")) {
+    const std::string mesh = scene["organ"]["mesh"];
+    if (mesh.rfind("phantom:", 0) != 0 && !fs::path(mesh).is_absolute())
+      scene["organ"]["mesh"] =
+          fs::absolute(fs::path(sceneFile).parent_path() / mesh).lexically_normal().string();
+  }
+
+  std::vector<Planned> planned;
+  const ojson models = plannedModels(scene, loader, options, planned);
+  scene["models"] = models;
+  // The points' outcomes (fillPoint), the reference's status, the results files.
+  std::vector<SweepPoint> points;
+  for (const Planned& p : planned) {
+    SweepPoint s;
+    s.model = p.model;
+    s.plugin = p.plugin;
+    s.label = p.label;
+    s.param = p.param;
+    s.value = p.value;
+    s.calibrated = p.calibration != nullptr;
+    points.push_back(s);
+  }
+  const auto fillPointOf = [&](size_t i, const CaseResult& c) {
+    fillPoint(points[i], planned[i], c);
+  };
+  std::string refStatus = "not run";
+  std::string results = "runs/results.json";
+  std::vector<std::string> pointResults(points.size(), results);
+
+  CaseOptions co = options.cases;
+  if (!co.child) {
+    // One scene with every point; the reference is solved once, only at the compared instants.
+    // The runner reports each run started and finished: that is the progress.
+    if (progress) progress->addTotal(int(planned.size()) + 1);
+    co.progress = [progress](const std::string& line) {
+      if (!progress) return;
+      const std::string prefix = "running ";
+      if (line.rfind(prefix, 0) == 0) {
+        std::string label = line.substr(prefix.size());
+        if (label.size() > 4 && label.compare(label.size() - 4, 4, " ...") == 0)
+          label.resize(label.size() - 4);
+        progress->start(label);
+      } else {
+        const auto colon = line.find(": ");
+        progress->finish(line.substr(0, colon),
+                         colon == std::string::npos ? line : line.substr(colon + 2));
+      }
+    };
+    const CaseResult c = runSceneCase(scene, options.outDir / "sweep_scene.json",
+                                      options.outDir / "runs", loader, co);
+    for (size_t i = 0; i < points.size(); ++i) fillPointOf(i, c);
+    refStatus = referenceStatus(c, parsed);
+  } else {
+    // One child case per point (scenes/point_<i>.json, runs/point_<i>/), handed to the
+    // dispatcher. The first point whose plugin loads solves the reference (stage 0) and leaves
+    // it in the cache; the others (stage 1) read it from there (`run --reuse-reference`), so
+    // it is solved once and every point's error is against the same surfaces.
+    std::error_code ec;
+    fs::create_directories(options.outDir, ec);
+    writeFileAtomic(options.outDir / "sweep_scene.json", scene.dump(2) + "\n");
+    // --no-cache: the reference still goes through a cache, the sweep's own.
+    if (co.cacheDir && co.cacheDir->empty()) co.cacheDir = options.outDir / "cache";
+    co.child->runArgs.push_back("--reuse-reference");
+    std::optional<size_t> first;
+    for (size_t i = 0; i < planned.size() && !first; ++i)
+      if (pluginProblem(loader, planned[i].plugin).empty()) first = i;
+    std::vector<SceneCase> cases;
+    for (size_t i = 0; i < planned.size(); ++i) {
+      SceneCase c;
+      c.scene = scene;
+      c.scene["models"] = ojson::array({models[i]});
+      const std::string id = "point_" + std::to_string(i);
+      c.sceneFile = options.outDir / "scenes" / (id + ".json");
+      c.outDir = options.outDir / "runs" / id;
+      c.options = co;
+      c.options.stage = first && i == *first ? 0 : 1;
+      cases.push_back(std::move(c));
+      pointResults[i] = "runs/" + id + "/results.json";
+    }
+    if (first) results = pointResults[*first];
+    if (progress) progress->addTotal(int(planned.size()));
+    runSceneCases(
+        cases, loader, co.dispatcher,
+        [&](size_t i) {
+          if (progress) progress->start(points[i].label);
+        },
+        [&](size_t i, CaseResult&& c) {
+          fillPointOf(i, c);
+          if (first && i == *first) refStatus = referenceStatus(c, parsed);
+          if (progress) progress->finish(points[i].label, points[i].status);
+        });
+    if (!first)
+      refStatus = pluginProblem(loader, parsed.reference->plugin).empty() ? "not run" : "missing";
+  }
+  markPareto(points);
+
+  writeSweepFiles(points, pointResults, sceneFile, parsed, refStatus, results, options);
   return points;
 }
 

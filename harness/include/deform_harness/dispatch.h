@@ -39,6 +39,12 @@ nlohmann::ordered_json lostTaskResult(const nlohmann::ordered_json& task,
 /// it; null otherwise.
 nlohmann::ordered_json resumedTaskResult(const nlohmann::ordered_json& task);
 
+/// The indices of the tasks still to run, ascending: the others left a result in an earlier
+/// command (resumedTaskResult()) and are handed to onDone (when given) at once, in order.
+std::vector<size_t> tasksToRun(
+    const std::vector<nlohmann::ordered_json>& tasks,
+    const std::function<void(size_t, const nlohmann::ordered_json&)>& onDone);
+
 /// Stages: a task may say "stage": S (default 0). Every dispatcher runs the tasks of a stage only
 /// after every task of the earlier stages ended (e.g. the sweep's first case solves the reference
 /// that the later ones read from the cache); the Slurm one writes one job array per stage, each

@@ -1,10 +1,14 @@
 // deformbench harness: results.json (docs/results-format.md) and the surfaces written beside it.
 #pragma once
 
-#include <deform_harness/runner.h>
+#include <deform/engine/scene.h>
+#include <deform_harness/run_record.h>
+
+#include <nlohmann/json.hpp>
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 namespace deform::harness {
 

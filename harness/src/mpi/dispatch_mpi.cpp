@@ -95,15 +95,7 @@ class MpiDispatcher : public Dispatcher {
 
   void run(const std::vector<ojson>& tasks, const std::function<void(size_t)>& onStart,
            const std::function<void(size_t, const ojson&)>& onDone) override {
-    std::vector<size_t> pending;
-    for (size_t i = 0; i < tasks.size(); ++i) {
-      const ojson r = resumedTaskResult(tasks[i]);
-      if (r.is_null()) {
-        pending.push_back(i);
-      } else if (onDone) {
-        onDone(i, r);
-      }
-    }
+    const std::vector<size_t> pending = tasksToRun(tasks, onDone);
     for (const std::vector<size_t>& stage : byStage(tasks, pending))
       runStage(tasks, std::deque<size_t>(stage.begin(), stage.end()), onStart, onDone);
   }

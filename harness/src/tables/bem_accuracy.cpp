@@ -86,7 +86,7 @@ TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader, Progress* pro
           ": BEM on the whole fine surface, cut along the fixed box's top face, so it has a few "
           "more nodes than the fine vertices, which are among them). Loss ratio = sum|u_ref - u| / "
           "sum|u_ref| over the fine vertices at the end of the run (" +
-          number(duration) +
+          formatG(duration) +
           " s; a 0.5 N force presses on the liver's top, bottom 15% "
           "fixed, E = 5.5 kPa, nu = 0.3, no gravity).",
       "Where the coarse count exceeds the fine one (paper rows with ratio < 1) our "

@@ -29,7 +29,7 @@ TableDef bemTiming(const TablesOptions& o) {
       "particle_bem (guided) on the liver phantom at resolution 0.27 (~2.2k vertices), "
       "coarse surface = the paper's point number; a grasper at the liver's top lifts 1 cm "
       "over " +
-          number(duration) +
+          formatG(duration) +
           " s and a 0.5 N force presses beside it; bottom 15% "
           "fixed. Phases are medians over the steps after warm-up; overall is the median "
           "wall time of step().",

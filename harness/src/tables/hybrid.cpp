@@ -81,7 +81,7 @@ std::vector<Case> hybridSceneCases(bool quick, long long refElements, bool surfa
                             (hc.up ? "up-" : "down-") + forceTag(hc.force),
                         std::string("Hybrid FEM+PBD paper Sec. 8.3: ") +
                             (hc.up ? "upward tension" : "downward pressure") + " of " +
-                            number(hc.force) + " N at the top of the " + hc.phantom->name +
+                            formatG(hc.force) + " N at the top of the " + hc.phantom->name +
                             " phantom, bottom tenth fixed, E = 5.5 kPa, nu = 0.3, no gravity.",
                         organ, duration);
     j["loads"] = verticalForce(topVertex(s), hc.up ? hc.force : -hc.force, duration + 1.0);
@@ -242,11 +242,11 @@ TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing)
         "Constant vertical point force at the top vertex nearest the top's centre, bottom "
         "tenth fixed, E = 5.5 kPa, nu = 0.3, no gravity, spread over a 3 cm pressure patch "
         "every model receives alike; the same velocity damping of " +
-            number(kHybridDamping) +
+            formatG(kHybridDamping) +
             " 1/s in every model (the hybrid's default; it does not move an equilibrium); 1 ms "
             "steps, each model compared once it settled (largest surface speed below 1e-4 m/s "
             "for 20 steps; " +
-            number(hybridCap(o.quick)) +
+            formatG(hybridCap(o.quick)) +
             " s cap: a model that has not settled by then is "
             "invalid); reference_fem with " +
             referenceTets(refElements, kHybridReferenceOrder) + " solved at equilibrium.",

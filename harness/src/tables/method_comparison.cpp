@@ -43,7 +43,7 @@ TableDef methodComparison(const TablesOptions& o, long long refElements) {
   t.notes = {
       "Scenes: the shipped grasp-and-lift scenes (liver at resolution 0.27, ~2.2k vertices "
       "as in the paper's PBD comparison; gallbladder at resolution 1), " +
-          number(duration) + " s at 1 ms; error against reference_fem (" +
+          formatG(duration) + " s at 1 ms; error against reference_fem (" +
           referenceTets(refElements, kReferenceOrder) +
           ", Neo-Hookean, quasi-static, solved where the grasp closes and at the end of the "
           "run).",

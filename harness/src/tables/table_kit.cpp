@@ -9,18 +9,8 @@
 
 namespace deform::harness::tables {
 
-ojson vec(const Vec3& v) {
-  return ojson::array({v.x(), v.y(), v.z()});
-}
-
-std::string number(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-
 std::string forceTag(double f) {
-  std::string s = number(f) + "N";
+  std::string s = formatG(f) + "N";
   std::replace(s.begin(), s.end(), '.', 'p');
   return s;
 }
@@ -47,7 +37,7 @@ ojson phantomOrgan(const std::string& name, double resolution, double fixedFract
   return {{"mesh", "phantom:" + name},
           {"resolution", resolution},
           {"material", material()},
-          {"fixed", {{"box", ojson::array({vec(lo), vec(hi)})}}}};
+          {"fixed", {{"box", ojson::array({vecJson(lo), vecJson(hi)})}}}};
 }
 
 ojson baseScene(const std::string& name, const std::string& description, ojson organ,
@@ -84,7 +74,7 @@ Vec3 topVertex(const SurfaceMesh& s) {
 
 ojson verticalForce(const Vec3& at, double fz, double end) {
   return ojson::array({{{"type", "point_force"},
-                        {"at", vec(at)},
+                        {"at", vecJson(at)},
                         {"force", {0, 0, fz}},
                         {"start", 0.0},
                         {"end", end}}});
@@ -97,8 +87,8 @@ ojson graspFromTop(const SurfaceMesh& s, double depthFraction, double radiusFrac
   return ojson::array({{{"type", "grasper"},
                         {"radius", radiusFraction * height},
                         {"trajectory",
-                         {{{"t", 0.0}, {"pos", vec(p)}, {"jaw", "closed"}},
-                          {{"t", duration}, {"pos", vec(p + Vec3(0, 0, lift))}}}}}});
+                         {{{"t", 0.0}, {"pos", vecJson(p)}, {"jaw", "closed"}},
+                          {{"t", duration}, {"pos", vecJson(p + Vec3(0, 0, lift))}}}}}});
 }
 
 std::vector<TableColumn> withPaper(const std::string& key, const std::string& header,

@@ -8,6 +8,7 @@
 #include <deform/engine/plugin_loader.h>
 #include <deform/sdk/mesh.h>
 #include <deform_harness/cases.h>
+#include <deform_harness/format.h>
 #include <deform_harness/progress.h>
 #include <deform_harness/tables.h>
 
@@ -37,10 +38,6 @@ inline constexpr int kHybridReferenceOrder = 1;
 
 /// Target tets of the reference (a multiple of 8: the check's coarsest level is 1/8 of it).
 inline constexpr long long kReferenceElements = 20000, kQuickReferenceElements = 4000;
-
-ojson vec(const Vec3& v);
-
-std::string number(double v);
 
 /// "2N", "0p5N": a force as part of a file name.
 std::string forceTag(double f);

@@ -223,22 +223,22 @@ ojson truthCubeScene(const TruthCubeData& d, const std::vector<ojson>& models) {
       {"mesh", "phantom:cube"},
       {"scale", kSide / 0.1},
       {"material", {{"young", 15300}, {"poisson", 0.499}, {"density", 980}}},
-      {"fixed", {{"box", ojson::array({vec(Vec3(-m, -m, -m)), vec(Vec3(m, m, -h + e))})}}}};
-  j["gravity"] = vec(Vec3::Zero());
+      {"fixed", {{"box", ojson::array({vecJson(Vec3(-m, -m, -m)), vecJson(Vec3(m, m, -h + e))})}}}};
+  j["gravity"] = vecJson(Vec3::Zero());
   j["dt"] = 1.0;
   const size_t levels = d.strains.size();
   j["duration"] = double(levels);
-  ojson traj = ojson::array({{{"t", 0.0}, {"offset", vec(Vec3::Zero())}}});
+  ojson traj = ojson::array({{{"t", 0.0}, {"offset", vecJson(Vec3::Zero())}}});
   ojson compare = ojson::array();
   ojson measured = ojson::array();
   for (size_t l = 0; l < levels; ++l) {
     const double t = double(l + 1);
-    traj.push_back({{"t", t}, {"offset", vec(Vec3(0, 0, -d.strains[l] * kSide))}});
+    traj.push_back({{"t", t}, {"offset", vecJson(Vec3(0, 0, -d.strains[l] * kSide))}});
     compare.push_back(t);
     measured.push_back({{"t", t}, {"points", pointsJson(truthCubeSceneFrame(d, int(l + 1)))}});
   }
   j["plates"] = ojson::array(
-      {{{"region", {{"box", ojson::array({vec(Vec3(-m, -m, h - e)), vec(Vec3(m, m, m))})}}},
+      {{{"region", {{"box", ojson::array({vecJson(Vec3(-m, -m, h - e)), vecJson(Vec3(m, m, m))})}}},
         {"contact", "bonded"},
         {"trajectory", traj}}});
   j["markers"] = {{"points", pointsJson(truthCubeSceneFrame(d, 0))}, {"measured", measured}};
@@ -255,13 +255,13 @@ ojson truthCubeDynamicScene(const TruthCubeData& d, size_t level, const std::vec
   ojson j = truthCubeScene(d, models);
   j["name"] = "truth-cube-dynamic-" + std::to_string(level + 1);
   j["description"] = "Truth Cube, dynamic models: the plate moves down by " +
-                     number(1e3 * d.strains[level] * kSide) +
+                     formatG(1e3 * d.strains[level] * kSide) +
                      " mm over 1 s and holds; compared at equilibrium.";
   j["dt"] = 1e-3;
   j["duration"] = duration;
   j["plates"][0]["trajectory"] =
-      ojson::array({{{"t", 0.0}, {"offset", vec(Vec3::Zero())}},
-                    {{"t", 1.0}, {"offset", vec(Vec3(0, 0, -d.strains[level] * kSide))}}});
+      ojson::array({{{"t", 0.0}, {"offset", vecJson(Vec3::Zero())}},
+                    {{"t", 1.0}, {"offset", vecJson(Vec3(0, 0, -d.strains[level] * kSide))}}});
   j["markers"].erase("measured");  // measured positions need a compared instant given in time
   j["compare_at"] = "equilibrium";
   return j;
@@ -317,6 +317,141 @@ std::string layersMm(const std::vector<double>& v) {
     s += (s.empty() ? "" : " ") + std::string(buf);
   }
   return s;
+}
+
+/// The table's rows: each source per registration and level (its bead figures, or why it has
+/// none), the reference against CalculiX, and a row for each absent model.
+std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<Source>& sources,
+                                 const std::vector<std::pair<std::string, std::string>>& absent,
+                                 const Results& res, const fs::path& dir) {
+  std::vector<ojson> out;
+  const MatX3 rest = truthCubeSceneFrame(data, 0);
+  // CalculiX's figures, for the reference's comparison column.
+  std::map<std::pair<std::string, size_t>, double> calculix;
+  // Each source's markers per level (empty when absent) and why not; each case read once.
+  std::map<std::pair<std::string, std::string>, std::pair<std::vector<MatX3>, std::string>> read;
+  struct Computed {
+    std::string label, plugin;
+    std::vector<const CaseResult*> cases;
+    std::vector<MatX3> markers;  ///< per level; 0 rows when absent
+    std::vector<std::string> why;
+  };
+  std::vector<Computed> computed;
+  for (const Source& src : sources) {
+    Computed k{src.label, src.plugin, {}, {}, {}};
+    for (const auto& [caseId, index] : src.levels) {
+      const CaseResult* c = res.count(caseId) ? &res.at(caseId) : nullptr;
+      const auto key = std::make_pair(caseId, src.label);
+      if (c && !read.count(key)) {
+        std::string why;
+        std::vector<MatX3> m = markersOf(*c, src.label, why);
+        read[key] = {std::move(m), why};
+      }
+      const auto* m = c ? &read[key] : nullptr;
+      k.cases.push_back(c);
+      k.markers.push_back(m && index < m->first.size() ? m->first[index] : MatX3());
+      k.why.push_back(m ? m->second : std::string());
+    }
+    computed.push_back(std::move(k));
+  }
+  for (const char* reg : {"translation", "bottom_layer"}) {
+    const bool bottom = std::string(reg) == "bottom_layer";
+    for (const Computed& k : computed) {
+      for (size_t l = 0; l < data.strains.size(); ++l) {
+        ojson row;
+        row["model"] = k.label;
+        row["level"] = data.strains[l];
+        row["plate_mm"] = 1e3 * data.strains[l] * kSide;
+        row["registration"] = reg;
+        row["calibrated"] = false;
+        const CaseResult* c = k.cases[l];
+        const RunRecord* r = c ? c->run(k.label) : nullptr;
+        const bool ok = r && r->status == RunStatus::Ok && r->valid && k.markers[l].rows() > 0;
+        if (ok) {
+          const TruthCubeFigures f = truthCubeFigures(data, rest, k.markers[l], int(l + 1), bottom);
+          row["rms_error_m"] = numberOrNull(f.rms);
+          row["max_error_m"] = numberOrNull(f.maxError);
+          row["measured_rms_m"] = numberOrNull(f.measuredRms);
+          row["rms_error_mm"] = numberOrNull(1e3 * f.rms);
+          row["relative_error"] = numberOrNull(f.rms / f.measuredRms);
+          row["max_error_mm"] = numberOrNull(1e3 * f.maxError);
+          row["measured_rms_mm"] = numberOrNull(1e3 * f.measuredRms);
+          row["layer_rms_mm"] = layersMm(f.layerRms);
+          ojson layers = ojson::array();
+          for (double v : f.layerRms) layers.push_back(v);
+          row["layer_rms_error_m"] = layers;
+          row["bulge_mm"] = numberOrNull(1e3 * f.bulge);
+          row["measured_bulge_mm"] = numberOrNull(1e3 * f.measuredBulge);
+          if (k.label == kCalculix) calculix[{reg, l}] = f.rms;
+        } else {
+          for (const char* key :
+               {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm", "relative_error",
+                "max_error_mm", "measured_rms_mm", "bulge_mm", "measured_bulge_mm"})
+            row[key] = nullptr;
+          row["layer_rms_mm"] = "";
+        }
+        // init plus the solves (a run read back from results.json keeps the statistics only).
+        double seconds = NAN;
+        if (r) {
+          seconds = r->precomputeS;
+          if (!r->stepMs.empty()) {
+            for (double ms : r->stepMs) seconds += 1e-3 * ms;
+          } else {
+            seconds += 1e-3 * r->stepStats.mean * r->stepStats.samples;
+          }
+        }
+        row["run_s"] = numberOrNull(seconds);
+        if (c) {
+          caseCells(row, *c, k.plugin, r, dir, false);
+        } else {
+          row["status"] = "not run";
+          row["scene"] = "";
+          row["note"] = "";
+        }
+        if (!k.why[l].empty()) {
+          std::string note = row["note"].get<std::string>();
+          appendTo(note, k.why[l]);
+          row["note"] = note;
+          if (row["status"] == "ok") row["status"] = "no bead figures";
+        }
+        out.push_back(row);
+      }
+    }
+  }
+  // The reference against CalculiX on the same registration (done when within 10%).
+  for (ojson& row : out) {
+    row["vs_calculix_pct"] = nullptr;
+    const std::string label = row["model"].get<std::string>();
+    if (label.rfind("reference_fem", 0) != 0 || !row["rms_error_m"].is_number()) continue;
+    size_t l = 0;
+    while (l < data.strains.size() && data.strains[l] != row["level"].get<double>()) ++l;
+    const auto it = calculix.find({row["registration"].get<std::string>(), l});
+    if (it == calculix.end() || !(it->second > 0)) continue;
+    const double pct = 100 * (row["rms_error_m"].get<double>() - it->second) / it->second;
+    row["vs_calculix_pct"] = pct;
+    if (std::abs(pct) > 10 && label == "reference_fem") {
+      std::string status = row["status"].get<std::string>();
+      appendTo(status, "bead error over 10% from CalculiX's");
+      row["status"] = status;
+    }
+  }
+  for (const auto& [name, why] : absent) {
+    ojson row = {{"model", name},
+                 {"level", nullptr},
+                 {"plate_mm", nullptr},
+                 {"registration", nullptr},
+                 {"calibrated", false}};
+    for (const char* key : {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm",
+                            "relative_error", "max_error_mm", "measured_rms_mm", "bulge_mm",
+                            "measured_bulge_mm", "vs_calculix_pct", "run_s"})
+      row[key] = nullptr;
+    row["layer_rms_mm"] = "";
+    row["status"] = why;
+    row["scene"] = "";
+    row["note"] = "";
+    out.push_back(row);
+  }
+  return out;
 }
 
 }  // namespace
@@ -417,7 +552,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
         "Dynamic models (their volume network where they have one, default parameters): one "
         "scene per level (scenes/truth-cube/dynamic_N.json, dt 1 ms), the plate moved over 1 s "
         "and held, compared once settled (\"compare_at\": \"equilibrium\", capped at " +
-        number(o.quick ? 3.0 : 5.0) + " s).");
+        formatG(o.quick ? 3.0 : 5.0) + " s).");
     for (size_t l = 0; l < data.strains.size(); ++l) {
       const std::string dyn = "truth-cube/dynamic_" + std::to_string(l + 1);
       t.cases.push_back({dyn, truthCubeDynamicScene(data, l, dynamic, o.quick ? 3.0 : 5.0)});
@@ -430,135 +565,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
     }
   }
   t.rows = [data, sources, absent](const Results& res, const fs::path& dir) {
-    std::vector<ojson> out;
-    const MatX3 rest = truthCubeSceneFrame(data, 0);
-    // CalculiX's figures, for the reference's comparison column.
-    std::map<std::pair<std::string, size_t>, double> calculix;
-    // Each source's markers per level (empty when absent) and why not; each case read once.
-    std::map<std::pair<std::string, std::string>, std::pair<std::vector<MatX3>, std::string>> read;
-    struct Computed {
-      std::string label, plugin;
-      std::vector<const CaseResult*> cases;
-      std::vector<MatX3> markers;  ///< per level; 0 rows when absent
-      std::vector<std::string> why;
-    };
-    std::vector<Computed> computed;
-    for (const Source& src : sources) {
-      Computed k{src.label, src.plugin, {}, {}, {}};
-      for (const auto& [caseId, index] : src.levels) {
-        const CaseResult* c = res.count(caseId) ? &res.at(caseId) : nullptr;
-        const auto key = std::make_pair(caseId, src.label);
-        if (c && !read.count(key)) {
-          std::string why;
-          std::vector<MatX3> m = markersOf(*c, src.label, why);
-          read[key] = {std::move(m), why};
-        }
-        const auto* m = c ? &read[key] : nullptr;
-        k.cases.push_back(c);
-        k.markers.push_back(m && index < m->first.size() ? m->first[index] : MatX3());
-        k.why.push_back(m ? m->second : std::string());
-      }
-      computed.push_back(std::move(k));
-    }
-    for (const char* reg : {"translation", "bottom_layer"}) {
-      const bool bottom = std::string(reg) == "bottom_layer";
-      for (const Computed& k : computed) {
-        for (size_t l = 0; l < data.strains.size(); ++l) {
-          ojson row;
-          row["model"] = k.label;
-          row["level"] = data.strains[l];
-          row["plate_mm"] = 1e3 * data.strains[l] * kSide;
-          row["registration"] = reg;
-          row["calibrated"] = false;
-          const CaseResult* c = k.cases[l];
-          const RunRecord* r = c ? c->run(k.label) : nullptr;
-          const bool ok = r && r->status == RunStatus::Ok && r->valid && k.markers[l].rows() > 0;
-          if (ok) {
-            const TruthCubeFigures f =
-                truthCubeFigures(data, rest, k.markers[l], int(l + 1), bottom);
-            row["rms_error_m"] = numberOrNull(f.rms);
-            row["max_error_m"] = numberOrNull(f.maxError);
-            row["measured_rms_m"] = numberOrNull(f.measuredRms);
-            row["rms_error_mm"] = numberOrNull(1e3 * f.rms);
-            row["relative_error"] = numberOrNull(f.rms / f.measuredRms);
-            row["max_error_mm"] = numberOrNull(1e3 * f.maxError);
-            row["measured_rms_mm"] = numberOrNull(1e3 * f.measuredRms);
-            row["layer_rms_mm"] = layersMm(f.layerRms);
-            ojson layers = ojson::array();
-            for (double v : f.layerRms) layers.push_back(v);
-            row["layer_rms_error_m"] = layers;
-            row["bulge_mm"] = numberOrNull(1e3 * f.bulge);
-            row["measured_bulge_mm"] = numberOrNull(1e3 * f.measuredBulge);
-            if (k.label == kCalculix) calculix[{reg, l}] = f.rms;
-          } else {
-            for (const char* key :
-                 {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm", "relative_error",
-                  "max_error_mm", "measured_rms_mm", "bulge_mm", "measured_bulge_mm"})
-              row[key] = nullptr;
-            row["layer_rms_mm"] = "";
-          }
-          // init plus the solves (a run read back from results.json keeps the statistics only).
-          double seconds = NAN;
-          if (r) {
-            seconds = r->precomputeS;
-            if (!r->stepMs.empty()) {
-              for (double ms : r->stepMs) seconds += 1e-3 * ms;
-            } else {
-              seconds += 1e-3 * r->stepStats.mean * r->stepStats.samples;
-            }
-          }
-          row["run_s"] = numberOrNull(seconds);
-          if (c) {
-            caseCells(row, *c, k.plugin, r, dir, false);
-          } else {
-            row["status"] = "not run";
-            row["scene"] = "";
-            row["note"] = "";
-          }
-          if (!k.why[l].empty()) {
-            std::string note = row["note"].get<std::string>();
-            appendTo(note, k.why[l]);
-            row["note"] = note;
-            if (row["status"] == "ok") row["status"] = "no bead figures";
-          }
-          out.push_back(row);
-        }
-      }
-    }
-    // The reference against CalculiX on the same registration (done when within 10%).
-    for (ojson& row : out) {
-      row["vs_calculix_pct"] = nullptr;
-      const std::string label = row["model"].get<std::string>();
-      if (label.rfind("reference_fem", 0) != 0 || !row["rms_error_m"].is_number()) continue;
-      size_t l = 0;
-      while (l < data.strains.size() && data.strains[l] != row["level"].get<double>()) ++l;
-      const auto it = calculix.find({row["registration"].get<std::string>(), l});
-      if (it == calculix.end() || !(it->second > 0)) continue;
-      const double pct = 100 * (row["rms_error_m"].get<double>() - it->second) / it->second;
-      row["vs_calculix_pct"] = pct;
-      if (std::abs(pct) > 10 && label == "reference_fem") {
-        std::string status = row["status"].get<std::string>();
-        appendTo(status, "bead error over 10% from CalculiX's");
-        row["status"] = status;
-      }
-    }
-    for (const auto& [name, why] : absent) {
-      ojson row = {{"model", name},
-                   {"level", nullptr},
-                   {"plate_mm", nullptr},
-                   {"registration", nullptr},
-                   {"calibrated", false}};
-      for (const char* key : {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm",
-                              "relative_error", "max_error_mm", "measured_rms_mm", "bulge_mm",
-                              "measured_bulge_mm", "vs_calculix_pct", "run_s"})
-        row[key] = nullptr;
-      row["layer_rms_mm"] = "";
-      row["status"] = why;
-      row["scene"] = "";
-      row["note"] = "";
-      out.push_back(row);
-    }
-    return out;
+    return truthCubeRows(data, sources, absent, res, dir);
   };
   return t;
 }

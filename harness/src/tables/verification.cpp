@@ -38,7 +38,7 @@ struct VerificationRow {
 };
 
 ojson box(const Vec3& lo, const Vec3& hi) {
-  return ojson::array({vec(lo), vec(hi)});
+  return ojson::array({vecJson(lo), vecJson(hi)});
 }
 
 ojson materialOf(double young, double poisson, double density = 1000) {
@@ -53,7 +53,7 @@ ojson verificationScene(const std::string& name, const std::string& description,
   j["name"] = "verification-" + name;
   j["description"] = description;
   j["organ"] = std::move(organ);
-  j["gravity"] = vec(gravity);
+  j["gravity"] = vecJson(gravity);
   j["dt"] = 1.0;
   j["duration"] = 1.0;
   if (!loads.empty()) j["loads"] = std::move(loads);
@@ -101,7 +101,7 @@ std::vector<VerificationRow> verificationRows(bool withCalculix) {
     const double alpha = 3, q = rho * kGravity * t * t, I = t * t * t * t / 12;
     const double E = q * L * L * L / (alpha * I);
     r.what = "gravity cantilever, large deflection (q L^3 / EI = 3, E " +
-             number(std::round(E / 100) / 10) + " kPa)";
+             formatG(std::round(E / 100) / 10) + " kPa)";
     r.quantity = "tip sag";
     r.value = elasticaCantilever(L, E * I, q, 0).sag;
     r.source =
@@ -129,8 +129,8 @@ std::vector<VerificationRow> verificationRows(bool withCalculix) {
     r.source =
         "closed form: psi = mu/2 (J^-2/3 I1 - 3) + kappa/2 (J - 1)^2 under a dead nominal "
         "stress, lateral Cauchy stress zero (axial stretch " +
-        number(std::round(s.axialStretch * 1e5) / 1e5) + ", lateral " +
-        number(std::round(s.lateralStretch * 1e5) / 1e5) + ")";
+        formatG(std::round(s.axialStretch * 1e5) / 1e5) + ", lateral " +
+        formatG(std::round(s.lateralStretch * 1e5) / 1e5) + ")";
     r.phantom = "cube";
     r.probe = {Box{Vec3(-1, -1, -1e-9), Vec3(1, 1, 1e-9)}, 2, -1};
     const double e = 1e-6, m = 0.06;
@@ -273,7 +273,7 @@ TableDef verification(const TablesOptions& o, PluginLoader& loader) {
       "Each row is one quasi-static scene (scenes/verification/*.json) run by reference_fem at "
       "its defaults (no parameters given) and by CalculiX (the calculix plugin) at its own; "
       "error % = (model - value) / value; a reference_fem error above " +
-          number(kTolerancePct) + "% is flagged in the status.",
+          formatG(kTolerancePct) + "% is flagged in the status.",
       "Rollers (\"fixed\" boxes with \"axes\") make the cube's faces frictionless and Cook's "
       "membrane plane strain; tractions (\"traction\" loads) spread the force uniformly over "
       "the loaded face, and both solvers integrate it against their quadratic faces' shape "
@@ -319,7 +319,7 @@ TableDef verification(const TablesOptions& o, PluginLoader& loader) {
       caseCells(row, *c, "reference_fem", ref, dir, false);
       std::string status = row["status"].get<std::string>();
       if (std::isfinite(a) && std::abs(100 * (a - v.value) / v.value) > kTolerancePct)
-        appendTo(status, "reference_fem error above " + number(kTolerancePct) + "%");
+        appendTo(status, "reference_fem error above " + formatG(kTolerancePct) + "%");
       std::string note = row["note"].get<std::string>();
       if (!withCalculix) {
         appendTo(note, "CalculiX: not available (see the notes)");

@@ -1,0 +1,123 @@
+// deformbench calibrate: a model's calibratable parameters fitted to training scenes.
+#include "cli.h"
+
+#include <deform/engine/plugin_loader.h>
+#include <deform_harness/calibration.h>
+#include <deform_harness/child_process.h>
+#include <deform_harness/progress.h>
+
+#include <iomanip>
+#include <iostream>
+
+namespace deform::harness::cli {
+
+namespace {
+
+struct CalibrateArgs {
+  CommonArgs common;
+  std::vector<std::string> train, validate, params;
+  std::string model, metric = "rmse_all", label;
+  int budget = 40;
+  double timeout = 0;
+  DispatchArgs dispatch;
+};
+
+int cmdCalibrate(const CalibrateArgs& a);
+
+}  // namespace
+
+Verb addCalibrate(CLI::App& app) {
+  auto args = std::make_shared<CalibrateArgs>();
+  CalibrateArgs& cal = *args;
+  CLI::App* calibrate = app.add_subcommand(
+      "calibrate", "fit a model's calibratable parameters to the reference of training scenes");
+  calibrate->add_option("scenes", cal.train, "training scene files (with a reference)")->required();
+  calibrate->add_option("--model", cal.model, "plugin to calibrate")->required();
+  calibrate->add_option("--out", cal.common.out, "output folder (calibration.json)")->required();
+  calibrate->add_option("--validate", cal.validate, "held-out scene (repeatable)")
+      ->allow_extra_args(false);
+  calibrate->add_option("--metric", cal.metric, "rmse_all (default), rmse_50 or loss_ratio");
+  calibrate->add_option("--budget", cal.budget, "trials at most (default 40)");
+  calibrate->add_option("--label", cal.label, "free text kept in calibration.json");
+  calibrate
+      ->add_option("--param", cal.params, "calibrate only this calibratable parameter (repeatable)")
+      ->allow_extra_args(false);
+  calibrate
+      ->add_option("--timeout", cal.timeout,
+                   "seconds per model run, each in its own process "
+                   "(default 900)")
+      ->check(positiveValue(false));
+  addDispatch(calibrate, cal.dispatch);
+  addCommon(calibrate, cal.common, false);
+  return {calibrate, [args](const std::vector<std::string>& pluginDirs) {
+            args->common.pluginDirs = pluginDirs;
+            return cmdCalibrate(*args);
+          }};
+}
+
+namespace {
+
+int cmdCalibrate(const CalibrateArgs& a) {
+  PluginLoader loader(searchPath(a.common.pluginDirs));
+  CalibrateOptions o;
+  o.train = a.train;
+  o.validate = a.validate;
+  o.plugin = a.model;
+  o.params = a.params;
+  o.label = a.label;
+  o.budget = a.budget;
+  if (!calibMetricFromName(a.metric, o.metric))
+    throw InputError("--metric", "",
+                     "unknown metric '" + a.metric + "' (rmse_all, rmse_50 or loss_ratio)");
+  if (a.budget < 1) throw InputError("--budget", "", "must be at least 1 (trials)");
+  if (a.model.empty()) throw InputError("--model", "", "name the plugin to calibrate");
+  o.outDir = makeOutDir(a.common.out);
+  o.cases = caseOptions(a.common);
+  if (!a.dispatch.slurm.empty())
+    throw InputError("--slurm", "",
+                     "calibrate chooses its trials as results come: use --jobs "
+                     "or --mpi");
+  const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(a.dispatch);
+  o.cases.dispatcher = dispatcher.get();
+  ChildCaseOptions child;
+  child.executable = selfExecutable();
+  child.pluginArgs = pluginDirArgs(loader.searchPath());
+  child.runArgs = {"--reuse-reference"};
+  if (a.timeout > 0) child.timeoutS = a.timeout;
+  o.cases.child = child;
+  nlohmann::ordered_json doc;
+  {
+    Progress progress(a.budget, "calibrate");
+    doc = runCalibration(loader, o, &progress);
+  }
+  const auto mm = [&](const nlohmann::ordered_json& v) {
+    if (!v.is_number()) return std::string("-");
+    return doc["metric"] == "loss_ratio" ? fmt(v.get<double>(), 4)
+                                         : fmt(1e3 * v.get<double>(), 4) + " mm";
+  };
+  std::cout << "\n"
+            << doc["plugin"].get<std::string>() << " calibrated on " << a.train.size()
+            << " scene(s), " << doc["evaluations"].get<int>() << " trials, "
+            << fmt(doc["wall_s"].get<double>(), 3) << " s; metric "
+            << doc["metric"].get<std::string>() << "\n";
+  for (const auto& [k, v] : doc["params"].items())
+    std::cout << "  " << k << " = " << fmt(v.get<double>(), 5) << " (default "
+              << fmt(doc["defaults"][k].get<double>(), 5) << ")\n";
+  for (const auto& w : doc["warnings"]) std::cout << "warning: " << w.get<std::string>() << "\n";
+  for (const char* set : {"train", "validation"}) {
+    for (const auto& p : doc[set]["per_scene"])
+      std::cout << "  " << std::left << std::setw(11) << set << std::setw(48)
+                << fs::path(p["scene"].get<std::string>()).filename().string() << " before "
+                << std::setw(12) << mm(p["before"]) << " after " << mm(p["after"]) << "\n";
+    if (!doc[set]["per_scene"].empty())
+      std::cout << "  " << std::left << std::setw(11) << set << std::setw(48) << "mean"
+                << " before " << std::setw(12) << mm(doc[set]["before"]) << " after "
+                << mm(doc[set]["after"]) << "\n";
+  }
+  std::cout << "calibration: " << (o.outDir / "calibration.json").string() << "\n";
+  return 0;
+}
+
+}  // namespace
+
+}  // namespace deform::harness::cli

@@ -1,0 +1,95 @@
+// deformbench sweep: error against run time, each model over its accuracy knob.
+#include "cli.h"
+
+#include <deform/engine/plugin_loader.h>
+#include <deform_harness/progress.h>
+#include <deform_harness/sweep.h>
+
+#include <algorithm>
+#include <iomanip>
+#include <iostream>
+#include <set>
+
+namespace deform::harness::cli {
+
+namespace {
+
+struct SweepArgs {
+  std::string scene;
+  CommonArgs common;
+  bool noPlot = false;
+  std::vector<std::string> calibrations;
+  ChildArgs child;
+};
+
+int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
+             const std::vector<std::string>& calibrations, const ChildArgs& ch);
+
+}  // namespace
+
+Verb addSweep(CLI::App& app) {
+  auto args = std::make_shared<SweepArgs>();
+  CLI::App* sweep = app.add_subcommand(
+      "sweep", "error against run time: each model over its accuracy knob, with a plot");
+  sweep->add_option("scene", args->scene, "scene file with a reference")->required();
+  sweep->add_option("--out", args->common.out, "output folder")->required();
+  sweep->add_flag("--no-plot", args->noPlot, "write the data only");
+  sweep
+      ->add_option("--calibration", args->calibrations,
+                   "calibration.json: its model is swept at its defaults and calibrated "
+                   "(repeatable)")
+      ->allow_extra_args(false);
+  sweep->add_flag("--explain", args->common.explain, "say what was loaded, built, cached, skipped");
+  addCommon(sweep, args->common, true);
+  addChildArgs(sweep, args->child, "point");
+  return {sweep, [args, sweep](const std::vector<std::string>& pluginDirs) {
+            SweepArgs& a = *args;
+            a.common.pluginDirs = pluginDirs;
+            a.child.given = childArgsGiven(sweep);
+            return cmdSweep(a.scene, a.common, a.noPlot, a.calibrations, a.child);
+          }};
+}
+
+namespace {
+
+int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
+             const std::vector<std::string>& calibrations, const ChildArgs& ch) {
+  PluginLoader loader(searchPath(a.pluginDirs));
+  SweepOptions o;
+  o.calibrations = readCalibrations(calibrations);
+  o.quick = a.quick;
+  o.outDir = makeOutDir(a.out);
+  o.cases = caseOptions(a);
+  const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(ch.dispatch);
+  o.cases.dispatcher = dispatcher.get();
+  o.cases.child = childOptions(ch, loader, 900);
+  std::vector<SweepPoint> points;
+  {
+    Progress progress(0, "sweep");
+    points = runSweep(scene, loader, o, &progress);
+  }
+  size_t w = 6;
+  for (const SweepPoint& p : points) w = std::max(w, p.label.size() + 2);
+  std::cout << "\n";
+  std::cout << std::left << std::setw(int(w)) << "point" << std::setw(12) << "status"
+            << std::setw(10) << "ms/step" << std::setw(14) << "rmse_50 mm" << std::setw(14)
+            << "rmse_all mm"
+            << "pareto\n";
+  for (const SweepPoint& p : points) {
+    std::cout << std::left << std::setw(int(w)) << p.label << std::setw(12)
+              << (p.status.size() > 11 ? p.status.substr(0, 11) : p.status) << std::setw(10)
+              << fmt(p.msMedian) << std::setw(14) << fmt(1e3 * p.rmseNearest) << std::setw(14)
+              << fmt(1e3 * p.rmseAll) << (p.pareto ? "*" : "") << "\n";
+  }
+  std::set<std::string> notes;  // the calibrated points' (the same for most of them)
+  for (const SweepPoint& p : points)
+    if (!p.note.empty() && notes.insert(p.note).second) std::cout << "note: " << p.note << "\n";
+  if (!noPlot)
+    plot("plot_sweep.py", {(o.outDir / "sweep.json").string(), (o.outDir / "sweep.png").string()});
+  std::cout << "sweep: " << (o.outDir / "sweep.json").string() << "\n";
+  return 0;
+}
+
+}  // namespace
+
+}  // namespace deform::harness::cli
