@@ -9,33 +9,6 @@ namespace deform::reference_fem {
 
 namespace {
 
-Mat3 cofactor(const Mat3& F) {
-  Mat3 H;
-  H.col(0) = F.col(1).cross(F.col(2));
-  H.col(1) = F.col(2).cross(F.col(0));
-  H.col(2) = F.col(0).cross(F.col(1));
-  return H;
-}
-
-Mat3 crossMatrix(const Vec3& w) {
-  Mat3 W;
-  W << 0, -w(2), w(1), w(2), 0, -w(0), -w(1), w(0), 0;
-  return W;
-}
-
-/// D += s dH/dF (9x9 on vec(F), column-major): H = [F1 x F2, F2 x F0, F0 x F1], so column j of
-/// dH is a cross product of the other two columns of F with those of dF.
-void addCofactorDerivative(Real s, const Mat3& F, Mat9& D) {
-  const Mat3 X0 = s * crossMatrix(F.col(0)), X1 = s * crossMatrix(F.col(1)),
-             X2 = s * crossMatrix(F.col(2));
-  D.block<3, 3>(0, 3) -= X2;
-  D.block<3, 3>(0, 6) += X1;
-  D.block<3, 3>(3, 0) += X2;
-  D.block<3, 3>(3, 6) -= X0;
-  D.block<3, 3>(6, 0) -= X1;
-  D.block<3, 3>(6, 3) += X0;
-}
-
 /// The PSD projection of a symmetric 9x9 matrix; a Cholesky test first, as most points of a
 /// solve are positive definite and then nothing changes.
 Mat9 projectedIfNeeded(const Mat9& D) {

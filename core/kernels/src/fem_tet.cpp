@@ -17,14 +17,6 @@ Vec9 vec(const Mat3& A) {
   return Eigen::Map<const Vec9>(A.data());
 }
 
-Mat3 cofactor(const Mat3& F) {
-  Mat3 H;
-  H.col(0) = F.col(1).cross(F.col(2));
-  H.col(1) = F.col(2).cross(F.col(0));
-  H.col(2) = F.col(0).cross(F.col(1));
-  return H;
-}
-
 /// J^{-2/3}: cbrt is several times cheaper than pow; pow's value (NaN, inf) for J <= 0.
 Real jMinusTwoThirds(Real J) {
   if (!(J > 0)) return std::pow(J, -2.0 / 3.0);
@@ -44,13 +36,32 @@ Mat3 singularValueHessian(Real mu, Real kappa, const Vec3& s, Real J, Real I1, R
   return H;
 }
 
-Mat3 cross(const Vec3& w) {
+}  // namespace
+
+Mat3 cofactor(const Mat3& F) {
+  Mat3 H;
+  H.col(0) = F.col(1).cross(F.col(2));
+  H.col(1) = F.col(2).cross(F.col(0));
+  H.col(2) = F.col(0).cross(F.col(1));
+  return H;
+}
+
+Mat3 crossMatrix(const Vec3& w) {
   Mat3 W;
   W << 0, -w(2), w(1), w(2), 0, -w(0), -w(1), w(0), 0;
   return W;
 }
 
-}  // namespace
+void addCofactorDerivative(Real s, const Mat3& F, Mat9& D) {
+  const Mat3 X0 = s * crossMatrix(F.col(0)), X1 = s * crossMatrix(F.col(1)),
+             X2 = s * crossMatrix(F.col(2));
+  D.block<3, 3>(0, 3) -= X2;
+  D.block<3, 3>(0, 6) += X1;
+  D.block<3, 3>(3, 0) += X2;
+  D.block<3, 3>(3, 6) -= X0;
+  D.block<3, 3>(6, 0) -= X1;
+  D.block<3, 3>(6, 3) += X0;
+}
 
 LameParameters LameParameters::fromYoungPoisson(Real young, Real poisson) {
   LameParameters l;
@@ -165,7 +176,7 @@ Mat9 CorotationalMaterial::stressDerivative(const Mat3& F) const {
     const Mat3 Y = R.transpose() * dF;
     const Mat3 K = Y - Y.transpose();
     const Vec3 w = invertible ? Vec3(lu.solve(Vec3(K(2, 1), K(0, 2), K(1, 0)))) : Vec3::Zero();
-    const Mat3 dR = R * cross(w);
+    const Mat3 dR = R * crossMatrix(w);
     D.col(k) = vec(2.0 * lame.mu * dF + c * dR + lame.lambda * Y.trace() * R);
   }
   return D;
@@ -210,13 +221,7 @@ Mat9 NeoHookeanMaterial::stressDerivative(const Mat3& F) const {
   Mat9 D = alpha * (f * h.transpose() + h * f.transpose()) + beta * h * h.transpose();
   D.diagonal().array() += mu * a;
   const Real s = b + c;
-  const Mat3 X0 = s * cross(F.col(0)), X1 = s * cross(F.col(1)), X2 = s * cross(F.col(2));
-  D.block<3, 3>(0, 3) -= X2;
-  D.block<3, 3>(0, 6) += X1;
-  D.block<3, 3>(3, 0) += X2;
-  D.block<3, 3>(3, 6) -= X0;
-  D.block<3, 3>(6, 0) -= X1;
-  D.block<3, 3>(6, 3) += X0;
+  addCofactorDerivative(s, F, D);
   return D;
 }
 

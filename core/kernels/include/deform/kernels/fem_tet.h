@@ -77,6 +77,14 @@ void polarDecomposition(const Mat3& F, Mat3& R, Mat3& S);
 /// Clamps the eigenvalues of a symmetric 9x9 matrix to >= 0 (projection onto the PSD cone).
 Mat9 projectPositiveSemiDefinite(const Mat9& A);
 
+/// The cofactor matrix H = cof F = J F^{-T}, by columns [F1 x F2, F2 x F0, F0 x F1].
+Mat3 cofactor(const Mat3& F);
+/// The cross-product matrix [w]x (W v = w x v).
+Mat3 crossMatrix(const Vec3& w);
+/// D += s dH/dF (9x9 on vec(F), column-major): column j of dH is a cross product of the other
+/// two columns of F with those of dF.
+void addCofactorDerivative(Real s, const Mat3& F, Mat9& D);
+
 struct LinearMaterial {
   LameParameters lame;
   Real energyDensity(const Mat3& F) const;
