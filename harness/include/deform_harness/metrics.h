@@ -42,7 +42,7 @@ struct ErrorMetrics {
   int excludedGrasped = 0;  ///< vertices left out of rmse_k's candidates (grasped)
 };
 
-/// The surface vertices a grasp holds: deform::graspedSurfaceVertices (interaction.h), the one
+/// The surface vertices a grasp holds: deform::graspedSurfaceVertices (deform/sdk/model.h), the one
 /// definition. The union of those over every closing of every grasper of the scene (a keyframe
 /// whose jaws are closed after open ones, or closed at the first keyframe). Sorted, no repeats.
 std::vector<int> graspedSurfaceVertices(const Scene& scene, const MatX3& rest);
