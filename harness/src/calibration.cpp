@@ -549,7 +549,9 @@ class Calibrator {
     // reference with this parameter); within 1% of the range, in its own scale.
     ojson atBound = ojson::object();
     ojson warnings = ojson::array();
-    for (const auto& [key, side] : fittedAtBound(m_dims, best)) {
+    for (const auto& bound : fittedAtBound(m_dims, best)) {
+      const std::string& key = bound.first;
+      const std::string& side = bound.second;
       atBound[key] = side;
       const CalibDimension& d =
           *std::find_if(m_dims.begin(), m_dims.end(), [&](const auto& x) { return x.key == key; });
