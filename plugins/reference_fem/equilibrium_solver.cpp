@@ -149,7 +149,7 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
   }
   for (int fc = 0; fc < nf; ++fc) count[size_t(fc) + 1] += count[size_t(fc)];
   std::vector<std::pair<int, int>, LargePageAllocator<std::pair<int, int>>> entries(
-      size_t(count[size_t(nf)]));  // (row, full index)
+      static_cast<size_t>(count[size_t(nf)]));  // (row, full index)
   {
     std::vector<int> next(count.begin(), count.end() - 1);
     for (int c = 0; c < ndof; ++c) {
