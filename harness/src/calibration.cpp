@@ -220,17 +220,19 @@ const CalibrationParams* calibrationFor(const std::vector<CalibrationParams>& ca
 }
 
 std::vector<std::string> calibrationDifferences(const CalibrationParams& c, const json& resolved,
-                                                const std::string& except) {
+                                                const std::vector<std::string>& except) {
   std::vector<std::string> out;
   for (const auto& [k, fitted] : c.held.items()) {
-    if (k == except || !resolved.contains(k) || resolved[k] == fitted) continue;
+    if (std::find(except.begin(), except.end(), k) != except.end() || !resolved.contains(k) ||
+        resolved[k] == fitted)
+      continue;
     out.push_back(k + " = " + resolved[k].dump() + " (fitted with " + fitted.dump() + ")");
   }
   return out;
 }
 
 std::string calibrationDifferenceNote(const CalibrationParams& c, const json& resolved,
-                                      const std::string& except) {
+                                      const std::vector<std::string>& except) {
   std::string list;
   for (const std::string& d : calibrationDifferences(c, resolved, except))
     list += (list.empty() ? "" : ", ") + d;

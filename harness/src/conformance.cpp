@@ -158,6 +158,24 @@ void checkParams(const ModelInfo& info, Cache&, const ConformanceOptions&, std::
       require(refused, "parameter '" + p.key + "': a value above its maximum was accepted");
     }
   }
+  // The sweep's axes (and the older knob) name parameters of the model, with valid values.
+  for (const auto& [axis, knob] :
+       {std::pair{"resolution", &info.resolution}, std::pair{"effort", &info.effort},
+        std::pair{"knob", &info.knob}}) {
+    if (knob->param.empty()) continue;
+    require(info.param(knob->param) != nullptr,
+            std::string(axis) + " '" + knob->param + "' is not a parameter of the model");
+    for (const auto* values : {&knob->values, &knob->quickValues})
+      for (const ParamValue& v : *values) {
+        try {
+          resolveParams(info.params,
+                        json{{knob->param, std::visit([](const auto& x) { return json(x); }, v)}},
+                        "", "/params");
+        } catch (const InputError& e) {
+          require(false, std::string(axis) + " '" + knob->param + "': " + e.what());
+        }
+      }
+  }
   detail = std::to_string(info.params.size()) + " parameters";
 }
 

@@ -1,9 +1,10 @@
-// Error against run time: sweeping each model over its accuracy knob (see sweep.h).
+// Error against run time: sweeping each model over its two cost axes (see sweep.h).
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
 #include <deform_harness/json_file.h>
 #include <deform_harness/sweep.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -24,24 +25,15 @@ SweepKnob sweepKnob(const ModelInfo& info, bool quick) {
   return k;
 }
 
-void markPareto(std::vector<SweepPoint>& points) {
-  const auto usable = [](const SweepPoint& p) {
-    return p.status == "ok" && p.valid && std::isfinite(p.msMedian) && std::isfinite(p.rmseNearest);
+SweepAxes sweepAxes(const ModelInfo& info, bool quick) {
+  const auto axis = [quick](const ModelInfo::Knob& knob) {
+    ModelInfo only;
+    only.knob = knob;
+    return sweepKnob(only, quick);
   };
-  for (SweepPoint& p : points) {
-    p.pareto = false;
-    if (!usable(p)) continue;
-    bool dominated = false;
-    for (const SweepPoint& q : points) {
-      if (&q == &p || !usable(q) || q.calibrated != p.calibrated) continue;
-      if (q.msMedian <= p.msMedian && q.rmseNearest <= p.rmseNearest &&
-          (q.msMedian < p.msMedian || q.rmseNearest < p.rmseNearest)) {
-        dominated = true;
-        break;
-      }
-    }
-    p.pareto = !dominated;
-  }
+  SweepAxes a{axis(info.resolution), axis(info.effort)};
+  if (a.resolution.param.empty() && a.effort.param.empty()) a.effort = sweepKnob(info, quick);
+  return a;
 }
 
 namespace {
@@ -50,18 +42,227 @@ std::string valueText(const json& v) {
   return v.is_string() ? v.get<std::string>() : v.dump();
 }
 
+/// An ok, valid point with a time and a finite error `err`: ranked on a front.
+bool usable(const SweepPoint& p, double err) {
+  return p.status == "ok" && p.valid && std::isfinite(p.msMedian) && std::isfinite(err);
+}
+
+/// Whether `p` is on the front of error `err` against time over the points `among` accepts.
+template <typename Among>
+bool onFront(const std::vector<SweepPoint>& points, const SweepPoint& p, double SweepPoint::*err,
+             const Among& among) {
+  if (!usable(p, p.*err)) return false;
+  for (const SweepPoint& q : points) {
+    if (&q == &p || !usable(q, q.*err) || !among(q)) continue;
+    if (q.msMedian <= p.msMedian && q.*err <= p.*err &&
+        (q.msMedian < p.msMedian || q.*err < p.*err))
+      return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+void markPareto(std::vector<SweepPoint>& points) {
+  for (SweepPoint& p : points) {
+    p.pareto = onFront(points, p, &SweepPoint::rmseNearest, [&p](const SweepPoint& q) {
+      return q.calibrated == p.calibrated && q.model == p.model && q.plugin == p.plugin;
+    });
+    p.paretoOverall = onFront(points, p, &SweepPoint::rmseNearest,
+                              [&p](const SweepPoint& q) { return q.calibrated == p.calibrated; });
+  }
+}
+
+namespace {
+
+/// Least-squares slope of ln(error) against ln(ms) over the usable points; NaN with fewer than
+/// two distinct times.
+double logSlope(const std::vector<const SweepPoint*>& points, double SweepPoint::*err) {
+  std::vector<std::pair<double, double>> xy;
+  for (const SweepPoint* p : points)
+    if (usable(*p, p->*err) && p->msMedian > 0 && p->*err > 0)
+      xy.emplace_back(std::log(p->msMedian), std::log(p->*err));
+  if (xy.size() < 2) return NAN;
+  double mx = 0, my = 0;
+  for (const auto& [x, y] : xy) mx += x, my += y;
+  mx /= double(xy.size());
+  my /= double(xy.size());
+  double sxx = 0, sxy = 0;
+  for (const auto& [x, y] : xy) sxx += (x - mx) * (x - mx), sxy += (x - mx) * (y - my);
+  return sxx > 1e-12 ? sxy / sxx : NAN;
+}
+
+std::string mm(double m) {
+  std::ostringstream s;
+  s.precision(3);
+  s << 1e3 * m << " mm";
+  return s.str();
+}
+
+std::string fixed(double v, int digits) {
+  std::ostringstream s;
+  s.setf(std::ios::fixed);
+  s.precision(digits);
+  s << v;
+  return s.str();
+}
+
+/// The usable points of `curve` on error `err`, and those of them on its front, by time.
+void validAndFront(const std::vector<const SweepPoint*>& curve, double SweepPoint::*err,
+                   std::vector<const SweepPoint*>& valid, std::vector<const SweepPoint*>& front) {
+  valid.clear();
+  front.clear();
+  for (const SweepPoint* p : curve)
+    if (usable(*p, p->*err)) valid.push_back(p);
+  for (const SweepPoint* p : valid) {
+    bool dominated = false;
+    for (const SweepPoint* q : valid)
+      if (q != p && q->msMedian <= p->msMedian && q->*err <= p->*err &&
+          (q->msMedian < p->msMedian || q->*err < p->*err))
+        dominated = true;
+    if (!dominated) front.push_back(p);
+  }
+  std::sort(front.begin(), front.end(),
+            [](const SweepPoint* a, const SweepPoint* b) { return a->msMedian < b->msMedian; });
+}
+
+/// The points of `curve` whose value on the other axis is that of the curve's last planned point
+/// (the costliest effort, or the finest resolution).
+std::vector<const SweepPoint*> alongAxis(const std::vector<const SweepPoint*>& curve,
+                                         bool resolution) {
+  if (curve.empty()) return {};
+  const nlohmann::json& other = resolution ? curve.back()->effort : curve.back()->resolution;
+  std::vector<const SweepPoint*> line;
+  for (const SweepPoint* p : curve)
+    if ((resolution ? p->effort : p->resolution) == other) line.push_back(p);
+  return line;
+}
+
+/// The floor of one curve (SweepFloor) on error `err`. The most accurate valid point is looked at
+/// along each axis: where a costlier value of the axis exists, it bought no accuracy; where the
+/// point is at the axis' costliest value, the axis' last step tells whether the error still falls.
+SweepFloor curveFloor(const std::vector<const SweepPoint*>& curve, double SweepPoint::*err) {
+  SweepFloor f;
+  std::vector<const SweepPoint*> valid, front;
+  validAndFront(curve, err, valid, front);
+  if (valid.size() < 2) {
+    f.text = valid.empty() ? "no valid point" : "one valid point: no floor can be told";
+    return f;
+  }
+  f.known = true;
+  const SweepPoint& best = *front.back();
+  f.ms = best.msMedian;
+  std::string fallingAxis, flatWhy;  // flatWhy: why the error stopped falling
+  std::vector<const SweepPoint*> fallingLine;
+  for (const bool resolution : {true, false}) {
+    const std::string& param = resolution ? best.resolutionParam : best.effortParam;
+    if (param.empty()) continue;
+    // The axis' line through the best point, in the order of increasing cost.
+    std::vector<const SweepPoint*> line;
+    for (const SweepPoint* p : curve)
+      if ((resolution ? p->effort : p->resolution) == (resolution ? best.effort : best.resolution))
+        line.push_back(p);
+    const auto at = std::find(line.begin(), line.end(), &best);
+    if (at == line.end()) continue;
+    if (at + 1 != line.end()) {  // a costlier value exists and is no more accurate
+      flatWhy = "more " + param + " than " + valueText(resolution ? best.resolution : best.effort) +
+                " buys no accuracy";
+      continue;
+    }
+    const SweepPoint* prev = at == line.begin() ? nullptr : *(at - 1);
+    if (!prev || !usable(*prev, prev->*err) || !(prev->*err > 0) || !(best.*err > 0) ||
+        !(prev->msMedian > 0) || prev->msMedian == best.msMedian)
+      continue;
+    const double slope =
+        std::log(best.*err / prev->*err) / std::log(best.msMedian / prev->msMedian);
+    if (!(slope >= f.lastSlope)) f.lastSlope = slope;  // the steepest (NaN at first)
+    if (slope < SweepFloor::kFloorSlope) {
+      fallingAxis = param;
+      fallingLine.assign(line.begin(), line.end());
+    } else if (flatWhy.empty()) {
+      flatWhy = "the last step along " + param + " has slope " + fixed(slope, 2);
+    }
+  }
+  f.reached = fallingAxis.empty();
+  if (f.reached) {
+    f.errorM = best.*err;
+    f.text = "floor " + mm(f.errorM) + " at " + fixed(best.msMedian, 3) +
+             " ms (the model's error): " +
+             (flatWhy.empty() ? "its most accurate point is alone on its axes" : flatWhy);
+    return f;
+  }
+  // Still falling: Aitken's delta-squared over the last three errors along that axis.
+  const size_t n = fallingLine.size();
+  if (n >= 3 && usable(*fallingLine[n - 3], fallingLine[n - 3]->*err)) {
+    const double e1 = fallingLine[n - 3]->*err, e2 = fallingLine[n - 2]->*err, e3 = best.*err;
+    const double d1 = e2 - e1, d2 = e3 - e2;
+    if (d1 < 0 && d2 < 0 && d2 > d1) f.estimateM = std::max(0.0, e3 - d2 * d2 / (d2 - d1));
+  }
+  f.text = "still falling along " + fallingAxis + " (slope " + fixed(f.lastSlope, 2) + " at " +
+           fixed(best.msMedian, 3) + " ms, best " + mm(best.*err) + ")" +
+           (std::isfinite(f.estimateM) ? "; floor estimated at " + mm(f.estimateM)
+                                       : "; no floor in reach of the sweep");
+  return f;
+}
+
+SweepMetricSummary metricSummary(const std::vector<const SweepPoint*>& curve,
+                                 const SweepModelSummary& m, double SweepPoint::*err) {
+  SweepMetricSummary s;
+  if (!m.resolutionParam.empty()) s.slopeResolution = logSlope(alongAxis(curve, true), err);
+  if (!m.effortParam.empty()) s.slopeEffort = logSlope(alongAxis(curve, false), err);
+  std::vector<const SweepPoint*> valid, front;
+  validAndFront(curve, err, valid, front);
+  s.slopeFront = logSlope(front, err);
+  s.floor = curveFloor(curve, err);
+  return s;
+}
+
+}  // namespace
+
+std::vector<SweepModelSummary> summariseSweep(const std::vector<SweepPoint>& points) {
+  std::vector<SweepModelSummary> out;
+  std::vector<std::vector<const SweepPoint*>> curves;
+  for (const SweepPoint& p : points) {
+    size_t i = 0;
+    while (i < out.size() && !(out[i].model == p.model && out[i].plugin == p.plugin &&
+                               out[i].calibrated == p.calibrated))
+      ++i;
+    if (i == out.size()) {
+      SweepModelSummary m;
+      m.model = p.model;
+      m.plugin = p.plugin;
+      m.calibrated = p.calibrated;
+      m.resolutionParam = p.resolutionParam;
+      m.effortParam = p.effortParam;
+      out.push_back(m);
+      curves.emplace_back();
+    }
+    curves[i].push_back(&p);
+    ++out[i].points;
+    if (usable(p, p.rmseNearest) || usable(p, p.rmseAll)) ++out[i].validPoints;
+  }
+  for (size_t i = 0; i < out.size(); ++i) {
+    out[i].rmse50 = metricSummary(curves[i], out[i], &SweepPoint::rmseNearest);
+    out[i].rmseAll = metricSummary(curves[i], out[i], &SweepPoint::rmseAll);
+  }
+  return out;
+}
+
+namespace {
+
 ojson num(double v) {
   return std::isfinite(v) ? ojson(v) : ojson(nullptr);
 }
 
-/// A point of the sweep: a model at one value of its knob (at its calibration for "+cal").
+/// A point of the sweep: a model at one value of each axis (at its calibration for "+cal").
 struct Planned {
-  std::string model, plugin, label, param;
-  json value;
+  std::string model, plugin, label;
+  std::string resolutionParam, effortParam;
+  json resolution, effort;
   const CalibrationParams* calibration = nullptr;  ///< the "+cal" points'
 };
 
-/// The scene's models, each once per value of its knob (and once more per value at its
+/// The scene's models, each once per point of its axes' grid (and once more per point at its
 /// calibration): the scene's new "models" and the planned points, in the same order.
 ojson plannedModels(ojson& scene, PluginLoader& loader, const SweepOptions& options,
                     std::vector<Planned>& planned) {
@@ -70,38 +271,44 @@ ojson plannedModels(ojson& scene, PluginLoader& loader, const SweepOptions& opti
   for (const auto& m : scene["models"]) {
     const std::string plugin = m.value("plugin", "");
     const std::string modelName = m.value("model", plugin);
-    // The knob the plugin declares; none when it does not load (the run then reports why).
-    SweepKnob knob;
+    // The axes the plugin declares; none when it does not load (the run then reports why).
+    SweepAxes axes;
     try {
-      knob = sweepKnob(loader.load(plugin, m.value("model", "")), options.quick);
+      axes = sweepAxes(loader.load(plugin, m.value("model", "")), options.quick);
     } catch (const std::exception&) {
     }
-    std::vector<json> values = knob.values;
-    if (values.empty()) values.push_back(nullptr);
+    std::vector<json> resolutions = axes.resolution.values, efforts = axes.effort.values;
+    if (resolutions.empty()) resolutions.push_back(nullptr);
+    if (efforts.empty()) efforts.push_back(nullptr);
     // With a calibration of this model (--calibration), every point once more at the
     // calibrated parameters (the scene's own values still win): a second curve, "+cal".
     const CalibrationParams* calibration =
         calibrationFor(options.calibrations, plugin, modelName, organ, false);
     for (const bool calibrated : {false, true}) {
       if (calibrated && !calibration) continue;
-      for (const json& v : values) {
-        ojson copy = m;
-        if (!copy.contains("params")) copy["params"] = ojson::object();
-        if (calibrated) {
-          ojson params = ojson::parse(calibration->params.dump());
-          for (const auto& [k, pv] : copy["params"].items()) params[k] = pv;
-          copy["params"] = params;
+      for (const json& r : resolutions) {
+        for (const json& e : efforts) {
+          ojson copy = m;
+          if (!copy.contains("params")) copy["params"] = ojson::object();
+          if (calibrated) {
+            ojson params = ojson::parse(calibration->params.dump());
+            for (const auto& [k, pv] : copy["params"].items()) params[k] = pv;
+            copy["params"] = params;
+          }
+          std::string values;
+          for (const auto& [param, v] :
+               {std::pair{axes.resolution.param, r}, std::pair{axes.effort.param, e}}) {
+            if (param.empty()) continue;
+            copy["params"][param] = ojson::parse(v.dump());
+            values += (values.empty() ? "" : ",") + param + "=" + valueText(v);
+          }
+          const std::string label =
+              modelName + (values.empty() ? "" : "[" + values + "]") + (calibrated ? "+cal" : "");
+          copy["label"] = label;
+          models.push_back(copy);
+          planned.push_back({modelName, plugin, label, axes.resolution.param, axes.effort.param, r,
+                             e, calibrated ? calibration : nullptr});
         }
-        std::string label = modelName;
-        if (!knob.param.empty()) {
-          copy["params"][knob.param] = ojson::parse(v.dump());
-          label += "[" + knob.param + "=" + valueText(v) + "]";
-        }
-        if (calibrated) label += "+cal";
-        copy["label"] = label;
-        models.push_back(copy);
-        planned.push_back(
-            {modelName, plugin, label, knob.param, v, calibrated ? calibration : nullptr});
       }
     }
   }
@@ -113,7 +320,8 @@ void fillPoint(SweepPoint& s, const Planned& planned, const CaseResult& c) {
   const RunRecord* r = c.run(s.label);
   // A calibrated point whose other parameters differ from those of the fit (the knob apart).
   const CalibrationParams* calibration = planned.calibration;
-  if (r && calibration) s.note = calibrationDifferenceNote(*calibration, r->params, s.param);
+  if (r && calibration)
+    s.note = calibrationDifferenceNote(*calibration, r->params, {s.resolutionParam, s.effortParam});
   if (c.missing.count(s.plugin)) {
     s.status = "missing plugin: " + c.missing.at(s.plugin);
   } else if (!r) {
@@ -145,6 +353,15 @@ std::string referenceStatus(const CaseResult& c, const Scene& parsed) {
   return c.missing.count(parsed.reference->plugin) ? "missing" : "not run";
 }
 
+/// What the "nearest" vertices of rmse_50 are nearest to in this scene, for the plots' labels.
+std::string interactionName(const Scene& scene) {
+  for (const ToolSpec& t : scene.tools)
+    if (t.type == ToolType::Grasper) return "grasp";
+  if (!scene.tools.empty()) return "tool";
+  if (!scene.plates.empty()) return "plate";
+  return "load";
+}
+
 /// sweep.json and sweep.csv.
 void writeSweepFiles(const std::vector<SweepPoint>& points,
                      const std::vector<std::string>& pointResults, const std::string& sceneFile,
@@ -157,11 +374,17 @@ void writeSweepFiles(const std::vector<SweepPoint>& points,
   doc["reference_status"] = refStatus;
   doc["quick"] = options.quick;
   doc["haptic_budget_ms"] = 1.0;
+  doc["nearest_to"] = interactionName(parsed);
   doc["results"] = results;
   doc["points"] = ojson::array();
   std::ostringstream csv;
   csv << "model,plugin,label,param,value,status,ms_median,ms_p95,rmse_50_m,rmse_all_m,max_m,"
-         "loss_ratio,pareto\n";
+         "loss_ratio,pareto,calibrated,resolution_param,resolution,effort_param,effort,"
+         "pareto_overall\n";
+  const auto axis = [](const std::string& param, const json& v) {
+    return param.empty() ? ojson(nullptr)
+                         : ojson{{"param", param}, {"value", ojson::parse(v.dump())}};
+  };
   for (size_t i = 0; i < points.size(); ++i) {
     const SweepPoint& p = points[i];
     doc["points"].push_back({{"model", p.model},
@@ -169,6 +392,8 @@ void writeSweepFiles(const std::vector<SweepPoint>& points,
                              {"label", p.label},
                              {"param", p.param},
                              {"value", ojson::parse(p.value.dump())},
+                             {"resolution", axis(p.resolutionParam, p.resolution)},
+                             {"effort", axis(p.effortParam, p.effort)},
                              {"status", p.status},
                              {"ms_median", num(p.msMedian)},
                              {"ms_p95", num(p.msP95)},
@@ -179,6 +404,7 @@ void writeSweepFiles(const std::vector<SweepPoint>& points,
                              {"valid", p.valid},
                              {"invalid_reason", p.invalidReason},
                              {"pareto", p.pareto},
+                             {"pareto_overall", p.paretoOverall},
                              {"calibrated", p.calibrated},
                              {"note", p.note},
                              {"results", pointResults[i]}});
@@ -189,11 +415,40 @@ void writeSweepFiles(const std::vector<SweepPoint>& points,
       s << v;
       return s.str();
     };
-    std::string value = p.value.is_null() ? "" : valueText(p.value);
-    csv << p.model << ',' << p.plugin << ",\"" << p.label << "\"," << p.param << ',' << value
-        << ",\"" << p.status << "\"," << f(p.msMedian) << ',' << f(p.msP95) << ','
+    const auto text = [](const json& v) { return v.is_null() ? "" : valueText(v); };
+    const auto yes = [](bool b) { return b ? "yes" : "no"; };
+    csv << p.model << ',' << p.plugin << ",\"" << p.label << "\"," << p.param << ','
+        << text(p.value) << ",\"" << p.status << "\"," << f(p.msMedian) << ',' << f(p.msP95) << ','
         << f(p.rmseNearest) << ',' << f(p.rmseAll) << ',' << f(p.max) << ',' << f(p.lossRatio)
-        << ',' << (p.pareto ? "yes" : "no") << '\n';
+        << ',' << yes(p.pareto) << ',' << yes(p.calibrated) << ',' << p.resolutionParam << ','
+        << text(p.resolution) << ',' << p.effortParam << ',' << text(p.effort) << ','
+        << yes(p.paretoOverall) << '\n';
+  }
+  doc["models"] = ojson::array();
+  for (const SweepModelSummary& m : summariseSweep(points)) {
+    const auto metric = [](const SweepMetricSummary& s) {
+      const SweepFloor& f = s.floor;
+      return ojson{{"slope_resolution", num(s.slopeResolution)},
+                   {"slope_effort", num(s.slopeEffort)},
+                   {"slope_front", num(s.slopeFront)},
+                   {"floor",
+                    {{"known", f.known},
+                     {"reached", f.reached},
+                     {"error_m", num(f.errorM)},
+                     {"at_ms", num(f.ms)},
+                     {"estimate_m", num(f.estimateM)},
+                     {"last_slope", num(f.lastSlope)},
+                     {"text", f.text}}}};
+    };
+    doc["models"].push_back({{"model", m.model},
+                             {"plugin", m.plugin},
+                             {"calibrated", m.calibrated},
+                             {"resolution_param", m.resolutionParam},
+                             {"effort_param", m.effortParam},
+                             {"points", m.points},
+                             {"valid_points", m.validPoints},
+                             {"rmse_50", metric(m.rmse50)},
+                             {"rmse_all", metric(m.rmseAll)}});
   }
   writeFileAtomic(options.outDir / "sweep.json", doc.dump(2) + "\n");
   writeFileAtomic(options.outDir / "sweep.csv", csv.str());
@@ -228,8 +483,12 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
     s.model = p.model;
     s.plugin = p.plugin;
     s.label = p.label;
-    s.param = p.param;
-    s.value = p.value;
+    s.resolutionParam = p.resolutionParam;
+    s.effortParam = p.effortParam;
+    s.resolution = p.resolution;
+    s.effort = p.effort;
+    s.param = p.resolutionParam.empty() ? p.effortParam : p.resolutionParam;
+    s.value = p.resolutionParam.empty() ? p.effort : p.resolution;
     s.calibrated = p.calibration != nullptr;
     points.push_back(s);
   }

@@ -75,5 +75,7 @@ DEFORM_PLUGIN(registry) {
   // take 22 ms; its tip sag after 1 s is 1.08 mm, 1.12 mm with 300 (beam theory 1.49 mm).
   info.presets["stability_quick"] = {{{"tets", 1500LL}, {"krylov_iterations", 30LL}}};
   info.presets["stability"] = {{{"tets", 1500LL}, {"krylov_iterations", 30LL}}};
+  info.resolution = {"tets", {1000LL, 3000LL, 6000LL, 12000LL}, {1000LL, 3000LL, 6000LL}};
+  info.effort = {"newton_iterations", {1LL, 2LL, 4LL}, {1LL, 4LL}};
   registry.add(std::move(info));
 }

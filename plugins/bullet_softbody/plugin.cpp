@@ -67,5 +67,6 @@ DEFORM_PLUGIN(registry) {
   info.capabilities = {C::Grasp, C::PointForce, C::Gravity, C::Contact, C::ContactReaction};
   info.params = deform::bullet_softbody::paramSpecs();
   info.create = [] { return std::make_unique<deform::bullet_softbody::BulletSoftBodyModel>(); };
+  info.effort = {"iterations", {2LL, 5LL, 10LL, 20LL, 40LL}, {5LL, 20LL}};
   registry.add(std::move(info));
 }

@@ -115,7 +115,8 @@ DEFORM_PLUGIN(registry) {
   info.params = deform::fem_hex::paramSpecs();
   info.create = [] { return std::make_unique<deform::fem_hex::HexFemModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).
-  info.knob = {"elements", {100LL, 300LL, 967LL, 2500LL}, {100LL, 500LL}};
+  info.resolution = {"elements", {100LL, 300LL, 967LL, 2500LL, 6000LL}, {300LL, 967LL, 2500LL}};
+  info.effort = {"pcg_tolerance", {1e-1, 1e-2, 1e-3, 1e-5}, {1e-2, 1e-4}};
   info.presets["bench"] = {{}};
   info.presets["bench_8k"] = {{}};
   info.presets["stability_quick"] = {{{"elements", 300LL}}};

@@ -80,7 +80,9 @@ DEFORM_PLUGIN(registry) {
   info.params = deform::hybrid_fem_pbd::paramSpecs();
   info.create = [] { return std::make_unique<deform::hybrid_fem_pbd::HybridModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).
-  info.knob = {"iterations", {2LL, 5LL, 10LL, 20LL, 40LL}, {2LL, 10LL, 40LL}};
+  // The coarse FEM's resolution: fewer vertex-cover passes leave a finer coarse surface.
+  info.resolution = {"simplification_levels", {4LL, 3LL, 2LL, 1LL}, {3LL, 2LL, 1LL}};
+  info.effort = {"iterations", {2LL, 5LL, 10LL, 20LL, 40LL}, {5LL, 20LL}};
   info.presets["bench"] = {{}};
   info.presets["bench_8k"] = {{}};
   registry.add(std::move(info));

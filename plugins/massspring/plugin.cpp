@@ -103,10 +103,9 @@ DEFORM_PLUGIN(registry) {
   info.params = deform::massspring::paramSpecs();
   info.create = [] { return std::make_unique<deform::massspring::MassSpringModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).
-  info.knob = {"integrator",
-               {std::string("explicit_euler"), std::string("symplectic_euler"),
-                std::string("implicit_euler")},
-               {std::string("symplectic_euler"), std::string("implicit_euler")}};
+  // On the organ's surface mesh (no resolution of its own); substeps 0 is the automatic
+  // (stable) count, and fixed counts below it are swept too (they diverge, flagged invalid).
+  info.effort = {"substeps", {0LL, 5LL, 10LL, 20LL, 50LL}, {0LL, 20LL, 50LL}};
   info.presets["bench"] = {{{"integrator", std::string("implicit_euler")}}};
   info.presets["bench_8k"] = {{},
                               {{"integrator", std::string("local_global")}},

@@ -74,7 +74,8 @@ DEFORM_PLUGIN(registry) {
   info.params = deform::metaballs::metaballsParams();
   info.create = [] { return std::make_unique<deform::metaballs::MetaballsModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).
-  info.knob = {"spheres", {100LL, 250LL, 500LL, 900LL}, {100LL, 300LL}};
+  info.resolution = {"spheres", {100LL, 250LL, 500LL, 900LL, 1600LL}, {100LL, 300LL, 900LL}};
+  info.effort = {"iterations", {2LL, 5LL, 10LL, 20LL, 40LL}, {5LL, 20LL}};
   info.presets["bench"] = {{{"spheres", 300LL}}};
   info.presets["stability_quick"] = {{{"spheres", 150LL}}};
   registry.add(std::move(info));

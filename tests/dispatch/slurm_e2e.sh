@@ -120,7 +120,7 @@ points() {
 s = json.load(open(sys.argv[1]))
 print(s["reference_status"])
 for p in s["points"]:
-    print({k: v for k, v in p.items() if k not in ("ms_median", "ms_p95", "pareto", "results")})' "$1"
+    print({k: v for k, v in p.items() if k not in ("ms_median", "ms_p95", "pareto", "pareto_overall", "results")})' "$1"
 }
 diff <(points "$work/sweep_serial/sweep.json") <(points "$work/sweep_cluster/sweep.json")
 echo "slurm_e2e: the sweep through Slurm (two arrays) equals the serial one"

@@ -31,7 +31,7 @@ import json, sys
 s = json.load(open(sys.argv[1]))
 print("reference", s["reference_status"])
 for p in s["points"]:
-    print({k: v for k, v in p.items() if k not in ("ms_median", "ms_p95", "pareto", "results")})
+    print({k: v for k, v in p.items() if k not in ("ms_median", "ms_p95", "pareto", "pareto_overall", "results")})
 PY
 }
 # The convergence study without the levels' wall times and the cached flag.

@@ -1131,9 +1131,10 @@ TEST(Progress, PlainLinesWhenNotATerminal) {
 
 // ---------------------------------------------------------------------------------- sweep
 
-TEST(Sweep, ParetoFrontAndKnobs) {
-  std::vector<SweepPoint> pts(4);
-  pts[0].status = pts[1].status = pts[2].status = "ok";
+TEST(Sweep, ParetoFrontsPerModelAndOverallAndTheAxes) {
+  std::vector<SweepPoint> pts(5);
+  for (SweepPoint& p : pts) p.model = p.plugin = "a";
+  pts[0].status = pts[1].status = pts[2].status = pts[4].status = "ok";
   pts[3].status = "diverged";
   pts[0].msMedian = 1;
   pts[0].rmseNearest = 3;
@@ -1143,18 +1144,82 @@ TEST(Sweep, ParetoFrontAndKnobs) {
   pts[2].rmseNearest = 2;  // slower and worse than pts[1]
   pts[3].msMedian = 0.1;
   pts[3].rmseNearest = 0.1;  // diverged: not a candidate
+  pts[4].model = pts[4].plugin = "b";
+  pts[4].msMedian = 5;
+  pts[4].rmseNearest = 2.5;  // dominated overall by pts[1], alone (so on the front) in model b
   markPareto(pts);
-  EXPECT_TRUE(pts[0].pareto);
-  EXPECT_TRUE(pts[1].pareto);
-  EXPECT_FALSE(pts[2].pareto);
-  EXPECT_FALSE(pts[3].pareto);
-  // The knob is the one the model declares (ModelInfo::knob), values as JSON of their type.
+  EXPECT_TRUE(pts[0].pareto && pts[0].paretoOverall);
+  EXPECT_TRUE(pts[1].pareto && pts[1].paretoOverall);
+  EXPECT_FALSE(pts[2].pareto || pts[2].paretoOverall);
+  EXPECT_FALSE(pts[3].pareto || pts[3].paretoOverall);
+  EXPECT_TRUE(pts[4].pareto);
+  EXPECT_FALSE(pts[4].paretoOverall);
+  // The axes are the ones the model declares, values as JSON of their type; an older plugin's
+  // single knob becomes the effort axis.
   ModelInfo info;
   info.knob = {"integrator", {std::string("explicit_euler"), 2LL}, {0.5}};
-  EXPECT_EQ(sweepKnob(info, false).param, "integrator");
   EXPECT_EQ(sweepKnob(info, false).values, (std::vector<nlohmann::json>{"explicit_euler", 2}));
   EXPECT_TRUE(sweepKnob(info, true).values.at(0).is_number_float());
+  EXPECT_EQ(sweepAxes(info, false).effort.param, "integrator");
+  EXPECT_TRUE(sweepAxes(info, false).resolution.param.empty());
+  info.resolution = {"elements", {100LL, 300LL, 900LL}, {100LL}};
+  info.effort = {"iterations", {5LL, 20LL}, {5LL}};
+  EXPECT_EQ(sweepAxes(info, false).resolution.values.size(), 3u);
+  EXPECT_EQ(sweepAxes(info, true).effort.param, "iterations");
   EXPECT_TRUE(sweepKnob(ModelInfo{}, false).param.empty());
+}
+
+namespace {
+
+/// A model's grid: error = floor + c / (resolution * effort), time = resolution * effort.
+std::vector<SweepPoint> gridPoints(double floor, bool withEffort) {
+  std::vector<SweepPoint> pts;
+  for (const double r : {1.0, 2.0, 4.0, 8.0})
+    for (const double e : withEffort ? std::vector<double>{1.0, 4.0} : std::vector<double>{1.0}) {
+      SweepPoint p;
+      p.model = p.plugin = "m";
+      p.status = "ok";
+      p.resolutionParam = "elements";
+      p.resolution = r;
+      if (withEffort) {
+        p.effortParam = "iterations";
+        p.effort = e;
+      }
+      p.msMedian = r * e;
+      p.rmseNearest = p.rmseAll = floor + 1e-3 / (r * r);
+      pts.push_back(p);
+    }
+  return pts;
+}
+
+}  // namespace
+
+// Issue H4 items 1 and 3: slopes along each axis, and the floor where the error stops falling.
+TEST(Sweep, SlopesAlongTheAxesAndTheFloor) {
+  // No floor: the error halves twice per doubling of resolution (slope -2 in time), effort buys
+  // nothing (slope 0 along it), and the error is still falling at the finest point.
+  std::vector<SweepModelSummary> s = summariseSweep(gridPoints(0, true));
+  ASSERT_EQ(s.size(), 1u);
+  EXPECT_NEAR(s[0].rmse50.slopeResolution, -2, 1e-9);
+  EXPECT_NEAR(s[0].rmse50.slopeEffort, 0, 1e-9);
+  EXPECT_TRUE(s[0].rmse50.floor.known);
+  EXPECT_FALSE(s[0].rmse50.floor.reached) << s[0].rmse50.floor.text;
+  // Aitken over the front's last three errors (1/4, 1/16, 1/64 mm) extrapolates to 0.
+  EXPECT_NEAR(s[0].rmse50.floor.estimateM, 0, 1e-12);
+  EXPECT_NE(s[0].rmse50.floor.text.find("still falling along elements"), std::string::npos)
+      << s[0].rmse50.floor.text;
+  // A floor of 2 mm far above the discretisation error: reached, stated in mm.
+  s = summariseSweep(gridPoints(2e-3, false));
+  EXPECT_TRUE(s[0].rmse50.floor.reached) << s[0].rmse50.floor.text;
+  EXPECT_NEAR(s[0].rmse50.floor.errorM, 2e-3 + 1e-3 / 64, 1e-12);
+  EXPECT_NE(s[0].rmse50.floor.text.find("floor 2.02 mm"), std::string::npos)
+      << s[0].rmse50.floor.text;
+  // One valid point: no floor can be told.
+  std::vector<SweepPoint> one = gridPoints(0, false);
+  for (size_t i = 1; i < one.size(); ++i) one[i].valid = false;
+  s = summariseSweep(one);
+  EXPECT_FALSE(s[0].rmse50.floor.known);
+  EXPECT_EQ(s[0].validPoints, 1);
 }
 
 // Issue 33 item 7 and issue 35 item 16: a row whose errors are against an invalid reference says

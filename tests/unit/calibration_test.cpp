@@ -221,9 +221,9 @@ TEST(Calibration, HeldParametersNameWhatARunChanged) {
   EXPECT_EQ(calibrationDifferences(c, other),
             (std::vector<std::string>{"iterations = 40 (fitted with 10)",
                                       "network = \"volume\" (fitted with \"surface\")"}));
-  EXPECT_EQ(calibrationDifferences(c, other, "iterations").size(), 1u);
+  EXPECT_EQ(calibrationDifferences(c, other, {"iterations"}).size(), 1u);
   EXPECT_EQ(
-      calibrationDifferenceNote(c, other, "iterations"),
+      calibrationDifferenceNote(c, other, {"iterations"}),
       "calibration " + file +
           " was fitted with other parameters: network = \"volume\" (fitted with \"surface\")");
 

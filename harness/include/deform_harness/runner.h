@@ -101,14 +101,14 @@ struct CalibrationParams {
 
 /// The parameters in which a run of c's model (its resolved params, as in results.json) differs
 /// from what c was fitted with (c.held), one text each: `network = "volume" (fitted with
-/// "surface")`. `except`: a parameter not to compare (a sweep's knob).
+/// "surface")`. `except`: parameters not to compare (a sweep's axes; "" entries are ignored).
 std::vector<std::string> calibrationDifferences(const CalibrationParams& c,
                                                 const nlohmann::json& resolved,
-                                                const std::string& except = "");
+                                                const std::vector<std::string>& except = {});
 /// The note a run gets when calibrationDifferences() is not empty ("" when it is): `calibration
 /// FILE was fitted with other parameters: network = "volume" (fitted with "surface")`.
 std::string calibrationDifferenceNote(const CalibrationParams& c, const nlohmann::json& resolved,
-                                      const std::string& except = "");
+                                      const std::vector<std::string>& except = {});
 
 /// The organ a calibration is fitted on, as written in calibration.json "organs": the mesh
 /// ("phantom:NAME" or the file's absolute path) with its resolution (phantoms) or scale (files),

@@ -1,4 +1,4 @@
-// deformbench sweep: error against run time, each model over its accuracy knob.
+// deformbench sweep: error against run time, each model over its two cost axes.
 #include "cli.h"
 
 #include <deform/engine/plugin_loader.h>
@@ -6,6 +6,7 @@
 #include <deform_harness/sweep.h>
 
 #include <algorithm>
+#include <cmath>
 #include <iomanip>
 #include <iostream>
 #include <set>
@@ -30,7 +31,8 @@ int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
 Verb addSweep(CLI::App& app) {
   auto args = std::make_shared<SweepArgs>();
   CLI::App* sweep = app.add_subcommand(
-      "sweep", "error against run time: each model over its accuracy knob, with a plot");
+      "sweep",
+      "error against run time: each model over its resolution and solver effort, with a plot");
   sweep->add_option("scene", args->scene, "scene file with a reference")->required();
   sweep->add_option("--out", args->common.out, "output folder")->required();
   sweep->add_flag("--no-plot", args->noPlot, "write the data only");
@@ -76,10 +78,22 @@ int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
             << "rmse_all mm"
             << "pareto\n";
   for (const SweepPoint& p : points) {
+    const std::string status = p.status == "ok" && !p.valid ? "invalid" : p.status;
     std::cout << std::left << std::setw(int(w)) << p.label << std::setw(12)
-              << (p.status.size() > 11 ? p.status.substr(0, 11) : p.status) << std::setw(10)
+              << (status.size() > 11 ? status.substr(0, 11) : status) << std::setw(10)
               << fmt(p.msMedian) << std::setw(14) << fmt(1e3 * p.rmseNearest) << std::setw(14)
               << fmt(1e3 * p.rmseAll) << (p.pareto ? "*" : "") << "\n";
+  }
+  // Each model's curve: its slopes along the axes and where its error stops falling.
+  std::cout << "\nper model (rmse_50; slopes are d ln(error) / d ln(ms per step)):\n";
+  for (const SweepModelSummary& m : summariseSweep(points)) {
+    std::cout << "  " << m.model << (m.calibrated ? " calibrated" : "") << ": ";
+    const auto slope = [](const std::string& param, double v) {
+      return param.empty() || !std::isfinite(v) ? std::string()
+                                                : "slope along " + param + " " + fmt(v) + "; ";
+    };
+    std::cout << slope(m.resolutionParam, m.rmse50.slopeResolution)
+              << slope(m.effortParam, m.rmse50.slopeEffort) << m.rmse50.floor.text << "\n";
   }
   std::set<std::string> notes;  // the calibrated points' (the same for most of them)
   for (const SweepPoint& p : points)

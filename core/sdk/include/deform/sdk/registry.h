@@ -40,7 +40,9 @@
 // gains RollerSupport (issue 33): plugin sources compile unchanged, binaries must be rebuilt.
 // 7: Model gains bindMarkers() and markers() (interior markers, issue 34) and Capability gains
 // Markers: the vtable changed, binaries must be rebuilt; plugin sources compile unchanged.
-#define DEFORM_ABI_VERSION 7
+// 8: ModelInfo gains `resolution` and `effort`, the two cost axes of `deformbench sweep` (issue
+// H4), appended after `measures`: plugin sources compile unchanged, binaries must be rebuilt.
+#define DEFORM_ABI_VERSION 8
 
 namespace deform {
 
@@ -82,8 +84,8 @@ struct ModelInfo {
   std::vector<ParamSpec> params;
   std::function<std::unique_ptr<Model>()> create;
 
-  /// The parameter that trades accuracy for run time, and the values `deformbench sweep` runs
-  /// (quickValues with --quick). An empty param: the model has none and runs once.
+  /// A parameter that trades accuracy for run time, and the values `deformbench sweep` runs
+  /// (quickValues with --quick), in the order of increasing cost. An empty param: none.
   struct Knob {
     std::string param;
     std::vector<ParamValue> values, quickValues;
@@ -103,6 +105,12 @@ struct ModelInfo {
   /// numerics, without a scene), by name: request and reply are JSON documents the measure
   /// documents; bad requests throw InputError. Example: particle_bem's "static_accuracy".
   std::map<std::string, std::function<nlohmann::json(const nlohmann::json& request)>> measures;
+  /// The two cost axes of `deformbench sweep`, which runs their grid (each resolution value with
+  /// each effort value): `resolution`, the parameter that sets the model's discretisation (tets,
+  /// hexahedra, spheres, coarse vertices; none for a model on the organ's own surface mesh), and
+  /// `effort`, its solver's work per step (iterations, substeps, a tolerance). A model that
+  /// declares neither is swept over `knob` (the single axis of plugins older than ABI 8).
+  Knob resolution, effort;
 
   bool has(Capability c) const;
   const ParamSpec* param(const std::string& key) const;
