@@ -30,6 +30,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from deform_plot_common import model_colour, nearest_label  # noqa: E402
 
 try:
     import matplotlib
@@ -426,7 +427,10 @@ def run_point_text(r, ms, err, err_name):
 
 def svg_scatter(points, xlabel, ylabel, budget_ms=None):
     """An error-against-time plot as inline SVG, log axes where the data span a decade.
-    points: dicts x, y (> 0), series, text (the hover text), href (or None), ring (bool)."""
+    points: dicts x, y (> 0), series, text (the hover text), href (or None), ring (bool), and
+    optionally model and plugin (the colour: one per model, deform_plot_common.model_colour),
+    calibrated (a diamond; its series' front dashed) and front (on its series' Pareto front:
+    joined by a line in the series' colour)."""
     pts = [p for p in points if p["x"] and p["y"] and p["x"] > 0 and p["y"] > 0]
     if not pts:
         return ""
@@ -435,8 +439,12 @@ def svg_scatter(points, xlabel, ylabel, budget_ms=None):
     for p in pts:
         if p["series"] not in series:
             series.append(p["series"])
-    palette = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
-               "#7f7f7f", "#bcbd22", "#17becf"]
+    first = {}
+    for p in pts:
+        first.setdefault(p["series"], p)
+
+    def colour(p):
+        return model_colour(p.get("model", p["series"]), p.get("plugin"))
 
     def axis(vals, extra=()):
         lo, hi = min(list(vals) + list(extra)), max(list(vals) + list(extra))
@@ -475,19 +483,37 @@ def svg_scatter(points, xlabel, ylabel, budget_ms=None):
     if budget_ms:
         o.append('<line x1="%.1f" x2="%.1f" y1="%d" y2="%d" stroke="red" stroke-dasharray="3,3"/>'
                  % (X(budget_ms), X(budget_ms), T, H - B))
+    for name in series:  # each series' own front, a line through its points by time
+        front = sorted([p for p in pts if p["series"] == name and p.get("front")],
+                       key=lambda p: p["x"])
+        if len(front) > 1:
+            o.append('<polyline fill="none" stroke="%s" stroke-width="1.5"%s points="%s"/>'
+                     % (colour(front[0]), ' stroke-dasharray="5,3"'
+                        if front[0].get("calibrated") else "",
+                        " ".join("%.1f,%.1f" % (X(p["x"]), Y(p["y"])) for p in front)))
+
+    def marker(p, x, y, fill, stroke, width, extra=""):
+        if p.get("calibrated"):  # a diamond
+            return ('<path d="M%.1f %.1fl6 6l-6 6l-6 -6z" fill="%s" stroke="%s" '
+                    'stroke-width="%d"%s>' % (x, y - 6, fill, stroke, width, extra))
+        return ('<circle cx="%.1f" cy="%.1f" r="5" fill="%s" stroke="%s" stroke-width="%d"%s>'
+                % (x, y, fill, stroke, width, extra))
+
     for p in pts:
-        c = palette[series.index(p["series"]) % len(palette)]
-        dot = '<circle cx="%.1f" cy="%.1f" r="5" fill="%s" stroke="%s" stroke-width="%d"%s>' \
-              '<title>%s</title></circle>' % (X(p["x"]), Y(p["y"]), c if p.get("valid", True) else "white",
-                                              "black" if p.get("ring") else c,
-                                              2 if p.get("ring") else 1,
-                                              ' style="cursor:pointer"' if p.get("href") else "",
-                                              esc(p["text"]))
+        c = colour(p)
+        hollow = not p.get("valid", True) or p.get("calibrated")
+        dot = marker(p, X(p["x"]), Y(p["y"]), "white" if hollow else c,
+                     "black" if p.get("ring") else c, 2 if p.get("ring") else 1,
+                     ' style="cursor:pointer"' if p.get("href") else "")
+        dot += "<title>%s</title>%s" % (esc(p["text"]),
+                                        "</path>" if p.get("calibrated") else "</circle>")
         o.append('<a href="%s">%s</a>' % (esc(p["href"]), dot) if p.get("href") else dot)
     for i, name in enumerate(series):
-        o.append('<circle cx="%d" cy="%d" r="5" fill="%s"/><text x="%d" y="%d">%s</text>'
-                 % (W - R + 12, T + 12 + 16 * i, palette[i % len(palette)], W - R + 22,
-                    T + 16 + 16 * i, esc(name[:22])))
+        p = first[name]
+        o.append(marker(p, W - R + 12, T + 12 + 16 * i, "white" if p.get("calibrated")
+                        else colour(p), colour(p), 1) +
+                 ("</path>" if p.get("calibrated") else "</circle>") +
+                 '<text x="%d" y="%d">%s</text>' % (W - R + 22, T + 16 + 16 * i, esc(name[:22])))
     o.append("</svg>")
     return "".join(o)
 
@@ -535,7 +561,11 @@ def results_table(path, viewer_href=None):
         e, sm = r.get("error") or {}, r.get("step_ms") or {}
         if r.get("role") == "reference" or e.get("rmse_all") is None or not sm.get("median"):
             continue
-        pts.append({"x": sm["median"], "y": 1e3 * e["rmse_all"], "series": r.get("model", "?"),
+        calibrated = bool(r.get("calibration")) or r.get("label", "").endswith("+cal")
+        pts.append({"x": sm["median"], "y": 1e3 * e["rmse_all"],
+                    "series": r.get("model", "?") + (" calibrated" if calibrated else ""),
+                    "model": r.get("model", "?"), "plugin": r.get("plugin"),
+                    "calibrated": calibrated,
                     "text": run_point_text(r, sm["median"], e["rmse_all"], "rmse_all"),
                     "href": href_of(r),
                     "valid": run_valid(r) and r.get("reference_valid") is not False})
@@ -730,23 +760,58 @@ def run_report():
             link = (own or href) + run_hash(p["label"]) if (own or href) else None
             links.append(link)
             if p.get("status") == "ok" and p.get("ms_median") and p.get("rmse_50"):
-                run = {"label": p["label"], "model": p["model"],
-                       "params": {p["param"]: p["value"]} if p.get("param") else {}}
-                pts.append({"x": p["ms_median"], "y": 1e3 * p["rmse_50"], "series": p["model"],
+                params = {a["param"]: a["value"] for a in (p.get("resolution"), p.get("effort"))
+                          if a}
+                if not params and p.get("param"):
+                    params = {p["param"]: p["value"]}
+                run = {"label": p["label"], "model": p["model"], "params": params,
+                       "valid": p.get("valid", True), "invalid_reason": p.get("invalid_reason")}
+                cal = bool(p.get("calibrated"))
+                pts.append({"x": p["ms_median"], "y": 1e3 * p["rmse_50"],
+                            "series": p["model"] + (" calibrated" if cal else ""),
+                            "model": p["model"], "plugin": p.get("plugin"), "calibrated": cal,
+                            "valid": p.get("valid", True),
                             "text": run_point_text(run, p["ms_median"], p["rmse_50"], "rmse_50"),
-                            "href": link, "ring": bool(p.get("pareto"))})
-        plot = svg_scatter(pts, "ms per step (median)", "rmse_50 (mm)",
+                            "href": link, "ring": bool(p.get("pareto_overall")),
+                            "front": bool(p.get("pareto"))})
+        plot = svg_scatter(pts, "ms per step (median)",
+                           "rmse_50 (mm), %s" % nearest_label(sweep),
                            sweep.get("haptic_budget_ms"))
         if plot:
-            parts.insert(0, "<p>Hover a point for its run; click it to open the run's viewer "
-                         "(rings: the Pareto front; red line: the haptic budget). The PNG below "
-                         "is the static version.</p>" + plot)
+            parts.insert(0, "<p>Hover a point for its run; click it to open the run's viewer. "
+                         "One colour per model; lines: each model's Pareto front (dashed: "
+                         "calibrated, diamonds); black rings: the front over all models; hollow: "
+                         "invalid or calibrated; red line: the haptic budget. The PNG below is "
+                         "the static version.</p>" + plot)
+        summary = []
+        for m in sweep.get("models", []):
+            e50, eall = m.get("rmse_50") or {}, m.get("rmse_all") or {}
+            summary.append({
+                "model": m["model"] + (" calibrated" if m.get("calibrated") else ""),
+                "axes": " x ".join(a for a in (m.get("resolution_param"), m.get("effort_param"))
+                                   if a) or "-",
+                "points": "%s of %s" % (m.get("valid_points"), m.get("points")),
+                "slope_resolution": e50.get("slope_resolution"),
+                "slope_effort": e50.get("slope_effort"),
+                "floor_50": (e50.get("floor") or {}).get("text"),
+                "floor_all": (eall.get("floor") or {}).get("text")})
+        if summary:
+            parts.append("<p>Per model: slopes are d ln(rmse_50) / d ln(ms per step) along each "
+                         "axis (at the other axis' costliest value); the floor is where the "
+                         "error stops falling (the model's own error, not the solver's).</p>")
+            parts.append(html_table([("model", "model"), ("axes", "axes"),
+                                     ("points", "valid points"),
+                                     ("slope_resolution", "slope along resolution"),
+                                     ("slope_effort", "slope along effort"),
+                                     ("floor_50", "rmse_50"), ("floor_all", "rmse_all")],
+                                    summary))
         for r in rows:
             if r.get("valid") is False:
                 r["status"] = "invalid (%s)" % r.get("invalid_reason", "")
         parts.append(html_table([("label", "point"), ("status", "status"),
                                  ("ms_median", "ms/step"), ("rmse_50", "rmse_50 mm"),
-                                 ("rmse_all", "rmse_all mm"), ("pareto", "Pareto")], rows, links))
+                                 ("rmse_all", "rmse_all mm"), ("pareto", "model's front"),
+                                 ("pareto_overall", "overall front")], rows, links))
         sections.append(("sweep", "Error against run time", "".join(parts)))
 
     # Stability.

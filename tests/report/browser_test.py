@@ -8,7 +8,7 @@ headless Chromium and checks: the viewer says it is ready and recorded no JavaSc
 console message reports an error, the viewer area of a screenshot is not blank, the pictures at
 the first and the last frame (URL hash frame=K, what the time slider sets) differ, the largest
 distance to the reference the viewer computes from its decoded surfaces matches results.json
-within 1%, and a page
+within 1%, the colour scale switch (#scale=shared|panel) takes effect, and a page
 with broken viewer data is reported as an error (so the checks can fail).
 Exit 77 (ctest: skipped) when Chromium or three.js is absent.
 """
@@ -99,6 +99,15 @@ def main():
     got = [float(v) for v in re.findall(r'data-frame-max-mm="([0-9.e+-]+)"', dom)]
     if len(got) != len(want) or any(abs(a - b) > 0.01 * b for a, b in zip(got, want)):
         failures.append("viewer's last-frame maxima %s mm, results.json %s mm" % (got, want))
+
+    # The colour scale: shared by every panel or each panel its own (#scale=, the switch), the
+    # latter named in each model's box.
+    for scale in ("shared", "panel"):
+        _, dom_s, _ = browse(exe, work, url + "#frame=last&scale=" + scale, ["--dump-dom"])
+        named = len(re.findall(r"colour scale 0 to [^'<]+\(this panel\)", dom_s))
+        if 'data-viewer-scale="%s"' % scale not in dom_s or named != (
+                len(want) if scale == "panel" else 0):
+            failures.append("scale=%s: not applied (%d panel scales named)" % (scale, named))
 
     pics = []
     for frame in ("0", "last"):

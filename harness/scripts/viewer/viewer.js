@@ -113,7 +113,9 @@
       '<div class="dbv-stage"><canvas></canvas></div>' +
       '<div class="dbv-bar2"><span class="dbv-legend"></span>' +
       '<label>colour max (mm) <input class="dbv-max" type="number" min="0" step="any" style="width:7em"></label>' +
-      '<button class="dbv-truemax">full range</button></div>' +
+      '<button class="dbv-truemax">full range</button>' +
+      '<label>scale <select class="dbv-scale"><option value="shared">shared by every panel</option>' +
+      '<option value="panel">each panel its own</option></select></label></div>' +
       '<div class="dbv-keys">Drag: orbit; right-drag or shift-drag: pan; wheel: zoom. ' +
       'Red points: grasped surface vertices; dark points: fixed surface vertices; boxes: fixed region; red line: tool path; sphere: tool (red: jaws closed).</div>' +
       '<div class="dbv-status">loading...</div><div class="dbv-errors"></div>';
@@ -151,6 +153,16 @@
     const centre = new THREE.Vector3((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2);
     const size = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) || 1;
 
+    // Where the scene acts on the organ: the grasped vertices, else the tools' first positions,
+    // else the loads' points (the home view looks at the organ from that side).
+    const it0 = D.interaction || {};
+    const acts = [];
+    if (shown.length && (it0.grasped_vertices || []).length) {
+      const x0 = series[shown[0]].at(0);
+      for (const v of it0.grasped_vertices) acts.push([x0[3 * v], x0[3 * v + 1], x0[3 * v + 2]]);
+    }
+    if (!acts.length) for (const t of it0.tools || []) if (t.trajectory && t.trajectory.length) acts.push(t.trajectory[0].pos);
+    if (!acts.length) for (const l of it0.loads || []) if (l.at) acts.push(l.at);
     const canvas = root.querySelector('canvas');
     const stage = root.querySelector('.dbv-stage');
     const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
@@ -158,6 +170,13 @@
     const camera = new THREE.PerspectiveCamera(30, 1, size / 100, size * 100);
     camera.up.set(0, 0, 1);
     const dir = new THREE.Vector3(0.35, 1.0, 0.55).normalize();
+    if (acts.length) {
+      const a = new THREE.Vector3();
+      for (const q of acts) a.add(new THREE.Vector3(q[0], q[1], q[2]));
+      a.multiplyScalar(1 / acts.length).sub(centre);
+      a.z = 0;  // look from the interaction's side, from above (z is up)
+      if (a.length() > 0.05 * size) dir.copy(a.normalize()).add(new THREE.Vector3(0, 0, 0.6)).normalize();
+    }
     camera.position.copy(centre).addScaledVector(dir, size * 2.7);
     const controls = new THREE.OrbitControls(camera, canvas);
     controls.target.copy(centre);
@@ -230,6 +249,15 @@
     slider.max = String(D.times.length - 1);
     const trueMax = D.colour.true_max_m, fullMax = D.colour.max_m;
     let colourMax = fullMax > 0 ? fullMax : 1e-3;
+    // Each run's largest distance over its frames: its panel's own scale.
+    const panelMax = (i) => Math.max(0, ...(D.runs[i].frame_max_m || []).filter((v) => v != null));
+    const scaleSelect = root.querySelector('.dbv-scale');
+    // Per panel by default when one model's error dwarfs the others' (the good ones would all look
+    // dark on a shared scale); #scale=shared or #scale=panel chooses.
+    const maxes = shown.filter((i) => i !== refIndex).map(panelMax).filter((v) => v > 0).sort((a, b) => a - b);
+    let perPanel = maxes.length > 1 && maxes[maxes.length - 1] > 3 * maxes[Math.floor((maxes.length - 1) / 2)];
+    if (hp.scale === 'shared' || hp.scale === 'panel') perPanel = hp.scale === 'panel';
+    scaleSelect.value = perPanel ? 'panel' : 'shared';
     maxInput.value = (1e3 * colourMax).toPrecision(4);
     let frame = D.times.length - 1;
     if (hp.frame !== undefined && hp.frame !== 'last') {
@@ -262,6 +290,7 @@
       } else {
         text += ' <span>(the full range: the largest distance of any run at any frame is ' + fmtMm(trueMax) + ')</span>';
       }
+      if (perPanel) text = '<span>each panel its own maximum (named in its box)</span>';
       if (refIndex == null) text = '<span>no reference in this folder: surfaces uniform</span>';
       legend.insertAdjacentHTML('beforeend', text);
     }
@@ -304,13 +333,14 @@
         const exact = run.times[lf] === t;
         const c = p.col.array;
         let fmax = null;
+        const cmax = perPanel ? (panelMax(p.i) || colourMax) : colourMax;
         if (p.i !== refIndex && ref2 && exact) {
           fmax = 0;
           for (let v = 0; v < n; ++v) {
             const dx = x[3 * v] - ref2[3 * v], dy = x[3 * v + 1] - ref2[3 * v + 1], dz = x[3 * v + 2] - ref2[3 * v + 2];
             const e = Math.sqrt(dx * dx + dy * dy + dz * dz);
             if (e > fmax) fmax = e;
-            if (e > colourMax * (1 + 1e-9)) { c[3 * v] = OVER[0]; c[3 * v + 1] = OVER[1]; c[3 * v + 2] = OVER[2]; } else viridis(e / colourMax, c, 3 * v);
+            if (e > cmax * (1 + 1e-9)) { c[3 * v] = OVER[0]; c[3 * v + 1] = OVER[1]; c[3 * v + 2] = OVER[2]; } else viridis(e / cmax, c, 3 * v);
           }
         } else {
           for (let v = 0; v < n; ++v) { c[3 * v] = NEUTRAL[0]; c[3 * v + 1] = NEUTRAL[1]; c[3 * v + 2] = NEUTRAL[2]; }
@@ -347,6 +377,7 @@
           lines += '<br>rmse_all ' + fmtMm(run.rmse_all_m) + ' &middot; max ' + fmtMm(run.max_m) + ' (compared instants)';
           if (run.reference_valid === false) lines += '<br><span class="bad">against an invalid reference' + (run.reference_invalid_reason ? ': ' + esc(run.reference_invalid_reason) : '') + '</span>';
           lines += '<br>' + (fmax != null ? 'this frame: max ' + fmtMm(fmax) : (exact ? 'no reference surface at this time' : 'no surface at this time: showing t = ' + run.times[lf].toFixed(3) + ' s'));
+          if (perPanel) lines += '<br>colour scale 0 to ' + fmtMm(cmax) + ' (this panel)';
         } else if (!exact) {
           lines += '<br>no surface at this time: showing t = ' + run.times[lf].toFixed(3) + ' s';
         }
@@ -372,6 +403,8 @@
         renderer.setViewport(r.x, H - r.y - r.h, r.w, r.h);
         renderer.setScissor(r.x, H - r.y - r.h, r.w, r.h);
         camera.aspect = r.w / r.h;
+        // The organ sits right of and below the panel's centre, clear of its info box (top left).
+        camera.setViewOffset(r.w, r.h, -0.1 * r.w, -0.12 * r.h, r.w, r.h);
         camera.updateProjectionMatrix();
         p.light.position.copy(camera.position);
         p.light.target.position.copy(controls.target);
@@ -382,6 +415,12 @@
     slider.addEventListener('input', () => { frame = parseInt(slider.value, 10); update(); });
     controls.addEventListener('change', render);
     root.querySelector('.dbv-reset').addEventListener('click', () => { controls.reset(); render(); });
+    scaleSelect.addEventListener('change', () => {
+      perPanel = scaleSelect.value === 'panel';
+      maxInput.disabled = perPanel;
+      drawLegend(); update();
+    });
+    maxInput.disabled = perPanel;
     maxInput.addEventListener('change', () => {
       const v = parseFloat(maxInput.value) / 1e3;
       if (v > 0) { colourMax = v; drawLegend(); update(); }
@@ -425,6 +464,7 @@
         D.absent.map((a) => a.label + ': ' + a.status + (a.message ? ' (' + a.message + ')' : '')).join('; ') : '');
     document.body.setAttribute('data-viewer-status', 'ready');
     document.body.setAttribute('data-viewer-frame', String(frame));
+    document.body.setAttribute('data-viewer-scale', perPanel ? 'panel' : 'shared');
     const sr = stage.getBoundingClientRect();
     document.body.setAttribute('data-viewer-stage', [sr.left + window.scrollX, sr.top + window.scrollY, sr.width, sr.height].map(Math.round).join(','));
   }
