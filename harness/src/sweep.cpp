@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <deque>
 #include <fstream>
 #include <map>
 #include <optional>
@@ -315,6 +316,66 @@ ojson plannedModels(ojson& scene, PluginLoader& loader, const SweepOptions& opti
   return models;
 }
 
+/// sweep --calibrate: fits each default point of a model with calibratable parameters on the
+/// sweep's scene and appends its calibrated twin to `models` and `planned` (the fits live in
+/// `fits`, which must outlive the planned points).
+void calibrateEachPoint(const ojson& scene, PluginLoader& loader, const SweepOptions& options,
+                        ojson& models, std::vector<Planned>& planned,
+                        std::deque<CalibrationParams>& fits, Progress* progress) {
+  const size_t n = planned.size();
+  for (size_t i = 0; i < n; ++i) {
+    const Planned p = planned[i];
+    if (p.calibration) continue;
+    bool calibratable = false;
+    try {
+      for (const ParamSpec& s : loader.load(p.plugin, models[i].value("model", "")).params)
+        calibratable = calibratable || s.calibratable;
+    } catch (const std::exception&) {
+    }
+    if (!calibratable) continue;
+    const fs::path dir = options.outDir / "calibrate" / ("point_" + std::to_string(i));
+    ojson one = scene;
+    one["models"] = ojson::array({models[i]});
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    writeFileAtomic(dir / "scene.json", one.dump(2) + "\n");
+    CalibrateOptions co;
+    co.train = {(dir / "scene.json").string()};
+    co.plugin = p.plugin;
+    co.model = models[i].value("model", "");
+    co.outDir = dir;
+    co.metric = options.calibrateMetric;
+    co.budget = options.calibrateBudget;
+    co.label = "sweep --calibrate, point " + p.label;
+    co.cases = options.cases;
+    co.cases.child = options.calibrateChild;
+    if (co.cases.cacheDir && co.cases.cacheDir->empty())
+      co.cases.cacheDir = options.outDir / "cache";
+    if (progress) {
+      progress->addTotal(1);
+      progress->start(p.label + " calibrating");
+    }
+    std::string outcome = "calibrated";
+    try {
+      runCalibration(loader, co, nullptr);
+      fits.push_back(readCalibrationFile((dir / "calibration.json").string()));
+    } catch (const std::exception& e) {
+      outcome = std::string("not calibrated: ") + e.what();
+    }
+    if (progress) progress->finish(p.label + " calibrating", outcome);
+    if (outcome != "calibrated") continue;
+    const CalibrationParams& fit = fits.back();
+    ojson twin = models[i];
+    for (const auto& [k, v] : fit.params.items()) twin["params"][k] = ojson::parse(v.dump());
+    Planned cal = p;
+    cal.label = p.label + "+cal";
+    cal.calibration = &fit;
+    twin["label"] = cal.label;
+    models.push_back(twin);
+    planned.push_back(cal);
+  }
+}
+
 /// A point's outcome from the case that ran it.
 void fillPoint(SweepPoint& s, const Planned& planned, const CaseResult& c) {
   const RunRecord* r = c.run(s.label);
@@ -474,7 +535,10 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   }
 
   std::vector<Planned> planned;
-  const ojson models = plannedModels(scene, loader, options, planned);
+  ojson models = plannedModels(scene, loader, options, planned);
+  std::deque<CalibrationParams> fits;  // --calibrate's, one per calibrated point
+  if (options.calibrate)
+    calibrateEachPoint(scene, loader, options, models, planned, fits, progress);
   scene["models"] = models;
   // The points' outcomes (fillPoint), the reference's status, the results files.
   std::vector<SweepPoint> points;

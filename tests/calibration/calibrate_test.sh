@@ -8,7 +8,8 @@
 #               names the organ it was fitted on, and applies to scenes of that organ only (a
 #               scene of another organ is refused in one line; one file per model and organ);
 #               it records the other parameters the training ran with, and a run or sweep
-#               point of the calibrated model with another value of one gets a note
+#               point of the calibrated model with another value of one gets a note; `sweep
+#               --calibrate` fits the point itself (and refuses --calibration beside it)
 #   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0:
 #               one stderr line each and exit 2
 set -euo pipefail
@@ -92,6 +93,27 @@ assert set(p) == {"toy", "toy+cal"}, list(p)
 assert p["toy+cal"]["calibrated"] and not p["toy"]["calibrated"]
 assert p["toy+cal"]["rmse_all"] < 0.05 * p["toy"]["rmse_all"], p
 PY
+  # sweep --calibrate: the point fitted on the scene itself (its own calibration.json), run
+  # again at its fit; the fitted curve is summarised apart.
+  "${db[@]}" sweep "$here/toy_reference.json" --out "$work/sweep_fit" --no-cache --no-plot \
+    --calibrate --calibrate-budget 8 --calibrate-metric rmse_all >"$work/sweep_fit.txt" 2>&1 \
+    || { cat "$work/sweep_fit.txt"; fail "sweep --calibrate"; }
+  python3 - "$work/sweep_fit" <<'PY'
+import json, sys, os
+s = json.load(open(os.path.join(sys.argv[1], "sweep.json")))
+p = {q["label"]: q for q in s["points"]}
+assert set(p) == {"toy", "toy+cal"}, list(p)
+assert p["toy+cal"]["rmse_all"] < 0.05 * p["toy"]["rmse_all"], p
+assert [m["calibrated"] for m in s["models"]] == [False, True], s["models"]
+fit = json.load(open(os.path.join(sys.argv[1], "calibrate", "point_0", "calibration.json")))
+assert abs(fit["params"]["gain"] - 0.4) < 0.05, fit["params"]
+PY
+  set +e
+  "${db[@]}" sweep "$here/toy_reference.json" --out "$work/sweep_both_ways" --calibrate \
+    --calibration "$work/cal/calibration.json" >/dev/null 2>"$work/both_ways.err"
+  code=$?
+  set -e
+  [[ $code == 2 && $(wc -l <"$work/both_ways.err") == 1 ]] || { cat "$work/both_ways.err"; fail "--calibrate with --calibration: exit $code"; }
   # Per organ: the same model on a coarser gallbladder is another organ.
   python3 - "$here/toy_reference.json" "$work/cal/calibration.json" "$work" <<'PY'
 import json, sys

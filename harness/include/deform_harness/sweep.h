@@ -8,6 +8,7 @@
 #pragma once
 
 #include <deform/sdk/registry.h>
+#include <deform_harness/calibration.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/progress.h>
 
@@ -109,6 +110,15 @@ struct SweepOptions {
   CaseOptions cases;
   /// --calibration: each calibrated model is swept twice, at its defaults and calibrated.
   std::vector<CalibrationParams> calibrations;
+  /// --calibrate: every default point of a model with calibratable parameters is fitted on the
+  /// sweep's scene (runCalibration with the model at that point: `calibrateBudget` trials on
+  /// `calibrateMetric`, DIR/calibrate/point_<i>/) and run once more at its fit, "+cal": what a
+  /// user gets for the time when each configuration is tuned. The trials run as children
+  /// (`calibrateChild`) through cases.dispatcher and share the scene's cached reference.
+  bool calibrate = false;
+  int calibrateBudget = 12;
+  CalibMetric calibrateMetric = CalibMetric::Rmse50;
+  std::optional<ChildCaseOptions> calibrateChild;
 };
 
 /// Runs the sweep of a scene; writes sweep.json and sweep.csv (and the scene it ran into

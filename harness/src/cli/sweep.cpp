@@ -2,6 +2,8 @@
 #include "cli.h"
 
 #include <deform/engine/plugin_loader.h>
+#include <deform_harness/calibration.h>
+#include <deform_harness/child_process.h>
 #include <deform_harness/progress.h>
 #include <deform_harness/sweep.h>
 
@@ -20,11 +22,13 @@ struct SweepArgs {
   CommonArgs common;
   bool noPlot = false;
   std::vector<std::string> calibrations;
+  bool calibrate = false;
+  int calibrateBudget = 12;
+  std::string calibrateMetric = "rmse_50";
   ChildArgs child;
 };
 
-int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
-             const std::vector<std::string>& calibrations, const ChildArgs& ch);
+int cmdSweep(const SweepArgs& args);
 
 }  // namespace
 
@@ -41,6 +45,13 @@ Verb addSweep(CLI::App& app) {
                    "calibration.json: its model is swept at its defaults and calibrated "
                    "(repeatable)")
       ->allow_extra_args(false);
+  sweep->add_flag("--calibrate", args->calibrate,
+                  "fit every point's calibratable parameters on the scene and run each point "
+                  "once more at its fit (+cal)");
+  sweep->add_option("--calibrate-budget", args->calibrateBudget,
+                    "--calibrate: trials per point (default 12)");
+  sweep->add_option("--calibrate-metric", args->calibrateMetric,
+                    "--calibrate: rmse_50 (default, the front's), rmse_all or loss_ratio");
   sweep->add_flag("--explain", args->common.explain, "say what was loaded, built, cached, skipped");
   addCommon(sweep, args->common, true);
   addChildArgs(sweep, args->child, "point");
@@ -48,23 +59,45 @@ Verb addSweep(CLI::App& app) {
             SweepArgs& a = *args;
             a.common.pluginDirs = pluginDirs;
             a.child.given = childArgsGiven(sweep);
-            return cmdSweep(a.scene, a.common, a.noPlot, a.calibrations, a.child);
+            return cmdSweep(a);
           }};
 }
 
 namespace {
 
-int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
-             const std::vector<std::string>& calibrations, const ChildArgs& ch) {
+int cmdSweep(const SweepArgs& args) {
+  const CommonArgs& a = args.common;
+  const ChildArgs& ch = args.child;
+  const std::string& scene = args.scene;
   PluginLoader loader(searchPath(a.pluginDirs));
   SweepOptions o;
-  o.calibrations = readCalibrations(calibrations);
+  if (args.calibrate && !args.calibrations.empty())
+    throw InputError("--calibrate", "",
+                     "fits every point itself: give it or --calibration FILE, not both");
+  if (args.calibrateBudget < 1) throw InputError("--calibrate-budget", "", "must be at least 1");
+  if (!calibMetricFromName(args.calibrateMetric, o.calibrateMetric))
+    throw InputError(
+        "--calibrate-metric", "",
+        "unknown metric '" + args.calibrateMetric + "' (rmse_50, rmse_all or loss_ratio)");
+  if (args.calibrate && !ch.dispatch.slurm.empty())
+    throw InputError("--slurm", "",
+                     "--calibrate chooses its trials as results come: use --jobs or --mpi");
+  o.calibrate = args.calibrate;
+  o.calibrateBudget = args.calibrateBudget;
+  o.calibrations = readCalibrations(args.calibrations);
   o.quick = a.quick;
   o.outDir = makeOutDir(a.out);
   o.cases = caseOptions(a);
   const std::unique_ptr<Dispatcher> dispatcher = makeDispatcher(ch.dispatch);
   o.cases.dispatcher = dispatcher.get();
   o.cases.child = childOptions(ch, loader, 900);
+  if (o.calibrate) {  // the trials always run in children, like calibrate's
+    ChildCaseOptions trial;
+    trial.executable = selfExecutable();
+    trial.pluginArgs = pluginDirArgs(loader.searchPath());
+    trial.runArgs = {"--reuse-reference"};
+    o.calibrateChild = trial;
+  }
   std::vector<SweepPoint> points;
   {
     Progress progress(0, "sweep");
@@ -98,7 +131,7 @@ int cmdSweep(const std::string& scene, const CommonArgs& a, bool noPlot,
   std::set<std::string> notes;  // the calibrated points' (the same for most of them)
   for (const SweepPoint& p : points)
     if (!p.note.empty() && notes.insert(p.note).second) std::cout << "note: " << p.note << "\n";
-  if (!noPlot)
+  if (!args.noPlot)
     plot("plot_sweep.py", {(o.outDir / "sweep.json").string(), (o.outDir / "sweep.png").string()});
   std::cout << "sweep: " << (o.outDir / "sweep.json").string() << "\n";
   return 0;
