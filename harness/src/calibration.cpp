@@ -208,7 +208,7 @@ const CalibrationParams* calibrationFor(const std::vector<CalibrationParams>& ca
   for (const CalibrationParams& c : calibrations) {
     if (c.plugin != plugin || c.model != model) continue;
     if (calibrationApplies(c, organ)) return &c;
-    if (!elsewhere) elsewhere = &c;
+    if (!elsewhere && !c.shipped) elsewhere = &c;
   }
   // A calibration is per organ: fitted on another, it would pass for one of this organ.
   if (elsewhere && !skipOtherOrgans)

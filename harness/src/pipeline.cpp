@@ -329,6 +329,7 @@ BenchmarkResult runBenchmark(const std::string& sceneFile, PluginLoader& loader,
               "prepared every step)");
     }
     if (!p.calibrationNote.empty()) rec.notes.push_back(p.calibrationNote);
+    rec.calibration = p.calibrationFile;
     for (const auto& note : rec.notes) explain(p.label + ": " + note);
     progress(p.label + ": " + statusName(rec.status) +
              (rec.message.empty() ? "" : " (" + rec.message + ")"));

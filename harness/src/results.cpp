@@ -269,6 +269,7 @@ json runJson(const RunRecord& run) {
   j["status"] = statusName(run.status);
   j["message"] = run.message;
   if (!run.notes.empty()) j["notes"] = run.notes;
+  if (!run.calibration.empty()) j["calibration"] = run.calibration;
   j["counts"] = json::object();
   for (const auto& [k, v] : run.counts) j["counts"][k] = v;
   j["precompute_s"] = run.precomputeS;

@@ -50,6 +50,7 @@ RunRecord runFromJson(const json& j) {
   r.status = parseStatus(j.at("status").get<std::string>());
   r.message = j.value("message", "");
   r.notes = j.value("notes", std::vector<std::string>());
+  r.calibration = j.value("calibration", "");
   const json counts = objectAt(j, "counts");
   for (const auto& [k, v] : counts.items())
     if (v.is_number()) r.counts[k] = v.get<long long>();

@@ -19,7 +19,7 @@ namespace {
 
 // Every field of RunRecord is either carried below or documented as not filled by runModel();
 // a new field changes the size and stops the build here until it is carried too.
-static_assert(sizeof(RunRecord) == 1192,
+static_assert(sizeof(RunRecord) == 1224,
               "RunRecord changed: carry the new field in serializeRunRecord/deserializeRunRecord "
               "(run_isolation.cpp), then update this size");
 
@@ -111,6 +111,7 @@ std::vector<char> serializeRunRecord(const RunRecord& r) {
   w.pod(static_cast<int>(r.status));
   w.string(r.message);
   putStrings(w, r.notes);
+  w.string(r.calibration);
   putMap(w, r.counts);
   w.pod(r.precomputeS);
   w.pod(r.steps);
@@ -194,6 +195,7 @@ RunRecord deserializeRunRecord(const std::vector<char>& bytes) {
   r.status = static_cast<RunStatus>(status);
   r.message = b.string();
   r.notes = getStrings(b);
+  r.calibration = b.string();
   getMap(b, r.counts);
   r.precomputeS = b.pod<double>();
   r.steps = b.pod<int>();

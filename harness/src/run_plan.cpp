@@ -43,24 +43,36 @@ std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
   std::set<std::string> labels;
   const std::string organ =
       calibrationOrgan(scene.organ.mesh, scene.organ.resolution, scene.organ.scale);
+  // Each model once, or with calibratedTwins and a calibration twice: as written, then its twin.
+  std::vector<std::pair<const ModelSpec*, bool>> runs;
   for (const ModelSpec* spec : specs) {
+    const bool isReference = scene.reference && spec == &*scene.reference;
+    const ModelInfo& info = loader.load(spec->plugin, spec->model);
+    const bool calibrated = !isReference && calibrationFor(options.calibrations, spec->plugin,
+                                                           info.name, organ, false) != nullptr;
+    if (options.calibratedTwins && calibrated) runs.emplace_back(spec, false);
+    runs.emplace_back(spec, calibrated);
+  }
+  for (const auto& [spec, calibrated] : runs) {
     PlannedRun run;
     run.spec = *spec;
     run.isReference = scene.reference && spec == &*scene.reference;
     run.info = &loader.load(spec->plugin, spec->model);
     nlohmann::json given = spec->params;
     const CalibrationParams* calibration =
-        run.isReference
-            ? nullptr
-            : calibrationFor(options.calibrations, spec->plugin, run.info->name, organ, false);
+        calibrated
+            ? calibrationFor(options.calibrations, spec->plugin, run.info->name, organ, false)
+            : nullptr;
     if (calibration) {
       nlohmann::json merged = calibration->params;
       for (const auto& [k, v] : spec->params.items()) merged[k] = v;
       given = merged;
     }
     run.params = resolveParams(run.info->params, given, scene.file, spec->jsonPath + "/params");
-    if (calibration)
+    if (calibration) {
       run.calibrationNote = calibrationDifferenceNote(*calibration, paramsToJson(run.params));
+      run.calibrationFile = calibration->file;
+    }
     if (options.explain) {
       // Where each parameter came from: the scene, a calibration file, or the default.
       std::string from;
@@ -79,8 +91,15 @@ std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
       explain("params of " + spec->plugin + "/" + run.info->name + " at " + spec->jsonPath + ": " +
               (from.empty() ? std::string("all defaults") : from + "; the rest defaults"));
     }
+    const std::string twin = options.calibratedTwins && calibration ? "+cal" : "";
     if (!spec->label.empty()) {
-      run.label = spec->label;
+      run.label = spec->label + twin;
+    } else if (!twin.empty()) {
+      // The label of the model it is the twin of (the calibration's values are not defaults).
+      const ParamValues own =
+          resolveParams(run.info->params, spec->params, scene.file, spec->jsonPath + "/params");
+      const std::string nd = formatNonDefault(own, run.info->params);
+      run.label = (nd.empty() ? spec->model : spec->model + "(" + nd + ")") + twin;
     } else {
       const std::string nd = formatNonDefault(run.params, run.info->params);
       run.label = nd.empty() ? spec->model : spec->model + "(" + nd + ")";

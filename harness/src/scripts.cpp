@@ -17,19 +17,31 @@ namespace deform::harness {
 
 namespace fs = std::filesystem;
 
-std::string scriptsDir() {
-  if (const char* env = std::getenv("DEFORM_SCRIPTS_DIR"); env && *env) return env;
-  const fs::path source = fs::path(DEFORM_SOURCE_DIR) / "harness" / "scripts";
+namespace {
+
+/// $env, else the source tree's `source` folder, else <prefix>/share/deformbench/`installed`.
+std::string dataDir(const char* env, const fs::path& source, const char* installed) {
+  if (const char* e = std::getenv(env); e && *e) return e;
+  const fs::path inSource = fs::path(DEFORM_SOURCE_DIR) / source;
   std::error_code ec;
-  if (!std::string(DEFORM_SOURCE_DIR).empty() && fs::is_directory(source, ec))
-    return source.string();
+  if (!std::string(DEFORM_SOURCE_DIR).empty() && fs::is_directory(inSource, ec))
+    return inSource.string();
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
   if (!ec) {
-    const fs::path installed =
-        exe.parent_path().parent_path() / "share" / "deformbench" / "scripts";
-    if (fs::is_directory(installed, ec)) return installed.string();
+    const fs::path share = exe.parent_path().parent_path() / "share" / "deformbench" / installed;
+    if (fs::is_directory(share, ec)) return share.string();
   }
   return "";
+}
+
+}  // namespace
+
+std::string scriptsDir() {
+  return dataDir("DEFORM_SCRIPTS_DIR", fs::path("harness") / "scripts", "scripts");
+}
+
+std::string shippedCalibrationsDir() {
+  return dataDir("DEFORM_CALIBRATIONS_DIR", "calibrations", "calibrations");
 }
 
 std::string pythonInterpreter() {

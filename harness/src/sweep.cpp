@@ -166,8 +166,8 @@ SweepFloor curveFloor(const std::vector<const SweepPoint*>& curve, double SweepP
     const auto at = std::find(line.begin(), line.end(), &best);
     if (at == line.end()) continue;
     if (at + 1 != line.end()) {  // a costlier value exists and is no more accurate
-      flatWhy = "more " + param + " than " + valueText(resolution ? best.resolution : best.effort) +
-                " buys no accuracy";
+      flatWhy = "the costlier values of " + param + " past " +
+                valueText(resolution ? best.resolution : best.effort) + " buy no accuracy";
       continue;
     }
     const SweepPoint* prev = at == line.begin() ? nullptr : *(at - 1);

@@ -9,7 +9,8 @@
 #               scene of another organ is refused in one line; one file per model and organ);
 #               it records the other parameters the training ran with, and a run or sweep
 #               point of the calibrated model with another value of one gets a note; `sweep
-#               --calibrate` fits the point itself (and refuses --calibration beside it)
+#               --calibrate` fits the point itself (and refuses --calibration beside it); `run
+#               --calibration shipped --calibrated-twins` runs the model and its twin
 #   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0:
 #               one stderr line each and exit 2
 set -euo pipefail
@@ -107,6 +108,27 @@ assert p["toy+cal"]["rmse_all"] < 0.05 * p["toy"]["rmse_all"], p
 assert [m["calibrated"] for m in s["models"]] == [False, True], s["models"]
 fit = json.load(open(os.path.join(sys.argv[1], "calibrate", "point_0", "calibration.json")))
 assert abs(fit["params"]["gain"] - 0.4) < 0.05, fit["params"]
+PY
+  # run --calibration shipped --calibrated-twins: the shipped folder's file for this organ gives
+  # a twin beside the model; a shipped file of another organ is passed over in silence.
+  mkdir -p "$work/shipped/a" "$work/shipped/b"
+  cp "$work/cal/calibration.json" "$work/shipped/a/toy.json"
+  python3 - "$work/cal/calibration.json" "$work/shipped/b/toy.json" <<'PY'
+import json, sys
+c = json.load(open(sys.argv[1]))
+c["organs"] = ["phantom:cube, resolution 1"]
+json.dump(c, open(sys.argv[2], "w"))
+PY
+  DEFORM_CALIBRATIONS_DIR=$work/shipped "${db[@]}" run "$here/toy_reference.json" --out "$work/twins" \
+    --no-cache --calibration shipped --calibrated-twins >"$work/twins.txt" 2>&1 \
+    || { cat "$work/twins.txt"; fail "run --calibrated-twins"; }
+  python3 - "$work/twins/results.json" "$work/shipped/a/toy.json" <<'PY'
+import json, sys
+runs = {r["label"]: r for r in json.load(open(sys.argv[1]))["runs"] if r["role"] == "model"}
+plain, twin = "toy(diverge_below=0.2)", "toy(diverge_below=0.2)+cal"
+assert set(runs) == {plain, twin}, list(runs)
+assert runs[twin]["calibration"] == sys.argv[2] and "calibration" not in runs[plain], runs
+assert runs[twin]["error"]["rmse_all"] < 0.05 * runs[plain]["error"]["rmse_all"]
 PY
   set +e
   "${db[@]}" sweep "$here/toy_reference.json" --out "$work/sweep_both_ways" --calibrate \

@@ -65,6 +65,7 @@ struct RunRecord {
   RunStatus status = RunStatus::Ok;
   std::string message;
   std::vector<std::string> notes;  ///< warnings that do not change the status
+  std::string calibration;         ///< the calibration file of its parameters ("" when none)
 
   Counts counts;
   double precomputeS = 0;  ///< wall time of init(), s

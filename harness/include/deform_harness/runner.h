@@ -81,6 +81,9 @@ struct PlannedRun {
   /// calibrationDifferenceNote() of the --calibration it takes ("" when none or no difference):
   /// added to the run's notes.
   std::string calibrationNote;
+  /// The calibration file whose parameters it runs with ("" when none): results.json
+  /// "calibration".
+  std::string calibrationFile;
 };
 
 /// The calibrated parameters of one model (DIR/calibration.json of `deformbench calibrate`).
@@ -97,6 +100,9 @@ struct CalibrationParams {
   /// run of the calibrated model with other values gets a note (calibrationDifferences()).
   /// Empty: a file written before they were recorded.
   nlohmann::json held = nlohmann::json::object();
+  /// One of the project's shipped calibrations (`--calibration shipped`): on a scene of an organ
+  /// it was not fitted on it is passed over in silence, where a file given by name is refused.
+  bool shipped = false;
 };
 
 /// The parameters in which a run of c's model (its resolved params, as in results.json) differs
@@ -151,6 +157,9 @@ struct BenchmarkOptions {
   /// Calibrations whose parameters a model (same plugin and model) takes where the scene writes
   /// none; the first file naming a model wins.
   std::vector<CalibrationParams> calibrations;
+  /// With calibrations: a model one of them calibrates runs twice, at the scene's parameters and
+  /// calibrated (its twin, label "LABEL+cal"), side by side (`run --calibrated-twins`).
+  bool calibratedTwins = false;
   /// Also write, per ok run with a compared instant, its surface at the last compared instant,
   /// exactly (binary, comparedSurfaceFile()): `converge` reads its levels from child processes
   /// this way (`run --write-compared`, internal).

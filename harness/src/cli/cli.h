@@ -68,7 +68,8 @@ void requirePluginName(const std::string& option, const std::string& name);
 std::string fmt(double v, int precision = 3);
 
 /// The --calibration files, read and checked (InputError names the file); two files for one
-/// model are refused.
+/// model and organ are refused. "shipped" stands for every shipped calibration
+/// (shippedCalibrationsDir()), each applied on its own organ's scenes only.
 std::vector<CalibrationParams> readCalibrations(const std::vector<std::string>& files);
 
 /// The options of tables, sweep, stability, calibrate, bench, converge and verify.

@@ -69,10 +69,38 @@ std::string fmt(double v, int precision) {
   return s.str();
 }
 
+namespace {
+
+/// The files, with "shipped" replaced by every file of the shipped calibrations folder (those
+/// marked true).
+std::vector<std::pair<std::string, bool>> expandShipped(const std::vector<std::string>& files) {
+  std::vector<std::pair<std::string, bool>> out;
+  for (const std::string& f : files) {
+    if (f != "shipped") {
+      out.emplace_back(f, false);
+      continue;
+    }
+    const std::string dir = shippedCalibrationsDir();
+    if (dir.empty())
+      throw InputError("--calibration", "shipped",
+                       "no shipped calibrations folder (calibrations/ in the source tree, "
+                       "share/deformbench/calibrations installed, or $DEFORM_CALIBRATIONS_DIR)");
+    std::vector<std::string> found;
+    for (const auto& e : fs::recursive_directory_iterator(dir))
+      if (e.is_regular_file() && e.path().extension() == ".json") found.push_back(e.path());
+    std::sort(found.begin(), found.end());  // a stable order, whatever the file system's
+    for (const std::string& s : found) out.emplace_back(s, true);
+  }
+  return out;
+}
+
+}  // namespace
+
 std::vector<CalibrationParams> readCalibrations(const std::vector<std::string>& files) {
   std::vector<CalibrationParams> out;
-  for (const std::string& f : files) {
+  for (const auto& [f, shipped] : expandShipped(files)) {
     CalibrationParams c = readCalibrationFile(f);
+    c.shipped = shipped;
     // One file per model and organ: calibrations of one model on different organs (a table
     // over several phantoms) each apply to their own organ's cases.
     for (const CalibrationParams& o : out) {

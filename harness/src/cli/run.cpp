@@ -25,6 +25,7 @@ struct RunArgs {
   bool strict = false;
   std::vector<std::string> pluginDirs;
   std::vector<std::string> calibrations;
+  bool calibratedTwins = false;
   bool reuseReference = false;
   bool reuseModelSolves = false;
   bool writeCompared = false;
@@ -54,8 +55,12 @@ Verb addRun(CLI::App& app) {
       ->check(positiveValue(true));
   run->add_option("--calibration", ra.calibrations,
                   "calibration.json of `deformbench calibrate`: its model takes those parameters "
-                  "where the scene writes none (repeatable, one file per model)")
+                  "where the scene writes none (repeatable, one file per model and organ; "
+                  "'shipped': the project's own, for the scene's organ)")
       ->allow_extra_args(false);
+  run->add_flag("--calibrated-twins", ra.calibratedTwins,
+                "with --calibration: each calibrated model runs at the scene's parameters and "
+                "calibrated (LABEL+cal), side by side");
   run->add_flag("--reuse-reference", ra.reuseReference,
                 "read the reference from the cache when an earlier run with this flag solved "
                 "the same problem (calibration trials, the tables; its timings are that run's)")
@@ -193,6 +198,10 @@ int cmdRun(const RunArgs& a) {
   options.outDir = a.out;
   options.run.maxSteps = a.steps;
   options.calibrations = readCalibrations(a.calibrations);
+  options.calibratedTwins = a.calibratedTwins;
+  if (a.calibratedTwins && a.calibrations.empty())
+    throw InputError("--calibrated-twins", "",
+                     "needs --calibration FILE (or --calibration shipped): the twins' parameters");
   options.reuseReference = a.reuseReference || a.reuseModelSolves;
   options.reuseModelSolves = a.reuseModelSolves;
   options.writeComparedSurface = a.writeCompared;
