@@ -96,10 +96,10 @@ class MassSpringModel final : public Model {
 
   /// Explicit/symplectic Euler: the largest step estimated stable (spring stiffness, dashpots
   /// and mass damping over the node masses, Gershgorin bounds) times kStabilitySafety; +inf for
-  /// implicit Euler or without free springs.
+  /// the implicit integrators or without free springs. Computed once at init.
   Real stableStep() const;
   /// Substeps a step of dt takes: the substeps parameter, or automatic (ceil(dt / stableStep()),
-  /// at most kMaxSubsteps); 1 for implicit Euler.
+  /// at most kMaxSubsteps); 1 for the implicit integrators (implicit_euler, local_global).
   int substepsFor(Real dt) const;
   /// Substeps the last explicit/symplectic step took.
   int lastSubsteps() const { return m_lastSubsteps; }
@@ -120,6 +120,9 @@ class MassSpringModel final : public Model {
   void buildSurface(const Organ& organ);
   void buildTets(const Organ& organ);
   void buildPattern();
+  void buildSpringArrays();
+  Real computeStableStep() const;
+  double* xvRows();  // the explicit integrators' node rows (explicit_rows.h), 64-byte aligned
   StepStatus stepImplicit(const StepInput& in, Real h);
   // Liu et al. 2013 (massspring_liu.cpp).
   StepStatus stepLocalGlobal(const StepInput& in, Real h);
@@ -137,6 +140,12 @@ class MassSpringModel final : public Model {
   VecX m_contactInvMass;   // invMass with grasped nodes 0 too (contact response)
   std::vector<int> m_fixed;
   std::vector<Spring> m_springs;
+  // The springs as arrays for the explicit integrators (explicit_rows.h): node row offsets
+  // (8 x node), rest length, stiffness, damping; and the node rows they work on.
+  std::vector<int> m_sa, m_sb;
+  std::vector<Real> m_sRest, m_sK, m_sC;
+  std::vector<double> m_rowBuf, m_forceRows;
+  Real m_stableStep = 0;  // stableStep(), computed at init
   long long m_edgeSprings = 0, m_bendingSprings = 0, m_elements = 0;
 
   bool m_surfaceIdentity = true;
