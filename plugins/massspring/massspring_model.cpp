@@ -229,8 +229,9 @@ void MassSpringModel::buildSpringArrays() {
     m_sC[i] = s.c;
   }
   const size_t N = static_cast<size_t>(m_rest.rows());
-  m_rowBuf.assign(8 * N + 8, 0.0);  // + 8: room to start the rows on a 64-byte boundary
-  m_forceRows.assign(4 * N, 0.0);
+  // Position/velocity rows, then force rows, from a 64-byte boundary (+ 8: room to find it): a
+  // row never straddles two cache lines.
+  m_rowBuf.assign(12 * N + 8, 0.0);
 }
 
 double* MassSpringModel::xvRows() {
@@ -406,7 +407,7 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     const int N = static_cast<int>(m_x.rows());
     // Positions and velocities as rows of 8 doubles, forces as rows of 4 (explicit_rows.h).
     double* xv = xvRows();
-    double* f4 = m_forceRows.data();
+    double* f4 = xv + 8 * static_cast<size_t>(N);
     {
       const Real* X = m_x.data();
       const Real* V = m_v.data();
@@ -433,7 +434,7 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     bool ok = true;
     for (int sub = 0; sub < n && ok; ++sub) {
       const auto tf = Clock::now();
-      std::fill(m_forceRows.begin(), m_forceRows.end(), 0.0);
+      std::fill(f4, f4 + 4 * static_cast<size_t>(N), 0.0);
       m_degenerate += rows::addSpringForces(xv, springs, f4);
       for (const auto& [node, force] : m_nodeForces)
         for (int k = 0; k < 3; ++k) f4[4 * node + k] += force[k];

@@ -122,7 +122,9 @@ class MassSpringModel final : public Model {
   void buildPattern();
   void buildSpringArrays();
   Real computeStableStep() const;
-  double* xvRows();  // the explicit integrators' node rows (explicit_rows.h), 64-byte aligned
+  // The explicit integrators' node rows (explicit_rows.h), 64-byte aligned: 8 doubles per node
+  // (position, velocity), then 4 per node (force).
+  double* xvRows();
   StepStatus stepImplicit(const StepInput& in, Real h);
   // Liu et al. 2013 (massspring_liu.cpp).
   StepStatus stepLocalGlobal(const StepInput& in, Real h);
@@ -144,7 +146,7 @@ class MassSpringModel final : public Model {
   // (8 x node), rest length, stiffness, damping; and the node rows they work on.
   std::vector<int> m_sa, m_sb;
   std::vector<Real> m_sRest, m_sK, m_sC;
-  std::vector<double> m_rowBuf, m_forceRows;
+  std::vector<double> m_rowBuf;
   Real m_stableStep = 0;  // stableStep(), computed at init
   long long m_edgeSprings = 0, m_bendingSprings = 0, m_elements = 0;
 
