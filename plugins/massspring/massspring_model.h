@@ -61,6 +61,8 @@ struct LocalGlobalSpring {
 constexpr int kMaxSubsteps = 100000;
 /// The automatic substep is this fraction of the estimated stability limit.
 constexpr Real kStabilitySafety = 0.5;
+/// The power-iteration estimates of the largest eigenvalues enter the limit times this.
+constexpr Real kEigenMargin = 1.05;
 
 std::vector<ParamSpec> paramSpecs();
 /// Reads validated parameters; throws InputError on an unknown integrator.
@@ -98,6 +100,10 @@ class MassSpringModel final : public Model {
   /// and mass damping over the node masses, Gershgorin bounds) times kStabilitySafety; +inf for
   /// the implicit integrators or without free springs. Computed once at init.
   Real stableStep() const;
+  /// The largest eigenvalue of M^-1 K (1/s^2; damping: of M^-1 C, the dashpots, 1/s) over the
+  /// free nodes at the rest shape, by power iteration (a lower bound within about 1e-4 of it);
+  /// stableStep() uses it times kEigenMargin, capped by the Gershgorin bound.
+  Real largestRestEigenvalue(bool damping) const;
   /// Substeps a step of dt takes: the substeps parameter, or automatic (ceil(dt / stableStep()),
   /// at most kMaxSubsteps); 1 for the implicit integrators (implicit_euler, local_global).
   int substepsFor(Real dt) const;
