@@ -1,5 +1,7 @@
 #include "massspring_model.h"
 
+#include "explicit_rows.h"
+
 #include <deform/geometry/surface_mass.h>
 #include <deform/geometry/tet_nodes.h>
 
@@ -13,6 +15,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <stdexcept>
 
@@ -34,12 +37,54 @@ void MassSpringModel::init(const ModelSetup& setup) {
 }
 
 Real MassSpringModel::stableStep() const {
-  if (m_config.integrator == Integrator::ImplicitEuler)
+  return m_stableStep;
+}
+
+// The largest eigenvalue of M^-1 K (or of M^-1 C, the dashpots) over the free nodes at the rest
+// shape, where K = sum k n n^T per spring (the transverse term vanishes at rest): power
+// iteration on the symmetric M^-1/2 K M^-1/2 from a fixed start, until the Rayleigh quotient
+// (a lower bound that rises to the eigenvalue) changes by less than 1e-4 of itself.
+Real MassSpringModel::largestRestEigenvalue(bool damping) const {
+  const Eigen::Index N = m_rest.rows();
+  VecX s(N);
+  for (Eigen::Index i = 0; i < N; ++i) s[i] = std::sqrt(m_invMass[i]);  // 0: fixed
+  MatX3 u(N, 3), y(N, 3);
+  for (Eigen::Index i = 0; i < N; ++i)
+    for (int k = 0; k < 3; ++k) u(i, k) = s[i] * (1.0 + 0.5 * std::sin(1.7 * double(i) + k));
+  Real rq = 0;
+  for (int it = 0; it < 1000; ++it) {
+    const Real norm = u.norm();
+    if (!(norm > 0)) return 0;
+    u /= norm;
+    y.setZero();
+    for (const Spring& sp : m_springs) {
+      const Real coef = damping ? sp.c : sp.k;
+      if (coef == 0 || (s[sp.a] == 0 && s[sp.b] == 0)) continue;
+      const Vec3 d = (m_rest.row(sp.b) - m_rest.row(sp.a)).transpose();
+      const Real l2 = d.squaredNorm();
+      if (!(l2 > 0)) continue;
+      const Vec3 du = s[sp.a] * u.row(sp.a).transpose() - s[sp.b] * u.row(sp.b).transpose();
+      const Vec3 f = (coef * d.dot(du) / l2) * d;
+      y.row(sp.a) += s[sp.a] * f.transpose();
+      y.row(sp.b) -= s[sp.b] * f.transpose();
+    }
+    const Real next = (u.array() * y.array()).sum();
+    const bool done = it > 0 && std::abs(next - rq) <= 1e-4 * next;
+    rq = next;
+    if (done) break;
+    u = y;
+  }
+  return rq;
+}
+
+Real MassSpringModel::computeStableStep() const {
+  if (m_config.integrator == Integrator::ImplicitEuler ||
+      m_config.integrator == Integrator::LocalGlobal)
     return std::numeric_limits<Real>::infinity();
   // Block Gershgorin bounds over the free nodes: the largest eigenvalue of M^-1 K is at most
   // max_i 2 sum_{springs at i} k / m_i (each spring's 3x3 block has norm k), and of M^-1 C at
   // most max_i 2 sum c / m_i (axial dashpots) plus the mass damping alpha.
-  const int N = static_cast<int>(m_x.rows());
+  const int N = static_cast<int>(m_rest.rows());
   std::vector<Real> sumK(N, 0.0), sumC(N, 0.0);
   Real minRatio = std::numeric_limits<Real>::infinity();  // min c/k over the springs
   for (const Spring& s : m_springs) {
@@ -56,6 +101,10 @@ Real MassSpringModel::stableStep() const {
     w2 = std::max(w2, 2 * sumK[i] * m_invMass[i]);
     gamma = std::max(gamma, 2 * sumC[i] * m_invMass[i]);
   }
+  // The bounds overestimate (by 1.86x for w^2 on the liver phantom): the largest eigenvalues
+  // themselves, by power iteration, with a margin for the iteration's approach from below.
+  if (w2 > 0) w2 = std::min(w2, kEigenMargin * largestRestEigenvalue(false));
+  if (gamma > 0) gamma = std::min(gamma, kEigenMargin * largestRestEigenvalue(true));
   if (!(w2 > 0)) return std::numeric_limits<Real>::infinity();
   const Real alpha = m_config.massDamping;
   gamma += alpha;
@@ -75,7 +124,9 @@ Real MassSpringModel::stableStep() const {
 }
 
 int MassSpringModel::substepsFor(Real dt) const {
-  if (m_config.integrator == Integrator::ImplicitEuler) return 1;
+  if (m_config.integrator == Integrator::ImplicitEuler ||
+      m_config.integrator == Integrator::LocalGlobal)
+    return 1;
   if (m_config.substeps > 0) return m_config.substeps;
   const Real h = stableStep();
   if (!(dt > 0) || !(h < dt)) return 1;
@@ -114,6 +165,8 @@ void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
   m_invMass.resize(N);
   for (int i = 0; i < N; ++i) m_invMass[i] = m_mass[i] > 0 ? 1.0 / m_mass[i] : 0.0;
   for (int i : m_fixed) m_invMass[i] = 0.0;
+  m_stableStep = computeStableStep();  // springs and masses are fixed from here on
+  buildSpringArrays();
 
   const Box box = boundingBox(m_rest);
   m_boxCenter = box.center();
@@ -199,6 +252,32 @@ void MassSpringModel::buildTets(const Organ& organ) {
     m_springs.push_back(s);
   }
   m_edgeSprings = static_cast<long long>(m_springs.size());
+}
+
+void MassSpringModel::buildSpringArrays() {
+  const size_t n = m_springs.size();
+  m_sa.resize(n);
+  m_sb.resize(n);
+  m_sRest.resize(n);
+  m_sK.resize(n);
+  m_sC.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Spring& s = m_springs[i];
+    m_sa[i] = 8 * s.a;
+    m_sb[i] = 8 * s.b;
+    m_sRest[i] = s.rest;
+    m_sK[i] = s.k;
+    m_sC[i] = s.c;
+  }
+  const size_t N = static_cast<size_t>(m_rest.rows());
+  // Position/velocity rows, then force rows, from a 64-byte boundary (+ 8: room to find it): a
+  // row never straddles two cache lines.
+  m_rowBuf.assign(12 * N + 8, 0.0);
+}
+
+double* MassSpringModel::xvRows() {
+  const auto p = reinterpret_cast<std::uintptr_t>(m_rowBuf.data());
+  return m_rowBuf.data() + ((64 - p % 64) % 64) / sizeof(double);
 }
 
 void MassSpringModel::buildPattern() {
@@ -367,52 +446,71 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     const auto t1 = Clock::now();
     double msForces = 0;
     const int N = static_cast<int>(m_x.rows());
-    const Real alpha = m_config.massDamping;
-    const bool symplectic = m_config.integrator == Integrator::SymplecticEuler;
-    const Real c[3] = {m_boxCenter[0], m_boxCenter[1], m_boxCenter[2]};
-    const Real half = m_boxHalf, vmax = std::numeric_limits<Real>::max();
-    int ok = 1;
+    // Positions and velocities as rows of 8 doubles, forces as rows of 4 (explicit_rows.h).
+    double* xv = xvRows();
+    double* f4 = xv + 8 * static_cast<size_t>(N);
+    {
+      const Real* X = m_x.data();
+      const Real* V = m_v.data();
+      for (int i = 0; i < N; ++i)
+        for (int k = 0; k < 3; ++k) {
+          xv[8 * i + k] = X[3 * i + k];
+          xv[8 * i + 4 + k] = V[3 * i + k];
+        }
+    }
+    const rows::SpringArrays springs{m_sa.data(), m_sb.data(), m_sRest.data(),
+                                     m_sK.data(), m_sC.data(), m_springs.size()};
+    rows::IntegrateArgs args;
+    args.w = m_invMass.data();
+    args.alpha = m_config.massDamping;
+    args.h = hs;
+    args.half = m_boxHalf;
+    args.symplectic = m_config.integrator == Integrator::SymplecticEuler;
+    for (int k = 0; k < 3; ++k) {
+      args.g[k] = in.gravity[k];
+      args.c[k] = m_boxCenter[k];
+    }
+    // The divergence check rides along in rows::integrate(): grasped nodes end on their
+    // targets, which are finite and inside the box by construction.
+    bool ok = true;
     for (int sub = 0; sub < n && ok; ++sub) {
       const auto tf = Clock::now();
-      springForces(m_x, m_v, m_f);
-      for (const auto& [node, force] : m_nodeForces) m_f.row(node) += force.transpose();
-      if (penalty) m_f += m_contactForce;
-      msForces += std::chrono::duration<double, std::milli>(Clock::now() - tf).count();
-      Real* X = m_x.data();
-      Real* V = m_v.data();
-      const Real* Fp = m_f.data();
-      // The divergence check (as checkDivergence()) rides along: grasped nodes end on their
-      // targets, which are finite and inside the box by construction.
-      // |x - c| <= half and |v| <= max are false for NaN and Inf too: one integer flag, no
-      // floating-point reduction.
-      for (int i = 0; i < N; ++i) {
-        const Real w = m_invMass[i];
-        for (int k = 0; k < 3; ++k) {
-          if (w != 0.0) {  // fixed (or massless) nodes stay at rest
-            // a = f/m + g - alpha v (mass-proportional damping)
-            const Real a = Fp[3 * i + k] * w + in.gravity[k] - alpha * V[3 * i + k];
-            if (symplectic) {
-              V[3 * i + k] += hs * a;
-              X[3 * i + k] += hs * V[3 * i + k];
-            } else {
-              X[3 * i + k] += hs * V[3 * i + k];
-              V[3 * i + k] += hs * a;
-            }
-          }
-          ok &= static_cast<int>(std::abs(X[3 * i + k] - c[k]) <= half) &
-                static_cast<int>(std::abs(V[3 * i + k]) <= vmax);
-        }
+      std::fill(f4, f4 + 4 * static_cast<size_t>(N), 0.0);
+      m_degenerate += rows::addSpringForces(xv, springs, f4);
+      for (const auto& [node, force] : m_nodeForces)
+        for (int k = 0; k < 3; ++k) f4[4 * node + k] += force[k];
+      if (penalty) {
+        const Real* C = m_contactForce.data();
+        for (int i = 0; i < N; ++i)
+          for (int k = 0; k < 3; ++k) f4[4 * i + k] += C[3 * i + k];
       }
+      msForces += std::chrono::duration<double, std::milli>(Clock::now() - tf).count();
+      ok = rows::integrate(xv, f4, static_cast<size_t>(N), args);
       if (sub + 1 < n) {
         const Real t = Real(sub + 1) / n;
         for (const NodeGrasp& g : m_nodeGrasps) {
           for (size_t k = 0; k < g.nodes.size(); ++k) {
             const int i = g.nodes[k];
-            m_v.row(i) = (g.targets.row(k) - m_xOld.row(i)) / h;
-            m_x.row(i) = m_xOld.row(i) + t * (g.targets.row(k) - m_xOld.row(i));
+            for (int c = 0; c < 3; ++c) {
+              const Real xo = m_xOld(i, c), target = g.targets(static_cast<Eigen::Index>(k), c);
+              xv[8 * i + 4 + c] = (target - xo) / h;
+              xv[8 * i + c] = xo + t * (target - xo);
+            }
           }
         }
       }
+    }
+    {
+      Real* X = m_x.data();
+      Real* V = m_v.data();
+      m_f.resize(N, 3);
+      Real* Fp = m_f.data();
+      for (int i = 0; i < N; ++i)
+        for (int k = 0; k < 3; ++k) {
+          X[3 * i + k] = xv[8 * i + k];
+          V[3 * i + k] = xv[8 * i + 4 + k];
+          Fp[3 * i + k] = f4[4 * i + k];
+        }
     }
     applyConstraints(in, h, m_xOld);
     const auto t2 = Clock::now();

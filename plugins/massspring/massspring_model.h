@@ -61,6 +61,8 @@ struct LocalGlobalSpring {
 constexpr int kMaxSubsteps = 100000;
 /// The automatic substep is this fraction of the estimated stability limit.
 constexpr Real kStabilitySafety = 0.5;
+/// The power-iteration estimates of the largest eigenvalues enter the limit times this.
+constexpr Real kEigenMargin = 1.05;
 
 std::vector<ParamSpec> paramSpecs();
 /// Reads validated parameters; throws InputError on an unknown integrator.
@@ -96,10 +98,14 @@ class MassSpringModel final : public Model {
 
   /// Explicit/symplectic Euler: the largest step estimated stable (spring stiffness, dashpots
   /// and mass damping over the node masses, Gershgorin bounds) times kStabilitySafety; +inf for
-  /// implicit Euler or without free springs.
+  /// the implicit integrators or without free springs. Computed once at init.
   Real stableStep() const;
+  /// The largest eigenvalue of M^-1 K (1/s^2; damping: of M^-1 C, the dashpots, 1/s) over the
+  /// free nodes at the rest shape, by power iteration (a lower bound within about 1e-4 of it);
+  /// stableStep() uses it times kEigenMargin, capped by the Gershgorin bound.
+  Real largestRestEigenvalue(bool damping) const;
   /// Substeps a step of dt takes: the substeps parameter, or automatic (ceil(dt / stableStep()),
-  /// at most kMaxSubsteps); 1 for implicit Euler.
+  /// at most kMaxSubsteps); 1 for the implicit integrators (implicit_euler, local_global).
   int substepsFor(Real dt) const;
   /// Substeps the last explicit/symplectic step took.
   int lastSubsteps() const { return m_lastSubsteps; }
@@ -120,6 +126,11 @@ class MassSpringModel final : public Model {
   void buildSurface(const Organ& organ);
   void buildTets(const Organ& organ);
   void buildPattern();
+  void buildSpringArrays();
+  Real computeStableStep() const;
+  // The explicit integrators' node rows (explicit_rows.h), 64-byte aligned: 8 doubles per node
+  // (position, velocity), then 4 per node (force).
+  double* xvRows();
   StepStatus stepImplicit(const StepInput& in, Real h);
   // Liu et al. 2013 (massspring_liu.cpp).
   StepStatus stepLocalGlobal(const StepInput& in, Real h);
@@ -137,6 +148,12 @@ class MassSpringModel final : public Model {
   VecX m_contactInvMass;   // invMass with grasped nodes 0 too (contact response)
   std::vector<int> m_fixed;
   std::vector<Spring> m_springs;
+  // The springs as arrays for the explicit integrators (explicit_rows.h): node row offsets
+  // (8 x node), rest length, stiffness, damping; and the node rows they work on.
+  std::vector<int> m_sa, m_sb;
+  std::vector<Real> m_sRest, m_sK, m_sC;
+  std::vector<double> m_rowBuf;
+  Real m_stableStep = 0;  // stableStep(), computed at init
   long long m_edgeSprings = 0, m_bendingSprings = 0, m_elements = 0;
 
   bool m_surfaceIdentity = true;

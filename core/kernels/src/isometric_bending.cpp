@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 
 #include "isometric_bending_math.h"
 
@@ -47,6 +48,15 @@ long long run(T* x4, const IsometricBatch<T>& b, size_t begin, size_t end, T* me
   size_t i = begin;
 #ifdef DEFORM_ISO_HAVE_AVX2
   static const bool kAvx2 = isometricSimdAvailable();
+  if constexpr (std::is_same_v<T, float>) {
+    // Projection of float hinges: sixteen per AVX-512 step first, the rest by AVX2 / scalar
+    // (the same arithmetic, so the rest values measured by AVX2 stay exact).
+    static const bool kAvx512 = kAvx2 && __builtin_cpu_supports("avx512f") &&
+                                __builtin_cpu_supports("avx512vl") &&
+                                __builtin_cpu_supports("avx512dq");
+    if (simd && kAvx512 && measure == nullptr)
+      i += isobatch::rangeAvx512(x4, v, i, end, &degenerate);
+  }
   if (simd && kAvx2) i += isobatch::rangeAvx2(x4, v, i, end, measure, &degenerate);
 #else
   (void)simd;

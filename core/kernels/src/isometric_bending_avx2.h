@@ -1,4 +1,4 @@
-// Internal: the AVX2 entry points of the batched isometric bending projection
+// Internal: the AVX2 (and AVX-512) entry points of the batched isometric bending projection
 // (isometric_bending_avx2.cpp). Each projects (measure == nullptr) or measures whole vector
 // groups from begin on and returns how many hinges it handled; the caller does the tail.
 #pragma once
@@ -13,5 +13,8 @@ std::size_t rangeAvx2(float* x4, const View<float>& b, std::size_t begin, std::s
                       float* measure, long long* degenerate);
 std::size_t rangeAvx2(double* x4, const View<double>& b, std::size_t begin, std::size_t end,
                       double* measure, long long* degenerate);
+/// Sixteen float hinges per step, projection only (isometric_bending_avx512.cpp, AVX-512F/VL/DQ).
+std::size_t rangeAvx512(float* x4, const View<float>& b, std::size_t begin, std::size_t end,
+                        long long* degenerate);
 
 }  // namespace deform::pbd::isobatch

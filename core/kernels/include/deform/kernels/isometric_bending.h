@@ -95,9 +95,9 @@ struct IsometricBatch {
 /// Projects hinges [begin, end) of one colour: no two of them share a particle that moves (an
 /// immovable particle, wK = 0 in every hinge that holds it, may be shared), so projecting them
 /// together equals projecting them one after the other. On a CPU with AVX2 eight (float) or four
-/// (double) hinges go per vector step with the scalar path's operations in the same order (no
-/// fused multiply-add), so both paths give identical results. Returns the number of degenerate
-/// (skipped) hinges.
+/// (double) hinges go per vector step, with AVX-512 sixteen float hinges first, all with the
+/// scalar path's operations in the same order (no fused multiply-add), so every path gives
+/// identical results. Returns the number of degenerate (skipped) hinges.
 long long projectIsometricColour(float* x4, const IsometricBatch<float>& b, size_t begin,
                                  size_t end, bool simd = true);
 long long projectIsometricColour(double* x4, const IsometricBatch<double>& b, size_t begin,
@@ -111,7 +111,8 @@ void isometricLengthsColour(const float* x4, const IsometricBatch<float>& b, siz
 void isometricLengthsColour(const double* x4, const IsometricBatch<double>& b, size_t begin,
                             size_t end, double* out, bool simd = true);
 
-/// Whether projectIsometricColour(simd = true) uses AVX2 on this CPU.
+/// Whether projectIsometricColour(simd = true) uses AVX2 on this CPU (and AVX-512 for float
+/// hinges where the CPU has AVX-512F/VL/DQ).
 bool isometricSimdAvailable();
 
 }  // namespace deform::pbd

@@ -1,0 +1,59 @@
+// The explicit integrators' inner loops (symplectic and explicit Euler) on node rows: each node's
+// position and velocity as one row of eight doubles (x, y, z, 0, vx, vy, vz, 0: one 64-byte cache
+// line) and its force as a row of four (fx, fy, fz, 0). A scalar path and an AVX-512 one
+// (explicit_rows_avx512.cpp, eight springs per vector step, chosen at run time) do the same
+// operations in the same order as MassSpringModel::springForces() and the integration loop did
+// before them, without fused multiply-adds (both files are compiled with -ffp-contract=off): the
+// results are identical bit for bit on either path.
+//
+// Plain types only: the AVX-512 unit includes this header and nothing with inline library code
+// (see deform/kernels/simd_rows_avx2.h for why).
+#pragma once
+
+#include <cstddef>
+
+namespace deform::massspring::rows {
+
+/// Springs as structure of arrays, in the order their forces are summed. a and b are the nodes'
+/// offsets in the position/velocity rows (8 x node index); the force rows are at a / 2, b / 2.
+struct SpringArrays {
+  const int* a;
+  const int* b;
+  const double* rest;  ///< L, m
+  const double* k;     ///< N/m
+  const double* c;     ///< N s/m
+  std::size_t n;
+};
+
+/// f4 (4 doubles per node) += the spring forces (elastic + axial dashpot) at the positions and
+/// velocities in xv (8 doubles per node): per spring, with d = x_b - x_a, l = |d|,
+/// m = (k (l - L) + c (v_b - v_a) . d / l) / l, f_a += m d and f_b -= m d, in spring order.
+/// Springs of (near) zero length (|d|^2 <= 1e-24 m^2) add nothing; returns their number.
+long long addSpringForces(const double* xv, const SpringArrays& s, double* f4, bool simd = true);
+
+/// One explicit substep of n nodes: a = f w + g - alpha v; symplectic: v += h a, x += h v;
+/// explicit: x += h v, v += h a (a from the old v). Nodes with w == 0 do not move. Returns false
+/// when a coordinate leaves [c - half, c + half] or a velocity is not finite (NaN included).
+struct IntegrateArgs {
+  const double* w;  ///< inverse masses, n
+  double g[3];      ///< gravity, m/s^2
+  double alpha;     ///< mass damping, 1/s
+  double h;         ///< substep, s
+  double c[3];      ///< centre of the divergence box
+  double half;      ///< half side of the divergence box
+  bool symplectic;
+};
+bool integrate(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args,
+               bool simd = true);
+
+/// Whether the simd = true calls use AVX-512 on this CPU.
+bool simdAvailable();
+
+namespace detail {
+// AVX-512 bodies (explicit_rows_avx512.cpp): the springs [0, return value) / every node.
+std::size_t addSpringForcesAvx512(const double* xv, const SpringArrays& s, double* f4,
+                                  long long* degenerate);
+bool integrateAvx512(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args);
+}  // namespace detail
+
+}  // namespace deform::massspring::rows
