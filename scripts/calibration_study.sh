@@ -5,6 +5,8 @@
 # prints the before/after table (also written as OUT/study.md).
 #
 #   scripts/calibration_study.sh [--out DIR] [--budget N] [--jobs N] [--deformbench PATH]
+#                                [--scenes DIR]    (train_*.json and validate_*.json; default
+#                                                   scenes/calibration)
 #                                [--model M]...    (default: pbd massspring metaballs
 #                                                   particle_bem hybrid_fem_pbd)
 #                                [--param M:KEY]... (calibrate only these parameters of model M;
@@ -14,6 +16,7 @@
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 out=out/calibration budget=30 jobs=1 exe="$here/build/bin/deformbench" models=() params=()
+scenes=$here/scenes/calibration
 while [[ $# -gt 0 ]]; do
   case $1 in
     --out) out=$2; shift 2 ;;
@@ -22,11 +25,11 @@ while [[ $# -gt 0 ]]; do
     --deformbench) exe=$2; shift 2 ;;
     --model) models+=("$2"); shift 2 ;;
     --param) params+=("$2"); shift 2 ;;
+    --scenes) scenes=$(cd "$2" && pwd); shift 2 ;;
     *) echo "calibration_study.sh: unknown argument '$1'" >&2; exit 2 ;;
   esac
 done
 [[ ${#models[@]} -gt 0 ]] || models=(pbd massspring metaballs particle_bem hybrid_fem_pbd)
-scenes=$here/scenes/calibration
 mkdir -p "$out"
 for m in "${models[@]}"; do
   if [[ -f $out/$m/calibration.json ]]; then
@@ -36,7 +39,7 @@ for m in "${models[@]}"; do
   only=()
   for p in "${params[@]}"; do [[ ${p%%:*} == "$m" ]] && only+=(--param "${p#*:}"); done
   validate=()
-  for v in "$scenes"/validate_*.json; do validate+=(--validate "$v"); done
+  for v in "$scenes"/validate_*.json; do [[ -f $v ]] && validate+=(--validate "$v"); done
   "$exe" calibrate "$scenes"/train_*.json --model "$m" --out "$out/$m" "${validate[@]}" \
     --budget "$budget" --jobs "$jobs" --label "calibration study" "${only[@]}" \
     || echo "$m: calibrate failed (exit $?)" >&2
