@@ -165,8 +165,9 @@ TEST_P(ContactConformance, AFreeObjectRestsOnTheOrganOfEveryModelReportingItsCon
       EXPECT_NE(rec.message.find(needed), std::string::npos) << rec.message;
       continue;
     }
-    // A quasi-static model solves only at the compared instants: no dynamic object to hold.
-    if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
+    // A quasi-static model is solved every step in a scene with dynamics, so it holds the object
+    // too (issue 35: solved only at the compared instants, it let the object fall through).
+    if (!why.empty()) continue;
     ++tested;
     const RunRecord rec =
         runModel(info, ParamValues::defaults(info.params), scene, organ, conformanceCache());
