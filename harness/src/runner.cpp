@@ -132,6 +132,14 @@ bool solveOnlyAtComparedInstants(const ModelInfo& info, const ParamValues& param
 
 std::vector<int> quasiStaticSolveSteps(const Scene& scene, int lastStep) {
   const int n = lastStep >= 0 ? std::min(lastStep, scene.numSteps()) : scene.numSteps();
+  if (scene.needsDynamics()) {
+    // Instruments or objects with dynamics (ODE) take the tissue's reaction every step: a model
+    // left idle between compared instants holds no reaction there, so a box pushed by its
+    // coupling falls through the organ and the next solve finds it deep inside (issue 35).
+    std::vector<int> every(size_t(std::max(n, 0)));
+    for (int k = 0; k < n; ++k) every[size_t(k)] = k + 1;
+    return every;
+  }
   std::vector<int> steps = comparedSteps(scene, n);
   // Same slack as the interaction's keyframe test, so "closes at step k" means the same here.
   const Real slack = 1e-6 * scene.dt;

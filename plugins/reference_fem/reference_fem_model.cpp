@@ -97,6 +97,10 @@ class ReferenceFemModel final : public Model {
     ContactConstraintSolver solver;
     solver.solve = [this](const StepInput& x) { return solveOnce(x); };
     solver.graspForces = [this] { return m_graspForces; };
+    // A contact node's force on the instrument: minus the gradient there, as graspForces'.
+    solver.nodeReaction = [this](int n) -> Vec3 {
+      return -m_solver->lastGradient().segment<3>(3 * n);
+    };
     solver.immovable = m_fixed;
     const bool quasiStatic = m_solveKind == SolveKind::QuasiStatic;
     solver.maxRounds = quasiStatic ? 4 : 1;

@@ -165,7 +165,11 @@ TEST_P(ContactConformance, AFreeObjectRestsOnTheOrganOfEveryModelReportingItsCon
       EXPECT_NE(rec.message.find(needed), std::string::npos) << rec.message;
       continue;
     }
-    // A quasi-static model solves only at the compared instants: no dynamic object to hold.
+    // A quasi-static model is solved every step in a scene with dynamics (issue 35), but a free
+    // object bounces on it: the tissue has neither inertia nor damping, and the reaction of the
+    // last solve acts over the next step, which adds energy at each impact (reference_fem: the
+    // sphere rose 1.5 mm above its start within the 0.1 s). An object on a damped coupling is
+    // held (liver_instruments in the conformance suite's scenes check).
     if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
     ++tested;
     const RunRecord rec =

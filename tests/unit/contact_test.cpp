@@ -154,6 +154,65 @@ TEST(ResolveContacts, NodesAgainstALightBodyShareTheDepthAndDoNotOverpushIt) {
     EXPECT_LE((x.row(i) - before.row(i)).norm(), 0.1 * dxBody.norm() + 1e-12) << "node " << i;
 }
 
+// Contact as prescribed positions (solveWithContactConstraints) is frictionless and pushes: a
+// node held while touching whose tissue then pulls the instrument (it sagged away under it) is
+// let go, so the instrument feels only the push of the node pressed into it. Before issue 35
+// the held node stuck to it: on liver_instruments the quasi-static reference pulled the box
+// down into the sagging organ and sideways.
+TEST(ContactConstraints, ANodeThatPullsTheInstrumentIsReleased) {
+  ContactParams params;
+  params.thickness = 2e-4;
+  ContactWorld w(params);
+  const int b = w.addBody(probeShape(0.01, 0, 0, Vec3::UnitZ()));  // a sphere resting on z = 0
+  w.setPose(b, Vec3(0, 0, 0.01));
+  // Each node on a spring (k) to its rest position; node 0 is pressed 1 mm into the sphere (its
+  // rest also 1 mm aside: a tangential force the frictionless contact does not pass on), node 1
+  // touches it (0.1 mm outside) while its rest is 2 mm below.
+  const Real k = 50;
+  const Real zSkin = 0.01 - std::sqrt(0.01 * 0.01 - 0.003 * 0.003);
+  MatX3 rest(2, 3);
+  rest << 0.001, 0, 0.001,  //
+      0.003, 0, zSkin - 0.0021;
+  MatX3 x(2, 3);
+  x << 0, 0, 0.001,  //
+      0.003, 0, zSkin - 0.0001;
+  std::vector<Vec3> force;  // per node, on what holds it, after the last solve
+  std::vector<Vec3> perGrasp;
+  int solves = 0;
+  ContactConstraintSolver solver;
+  solver.maxRounds = 4;
+  solver.solve = [&](const StepInput& in) {
+    ++solves;
+    x = rest;
+    perGrasp.clear();
+    force.assign(2, Vec3::Zero());
+    for (const NodeGrasp& g : in.nodeConstraints) {
+      Vec3 sum = Vec3::Zero();
+      for (size_t i = 0; i < g.nodes.size(); ++i) {
+        x.row(g.nodes[i]) = g.targets.row(Eigen::Index(i));
+        force[size_t(g.nodes[i])] = k * (rest.row(g.nodes[i]) - x.row(g.nodes[i])).transpose();
+        sum += force[size_t(g.nodes[i])];
+      }
+      perGrasp.push_back(sum);
+    }
+    return StepStatus::Ok;
+  };
+  solver.graspForces = [&] { return perGrasp; };
+  solver.nodeReaction = [&](int n) { return force[size_t(n)]; };
+  ContactProxy proxy;
+  proxy.nodes = &x;
+  StepInput in;
+  ASSERT_EQ(solveWithContactConstraints(w, proxy, in, solver), StepStatus::Ok);
+  EXPECT_GE(solves, 2);
+  EXPECT_LT((x.row(1) - rest.row(1)).norm(), 1e-12) << "the pulling node was let go";
+  EXPECT_LE(x(0, 2), 1e-12) << "the pressed node is out of the sphere";
+  const Vec3 f = w.reactionForce(b);
+  EXPECT_GT(f.z(), 0) << "the tissue pushes the sphere up: " << f.transpose();
+  EXPECT_NEAR(f.z(), k * (rest(0, 2) - x(0, 2)), 1e-9) << "only the pressed node's push";
+  EXPECT_NEAR(f.x(), 0, 1e-9) << "frictionless: no tangential force";
+  EXPECT_NEAR(f.y(), 0, 1e-9);
+}
+
 TEST(ResolveEmbeddedContacts, MovesTheEmbeddedPointsOutThroughTheirNodes) {
   ContactWorld w;
   const Vec3 c(0.5, 0.5, 1.0);

@@ -69,6 +69,27 @@ TEST(QuasiStaticRunner, CompareAtInstantsAreTheSolveSteps) {
   EXPECT_NEAR(r.compared[0].positions(3, 2) - 0.1, 0.008, 1e-12) << "tool at 0.3 s: +8 mm";
 }
 
+// Issue 35: an object (or instrument) with dynamics takes the tissue's reaction every step; a
+// quasi-static model left idle between compared instants gave none, so on liver_instruments the
+// box sank through the organ and the next solve found it deep inside.
+TEST(QuasiStaticRunner, ASceneWithDynamicsIsSolvedEveryStep) {
+  QuasiStaticFixture f;
+  f.scene.compareAt = {0.3, 0.5};
+  EXPECT_FALSE(f.scene.needsDynamics());
+  ObjectSpec box;
+  ShapePrimitive p;
+  p.kind = ShapePrimitive::Kind::Box;
+  p.halfExtents = Vec3::Constant(0.005);
+  box.shape.parts.push_back(p);
+  box.pos = Vec3(0.5, 0.5, 0.5);
+  f.scene.objects.push_back(box);
+  ASSERT_TRUE(f.scene.needsDynamics());
+  std::vector<int> every(100);
+  for (int k = 0; k < 100; ++k) every[size_t(k)] = k + 1;
+  EXPECT_EQ(quasiStaticSolveSteps(f.scene), every);
+  EXPECT_EQ(quasiStaticSolveSteps(f.scene, 40).size(), 40u);
+}
+
 TEST(QuasiStaticRunner, DynamicModelsAndDynamicSolveStepEveryStep) {
   const QuasiStaticFixture f;
   std::vector<StepInput> inputs;

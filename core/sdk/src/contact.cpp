@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -450,18 +451,72 @@ class HeldNodes {
   HeldNodes(const ContactWorld& world, const std::vector<int>& immovable)
       : m_immovable(immovable),
         m_nodes(size_t(world.numBodies())),
-        m_targets(size_t(world.numBodies())) {}
+        m_targets(size_t(world.numBodies())),
+        m_normals(size_t(world.numBodies())) {}
 
   bool free(int node) const {
     return m_owner[size_t(node)] < 0 &&
            !std::binary_search(m_immovable.begin(), m_immovable.end(), node);
   }
-  void hold(int node, int body, const Vec3& target) {
+  /// free(), and a node released for pulling its instrument only when it penetrates deeper than
+  /// the thickness (a released node still touching the skin is not held again).
+  bool mayHold(int node, Real depth, Real thickness) const {
+    return free(node) && (!m_released[size_t(node)] || depth > thickness);
+  }
+  void hold(int node, int body, const Vec3& target, const Vec3& normal) {
     m_owner[size_t(node)] = body;
     m_nodes[size_t(body)].push_back(node);
     m_targets[size_t(body)].push_back(target);
+    m_normals[size_t(body)].push_back(normal);
   }
-  void resize(Eigen::Index nodes) { m_owner.resize(size_t(nodes), -1); }
+  void resize(Eigen::Index nodes) {
+    m_owner.resize(size_t(nodes), -1);
+    m_released.resize(size_t(nodes), 0);
+  }
+
+  /// The force of the held nodes on `body` with their forces `reaction`: the push along each
+  /// node's contact normal, and of the rest (the held position also holds the node tangentially)
+  /// at most mu times that push (Coulomb; frictionless: none).
+  Vec3 contactForce(int body, const std::function<Vec3(int)>& reaction, Real mu) const {
+    Vec3 total = Vec3::Zero();
+    for (size_t k = 0; k < m_nodes[size_t(body)].size(); ++k) {
+      const Vec3 f = reaction(m_nodes[size_t(body)][k]);
+      const Vec3& n = m_normals[size_t(body)][k];
+      const Real push = std::min(f.dot(n), Real(0));  // along -n: into the instrument
+      total += push * n;
+      const Vec3 tangential = f - f.dot(n) * n;
+      const Real cap = mu * -push, len = tangential.norm();
+      if (len > 0 && cap > 0) total += std::min(Real(1), cap / len) * tangential;
+    }
+    return total;
+  }
+
+  /// Frictionless contact pushes: every held node whose force on its instrument (`reaction`)
+  /// has a component along the contact normal (out of the instrument, i.e. the tissue pulls it)
+  /// is released. Returns how many were.
+  int releaseAdhesive(const std::function<Vec3(int)>& reaction) {
+    int released = 0;
+    for (size_t b = 0; b < m_nodes.size(); ++b) {
+      size_t keep = 0;
+      for (size_t k = 0; k < m_nodes[b].size(); ++k) {
+        const int node = m_nodes[b][k];
+        if (reaction(node).dot(m_normals[b][k]) > 0) {
+          m_owner[size_t(node)] = -1;
+          m_released[size_t(node)] = 1;
+          ++released;
+          continue;
+        }
+        m_nodes[b][keep] = node;
+        m_targets[b][keep] = m_targets[b][k];
+        m_normals[b][keep] = m_normals[b][k];
+        ++keep;
+      }
+      m_nodes[b].resize(keep);
+      m_targets[b].resize(keep);
+      m_normals[b].resize(keep);
+    }
+    return released;
+  }
 
   /// Nodes within twice the thickness count as touching and stay prescribed where they are (a
   /// node set exactly on the skin would otherwise be free in the next step, be pulled back in by
@@ -472,8 +527,9 @@ class HeldNodes {
     const VecX radii = VecX::Constant(x.rows(), 2 * t);
     bool added = false;
     for (const Contact& c : world.query(x, &radii)) {
-      if (!free(c.proxy)) continue;
-      hold(c.proxy, c.body, x.row(c.proxy).transpose() + std::max(c.depth - t, Real(0)) * c.normal);
+      if (!mayHold(c.proxy, c.depth, t)) continue;
+      hold(c.proxy, c.body, x.row(c.proxy).transpose() + std::max(c.depth - t, Real(0)) * c.normal,
+           c.normal);
       added = c.depth > t || added;
     }
     return added;
@@ -488,15 +544,15 @@ class HeldNodes {
     for (const TriangleContact& c : world.queryTriangles(x, faces)) {
       Real sum2 = 0, share = 0;
       for (int a = 0; a < 3; ++a)
-        if (free(faces(c.triangle, a))) {
+        if (mayHold(faces(c.triangle, a), c.depth, t)) {
           sum2 += c.bary[a] * c.bary[a];
           share += c.bary[a];
         }
       if (!(sum2 > 0) || share < kMinMovableShare) continue;
       for (int a = 0; a < 3; ++a) {
         const int v = faces(c.triangle, a);
-        if (!free(v)) continue;
-        hold(v, c.body, x.row(v).transpose() + (c.bary[a] * c.depth / sum2) * c.normal);
+        if (!mayHold(v, c.depth, t)) continue;
+        hold(v, c.body, x.row(v).transpose() + (c.bary[a] * c.depth / sum2) * c.normal, c.normal);
       }
       added = c.depth > t || added;
     }
@@ -534,9 +590,11 @@ class HeldNodes {
 
  private:
   const std::vector<int>& m_immovable;
-  std::vector<int> m_owner;  // body holding each node, -1 if free
+  std::vector<int> m_owner;      // body holding each node, -1 if free
+  std::vector<char> m_released;  // released this step for pulling its instrument
   std::vector<std::vector<int>> m_nodes;
   std::vector<std::vector<Vec3>> m_targets;
+  std::vector<std::vector<Vec3>> m_normals;  // contact normal (out of the instrument) per node
 };
 
 /// The rounds of detection and solve at the instruments' current poses.
@@ -545,7 +603,9 @@ StepStatus solveWithConstraints(ContactWorld& world, const ContactProxy& proxy, 
   HeldNodes held(world, solver.immovable);
   std::vector<int> lastBodies;
   StepStatus status = StepStatus::Ok;
-  for (int round = 0; round < std::max(solver.maxRounds, 1); ++round) {
+  const int rounds = std::max(solver.maxRounds, 1);
+  bool released = false;
+  for (int round = 0; round < rounds; ++round) {
     const MatX3& x = *proxy.nodes;
     held.resize(x.rows());
     bool added = held.addPenetratingNodes(world, x);
@@ -553,11 +613,21 @@ StepStatus solveWithConstraints(ContactWorld& world, const ContactProxy& proxy, 
       added = held.addTriangleVertices(world, x, *proxy.faces) || added;
       held.pushTargetsOut(world);
     }
-    if (!added && round > 0) break;
+    if (!added && !released && round > 0) break;
     status = solver.solve(held.constrained(in, lastBodies));
     if (status != StepStatus::Ok) return status;
+    // Nodes that pull their instrument let go, and the next round solves without them (never
+    // after the last round: the state reported is always a solve of the held set).
+    released =
+        solver.nodeReaction && round + 1 < rounds && held.releaseAdhesive(solver.nodeReaction) > 0;
   }
-  if (solver.graspForces) {
+  if (solver.nodeReaction) {
+    // From the nodes' own forces: the push, and friction only as far as the scene's coefficient
+    // allows (the held positions hold the nodes tangentially as well).
+    for (int b : lastBodies)
+      world.addReaction(b, held.contactForce(b, solver.nodeReaction, world.params().friction),
+                        world.position(b));
+  } else if (solver.graspForces) {
     const std::vector<Vec3> f = solver.graspForces();
     for (size_t k = 0; k < lastBodies.size(); ++k) {
       const size_t idx = in.grasps.size() + k;

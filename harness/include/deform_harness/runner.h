@@ -44,7 +44,9 @@ bool solveOnlyAtComparedInstants(const ModelInfo& info, const ParamValues& param
 
 /// Steps (counts of completed steps, ascending) after which a quasi-static model is solved:
 /// the compared steps, and for each grasper whose jaws close at the start of step k > 0 the
-/// step k (the state the attachment is taken from). lastStep as in comparedSteps().
+/// step k (the state the attachment is taken from); every step when the scene has dynamics
+/// (Scene::needsDynamics(): its ODE bodies take the tissue's reaction each step). lastStep as in
+/// comparedSteps().
 std::vector<int> quasiStaticSolveSteps(const Scene& scene, int lastStep = -1);
 
 /// Steps (counts of completed steps) at which the scene compares surfaces: round(t / dt) for

@@ -261,6 +261,14 @@ struct ContactConstraintSolver {
   /// The forces the model's grasps and node constraints exert, as graspForces(); may be empty
   /// (no reaction reported).
   std::function<std::vector<Vec3>()> graspForces;
+  /// The force (N) the solved tissue exerts at a node held by a node constraint on what holds it
+  /// (minus its energy's gradient there), after solve(); may be empty. With it, a held node whose
+  /// force pulls its instrument (a component along the contact normal, which points out of the
+  /// instrument) is released before the next round: contact pushes, it never sticks. The
+  /// instruments' reaction is then the held nodes' push along their normals, plus their
+  /// tangential force up to the scene's friction coefficient times that push (frictionless:
+  /// none), instead of graspForces().
+  std::function<Vec3(int node)> nodeReaction;
   /// Nodes never held (sorted): the model's fixed nodes.
   std::vector<int> immovable;
   /// Rounds of detection and solve; stops earlier when a round adds no penetration.
@@ -280,8 +288,11 @@ struct ContactConstraintSolver {
 /// thickness: x_a + b_a d n / sum_b b_b^2), their targets pushed out onto its surface plus the
 /// thickness (nodes touching it, within twice the thickness, are held where they are). Round 0
 /// tests the nodes at the step's start, each later round those of the previous solve; a node
-/// once held stays (its target kept) and only new penetrations are added. The appended
-/// constraints' graspForces() become the instruments' reaction. solver.immovable are never
+/// once held stays (its target kept) and only new penetrations are added, except that with
+/// solver.nodeReaction a node pulling its instrument is released when another round remains (and
+/// held again only if it penetrates deeper than the thickness). The appended
+/// constraints' graspForces() become the instruments' reaction (with nodeReaction: the nodes'
+/// normal push and friction, see there). solver.immovable are never
 /// held. The proxy's points are its nodes (no embedding, no radii; invMass and velocity unused).
 /// Returns the last solve's status; throws std::invalid_argument for such a proxy or an
 /// unsorted immovable list.
