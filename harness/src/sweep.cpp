@@ -127,12 +127,11 @@ void validAndFront(const std::vector<const SweepPoint*>& curve, double SweepPoin
             [](const SweepPoint* a, const SweepPoint* b) { return a->msMedian < b->msMedian; });
 }
 
-/// The points of `curve` whose value on the other axis is that of the curve's last planned point
-/// (the costliest effort, or the finest resolution).
+/// The line of `curve` along one axis through `through`: the points whose value on the other axis
+/// is `through`'s, in the order of increasing cost.
 std::vector<const SweepPoint*> alongAxis(const std::vector<const SweepPoint*>& curve,
-                                         bool resolution) {
-  if (curve.empty()) return {};
-  const nlohmann::json& other = resolution ? curve.back()->effort : curve.back()->resolution;
+                                         bool resolution, const SweepPoint& through) {
+  const nlohmann::json& other = resolution ? through.effort : through.resolution;
   std::vector<const SweepPoint*> line;
   for (const SweepPoint* p : curve)
     if ((resolution ? p->effort : p->resolution) == other) line.push_back(p);
@@ -158,11 +157,7 @@ SweepFloor curveFloor(const std::vector<const SweepPoint*>& curve, double SweepP
   for (const bool resolution : {true, false}) {
     const std::string& param = resolution ? best.resolutionParam : best.effortParam;
     if (param.empty()) continue;
-    // The axis' line through the best point, in the order of increasing cost.
-    std::vector<const SweepPoint*> line;
-    for (const SweepPoint* p : curve)
-      if ((resolution ? p->effort : p->resolution) == (resolution ? best.effort : best.resolution))
-        line.push_back(p);
+    const std::vector<const SweepPoint*> line = alongAxis(curve, resolution, best);
     const auto at = std::find(line.begin(), line.end(), &best);
     if (at == line.end()) continue;
     if (at + 1 != line.end()) {  // a costlier value exists and is no more accurate
@@ -209,8 +204,11 @@ SweepFloor curveFloor(const std::vector<const SweepPoint*>& curve, double SweepP
 SweepMetricSummary metricSummary(const std::vector<const SweepPoint*>& curve,
                                  const SweepModelSummary& m, double SweepPoint::*err) {
   SweepMetricSummary s;
-  if (!m.resolutionParam.empty()) s.slopeResolution = logSlope(alongAxis(curve, true), err);
-  if (!m.effortParam.empty()) s.slopeEffort = logSlope(alongAxis(curve, false), err);
+  // Along each axis at the other's costliest value: through the curve's last planned point.
+  if (!m.resolutionParam.empty() && !curve.empty())
+    s.slopeResolution = logSlope(alongAxis(curve, true, *curve.back()), err);
+  if (!m.effortParam.empty() && !curve.empty())
+    s.slopeEffort = logSlope(alongAxis(curve, false, *curve.back()), err);
   std::vector<const SweepPoint*> valid, front;
   validAndFront(curve, err, valid, front);
   s.slopeFront = logSlope(front, err);
