@@ -64,10 +64,17 @@ std::pair<std::string, std::string> levelsProblem(double h0, double h1, double h
   return {};
 }
 
+/// The error of the estimated level from the finest pair's difference d12 at order q: the finest
+/// level's d12 h2^q / (h1^q - h2^q), or the middle one's d12 h1^q / (h1^q - h2^q).
+double extrapolatedError(double h1, double h2, double d12, double q, EstimateOf of) {
+  const double denominator = std::pow(h1, q) - std::pow(h2, q);
+  return d12 * std::pow(of == EstimateOf::Middle ? h1 : h2, q) / denominator;
+}
+
 }  // namespace
 
 void richardsonEstimate(double h0, double h1, double h2, double d01, double d12, double peak,
-                        ConvergenceResult& out) {
+                        ConvergenceResult& out, EstimateOf of) {
   out.d01 = d01;
   out.d12 = d12;
   out.reason.clear();
@@ -84,7 +91,7 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
     // factor 3 for two grids (Roache 1994, J. Fluids Eng. 116:405).
     if (reason == "levels_too_close" && h1 / h2 >= kMinLevelRatio && d12 > 0) {
       constexpr double kTwoLevelSafety = 3;
-      out.errorEstimate = kTwoLevelSafety * d12 * h2 * h2 / (h1 * h1 - h2 * h2);
+      out.errorEstimate = kTwoLevelSafety * extrapolatedError(h1, h2, d12, 2, of);
       out.relativeError = peak > 0 ? out.errorEstimate / peak : NAN;
       out.converged = out.relativeError <= 0.01;
       out.message += "; the finest pair (h ratio " + fixedDigits(h1 / h2, 2) +
@@ -113,8 +120,7 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
   constexpr double kUpperEstimateOrder = 2;
   if (!std::isfinite(p) || p > 4) {
     out.order = std::isfinite(p) ? p : NAN;
-    out.errorEstimate = d12 * std::pow(h2, kUpperEstimateOrder) /
-                        (std::pow(h1, kUpperEstimateOrder) - std::pow(h2, kUpperEstimateOrder));
+    out.errorEstimate = extrapolatedError(h1, h2, d12, kUpperEstimateOrder, of);
     out.relativeError = peak > 0 ? out.errorEstimate / peak : NAN;
     out.asymptotic = false;
     out.converged = out.relativeError <= 0.01;
@@ -128,7 +134,7 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
     return;
   }
   out.order = p;
-  out.errorEstimate = d12 * std::pow(h2, p) / (std::pow(h1, p) - std::pow(h2, p));
+  out.errorEstimate = extrapolatedError(h1, h2, d12, p, of);
   out.relativeError = peak > 0 ? out.errorEstimate / peak : NAN;
   out.asymptotic = p >= 0.5;
   out.converged = out.asymptotic && out.relativeError <= 0.01;
@@ -141,7 +147,7 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
 }
 
 void richardsonRms(double h0, double h1, double h2, double rms01, double rms12, double peak,
-                   ConvergenceResult& out) {
+                   ConvergenceResult& out, EstimateOf of) {
   out.rmsOrder = out.rmsRelativeError = NAN;
   out.rmsConverged = false;
   if (!levelsProblem(h0, h1, h2).first.empty() || !(rms01 > 0) || !(rms12 > 0) || !(peak > 0))
@@ -149,7 +155,7 @@ void richardsonRms(double h0, double h1, double h2, double rms01, double rms12, 
   const double p = observedOrder(h0, h1, h2, rms01, rms12);
   if (!(p > 0) || !std::isfinite(p)) return;
   out.rmsOrder = p;
-  out.rmsRelativeError = rms12 * std::pow(h2, p) / (std::pow(h1, p) - std::pow(h2, p)) / peak;
+  out.rmsRelativeError = extrapolatedError(h1, h2, rms12, p, of) / peak;
   out.rmsConverged = p >= 0.5 && p <= 4 && out.rmsRelativeError <= 0.01;
 }
 
@@ -157,7 +163,8 @@ namespace {
 
 constexpr const char* kCacheKind = "harness.convergence";
 // 2: RMS differences; 3: levels by edge length, reasons, RMS orders; 4: order-2 upper estimate
-constexpr const char* kCacheVersion = "harness.convergence/4";
+// 5: a finer level where the surface bounds the coarse ones (finer_level_added, estimated_level)
+constexpr const char* kCacheVersion = "harness.convergence/5";
 
 ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   ojson doc;
@@ -189,6 +196,8 @@ ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   doc["rms_relative_error"] = numberOrNull(r.rmsRelativeError);
   doc["rms_converged"] = r.rmsConverged;
   doc["cached"] = r.cached;
+  doc["finer_level_added"] = r.finerLevelAdded;
+  doc["estimated_level"] = r.estimatedLevel;
   return doc;
 }
 
@@ -224,6 +233,8 @@ ConvergenceResult fromJson(const ojson& doc) {
   r.rmsOrder = numberOrNaN(doc, "rms_order");
   r.rmsRelativeError = numberOrNaN(doc, "rms_relative_error");
   r.rmsConverged = doc.at("rms_converged").get<bool>();
+  r.finerLevelAdded = doc.value("finer_level_added", false);
+  r.estimatedLevel = doc.value("estimated_level", int(r.levels.size()) - 1);
   return r;
 }
 
@@ -249,9 +260,11 @@ std::string convergenceSummary(const ConvergenceResult& r) {
   levels += " tets";
   if (!sizes.empty()) levels += ", h " + sizes + " mm";
   std::string rms;
-  if (std::isfinite(r.rms12) && r.levels.size() == 3 && r.levels[2].peakDisplacement > 0) {
-    rms = "; RMS level differences " + percent(r.rms01 / r.levels[2].peakDisplacement) + " then " +
-          percent(r.rms12 / r.levels[2].peakDisplacement);
+  // The peak of the level the estimate is for (the last, unless a finer one was added).
+  const size_t of = r.estimatedLevel >= 0 ? size_t(r.estimatedLevel) : r.levels.size() - 1;
+  const double peak = of < r.levels.size() ? r.levels[of].peakDisplacement : 0;
+  if (std::isfinite(r.rms12) && r.levels.size() >= 3 && peak > 0) {
+    rms = "; RMS level differences " + percent(r.rms01 / peak) + " then " + percent(r.rms12 / peak);
     if (std::isfinite(r.rmsRelativeError))
       rms +=
           ", RMS estimate " + percent(r.rmsRelativeError) + " (p = " + fixed(r.rmsOrder, 2) + ")";
@@ -264,11 +277,18 @@ std::string convergenceSummary(const ConvergenceResult& r) {
            (r.message.empty() ? std::string("no levels ran") : r.message) + bound + "; levels " +
            levels + rms + ")";
   }
+  // With a finer level added, the error is that of the level before the last (the reference).
+  const std::string whose =
+      r.finerLevelAdded && r.estimatedLevel >= 0
+          ? " of level " + std::to_string(r.estimatedLevel) +
+                " (the reference; the last level, finer, was added because the surface bounds "
+                "the coarse ones)"
+          : "";
   if (!r.asymptotic && !(r.order < 0.5))  // faster than order 4: the upper estimate at order 2
-    return "estimated discretisation error at most " + percent(r.relativeError) +
+    return "estimated discretisation error" + whose + " at most " + percent(r.relativeError) +
            " of the peak (levels " + levels + "; " + r.message + rms + ")";
-  return "estimated discretisation error " + percent(r.relativeError) + " of the peak (levels " +
-         levels + ", p = " + fixed(r.order, 2) + rms + ")";
+  return "estimated discretisation error" + whose + " " + percent(r.relativeError) +
+         " of the peak (levels " + levels + ", p = " + fixed(r.order, 2) + rms + ")";
 }
 
 std::string convergenceWarning(const ConvergenceResult& r) {
@@ -391,6 +411,7 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
     k.add(what.dump());
     k.add(p.h).add(p.exclude).add((long long)p.ownSize);
     for (double f : options.hRatios) k.add(f);
+    k.add((long long)options.finerWhenBound);
     k.add(sha256File(loader.locate(plugin)));
     const std::string mesh = base["organ"].value("mesh", "");
     if (mesh.rfind("phantom:", 0) != 0) k.add(sha256File(mesh));
@@ -410,9 +431,7 @@ std::optional<ConvergenceResult> cachedReferenceCheck(const std::string& sceneFi
   try {
     std::ifstream in(sceneFile);
     const ojson scene = ojson::parse(in);
-    ConvergeOptions o;
-    o.hRatios = kReferenceCheckRatios;
-    const PreparedStudy p = prepareStudy(scene, sceneFile, loader, o);
+    const PreparedStudy p = prepareStudy(scene, sceneFile, loader, referenceCheckOptions());
     if (!p.key) return std::nullopt;
     Cache cache(cacheDir ? *cacheDir : Cache::defaultDir());
     const auto hit = cache.get(kCacheKind, *p.key);
@@ -446,19 +465,19 @@ std::vector<char> comparedVertices(const Scene& parsed, const Organ& organ, doub
   return include;
 }
 
-/// The level cases (one per ratio of options.hRatios) and their ids; out gets a level each.
+/// The level cases, one per ratio (ids level_{firstIndex + k}); out gets a level each.
 std::vector<SceneCase> levelCases(const PreparedStudy& prepared, const ConvergeOptions& options,
+                                  const std::vector<double>& ratios, size_t firstIndex,
                                   ConvergenceResult& out, std::vector<std::string>& ids) {
   const ojson& base = prepared.base;
   const ojson& ref = prepared.ref;
-  const std::vector<double>& factors = options.hRatios;
   std::vector<SceneCase> cases;
   // The level scenes: the reference plugin alone, as a model, at the level's size: its
   // `edge_length` (Gmsh's size field), or for a plugin without one `elements` scaled by r^-3. A
   // level at ratio 1 of the reference's own size is the reference as the scene runs it.
-  for (size_t k = 0; k < factors.size(); ++k) {
+  for (size_t k = 0; k < ratios.size(); ++k) {
     ConvergenceLevelResult level;
-    const double ratio = factors[k];
+    const double ratio = ratios[k];
     level.targetElements =
         std::max<long long>(1, std::llround(double(prepared.n) / (ratio * ratio * ratio)));
     ojson j = base;
@@ -473,10 +492,10 @@ std::vector<SceneCase> levelCases(const PreparedStudy& prepared, const ConvergeO
         r["params"]["elements"] = level.targetElements;
       }
     }
-    r["label"] = "level_" + std::to_string(k);
+    const std::string id = "level_" + std::to_string(firstIndex + k);
+    r["label"] = id;
     j["models"].push_back(r);
     j.erase("reference");
-    const std::string id = "level_" + std::to_string(k);
     SceneCase c;
     c.scene = j;
     c.sceneFile = options.outDir / (id + ".json");
@@ -494,7 +513,8 @@ std::vector<SceneCase> levelCases(const PreparedStudy& prepared, const ConvergeO
   return cases;
 }
 
-/// The Richardson estimates from the three levels' displacements, over the compared vertices.
+/// The Richardson estimates from the last three levels' displacements, over the compared
+/// vertices: the error of the finest, or with a finer level added, of the one before it.
 void estimateFromLevels(const std::vector<MatX3>& displacement, const std::vector<char>& include,
                         ConvergenceResult& out) {
   const auto maxDiff = [&](const MatX3& a, const MatX3& b) {
@@ -513,58 +533,36 @@ void estimateFromLevels(const std::vector<MatX3>& displacement, const std::vecto
       }
     return counted > 0 ? std::sqrt(sum / double(counted)) : NAN;
   };
-  const double h0 = out.levels[0].h, h1 = out.levels[1].h, h2 = out.levels[2].h;
-  const double peak = out.levels[2].peakDisplacement;
-  richardsonEstimate(h0, h1, h2, maxDiff(displacement[0], displacement[1]),
-                     maxDiff(displacement[1], displacement[2]), peak, out);
-  out.rms01 = rmsDiff(displacement[0], displacement[1]);
-  out.rms12 = rmsDiff(displacement[1], displacement[2]);
-  richardsonRms(h0, h1, h2, out.rms01, out.rms12, peak, out);
+  const size_t n = displacement.size(), a = n - 3, b = n - 2, c = n - 1;
+  const EstimateOf of = out.finerLevelAdded ? EstimateOf::Middle : EstimateOf::Finest;
+  out.estimatedLevel = int(of == EstimateOf::Middle ? b : c);
+  const double h0 = out.levels[a].h, h1 = out.levels[b].h, h2 = out.levels[c].h;
+  const double peak = out.levels[size_t(out.estimatedLevel)].peakDisplacement;
+  richardsonEstimate(h0, h1, h2, maxDiff(displacement[a], displacement[b]),
+                     maxDiff(displacement[b], displacement[c]), peak, out, of);
+  out.rms01 = rmsDiff(displacement[a], displacement[b]);
+  out.rms12 = rmsDiff(displacement[b], displacement[c]);
+  richardsonRms(h0, h1, h2, out.rms01, out.rms12, peak, out, of);
 }
 
-ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFile,
-                                 PluginLoader& loader, const ConvergeOptions& options,
-                                 Progress* progress) {
-  PreparedStudy prepared = prepareStudy(scene, sceneFile, loader, options);
-  const Scene& parsed = prepared.parsed;
-  const Organ& organ = prepared.organ;
-  const double volume = prepared.volume, exclude = prepared.exclude;
-  const std::optional<CacheKey>& key = prepared.key;
-  const fs::path cacheDir = options.cacheDir ? *options.cacheDir : Cache::defaultDir();
-  Cache cache(cacheDir);
-  if (key) {
-    if (auto hit = cache.get(kCacheKind, *key)) {
-      try {
-        ByteReader r(*hit);
-        ConvergenceResult out = fromJson(ojson::parse(r.string()));
-        out.cached = true;
-        fs::create_directories(options.outDir);
-        writeFileAtomic(options.outDir / "convergence.json", toJson(out, sceneFile).dump(2) + "\n");
-        return out;
-      } catch (const std::exception&) {
-        // An entry of another layout: recompute and overwrite it.
-      }
-    }
-  }
-
-  const std::vector<char> include = comparedVertices(parsed, organ, exclude);
-  ConvergenceResult out;
-  std::vector<MatX3> displacement;
-  const std::vector<double>& factors = options.hRatios;
-  if (progress) progress->addTotal(int(factors.size()));
-  std::vector<std::string> ids;
-  std::vector<SceneCase> cases = levelCases(prepared, options, out, ids);
+/// Runs the level cases (ids[k] is level first + k of out.levels) and appends each level's
+/// surface displacement to `displacement` where it ran to its compared instant.
+void runLevels(std::vector<SceneCase>& cases, const std::vector<std::string>& ids, size_t first,
+               const Organ& organ, double volume, PluginLoader& loader,
+               const ConvergeOptions& options, Progress* progress, ConvergenceResult& out,
+               std::vector<MatX3>& displacement) {
+  if (progress) progress->addTotal(int(cases.size()));
   const auto started = [&](size_t k) {
+    const ConvergenceLevelResult& level = out.levels[first + k];
     if (progress)
-      progress->start(ids[k] +
-                      (out.levels[k].targetH > 0
-                           ? " (h " + fixed(1e3 * out.levels[k].targetH, 2) + " mm)"
-                           : " (" + std::to_string(out.levels[k].targetElements) + " elements)"));
+      progress->start(ids[k] + (level.targetH > 0
+                                    ? " (h " + fixed(1e3 * level.targetH, 2) + " mm)"
+                                    : " (" + std::to_string(level.targetElements) + " elements)"));
   };
   // A level's outcome: its status, elements and surface at the last compared instant.
-  std::vector<std::optional<MatX3>> surfaces(factors.size());
+  std::vector<std::optional<MatX3>> surfaces(cases.size());
   const auto finished = [&](size_t k, const CaseResult& c, double wallS) {
-    ConvergenceLevelResult& level = out.levels[k];
+    ConvergenceLevelResult& level = out.levels[first + k];
     level.solveS = wallS;
     const RunRecord* run = c.run(ids[k]);
     if (!c.missing.empty()) {
@@ -599,30 +597,92 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
       finished(k, c, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     }
   }
-  for (size_t k = 0; k < factors.size(); ++k) {
-    ConvergenceLevelResult& level = out.levels[k];
+  for (size_t k = 0; k < cases.size(); ++k) {
+    ConvergenceLevelResult& level = out.levels[first + k];
     if (!surfaces[k] || surfaces[k]->rows() < organ.surface.numVertices()) continue;
     const MatX3 u = surfaces[k]->topRows(organ.surface.numVertices()) - organ.surface.V;
     displacement.push_back(u);
     level.h = std::cbrt(volume / double(level.elements));
     level.peakDisplacement = u.rowwise().norm().maxCoeff();
   }
-  if (displacement.size() != 3) {
+}
+
+ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFile,
+                                 PluginLoader& loader, const ConvergeOptions& options,
+                                 Progress* progress) {
+  PreparedStudy prepared = prepareStudy(scene, sceneFile, loader, options);
+  const Organ& organ = prepared.organ;
+  const std::optional<CacheKey>& key = prepared.key;
+  const fs::path cacheDir = options.cacheDir ? *options.cacheDir : Cache::defaultDir();
+  Cache cache(cacheDir);
+  if (key) {
+    if (auto hit = cache.get(kCacheKind, *key)) {
+      try {
+        ByteReader r(*hit);
+        ConvergenceResult out = fromJson(ojson::parse(r.string()));
+        out.cached = true;
+        fs::create_directories(options.outDir);
+        writeFileAtomic(options.outDir / "convergence.json", toJson(out, sceneFile).dump(2) + "\n");
+        return out;
+      } catch (const std::exception&) {
+        // An entry of another layout: recompute and overwrite it.
+      }
+    }
+  }
+
+  const std::vector<char> include = comparedVertices(prepared.parsed, organ, prepared.exclude);
+  ConvergenceResult out;
+  std::vector<MatX3> displacement;
+  std::vector<std::string> ids;
+  std::vector<SceneCase> cases = levelCases(prepared, options, options.hRatios, 0, out, ids);
+  runLevels(cases, ids, 0, organ, prepared.volume, loader, options, progress, out, displacement);
+  size_t expected = 3;
+  if (displacement.size() == 3) {
+    estimateFromLevels(displacement, include, out);
+    // The surface bounds the coarse pair: one level finer than the last instead.
+    if (options.finerWhenBound && !out.converged &&
+        out.levels[0].h / out.levels[1].h < kMinLevelRatio) {
+      const ConvergenceResult threeLevels = out;
+      std::vector<std::string> finerIds;
+      std::vector<SceneCase> finer = levelCases(
+          prepared, options, {options.hRatios.back() / kFinerLevelStep}, 3, out, finerIds);
+      runLevels(finer, finerIds, 3, organ, prepared.volume, loader, options, progress, out,
+                displacement);
+      expected = 4;
+      if (displacement.size() == 4) {
+        out.finerLevelAdded = true;
+        out.reason.clear();
+        out.message.clear();
+        out.boundRelative = NAN;
+        estimateFromLevels(displacement, include, out);
+      } else {
+        std::vector<ConvergenceLevelResult> levels = out.levels;
+        out = threeLevels;
+        out.levels = levels;
+        out.message += "; the finer level added did not run to its compared instant";
+      }
+    }
+  } else {
     out.reason = "levels_failed";
     out.message = "no estimate: not every level ran to its compared instant";
-  } else {
-    estimateFromLevels(displacement, include, out);
   }
   const ojson doc = toJson(out, sceneFile);
   writeFileAtomic(options.outDir / "convergence.json", doc.dump(2) + "\n");
   // Only a study whose every level ran is kept: a missing plugin or a failed level may not
   // recur.
-  if (key && displacement.size() == 3) {
+  if (key && displacement.size() == expected) {
     ByteWriter w;
     w.string(doc.dump());
     cache.put(kCacheKind, *key, w.bytes());
   }
   return out;
+}
+
+ConvergeOptions referenceCheckOptions() {
+  ConvergeOptions o;
+  o.hRatios = kReferenceCheckRatios;
+  o.finerWhenBound = true;
+  return o;
 }
 
 }  // namespace deform::harness

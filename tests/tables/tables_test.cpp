@@ -368,9 +368,11 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
   EXPECT_NE(md.find(warnings[0]), std::string::npos);
   EXPECT_EQ(tableWarnings(tables), warnings) << "what the command prints at the end";
 
-  // The study: three levels whose finest is the table's reference (same target, same mesh).
+  // The study: levels 2h, 1.4h, h whose third is the table's reference (same target, same mesh),
+  // and a finer fourth, since the cube's surface bounds the coarse ones.
   const json study = readJson(out / "convergence/hybrid/cube_down_20N/convergence.json");
-  ASSERT_EQ(study["levels"].size(), 3u);
+  ASSERT_EQ(study["levels"].size(), 4u);
+  EXPECT_EQ(study["estimated_level"], 2);
   EXPECT_EQ(study["levels"][2]["target_elements"], 800);
   EXPECT_EQ(study["levels"][0]["target_elements"], 100);
   EXPECT_EQ(study["cached"], false);
@@ -393,14 +395,13 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
   EXPECT_EQ(levelNotes(0).find("read from the cache"), std::string::npos) << levelNotes(0);
 
   // The same study again (as a second tables run would ask for it): read from the cache.
-  ConvergeOptions co;
-  co.hRatios = kReferenceCheckRatios;
+  ConvergeOptions co = referenceCheckOptions();
   co.outDir = m_dir / "again";
   co.cacheDir = cache;
   const ConvergenceResult cached =
       runConvergence((out / "scenes/hybrid/cube_down_20N.json").string(), loader, co, nullptr);
   EXPECT_TRUE(cached.cached);
-  ASSERT_EQ(cached.levels.size(), 3u);
+  ASSERT_EQ(cached.levels.size(), 4u);
   EXPECT_EQ(cached.levels[2].elements, referenceTets);
   EXPECT_EQ(cached.d12, study["d12_m"].get<double>());
   // The RMS differences: over the same vertices as the max, so positive and not above it.
@@ -423,6 +424,13 @@ TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) 
     EXPECT_NEAR(r.order, 2.0, 1e-6);
     EXPECT_NEAR(r.errorEstimate, c * h2 * h2, 1e-9 * c);
     EXPECT_TRUE(r.asymptotic);
+    // The same levels read as a reference (h1) between a coarser and a finer level: its error
+    // is C h1^2, the finest pair's difference plus the finest level's error.
+    ConvergenceResult middle;
+    richardsonEstimate(h0, h1, h2, c * (h0 * h0 - h1 * h1), c * (h1 * h1 - h2 * h2), peak, middle,
+                       EstimateOf::Middle);
+    EXPECT_NEAR(middle.errorEstimate, c * h1 * h1, 1e-9 * c);
+    EXPECT_NEAR(middle.errorEstimate, r.errorEstimate + c * (h1 * h1 - h2 * h2), 1e-9 * c);
     const std::string summary = convergenceSummary(r);
     EXPECT_NE(summary.find("p = 2.00"), std::string::npos) << summary;
     EXPECT_EQ(summary.find("RMS"), std::string::npos) << "no RMS differences given";
@@ -516,6 +524,29 @@ TEST_F(TempDir, ConvergeLevelsRefineByEdgeLength) {
   EXPECT_EQ(readJson(own.outDir / "convergence.json")["reason"], "levels_too_close");
   EXPECT_NE(convergenceSummary(c).find("too close in size"), std::string::npos)
       << convergenceSummary(c);
+  // The check the tables run adds a level finer than the reference (h / 1.4) when the surface
+  // bounds the coarse ones, and estimates the reference's error (level 2) from the last three.
+  ASSERT_FALSE(c.converged);
+  ConvergeOptions finer = referenceCheckOptions();
+  finer.outDir = m_dir / "finer";
+  finer.cacheDir = fs::path();
+  const ConvergenceResult f =
+      runConvergence(scene, (m_dir / "scene.json").string(), loader, finer, nullptr);
+  ASSERT_EQ(f.levels.size(), 4u);
+  EXPECT_TRUE(f.finerLevelAdded);
+  EXPECT_EQ(f.estimatedLevel, 2);
+  EXPECT_NEAR(f.levels[2].targetH / f.levels[3].targetH, kFinerLevelStep, 1e-12);
+  EXPECT_EQ(readJson(finer.outDir / "level_3.json")["models"][0]["params"]["edge_length"],
+            f.levels[3].targetH);
+  EXPECT_GT(f.levels[3].elements, f.levels[2].elements);
+  const json fdoc = readJson(finer.outDir / "convergence.json");
+  EXPECT_EQ(fdoc["finer_level_added"], true);
+  EXPECT_EQ(fdoc["estimated_level"], 2);
+  EXPECT_EQ(fdoc["levels"].size(), 4u);
+  if (std::isfinite(f.relativeError)) {
+    EXPECT_NE(convergenceSummary(f).find("of level 2 (the reference"), std::string::npos)
+        << convergenceSummary(f);
+  }
 }
 
 TEST(ReferenceCheck, SaysWhyRichardsonDoesNotApply) {

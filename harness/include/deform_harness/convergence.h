@@ -74,21 +74,32 @@ struct ConvergenceResult {
   double rmsOrder = NAN, rmsRelativeError = NAN;
   bool rmsConverged = false;  ///< the RMS analysis is asymptotic and within 1%
   bool cached = false;        ///< read from the precomputation cache, not recomputed
+  /// A level finer than the reference was added (ConvergeOptions::finerWhenBound): the
+  /// estimate comes from the last three levels and is the error of the one before the last.
+  bool finerLevelAdded = false;
+  /// Index into `levels` of the level whose error errorEstimate is (-1: none ran).
+  int estimatedLevel = -1;
 };
 
 /// Smallest ratio h_k / h_{k+1} of consecutive levels' measured sizes for which the study
 /// extrapolates: closer levels differ mostly by mesh noise (Roache's minimum refinement ratio).
 inline constexpr double kMinLevelRatio = 1.1;
 
+/// Which level's error a three-level analysis estimates: the finest (level 2), or the middle one
+/// (level 1, a reference checked between a coarser and a finer level): its error is the finest
+/// pair's difference plus the finest level's error, d12 h1^p / (h1^p - h2^p) where the finest
+/// level's is d12 h2^p / (h1^p - h2^p).
+enum class EstimateOf { Finest, Middle };
+
 /// Richardson analysis of three levels (h0 > h1 > h2, differences d01, d12): fills order,
 /// errorEstimate, relativeError (errorEstimate / peak), asymptotic, converged, and reason,
 /// message and boundRelative where it does not apply.
 void richardsonEstimate(double h0, double h1, double h2, double d01, double d12, double peak,
-                        ConvergenceResult& out);
+                        ConvergenceResult& out, EstimateOf of = EstimateOf::Finest);
 
 /// The same on the RMS differences: fills rmsOrder, rmsRelativeError, rmsConverged only.
 void richardsonRms(double h0, double h1, double h2, double rms01, double rms12, double peak,
-                   ConvergenceResult& out);
+                   ConvergenceResult& out, EstimateOf of = EstimateOf::Finest);
 
 /// Level sizes of `converge`: h, h/1.4, h/2 from the reference's own h.
 inline const std::vector<double> kRefineRatios = {1.0, 1.0 / 1.4, 0.5};
@@ -97,6 +108,10 @@ inline const std::vector<double> kRefineRatios = {1.0, 1.0 / 1.4, 0.5};
 /// the reference as the scene runs it and the estimate is its error (what the tables check, and
 /// `converge --of-reference`).
 inline const std::vector<double> kReferenceCheckRatios = {2.0, 1.4, 1.0};
+
+/// The size step of the finer level a reference check adds when the surface bounds its coarse
+/// levels (ConvergeOptions::finerWhenBound): h / 1.4.
+inline constexpr double kFinerLevelStep = 1.4;
 
 struct ConvergeOptions {
   /// h: > 0 this edge length (m); else from baseElements N (the interior edge length that gives
@@ -118,7 +133,18 @@ struct ConvergeOptions {
   /// Levels read from and stored in the cache's shared solves (runner.h, reuseModelSolves): the
   /// finest level of a reference check is the reference the table's case already solved.
   bool reuseSolves = false;
+  /// When the two coarse levels are less than kMinLevelRatio apart (all of the organ's surface
+  /// vertices are nodes, so a fine surface bounds the coarse levels) and the estimate is not
+  /// converged: run a fourth level at hRatios.back() / kFinerLevelStep and estimate the error of
+  /// the third level (the reference, in a check of it) from the last three levels
+  /// (EstimateOf::Middle). The reference itself is not changed.
+  bool finerWhenBound = false;
 };
+
+/// The options of a check of the scene's reference itself: levels 2h, 1.4h, h of its own size,
+/// and a finer level where the surface bounds the coarse ones (what the tables, `converge
+/// --of-reference` and `run`'s note use).
+ConvergeOptions referenceCheckOptions();
 
 /// The cached check of the scene's reference (kReferenceCheckRatios, its own size), if a
 /// study of exactly that scene and plugin build is in the cache; nothing is run.

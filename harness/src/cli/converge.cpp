@@ -62,7 +62,7 @@ namespace {
 int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements,
                 double edgeLength, bool ofReference, const ChildArgs& ch) {
   PluginLoader loader(searchPath(a.pluginDirs));
-  ConvergeOptions o;
+  ConvergeOptions o = ofReference ? referenceCheckOptions() : ConvergeOptions();
   o.outDir = makeOutDir(a.out);
   o.cacheDir = cacheChoice(a);
   o.baseElements = elements;
@@ -74,7 +74,6 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
     if (elements > 0 || edgeLength > 0)
       throw InputError("--of-reference", "",
                        "takes the reference's own size: drop --elements and --edge-length");
-    o.hRatios = kReferenceCheckRatios;
   }
   ConvergenceResult r;
   {
@@ -108,7 +107,14 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
                 << "% of the peak displacement";
     std::cout << "\n";
   } else {
-    std::cout << "observed order p = " << fmt(r.order) << ", estimated error of the finest level "
+    // With a finer level added, the estimate is the reference's: the level before the last.
+    const size_t of = r.estimatedLevel >= 0 ? size_t(r.estimatedLevel) : r.levels.size() - 1;
+    if (r.finerLevelAdded)
+      std::cout << "the coarse levels are bound by the surface: a level finer than the reference "
+                   "was added, and the estimate is the reference's (level "
+                << of << ")\n";
+    std::cout << "observed order p = " << fmt(r.order) << ", estimated error of "
+              << (r.finerLevelAdded ? "the reference" : "the finest level") << " "
               << fmt(1e3 * r.errorEstimate) << " mm = " << fmt(100 * r.relativeError)
               << "% of the peak displacement\n";
   }
@@ -123,7 +129,8 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
                 << ": refine it (a smaller \"edge_length\") or read its errors as bounds of that "
                    "size\n";
   } else {
-    std::cout << "the reference is converged to within 1% at " << r.levels[2].elements
+    const size_t of = r.estimatedLevel >= 0 ? size_t(r.estimatedLevel) : r.levels.size() - 1;
+    std::cout << "the reference is converged to within 1% at " << r.levels[of].elements
               << " elements\n";
   }
   return 0;

@@ -59,8 +59,8 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
     out.cell = order + ", not checked (" + statusOf(r, plugin, run) + ")";
     return out;
   }
-  ConvergeOptions co;  // the reference's own size h: levels 2h, 1.4h, h
-  co.hRatios = kReferenceCheckRatios;
+  // The reference's own size h: levels 2h, 1.4h, h, and h / 1.4 where the surface bounds them.
+  ConvergeOptions co = referenceCheckOptions();
   co.outDir = o.outDir / "convergence" / c.id;
   co.cacheDir = o.cases.cacheDir;
   co.reuseSolves = true;  // the finest level is the case's reference, solved once
