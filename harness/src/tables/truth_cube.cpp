@@ -405,6 +405,15 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
           }
         }
         row["run_s"] = numberOrNull(seconds);
+        // The mean wall time of a step (a quasi-static model's steps are its solves).
+        double msPerStep = NAN;
+        if (r && !r->stepMs.empty()) {
+          msPerStep = 0;
+          for (double ms : r->stepMs) msPerStep += ms / double(r->stepMs.size());
+        } else if (r && r->stepStats.samples > 0) {
+          msPerStep = r->stepStats.mean;
+        }
+        row["ms_per_step"] = numberOrNull(msPerStep);
         if (c) {
           caseCells(row, *c, k.plugin, r, dir, false);
         } else {
@@ -444,7 +453,7 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
                  {"registration", nullptr}, {"contact", contact}, {"calibrated", false}};
     for (const char* key : {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm",
                             "relative_error", "max_error_mm", "measured_rms_mm", "bulge_mm",
-                            "measured_bulge_mm", "vs_calculix_pct", "run_s"})
+                            "measured_bulge_mm", "vs_calculix_pct", "run_s", "ms_per_step"})
       row[key] = nullptr;
     row["layer_rms_mm"] = "";
     row["status"] = why;
@@ -477,6 +486,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
        {"vs_calculix_pct", "vs CalculiX %"},
        {"calibrated", "calibrated"},
        {"run_s", "run s"},
+       {"ms_per_step", "ms/step"},
        {"status", "status"},
        {"scene", "scene"},
        {"note", "note"}});
