@@ -392,7 +392,7 @@ std::vector<int> EquilibriumSolver::constrainedDofs(const LoadCase& loads, VecX&
     for (int k = 0; k < 3; ++k) cdofs.push_back(3 * node + k);
     target.segment<3>(3 * node) = loads.targets.row(Eigen::Index(i)).transpose();
   }
-  const size_t held = cdofs.size();  // the fully held nodes' dofs, ascending by node
+  const size_t held = cdofs.size();  // the dofs of the fully held nodes
   for (int d : loads.fixedDofs) {
     cdofs.push_back(d);
     target(d) = restV(d / 3, d % 3);
