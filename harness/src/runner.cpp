@@ -176,6 +176,11 @@ std::string unsupportedReason(const ModelInfo& info, const Scene& scene) {
   if (!scene.plates.empty() && !info.has(Capability::Grasp))
     return lacks("the scene's plates (held as grasps of their surface vertices)",
                  Capability::Grasp);
+  for (size_t i = 0; i < scene.plates.size(); ++i)
+    if (scene.plates[i].contact == PlateContact::Sliding && !info.has(Capability::Sliding))
+      return lacks("the scene's plate " + std::to_string(i) +
+                       " (sliding: the normal displacement prescribed, the tangential free)",
+                   Capability::Sliding);
   if (!scene.objects.empty() && !info.has(Capability::Contact))
     return lacks("the scene's rigid objects", Capability::Contact);
   // A free object is held up only by the reaction the model reports: without it the object falls
@@ -522,7 +527,9 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
     }
     for (const GraspInput& g : in.grasps) {
       for (size_t q = 0; q < g.vertices.size(); ++q) {
-        residual2 += (surface.row(g.vertices[q]) - g.targets.row(Eigen::Index(q))).squaredNorm();
+        const Vec3 miss = (surface.row(g.vertices[q]) - g.targets.row(Eigen::Index(q))).transpose();
+        // A sliding plate prescribes the normal component only.
+        residual2 += g.sliding() ? std::pow(miss.dot(g.slideNormal), 2) : miss.squaredNorm();
         ++residualCount;
       }
     }

@@ -87,15 +87,27 @@ class CalculixModel final : public Model {
     loads.gravity = in.gravity;
     // Grasped surface vertices: prescribed displacements (a vertex with no node, or on a node of
     // the fixed region, stays where the support holds it, as in reference_fem).
+    // A sliding plate (axis-aligned normal) prescribes the normal dof only.
     std::map<int, Vec3> held;
+    std::map<std::pair<int, int>, Real> heldDof;
     for (const GraspInput& g : in.grasps) {
+      const int axis = slideAxis(g);
+      if (g.sliding() && axis < 0)
+        throw InputError("calculix", "grasp of tool " + std::to_string(g.tool),
+                         "a sliding plate's normal must lie along x, y or z");
+      const auto hold = [&](int node, const Vec3& target) {
+        const Vec3 u = target - m_model.nodes.row(node).transpose();
+        if (axis >= 0)
+          heldDof[{node, axis}] = u(axis);
+        else
+          held[node] = u;
+      };
       std::map<int, Eigen::Index> row;
       for (size_t k = 0; k < g.vertices.size(); ++k) {
         row[g.vertices[k]] = Eigen::Index(k);
         const int node = m_surfaceNode[size_t(g.vertices[k])];
         if (node < 0 || isFixed(node)) continue;
-        held[node] =
-            g.targets.row(Eigen::Index(k)).transpose() - m_model.nodes.row(node).transpose();
+        hold(node, g.targets.row(Eigen::Index(k)).transpose());
       }
       // The nodes on the triangles between the grasped vertices, at interpolated targets.
       for (const GraspedPatchNodes::Held& h : m_graspPatch->held(g.vertices)) {
@@ -103,7 +115,7 @@ class CalculixModel final : public Model {
         Vec3 target = Vec3::Zero();
         for (int k = 0; k < 3; ++k)
           target += h.weights(k) * g.targets.row(row.at(h.vertices[size_t(k)])).transpose();
-        held[h.node] = target - m_model.nodes.row(h.node).transpose();
+        hold(h.node, target);
       }
     }
     for (const NodeGrasp& g : in.nodeConstraints)
@@ -112,6 +124,7 @@ class CalculixModel final : public Model {
           held[g.nodes[k]] = g.targets.row(Eigen::Index(k)).transpose() -
                              m_model.nodes.row(g.nodes[k]).transpose();
     loads.displacements.assign(held.begin(), held.end());
+    loads.dofDisplacements.assign(heldDof.begin(), heldDof.end());
     for (const PointLoad& l : in.loads) {
       std::vector<std::pair<int, Vec3>> shares;
       for (size_t k = 0; k < l.vertices.size(); ++k) {

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -68,11 +69,18 @@ std::string ccxStepDeck(const CcxModel& model, const CcxLoads& loads, const CcxI
   s << "*STATIC\n"
     << num(nlgeom ? inc.initial : 1.0) << ", 1.0, " << num(inc.minimum) << ", "
     << num(nlgeom ? inc.maximum : 1.0) << "\n";
-  if (!loads.displacements.empty()) {
+  if (!loads.displacements.empty() || !loads.dofDisplacements.empty()) {
     s << "*BOUNDARY\n";
-    for (const auto& [node, u] : loads.displacements)
+    std::set<int> whole;
+    for (const auto& [node, u] : loads.displacements) {
+      whole.insert(node);
       for (int k = 0; k < 3; ++k)
         s << node + 1 << ", " << k + 1 << ", " << k + 1 << ", " << num(u(k)) << "\n";
+    }
+    for (const auto& [dof, u] : loads.dofDisplacements)
+      if (!whole.count(dof.first))
+        s << dof.first + 1 << ", " << dof.second + 1 << ", " << dof.second + 1 << ", " << num(u)
+          << "\n";
   }
   std::map<int, Vec3> forces;
   for (const auto& [node, f] : loads.forces) {

@@ -39,8 +39,11 @@ struct CcxModel {
 /// The loads of one solve, from the rest state.
 struct CcxLoads {
   std::vector<std::pair<int, Vec3>> displacements;  ///< (node, prescribed displacement, m)
-  std::vector<std::pair<int, Vec3>> forces;         ///< (node, force, N), summed per node
-  Vec3 gravity = Vec3::Zero();                      ///< m/s^2
+  /// ((node, axis 0..2), prescribed displacement along that axis, m): a sliding plate's normal
+  /// component, the other two free. A node in `displacements` too is held there.
+  std::vector<std::pair<std::pair<int, int>, Real>> dofDisplacements;
+  std::vector<std::pair<int, Vec3>> forces;  ///< (node, force, N), summed per node
+  Vec3 gravity = Vec3::Zero();               ///< m/s^2
 };
 
 struct CcxIncrements {

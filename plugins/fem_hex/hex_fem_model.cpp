@@ -318,10 +318,13 @@ int HexFemModel::valuePosition(int row, int col) const {
   return static_cast<int>(std::lower_bound(begin, end, row) - m_A.innerIndexPtr());
 }
 
-void HexFemModel::addHeldValues(const std::vector<int>& verts, Real s) {
+void HexFemModel::addHeldValues(const std::vector<int>& verts, Real s,
+                                const std::vector<int>& axes) {
   // The nodes of one vertex are the corners of one hexahedron: every pair is in the pattern.
   Real* val = m_A.valuePtr();
-  for (int v : verts)
+  for (size_t q = 0; q < verts.size(); ++q) {
+    const int v = verts[q];
+    const int axis = axes.empty() ? -1 : axes[q];
     for (int a = 0; a < 8; ++a) {
       const int da = m_dofOfNode[m_embedding.nodeIds(v, a)];
       const Real wa = m_embedding.weights(v, a);
@@ -330,39 +333,44 @@ void HexFemModel::addHeldValues(const std::vector<int>& verts, Real s) {
         const int db = m_dofOfNode[m_embedding.nodeIds(v, b)];
         const Real wb = m_embedding.weights(v, b);
         if (db < 0 || wb == 0 || da < db) continue;  // lower triangle (da == db: the diagonal)
-        for (int i = 0; i < 3; ++i) val[valuePosition(da + i, db + i)] += s * wa * wb;
+        for (int i = 0; i < 3; ++i)
+          if (axis < 0 || i == axis) val[valuePosition(da + i, db + i)] += s * wa * wb;
       }
     }
+  }
 }
 
 void HexFemModel::applyHeld(const VecX& in, Real scale, VecX& out) const {
-  auto one = [&](int v) {
+  // axis >= 0: a sliding plate's vertex, penalised along that axis only.
+  auto one = [&](int v, int axis) {
     Vec3 p = Vec3::Zero();
     for (int a = 0; a < 8; ++a)
       p += m_embedding.weights(v, a) * in.segment<3>(3 * m_embedding.nodeIds(v, a));
+    if (axis >= 0) p = Vec3::Unit(axis) * p[axis];
     for (int a = 0; a < 8; ++a)
       out.segment<3>(3 * m_embedding.nodeIds(v, a)) += (scale * m_embedding.weights(v, a)) * p;
   };
-  for (int v : m_clampVerts) one(v);
-  for (int v : m_graspVerts) one(v);
+  for (int v : m_clampVerts) one(v, -1);
+  for (size_t k = 0; k < m_graspVerts.size(); ++k) one(m_graspVerts[k], m_graspVertAxis[k]);
 }
 
 void HexFemModel::addHeldResidual(const VecX& v0, VecX& out) const {
   const Real h = m_dt;
-  auto one = [&](int v, const Vec3& t) {
+  auto one = [&](int v, const Vec3& t, int axis) {
     Vec3 p = Vec3::Zero();
     for (int a = 0; a < 8; ++a) {
       const int n = m_embedding.nodeIds(v, a);
       p += m_embedding.weights(v, a) * (m_x.row(n).transpose() + h * v0.segment<3>(3 * n));
     }
-    const Vec3 g = (h * m_kp) * (t - p);
+    Vec3 g = (h * m_kp) * (t - p);
+    if (axis >= 0) g = Vec3::Unit(axis) * g[axis];
     for (int a = 0; a < 8; ++a)
       out.segment<3>(3 * m_embedding.nodeIds(v, a)) += m_embedding.weights(v, a) * g;
   };
   for (size_t k = 0; k < m_clampVerts.size(); ++k)
-    one(m_clampVerts[k], m_clampTargets.row(Eigen::Index(k)).transpose());
+    one(m_clampVerts[k], m_clampTargets.row(Eigen::Index(k)).transpose(), -1);
   for (size_t k = 0; k < m_graspVerts.size(); ++k)
-    one(m_graspVerts[k], m_graspVertTargets.row(Eigen::Index(k)).transpose());
+    one(m_graspVerts[k], m_graspVertTargets.row(Eigen::Index(k)).transpose(), m_graspVertAxis[k]);
 }
 
 void HexFemModel::assembleValues(bool rotated) {
@@ -395,7 +403,7 @@ void HexFemModel::assembleValues(bool rotated) {
 
 void HexFemModel::factorize(bool withGrasps) {
   // The grasped points' penalty joins the values (the caller restored the grasp-free ones).
-  if (withGrasps) addHeldValues(m_graspVerts, m_dt * m_dt * m_kp);
+  if (withGrasps) addHeldValues(m_graspVerts, m_dt * m_dt * m_kp, m_graspVertAxis);
   {
     const SerialOpenMpScope serial;
     m_chol.factorize(m_A);
@@ -544,6 +552,7 @@ void HexFemModel::reset() {
   m_graspVerts.clear();
   m_graspVertOwner.clear();
   m_graspVertTargets.resize(0, 3);
+  m_graspVertAxis.clear();
   m_graspForces.clear();
   m_lastIterations = 0;
   m_rotationNotConverged = m_pcgNotConverged = m_ignoredGraspNodes = m_pcgIterations = 0;
@@ -565,12 +574,17 @@ void HexFemModel::collectGrasps(const StepInput& in) {
   // The grasped surface vertices (a vertex held by two grasps belongs to the first).
   m_graspVerts.clear();
   m_graspVertOwner.clear();
+  m_graspVertAxis.clear();
   const Eigen::Index numVerts = m_embedding.nodeIds.rows();
   Eigen::Index rows = 0;
   for (const GraspInput& g : in.grasps) rows += Eigen::Index(g.vertices.size());
   m_graspVertTargets.resize(rows, 3);
   for (int g = 0; g < static_cast<int>(in.grasps.size()); ++g) {
     const GraspInput& grasp = in.grasps[size_t(g)];
+    const int axis = slideAxis(grasp);
+    if (grasp.sliding() && axis < 0)
+      throw InputError("fem_hex", "grasp of tool " + std::to_string(grasp.tool),
+                       "a sliding plate's normal must lie along x, y or z");
     for (size_t k = 0; k < grasp.vertices.size(); ++k) {
       const int v = grasp.vertices[k];
       if (v < 0 || v >= numVerts || static_cast<Eigen::Index>(k) >= grasp.targets.rows() ||
@@ -582,6 +596,7 @@ void HexFemModel::collectGrasps(const StepInput& in) {
           grasp.targets.row(Eigen::Index(k));
       m_graspVerts.push_back(v);
       m_graspVertOwner.push_back(g);
+      m_graspVertAxis.push_back(axis);
     }
   }
   m_graspVertTargets.conservativeResize(Eigen::Index(m_graspVerts.size()), 3);
@@ -666,6 +681,10 @@ void HexFemModel::graspReactions(const StepInput& in, Real h) {
       for (Eigen::Index g = 0; g < m_carryShare.cols(); ++g)
         m_graspForces[size_t(g)] += m_carryShare(c, g) * m_z.segment<3>(3 * n) / h;
     }
+    // A sliding plate feels the normal component only (its carrying nodes are free along it).
+    for (size_t g = 0; g < in.grasps.size(); ++g)
+      if (const int axis = slideAxis(in.grasps[g]); axis >= 0)
+        m_graspForces[g] = Vec3::Unit(axis) * m_graspForces[g][axis];
   }
 }
 

@@ -160,7 +160,8 @@ class HexFemModel : public Model {
   /// Position of (row, col), row >= col, in m_A's values.
   int valuePosition(int row, int col) const;
   /// m_A values += s J_v^T J_v (per coordinate) for every vertex v of verts (free nodes only).
-  void addHeldValues(const std::vector<int>& verts, Real s);
+  /// axes: per vertex, -1 (all three components) or the one axis held; empty: all three.
+  void addHeldValues(const std::vector<int>& verts, Real s, const std::vector<int>& axes = {});
   /// out += scale J_H^T J_H in over the held points (clamped and grasped).
   void applyHeld(const VecX& in, Real scale, VecX& out) const;
   /// out += h kp J_H^T (t - J_H (x + h v0)) over the held points.
@@ -247,6 +248,9 @@ class HexFemModel : public Model {
   std::vector<int> m_graspVerts;      // grasped surface vertices of this step (grasp order)
   std::vector<int> m_graspVertOwner;  // their grasp index
   MatX3 m_graspVertTargets;           // their targets
+  /// Per grasped vertex: -1 (bonded: the penalty on all three components), else the axis of its
+  /// sliding plate's normal (the penalty on that component only, the other two free).
+  std::vector<int> m_graspVertAxis;
   std::vector<int> m_carryCol;        // N, index of a carrying node in m_grasped or -1
   MatX m_carryShare;                  // #carrying x #grasps: share of each node's reaction
   std::vector<int> m_touched;         // elements touching carrying nodes

@@ -111,7 +111,7 @@ DEFORM_PLUGIN(registry) {
   info.capabilities = {Capability::Grasp,   Capability::PointForce,
                        Capability::Gravity, Capability::ReactionForce,
                        Capability::Contact, Capability::ContactReaction,
-                       Capability::Markers};
+                       Capability::Markers, Capability::Sliding};
   info.params = deform::fem_hex::paramSpecs();
   info.create = [] { return std::make_unique<deform::fem_hex::HexFemModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).

@@ -121,10 +121,10 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
   }
 
   // Prescribed rows: rebuild Z and S only when the rows (nodes, weights, axes) change.
-  std::vector<std::array<Real, 7>>& key = m_keyScratch;
+  std::vector<std::array<Real, 8>>& key = m_keyScratch;
   key.clear();
   for (const Prescribed& p : prescribed) {
-    std::array<Real, 7> k = {Real(p.at.count), -1, -1, -1, 0, 0, 0};
+    std::array<Real, 8> k = {Real(p.at.count), -1, -1, -1, 0, 0, 0, Real(p.axes)};
     for (int i = 0; i < p.at.count; ++i) {
       k[1 + i] = p.at.nodes[i];
       k[4 + i] = p.at.weights[i];
@@ -144,6 +144,7 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
     for (const Prescribed& p : prescribed)
       for (int a = 0; a < 3; ++a) {
         if (r >= m_rowAt.size()) break;
+        if (!(p.axes & (1 << a))) continue;
         bool anyFree = false;
         for (int i = 0; i < p.at.count; ++i) anyFree |= m_dof[3 * p.at.nodes[i] + a] >= 0;
         if (!anyFree) continue;
@@ -169,6 +170,7 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
       r = 0;
       for (size_t e = 0; e < prescribed.size() && r < m_rowAt.size(); ++e)
         for (int a = 0; a < 3 && r < m_rowAt.size(); ++a) {
+          if (!(prescribed[e].axes & (1 << a))) continue;
           bool anyFree = false;
           for (int i = 0; i < prescribed[e].at.count; ++i)
             anyFree |= m_dof[3 * prescribed[e].at.nodes[i] + a] >= 0;
@@ -189,6 +191,7 @@ void CoarseLinearFem::buildPrescribedRows(const std::vector<Prescribed>& prescri
   m_rowAxis.clear();
   for (const Prescribed& p : prescribed)
     for (int a = 0; a < 3; ++a) {
+      if (!(p.axes & (1 << a))) continue;
       bool anyFree = false;
       for (int i = 0; i < p.at.count; ++i) anyFree |= m_dof[3 * p.at.nodes[i] + a] >= 0;
       if (!anyFree) continue;  // a pinned node stays pinned

@@ -46,6 +46,7 @@ class CoarseLinearFem {
   struct Prescribed {
     CoarseAttachment at;
     Vec3 displacement = Vec3::Zero();
+    int axes = 7;  ///< the components prescribed (bits 1 x, 2 y, 4 z); a sliding plate's: one
   };
 
   /// Assembles and factorises K. mesh: positively oriented tets (m); fixed: pinned node indices.
@@ -100,7 +101,7 @@ class CoarseLinearFem {
   bool m_regularised = false;
   long long m_degenerate = 0;
   // Capacitance data for the current prescribed rows.
-  std::vector<std::array<Real, 7>> m_rowKey;
+  std::vector<std::array<Real, 8>> m_rowKey;
   MatX m_Z;  ///< #free by #rows
   Eigen::CompleteOrthogonalDecomposition<MatX> m_S;
   std::vector<int> m_rowAxis;
@@ -111,7 +112,7 @@ class CoarseLinearFem {
   MatX m_Zout;                 ///< m_Z's rows at m_outDofs (double response)
   bool m_floatResponse = false;
   BlockedResponse m_ZoutF;  ///< m_Z's rows at m_outDofs in float (single-precision response)
-  std::vector<std::array<Real, 7>> m_keyScratch;
+  std::vector<std::array<Real, 8>> m_keyScratch;
 };
 
 }  // namespace deform::hybrid_fem_pbd

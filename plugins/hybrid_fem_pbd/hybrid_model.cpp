@@ -211,8 +211,14 @@ StepStatus HybridModel::step(const StepInput& in) {
   std::vector<char>& immovable = m_immovableStep;
   immovable.assign(n, 0);
   m_graspTargets.clear();
+  m_graspTargetAxis.clear();
   for (size_t gi = 0; gi < in.grasps.size(); ++gi) {
     const GraspInput& g = in.grasps[gi];
+    // A sliding plate: its normal component only, in the coarse FEM and on the fine surface.
+    const int axis = slideAxis(g);
+    if (g.sliding() && axis < 0)
+      throw InputError("hybrid_fem_pbd", "grasp of tool " + std::to_string(g.tool),
+                       "a sliding plate's normal must lie along x, y or z");
     bool anyControl = false;
     for (int i : g.vertices)
       if (i >= 0 && i < n && m_controlOf[i] >= 0) anyControl = true;
@@ -221,11 +227,13 @@ StepStatus HybridModel::step(const StepInput& in) {
       if (i < 0 || i >= n || static_cast<Eigen::Index>(k) >= g.targets.rows()) continue;
       const Vec3 target = g.targets.row(k).transpose();
       m_graspTargets.emplace_back(i, target);
+      m_graspTargetAxis.push_back(axis);
       immovable[i] = 1;
       if (m_controlOf[i] >= 0 || !anyControl) {
         CoarseLinearFem::Prescribed p;
         p.at = attachment(i);
         p.displacement = target - m_surf.rest.row(i).transpose();
+        if (axis >= 0) p.axes = 1 << axis;
         m_prescribed.push_back(p);
         m_prescribedGrasp.push_back(static_cast<int>(gi));
       }
@@ -246,6 +254,19 @@ StepStatus HybridModel::step(const StepInput& in) {
   m_graspForces.assign(in.grasps.size(), Vec3::Zero());
   for (size_t e = 0; e < m_prescribed.size(); ++e)
     m_graspForces[static_cast<size_t>(m_prescribedGrasp[e])] -= m_reactions[e];
+  // A sliding plate's fine vertices follow the coarse surface along the plate (their attachment's
+  // displacement) and the plate along its normal.
+  for (size_t k = 0; k < m_graspTargets.size(); ++k) {
+    const int axis = m_graspTargetAxis[k];
+    if (axis < 0) continue;
+    auto& [i, target] = m_graspTargets[k];
+    const CoarseAttachment& a = attachment(i);
+    Vec3 x = m_surf.rest.row(i).transpose();
+    for (int c = 0; c < a.count; ++c)
+      x += a.weights[size_t(c)] * m_volumeU.row(a.nodes[size_t(c)]).transpose();
+    x[axis] = target[axis];
+    target = x;
+  }
   m_phase["fem"] = msSince(t);
 
   // 3.-5. Fine surface PBD.

@@ -162,6 +162,7 @@ class HybridModel final : public Model {
   // Per-step scratch (kept to avoid allocations in step()).
   std::vector<CoarseLinearFem::NodalForce> m_nodal;
   std::vector<std::pair<int, Vec3>> m_surfaceForces, m_graspTargets;
+  std::vector<int> m_graspTargetAxis;  ///< per m_graspTargets: -1 bonded, else the sliding axis
   std::vector<CoarseLinearFem::Prescribed> m_prescribed;
   std::vector<int> m_prescribedGrasp;  ///< grasp index of each m_prescribed entry
   std::vector<Vec3> m_reactions;

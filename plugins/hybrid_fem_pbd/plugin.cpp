@@ -75,8 +75,8 @@ DEFORM_PLUGIN(registry) {
       "Scientific Programming 2021, article 8343312 (hindawi.com/journals/sp/2021/8343312)";
   info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp, C::PointForce,      C::Gravity, C::ReactionForce,
-                       C::Cut,   C::NeedsPrecompute, C::Contact, C::Markers};
+  info.capabilities = {C::Grasp,           C::PointForce, C::Gravity, C::ReactionForce, C::Cut,
+                       C::NeedsPrecompute, C::Contact,    C::Markers, C::Sliding};
   info.params = deform::hybrid_fem_pbd::paramSpecs();
   info.create = [] { return std::make_unique<deform::hybrid_fem_pbd::HybridModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).

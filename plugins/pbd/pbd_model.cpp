@@ -324,6 +324,8 @@ void PbdModel::reset() {
   m_w = m_w0;
   m_hotDt = -1;
   m_hotGrasped.clear();
+  m_hotSliding.clear();
+  m_sliding.clear();
   std::fill(m_graspMask.begin(), m_graspMask.end(), 0);
   m_lambdaVolume = 0;
   m_volumeGrad4.assign(4 * static_cast<size_t>(m_rest.rows()), 0.0);
@@ -492,8 +494,36 @@ void PbdModel::projectAll(Real dt) {
       packed = true;
       projectVolume(dt);
     }
+    holdSliding(packed);
   }
   if (packed) unpackPositions();
+}
+
+void PbdModel::holdSliding(bool packed) {
+  if (m_sliding.empty()) return;
+  if (!packed) {
+    for (const SlidingHold& h : m_sliding) {
+      const Vec3 p = m_p.row(h.node).transpose();
+      m_p.row(h.node) = (p - (h.normal.dot(p) - h.offset) * h.normal).transpose();
+    }
+    return;
+  }
+  if (m_f32) {  // packed relative to the box centre, in float
+    float* x = p4f();
+    for (const SlidingHold& h : m_sliding) {
+      const Real d = h.offset - h.normal.dot(m_boxCenter);
+      float* q = x + 4 * size_t(h.node);
+      const Real miss = h.normal.x() * q[0] + h.normal.y() * q[1] + h.normal.z() * q[2] - d;
+      for (int k = 0; k < 3; ++k) q[k] = static_cast<float>(q[k] - miss * h.normal[k]);
+    }
+    return;
+  }
+  Real* x = p4();
+  for (const SlidingHold& h : m_sliding) {
+    Real* q = x + 4 * size_t(h.node);
+    const Real miss = h.normal.x() * q[0] + h.normal.y() * q[1] + h.normal.z() * q[2] - h.offset;
+    for (int k = 0; k < 3; ++k) q[k] -= miss * h.normal[k];
+  }
 }
 
 StepStatus PbdModel::step(const StepInput& in) {
@@ -504,17 +534,41 @@ StepStatus PbdModel::step(const StepInput& in) {
 
   // Grasped surface vertices are particles (J a selection): kinematic this step, inverse mass 0,
   // position = target.
+  // Sliding plates hold their particles on the plate's plane only: those stay free (inverse
+  // mass kept) and are projected back onto the plane after every iteration (holdSliding); the
+  // constraints touching them are listed with the grasped ones for the plate's force.
   graspsOnNodes(in.grasps, m_surfaceRows, m_nodeGrasps);
   std::vector<int>& grasped = m_graspedScratch;
-  graspedNodeSet(m_nodeGrasps, grasped);
-  if (grasped != m_hotGrasped || dt != m_hotDt) {
+  grasped.clear();
+  m_sliding.clear();
+  for (const NodeGrasp& g : m_nodeGrasps)
+    if (!g.sliding()) grasped.insert(grasped.end(), g.nodes.begin(), g.nodes.end());
+  std::sort(grasped.begin(), grasped.end());
+  grasped.erase(std::unique(grasped.begin(), grasped.end()), grasped.end());
+  std::vector<int>& sliding = m_slidingScratch;
+  sliding.clear();
+  for (const NodeGrasp& g : m_nodeGrasps) {
+    if (!g.sliding()) continue;
+    const Vec3 n = g.slideNormal.normalized();
+    for (size_t k = 0; k < g.nodes.size(); ++k) {
+      const int i = g.nodes[k];
+      if (std::binary_search(grasped.begin(), grasped.end(), i)) continue;
+      m_sliding.push_back({i, n, n.dot(g.targets.row(Eigen::Index(k)).transpose())});
+      sliding.push_back(i);
+    }
+  }
+  std::sort(sliding.begin(), sliding.end());
+  if (grasped != m_hotGrasped || sliding != m_hotSliding || dt != m_hotDt) {
     for (int i : m_hotGrasped) m_graspMask[i] = 0;
+    for (int i : m_hotSliding) m_graspMask[i] = 0;
     m_w = m_w0;
     for (int i : grasped) {
       m_w[i] = 0.0;
       m_graspMask[i] = 1;
     }
+    for (int i : sliding) m_graspMask[i] = 1;
     m_hotGrasped = grasped;
+    m_hotSliding = sliding;
     refreshHotData(dt);
     listGraspConstraints();
   }
@@ -529,7 +583,9 @@ StepStatus PbdModel::step(const StepInput& in) {
   }
   m_p = m_x + dt * m_v;
   for (const NodeGrasp& g : m_nodeGrasps)
-    for (size_t k = 0; k < g.nodes.size(); ++k) m_p.row(g.nodes[k]) = g.targets.row(k);
+    if (!g.sliding())
+      for (size_t k = 0; k < g.nodes.size(); ++k) m_p.row(g.nodes[k]) = g.targets.row(k);
+  holdSliding(false);
   const auto t1 = Clock::now();
 
   if (m_f32)
@@ -616,6 +672,7 @@ void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
   MatX3& nodeForce = m_nodeForce;
   if (nodeForce.rows() != m_x.rows()) nodeForce.setZero(m_x.rows(), 3);
   for (int i : m_hotGrasped) nodeForce.row(i).setZero();
+  for (int i : m_hotSliding) nodeForce.row(i).setZero();
   const auto add = [&](int node, const Vec3& f) {
     if (m_graspMask[node]) nodeForce.row(node) += f.transpose();
   };
@@ -650,11 +707,20 @@ void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
     for (int k = 0; k < 4; ++k) add(c.p[k], (m_lambdaTet[i] * invDt2) * g[k]);
   }
   addIsometricGraspForces(invDt2, nodeForce);
-  if (m_hasVolume)
+  if (m_hasVolume) {
     for (int i : m_hotGrasped)
       nodeForce.row(i) += (m_lambdaVolume * invDt2) * volumeGradient(i).transpose();
-  for (size_t g = 0; g < in.grasps.size(); ++g)
+    for (int i : m_hotSliding)
+      nodeForce.row(i) += (m_lambdaVolume * invDt2) * volumeGradient(i).transpose();
+  }
+  for (size_t g = 0; g < in.grasps.size(); ++g) {
     for (int node : m_nodeGrasps[g].nodes) m_graspForces[g] += nodeForce.row(node).transpose();
+    // A sliding plate takes the normal component only (the tangential is left to the tissue).
+    if (m_nodeGrasps[g].sliding()) {
+      const Vec3 n = m_nodeGrasps[g].slideNormal.normalized();
+      m_graspForces[g] = n * n.dot(m_graspForces[g]);
+    }
+  }
 }
 
 Counts PbdModel::counts() const {

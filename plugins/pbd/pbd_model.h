@@ -183,7 +183,20 @@ class PbdModel final : public Model {
   long long m_degenerate = 0;        // skipped projections since init/reset
   long long m_degenerateAtInit = 0;  // hinges dropped at init (degenerate rest triangles)
   std::vector<int> m_graspedScratch;
-  std::vector<NodeGrasp> m_nodeGrasps;             // this step's grasps on particles
+  std::vector<NodeGrasp> m_nodeGrasps;  // this step's grasps on particles
+  /// This step's particles under a sliding plate (not also held by a bonded grasp): free
+  /// particles projected onto the plate's plane n . p = offset after every solver iteration.
+  struct SlidingHold {
+    int node;
+    Vec3 normal;
+    Real offset;
+  };
+  std::vector<SlidingHold> m_sliding;
+  std::vector<int> m_slidingScratch;
+  std::vector<int> m_hotSliding;  // sliding particles the hot data was built for
+  /// Projects the sliding particles onto their planes, in the packed (p4) positions when
+  /// `packed`, else in m_p.
+  void holdSliding(bool packed);
   std::vector<std::pair<int, Vec3>> m_nodeForces;  // this step's load shares on particles
   MatX3 m_nodeForce;
   // Constraints touching a grasped node (rebuilt with the hot data when the grasped set changes).

@@ -85,8 +85,8 @@ DEFORM_PLUGIN(registry) {
       "XPBD, MIG '16, doi:10.1145/2994258.2994272";
   info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,         C::ReactionForce,
-                       C::TetInput, C::Contact,    C::ContactReaction, C::Markers};
+  info.capabilities = {C::Grasp,   C::PointForce,      C::Gravity, C::ReactionForce, C::TetInput,
+                       C::Contact, C::ContactReaction, C::Markers, C::Sliding};
   info.params = deform::pbd::paramSpecs();
   info.create = [] { return std::make_unique<deform::pbd::PbdModel>(); };
   // What the harness's sweep, bench and stability run it with (registry.h).

@@ -392,9 +392,17 @@ std::vector<int> EquilibriumSolver::constrainedDofs(const LoadCase& loads, VecX&
     for (int k = 0; k < 3; ++k) cdofs.push_back(3 * node + k);
     target.segment<3>(3 * node) = loads.targets.row(Eigen::Index(i)).transpose();
   }
+  const size_t held = cdofs.size();  // the dofs of the fully held nodes
   for (int d : loads.fixedDofs) {
     cdofs.push_back(d);
     target(d) = restV(d / 3, d % 3);
+  }
+  std::vector<int> whole(cdofs.begin(), cdofs.begin() + std::ptrdiff_t(held));
+  std::sort(whole.begin(), whole.end());
+  for (const auto& [d, value] : loads.prescribedDofs) {
+    if (std::binary_search(whole.begin(), whole.end(), d)) continue;
+    cdofs.push_back(d);
+    target(d) = value;
   }
   std::sort(cdofs.begin(), cdofs.end());
   cdofs.erase(std::unique(cdofs.begin(), cdofs.end()), cdofs.end());

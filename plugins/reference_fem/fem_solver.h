@@ -106,7 +106,10 @@ struct LoadCase {
   std::vector<int> fixedDofs;        ///< single dofs (3 node + axis) held at rest (rollers)
   std::vector<int> prescribedNodes;  ///< held at `targets` (grasped nodes); fixed wins on overlap
   MatX3 targets;                     ///< #prescribedNodes by 3, m
-  Vec3 gravity = Vec3::Zero();       ///< m/s^2
+  /// Single dofs (3 node + axis) held at a value, m: the normal component of a node under a
+  /// sliding plate. A dof of a fixed or prescribed node stays as those hold it.
+  std::vector<std::pair<int, Real>> prescribedDofs;
+  Vec3 gravity = Vec3::Zero();                   ///< m/s^2
   std::vector<std::pair<int, Vec3>> nodeForces;  ///< (node, force in N)
 };
 

@@ -84,7 +84,7 @@ DEFORM_PLUGIN(registry) {
       Capability::Grasp,         Capability::PointForce,      Capability::Gravity,
       Capability::ReactionForce, Capability::NeedsPrecompute, Capability::TetInput,
       Capability::QuasiStatic,   Capability::Contact,         Capability::ContactReaction,
-      Capability::RollerSupport, Capability::Markers};
+      Capability::RollerSupport, Capability::Markers,         Capability::Sliding};
   info.params = reference_fem::paramSpecs();
   info.create = [] { return reference_fem::makeReferenceFemModel(); };
   // No other presets: every command (stability, tables, calibrate, sweep) uses the reference at

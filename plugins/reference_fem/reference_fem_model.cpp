@@ -121,26 +121,37 @@ class ReferenceFemModel final : public Model {
     // fixed box are pinned (fixed wins over a grasp; the support takes their load share).
     // With them, the nodes on the triangles and edges between the grasped vertices, at the
     // interpolated targets (the same held surface as every model's).
+    // A sliding plate holds the same nodes along its normal axis only (the dof at the target's
+    // coordinate), the tangential dofs free.
     std::vector<std::vector<int>> patchNodes(in.grasps.size());
     for (size_t gi = 0; gi < in.grasps.size(); ++gi) {
       const GraspInput& g = in.grasps[gi];
+      const int axis = slideAxis(g);
+      if (g.sliding() && axis < 0)
+        throw InputError("reference_fem", "grasp of tool " + std::to_string(g.tool),
+                         "a sliding plate's normal must lie along x, y or z");
+      const auto hold = [&](int node, const Vec3& target) {
+        if (axis >= 0) {
+          lc.prescribedDofs.emplace_back(3 * node + axis, target[axis]);
+          return;
+        }
+        lc.prescribedNodes.push_back(node);
+        lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
+        lc.targets.bottomRows(1) = target.transpose();
+      };
       std::map<int, Eigen::Index> row;
       for (size_t k = 0; k < g.vertices.size(); ++k) {
         row[g.vertices[k]] = Eigen::Index(k);
         const int node = m_surfaceNode[size_t(g.vertices[k])];
         if (fixed[size_t(node)]) continue;
-        lc.prescribedNodes.push_back(node);
-        lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
-        lc.targets.bottomRows(1) = g.targets.row(Eigen::Index(k));
+        hold(node, g.targets.row(Eigen::Index(k)).transpose());
       }
       for (const GraspedPatchNodes::Held& h : m_graspPatch->held(g.vertices)) {
         if (fixed[size_t(h.node)]) continue;
         Vec3 target = Vec3::Zero();
         for (int k = 0; k < 3; ++k)
           target += h.weights(k) * g.targets.row(row.at(h.vertices[size_t(k)])).transpose();
-        lc.prescribedNodes.push_back(h.node);
-        lc.targets.conservativeResize(Eigen::Index(lc.prescribedNodes.size()), 3);
-        lc.targets.bottomRows(1) = target.transpose();
+        hold(h.node, target);
         patchNodes[gi].push_back(h.node);
       }
     }

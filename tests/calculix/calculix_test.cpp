@@ -247,4 +247,71 @@ TEST(Calculix, PlateAndMarkersThroughTheHarnessMatchUniaxialStrain) {
   }
 }
 
+// A sliding plate (issue 34) on a cube on frictionless faces (the base on z-rollers, two side
+// faces on symmetry rollers): the top face slides out freely, so the cube is in uniaxial stress
+// (u_z = -press (z + a) / 2a, u_x = nu eps (x + a)) and the plate's force is E A eps; a bonded
+// plate holds the top face's lateral motion at zero and needs more force. Both solvers, linear
+// elements and material (the exact answer is linear: every mesh reproduces it).
+TEST(Calculix, SlidingPlateOnFrictionlessFacesGivesUniaxialStressAndBondedDoesNot) {
+  const double a = 0.05, press = 0.001, E = 5500, nu = 0.3, eps = press / (2 * a);
+  nlohmann::json j = nlohmann::json::parse(R"({
+    "organ": {"mesh": "phantom:cube", "resolution": 0.3,
+              "material": {"young": 5500, "poisson": 0.3, "density": 1000},
+              "fixed": [{"box": [[-0.06, -0.06, -0.050001], [0.06, 0.06, -0.049999]], "axes": "z"},
+                        {"box": [[-0.050001, -0.06, -0.06], [-0.049999, 0.06, 0.06]], "axes": "x"},
+                        {"box": [[-0.06, -0.050001, -0.06], [0.06, -0.049999, 0.06]], "axes": "y"}]},
+    "gravity": [0, 0, 0], "dt": 1.0, "duration": 1.0,
+    "plates": [{"region": {"box": [[-0.06, -0.06, 0.049999], [0.06, 0.06, 0.06]]},
+                "contact": "sliding",
+                "trajectory": [{"t": 0, "offset": [0, 0, 0]}, {"t": 1, "offset": [0, 0, -0.001]}]}],
+    "markers": {"points": [[0.01, -0.02, 0.0], [-0.03, 0.025, 0.03]]},
+    "models": [{"plugin": "calculix"}], "reference": {"plugin": "reference_fem"}})");
+  const bool ccx = !calculix::findCcx().empty();
+  for (const char* contact : {"sliding", "bonded"}) {
+    j["plates"][0]["contact"] = contact;
+    const bool sliding = std::string(contact) == "sliding";
+    const Scene scene = parseScene(j, "sliding.json");
+    const Organ organ = loadOrgan(scene);
+    for (const char* plugin : {"reference_fem", "calculix"}) {
+      if (!ccx && std::string(plugin) == "calculix") continue;
+      const ModelInfo& info = loader().load(plugin);
+      ASSERT_TRUE(info.has(Capability::Sliding)) << plugin;
+      const ParamValues p = resolveParams(
+          info.params, {{"elements", 300}, {"element_order", 1}, {"material", "linear"}}, "test",
+          "/params");
+      const harness::RunRecord r = harness::runModel(info, p, scene, organ, cache());
+      const std::string what = std::string(plugin) + ", " + contact;
+      ASSERT_EQ(r.status, harness::RunStatus::Ok) << what << ": " << r.message;
+      EXPECT_TRUE(r.valid) << what << ": " << r.invalidReason;
+      // The top corner (a, a, a): uniaxial stress when sliding, no lateral motion when bonded.
+      Eigen::Index corner = 0;
+      for (Eigen::Index v = 0; v < organ.surface.V.rows(); ++v)
+        if (organ.surface.V.row(v).sum() > organ.surface.V.row(corner).sum()) corner = v;
+      const Vec3 u = (r.finalSurface.row(corner) - organ.surface.V.row(corner)).transpose();
+      EXPECT_NEAR(u.z(), -press, 1e-9) << what << ": the plate prescribes the normal";
+      EXPECT_NEAR(u.x(), sliding ? nu * eps * 2 * a : 0.0, 1e-7) << what;
+      EXPECT_NEAR(u.y(), sliding ? nu * eps * 2 * a : 0.0, 1e-7) << what;
+      ASSERT_EQ(r.compared.size(), 1u);
+      const MatX3& x = r.compared[0].markers;
+      ASSERT_EQ(x.rows(), 2);
+      for (Eigen::Index i = 0; sliding && i < 2; ++i) {
+        const Vec3 X = scene.markers.points.row(i).transpose();
+        EXPECT_NEAR(x(i, 2) - X.z(), -eps * (X.z() + a), 1e-7) << what << " marker " << i;
+        EXPECT_NEAR(x(i, 0) - X.x(), nu * eps * (X.x() + a), 1e-7) << what << " marker " << i;
+      }
+      if (std::string(plugin) == "reference_fem") {
+        ASSERT_EQ(r.compared[0].plateForces.size(), 1u);
+        const double f = r.compared[0].plateForces[0].z(), uniaxial = E * 4 * a * a * eps;
+        if (sliding) {
+          EXPECT_NEAR(f, uniaxial, 1e-6 * uniaxial) << "E A eps";
+          EXPECT_NEAR(r.compared[0].plateForces[0].head<2>().norm(), 0, 1e-6 * uniaxial)
+              << "no tangential force on a frictionless plate";
+        } else {
+          EXPECT_GT(f, 1.05 * uniaxial) << "a bonded plate restrains the top face";
+        }
+      }
+    }
+  }
+}
+
 }  // namespace

@@ -1,5 +1,6 @@
 #include "hex_fem_model.h"
 #include "../support/grasp.h"
+#include "../support/plate.h"
 #include "test_meshes.h"
 
 #include <deform/engine/interaction.h>
@@ -287,6 +288,19 @@ TEST(HexFemModel, GravitySagsAPinnedOrgan) {
     const Vec3 mean = (m.surface() - liverLike().V).colwise().mean();
     EXPECT_LT(mean.z(), 0.0);
     EXPECT_GT(mean.z(), -0.5 * 9.81 * 0.02 * 0.02 - 1e-12);  // no faster than free fall
+  }
+}
+
+// A sliding plate (GraspInput::slideNormal): the penalty holds the normal component only;
+// against a bonded plate the top spreads out and the plate's force is lower
+// (tests/support/plate.h). The cube's bottom face fixed.
+TEST(HexFemModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
+  for (const HexFemConfig& c : {config(ElasticModel::Corotational, CorotationalSolver::Pcg),
+                                config(ElasticModel::Linear)}) {
+    TestModel m;
+    const Organ organ = makeOrgan(makePhantom("cube", 0.5));
+    m.initialize(organ, c, 1e-3, fixedBelow(2, -0.0499));
+    testing::expectSlidingSpreadsTheTopAndEasesThePlate(m, organ, 0.002, 200, 400, "fem_hex");
   }
 }
 

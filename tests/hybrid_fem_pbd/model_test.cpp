@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <set>
 
+#include "../support/plate.h"
 #include "hybrid_model.h"
 
 namespace deform::hybrid_fem_pbd {
@@ -201,6 +202,14 @@ TEST_F(HybridModelTest, GraspMovesTheGraspedRegion) {
   // A node just outside the grasp is lifted too (through MV and the surface constraints).
   const int outside = nearestVertices(organ.surface.V, organ.surface.V.row(top), 12).back();
   EXPECT_GT(model.surface()(outside, 2) - organ.surface.V(outside, 2), 1e-4);
+}
+
+// A sliding plate (GraspInput::slideNormal) holds the coarse FEM's normal component only and the
+// fine vertices follow the coarse surface along it; against a bonded plate the top spreads out
+// and the plate's force is lower (tests/support/plate.h).
+TEST_F(HybridModelTest, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
+  deform::testing::expectSlidingSpreadsTheTopAndEasesThePlate(model, organ, 0.002, 20, 20,
+                                                              "hybrid_fem_pbd");
 }
 
 TEST_F(HybridModelTest, ResetReproducesBitForBit) {

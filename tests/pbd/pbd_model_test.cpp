@@ -4,6 +4,7 @@
 #include "pbd_model.h"
 #include "../support/grasp.h"
 #include "../support/meshes.h"
+#include "../support/plate.h"
 #include "../support/press.h"
 
 #include <gtest/gtest.h>
@@ -289,6 +290,22 @@ TEST(PbdModel, VolumeNetworkIsPressedLikeASolid) {
   EXPECT_EQ(c.at("volume_constraints"), c.at("elements"));
   EXPECT_EQ(c.at("bending_constraints"), 0);
   testing::expectPressedLikeASolidWithMarkers(m, press, "volume PBD");
+}
+
+// A sliding plate (GraspInput::slideNormal): the held particles stay free along the plate and
+// are projected onto its plane; against a bonded plate the top spreads out and the plate's force
+// is lower (tests/support/plate.h).
+TEST(PbdModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
+  const testing::CubePress press = testing::cubePress(0.5);
+  ParamValues p = ParamValues::defaults(paramSpecs());
+  p.set("network", std::string("volume"));
+  p.set("volume_elements", 500LL);
+  p.set("damping", 20.0);
+  Cache cache{std::filesystem::path()};
+  PbdModel m;
+  m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
+  testing::expectSlidingSpreadsTheTopAndEasesThePlate(m, press.organ, 0.002, 200, 400,
+                                                      "volume PBD");
 }
 
 TEST(PbdModel, ASurfaceNetworkHasNoInteriorForMarkers) {

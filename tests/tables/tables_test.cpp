@@ -844,8 +844,9 @@ TEST_F(TempDir, QuickTruthCubeTableWithoutTheSolversSaysWhy) {
   ASSERT_EQ(doc["rows"].size(), 8u + 6u);
   for (const auto& row : doc["rows"]) {
     for (const char* k : {"model", "level", "rms_error_m", "max_error_m", "measured_rms_m",
-                          "registration", "calibrated"})
+                          "registration", "calibrated", "contact", "ms_per_step"})
       EXPECT_TRUE(row.contains(k)) << k << " in " << row.dump();
+    EXPECT_EQ(row["contact"], "bonded");
     EXPECT_TRUE(row["rms_error_m"].is_null());
     EXPECT_NE(row["status"].get<std::string>().find("missing plugin"), std::string::npos)
         << row.dump();
@@ -879,6 +880,21 @@ TEST_F(TempDir, TruthCubeRunsADynamicModelOnItsVolumeNetworkInASettlingScenePerL
   EXPECT_EQ(s.models[0].params["network"], "volume");
   EXPECT_NEAR(s.plates[0].trajectory.back().pos.z(), -0.010, 1e-12);
   EXPECT_EQ(s.markers.points.rows(), 343);
+  EXPECT_EQ(s.plates[0].contact, PlateContact::Bonded);
+  // --contact sliding: the same scenes with a sliding plate, as cases of their own.
+  o.truthCubeContact = "sliding";
+  const tables::TableDef ts = tables::truthCube(o, loader);
+  ASSERT_EQ(ts.cases.size(), 3u);
+  EXPECT_EQ(ts.cases[0].id, "truth-cube/cube_sliding");
+  EXPECT_EQ(ts.cases[1].id, "truth-cube/dynamic_1_sliding");
+  for (const auto& c : ts.cases) {
+    const Scene sl = parseScene(json::parse(c.scene.dump()), "sliding.json");
+    ASSERT_EQ(sl.plates.size(), 1u);
+    EXPECT_EQ(sl.plates[0].contact, PlateContact::Sliding) << c.id;
+    EXPECT_EQ(sl.plates[0].normal, Vec3(0, 0, -1)) << c.id;
+  }
+  o.truthCubeContact = "glued";
+  EXPECT_THROW(tables::truthCube(o, loader), InputError);
 }
 
 TEST(Tables, UnknownTableIsAnInputError) {

@@ -13,7 +13,7 @@ namespace {
 
 TEST(Capability, EveryNameParsesBackToItsCapabilityAndNamesAreUnique) {
   std::set<std::string> names;
-  for (int i = 0; i <= static_cast<int>(Capability::Markers); ++i) {
+  for (int i = 0; i <= static_cast<int>(Capability::Sliding); ++i) {
     const auto c = static_cast<Capability>(i);
     const std::string name = capabilityName(c);
     EXPECT_TRUE(names.insert(name).second) << "duplicate name " << name;
@@ -38,6 +38,29 @@ TEST(Capability, AppendedEnumeratorsKeepTheValuesOldPluginsWereBuiltWith) {
   EXPECT_STREQ(capabilityName(Capability::RollerSupport), "roller_support");
   EXPECT_EQ(static_cast<int>(Capability::Markers), 11);
   EXPECT_STREQ(capabilityName(Capability::Markers), "markers");
+  EXPECT_EQ(static_cast<int>(Capability::Sliding), 12);
+  EXPECT_STREQ(capabilityName(Capability::Sliding), "sliding");
+}
+
+TEST(Capability, SlidingPlatesNeedSlidingNeverABondedHoldInSilence) {
+  nlohmann::json j = nlohmann::json::parse(R"({
+    "organ": {"mesh": "phantom:cube"},
+    "plates": [{"region": {"box": [[-1, -1, 0.049], [1, 1, 1]]}, "contact": "sliding",
+                "trajectory": [{"t": 0, "offset": [0, 0, 0]}, {"t": 1, "offset": [0, 0, -0.004]}]}],
+    "models": [{"plugin": "toy"}]
+  })");
+  ModelInfo info;
+  info.name = "toy";
+  info.capabilities = {Capability::Grasp};
+  const std::string why = harness::unsupportedReason(info, parseScene(j, "s.json"));
+  EXPECT_NE(why.find("sliding capability"), std::string::npos) << why;
+  EXPECT_NE(why.find("plate 0"), std::string::npos) << why;
+  info.capabilities.push_back(Capability::Sliding);
+  EXPECT_EQ(harness::unsupportedReason(info, parseScene(j, "s.json")), "");
+  // A bonded plate needs grasp only.
+  j["plates"][0]["contact"] = "bonded";
+  info.capabilities = {Capability::Grasp};
+  EXPECT_EQ(harness::unsupportedReason(info, parseScene(j, "s.json")), "");
 }
 
 TEST(Capability, RollerSupportsNeedRollerSupportNeverAFullPin) {

@@ -136,6 +136,22 @@ TEST(Interaction, APlateIsAGraspOfItsBoxsRestVerticesOnRestPlusOffset) {
   EXPECT_NEAR(in.grasps[0].targets(1, 0), 0.006, 1e-15);
   EXPECT_EQ(inter.graspTravel(), (std::vector<Real>{0.01}));
   EXPECT_TRUE(plateSurfaceVertices(rest.V, Box{Vec3::Constant(2), Vec3::Constant(3)}).empty());
+  EXPECT_FALSE(in.grasps[0].sliding()) << "a bonded plate";
+  EXPECT_EQ(slideAxis(in.grasps[0]), -1);
+  // A sliding plate: the same vertices and targets, with its normal.
+  scene.plates[0].contact = PlateContact::Sliding;
+  scene.plates[0].normal = Vec3(0, 0, -1);
+  Interaction sliding(scene, rest);
+  const StepInput s = sliding.prepare(0.49, 0.01, model);
+  ASSERT_EQ(s.grasps.size(), 1u);
+  EXPECT_EQ(s.grasps[0].vertices, in.grasps[0].vertices);
+  EXPECT_EQ(s.grasps[0].targets, in.grasps[0].targets);
+  EXPECT_EQ(s.grasps[0].slideNormal, Vec3(0, 0, -1));
+  EXPECT_EQ(slideAxis(s.grasps[0]), 2);
+  std::vector<NodeGrasp> nodes;
+  graspsOnNodes(s.grasps, {}, nodes);
+  ASSERT_EQ(nodes.size(), 1u);
+  EXPECT_TRUE(nodes[0].sliding()) << "the normal reaches the node grasps";
 }
 
 TEST(Interaction, SmallJawsHoldAtLeastTheNearestVertexAndResetForgets) {

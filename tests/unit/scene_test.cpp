@@ -508,8 +508,6 @@ TEST(Scene, PlatesAreBondedBoxesWithAnOffsetTrajectory) {
   json bad = j;
   bad["plates"][0]["contact"] = "glued";
   expectError(bad, "/plates/0/contact", "expected \"bonded\" or \"sliding\"");
-  bad["plates"][0]["contact"] = "sliding";
-  expectError(bad, "/plates/0/contact", "not yet supported");
   bad = j;
   bad["plates"][0]["trajectory"] = json::array();
   expectError(bad, "/plates/0/trajectory", "needs at least one keyframe");
@@ -533,6 +531,36 @@ TEST(Scene, PlatesAreBondedBoxesWithAnOffsetTrajectory) {
     EXPECT_EQ(e.place(), "/plates/0/region/box");
     EXPECT_NE(std::string(e.what()).find("hold nothing"), std::string::npos) << e.what();
   }
+}
+
+TEST(Scene, SlidingPlatesHaveAnAxisNormalFromTheirTrajectoryOrGiven) {
+  json j = minimalScene();
+  j["plates"] =
+      json::parse(R"([{"region": {"box": [[-1, -1, 0.049], [1, 1, 1]]}, "contact": "sliding",
+                                 "trajectory": [{"t": 0, "offset": [0, 0, 0]},
+                                                {"t": 1, "offset": [0, 0, -0.004]}]}])");
+  Scene s = parseScene(j, "scene.json");
+  ASSERT_EQ(s.plates.size(), 1u);
+  EXPECT_EQ(s.plates[0].contact, PlateContact::Sliding);
+  EXPECT_EQ(s.plates[0].normal, Vec3(0, 0, -1));  // the direction of the largest offset
+  json given = j;
+  given["plates"][0]["normal"] = {0, 0, 2};
+  EXPECT_EQ(parseScene(given, "scene.json").plates[0].normal, Vec3(0, 0, 1));
+  json bad = given;
+  bad["plates"][0]["contact"] = "bonded";
+  expectError(bad, "/plates/0/normal", "only a sliding plate has a normal");
+  bad = j;
+  bad["plates"][0]["normal"] = {0, 1, 1};
+  expectError(bad, "/plates/0/normal", "must lie along x, y or z");
+  bad = j;
+  bad["plates"][0]["trajectory"][1]["offset"] = {0.001, 0, -0.004};
+  expectError(bad, "/plates/0/normal", "the direction of its largest offset");
+  bad = j;
+  bad["plates"][0]["trajectory"][1]["offset"] = {0, 0, 0};
+  expectError(bad, "/plates/0/normal", "never moves needs a \"normal\"");
+  bad = j;
+  bad["plates"][0]["normal"] = {0, 0, 0};
+  expectError(bad, "/plates/0/normal", "non-zero");
 }
 
 TEST_F(SceneFiles, MarkersFromAListOrAFileWithMeasuredPositions) {

@@ -305,14 +305,16 @@ StepInput Interaction::prepare(Real t, Real dt, const Model& model) {
     }
     // Probes act through the contact world (set above), not through the grasp input.
   }
-  // Plates: grasps of the surface vertices in their boxes, bonded from the start to rest +
-  // offset(t + dt).
+  // Plates: grasps of the surface vertices in their boxes, from the start, to rest +
+  // offset(t + dt): bonded, or along the plate's normal only (sliding).
   for (size_t p = 0; p < m_scene.plates.size(); ++p) {
     const std::vector<int>& held = m_plateVertices[p];
     if (held.empty()) continue;
     GraspInput g;
     g.tool = static_cast<int>(m_scene.tools.size() + p);
     g.vertices = held;
+    if (m_scene.plates[p].contact == PlateContact::Sliding)
+      g.slideNormal = m_scene.plates[p].normal;
     const Vec3 offset = toolPosition(m_scene.plates[p].trajectory, t + dt);
     g.targets.resize(Eigen::Index(held.size()), 3);
     for (size_t k = 0; k < held.size(); ++k)

@@ -375,16 +375,15 @@ LoadSpec parseLoad(const Ctx& c, const json& j, const std::string& path) {
 }
 
 PlateSpec parsePlate(const Ctx& c, const json& j, const std::string& path) {
-  ObjectReader r(j, path, c.file, {"region", "contact", "trajectory"});
+  ObjectReader r(j, path, c.file, {"region", "contact", "normal", "trajectory"});
   PlateSpec p;
   ObjectReader region(r.required("region"), r.child("region"), c.file, {"box"});
   p.region = c.box(region.required("box"), region.child("box"));
   if (const json* v = r.optional("contact")) {
     const std::string s = c.string(*v, r.child("contact"));
     if (s == "sliding")
-      c.fail(r.child("contact"),
-             "\"sliding\" (normal component only) is not yet supported; use \"bonded\"");
-    if (s != "bonded")
+      p.contact = PlateContact::Sliding;
+    else if (s != "bonded")
       c.fail(r.child("contact"), "expected \"bonded\" or \"sliding\", got \"" + s + "\"");
   }
   const std::string tp = r.child("trajectory");
@@ -401,6 +400,33 @@ PlateSpec parsePlate(const Ctx& c, const json& j, const std::string& path) {
                                " after " + num(p.trajectory.back().t));
     k.pos = c.vec3(f.required("offset"), f.child("offset"));
     p.trajectory.push_back(k);
+  }
+  // The normal of a sliding plate: given, or the direction of the trajectory's largest offset;
+  // a coordinate axis for now (the models hold single coordinates).
+  const std::string np = r.child("normal");
+  if (const json* v = r.optional("normal")) {
+    if (p.contact != PlateContact::Sliding)
+      c.fail(np, "only a sliding plate has a normal (\"contact\": \"sliding\")");
+    p.normal = c.vec3(*v, np);
+    if (!(p.normal.norm() > 0)) c.fail(np, "must be a non-zero vector");
+  } else if (p.contact == PlateContact::Sliding) {
+    for (const KeyFrame& k : p.trajectory)
+      if (k.pos.norm() > p.normal.norm()) p.normal = k.pos;
+    if (!(p.normal.norm() > 0))
+      c.fail(np, "a sliding plate whose trajectory never moves needs a \"normal\"");
+  }
+  if (p.contact == PlateContact::Sliding) {
+    p.normal.normalize();
+    int axis = -1;
+    for (int a = 0; a < 3; ++a)
+      if (std::abs(p.normal[a]) > 1 - 1e-9) axis = a;
+    if (axis < 0)
+      c.fail(np, "a sliding plate's normal must lie along x, y or z for now, got [" +
+                     num(p.normal.x()) + ", " + num(p.normal.y()) + ", " + num(p.normal.z()) + "]" +
+                     (r.has("normal") ? "" : " (the direction of its largest offset)"));
+    const Real sign = p.normal[axis] > 0 ? 1.0 : -1.0;
+    p.normal = Vec3::Zero();
+    p.normal[axis] = sign;
   }
   return p;
 }

@@ -33,13 +33,15 @@ const char* capabilityName(Capability c) {
       return "roller_support";
     case Capability::Markers:
       return "markers";
+    case Capability::Sliding:
+      return "sliding";
   }
   assert(false && "unknown Capability");
   return "unknown";
 }
 
 // The last enumerator: capabilities are only ever appended (registry.h), so move this with them.
-constexpr Capability kLastCapability = Capability::Markers;
+constexpr Capability kLastCapability = Capability::Sliding;
 
 bool capabilityFromName(const std::string& name, Capability& out) {
   for (int i = 0; i <= static_cast<int>(kLastCapability); ++i) {

@@ -57,6 +57,9 @@ struct TablesOptions {
   /// --data of truth-cube: the bead file ("": data/truth-cube/uniaxial_positions.csv of the
   /// source tree).
   std::string truthCubeData;
+  /// --contact of truth-cube: the plate's contact, "bonded" (default) or "sliding" (the normal
+  /// displacement only: a lubricated platen).
+  std::string truthCubeContact = "bonded";
 };
 
 /// Names of the tables, in DESIGN.md's order.

@@ -24,6 +24,7 @@ struct TablesArgs {
   bool noReferenceCheck = false;
   bool surfaceBaselines = false;
   std::string truthCubeData;
+  std::string truthCubeContact = "bonded";
   DispatchArgs dispatch;
   std::vector<std::string> calibrations;
 };
@@ -56,6 +57,11 @@ Verb addTables(CLI::App& app) {
       "--data", ta.truthCubeData,
       "truth-cube: a bead file of the layout of data/truth-cube/uniaxial_positions.csv "
       "(default: that file)");
+  tables
+      ->add_option("--contact", ta.truthCubeContact,
+                   "truth-cube: the plate's contact, bonded (default) or sliding (the normal "
+                   "displacement prescribed, the tangential free: a lubricated plate)")
+      ->check(CLI::IsMember({"bonded", "sliding"}));
   tables->add_flag("--explain", ta.common.explain,
                    "say what each case loaded, built, cached, skipped");
   tables
@@ -96,6 +102,7 @@ int cmdTables(const TablesArgs& ta) {
   o.referenceCheck = !ta.noReferenceCheck;
   o.surfaceBaselines = ta.surfaceBaselines;
   o.truthCubeData = ta.truthCubeData;
+  o.truthCubeContact = ta.truthCubeContact;
   o.calibrations = readCalibrations(ta.calibrations);
   if (ta.resume && ta.inProcess)
     throw InputError("--resume", "", "needs the cases in child processes (drop --in-process)");

@@ -212,13 +212,15 @@ ojson pointsJson(const MatX3& p) {
 /// The compression scene: the phantom cube scaled to 80 mm, its bottom face bonded (fixed), its
 /// top face bonded to a plate moved down by each level's strain times the height (one compared
 /// instant per level, t = level), the beads as markers with their measured positions.
-ojson truthCubeScene(const TruthCubeData& d, const std::vector<ojson>& models) {
+ojson truthCubeScene(const TruthCubeData& d, const std::vector<ojson>& models,
+                     const std::string& contact) {
   const double h = 0.5 * kSide, e = 1e-6, m = h + 0.01;
   ojson j;
   j["name"] = "truth-cube";
   j["description"] =
       "Truth Cube (Kerdok et al. 2003): 80 mm silicone cube, E 15.3 kPa, nu 0.499, rho 980; "
-      "base bonded, top plate bonded and displacement-controlled; 343 beads as markers.";
+      "base bonded, top plate " +
+      contact + " and displacement-controlled; 343 beads as markers.";
   j["organ"] = {
       {"mesh", "phantom:cube"},
       {"scale", kSide / 0.1},
@@ -239,7 +241,7 @@ ojson truthCubeScene(const TruthCubeData& d, const std::vector<ojson>& models) {
   }
   j["plates"] = ojson::array(
       {{{"region", {{"box", ojson::array({vecJson(Vec3(-m, -m, h - e)), vecJson(Vec3(m, m, m))})}}},
-        {"contact", "bonded"},
+        {"contact", contact},
         {"trajectory", traj}}});
   j["markers"] = {{"points", pointsJson(truthCubeSceneFrame(d, 0))}, {"measured", measured}};
   j["models"] = models;
@@ -251,8 +253,8 @@ ojson truthCubeScene(const TruthCubeData& d, const std::vector<ojson>& models) {
 /// The compression scene for dynamic models at one level: the plate moves down over the first
 /// second and holds; each model is compared once it settles (the duration is the cap).
 ojson truthCubeDynamicScene(const TruthCubeData& d, size_t level, const std::vector<ojson>& models,
-                            double duration) {
-  ojson j = truthCubeScene(d, models);
+                            double duration, const std::string& contact) {
+  ojson j = truthCubeScene(d, models, contact);
   j["name"] = "truth-cube-dynamic-" + std::to_string(level + 1);
   j["description"] = "Truth Cube, dynamic models: the plate moves down by " +
                      formatG(1e3 * d.strains[level] * kSide) +
@@ -323,7 +325,8 @@ std::string layersMm(const std::vector<double>& v) {
 /// none), the reference against CalculiX, and a row for each absent model.
 std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<Source>& sources,
                                  const std::vector<std::pair<std::string, std::string>>& absent,
-                                 const Results& res, const fs::path& dir) {
+                                 const std::string& contact, const Results& res,
+                                 const fs::path& dir) {
   std::vector<ojson> out;
   const MatX3 rest = truthCubeSceneFrame(data, 0);
   // CalculiX's figures, for the reference's comparison column.
@@ -363,6 +366,7 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
         row["level"] = data.strains[l];
         row["plate_mm"] = 1e3 * data.strains[l] * kSide;
         row["registration"] = reg;
+        row["contact"] = contact;
         row["calibrated"] = false;
         const CaseResult* c = k.cases[l];
         const RunRecord* r = c ? c->run(k.label) : nullptr;
@@ -401,6 +405,15 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
           }
         }
         row["run_s"] = numberOrNull(seconds);
+        // The mean wall time of a step (a quasi-static model's steps are its solves).
+        double msPerStep = NAN;
+        if (r && !r->stepMs.empty()) {
+          msPerStep = 0;
+          for (double ms : r->stepMs) msPerStep += ms / double(r->stepMs.size());
+        } else if (r && r->stepStats.samples > 0) {
+          msPerStep = r->stepStats.mean;
+        }
+        row["ms_per_step"] = numberOrNull(msPerStep);
         if (c) {
           caseCells(row, *c, k.plugin, r, dir, false);
         } else {
@@ -436,14 +449,11 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
     }
   }
   for (const auto& [name, why] : absent) {
-    ojson row = {{"model", name},
-                 {"level", nullptr},
-                 {"plate_mm", nullptr},
-                 {"registration", nullptr},
-                 {"calibrated", false}};
+    ojson row = {{"model", name},           {"level", nullptr},   {"plate_mm", nullptr},
+                 {"registration", nullptr}, {"contact", contact}, {"calibrated", false}};
     for (const char* key : {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm",
                             "relative_error", "max_error_mm", "measured_rms_mm", "bulge_mm",
-                            "measured_bulge_mm", "vs_calculix_pct", "run_s"})
+                            "measured_bulge_mm", "vs_calculix_pct", "run_s", "ms_per_step"})
       row[key] = nullptr;
     row["layer_rms_mm"] = "";
     row["status"] = why;
@@ -465,6 +475,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
        {"level", "strain"},
        {"plate_mm", "plate mm"},
        {"registration", "registration"},
+       {"contact", "plate"},
        {"rms_error_mm", "bead RMS error mm"},
        {"relative_error", "RMS error / measured RMS"},
        {"max_error_mm", "max error mm"},
@@ -475,11 +486,15 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
        {"vs_calculix_pct", "vs CalculiX %"},
        {"calibrated", "calibrated"},
        {"run_s", "run s"},
+       {"ms_per_step", "ms/step"},
        {"status", "status"},
        {"scene", "scene"},
        {"note", "note"}});
   const std::string file = o.truthCubeData.empty() ? defaultDataFile() : o.truthCubeData;
   const TruthCubeData data = readTruthCubeData(file);
+  const std::string contact = o.truthCubeContact.empty() ? "bonded" : o.truthCubeContact;
+  if (contact != "bonded" && contact != "sliding")
+    throw InputError("--contact", "", "expected bonded or sliding, got " + contact);
   const std::string calculixProblem = pluginProblem(loader, kCalculix);
   const bool withCalculix = calculixProblem.empty();
   // Reference and CalculiX on one quadratic tet mesh (deform/geometry/organ_tets.h): the same Gmsh
@@ -523,8 +538,11 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
           "layer.",
       "Scene (scenes/truth-cube/cube.json): the phantom cube scaled to 80 mm; E 15.3 kPa, nu "
       "0.499, rho 980, no gravity (the rest scan is the reference state); the bottom face "
-      "fixed (bonded base); the top face held by a bonded plate moved down by strain x 80 mm; "
-      "one compared instant per level. reference_fem and CalculiX solve the same " +
+      "fixed (bonded base); the top face held by a " +
+          contact +
+          " plate (sliding: its vertical displacement prescribed, the lateral free, --contact) "
+          "moved down by strain x 80 mm; one compared instant per level. reference_fem and "
+          "CalculiX solve the same " +
           std::to_string(elements) +
           "-target quadratic tet mesh: reference_fem with its default volumetric term at nu "
           "0.499 (mean dilatation, constant per element), and again with the volumetric term "
@@ -538,8 +556,10 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
       "mm (translation), 0.90 / 1.18 mm (bottom layer) at 5% / 12.5%.",
       "Not calibrated: every row is at the published material (calibrated = false)."};
   if (!withCalculix) t.notes.push_back("CalculiX: not available: " + calculixProblem + ".");
-  const std::string id = "truth-cube/cube";
-  t.cases.push_back({id, truthCubeScene(data, models)});
+  // Sliding runs are other cases (a --resume never mixes them with the bonded ones).
+  const std::string suffix = contact == "sliding" ? "_sliding" : "";
+  const std::string id = "truth-cube/cube" + suffix;
+  t.cases.push_back({id, truthCubeScene(data, models, contact)});
   // Where each model's markers at each level are: (case, index of the compared instant).
   std::vector<Source> sources;
   for (const ojson& m : models) {
@@ -554,18 +574,19 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
         "and held, compared once settled (\"compare_at\": \"equilibrium\", capped at " +
         formatG(o.quick ? 3.0 : 5.0) + " s).");
     for (size_t l = 0; l < data.strains.size(); ++l) {
-      const std::string dyn = "truth-cube/dynamic_" + std::to_string(l + 1);
-      t.cases.push_back({dyn, truthCubeDynamicScene(data, l, dynamic, o.quick ? 3.0 : 5.0)});
+      const std::string dyn = "truth-cube/dynamic_" + std::to_string(l + 1) + suffix;
+      t.cases.push_back(
+          {dyn, truthCubeDynamicScene(data, l, dynamic, o.quick ? 3.0 : 5.0, contact)});
     }
     for (const ojson& m : dynamic) {
       Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
       for (size_t l = 0; l < data.strains.size(); ++l)
-        src.levels.emplace_back("truth-cube/dynamic_" + std::to_string(l + 1), 0);
+        src.levels.emplace_back("truth-cube/dynamic_" + std::to_string(l + 1) + suffix, 0);
       sources.push_back(src);
     }
   }
-  t.rows = [data, sources, absent](const Results& res, const fs::path& dir) {
-    return truthCubeRows(data, sources, absent, res, dir);
+  t.rows = [data, sources, absent, contact](const Results& res, const fs::path& dir) {
+    return truthCubeRows(data, sources, absent, contact, res, dir);
   };
   return t;
 }

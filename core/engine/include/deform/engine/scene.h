@@ -98,11 +98,14 @@ struct OrganSpec {
 /// held before the first and after the last). The harness hands each plate to the models as a
 /// grasp (GraspInput::tool = number of tools + plate index), so every model follows it through
 /// its surface mapping and the reference solvers take it as Dirichlet conditions.
+/// A sliding plate prescribes only the normal displacement (GraspInput::slideNormal); its normal
+/// is "normal" or the direction of the trajectory's largest offset, a coordinate axis for now.
 enum class PlateContact { Bonded, Sliding };
 struct PlateSpec {
   Box region;
-  PlateContact contact = PlateContact::Bonded;  ///< sliding is refused for now
-  std::vector<KeyFrame> trajectory;             ///< pos = the offset, m; times increasing
+  PlateContact contact = PlateContact::Bonded;
+  Vec3 normal = Vec3::Zero();        ///< sliding: unit, along an axis; bonded: zero
+  std::vector<KeyFrame> trajectory;  ///< pos = the offset, m; times increasing
 };
 
 /// "markers": interior points (rest positions, m) whose current positions every model reports

@@ -16,6 +16,7 @@
 #include <deform/sdk/params.h>
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <memory>
 #include <optional>
@@ -86,11 +87,29 @@ struct ModelSetup {
 /// their positions at the closing, translated with the tool. They stay held until the jaws open.
 /// The model makes its surface points follow these targets through its own surface mapping; the
 /// harness reports how well it did (grasp_residual_m).
+/// A sliding plate (scene "plates" with "contact": "sliding") arrives as a grasp with a non-zero
+/// `slideNormal`: only the held vertices' displacement along that unit normal is prescribed
+/// (n . x = n . target), the tangential components are free (a frictionless platen). Only models
+/// with the "sliding" capability receive such grasps; the others are reported unsupported, so a
+/// model without it may treat every grasp as bonded.
 struct GraspInput {
   int tool = 0;               ///< index of the tool in the scene
   std::vector<int> vertices;  ///< organ surface vertex indices, sorted, unique
   MatX3 targets;              ///< #vertices by 3
+  /// Zero for an ordinary (bonded) grasp; a unit vector for a sliding plate: the plate's normal.
+  /// The scene restricts it to a coordinate axis for now (models may rely on that and say so).
+  Vec3 slideNormal = Vec3::Zero();
+  bool sliding() const { return slideNormal.squaredNorm() > 0; }
 };
+
+/// The coordinate axis (0 x, 1 y, 2 z) a sliding grasp's normal lies along, or -1 when it is not
+/// axis-aligned (or the grasp is bonded): for models that hold single coordinates.
+inline int slideAxis(const GraspInput& g) {
+  if (!g.sliding()) return -1;
+  for (int a = 0; a < 3; ++a)
+    if (std::abs(g.slideNormal[a]) == 1 && g.slideNormal.squaredNorm() == 1) return a;
+  return -1;
+}
 
 /// The surface vertices held by any of the grasps, sorted and without repeats, written to out
 /// (its capacity is kept, so a model can call this every step without allocating).
@@ -123,7 +142,9 @@ struct PointLoad {
 struct NodeGrasp {
   int tool = 0;
   std::vector<int> nodes;
-  MatX3 targets;  ///< #nodes by 3
+  MatX3 targets;                    ///< #nodes by 3
+  Vec3 slideNormal = Vec3::Zero();  ///< as GraspInput::slideNormal (zero: bonded)
+  bool sliding() const { return slideNormal.squaredNorm() > 0; }
 };
 
 /// The grasps on the nodes that carry the grasped surface vertices. vertexNode: the node of each
@@ -140,6 +161,7 @@ inline void graspsOnNodes(const std::vector<GraspInput>& grasps, const std::vect
       n.nodes[k] = vertexNode.empty() ? v : vertexNode[size_t(v)];
     }
     n.targets = grasps[g].targets;
+    n.slideNormal = grasps[g].slideNormal;
   }
 }
 

@@ -42,7 +42,10 @@
 // Markers: the vtable changed, binaries must be rebuilt; plugin sources compile unchanged.
 // 8: ModelInfo gains `resolution` and `effort`, the two cost axes of `deformbench sweep` (issue
 // H4), appended after `measures`: plugin sources compile unchanged, binaries must be rebuilt.
-#define DEFORM_ABI_VERSION 8
+// 9: GraspInput and NodeGrasp gain `slideNormal` (sliding plates, issue 34: only the normal
+// displacement prescribed) and Capability gains Sliding: plugin sources compile unchanged,
+// binaries must be rebuilt.
+#define DEFORM_ABI_VERSION 9
 
 namespace deform {
 
@@ -67,6 +70,10 @@ enum class Capability {
   /// model's own interior mapping). Without it a scene's markers are reported unsupported for
   /// the model (its run goes on).
   Markers,
+  /// "sliding": honours GraspInput::slideNormal (a sliding plate: only the held vertices'
+  /// normal displacement prescribed, the tangential free). Scenes with a sliding plate are
+  /// reported unsupported for models without it (never held bonded in silence).
+  Sliding,
 };
 
 /// The capability named `name` (the spelling capabilityName() gives); false when unknown.

@@ -1,0 +1,89 @@
+// A plate pressing the top of a cube whose bottom face is fixed (press.h's cubePress organ),
+// bonded or sliding (GraspInput::slideNormal), driven without the harness: shared by the models
+// with the "sliding" capability. With nu > 0 a sliding plate lets the top face spread out (the
+// cube nearer uniaxial stress), so against a bonded one its top vertices move outward and the
+// plate needs less force; both push the top face down by the plate's travel.
+#pragma once
+
+#include <deform/sdk/model.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <vector>
+
+namespace deform::testing {
+
+struct PlateRun {
+  Real drop = 0;     ///< m, mean downward displacement of the top vertices
+  Real outward = 0;  ///< m, mean outward lateral displacement of the top vertices
+  Real force = 0;    ///< N, the plate's force along +z (NaN when the model reports none)
+  bool ok = true;    ///< every step returned Ok
+};
+
+/// Moves a plate holding the top vertices of `organ` (model initialised on it, at rest) down by
+/// `press` over `ramp` steps of dt and holds it `hold` steps; the model is reset first.
+inline PlateRun pressByPlate(Model& model, const Organ& organ, bool sliding, Real press, int ramp,
+                             int hold, Real dt = 1e-3) {
+  model.reset();
+  const MatX3& rest = organ.surface.V;
+  const Real top = rest.col(2).maxCoeff(), eps = 1e-6;
+  GraspInput g;
+  g.tool = 0;
+  for (Eigen::Index v = 0; v < rest.rows(); ++v)
+    if (rest(v, 2) > top - eps) g.vertices.push_back(int(v));
+  if (sliding) g.slideNormal = Vec3(0, 0, -1);
+  PlateRun r;
+  StepInput in;
+  in.dt = dt;
+  for (int s = 0; s < ramp + hold; ++s) {
+    const Real offset = -press * std::min<Real>(1, Real(s + 1) / ramp);
+    g.targets.resize(Eigen::Index(g.vertices.size()), 3);
+    for (size_t k = 0; k < g.vertices.size(); ++k)
+      g.targets.row(Eigen::Index(k)) = rest.row(g.vertices[k]) + Vec3(0, 0, offset).transpose();
+    in.time = s * dt;
+    in.grasps = {g};
+    if (model.step(in) != StepStatus::Ok) r.ok = false;
+  }
+  const MatX3& x = model.surface();
+  int n = 0;
+  for (int v : g.vertices) {
+    r.drop += (rest(v, 2) - x(v, 2)) / Real(g.vertices.size());
+    const Vec3 radial(rest(v, 0), rest(v, 1), 0);
+    if (radial.norm() < 1e-9) continue;
+    r.outward += radial.normalized().dot((x.row(v) - rest.row(v)).transpose());
+    ++n;
+  }
+  r.outward /= std::max(n, 1);
+  const std::vector<Vec3> f = model.graspForces();
+  r.force = f.empty() ? std::nan("") : f[0].z();
+  return r;
+}
+
+/// The sliding plate against the bonded one (see the file comment): both drop the top by the
+/// travel (within dropTolerance of it), the sliding top spreads outward (by at least a tenth of
+/// nu press / 2, the uniaxial figure at the edge's middle of a cube as high as wide, and 10 times
+/// more than the bonded one), and the sliding plate's force is lower where the model reports one.
+inline void expectSlidingSpreadsTheTopAndEasesThePlate(Model& model, const Organ& organ, Real press,
+                                                       int ramp, int hold, const char* label,
+                                                       Real dropTolerance = 0.05) {
+  const PlateRun sliding = pressByPlate(model, organ, true, press, ramp, hold);
+  const PlateRun bonded = pressByPlate(model, organ, false, press, ramp, hold);
+  std::printf(
+      "%s: drop %.4f / %.4f mm, outward %.4f / %.4f mm, force %.4g / %.4g N "
+      "(sliding / bonded)\n",
+      label, 1e3 * sliding.drop, 1e3 * bonded.drop, 1e3 * sliding.outward, 1e3 * bonded.outward,
+      sliding.force, bonded.force);
+  ASSERT_TRUE(sliding.ok && bonded.ok) << label;
+  EXPECT_NEAR(sliding.drop, press, dropTolerance * press) << label;
+  EXPECT_NEAR(bonded.drop, press, dropTolerance * press) << label;
+  const Real nu = organ.material.poisson;
+  EXPECT_GT(sliding.outward, 0.1 * nu * press / 2) << label;
+  EXPECT_GT(sliding.outward, 10 * std::abs(bonded.outward)) << label;
+  if (!std::isnan(sliding.force)) {
+    EXPECT_GT(sliding.force, 0) << label;
+    EXPECT_LT(sliding.force, bonded.force) << label;
+  }
+}
+
+}  // namespace deform::testing
