@@ -17,22 +17,14 @@
 
 #include "hybrid_model.h"
 #include "response_product.h"
+#include "support/organs.h"
 
 namespace {
 
 using namespace deform;
 
 Organ liverOrgan() {
-  Organ o;
-  o.source = "phantom:liver";
-  o.surface = makePhantom("liver", 0.25);
-  o.material = Material{5500, 0.3, 1000};
-  const Box b = boundingBox(o.surface.V);
-  Box fixed;
-  fixed.lo = b.lo - Vec3::Constant(0.01);
-  fixed.hi = Vec3(b.hi.x() + 0.01, b.hi.y() + 0.01, b.lo.z() + 0.15 * b.size().z());
-  o.fixed.boxes.push_back(fixed);
-  return o;
+  return testing::phantomWithFixedBottom("liver", 0.25, 0.15);
 }
 
 void BM_HybridConstruction(benchmark::State& state) {

@@ -4,6 +4,7 @@
 #include "massspring_model.h"
 #include "node_cholesky.h"
 #include "support/meshes.h"
+#include "support/organs.h"
 
 #include <deform/geometry/phantom.h>
 
@@ -19,19 +20,10 @@ namespace {
 using namespace deform;
 
 void runMassSpring(benchmark::State& state, massspring::MassSpringConfig cfg) {
-  Organ o;
-  o.source = "bench:liver-sized ellipsoid";
-  o.surface = testing::liverSizedSurface();
+  const Organ o = testing::liverSizedOrgan();
   massspring::MassSpringModel m;
   m.init(o, cfg);
-  StepInput in;
-  in.dt = 1e-4;
-  in.gravity = Vec3(0, 0, -9.81);
-  GraspInput g;
-  g.vertices = nearestVertices(o.surface.V, Vec3(0, 0, 0.04), 5);
-  g.targets.resize(static_cast<Eigen::Index>(g.vertices.size()), 3);
-  for (size_t k = 0; k < g.vertices.size(); ++k) g.targets.row(k) = o.surface.V.row(g.vertices[k]);
-  in.grasps.push_back(g);
+  StepInput in = testing::heldTopInput(o, 1e-4);
   for (int s = 0; s < 20; ++s) m.step(in);
   for (auto _ : state) {
     in.grasps[0].targets.col(2).array() += 1e-7;

@@ -5,6 +5,7 @@
 // for the first two, the double-precision one.
 #include "pbd_model.h"
 #include "support/meshes.h"
+#include "support/organs.h"
 
 #include <benchmark/benchmark.h>
 
@@ -16,20 +17,11 @@ namespace {
 using namespace deform;
 
 void runPbd(benchmark::State& state, pbd::PbdConfig cfg) {
-  Organ o;
-  o.source = "bench:liver-sized ellipsoid";
-  o.surface = testing::liverSizedSurface();
+  const Organ o = testing::liverSizedOrgan();
   pbd::PbdModel m;
   m.init(o, cfg);
-  StepInput in;
-  in.dt = 1e-3;
-  in.gravity = Vec3(0, 0, -9.81);
   // A grasp on the top, moving slowly upwards: the realistic case (kinematic nodes).
-  GraspInput g;
-  g.vertices = nearestVertices(o.surface.V, Vec3(0, 0, 0.04), 5);
-  g.targets.resize(static_cast<Eigen::Index>(g.vertices.size()), 3);
-  for (size_t k = 0; k < g.vertices.size(); ++k) g.targets.row(k) = o.surface.V.row(g.vertices[k]);
-  in.grasps.push_back(g);
+  StepInput in = testing::heldTopInput(o, 1e-3);
   for (int s = 0; s < 20; ++s) m.step(in);  // warm-up
   std::map<std::string, double> phaseSum;
   for (auto _ : state) {

@@ -3,6 +3,7 @@
 #include <deform/engine/interaction.h>
 #include <deform/engine/scene.h>
 #include <deform/geometry/phantom.h>
+#include <deform/sdk/enum_names.h>
 #include <deform/sdk/mesh.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/conformance.h>
@@ -498,19 +499,12 @@ bool expectedToFail(const ConformanceOptions& o, const CheckResult& r) {
 }  // namespace
 
 const char* checkOutcomeName(CheckOutcome o) {
-  switch (o) {
-    case CheckOutcome::Passed:
-      return "pass";
-    case CheckOutcome::Failed:
-      return "FAIL";
-    case CheckOutcome::Skipped:
-      return "skip";
-    case CheckOutcome::ExpectedFailure:
-      return "xfail";
-    case CheckOutcome::UnexpectedPass:
-      return "XPASS";
-  }
-  return "?";
+  static constexpr EnumName<CheckOutcome> kNames[] = {{CheckOutcome::Passed, "pass"},
+                                                      {CheckOutcome::Failed, "FAIL"},
+                                                      {CheckOutcome::Skipped, "skip"},
+                                                      {CheckOutcome::ExpectedFailure, "xfail"},
+                                                      {CheckOutcome::UnexpectedPass, "XPASS"}};
+  return enumName(kNames, o, "?");
 }
 
 const std::vector<std::string>& conformanceCheckNames() {

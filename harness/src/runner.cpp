@@ -4,6 +4,7 @@
 #include <deform/engine/interaction.h>
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/contact.h>
+#include <deform/sdk/enum_names.h>
 #include <deform_harness/results.h>
 #include <deform_harness/run_isolation.h>
 #include <deform_harness/runner.h>
@@ -29,17 +30,11 @@ namespace deform::harness {
 namespace fs = std::filesystem;
 
 const char* statusName(RunStatus s) {
-  switch (s) {
-    case RunStatus::Ok:
-      return "ok";
-    case RunStatus::Diverged:
-      return "diverged";
-    case RunStatus::Unsupported:
-      return "unsupported";
-    case RunStatus::Failed:
-      return "failed";
-  }
-  return "failed";
+  static constexpr EnumName<RunStatus> kNames[] = {{RunStatus::Ok, "ok"},
+                                                   {RunStatus::Diverged, "diverged"},
+                                                   {RunStatus::Unsupported, "unsupported"},
+                                                   {RunStatus::Failed, "failed"}};
+  return enumName(kNames, s, "failed");
 }
 
 void forceSingleThreadedNumerics() {

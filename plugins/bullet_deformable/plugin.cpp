@@ -52,21 +52,17 @@ DeformableConfig configFromParams(const ParamValues& p) {
 }  // namespace deform::bullet_deformable
 
 DEFORM_PLUGIN(registry) {
-  deform::ModelInfo info;
-  info.name = "bullet_deformable";
-  info.description =
+  using C = deform::Capability;
+  deform::ModelInfo info = deform::modelInfo<deform::bullet_deformable::BulletDeformableModel>(
+      "bullet_deformable",
       "Peer baseline: Bullet 3.24's implicit FEM deformable body (btDeformableMultiBodyDynamics"
-      "World, Neo-Hookean or linear elasticity on a tet mesh, kinematic grasps)";
-  info.citation =
+      "World, Neo-Hookean or linear elasticity on a tet mesh, kinematic grasps)",
       "Bullet Physics SDK 3.24, E. Coumans et al., https://github.com/bulletphysics/bullet3 "
       "(deformable solver by Xuchen Han, 2019); stable Neo-Hookean: Smith, de Goes, Kim 2018, "
-      "ACM TOG 37(2), doi:10.1145/3180491";
-  info.version = "1.0";
-  using C = deform::Capability;
-  info.capabilities = {C::Grasp,           C::PointForce, C::Gravity,        C::TetInput,
-                       C::NeedsPrecompute, C::Contact,    C::ContactReaction};
-  info.params = deform::bullet_deformable::paramSpecs();
-  info.create = [] { return std::make_unique<deform::bullet_deformable::BulletDeformableModel>(); };
+      "ACM TOG 37(2), doi:10.1145/3180491",
+      {C::Grasp, C::PointForce, C::Gravity, C::TetInput, C::NeedsPrecompute, C::Contact,
+       C::ContactReaction},
+      deform::bullet_deformable::paramSpecs());
   // The conformance suite runs every shipped scene: 1500 tets instead of 6000 keep it to seconds.
   info.presets["conformance"] = {{{"tets", 1500LL}}};
   // The stability sweep's cases run 1 s of 1 ms steps in a 60 s limit (120 s without --quick).

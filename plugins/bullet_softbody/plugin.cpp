@@ -8,17 +8,16 @@ namespace deform::bullet_softbody {
 
 std::vector<ParamSpec> paramSpecs() {
   return {
-      ParamSpec::integer("iterations", 10, 1, 100000,
-                         "position solver sweeps per step (btSoftBody m_cfg.piterations)"),
+      common_params::iterations(10, 100000,
+                                "position solver sweeps per step (btSoftBody m_cfg.piterations)"),
       ParamSpec::choice("stiffness_mapping", "xpbd", {"xpbd", "fixed"},
                         "link stiffness kLST: xpbd = per link from E (one XPBD projection's "
                         "fraction, see README); fixed = link_stiffness for every link"),
       ParamSpec::real("link_stiffness", "1", 0.5, 1e-6, 1.0,
                       "kLST of every structural link when stiffness_mapping is fixed")
           .calibrate(0.001, 1, ParamScale::Log),
-      ParamSpec::real("thickness", "m", 0.01, 1e-6, 1.0,
-                      "shell thickness t of the xpbd mapping (alpha = L^2 / (E t A_e))")
-          .calibrate(0.0001, 0.3, ParamScale::Log),
+      common_params::thickness(1.0,
+                               "shell thickness t of the xpbd mapping (alpha = L^2 / (E t A_e))"),
       ParamSpec::flag("bending", false,
                       "add Bullet's bending links between nodes two edges apart "
                       "(generateBendingConstraints(2))"),
@@ -29,9 +28,8 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::real("volume_scale", "1", 1.0, 0.0, 1e6,
                       "multiplier on the physical volume coefficient K / V0")
           .calibrate(0.001, 1000.0, ParamScale::Log),
-      ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
-                      "velocity damping rate c: Bullet kDP = 1 - exp(-c dt)")
-          .calibrate(0.01, 1000, ParamScale::Log),
+      common_params::damping(1.0, 1e4, 0.01,
+                             "velocity damping rate c: Bullet kDP = 1 - exp(-c dt)"),
   };
 }
 
@@ -53,20 +51,16 @@ SoftBodyConfig configFromParams(const ParamValues& p) {
 }  // namespace deform::bullet_softbody
 
 DEFORM_PLUGIN(registry) {
-  deform::ModelInfo info;
-  info.name = "bullet_softbody";
-  info.description =
+  using C = deform::Capability;
+  deform::ModelInfo info = deform::modelInfo<deform::bullet_softbody::BulletSoftBodyModel>(
+      "bullet_softbody",
       "Peer baseline: Bullet 3.24's classic position-based btSoftBody on the organ surface "
-      "(links from mesh edges, volume conservation force, kinematic grasps)";
-  info.citation =
+      "(links from mesh edges, volume conservation force, kinematic grasps)",
       "Bullet Physics SDK 3.24, E. Coumans et al., https://github.com/bulletphysics/bullet3 "
       "(btSoftBody by N. Presson); method family: Mueller, Heidelberger, Hennix, Ratcliff 2007, "
-      "Position based dynamics, doi:10.1016/j.jvcir.2007.01.005";
-  info.version = "1.0";
-  using C = deform::Capability;
-  info.capabilities = {C::Grasp, C::PointForce, C::Gravity, C::Contact, C::ContactReaction};
-  info.params = deform::bullet_softbody::paramSpecs();
-  info.create = [] { return std::make_unique<deform::bullet_softbody::BulletSoftBodyModel>(); };
+      "Position based dynamics, doi:10.1016/j.jvcir.2007.01.005",
+      {C::Grasp, C::PointForce, C::Gravity, C::Contact, C::ContactReaction},
+      deform::bullet_softbody::paramSpecs());
   info.effort = {"iterations", {2LL, 5LL, 10LL, 20LL, 40LL}, {5LL, 20LL}};
   registry.add(std::move(info));
 }

@@ -96,24 +96,18 @@ HexFemConfig configFromParams(const ParamValues& p) {
 
 DEFORM_PLUGIN(registry) {
   using deform::Capability;
-  deform::ModelInfo info;
-  info.name = "fem_hex";
-  info.description =
+  deform::ModelInfo info = deform::modelInfo<deform::fem_hex::HexFemModel>(
+      "fem_hex",
       "Hexahedral FEM on a voxel grid embedding the surface (linear or corotational, implicit "
-      "Euler, CHOLMOD)";
-  info.citation =
+      "Euler, CHOLMOD)",
       "FEM baseline of Table 2 in Pan et al. 2015, Metaballs-based physical modeling and "
       "deformation "
       "of organs for virtual surgery, The Visual Computer; "
       "corotational: Mueller & Gross 2004, Interactive virtual materials, Graphics Interface; "
-      "Nesme et al. 2005, Efficient, physically plausible finite elements, Eurographics short";
-  info.version = "1.0";
-  info.capabilities = {Capability::Grasp,   Capability::PointForce,
-                       Capability::Gravity, Capability::ReactionForce,
-                       Capability::Contact, Capability::ContactReaction,
-                       Capability::Markers, Capability::Sliding};
-  info.params = deform::fem_hex::paramSpecs();
-  info.create = [] { return std::make_unique<deform::fem_hex::HexFemModel>(); };
+      "Nesme et al. 2005, Efficient, physically plausible finite elements, Eurographics short",
+      {Capability::Grasp, Capability::PointForce, Capability::Gravity, Capability::ReactionForce,
+       Capability::Contact, Capability::ContactReaction, Capability::Markers, Capability::Sliding},
+      deform::fem_hex::paramSpecs());
   // What the harness's sweep, bench and stability run it with (registry.h).
   info.resolution = {"elements", {100LL, 300LL, 967LL, 2500LL, 6000LL}, {300LL, 967LL, 2500LL}};
   info.effort = {"pcg_tolerance", {1e-1, 1e-2, 1e-3, 1e-5}, {1e-2, 1e-4}};

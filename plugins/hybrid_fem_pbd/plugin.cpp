@@ -8,20 +8,16 @@ namespace deform::hybrid_fem_pbd {
 
 std::vector<ParamSpec> paramSpecs() {
   return {
-      ParamSpec::integer("iterations", 10, 1, 10000,
-                         "Gauss-Seidel sweeps over the surface constraints"),
-      ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
-                      "stretch constraint stiffness (classic PBD)")
-          .calibrate(0.01, 1, ParamScale::Log),
-      ParamSpec::real("bending_stiffness", "1", 0.5, 0.0, 1.0,
-                      "bending constraint stiffness (classic PBD)")
-          .calibrate(0.01, 1, ParamScale::Log),
-      ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
-                        "surface bending constraint: isometric (Bergou et al. 2006, a constant "
-                        "stencil per hinge) or the paper's dihedral angle (Eqs. (10)-(11))"),
-      ParamSpec::real("damping", "1/s", 20.0, 0.0, 1e4,
-                      "surface velocity damping rate: v <- v exp(-damping dt) each step")
-          .calibrate(0.1, 1000, ParamScale::Log),
+      common_params::iterations(10, 10000, "Gauss-Seidel sweeps over the surface constraints"),
+      common_params::unitStiffness("stretch_stiffness", 1.0, 0.01,
+                                   "stretch constraint stiffness (classic PBD)"),
+      common_params::unitStiffness("bending_stiffness", 0.5, 0.01,
+                                   "bending constraint stiffness (classic PBD)"),
+      common_params::bendingModel(
+          "surface bending constraint: isometric (Bergou et al. 2006, a constant "
+          "stencil per hinge) or the paper's dihedral angle (Eqs. (10)-(11))"),
+      common_params::damping(20.0, 1e4, 0.1,
+                             "surface velocity damping rate: v <- v exp(-damping dt) each step"),
       ParamSpec::flag("surface_load", true,
                       "the point force also moves its own fine node in the PBD prediction "
                       "(paper Sec. 6.3) besides loading the coarse FEM"),
@@ -37,10 +33,10 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::real("cut_snap", "1", 0.1, 0.0, 0.3,
                       "incision: intersection points within this barycentric distance of a "
                       "vertex or edge snap to it"),
-      ParamSpec::choice("precision", "float32", {"float32", "float64"},
-                        "number type of the surface projection (isometric bending; positions "
-                        "relative to the organ's centre) and of the stored grasp response of "
-                        "the coarse FEM; state between steps and the FEM solve stay double"),
+      common_params::precision(
+          "number type of the surface projection (isometric bending; positions "
+          "relative to the organ's centre) and of the stored grasp response of "
+          "the coarse FEM; state between steps and the FEM solve stay double"),
   };
 }
 
@@ -65,20 +61,16 @@ HybridConfig configFromParams(const ParamValues& p) {
 }  // namespace deform::hybrid_fem_pbd
 
 DEFORM_PLUGIN(registry) {
-  deform::ModelInfo info;
-  info.name = "hybrid_fem_pbd";
-  info.description =
-      "Hybrid mesh: linear FEM on a coarse tet mesh (vertex-cover simplified surface) drives "
-      "PBD stretch/bending on the fine surface; small incisions";
-  info.citation =
-      "A Hybrid Model Method for Accurate Surface Deformation and Incision Based on FEM and PBD, "
-      "Scientific Programming 2021, article 8343312 (hindawi.com/journals/sp/2021/8343312)";
-  info.version = "1.0";
   using C = deform::Capability;
-  info.capabilities = {C::Grasp,           C::PointForce, C::Gravity, C::ReactionForce, C::Cut,
-                       C::NeedsPrecompute, C::Contact,    C::Markers, C::Sliding};
-  info.params = deform::hybrid_fem_pbd::paramSpecs();
-  info.create = [] { return std::make_unique<deform::hybrid_fem_pbd::HybridModel>(); };
+  deform::ModelInfo info = deform::modelInfo<deform::hybrid_fem_pbd::HybridModel>(
+      "hybrid_fem_pbd",
+      "Hybrid mesh: linear FEM on a coarse tet mesh (vertex-cover simplified surface) drives "
+      "PBD stretch/bending on the fine surface; small incisions",
+      "A Hybrid Model Method for Accurate Surface Deformation and Incision Based on FEM and PBD, "
+      "Scientific Programming 2021, article 8343312 (hindawi.com/journals/sp/2021/8343312)",
+      {C::Grasp, C::PointForce, C::Gravity, C::ReactionForce, C::Cut, C::NeedsPrecompute,
+       C::Contact, C::Markers, C::Sliding},
+      deform::hybrid_fem_pbd::paramSpecs());
   // What the harness's sweep, bench and stability run it with (registry.h).
   // The coarse FEM's resolution: fewer vertex-cover passes leave a finer coarse surface.
   info.resolution = {"simplification_levels", {4LL, 3LL, 2LL, 1LL}, {3LL, 2LL, 1LL}};

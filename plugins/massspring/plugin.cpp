@@ -14,16 +14,14 @@ std::vector<ParamSpec> paramSpecs() {
                         "Euler, implicit Euler with one Newton step (Baraff & Witkin 1998), or "
                         "implicit Euler by local/global iterations with a prefactored matrix "
                         "(Liu et al. 2013)"),
-      ParamSpec::choice("network", "surface", {"surface", "volume"},
-                        "surface: springs on the organ's surface mesh (the papers' baselines); "
-                        "volume: on the tet edges of the surface tetrahedralised with about "
-                        "volume_elements tets (a mesh file with tets is used as given either "
-                        "way)"),
-      ParamSpec::integer("volume_elements", 4000, 100, 10000000,
-                         "network = volume: target number of tets"),
-      ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
-                      "surface input: membrane thickness t in the spring rule k = E t sum|T|/L^2")
-          .calibrate(0.0001, 0.3, ParamScale::Log),
+      common_params::network(
+          "surface: springs on the organ's surface mesh (the papers' baselines); "
+          "volume: on the tet edges of the surface tetrahedralised with about "
+          "volume_elements tets (a mesh file with tets is used as given either "
+          "way)"),
+      common_params::volumeElements(),
+      common_params::thickness(
+          10.0, "surface input: membrane thickness t in the spring rule k = E t sum|T|/L^2"),
       ParamSpec::real("bending_ratio", "1", 0.1, 0.0, 100.0,
                       "bending spring stiffness relative to the spring on the hinge edge")
           .calibrate(0.001, 10, ParamScale::Log),
@@ -83,25 +81,21 @@ MassSpringConfig configFromParams(const ParamValues& p) {
 }  // namespace deform::massspring
 
 DEFORM_PLUGIN(registry) {
-  deform::ModelInfo info;
-  info.name = "massspring";
-  info.description =
+  using C = deform::Capability;
+  deform::ModelInfo info = deform::modelInfo<deform::massspring::MassSpringModel>(
+      "massspring",
       "Mass-spring network on the organ surface (edge + bending springs, van Gelder stiffness) "
       "or on tet edges; explicit, symplectic or implicit Euler (Newton + CG, or prefactored "
-      "local/global iterations)";
-  info.citation =
+      "local/global iterations)",
       "van Gelder 1998, Approximate simulation of elastic membranes by triangulated spring "
       "meshes, J. Graphics Tools 3(2); Baraff & Witkin 1998, "
       "Large steps in cloth simulation, SIGGRAPH '98, doi:10.1145/280814.280821; Liu, Bargteil, "
       "O'Brien & Kavan 2013, Fast simulation of mass-spring systems, ACM TOG 32(6) 214; Wang "
       "2015, A Chebyshev semi-iterative approach for accelerating projective and position-based "
-      "dynamics, ACM TOG 34(6) 246";
-  info.version = "1.0";
-  using C = deform::Capability;
-  info.capabilities = {C::Grasp,    C::PointForce, C::Gravity,         C::ReactionForce,
-                       C::TetInput, C::Contact,    C::ContactReaction, C::Markers};
-  info.params = deform::massspring::paramSpecs();
-  info.create = [] { return std::make_unique<deform::massspring::MassSpringModel>(); };
+      "dynamics, ACM TOG 34(6) 246",
+      {C::Grasp, C::PointForce, C::Gravity, C::ReactionForce, C::TetInput, C::Contact,
+       C::ContactReaction, C::Markers},
+      deform::massspring::paramSpecs());
   // What the harness's sweep, bench and stability run it with (registry.h).
   // On the organ's surface mesh (no resolution of its own); substeps 0 is the automatic
   // (stable) count, and fixed counts below it are swept too (they diverge, flagged invalid).

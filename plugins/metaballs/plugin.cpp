@@ -21,15 +21,14 @@ std::vector<ParamSpec> metaballsParams() {
       ParamSpec::integer("optimisation_max_moves", 20000, 0, 10000000,
                          "Algorithm 2: most accepted one-voxel moves"),
       ParamSpec::integer("topology_neighbours", 9, 1, 64, "N of eq. (5)"),
-      ParamSpec::integer("iterations", 10, 1, 1000, "PBD solver iterations per step"),
+      common_params::iterations(10, 1000, "PBD solver iterations per step"),
       ParamSpec::choice("stiffness_mode", "xpbd", {"xpbd", "classic"},
                         "xpbd: compliance from Young's modulus; classic: stiffness coefficient"),
-      ParamSpec::real("stiffness", "1", 1.0, 0.0, 1.0, "classic PBD stretching stiffness")
-          .calibrate(0.01, 1, ParamScale::Log),
+      common_params::unitStiffness("stiffness", 1.0, 0.01, "classic PBD stretching stiffness"),
       ParamSpec::flag("laplacian", true, "Laplacian coordinate constraints (eqs. 9-11)"),
-      ParamSpec::real("laplacian_stiffness", "1", 0.5, 0.0, 1.0,
-                      "classic: coefficient; xpbd: fraction of E r_m used as stiffness (N/m)")
-          .calibrate(0.01, 1, ParamScale::Log),
+      common_params::unitStiffness(
+          "laplacian_stiffness", 0.5, 0.01,
+          "classic: coefficient; xpbd: fraction of E r_m used as stiffness (N/m)"),
       ParamSpec::choice("laplacian_frame", "rotated", {"rotated", "fixed"},
                         "rotated: L_m follows the local rotation; fixed: the paper's world frame"),
       ParamSpec::flag("volume_preservation", true, "local volume preservation by radii (eq. 12)"),
@@ -38,8 +37,7 @@ std::vector<ParamSpec> metaballsParams() {
       ParamSpec::real("skin_threshold", "1", 0.2, 1e-6, 1.0,
                       "T: a sphere is attached when f(d, r) >= T (eq. 13, c = 1)"),
       ParamSpec::integer("skin_max_spheres", 6, 1, 16, "most attached spheres per vertex"),
-      ParamSpec::real("damping", "1/s", 5.0, 0.0, 1000.0, "velocity damping rate")
-          .calibrate(0.1, 1000, ParamScale::Log),
+      common_params::damping(5.0, 1000.0, 0.1, "velocity damping rate"),
   };
 }
 
@@ -58,21 +56,16 @@ ConstructionParams constructionParams(const ParamValues& p) {
 }  // namespace deform::metaballs
 
 DEFORM_PLUGIN(registry) {
-  deform::ModelInfo info;
-  info.name = "metaballs";
-  info.description =
+  deform::ModelInfo info = deform::modelInfo<deform::metaballs::MetaballsModel>(
+      "metaballs",
       "Metaballs (overlapping spheres) + PBD with Laplacian and local volume constraints, "
-      "skinned surface";
-  info.citation =
+      "skinned surface",
       "Pan, Zhao, Zhao, Hao, Qin 2015, Metaballs-based physical modeling and deformation of "
-      "organs for virtual surgery, The Visual Computer 31, doi:10.1007/s00371-015-1092-2";
-  info.version = "1.0";
-  info.capabilities = {deform::Capability::Grasp,   deform::Capability::PointForce,
-                       deform::Capability::Gravity, deform::Capability::NeedsPrecompute,
-                       deform::Capability::Contact, deform::Capability::ContactReaction,
-                       deform::Capability::Markers};
-  info.params = deform::metaballs::metaballsParams();
-  info.create = [] { return std::make_unique<deform::metaballs::MetaballsModel>(); };
+      "organs for virtual surgery, The Visual Computer 31, doi:10.1007/s00371-015-1092-2",
+      {deform::Capability::Grasp, deform::Capability::PointForce, deform::Capability::Gravity,
+       deform::Capability::NeedsPrecompute, deform::Capability::Contact,
+       deform::Capability::ContactReaction, deform::Capability::Markers},
+      deform::metaballs::metaballsParams());
   // What the harness's sweep, bench and stability run it with (registry.h).
   info.resolution = {"spheres", {100LL, 250LL, 500LL, 900LL, 1600LL}, {100LL, 300LL, 900LL}};
   info.effort = {"iterations", {2LL, 5LL, 10LL, 20LL, 40LL}, {5LL, 20LL}};

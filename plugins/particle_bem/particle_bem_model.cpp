@@ -113,21 +113,16 @@ std::vector<ParamSpec> ParticleBemModel::paramSpecs() {
 }
 
 ModelInfo ParticleBemModel::info() {
-  ModelInfo i;
-  i.name = "particle_bem";
-  i.description =
+  return modelInfo<ParticleBemModel>(
+      "particle_bem",
       "particles guided by a precomputed BEM deformation matrix (pure MLS particles when "
-      "guidance=false)";
-  i.citation =
+      "guidance=false)",
       "Zhu B., Gu L., Zhou Z.: Particle-Based Deformable Modeling with Pre-computed Surface Data "
       "in Real-Time Surgical Simulation (Image Guided Surgery and Therapy Lab, Shanghai Jiao Tong "
-      "University; no DOI given in the paper)";
-  i.version = "1.0";
-  i.capabilities = {Capability::Grasp,           Capability::PointForce, Capability::Gravity,
-                    Capability::NeedsPrecompute, Capability::Contact,    Capability::Markers};
-  i.params = paramSpecs();
-  i.create = [] { return std::make_unique<ParticleBemModel>(); };
-  return i;
+      "University; no DOI given in the paper)",
+      {Capability::Grasp, Capability::PointForce, Capability::Gravity, Capability::NeedsPrecompute,
+       Capability::Contact, Capability::Markers},
+      paramSpecs());
 }
 
 void ParticleBemModel::init(const ModelSetup& setup) {

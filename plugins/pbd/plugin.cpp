@@ -8,43 +8,36 @@ namespace deform::pbd {
 
 std::vector<ParamSpec> paramSpecs() {
   return {
-      ParamSpec::integer("iterations", 10, 1, 10000, "Gauss-Seidel sweeps over all constraints"),
-      ParamSpec::choice("network", "surface", {"surface", "volume"},
-                        "surface: constraints on the organ's surface mesh (the papers' "
-                        "baselines); volume: on the tets of the surface tetrahedralised with "
-                        "about volume_elements tets (a mesh file with tets is used as given "
-                        "either way)"),
-      ParamSpec::integer("volume_elements", 4000, 100, 10000000,
-                         "network = volume: target number of tets"),
+      common_params::iterations(10, 10000, "Gauss-Seidel sweeps over all constraints"),
+      common_params::network("surface: constraints on the organ's surface mesh (the papers' "
+                             "baselines); volume: on the tets of the surface tetrahedralised with "
+                             "about volume_elements tets (a mesh file with tets is used as given "
+                             "either way)"),
+      common_params::volumeElements(),
       ParamSpec::choice("stiffness_mode", "xpbd", {"classic", "xpbd"},
                         "classic: [0,1] stiffness with k' = 1-(1-k)^(1/n); xpbd: compliances "
                         "from E, nu, thickness"),
-      ParamSpec::real("stretch_stiffness", "1", 1.0, 0.0, 1.0,
-                      "classic mode: distance constraint stiffness")
-          .calibrate(0.01, 1, ParamScale::Log),
-      ParamSpec::real("bending_stiffness", "1", 0.1, 0.0, 1.0,
-                      "classic mode: dihedral bending constraint stiffness")
-          .calibrate(0.001, 1, ParamScale::Log),
-      ParamSpec::real("volume_stiffness", "1", 1.0, 0.0, 1.0,
-                      "classic mode: volume constraint stiffness (global or per tet)")
-          .calibrate(0.01, 1, ParamScale::Log),
+      common_params::unitStiffness("stretch_stiffness", 1.0, 0.01,
+                                   "classic mode: distance constraint stiffness"),
+      common_params::unitStiffness("bending_stiffness", 0.1, 0.001,
+                                   "classic mode: dihedral bending constraint stiffness"),
+      common_params::unitStiffness("volume_stiffness", 1.0, 0.01,
+                                   "classic mode: volume constraint stiffness (global or per tet)"),
       ParamSpec::flag("bending", false, "bending constraints on interior surface edges"),
-      ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
-                        "bending constraint: isometric (Bergou et al. 2006, a constant stencil "
-                        "per hinge) or dihedral angle (Mueller et al. 2007)"),
+      common_params::bendingModel(
+          "bending constraint: isometric (Bergou et al. 2006, a constant stencil "
+          "per hinge) or dihedral angle (Mueller et al. 2007)"),
       ParamSpec::flag("volume", true, "global volume constraint on a closed surface"),
       ParamSpec::flag("volume_every_sweep", false,
                       "project the global volume constraint in every sweep (default: last sweep "
                       "only; it costs a pass over all triangles)"),
-      ParamSpec::real("thickness", "m", 0.01, 1e-6, 10.0,
-                      "xpbd mode, surface input: shell thickness for stretch/bending compliance")
-          .calibrate(0.0001, 0.3, ParamScale::Log),
-      ParamSpec::real("damping", "1/s", 1.0, 0.0, 1e4,
-                      "velocity damping rate: v <- v exp(-damping dt) each step")
-          .calibrate(0.01, 1000, ParamScale::Log),
-      ParamSpec::choice("precision", "float32", {"float32", "float64"},
-                        "number type of the distance and global volume projections (positions "
-                        "relative to the organ's centre); state between steps stays double"),
+      common_params::thickness(
+          10.0, "xpbd mode, surface input: shell thickness for stretch/bending compliance"),
+      common_params::damping(1.0, 1e4, 0.01,
+                             "velocity damping rate: v <- v exp(-damping dt) each step"),
+      common_params::precision(
+          "number type of the distance and global volume projections (positions "
+          "relative to the organ's centre); state between steps stays double"),
   };
 }
 
@@ -74,21 +67,17 @@ PbdConfig configFromParams(const ParamValues& p) {
 }  // namespace deform::pbd
 
 DEFORM_PLUGIN(registry) {
-  deform::ModelInfo info;
-  info.name = "pbd";
-  info.description =
+  using C = deform::Capability;
+  deform::ModelInfo info = deform::modelInfo<deform::pbd::PbdModel>(
+      "pbd",
       "Position based dynamics on the organ surface (stretch, dihedral bending, global volume) "
-      "or on a tet mesh (edges + tet volumes); classic or XPBD stiffness";
-  info.citation =
+      "or on a tet mesh (edges + tet volumes); classic or XPBD stiffness",
       "Mueller, Heidelberger, Hennix, Ratcliff 2007, Position based dynamics, J. Vis. Commun. "
       "Image Represent. 18(2), doi:10.1016/j.jvcir.2007.01.005; Macklin, Mueller, Chentanez 2016, "
-      "XPBD, MIG '16, doi:10.1145/2994258.2994272";
-  info.version = "1.0";
-  using C = deform::Capability;
-  info.capabilities = {C::Grasp,   C::PointForce,      C::Gravity, C::ReactionForce, C::TetInput,
-                       C::Contact, C::ContactReaction, C::Markers, C::Sliding};
-  info.params = deform::pbd::paramSpecs();
-  info.create = [] { return std::make_unique<deform::pbd::PbdModel>(); };
+      "XPBD, MIG '16, doi:10.1145/2994258.2994272",
+      {C::Grasp, C::PointForce, C::Gravity, C::ReactionForce, C::TetInput, C::Contact,
+       C::ContactReaction, C::Markers, C::Sliding},
+      deform::pbd::paramSpecs());
   // What the harness's sweep, bench and stability run it with (registry.h).
   // On the organ's surface mesh (no resolution of its own): the solver's sweeps only.
   info.effort = {"iterations", {1LL, 2LL, 5LL, 10LL, 20LL, 50LL}, {2LL, 10LL, 40LL}};

@@ -15,8 +15,6 @@ namespace {
 
 using deform::testing::bottomSlab;
 using deform::testing::maxDisplacement;
-using deform::testing::pressProbe;
-using deform::testing::ProbeRun;
 using deform::testing::topGrasp;
 
 constexpr Real kDt = 1e-3;
@@ -46,10 +44,7 @@ Material material(Real young = 5500) {
 }
 
 StepInput gravityInput() {
-  StepInput in;
-  in.dt = kDt;
-  in.gravity = Vec3(0, 0, -9.81);
-  return in;
+  return testing::gravityInput(kDt);
 }
 
 TEST(BulletDeformableKernels, LameParametersAndLumpedMass) {
@@ -69,7 +64,15 @@ TEST(BulletDeformableKernels, LameParametersAndLumpedMass) {
   EXPECT_NEAR(lumpedMasses(t, 1000).sum(), 1000 * volume, 1e-12);
 }
 
-class BulletDeformableForces : public ::testing::TestWithParam<ElasticForce> {};
+class BulletDeformableForces : public ::testing::TestWithParam<ElasticForce> {
+ protected:
+  /// m on liverTets() with this test's elastic force, `fixed` pinned.
+  void initModel(BulletDeformableModel& m, const std::vector<int>& fixed, Real young = 5500) {
+    DeformableConfig c;
+    c.force = GetParam();
+    m.init(liverTets(), identitySurface(), material(young), c, kDt, fixed);
+  }
+};
 
 TEST_P(BulletDeformableForces, RestStaysAtRestWithoutGravity) {
   // At rest F = Ds Dm^-1 = I up to rounding, so the elastic forces are rounding noise (~1e-16
@@ -77,10 +80,8 @@ TEST_P(BulletDeformableForces, RestStaysAtRestWithoutGravity) {
   // printed below); a wrong Dm^-1, a wrong Lame mapping of the Neo-Hookean rest state
   // (P(I) != 0) or a mass/velocity mix-up moves the nodes by millimetres.
   const TetMesh& t = liverTets();
-  DeformableConfig c;
-  c.force = GetParam();
   BulletDeformableModel m;
-  m.init(t, identitySurface(), material(), c, kDt, bottomSlab(t.V, 0.1));
+  initModel(m, bottomSlab(t.V, 0.1));
   StepInput in;
   in.dt = kDt;
   for (int s = 0; s < 60; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
@@ -92,10 +93,8 @@ TEST_P(BulletDeformableForces, RestStaysAtRestWithoutGravity) {
 TEST_P(BulletDeformableForces, GravitySagsAFixedOrganAndFixedNodesStay) {
   const TetMesh& t = liverTets();
   const std::vector<int> fixed = bottomSlab(t.V, 0.15);
-  DeformableConfig c;
-  c.force = GetParam();
   BulletDeformableModel m;
-  m.init(t, identitySurface(), material(), c, kDt, fixed);
+  initModel(m, fixed);
   const StepInput in = gravityInput();
   for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
   const VecX dz = m.surface().col(2) - t.V.topRows(m.surface().rows()).col(2);
@@ -108,10 +107,8 @@ TEST_P(BulletDeformableForces, StifferMaterialSagsLess) {
   const TetMesh& t = liverTets();
   Real sag[2];
   for (int k = 0; k < 2; ++k) {
-    DeformableConfig c;
-    c.force = GetParam();
     BulletDeformableModel m;
-    m.init(t, identitySurface(), material(k == 0 ? 3000 : 30000), c, kDt, bottomSlab(t.V, 0.15));
+    initModel(m, bottomSlab(t.V, 0.15), k == 0 ? 3000 : 30000);
     const StepInput in = gravityInput();
     for (int s = 0; s < 80; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
     sag[k] = -(m.nodes().col(2) - t.V.col(2)).mean();
@@ -123,10 +120,8 @@ TEST_P(BulletDeformableForces, StifferMaterialSagsLess) {
 
 TEST_P(BulletDeformableForces, GraspedNodesFollowTheirTargets) {
   const TetMesh& t = liverTets();
-  DeformableConfig c;
-  c.force = GetParam();
   BulletDeformableModel m;
-  m.init(t, identitySurface(), material(), c, kDt, bottomSlab(t.V, 0.15));
+  initModel(m, bottomSlab(t.V, 0.15));
   StepInput in = gravityInput();
   in.grasps.push_back(topGrasp(t.V, 6, 0.0));
   const MatX3 start = in.grasps[0].targets;
@@ -151,59 +146,24 @@ TEST_P(BulletDeformableForces, GraspedNodesFollowTheirTargets) {
 
 TEST_P(BulletDeformableForces, PointForceMovesTheLoadedVertexAlongTheForce) {
   const TetMesh& t = liverTets();
-  DeformableConfig c;
-  c.force = GetParam();
   BulletDeformableModel m;
-  m.init(t, identitySurface(), material(), c, kDt, bottomSlab(t.V, 0.15));
-  const Box b = boundingBox(t.V);
-  StepInput in;
-  in.dt = kDt;
-  PointLoad l;
-  l.surfaceVertex =
-      nearestVertex(makePhantom("liver", 0.12).V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
-  l.force = Vec3(0, 0, 0.5);
-  in.loads.push_back(PointLoad::onVertex(l.surfaceVertex, l.force));
-  for (int s = 0; s < 50; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
-  EXPECT_GT(m.surface()(l.surfaceVertex, 2) - t.V(l.surfaceVertex, 2), 1e-4);
+  initModel(m, bottomSlab(t.V, 0.15));
+  testing::expectPointForceLiftsItsVertex(m, boundingBox(t.V), makePhantom("liver", 0.12).V, t.V,
+                                          kDt);
 }
 
 TEST_P(BulletDeformableForces, ResetReproducesARunBitForBit) {
   const TetMesh& t = liverTets();
-  DeformableConfig c;
-  c.force = GetParam();
   BulletDeformableModel m;
-  m.init(t, identitySurface(), material(), c, kDt, bottomSlab(t.V, 0.15));
-  auto run = [&] {
-    StepInput in = gravityInput();
-    in.grasps.push_back(topGrasp(t.V, 5, 0.0));
-    for (int s = 0; s < 40; ++s) {
-      if (s == 30) in.grasps.clear();
-      if (!in.grasps.empty()) in.grasps[0].targets.col(1).array() += 1e-4;
-      EXPECT_EQ(m.step(in), StepStatus::Ok);
-    }
-    return MatX3(m.nodes());
-  };
-  const MatX3 a = run();
-  m.reset();
-  EXPECT_TRUE(m.nodes() == t.V);
-  const MatX3 b = run();
-  EXPECT_TRUE(a == b);
-  EXPECT_GT(maxDisplacement(a, t.V), 1e-4);
+  initModel(m, bottomSlab(t.V, 0.15));
+  testing::expectResetReproducesARun(m, t.V, 40, 30, kDt, &Model::nodes);
 }
 
 TEST_P(BulletDeformableForces, NoNanOverAGraspLift) {
   const TetMesh& t = liverTets();
-  DeformableConfig c;
-  c.force = GetParam();
   BulletDeformableModel m;
-  m.init(t, identitySurface(), material(), c, kDt, bottomSlab(t.V, 0.15));
-  StepInput in = gravityInput();
-  in.grasps.push_back(topGrasp(t.V, 8, 0.0));
-  for (int s = 0; s < 100; ++s) {
-    in.grasps[0].targets.col(2).array() += 2e-4;  // 2 cm lift over 0.1 s
-    ASSERT_EQ(m.step(in), StepStatus::Ok) << "step " << s;
-    ASSERT_TRUE(m.nodes().allFinite());
-  }
+  initModel(m, bottomSlab(t.V, 0.15));
+  testing::expectNoNanOverAGraspLift(m, t.V, 100, 2e-4, kDt, &Model::nodes);  // 2 cm in 0.1 s
 }
 
 TEST_P(BulletDeformableForces, APressedProbeKeepsNodesOutPushesTheBodyAndFeelsTheTissue) {
@@ -211,25 +171,10 @@ TEST_P(BulletDeformableForces, APressedProbeKeepsNodesOutPushesTheBodyAndFeelsTh
   // Bullet's body (nodes the probe never came near follow), the tissue pushes the probe up.
   const TetMesh& t = liverTets();
   const std::vector<int> fixed = bottomSlab(t.V, 0.15);
-  DeformableConfig c;
-  c.force = GetParam();
   BulletDeformableModel m;
-  m.init(t, identitySurface(), material(), c, kDt, fixed);
-  const Real r = 0.01, depth = 0.008;
-  const ProbeRun run = pressProbe(m, t.V, fixed, r, depth, 40, 20, kDt);
-  std::printf(
-      "bullet_deformable probe: worst %.3g m, top drop %.3g m, reaction z min %.3g N, last %.3g N, "
-      "%d far nodes moved, %d contact steps\n",
-      run.worst, run.topDrop, run.minReactionZ, run.lastReactionZ, run.farNodesMoved,
-      run.contactSteps);
-  EXPECT_TRUE(run.allOk);
-  EXPECT_GE(run.worst, -1e-9) << "a node ended a step inside the probe";
-  EXPECT_GT(run.topDrop, 0.5 * depth);
-  EXPECT_GE(run.contactSteps, 20);
-  EXPECT_GT(run.minReactionZ, 0.0) << "the tissue must push the probe up";
+  initModel(m, fixed);
   // Held 8 mm deep, the tissue pushes back with a finite force (not only round-off).
-  EXPECT_GT(run.lastReactionZ, 1e-3);
-  EXPECT_GT(run.farNodesMoved, 0);
+  testing::expectAPressedProbeIsPushedBack(m, t.V, fixed, kDt, 1e-3, "bullet_deformable");
 }
 
 INSTANTIATE_TEST_SUITE_P(Forces, BulletDeformableForces,

@@ -13,8 +13,6 @@ namespace {
 
 using deform::testing::bottomSlab;
 using deform::testing::maxDisplacement;
-using deform::testing::pressProbe;
-using deform::testing::ProbeRun;
 using deform::testing::topGrasp;
 
 constexpr Real kDt = 1e-3;
@@ -28,10 +26,7 @@ Organ organOf(const std::string& phantom, Real resolution, Real young = 5500) {
 }
 
 StepInput gravityInput() {
-  StepInput in;
-  in.dt = kDt;
-  in.gravity = Vec3(0, 0, -9.81);
-  return in;
+  return testing::gravityInput(kDt);
 }
 
 TEST(BulletSoftBodyKernels, XpbdLinkStiffnessIsAFractionGrowingWithE) {
@@ -147,15 +142,8 @@ TEST(BulletSoftBodyModel, PointForceMovesTheLoadedVertexAlongTheForce) {
   const Organ o = organOf("liver", 0.27);
   BulletSoftBodyModel m;
   m.init(o, SoftBodyConfig{}, kDt, bottomSlab(o.surface.V, 0.15));
-  const Box b = boundingBox(o.surface.V);
-  StepInput in;
-  in.dt = kDt;
-  PointLoad l;
-  l.surfaceVertex = nearestVertex(o.surface.V, Vec3(b.center().x(), b.center().y(), b.hi.z()));
-  l.force = Vec3(0, 0, 0.5);
-  in.loads.push_back(PointLoad::onVertex(l.surfaceVertex, l.force));
-  for (int s = 0; s < 50; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
-  EXPECT_GT(m.surface()(l.surfaceVertex, 2) - o.surface.V(l.surfaceVertex, 2), 1e-4);
+  testing::expectPointForceLiftsItsVertex(m, boundingBox(o.surface.V), o.surface.V, o.surface.V,
+                                          kDt);
 }
 
 TEST(BulletSoftBodyModel, ResetReproducesARunBitForBit) {
@@ -164,35 +152,15 @@ TEST(BulletSoftBodyModel, ResetReproducesARunBitForBit) {
   c.bending = true;
   BulletSoftBodyModel m;
   m.init(o, c, kDt, bottomSlab(o.surface.V, 0.15));
-  auto run = [&] {
-    StepInput in = gravityInput();
-    in.grasps.push_back(topGrasp(o.surface.V, 5, 0.0));
-    for (int s = 0; s < 60; ++s) {
-      if (s == 40) in.grasps.clear();
-      if (!in.grasps.empty()) in.grasps[0].targets.col(1).array() += 1e-4;
-      EXPECT_EQ(m.step(in), StepStatus::Ok);
-    }
-    return MatX3(m.surface());
-  };
-  const MatX3 a = run();
-  m.reset();
-  EXPECT_TRUE(m.surface() == o.surface.V);
-  const MatX3 b = run();
-  EXPECT_TRUE(a == b);
-  EXPECT_GT(maxDisplacement(a, o.surface.V), 1e-4);
+  testing::expectResetReproducesARun(m, o.surface.V, 60, 40, kDt, &Model::surface);
 }
 
 TEST(BulletSoftBodyModel, NoNanOverAGraspLift) {
   const Organ o = organOf("liver", 0.27);
   BulletSoftBodyModel m;
   m.init(o, SoftBodyConfig{}, kDt, bottomSlab(o.surface.V, 0.15));
-  StepInput in = gravityInput();
-  in.grasps.push_back(topGrasp(o.surface.V, 8, 0.0));
-  for (int s = 0; s < 200; ++s) {
-    in.grasps[0].targets.col(2).array() += 1e-4;  // 2 cm lift over 0.2 s
-    ASSERT_EQ(m.step(in), StepStatus::Ok) << "step " << s;
-    ASSERT_TRUE(m.surface().allFinite());
-  }
+  // 2 cm lift over 0.2 s
+  testing::expectNoNanOverAGraspLift(m, o.surface.V, 200, 1e-4, kDt, &Model::surface);
 }
 
 TEST(BulletSoftBodyModel, NanIsReportedAsDivergence) {
@@ -217,23 +185,10 @@ TEST(BulletSoftBodyModel, APressedProbeKeepsNodesOutPushesTheBodyAndFeelsTheTiss
   const std::vector<int> fixed = bottomSlab(o.surface.V, 0.15);
   BulletSoftBodyModel m;
   m.init(o, SoftBodyConfig{}, kDt, fixed);
-  const Real r = 0.01, depth = 0.008;
-  const ProbeRun run = pressProbe(m, o.surface.V, fixed, r, depth, 40, 20, kDt);
-  std::printf(
-      "bullet_softbody probe: worst %.3g m, top drop %.3g m, reaction z min %.3g N, last %.3g N, "
-      "%d far nodes moved, %d contact steps\n",
-      run.worst, run.topDrop, run.minReactionZ, run.lastReactionZ, run.farNodesMoved,
-      run.contactSteps);
-  EXPECT_TRUE(run.allOk);
-  EXPECT_GE(run.worst, -1e-9) << "a node ended a step inside the probe";
-  EXPECT_GT(run.topDrop, 0.5 * depth);
-  EXPECT_GE(run.contactSteps, 20);
-  EXPECT_GT(run.minReactionZ, 0.0) << "the tissue must push the probe up";
   // Held 8 mm deep, the tissue pushes back with a finite force, not only round-off (measured
   // 0.145 mN: the membrane without bending links resists a point indentation only through the
   // second-order stretch of its links and the small volume change; bullet_deformable: 0.3 N).
-  EXPECT_GT(run.lastReactionZ, 1e-5);
-  EXPECT_GT(run.farNodesMoved, 0);
+  testing::expectAPressedProbeIsPushedBack(m, o.surface.V, fixed, kDt, 1e-5, "bullet_softbody");
 }
 
 }  // namespace

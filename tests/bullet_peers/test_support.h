@@ -6,9 +6,11 @@
 #include <deform/geometry/phantom.h>
 #include <deform/sdk/contact.h>
 #include <deform/sdk/model.h>
+#include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 namespace deform::testing {
@@ -91,6 +93,90 @@ inline ProbeRun pressProbe(Model& m, const MatX3& rest, const std::vector<int>& 
   for (Eigen::Index i = 0; i < rest.rows(); ++i)
     if (!near[size_t(i)] && (m.nodes().row(i) - rest.row(i)).norm() > 1e-5) ++out.farNodesMoved;
   return out;
+}
+
+/// One step of dt under gravity (-9.81 m/s^2 along z).
+inline StepInput gravityInput(Real dt) {
+  StepInput in;
+  in.dt = dt;
+  in.gravity = Vec3(0, 0, -9.81);
+  return in;
+}
+
+/// The positions a check reads: Model::nodes or Model::surface.
+using Positions = const MatX3& (Model::*)() const;
+
+/// A 0.5 N upward force on the vertex of `pickFrom` nearest the top centre of `box`, 50 steps of
+/// dt: the vertex rises more than 0.1 mm above its row in `rest`.
+inline void expectPointForceLiftsItsVertex(Model& m, const Box& box, const MatX3& pickFrom,
+                                           const MatX3& rest, Real dt) {
+  StepInput in;
+  in.dt = dt;
+  PointLoad l;
+  l.surfaceVertex = nearestVertex(pickFrom, Vec3(box.center().x(), box.center().y(), box.hi.z()));
+  l.force = Vec3(0, 0, 0.5);
+  in.loads.push_back(PointLoad::onVertex(l.surfaceVertex, l.force));
+  for (int s = 0; s < 50; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
+  EXPECT_GT(m.surface()(l.surfaceVertex, 2) - rest(l.surfaceVertex, 2), 1e-4);
+}
+
+/// A run of `steps` steps of dt under gravity with a grasp of the 5 top nodes of `rest` sliding
+/// along y until step `release`; reset() returns to `rest` and the same run again gives the same
+/// positions bit for bit, more than 0.1 mm from rest.
+inline void expectResetReproducesARun(Model& m, const MatX3& rest, int steps, int release, Real dt,
+                                      Positions positions) {
+  auto run = [&] {
+    StepInput in = gravityInput(dt);
+    in.grasps.push_back(topGrasp(rest, 5, 0.0));
+    for (int s = 0; s < steps; ++s) {
+      if (s == release) in.grasps.clear();
+      if (!in.grasps.empty()) in.grasps[0].targets.col(1).array() += 1e-4;
+      EXPECT_EQ(m.step(in), StepStatus::Ok);
+    }
+    return MatX3((m.*positions)());
+  };
+  const MatX3 a = run();
+  m.reset();
+  EXPECT_TRUE((m.*positions)() == rest);
+  const MatX3 b = run();
+  EXPECT_TRUE(a == b);
+  EXPECT_GT(maxDisplacement(a, rest), 1e-4);
+}
+
+/// A grasp of the 8 top nodes of `rest` lifted by `lift` per step for `steps` steps of dt under
+/// gravity: every step Ok, the positions finite.
+inline void expectNoNanOverAGraspLift(Model& m, const MatX3& rest, int steps, Real lift, Real dt,
+                                      Positions positions) {
+  StepInput in = gravityInput(dt);
+  in.grasps.push_back(topGrasp(rest, 8, 0.0));
+  for (int s = 0; s < steps; ++s) {
+    in.grasps[0].targets.col(2).array() += lift;
+    ASSERT_EQ(m.step(in), StepStatus::Ok) << "step " << s;
+    ASSERT_TRUE((m.*positions)().allFinite());
+  }
+}
+
+/// pressProbe() with a 1 cm probe pressed 8 mm deep over 40 steps of dt and held 20, printed
+/// under `label`: every step Ok, no movable node ends a step inside the probe, the top goes down
+/// at least half the depth, 20 or more contact steps, the tissue pushes the probe up (with more
+/// than minLastReaction N at the end) and nodes the probe never came near follow.
+inline void expectAPressedProbeIsPushedBack(Model& m, const MatX3& rest,
+                                            const std::vector<int>& fixed, Real dt,
+                                            Real minLastReaction, const char* label) {
+  const Real r = 0.01, depth = 0.008;
+  const ProbeRun run = pressProbe(m, rest, fixed, r, depth, 40, 20, dt);
+  std::printf(
+      "%s probe: worst %.3g m, top drop %.3g m, reaction z min %.3g N, last %.3g N, %d far nodes "
+      "moved, %d contact steps\n",
+      label, run.worst, run.topDrop, run.minReactionZ, run.lastReactionZ, run.farNodesMoved,
+      run.contactSteps);
+  EXPECT_TRUE(run.allOk);
+  EXPECT_GE(run.worst, -1e-9) << "a node ended a step inside the probe";
+  EXPECT_GT(run.topDrop, 0.5 * depth);
+  EXPECT_GE(run.contactSteps, 20);
+  EXPECT_GT(run.minReactionZ, 0.0) << "the tissue must push the probe up";
+  EXPECT_GT(run.lastReactionZ, minLastReaction);
+  EXPECT_GT(run.farNodesMoved, 0);
 }
 
 }  // namespace deform::testing

@@ -10,6 +10,7 @@
 #include <deform_harness/runner.h>
 #include <gtest/gtest.h>
 
+#include "../support/fixtures.h"
 #include "ccx_deck.h"
 #include "ccx_process.h"
 
@@ -23,15 +24,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-PluginLoader& loader() {
-  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
-  return *l;
-}
+using deform::testing::loader;
 
-Cache& cache() {
-  static Cache c(fs::path(DEFORM_BUILD_DIR) / "test-cache");
-  return c;
-}
+using deform::testing::cache;
 
 /// Sets an environment variable for the lifetime of the object.
 class ScopedEnv {

@@ -21,6 +21,8 @@
 // (~1/(load spread)), set by each model's own local mesh size, so near the load the models need
 // not agree and fem_hex's displacement there grows with refinement; away from the load they must
 // agree, better with refinement.
+#include "../support/fixtures.h"
+
 #include <deform/engine/plugin_loader.h>
 #include <deform/engine/scene.h>
 #include <deform/sdk/cache.h>
@@ -50,11 +52,7 @@ fs::path shippedScene(const std::string& name) {
   return fs::path(DEFORM_SOURCE_DIR) / "scenes" / (name + ".json");
 }
 
-PluginLoader& loader() {
-  // Plugins stay loaded for the whole program (models may outlive a local loader otherwise).
-  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
-  return *l;
-}
+using deform::testing::loader;
 
 /// fem_hex at each element count and the scene's reference, run on the scene `j` (whose models
 /// are replaced). Returns the records, fem_hex runs first (in `elements` order), the reference

@@ -224,16 +224,36 @@ Real minArea(const MatX3& V, const MatX3i& F) {
   return m;
 }
 
+CuttableSurface cuttable(const SurfaceMesh& m) {
+  return CuttableSurface::fromMesh(m.V, m.V, m.F);
+}
+
+CutReport cutAlong(CuttableSurface& s, std::vector<Vec3> points) {
+  CutPath path;
+  path.points = std::move(points);
+  return cutSurface(s, path);
+}
+
+// After a cut: no edge in more than two triangles, consistently oriented, `boundary` boundary
+// edges and no triangle of area minArea or less. Returns the edge use.
+EdgeUse expectCleanCut(const CuttableSurface& s, int boundary, Real minTriangleArea) {
+  const MatX3i F = s.faces();
+  const EdgeUse use = edgeUse(F);
+  EXPECT_EQ(use.overused, 0);
+  EXPECT_EQ(use.directedTwice, 0);  // consistently oriented
+  EXPECT_EQ(use.boundary, boundary);
+  EXPECT_GT(minArea(s.x, F), minTriangleArea);
+  return use;
+}
+
 TEST(Incision, EndToEdgeToEndOnTwoSquares) {
   // Path (0.6,0.3) -> (1.4,0.8): facet point in triangle (0,1,4), edge point on edge (1,4) at
   // y = 0.3 + 0.625 * 0.4 = 0.55, facet point in triangle (1,5,4). Insertions: face split +2
   // triangles, edge split +2, face split +2; the edge point is the only interior path vertex,
   // duplicated once. New vertices 2 + 1 + 1 = 4, triangles 4 -> 10.
   const SurfaceMesh m = patch(2);
-  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
-  CutPath path;
-  path.points = {Vec3(0.6, 0.3, 0), Vec3(1.4, 0.8, 0)};
-  const CutReport r = cutSurface(s, path);
+  CuttableSurface s = cuttable(m);
+  const CutReport r = cutAlong(s, {Vec3(0.6, 0.3, 0), Vec3(1.4, 0.8, 0)});
   ASSERT_TRUE(r.applied) << r.reason;
   EXPECT_EQ(r.facetPoints, 2);
   EXPECT_EQ(r.edgePoints, 1);
@@ -248,14 +268,9 @@ TEST(Incision, EndToEdgeToEndOnTwoSquares) {
   EXPECT_EQ((s.x.row(copy) - s.x.row(e)).norm(), 0.0);
   // Original indices unchanged, new vertices appended.
   EXPECT_EQ((s.x.topRows(6) - m.V).norm(), 0.0);
-  const MatX3i F = s.faces();
-  const EdgeUse use = edgeUse(F);
-  EXPECT_EQ(use.overused, 0);
-  EXPECT_EQ(use.directedTwice, 0);  // consistently oriented
-  EXPECT_EQ(use.boundary, 6 + 4);   // the patch's own 6 boundary edges + the cut's 4 lips
-  EXPECT_GT(minArea(s.x, F), 0.01);
+  expectCleanCut(s, 6 + 4, 0.01);  // the patch's own 6 boundary edges + the cut's 4 lips
   // Area is conserved by the subdivision.
-  EXPECT_NEAR(surfaceArea(s.x, F), 2.0, 1e-12);
+  EXPECT_NEAR(surfaceArea(s.x, s.faces()), 2.0, 1e-12);
 }
 
 TEST(Incision, ThroughTriangleOnThreeSquares) {
@@ -263,11 +278,8 @@ TEST(Incision, ThroughTriangleOnThreeSquares) {
   // on (1,5) at y = 7/18, on diagonal (1,6) at (1.5,0.5), on (2,6) at y = 11/18; facet point in
   // (2,7,6). Triangle (1,6,5) is crossed edge to edge (3 pieces). New vertices: 5 points + 3
   // duplicates = 8; triangles 6 + 2 + 2 + 2 + 2 + 2 = 16.
-  const SurfaceMesh m = patch(3);
-  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
-  CutPath path;
-  path.points = {Vec3(0.6, 0.3, 0), Vec3(2.4, 0.7, 0)};
-  const CutReport r = cutSurface(s, path);
+  CuttableSurface s = cuttable(patch(3));
+  const CutReport r = cutAlong(s, {Vec3(0.6, 0.3, 0), Vec3(2.4, 0.7, 0)});
   ASSERT_TRUE(r.applied) << r.reason;
   EXPECT_EQ(r.facetPoints, 2);
   EXPECT_EQ(r.edgePoints, 3);
@@ -277,23 +289,15 @@ TEST(Incision, ThroughTriangleOnThreeSquares) {
   EXPECT_LT((s.x.row(r.path[1]) - Vec3(1, 7.0 / 18, 0).transpose()).norm(), 1e-12);
   EXPECT_LT((s.x.row(r.path[2]) - Vec3(1.5, 0.5, 0).transpose()).norm(), 1e-12);
   EXPECT_LT((s.x.row(r.path[3]) - Vec3(2, 11.0 / 18, 0).transpose()).norm(), 1e-12);
-  const MatX3i F = s.faces();
-  const EdgeUse use = edgeUse(F);
-  EXPECT_EQ(use.overused, 0);
-  EXPECT_EQ(use.directedTwice, 0);
-  EXPECT_EQ(use.boundary, 8 + 8);  // patch boundary 8, cut lips 2 x 4
-  EXPECT_NEAR(surfaceArea(s.x, F), 3.0, 1e-12);
-  EXPECT_GT(minArea(s.x, F), 1e-3);
+  expectCleanCut(s, 8 + 8, 1e-3);  // patch boundary 8, cut lips 2 x 4
+  EXPECT_NEAR(surfaceArea(s.x, s.faces()), 3.0, 1e-12);
 }
 
 TEST(Incision, CutInsideOneTriangleGetsAMidpoint) {
   // Both ends in triangle (0,1,4) of one square: face split (+2), face split of a piece (+2),
   // midpoint of the cut edge (+2), duplicated midpoint: +4 vertices, +6 triangles.
-  const SurfaceMesh m = patch(1);
-  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
-  CutPath path;
-  path.points = {Vec3(0.45, 0.15, 0), Vec3(0.8, 0.35, 0)};
-  const CutReport r = cutSurface(s, path);
+  CuttableSurface s = cuttable(patch(1));
+  const CutReport r = cutAlong(s, {Vec3(0.45, 0.15, 0), Vec3(0.8, 0.35, 0)});
   ASSERT_TRUE(r.applied) << r.reason;
   EXPECT_EQ(r.facetPoints, 2);
   EXPECT_EQ(r.newVertices, 4);
@@ -304,11 +308,8 @@ TEST(Incision, CutInsideOneTriangleGetsAMidpoint) {
 }
 
 TEST(Incision, RejectsAPathThatIsTooShort) {
-  const SurfaceMesh m = patch(1);
-  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
-  CutPath path;
-  path.points = {Vec3(0.5, 0.25, 0), Vec3(0.5, 0.25, 0)};
-  const CutReport r = cutSurface(s, path);
+  CuttableSurface s = cuttable(patch(1));
+  const CutReport r = cutAlong(s, {Vec3(0.5, 0.25, 0), Vec3(0.5, 0.25, 0)});
   EXPECT_FALSE(r.applied);
   EXPECT_EQ(s.numVertices(), 4);  // unchanged
 }
@@ -316,18 +317,12 @@ TEST(Incision, RejectsAPathThatIsTooShort) {
 TEST(Incision, ConstraintsAfterCutAreAtRestOnACurvedSurface) {
   const SurfaceMesh m = makePhantom("sphere", 0.3);
   const SurfaceConstraints c0 = buildSurfaceConstraints(m.V, m.F);
-  CuttableSurface s = CuttableSurface::fromMesh(m.V, m.V, m.F);
-  CutPath path;
-  path.points = {Vec3(-0.02, -0.01, 0.05), Vec3(0.0, 0.0, 0.05), Vec3(0.02, 0.012, 0.05)};
-  const CutReport r = cutSurface(s, path);
+  CuttableSurface s = cuttable(m);
+  const CutReport r =
+      cutAlong(s, {Vec3(-0.02, -0.01, 0.05), Vec3(0.0, 0.0, 0.05), Vec3(0.02, 0.012, 0.05)});
   ASSERT_TRUE(r.applied) << r.reason;
   EXPECT_GT(r.edgePoints, 0);
-  const MatX3i F = s.faces();
-  const EdgeUse use = edgeUse(F);
-  EXPECT_EQ(use.overused, 0);
-  EXPECT_EQ(use.directedTwice, 0);
-  EXPECT_EQ(use.boundary, 2 * (static_cast<int>(r.path.size()) - 1));
-  EXPECT_GT(minArea(s.x, F), 0);
+  const EdgeUse use = expectCleanCut(s, 2 * (static_cast<int>(r.path.size()) - 1), 0);
   const SurfaceConstraints c = constraintsAfterCut(s, c0);
   // Rest lengths from the law of cosines equal the rest distances (the pieces are flat).
   for (const auto& d : c.stretch)

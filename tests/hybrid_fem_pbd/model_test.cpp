@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <set>
 
+#include "../support/organs.h"
 #include "../support/plate.h"
 #include "hybrid_model.h"
 
@@ -20,16 +21,7 @@ Cache& testCache() {
 }
 
 Organ phantomOrgan(const std::string& name, double resolution) {
-  Organ o;
-  o.source = "phantom:" + name;
-  o.surface = makePhantom(name, resolution);
-  o.material = Material{5500, 0.3, 1000};
-  const Box b = boundingBox(o.surface.V);
-  Box fixed;
-  fixed.lo = b.lo - Vec3::Constant(0.01);
-  fixed.hi = Vec3(b.hi.x() + 0.01, b.hi.y() + 0.01, b.lo.z() + 0.1 * b.size().z());
-  o.fixed.boxes.push_back(fixed);
-  return o;
+  return testing::phantomWithFixedBottom(name, resolution, 0.1);
 }
 
 // The surface vertex with the largest z nearest the vertical axis through the centre.

@@ -5,6 +5,7 @@
 #include "massspring_model.h"
 #include "../support/grasp.h"
 #include "../support/meshes.h"
+#include "../support/network_model.h"
 #include "../support/press.h"
 #include "explicit_rows.h"
 
@@ -25,26 +26,10 @@ namespace {
 const Integrator kAll[] = {Integrator::ExplicitEuler, Integrator::SymplecticEuler,
                            Integrator::ImplicitEuler, Integrator::LocalGlobal};
 
-Organ smallOrgan(Real young = 5500.0) {
-  Organ o;
-  o.source = "test:ellipsoid";
-  o.surface = testing::uvEllipsoid(10, 16, 0.05, 0.04, 0.03);
-  o.material.young = young;
-  o.material.poisson = 0.3;
-  o.material.density = 1000.0;
-  return o;
-}
-
-StepInput input(Real dt, Vec3 gravity = Vec3::Zero()) {
-  StepInput in;
-  in.dt = dt;
-  in.gravity = gravity;
-  return in;
-}
-
-Real maxDistance(const MatX3& a, const MatX3& b) {
-  return (a - b).rowwise().norm().maxCoeff();
-}
+using testing::ellipsoidOrgan;
+using testing::maxDistance;
+using testing::scriptedRun;
+using testing::stepInput;
 
 MassSpringConfig withIntegrator(Integrator i) {
   MassSpringConfig c;
@@ -53,7 +38,7 @@ MassSpringConfig withIntegrator(Integrator i) {
 }
 
 TEST(MassSpringModel, CountsAndMass) {
-  const Organ o = smallOrgan();
+  const Organ o = ellipsoidOrgan();
   MassSpringModel m;
   m.init(o, MassSpringConfig{});
   const long long E = uniqueEdges(o.surface.F).rows();
@@ -67,41 +52,24 @@ TEST(MassSpringModel, CountsAndMass) {
 
 TEST(MassSpringModel, RestWithoutGravityStaysAtRest) {
   for (Integrator integ : kAll) {
-    const Organ o = smallOrgan();
+    const Organ o = ellipsoidOrgan();
     MassSpringModel m;
     m.init(o, withIntegrator(integ));
-    for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(input(1e-4)), StepStatus::Ok);
+    for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(stepInput(1e-4)), StepStatus::Ok);
     EXPECT_LT(maxDistance(m.surface(), o.surface.V), 1e-12);
   }
 }
 
-std::vector<MatX3> scriptedRun(MassSpringModel& m, const Organ& o, int steps, Real dt) {
-  std::vector<MatX3> out;
-  const int top = nearestVertex(o.surface.V, Vec3(0, 0, 0.03));
-  const int side = nearestVertex(o.surface.V, Vec3(0.05, 0, 0));
-  for (int s = 0; s < steps; ++s) {
-    StepInput in = input(dt, Vec3(0, 0, -9.81));
-    GraspInput g;
-    g.vertices = {top};
-    g.targets = o.surface.V.row(top) + Eigen::RowVector3d(0, 0, 2e-5 * (s + 1));
-    in.grasps.push_back(g);
-    in.loads.push_back(PointLoad::onVertex(side, Vec3(0.5, 0, 0)));
-    EXPECT_EQ(m.step(in), StepStatus::Ok);
-    out.push_back(m.surface());
-  }
-  return out;
-}
-
 TEST(MassSpringModel, ResetReproducesARunBitForBit) {
   for (Integrator integ : kAll) {
-    Organ o = smallOrgan();
+    Organ o = ellipsoidOrgan();
     o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.025)});
     MassSpringModel m;
     m.init(o, withIntegrator(integ));
-    const std::vector<MatX3> a = scriptedRun(m, o, 50, 2e-4);
+    const std::vector<MatX3> a = scriptedRun(m, o, 50, 2e-4, 2e-5);
     m.reset();
     EXPECT_TRUE(m.surface() == o.surface.V);
-    const std::vector<MatX3> b = scriptedRun(m, o, 50, 2e-4);
+    const std::vector<MatX3> b = scriptedRun(m, o, 50, 2e-4, 2e-5);
     for (size_t s = 0; s < a.size(); ++s) ASSERT_TRUE(a[s] == b[s]) << "step " << s;
     EXPECT_GT(maxDistance(a.back(), o.surface.V), 1e-5);
   }
@@ -109,28 +77,18 @@ TEST(MassSpringModel, ResetReproducesARunBitForBit) {
 
 TEST(MassSpringModel, GraspedNodeFollowsItsTargetExactly) {
   for (Integrator integ : kAll) {
-    const Organ o = smallOrgan();
+    const Organ o = ellipsoidOrgan();
     MassSpringModel m;
     m.init(o, withIntegrator(integ));
     const std::vector<int> nodes = nearestVertices(o.surface.V, Vec3(0, 0, 0.03), 3);
-    for (int s = 0; s < 30; ++s) {
-      StepInput in = input(2e-4, Vec3(0, 0, -9.81));
-      GraspInput g;
-      g.vertices = nodes;
-      g.targets.resize(3, 3);
-      for (int k = 0; k < 3; ++k)
-        g.targets.row(k) = o.surface.V.row(nodes[k]) + Eigen::RowVector3d(1e-4 * s, 0, 2e-4 * s);
-      in.grasps.push_back(g);
-      ASSERT_EQ(m.step(in), StepStatus::Ok);
-      for (int k = 0; k < 3; ++k) EXPECT_TRUE(m.nodes().row(nodes[k]) == g.targets.row(k));
-    }
+    testing::expectGraspedNodesFollow(m, o, nodes, 30, 2e-4, 1e-4, 2e-4);
   }
 }
 
 // A stiff organ (E = 1 MPa) pinned at the bottom under gravity and a lifting grasp, stepped at
 // dt = 1/30 s, far above explicit Euler's limit (~2/omega_max ~ 1e-4 s here).
 StepStatus runStiff(Integrator integ, int steps, MatX3* final = nullptr, int substeps = 1) {
-  Organ o = smallOrgan(1e6);
+  Organ o = ellipsoidOrgan(1e6);
   o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.025)});
   MassSpringModel m;
   MassSpringConfig c = withIntegrator(integ);
@@ -138,7 +96,7 @@ StepStatus runStiff(Integrator integ, int steps, MatX3* final = nullptr, int sub
   m.init(o, c);
   const int top = nearestVertex(o.surface.V, Vec3(0, 0, 0.03));
   for (int s = 0; s < steps; ++s) {
-    StepInput in = input(1.0 / 30.0, Vec3(0, 0, -9.81));
+    StepInput in = stepInput(1.0 / 30.0, Vec3(0, 0, -9.81));
     GraspInput g;
     g.vertices = {top};
     g.targets = o.surface.V.row(top) + Eigen::RowVector3d(0, 0, 1e-3 * std::min(s + 1, 10));
@@ -154,7 +112,7 @@ TEST(MassSpringModel, ImplicitIsStableWhereExplicitDiverges) {
   EXPECT_EQ(runStiff(Integrator::ExplicitEuler, 300), StepStatus::Diverged);
   MatX3 x;
   ASSERT_EQ(runStiff(Integrator::ImplicitEuler, 300, &x), StepStatus::Ok);
-  const Organ o = smallOrgan();
+  const Organ o = ellipsoidOrgan();
   // Bounded and sensible: the lift is 10 mm, nothing moves further than a few times that.
   EXPECT_LT(maxDistance(x, o.surface.V), 0.03);
   EXPECT_GT(maxDistance(x, o.surface.V), 5e-3);
@@ -167,10 +125,10 @@ TEST(MassSpringModel, AutomaticSubstepsKeepTheExplicitIntegratorsStable) {
     EXPECT_EQ(runStiff(integ, 300, nullptr, 1), StepStatus::Diverged);
     MatX3 x;
     ASSERT_EQ(runStiff(integ, 30, &x, 0), StepStatus::Ok);
-    EXPECT_LT(maxDistance(x, smallOrgan().surface.V), 0.03);
+    EXPECT_LT(maxDistance(x, ellipsoidOrgan().surface.V), 0.03);
     MassSpringModel soft, stiff;
-    soft.init(smallOrgan(5500), withIntegrator(integ));
-    stiff.init(smallOrgan(1e6), withIntegrator(integ));
+    soft.init(ellipsoidOrgan(5500), withIntegrator(integ));
+    stiff.init(ellipsoidOrgan(1e6), withIntegrator(integ));
     const Real h = soft.stableStep();
     EXPECT_GT(h, 0);
     EXPECT_NEAR(stiff.stableStep(), h * std::sqrt(5500 / 1e6), 0.6 * h * std::sqrt(5500 / 1e6));
@@ -178,7 +136,7 @@ TEST(MassSpringModel, AutomaticSubstepsKeepTheExplicitIntegratorsStable) {
     EXPECT_EQ(soft.substepsFor(2.5 * h), 3);
   }
   MassSpringModel implicit;
-  implicit.init(smallOrgan(), withIntegrator(Integrator::ImplicitEuler));
+  implicit.init(ellipsoidOrgan(), withIntegrator(Integrator::ImplicitEuler));
   EXPECT_EQ(implicit.substepsFor(1.0 / 30), 1);
 }
 
@@ -186,7 +144,7 @@ TEST(MassSpringModel, AutomaticSubstepsKeepTheExplicitIntegratorsStable) {
 // dashpots' C) over the free nodes of a small organ held at its base: the power iteration
 // approaches from below and stops within 1e-3 of the largest eigenvalue.
 TEST(MassSpringModel, RestEigenvalueEstimateMatchesTheDenseSpectrum) {
-  Organ o = smallOrgan();
+  Organ o = ellipsoidOrgan();
   o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.02)});
   MassSpringModel m;
   m.init(o, MassSpringConfig{});
@@ -226,7 +184,7 @@ TEST(MassSpringModel, RestEigenvalueEstimateMatchesTheDenseSpectrum) {
 // it) gives the scalar path's bits, degenerate springs included, for both integrators; a node
 // pushed out of the box or given a NaN velocity is reported.
 TEST(ExplicitRows, VectorAndScalarPathsAgreeBitForBit) {
-  const Organ o = smallOrgan();
+  const Organ o = ellipsoidOrgan();
   MassSpringModel m;
   m.init(o, MassSpringConfig{});
   const size_t N = static_cast<size_t>(o.surface.numVertices());
@@ -299,7 +257,7 @@ std::pair<StepStatus, long long> underGravity(const Organ& o, const std::string&
   m.init(ModelSetup{o, p, cache, 1e-3, Vec3(0, 0, -9.81)});
   const long long substeps = m.counts().at("substeps");
   for (int s = 0; s < steps; ++s) {
-    const StepStatus st = m.step(input(1e-3, Vec3(0, 0, -9.81)));
+    const StepStatus st = m.step(stepInput(1e-3, Vec3(0, 0, -9.81)));
     if (st != StepStatus::Ok) return {st, substeps};
   }
   EXPECT_EQ(m.lastSubsteps(), substeps);
@@ -353,32 +311,17 @@ TEST(MassSpringModel, DefaultsRunOneSecondOnEvalDataMeshes) {
 // Hanging from a grasp, once still, the springs pull the grasp down with the weight of every
 // node the grasp does not hold.
 TEST(MassSpringModel, GraspReactionBalancesTheHangingWeight) {
-  const Organ o = smallOrgan(2e4);
+  const Organ o = ellipsoidOrgan(2e4);
   MassSpringConfig cfg = withIntegrator(Integrator::ImplicitEuler);
   cfg.massDamping = 20.0;
   cfg.cgTolerance = 1e-10;
   MassSpringModel m;
   m.init(o, cfg);
-  const std::vector<int> held = nearestVertices(o.surface.V, Vec3(0, 0, 0.03), 7);
-  Real heldMass = 0;
-  for (int i : held) heldMass += m.masses()[i];
-  const Vec3 g(0, 0, -9.81);
-  for (int s = 0; s < 600; ++s) {
-    StepInput in = input(5e-3, g);
-    in.grasps.push_back(testing::graspOf(held, o.surface.V));
-    ASSERT_EQ(m.step(in), StepStatus::Ok);
-  }
-  const std::vector<Vec3> f = m.graspForces();
-  ASSERT_EQ(f.size(), 1u);
-  const Vec3 weight = (m.masses().sum() - heldMass) * g;
-  EXPECT_LT((f[0] - weight).norm(), 0.02 * weight.norm()) << f[0].transpose();
+  testing::expectGraspReactionBalancesTheWeight(m, o, 600, 5e-3, 0.02);
 }
 
 TEST(MassSpringModel, TetInputSags) {
-  Organ o;
-  o.source = "test:tetbox";
-  o.volume = testing::tetBox(4, 3, 2, 0.04, 0.03, 0.02);
-  o.surface = tetBoundary(*o.volume);
+  Organ o = testing::tetBoxOrgan();
   o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(0.001, 1, 1)});
   MassSpringConfig cfg = withIntegrator(Integrator::ImplicitEuler);
   cfg.massDamping = 20.0;
@@ -387,7 +330,8 @@ TEST(MassSpringModel, TetInputSags) {
   EXPECT_EQ(m.counts().at("nodes"), o.volume->numVertices());
   EXPECT_EQ(m.counts().at("elements"), o.volume->numTets());
   EXPECT_EQ(m.counts().at("bending_springs"), 0);
-  for (int s = 0; s < 200; ++s) ASSERT_EQ(m.step(input(2e-3, Vec3(0, 0, -9.81))), StepStatus::Ok);
+  for (int s = 0; s < 200; ++s)
+    ASSERT_EQ(m.step(stepInput(2e-3, Vec3(0, 0, -9.81))), StepStatus::Ok);
   const int tip = nearestVertex(o.volume->V, Vec3(0.04, 0.015, 0.02));
   EXPECT_LT(m.nodes()(tip, 2) - o.volume->V(tip, 2), -1e-4);
   EXPECT_EQ(m.nodes().row(0), o.volume->V.row(0));
@@ -395,10 +339,10 @@ TEST(MassSpringModel, TetInputSags) {
 
 TEST(MassSpringModel, NanIsReportedAsDivergence) {
   for (Integrator integ : kAll) {
-    const Organ o = smallOrgan();
+    const Organ o = ellipsoidOrgan();
     MassSpringModel m;
     m.init(o, withIntegrator(integ));
-    StepInput in = input(1e-4);
+    StepInput in = stepInput(1e-4);
     in.loads.push_back(PointLoad::onVertex(0, Vec3(std::numeric_limits<Real>::quiet_NaN(), 0, 0)));
     EXPECT_EQ(m.step(in), StepStatus::Diverged);
   }
@@ -411,10 +355,9 @@ TEST(MassSpringModel, ParametersAreReadAndBadChoicesRejected) {
   p.set("bending_ratio", 0.0);
   const MassSpringConfig c = configFromParams(p);
   EXPECT_EQ(c.integrator, Integrator::ImplicitEuler);
-  const Organ o = smallOrgan();
-  Cache cache{std::filesystem::path()};
+  const Organ o = ellipsoidOrgan();
   MassSpringModel m;
-  m.init(ModelSetup{o, p, cache, 1e-3, Vec3::Zero()});
+  testing::initWithParams(m, o, p);
   EXPECT_EQ(m.counts().at("bending_springs"), 0);
   p.set("integrator", std::string("rk4"));
   EXPECT_THROW(configFromParams(p), InputError);
@@ -444,9 +387,8 @@ TEST(MassSpringModel, VolumeNetworkIsPressedLikeASolid) {
   p.set("network", std::string("volume"));
   p.set("volume_elements", 500LL);
   p.set("mass_damping", 20.0);
-  Cache cache{std::filesystem::path()};
   MassSpringModel m;
-  m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
+  testing::initWithParams(m, press.organ, p);
   const Counts c = m.counts();
   EXPECT_GT(c.at("nodes"), press.organ.surface.numVertices());
   EXPECT_GT(c.at("elements"), 100);
@@ -457,9 +399,8 @@ TEST(MassSpringModel, VolumeNetworkIsPressedLikeASolid) {
 TEST(MassSpringModel, ASurfaceNetworkHasNoInteriorForMarkers) {
   const testing::CubePress press = testing::cubePress(0.5);
   ParamValues p = ParamValues::defaults(paramSpecs());
-  Cache cache{std::filesystem::path()};
   MassSpringModel m;
-  m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
+  testing::initWithParams(m, press.organ, p);
   testing::expectNoMarkersOnASurfaceNetwork(m);
 }
 

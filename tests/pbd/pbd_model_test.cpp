@@ -4,6 +4,7 @@
 #include "pbd_model.h"
 #include "../support/grasp.h"
 #include "../support/meshes.h"
+#include "../support/network_model.h"
 #include "../support/plate.h"
 #include "../support/press.h"
 
@@ -14,43 +15,13 @@
 namespace deform::pbd {
 namespace {
 
-Organ surfaceOrgan(const SurfaceMesh& s, Real young = 5500.0) {
-  Organ o;
-  o.source = "test:ellipsoid";
-  o.surface = s;
-  o.material.young = young;
-  o.material.poisson = 0.3;
-  o.material.density = 1000.0;
-  return o;
-}
-
-Organ smallOrgan(Real young = 5500.0) {
-  return surfaceOrgan(testing::uvEllipsoid(10, 16, 0.05, 0.04, 0.03), young);
-}
-
-Organ tetOrgan() {
-  Organ o;
-  o.source = "test:tetbox";
-  o.volume = testing::tetBox(4, 3, 2, 0.04, 0.03, 0.02);
-  o.surface = tetBoundary(*o.volume);
-  o.material.young = 5500.0;
-  o.material.poisson = 0.3;
-  return o;
-}
-
-StepInput input(Real dt, Vec3 gravity = Vec3::Zero()) {
-  StepInput in;
-  in.dt = dt;
-  in.gravity = gravity;
-  return in;
-}
-
-Real maxDistance(const MatX3& a, const MatX3& b) {
-  return (a - b).rowwise().norm().maxCoeff();
-}
+using testing::ellipsoidOrgan;
+using testing::maxDistance;
+using testing::stepInput;
+using testing::tetBoxOrgan;
 
 TEST(PbdModel, CountsOfAClosedSurface) {
-  const Organ o = smallOrgan();
+  const Organ o = ellipsoidOrgan();
   PbdModel m;
   PbdConfig cfg;
   cfg.bending = true;
@@ -72,38 +43,25 @@ TEST(PbdModel, RestWithoutGravityStaysAtRest) {
     PbdModel m;
     PbdConfig cfg;
     cfg.mode = mode;
-    const Organ o = smallOrgan();
+    const Organ o = ellipsoidOrgan();
     m.init(o, cfg);
-    for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(input(1e-3)), StepStatus::Ok);
+    for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(stepInput(1e-3)), StepStatus::Ok);
     EXPECT_LT(maxDistance(m.surface(), o.surface.V), 1e-12);
   }
   PbdModel t;
-  const Organ o = tetOrgan();
+  const Organ o = tetBoxOrgan();
   t.init(o, PbdConfig{});
-  for (int s = 0; s < 100; ++s) ASSERT_EQ(t.step(input(1e-3)), StepStatus::Ok);
+  for (int s = 0; s < 100; ++s) ASSERT_EQ(t.step(stepInput(1e-3)), StepStatus::Ok);
   EXPECT_LT(maxDistance(t.nodes(), o.volume->V), 1e-12);
 }
 
 // A scripted run with gravity, a pinned box, a moving grasp and a point load.
 std::vector<MatX3> scriptedRun(PbdModel& m, const Organ& o, int steps) {
-  std::vector<MatX3> out;
-  const int top = nearestVertex(o.surface.V, Vec3(0, 0, 0.03));
-  const int side = nearestVertex(o.surface.V, Vec3(0.05, 0, 0));
-  for (int s = 0; s < steps; ++s) {
-    StepInput in = input(1e-3, Vec3(0, 0, -9.81));
-    GraspInput g;
-    g.vertices = {top};
-    g.targets = o.surface.V.row(top) + Eigen::RowVector3d(0, 0, 1e-4 * (s + 1));
-    in.grasps.push_back(g);
-    in.loads.push_back(PointLoad::onVertex(side, Vec3(0.5, 0, 0)));
-    EXPECT_EQ(m.step(in), StepStatus::Ok);
-    out.push_back(m.surface());
-  }
-  return out;
+  return testing::scriptedRun(m, o, steps, 1e-3, 1e-4);
 }
 
 TEST(PbdModel, ResetReproducesARunBitForBit) {
-  Organ o = smallOrgan();
+  Organ o = ellipsoidOrgan();
   o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.025)});
   PbdModel m;
   m.init(o, PbdConfig{});
@@ -117,36 +75,27 @@ TEST(PbdModel, ResetReproducesARunBitForBit) {
 
 TEST(PbdModel, GraspedNodeFollowsItsTargetExactly) {
   for (StiffnessMode mode : {StiffnessMode::Xpbd, StiffnessMode::Classic}) {
-    const Organ o = smallOrgan();
+    const Organ o = ellipsoidOrgan();
     PbdModel m;
     PbdConfig cfg;
     cfg.mode = mode;
     m.init(o, cfg);
     const std::vector<int> nodes = {nearestVertex(o.surface.V, Vec3(0, 0, 0.03)),
                                     nearestVertex(o.surface.V, Vec3(0.01, 0, 0.03))};
-    for (int s = 0; s < 40; ++s) {
-      StepInput in = input(1e-3, Vec3(0, 0, -9.81));
-      GraspInput g;
-      g.vertices = nodes;
-      g.targets.resize(2, 3);
-      for (int k = 0; k < 2; ++k)
-        g.targets.row(k) = o.surface.V.row(nodes[k]) + Eigen::RowVector3d(2e-4 * s, 0, 5e-4 * s);
-      in.grasps.push_back(g);
-      ASSERT_EQ(m.step(in), StepStatus::Ok);
-      for (int k = 0; k < 2; ++k) EXPECT_TRUE(m.nodes().row(nodes[k]) == g.targets.row(k));
-    }
+    testing::expectGraspedNodesFollow(m, o, nodes, 40, 1e-3, 2e-4, 5e-4);
   }
 }
 
 // Mean z displacement of the free nodes after settling under gravity with the bottom pinned.
 Real sagUnderGravity(Real young) {
-  Organ o = smallOrgan(young);
+  Organ o = ellipsoidOrgan(young);
   o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.025)});
   PbdModel m;
   PbdConfig cfg;
   cfg.damping = 20.0;
   m.init(o, cfg);
-  for (int s = 0; s < 400; ++s) EXPECT_EQ(m.step(input(1e-3, Vec3(0, 0, -9.81))), StepStatus::Ok);
+  for (int s = 0; s < 400; ++s)
+    EXPECT_EQ(m.step(stepInput(1e-3, Vec3(0, 0, -9.81))), StepStatus::Ok);
   return (m.surface().col(2) - o.surface.V.col(2)).mean();
 }
 
@@ -160,28 +109,16 @@ TEST(PbdModel, GravitySagsAPinnedOrganLessWhenStiffer) {
 // An organ hanging from a grasp: once still, the tissue pulls the grasp down with the weight of
 // every node the grasp does not hold (momentum balance of the free nodes).
 TEST(PbdModel, GraspReactionBalancesTheHangingWeight) {
-  const Organ o = smallOrgan(2e4);
+  const Organ o = ellipsoidOrgan(2e4);
   PbdModel m;
   PbdConfig cfg;
   cfg.damping = 30.0;
   m.init(o, cfg);
-  const std::vector<int> held = nearestVertices(o.surface.V, Vec3(0, 0, 0.03), 7);
-  Real heldMass = 0;
-  for (int i : held) heldMass += m.masses()[i];
-  const Vec3 g(0, 0, -9.81);
-  for (int s = 0; s < 3000; ++s) {
-    StepInput in = input(1e-3, g);
-    in.grasps.push_back(testing::graspOf(held, o.surface.V));
-    ASSERT_EQ(m.step(in), StepStatus::Ok);
-  }
-  const std::vector<Vec3> f = m.graspForces();
-  ASSERT_EQ(f.size(), 1u);
-  const Vec3 weight = (m.masses().sum() - heldMass) * g;
-  EXPECT_LT((f[0] - weight).norm(), 0.05 * weight.norm()) << f[0].transpose();
+  testing::expectGraspReactionBalancesTheWeight(m, o, 3000, 1e-3, 0.05);
 }
 
 TEST(PbdModel, TetInputSagsAndKeepsVolume) {
-  Organ o = tetOrgan();
+  Organ o = tetBoxOrgan();
   o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(0.001, 1, 1)});  // the x = 0 face
   PbdModel m;
   PbdConfig cfg;
@@ -191,7 +128,8 @@ TEST(PbdModel, TetInputSagsAndKeepsVolume) {
   EXPECT_EQ(c.at("nodes"), o.volume->numVertices());
   EXPECT_EQ(c.at("elements"), o.volume->numTets());
   EXPECT_EQ(c.at("volume_constraints"), o.volume->numTets());
-  for (int s = 0; s < 300; ++s) ASSERT_EQ(m.step(input(1e-3, Vec3(0, 0, -9.81))), StepStatus::Ok);
+  for (int s = 0; s < 300; ++s)
+    ASSERT_EQ(m.step(stepInput(1e-3, Vec3(0, 0, -9.81))), StepStatus::Ok);
   // The free end of the cantilever drops; the pinned face stays.
   const int tip = nearestVertex(o.volume->V, Vec3(0.04, 0.015, 0.02));
   EXPECT_LT(m.nodes()(tip, 2) - o.volume->V(tip, 2), -1e-4);
@@ -203,10 +141,10 @@ TEST(PbdModel, TetInputSagsAndKeepsVolume) {
 }
 
 TEST(PbdModel, DivergenceIsReportedNotThrown) {
-  const Organ o = smallOrgan();
+  const Organ o = ellipsoidOrgan();
   PbdModel m;
   m.init(o, PbdConfig{});
-  StepInput in = input(1e-3);
+  StepInput in = stepInput(1e-3);
   in.loads.push_back(PointLoad::onVertex(0, Vec3(std::numeric_limits<Real>::quiet_NaN(), 0, 0)));
   EXPECT_EQ(m.step(in), StepStatus::Diverged);
 }
@@ -223,7 +161,7 @@ TEST(PbdModel, ParametersAreReadAndBadChoicesRejected) {
   EXPECT_EQ(c.mode, StiffnessMode::Classic);
   EXPECT_FALSE(c.bending);
 
-  const Organ o = smallOrgan();
+  const Organ o = ellipsoidOrgan();
   Cache cache{std::filesystem::path()};
   PbdModel m;
   m.init(ModelSetup{o, p, cache, 1e-3, Vec3::Zero()});
@@ -245,7 +183,7 @@ TEST(PbdModel, ParametersAreReadAndBadChoicesRejected) {
 // projection, so the two trajectories stay within 1e-3 of the displacement. Both paths are
 // deterministic.
 TEST(PbdModel, Float32TracksFloat64) {
-  Organ o = smallOrgan();
+  Organ o = ellipsoidOrgan();
   o.fixed.boxes.push_back({Vec3(-1, -1, -1), Vec3(1, 1, -0.025)});
   PbdConfig c32;
   c32.bending = true;
@@ -267,7 +205,7 @@ TEST(PbdModel, Float32TracksFloat64) {
 }
 
 TEST(PbdModel, BadMaterialIsAnInputError) {
-  Organ o = smallOrgan();
+  Organ o = ellipsoidOrgan();
   o.material.young = -1;
   PbdModel m;
   EXPECT_THROW(m.init(o, PbdConfig{}), InputError);
@@ -281,9 +219,8 @@ TEST(PbdModel, VolumeNetworkIsPressedLikeASolid) {
   p.set("network", std::string("volume"));
   p.set("volume_elements", 500LL);
   p.set("damping", 20.0);
-  Cache cache{std::filesystem::path()};
   PbdModel m;
-  m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
+  testing::initWithParams(m, press.organ, p);
   const Counts c = m.counts();
   EXPECT_GT(c.at("nodes"), press.organ.surface.numVertices());
   EXPECT_GT(c.at("elements"), 100);
@@ -311,9 +248,8 @@ TEST(PbdModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
 TEST(PbdModel, ASurfaceNetworkHasNoInteriorForMarkers) {
   const testing::CubePress press = testing::cubePress(0.5);
   ParamValues p = ParamValues::defaults(paramSpecs());
-  Cache cache{std::filesystem::path()};
   PbdModel m;
-  m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
+  testing::initWithParams(m, press.organ, p);
   testing::expectNoMarkersOnASurfaceNetwork(m);
 }
 

@@ -4,6 +4,8 @@
 // (zero displacement after a loaded solve, P1 and P2), the surface vertices inside the box report
 // their rest positions, a point load there is taken by the support; and conform_fixed = false
 // keeps the old mesh (surface vertex i is node i, the nodes inside the box pinned).
+#include "../support/fixtures.h"
+
 #include <deform/engine/plugin_loader.h>
 #include <deform/geometry/phantom.h>
 #include <deform/sdk/cache.h>
@@ -17,15 +19,9 @@ using namespace deform;
 
 namespace {
 
-PluginLoader& loader() {
-  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
-  return *l;
-}
+using deform::testing::loader;
 
-Cache& cache() {
-  static Cache c(std::filesystem::path(DEFORM_BUILD_DIR) / "test-cache");
-  return c;
-}
+using deform::testing::cache;
 
 Organ cubeOrgan() {
   Organ o;

@@ -10,6 +10,8 @@
 //   the organ at rest) is the rest state in zero Newton iterations, and the lift after it
 //   converges.
 #include "../support/finite_difference.h"
+#include "../support/fixtures.h"
+#include "fem_checks.h"
 #include "fem_solver.h"
 #include "mean_dilatation_tet.h"
 #include "test_shapes.h"
@@ -33,34 +35,10 @@ using deform::testing::numericGradient;
 
 namespace {
 
-Material material(Real young, Real poisson, Real density = 1000) {
-  Material m;
-  m.young = young;
-  m.poisson = poisson;
-  m.density = density;
-  return m;
-}
+using deform::testing::material;
 
-/// A structured box mesh with its interior corner nodes moved (general tet shapes).
-TetMesh jitteredBox(const Vec3& lo, const Vec3& hi, const Vec3i& cells) {
-  TetMesh mesh = structuredBoxTets(lo, hi, cells);
-  for (int i = 0; i < mesh.numVertices(); ++i) {
-    const Vec3 p = mesh.V.row(i);
-    bool boundary = false;
-    for (int k = 0; k < 3; ++k)
-      boundary = boundary || std::abs(p(k) - lo(k)) < 1e-12 || std::abs(p(k) - hi(k)) < 1e-12;
-    if (!boundary)
-      mesh.V.row(i) +=
-          0.0012 * Vec3(std::sin(7.0 * i), std::cos(3.0 * i), std::sin(5.0 * i + 1)).transpose();
-  }
-  return mesh;
-}
-
-MatX dense(const FemSystem& sys, const VecX& values) {
-  const SparseMatrix& P = sys.stiffnessPattern();
-  return MatX(Eigen::Map<const SparseMatrix>(P.rows(), P.cols(), P.nonZeros(), P.outerIndexPtr(),
-                                             P.innerIndexPtr(), values.data()));
-}
+using deform::reference_fem::fem_checks::dense;
+using deform::reference_fem::fem_checks::jitteredBox;
 
 FemSystem meanDilatationSystem(const TetMesh& mesh, Real poisson) {
   return FemSystem(mesh, material(5500, poisson), MaterialModel::NeoHookean,
@@ -73,34 +51,9 @@ TEST(MeanDilatationTet, ForcesAndStiffnessMatchFiniteDifferences) {
   const TetMesh mesh = jitteredBox(Vec3(0, 0, 0), Vec3(0.02, 0.015, 0.01), Vec3i(2, 1, 1));
   for (const Real poisson : {0.3, 0.49}) {
     const FemSystem sys = meanDilatationSystem(mesh, poisson);
-    const int n = sys.numNodes();
-    VecX x = sys.restPositions();
-    Mat3 F;
-    F << 1.1, 0.08, -0.05, -0.04, 0.93, 0.06, 0.03, -0.02, 1.05;
-    for (int i = 0; i < n; ++i)
-      x.segment<3>(3 * i) =
-          F * x.segment<3>(3 * i) +
-          4e-4 * Vec3(std::sin(3.1 * i), std::cos(1.7 * i), std::sin(0.9 * i + 2));
-    VecX g;
-    sys.elasticGradient(x, g);
-    ASSERT_TRUE(g.allFinite());
-    const Real h = 1e-7;
-    const VecX gFd = numericGradient(x, h, [&](const VecX& y) { return sys.elasticEnergy(y); });
-    EXPECT_LT((g - gFd).norm(), 1e-6 * g.norm()) << poisson;
-    VecX values;
-    sys.stiffnessValues(x, values, false);
-    const MatX K = dense(sys, values);
-    EXPECT_LT((K - K.transpose()).norm(), 1e-10 * K.norm());
-    const MatX KFd = centralDifferences(x, h, [&](const VecX& y) {
-      VecX gy;
-      sys.elasticGradient(y, gy);
-      return gy;
-    });
-    EXPECT_LT((K - KFd).norm(), 1e-6 * K.norm()) << poisson;
     // The projected stiffness is positive semi-definite, the exact one is not here.
-    sys.stiffnessValues(x, values, true);
-    const Eigen::SelfAdjointEigenSolver<MatX> es(dense(sys, values));
-    EXPECT_GT(es.eigenvalues().minCoeff(), -1e-9 * es.eigenvalues().maxCoeff()) << poisson;
+    deform::reference_fem::fem_checks::expectForcesAndStiffnessMatchDifferences(
+        sys, "nu = " + std::to_string(poisson));
   }
 }
 
@@ -279,15 +232,9 @@ TEST(CooksMembrane, CompressibleWithinTwoPercentOfDealII) {
 
 namespace {
 
-PluginLoader& loader() {
-  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
-  return *l;
-}
+using deform::testing::loader;
 
-Cache& cache() {
-  static Cache c(std::filesystem::path(DEFORM_BUILD_DIR) / "test-cache");
-  return c;
-}
+using deform::testing::cache;
 
 }  // namespace
 

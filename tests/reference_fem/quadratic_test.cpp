@@ -3,7 +3,9 @@
 // loads and masses, the cantilever against Euler-Bernoulli + Timoshenko, and Richardson on an
 // organ phantom.
 #include "../support/finite_difference.h"
+#include "../support/fixtures.h"
 #include "convergence.h"
+#include "fem_checks.h"
 #include "fem_solver.h"
 #include "liver_poke_case.h"
 #include "quadratic_tet.h"
@@ -25,38 +27,11 @@ using deform::testing::numericGradient;
 
 namespace {
 
-Material material(Real young, Real poisson, Real density = 1000) {
-  Material m;
-  m.young = young;
-  m.poisson = poisson;
-  m.density = density;
-  return m;
-}
+using deform::testing::material;
 
-bool onBoundaryOfBox(const Vec3& p, const Vec3& lo, const Vec3& hi) {
-  const Real e = 1e-12;
-  for (int k = 0; k < 3; ++k)
-    if (std::abs(p(k) - lo(k)) < e || std::abs(p(k) - hi(k)) < e) return true;
-  return false;
-}
-
-/// A jittered structured box mesh (interior corner nodes moved) of 0.02 x 0.015 x 0.01 m.
-TetMesh jitteredBox(const Vec3& lo, const Vec3& hi, const Vec3i& cells) {
-  TetMesh mesh = structuredBoxTets(lo, hi, cells);
-  for (int i = 0; i < mesh.numVertices(); ++i) {
-    const Vec3 p = mesh.V.row(i);
-    if (!onBoundaryOfBox(p, lo, hi))
-      mesh.V.row(i) +=
-          0.0012 * Vec3(std::sin(7.0 * i), std::cos(3.0 * i), std::sin(5.0 * i + 1)).transpose();
-  }
-  return mesh;
-}
-
-MatX dense(const FemSystem& sys, const VecX& values) {
-  const SparseMatrix& P = sys.stiffnessPattern();
-  return MatX(Eigen::Map<const SparseMatrix>(P.rows(), P.cols(), P.nonZeros(), P.outerIndexPtr(),
-                                             P.innerIndexPtr(), values.data()));
-}
+using deform::reference_fem::fem_checks::dense;
+using deform::reference_fem::fem_checks::jitteredBox;
+using deform::reference_fem::fem_checks::onBoundaryOfBox;
 
 }  // namespace
 
@@ -156,35 +131,8 @@ TEST(QuadraticTet, ForcesAndStiffnessMatchFiniteDifferences) {
   for (MaterialModel model :
        {MaterialModel::Linear, MaterialModel::Corotational, MaterialModel::NeoHookean}) {
     const FemSystem sys(mesh, material(5500, 0.45), model, ElementOrder::Quadratic);
-    const int n = sys.numNodes();
-    VecX x = sys.restPositions();
-    Mat3 F;
-    F << 1.1, 0.08, -0.05, -0.04, 0.93, 0.06, 0.03, -0.02, 1.05;
-    for (int i = 0; i < n; ++i)
-      x.segment<3>(3 * i) =
-          F * x.segment<3>(3 * i) +
-          4e-4 * Vec3(std::sin(3.1 * i), std::cos(1.7 * i), std::sin(0.9 * i + 2));
-    VecX g;
-    sys.elasticGradient(x, g);
-    ASSERT_TRUE(g.allFinite());
-    const Real h = 1e-7;
-    const VecX gFd = numericGradient(x, h, [&](const VecX& y) { return sys.elasticEnergy(y); });
-    EXPECT_LT((g - gFd).norm(), 1e-6 * g.norm()) << materialModelName(model);
-    VecX values;
-    sys.stiffnessValues(x, values, false);
-    const MatX K = dense(sys, values);
-    EXPECT_LT((K - K.transpose()).norm(), 1e-10 * K.norm()) << materialModelName(model);
-    const MatX KFd = centralDifferences(x, h, [&](const VecX& y) {
-      VecX gy;
-      sys.elasticGradient(y, gy);
-      return gy;
-    });
-    EXPECT_LT((K - KFd).norm(), 1e-6 * K.norm()) << materialModelName(model);
-    // The projected stiffness is positive semi-definite.
-    sys.stiffnessValues(x, values, true);
-    const Eigen::SelfAdjointEigenSolver<MatX> es(dense(sys, values));
-    EXPECT_GT(es.eigenvalues().minCoeff(), -1e-9 * es.eigenvalues().maxCoeff())
-        << materialModelName(model);
+    deform::reference_fem::fem_checks::expectForcesAndStiffnessMatchDifferences(
+        sys, materialModelName(model));
   }
 }
 

@@ -3,6 +3,8 @@
 // (interaction.h regionPatch) is compressed homogeneously, as the closed-form Neo-Hookean
 // answer says; the roller nodes keep their held coordinate and slide along the others, and
 // none of the roller boxes is clipped away by conform_fixed (they hold nodes).
+#include "../support/fixtures.h"
+
 #include <deform/engine/interaction.h>
 #include <deform/engine/plugin_loader.h>
 #include <deform/engine/scene.h>
@@ -18,15 +20,9 @@ using namespace deform;
 
 namespace {
 
-PluginLoader& loader() {
-  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
-  return *l;
-}
+using deform::testing::loader;
 
-Cache& cache() {
-  static Cache c(std::filesystem::path(DEFORM_BUILD_DIR) / "test-cache");
-  return c;
-}
+using deform::testing::cache;
 
 TEST(ReferenceFemRollers, FrictionlessCubeCompressesHomogeneously) {
   Organ o;

@@ -1,6 +1,8 @@
 // Reference FEM solves: patch tests, uniaxial stretch against the closed form, cantilever beam
 // against Euler-Bernoulli + Timoshenko shear, reaction forces, dynamic relaxation, convergence.
+#include "../support/fixtures.h"
 #include "convergence.h"
+#include "fem_checks.h"
 #include "fem_solver.h"
 #include "test_shapes.h"
 
@@ -16,20 +18,9 @@ using namespace deform::reference_fem;
 
 namespace {
 
-bool onBoundaryOfBox(const Vec3& p, const Vec3& lo, const Vec3& hi) {
-  const Real e = 1e-12;
-  for (int k = 0; k < 3; ++k)
-    if (std::abs(p(k) - lo(k)) < e || std::abs(p(k) - hi(k)) < e) return true;
-  return false;
-}
+using deform::reference_fem::fem_checks::onBoundaryOfBox;
 
-Material material(Real young, Real poisson, Real density = 1000) {
-  Material m;
-  m.young = young;
-  m.poisson = poisson;
-  m.density = density;
-  return m;
-}
+using deform::testing::material;
 
 }  // namespace
 

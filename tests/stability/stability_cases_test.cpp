@@ -3,6 +3,8 @@
 // the harness's runner: the stiff gravity cantilever must move (and the FEM models agree with beam
 // theory), and a plugin with no fixed length parameter must give the same relative displacement
 // at 1 cm, 10 cm and 1 m.
+#include "../support/fixtures.h"
+
 #include <deform/engine/plugin_loader.h>
 #include <deform/geometry/mesh_check.h>
 #include <deform/geometry/phantom.h>
@@ -25,10 +27,7 @@ namespace {
 namespace fs = std::filesystem;
 using ojson = nlohmann::ordered_json;
 
-PluginLoader& loader() {
-  static PluginLoader* l = new PluginLoader({DEFORM_BUILD_PLUGIN_DIR});
-  return *l;
-}
+using deform::testing::loader;
 
 /// The plugin's model, or nullptr when it does not load (a peer whose library is missing).
 const ModelInfo* tryLoad(const std::string& plugin) {

@@ -47,104 +47,64 @@ std::string joined(const std::vector<std::string>& lines) {
   return s;
 }
 
+/// An indexed format of mesh m: `head`, one line per vertex (x y z after `vertexPrefix`, or after
+/// the vertex's 1-based number when `numbered`), `middle`, one line per face written by `face`,
+/// `tail`.
+TextFormat indexedFormat(const SurfaceMesh& m, const char* name, std::vector<std::string> head,
+                         const std::string& vertexPrefix, bool numbered,
+                         const std::vector<std::string>& middle,
+                         std::string (*face)(int f, int a, int b, int c),
+                         const std::vector<std::string>& tail, int coordinateToken) {
+  TextFormat t{name, std::move(head), {}, {}};
+  for (int i = 0; i < int(m.V.rows()); ++i) {
+    const std::string prefix = numbered ? std::to_string(i + 1) + " " : vertexPrefix;
+    t.vertexLine.push_back(int(t.lines.size()));
+    t.lines.push_back(prefix + num(m.V(i, 0)) + " " + num(m.V(i, 1)) + " " + num(m.V(i, 2)));
+  }
+  t.lines.insert(t.lines.end(), middle.begin(), middle.end());
+  t.face = face;
+  for (int f = 0; f < int(m.F.rows()); ++f)
+    t.faceLine.push_back(int(t.lines.size())),
+        t.lines.push_back(t.face(f, m.F(f, 0), m.F(f, 1), m.F(f, 2)));
+  t.lines.insert(t.lines.end(), tail.begin(), tail.end());
+  t.coordinateToken = coordinateToken;
+  return t;
+}
+
 std::vector<TextFormat> textFormats() {
   const SurfaceMesh m = octahedron();
   auto xyz = [&](int i) { return num(m.V(i, 0)) + " " + num(m.V(i, 1)) + " " + num(m.V(i, 2)); };
+  auto objFace = [](int, int a, int b, int c) {
+    return "f " + std::to_string(a + 1) + " " + std::to_string(b + 1) + " " + std::to_string(c + 1);
+  };
+  auto counted = [](int, int a, int b, int c) {
+    return "3 " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(c);
+  };
+  auto msh22Face = [](int f, int a, int b, int c) {
+    return std::to_string(f + 1) + " 2 2 0 1 " + std::to_string(a + 1) + " " +
+           std::to_string(b + 1) + " " + std::to_string(c + 1);
+  };
+  auto legacyFace = [](int f, int a, int b, int c) {
+    return std::to_string(f + 1) + " 2 0 1 3 " + std::to_string(a + 1) + " " +
+           std::to_string(b + 1) + " " + std::to_string(c + 1);
+  };
   std::vector<TextFormat> out;
-  {
-    TextFormat t{"octa.obj", {"# octahedron"}, {}, {}};
-    for (int i = 0; i < 6; ++i)
-      t.vertexLine.push_back(int(t.lines.size())), t.lines.push_back("v " + xyz(i));
-    t.face = [](int, int a, int b, int c) {
-      return "f " + std::to_string(a + 1) + " " + std::to_string(b + 1) + " " +
-             std::to_string(c + 1);
-    };
-    for (int f = 0; f < 8; ++f)
-      t.faceLine.push_back(int(t.lines.size())),
-          t.lines.push_back(t.face(f, m.F(f, 0), m.F(f, 1), m.F(f, 2)));
-    t.coordinateToken = 2;
-    out.push_back(t);
-  }
-  {
-    TextFormat t{"octa.off", {"OFF", "6 8 0"}, {}, {}};
-    for (int i = 0; i < 6; ++i)
-      t.vertexLine.push_back(int(t.lines.size())), t.lines.push_back(xyz(i));
-    t.face = [](int, int a, int b, int c) {
-      return "3 " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(c);
-    };
-    for (int f = 0; f < 8; ++f)
-      t.faceLine.push_back(int(t.lines.size())),
-          t.lines.push_back(t.face(f, m.F(f, 0), m.F(f, 1), m.F(f, 2)));
-    out.push_back(t);
-  }
-  {
-    TextFormat t{"octa.ply",
-                 {"ply", "format ascii 1.0", "element vertex 6", "property float x",
-                  "property float y", "property float z", "element face 8",
-                  "property list uchar int vertex_indices", "end_header"},
-                 {},
-                 {}};
-    for (int i = 0; i < 6; ++i)
-      t.vertexLine.push_back(int(t.lines.size())), t.lines.push_back(xyz(i));
-    t.face = [](int, int a, int b, int c) {
-      return "3 " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(c);
-    };
-    for (int f = 0; f < 8; ++f)
-      t.faceLine.push_back(int(t.lines.size())),
-          t.lines.push_back(t.face(f, m.F(f, 0), m.F(f, 1), m.F(f, 2)));
-    out.push_back(t);
-  }
-  {
-    TextFormat t{
-        "octa.vtk",
-        {"# vtk DataFile Version 3.0", "octahedron", "ASCII", "DATASET POLYDATA", "POINTS 6 float"},
-        {},
-        {}};
-    for (int i = 0; i < 6; ++i)
-      t.vertexLine.push_back(int(t.lines.size())), t.lines.push_back(xyz(i));
-    t.lines.push_back("POLYGONS 8 32");
-    t.face = [](int, int a, int b, int c) {
-      return "3 " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(c);
-    };
-    for (int f = 0; f < 8; ++f)
-      t.faceLine.push_back(int(t.lines.size())),
-          t.lines.push_back(t.face(f, m.F(f, 0), m.F(f, 1), m.F(f, 2)));
-    out.push_back(t);
-  }
-  {
-    TextFormat t{"octa.msh", {"$MeshFormat", "2.2 0 8", "$EndMeshFormat", "$Nodes", "6"}, {}, {}};
-    for (int i = 0; i < 6; ++i)
-      t.vertexLine.push_back(int(t.lines.size())),
-          t.lines.push_back(std::to_string(i + 1) + " " + xyz(i));
-    t.lines.insert(t.lines.end(), {"$EndNodes", "$Elements", "8"});
-    t.face = [](int f, int a, int b, int c) {
-      return std::to_string(f + 1) + " 2 2 0 1 " + std::to_string(a + 1) + " " +
-             std::to_string(b + 1) + " " + std::to_string(c + 1);
-    };
-    for (int f = 0; f < 8; ++f)
-      t.faceLine.push_back(int(t.lines.size())),
-          t.lines.push_back(t.face(f, m.F(f, 0), m.F(f, 1), m.F(f, 2)));
-    t.lines.push_back("$EndElements");
-    t.coordinateToken = 2;
-    out.push_back(t);
-  }
-  {
-    TextFormat t{"legacy.msh", {"$NOD", "6"}, {}, {}};
-    for (int i = 0; i < 6; ++i)
-      t.vertexLine.push_back(int(t.lines.size())),
-          t.lines.push_back(std::to_string(i + 1) + " " + xyz(i));
-    t.lines.insert(t.lines.end(), {"$ENDNOD", "$ELM", "8"});
-    t.face = [](int f, int a, int b, int c) {
-      return std::to_string(f + 1) + " 2 0 1 3 " + std::to_string(a + 1) + " " +
-             std::to_string(b + 1) + " " + std::to_string(c + 1);
-    };
-    for (int f = 0; f < 8; ++f)
-      t.faceLine.push_back(int(t.lines.size())),
-          t.lines.push_back(t.face(f, m.F(f, 0), m.F(f, 1), m.F(f, 2)));
-    t.lines.push_back("$ENDELM");
-    t.coordinateToken = 2;
-    out.push_back(t);
-  }
+  out.push_back(indexedFormat(m, "octa.obj", {"# octahedron"}, "v ", false, {}, objFace, {}, 2));
+  out.push_back(indexedFormat(m, "octa.off", {"OFF", "6 8 0"}, "", false, {}, counted, {}, 1));
+  out.push_back(indexedFormat(m, "octa.ply",
+                              {"ply", "format ascii 1.0", "element vertex 6", "property float x",
+                               "property float y", "property float z", "element face 8",
+                               "property list uchar int vertex_indices", "end_header"},
+                              "", false, {}, counted, {}, 1));
+  out.push_back(indexedFormat(
+      m, "octa.vtk",
+      {"# vtk DataFile Version 3.0", "octahedron", "ASCII", "DATASET POLYDATA", "POINTS 6 float"},
+      "", false, {"POLYGONS 8 32"}, counted, {}, 1));
+  out.push_back(indexedFormat(m, "octa.msh",
+                              {"$MeshFormat", "2.2 0 8", "$EndMeshFormat", "$Nodes", "6"}, "", true,
+                              {"$EndNodes", "$Elements", "8"}, msh22Face, {"$EndElements"}, 2));
+  out.push_back(indexedFormat(m, "legacy.msh", {"$NOD", "6"}, "", true, {"$ENDNOD", "$ELM", "8"},
+                              legacyFace, {"$ENDELM"}, 2));
   {
     TextFormat t{"octa.stl", {"solid octa"}, std::vector<int>(6, -1), {}};
     for (int f = 0; f < 8; ++f) {

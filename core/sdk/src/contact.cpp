@@ -3,6 +3,7 @@
 // display-level projection) and solveWithContactConstraints() (prescribed positions). The world
 // itself is in contact_world.cpp.
 #include <deform/sdk/contact.h>
+#include <deform/sdk/enum_names.h>
 #include <deform/sdk/error.h>
 
 #include <algorithm>
@@ -370,15 +371,10 @@ ContactResolution projectPointsOut(ContactWorld& world, MatX3& points) {
 }
 
 const char* responseName(ContactResponse r) {
-  switch (r) {
-    case ContactResponse::Project:
-      return "Project";
-    case ContactResponse::Penalty:
-      return "Penalty";
-    case ContactResponse::Display:
-      return "Display";
-  }
-  return "?";
+  static constexpr EnumName<ContactResponse> kNames[] = {{ContactResponse::Project, "Project"},
+                                                         {ContactResponse::Penalty, "Penalty"},
+                                                         {ContactResponse::Display, "Display"}};
+  return enumName(kNames, r, "?");
 }
 
 /// A plugin's proxy that does not describe what its response needs is a programmer error; it is

@@ -1,5 +1,7 @@
 #include <deform/sdk/registry.h>
 
+#include <deform/sdk/enum_names.h>
+
 #include <cassert>
 #include <cmath>
 #include <set>
@@ -7,51 +9,35 @@
 
 namespace deform {
 
+namespace {
+
+// Every capability with its name (capabilities are only ever appended, registry.h: so is this).
+constexpr EnumName<Capability> kCapabilityNames[] = {
+    {Capability::Grasp, "grasp"},
+    {Capability::PointForce, "point_force"},
+    {Capability::Gravity, "gravity"},
+    {Capability::Cut, "cut"},
+    {Capability::ReactionForce, "reaction_force"},
+    {Capability::NeedsPrecompute, "needs_precompute"},
+    {Capability::TetInput, "tet_input"},
+    {Capability::QuasiStatic, "quasi_static"},
+    {Capability::Contact, "contact"},
+    {Capability::ContactReaction, "contact_reaction"},
+    {Capability::RollerSupport, "roller_support"},
+    {Capability::Markers, "markers"},
+    {Capability::Sliding, "sliding"},
+};
+
+}  // namespace
+
 const char* capabilityName(Capability c) {
-  switch (c) {
-    case Capability::Grasp:
-      return "grasp";
-    case Capability::PointForce:
-      return "point_force";
-    case Capability::Gravity:
-      return "gravity";
-    case Capability::Cut:
-      return "cut";
-    case Capability::ReactionForce:
-      return "reaction_force";
-    case Capability::NeedsPrecompute:
-      return "needs_precompute";
-    case Capability::TetInput:
-      return "tet_input";
-    case Capability::QuasiStatic:
-      return "quasi_static";
-    case Capability::Contact:
-      return "contact";
-    case Capability::ContactReaction:
-      return "contact_reaction";
-    case Capability::RollerSupport:
-      return "roller_support";
-    case Capability::Markers:
-      return "markers";
-    case Capability::Sliding:
-      return "sliding";
-  }
-  assert(false && "unknown Capability");
-  return "unknown";
+  const char* name = enumName(kCapabilityNames, c, nullptr);
+  assert(name && "unknown Capability");
+  return name ? name : "unknown";
 }
 
-// The last enumerator: capabilities are only ever appended (registry.h), so move this with them.
-constexpr Capability kLastCapability = Capability::Sliding;
-
 bool capabilityFromName(const std::string& name, Capability& out) {
-  for (int i = 0; i <= static_cast<int>(kLastCapability); ++i) {
-    const auto c = static_cast<Capability>(i);
-    if (name == capabilityName(c)) {
-      out = c;
-      return true;
-    }
-  }
-  return false;
+  return enumFromName(kCapabilityNames, name, out);
 }
 
 bool ModelInfo::has(Capability c) const {

@@ -81,6 +81,53 @@ struct ParamSpec {
   }
 };
 
+/// Declarations several plugins make alike: the same key, unit, lower bound and calibration
+/// scale; each plugin gives its default, its upper bound and its own one-line description.
+namespace common_params {
+
+/// "iterations": solver sweeps per step, an integer in [1, max].
+inline ParamSpec iterations(long long def, long long max, std::string description) {
+  return ParamSpec::integer("iterations", def, 1, max, std::move(description));
+}
+/// "damping": a velocity damping rate (1/s) in [0, max], calibratable in [calibLo, 1000] (log).
+inline ParamSpec damping(double def, double max, double calibLo, std::string description) {
+  return ParamSpec::real("damping", "1/s", def, 0.0, max, std::move(description))
+      .calibrate(calibLo, 1000, ParamScale::Log);
+}
+/// "thickness": the shell or membrane thickness (m) of a surface model, 0.01 in [1e-6, max],
+/// calibratable in [1e-4, 0.3] (log).
+inline ParamSpec thickness(double max, std::string description) {
+  return ParamSpec::real("thickness", "m", 0.01, 1e-6, max, std::move(description))
+      .calibrate(0.0001, 0.3, ParamScale::Log);
+}
+/// A classic PBD stiffness coefficient (dimensionless, in [0, 1]), calibratable in [calibLo, 1]
+/// (log).
+inline ParamSpec unitStiffness(std::string key, double def, double calibLo,
+                               std::string description) {
+  return ParamSpec::real(std::move(key), "1", def, 0.0, 1.0, std::move(description))
+      .calibrate(calibLo, 1, ParamScale::Log);
+}
+/// "precision": float32 (the default) or float64, the number type of a model's hot loops.
+inline ParamSpec precision(std::string description) {
+  return ParamSpec::choice("precision", "float32", {"float32", "float64"}, std::move(description));
+}
+/// "bending_model": isometric (the default) or dihedral.
+inline ParamSpec bendingModel(std::string description) {
+  return ParamSpec::choice("bending_model", "isometric", {"isometric", "dihedral"},
+                           std::move(description));
+}
+/// "network" (surface, the default, or volume) and "volume_elements" (the target number of tets
+/// of the volume network), for a model that runs on the organ's surface or on tets.
+inline ParamSpec network(std::string description) {
+  return ParamSpec::choice("network", "surface", {"surface", "volume"}, std::move(description));
+}
+inline ParamSpec volumeElements() {
+  return ParamSpec::integer("volume_elements", 4000, 100, 10000000,
+                            "network = volume: target number of tets");
+}
+
+}  // namespace common_params
+
 /// Why a declaration's calibration fields are inconsistent ("" when they are fine, or when it is
 /// not calibratable): only Real parameters, calibMin < calibMax inside [min, max], and bounds > 0
 /// on a log scale. The plugin loader refuses a plugin with such a declaration.

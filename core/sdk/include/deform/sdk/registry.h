@@ -123,6 +123,23 @@ struct ModelInfo {
   const ParamSpec* param(const std::string& key) const;
 };
 
+/// The fields every plugin's ModelInfo sets: name, description, citation, version "1.0",
+/// capabilities, parameter declarations and create() default-constructing ModelT. The plugin
+/// adds knob, presets, measures, resolution and effort itself.
+template <class ModelT>
+ModelInfo modelInfo(std::string name, std::string description, std::string citation,
+                    std::vector<Capability> capabilities, std::vector<ParamSpec> params) {
+  ModelInfo info;
+  info.name = std::move(name);
+  info.description = std::move(description);
+  info.citation = std::move(citation);
+  info.version = "1.0";
+  info.capabilities = std::move(capabilities);
+  info.params = std::move(params);
+  info.create = [] { return std::make_unique<ModelT>(); };
+  return info;
+}
+
 class Registry {
  public:
   /// Adds a model; asserts on a duplicate name within one registry.
