@@ -21,7 +21,10 @@
 // answers that coincide, differences that do not shrink (d_12 >= d_01: not monotone), an order
 // below 0.5 (not in the asymptotic range). Above order 4 the finest pair is extrapolated at
 // order 2 instead (an upper estimate). Without an estimate, the largest level difference
-// is given as a bound (Roache's oscillatory case: the spread of the levels' answers).
+// is given as a bound (Roache's oscillatory case: the spread of the levels' answers). A check of
+// the reference whose coarse levels the surface bounds runs a fourth level, finer than the
+// reference, and estimates the reference's own error from the last three
+// (ConvergeOptions::finerWhenBound).
 //
 // The study is deterministic, so its result is kept in the precomputation cache (kind
 // "harness.convergence"), keyed by the scene as run (organ, loads, tools, times, the reference
