@@ -261,7 +261,7 @@ std::string convergenceSummary(const ConvergenceResult& r) {
   if (!sizes.empty()) levels += ", h " + sizes + " mm";
   std::string rms;
   // The peak of the level the estimate is for (the last, unless a finer one was added).
-  const size_t of = r.estimatedLevel >= 0 ? size_t(r.estimatedLevel) : r.levels.size() - 1;
+  const size_t of = r.estimatedIndex();
   const double peak = of < r.levels.size() ? r.levels[of].peakDisplacement : 0;
   if (std::isfinite(r.rms12) && r.levels.size() >= 3 && peak > 0) {
     rms = "; RMS level differences " + percent(r.rms01 / peak) + " then " + percent(r.rms12 / peak);

@@ -80,8 +80,12 @@ struct ConvergenceResult {
   /// A level finer than the reference was added (ConvergeOptions::finerWhenBound): the
   /// estimate comes from the last three levels and is the error of the one before the last.
   bool finerLevelAdded = false;
-  /// Index into `levels` of the level whose error errorEstimate is (-1: none ran).
+  /// Index into `levels` of the level whose error errorEstimate is (-1: not set).
   int estimatedLevel = -1;
+  /// estimatedLevel where it is set, else the last level (a result built by hand).
+  size_t estimatedIndex() const {
+    return estimatedLevel >= 0 ? size_t(estimatedLevel) : levels.size() - 1;
+  }
 };
 
 /// Smallest ratio h_k / h_{k+1} of consecutive levels' measured sizes for which the study

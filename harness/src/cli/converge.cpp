@@ -108,7 +108,7 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
     std::cout << "\n";
   } else {
     // With a finer level added, the estimate is the reference's: the level before the last.
-    const size_t of = r.estimatedLevel >= 0 ? size_t(r.estimatedLevel) : r.levels.size() - 1;
+    const size_t of = r.estimatedIndex();
     if (r.finerLevelAdded)
       std::cout << "the coarse levels are bound by the surface: a level finer than the reference "
                    "was added, and the estimate is the reference's (level "
@@ -129,7 +129,7 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
                 << ": refine it (a smaller \"edge_length\") or read its errors as bounds of that "
                    "size\n";
   } else {
-    const size_t of = r.estimatedLevel >= 0 ? size_t(r.estimatedLevel) : r.levels.size() - 1;
+    const size_t of = r.estimatedIndex();
     std::cout << "the reference is converged to within 1% at " << r.levels[of].elements
               << " elements\n";
   }
