@@ -11,9 +11,37 @@
 # Training sets: liver scenes/calibration, gallbladder scenes/calibration/gallbladder, cube
 # scenes/calibration/cube (train_*.json; validate_*.json held out). An organ whose folder has no
 # training scene is skipped with a line saying so.
+#
+# truth-cube (not in the default list: `--organ truth-cube`): every model fitted to the Truth
+# Cube's beads at its first compression level and validated on the others (`calibrate
+# --truth-cube 1`, metric marker_rms), on what moves a model's equilibrium under a prescribed
+# plate: the organ's nu where the model uses it (E does not move the beads), and the
+# non-damping calibratable parameters of the models that do not use nu.
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 budget=30 jobs=1 work=$here/out/ship_calibrations organs=() models=() exe=()
+
+# What each model fits on the Truth Cube (calibrate flags).
+truth_cube_fit() {
+  case $1 in
+    reference_fem | fem_hex | pbd | hybrid_fem_pbd) echo "--material poisson" ;;
+    particle_bem) echo "--material poisson --param spring_stiffness" ;;
+    metaballs) echo "--param laplacian_stiffness" ;;
+    massspring) echo "--param thickness --param bending_ratio" ;;
+  esac
+}
+
+# Copies a calibration.json into the checkout with its paths made relative to it.
+ship() {
+  python3 - "$1" "$2" "$here/" <<'PY'
+import json, sys
+src, dst, root = sys.argv[1:]
+text = open(src).read().replace(root, "")  # the checkout's paths, relative
+json.dump(json.loads(text), open(dst, "w"), indent=2)
+open(dst, "a").write("\n")
+print("shipped " + dst.replace(root, ""))
+PY
+}
 while [[ $# -gt 0 ]]; do
   case $1 in
     --budget) budget=$2; shift 2 ;;
@@ -27,6 +55,19 @@ while [[ $# -gt 0 ]]; do
 done
 [[ ${#organs[@]} -gt 0 ]] || organs=(liver gallbladder cube)
 for organ in "${organs[@]}"; do
+  if [[ $organ == truth-cube ]]; then
+    bin=${exe[1]:-$here/build/bin/deformbench}
+    list=(reference_fem fem_hex pbd hybrid_fem_pbd particle_bem metaballs massspring)
+    [[ ${#models[@]} -gt 0 ]] && list=($(printf '%s\n' "${models[@]}" | grep -v '^--model$'))
+    mkdir -p "$here/calibrations/truth-cube"
+    for m in "${list[@]}"; do
+      # shellcheck disable=SC2046  # the flags split on purpose
+      "$bin" calibrate --truth-cube 1 --model "$m" $(truth_cube_fit "$m") --budget "$budget" \
+        --jobs "$jobs" --out "$work/truth-cube/$m"
+      ship "$work/truth-cube/$m/calibration.json" "$here/calibrations/truth-cube/$m.json"
+    done
+    continue
+  fi
   case $organ in
     liver) scenes=$here/scenes/calibration ;;
     *) scenes=$here/scenes/calibration/$organ ;;
@@ -41,13 +82,6 @@ for organ in "${organs[@]}"; do
   for f in "$work/$organ"/*/calibration.json; do
     [[ -f $f ]] || continue
     m=$(basename "$(dirname "$f")")
-    python3 - "$f" "$here/calibrations/$organ/$m.json" "$here/" <<'PY'
-import json, sys
-src, dst, root = sys.argv[1:]
-text = open(src).read().replace(root, "")  # the checkout's paths, relative
-json.dump(json.loads(text), open(dst, "w"), indent=2)
-open(dst, "a").write("\n")
-print("shipped " + dst.replace(root, ""))
-PY
+    ship "$f" "$here/calibrations/$organ/$m.json"
   done
 done

@@ -3,6 +3,7 @@
 #include <deform/internal/atomic_file.h>
 #include <deform_harness/calibration.h>
 #include <deform_harness/json_file.h>
+#include <deform_harness/tables.h>
 
 #include <algorithm>
 #include <chrono>
@@ -11,6 +12,7 @@
 #include <iomanip>
 #include <map>
 #include <nlopt.hpp>
+#include <set>
 #include <sstream>
 
 namespace deform::harness {
@@ -24,13 +26,17 @@ using Clock = std::chrono::steady_clock;
 
 double CalibDimension::value(double u) const {
   u = std::clamp(u, 0.0, 1.0);
+  if (logToHalf)
+    return 0.5 - std::exp(std::log(0.5 - lo) + u * (std::log(0.5 - hi) - std::log(0.5 - lo)));
   if (log) return std::exp(std::log(lo) + u * (std::log(hi) - std::log(lo)));
   return lo + u * (hi - lo);
 }
 
 double CalibDimension::unit(double v) const {
-  double u = log ? (std::log(std::max(v, lo)) - std::log(lo)) / (std::log(hi) - std::log(lo))
-                 : (v - lo) / (hi - lo);
+  double u = logToHalf ? (std::log(0.5 - std::clamp(v, lo, hi)) - std::log(0.5 - lo)) /
+                             (std::log(0.5 - hi) - std::log(0.5 - lo))
+             : log ? (std::log(std::max(v, lo)) - std::log(lo)) / (std::log(hi) - std::log(lo))
+                   : (v - lo) / (hi - lo);
   if (!std::isfinite(u)) u = 0;
   return std::clamp(u, 0.0, 1.0);
 }
@@ -161,6 +167,8 @@ bool calibMetricFromName(const std::string& name, CalibMetric& out) {
     out = CalibMetric::Rmse50;
   } else if (name == "loss_ratio") {
     out = CalibMetric::LossRatio;
+  } else if (name == "marker_rms") {
+    out = CalibMetric::MarkerRms;
   } else {
     return false;
   }
@@ -175,6 +183,8 @@ const char* calibMetricName(CalibMetric m) {
       return "rmse_50";
     case CalibMetric::LossRatio:
       return "loss_ratio";
+    case CalibMetric::MarkerRms:
+      return "marker_rms";
   }
   return "?";
 }
@@ -206,7 +216,8 @@ const CalibrationParams* calibrationFor(const std::vector<CalibrationParams>& ca
                                         const std::string& organ, bool skipOtherOrgans) {
   const CalibrationParams* elsewhere = nullptr;
   for (const CalibrationParams& c : calibrations) {
-    if (c.plugin != plugin || c.model != model) continue;
+    // A fitted material is the whole scene's, not a twin's (tables truth-cube runs it alone).
+    if (c.plugin != plugin || c.model != model || !c.material.empty()) continue;
     if (calibrationApplies(c, organ)) return &c;
     if (!elsewhere && !c.shipped) elsewhere = &c;
   }
@@ -265,6 +276,14 @@ CalibrationParams readCalibrationFile(const std::string& file) {
       throw InputError(file, "/held", "\"held\" must be an object of parameter values");
     c.held = doc["held"];
   }
+  if (doc.contains("material")) {
+    const json& m = doc["material"];
+    if (!m.is_object() ||
+        !std::all_of(m.begin(), m.end(), [](const json& v) { return v.is_number(); }))
+      throw InputError(file, "/material", "\"material\" must be an object of numbers");
+    c.material = m;
+  }
+  if (doc.contains("truth_cube") && doc["truth_cube"].is_object()) c.truthCube = doc["truth_cube"];
   return c;
 }
 
@@ -275,15 +294,23 @@ std::vector<std::pair<std::string, std::string>> addCalibratedTwins(
   ojson models = scene["models"];
   ojson out = ojson::array();
   const std::string organ = calibrationOrgan(scene.value("organ", ojson::object()));
+  std::set<std::string> labels;
+  for (const ojson& m : models) labels.insert(m.value("label", m.value("plugin", "")));
   for (const ojson& m : models) {
     out.push_back(m);
     const std::string plugin = m.value("plugin", "");
     const std::string model = m.value("model", plugin);
+    const std::string label = m.value("label", "");
+    const std::string twinLabel = (label.empty() ? model : label) + "+cal";
+    // A twin already (tables truth-cube adds its own) or twinned: nothing to add.
+    const auto endsWith = [](const std::string& s, const std::string& tail) {
+      return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
+    };
+    if (endsWith(label, "+cal") || labels.count(twinLabel)) continue;
     const CalibrationParams* c = calibrationFor(calibrations, plugin, model, organ, true);
     if (!c) continue;
     ojson twin = m;
-    const std::string label = m.value("label", "");
-    twin["label"] = (label.empty() ? model : label) + "+cal";
+    twin["label"] = twinLabel;
     ojson params = ojson::object();
     // json -> ordered_json through text (no implicit conversion between the two types).
     for (const auto& [k, v] : c->params.items()) params[k] = ojson::parse(v.dump());
@@ -316,7 +343,11 @@ SceneInfo loadScene(const std::string& file, const std::string& plugin, const st
   SceneInfo s;
   s.file = file;
   const Scene parsed = parseSceneFile(file);  // validates (throws InputError)
-  if (!parsed.reference)
+  if (metric == CalibMetric::MarkerRms) {
+    if (parsed.markers.measured.empty())
+      throw InputError(file, "/markers/measured",
+                       "--metric marker_rms needs measured marker positions in every scene");
+  } else if (!parsed.reference)
     throw InputError(file, "/reference",
                      "calibration needs a reference in every scene; add \"reference\": "
                      "{\"plugin\": \"reference_fem\", \"params\": {}}");
@@ -344,6 +375,46 @@ SceneInfo loadScene(const std::string& file, const std::string& plugin, const st
   return s;
 }
 
+/// The marker_rms of run `label` in a case's results.json: the mean over its measured instants
+/// of the registered marker RMS; NaN with `why` when there is none.
+double markerRmsOf(const fs::path& results, const std::string& label, std::string& why) {
+  try {
+    std::ifstream in(results);
+    const json doc = json::parse(in);
+    for (const json& r : doc.at("runs")) {
+      if (r.value("label", "") != label) continue;
+      const json m = r.value("markers", json::object());
+      if (m.value("status", "") != "ok") {
+        why = "markers " + m.value("status", std::string("absent")) + ": " +
+              m.value("reason", std::string("no markers in results.json"));
+        return NAN;
+      }
+      double sum = 0;
+      int n = 0;
+      for (const json& at : m.value("at", json::array())) {
+        if (!at.contains("rms_error_translation_m") || !at["rms_error_translation_m"].is_number())
+          continue;
+        sum += at["rms_error_translation_m"].get<double>();
+        ++n;
+      }
+      if (n == 0) why = "no compared instant with measured marker positions";
+      return n ? sum / n : NAN;
+    }
+    why = "no run " + label + " in results.json";
+  } catch (const std::exception& e) {
+    why = std::string("cannot read results.json: ") + e.what();
+  }
+  return NAN;
+}
+
+/// Calibrated dimensions on the organ's material (--material) carry this prefix in a trial's
+/// values; the rest are the model's parameters.
+constexpr const char* kMaterialPrefix = "material.";
+
+bool isMaterialKey(const std::string& key) {
+  return key.rfind(kMaterialPrefix, 0) == 0;
+}
+
 double metricOf(const ErrorMetrics& e, CalibMetric m) {
   switch (m) {
     case CalibMetric::RmseAll:
@@ -354,6 +425,8 @@ double metricOf(const ErrorMetrics& e, CalibMetric m) {
       return NAN;
     case CalibMetric::LossRatio:
       return e.lossRatio;
+    case CalibMetric::MarkerRms:
+      return NAN;  // read from the markers (markerRmsOf), not the reference's errors
   }
   return NAN;
 }
@@ -425,7 +498,13 @@ class Calibrator {
         if (m_info.name != m_o.plugin) entry["model"] = m_info.name;
         entry["label"] = "calibrated";
         ojson params = s.modelParams;
-        for (const auto& [k, v] : paramSets[p].items()) params[k] = v;
+        for (const auto& [k, v] : paramSets[p].items()) {
+          if (isMaterialKey(k)) {
+            c.scene["organ"]["material"][k.substr(std::string(kMaterialPrefix).size())] = v;
+          } else {
+            params[k] = v;
+          }
+        }
         entry["params"] = params;
         c.scene["models"] = ojson::array({entry});
         c.scene["output"] = {{"surfaces", "none"}};
@@ -451,6 +530,12 @@ class Calibrator {
           } else if (run->status != RunStatus::Ok) {
             r.status = std::string(statusName(run->status)) +
                        (run->message.empty() ? "" : ": " + run->message);
+          } else if (m_o.metric == CalibMetric::MarkerRms) {
+            // Against measurements: a run that did not do what the scene asked scores worst.
+            std::string why;
+            r.value = run->valid ? markerRmsOf(c.outDir / "results.json", "calibrated", why) : NAN;
+            if (!run->valid) why = "invalid: " + run->invalidReason;
+            r.status = std::isfinite(r.value) ? "ok" : why;
           } else if (!run->error) {
             r.status = "no error" + (run->notes.empty() ? "" : ": " + run->notes.back());
           } else {
@@ -481,10 +566,21 @@ class Calibrator {
     return held;
   }
 
+  /// A trial's values by key (the material's with their prefix).
   ojson pointParams(const std::vector<double>& values) const {
     ojson p = ojson::object();
     for (size_t d = 0; d < m_dims.size(); ++d) p[m_dims[d].key] = values[d];
     return p;
+  }
+
+  /// The model's parameters (material = false) or the organ's material (true) of a trial.
+  static ojson split(const ojson& point, bool material) {
+    ojson out = ojson::object();
+    for (const auto& [k, v] : point.items()) {
+      if (isMaterialKey(k) != material) continue;
+      out[material ? k.substr(std::string(kMaterialPrefix).size()) : k] = v;
+    }
+    return out;
   }
 
   /// The scored value of a run: its metric, or the scene's worst when it failed (and never
@@ -500,6 +596,14 @@ class Calibrator {
     std::vector<double> defaults;
     for (const CalibDimension& d : m_dims) {
       double v = d.lo;
+      if (isMaterialKey(d.key)) {
+        // The first training scene's material (runCalibration checked it writes it).
+        defaults.push_back(
+            m_train[0]
+                .doc["organ"]["material"][d.key.substr(std::string(kMaterialPrefix).size())]
+                .get<double>());
+        continue;
+      }
       const ParamSpec* ps = m_info.param(d.key);
       if (ps) v = std::get<double>(ps->defaultValue);
       // A training scene that writes the value starts there instead.
@@ -542,7 +646,9 @@ class Calibrator {
       defaultsJson[m_dims[d].key] = defaults[d];
       space[m_dims[d].key] = {{"min", m_dims[d].lo},
                               {"max", m_dims[d].hi},
-                              {"scale", m_dims[d].log ? "log" : "linear"}};
+                              {"scale", m_dims[d].logToHalf ? "log(0.5 - x)"
+                                        : m_dims[d].log     ? "log"
+                                                            : "linear"}};
     }
     doc["defaults"] = defaultsJson;
     for (const auto& [key, note] : m_boundNotes) space[key]["note"] = note;
@@ -560,7 +666,9 @@ class Calibrator {
       warnings.push_back(key + " fitted at its " + (side == "max" ? "upper" : "lower") + " bound " +
                          fmtValue(side == "max" ? d.hi : d.lo) +
                          ": the best fit may lie beyond the range, or the model cannot match "
-                         "the reference with it");
+                         "the " +
+                         (m_o.metric == CalibMetric::MarkerRms ? "measurements" : "reference") +
+                         " with it");
     }
     doc["at_bound"] = atBound;
     doc["warnings"] = warnings;
@@ -674,7 +782,9 @@ class Calibrator {
     doc["plugin"] = m_o.plugin;
     doc["metric"] = calibMetricName(m_o.metric);
     if (!m_o.label.empty()) doc["label"] = m_o.label;
-    doc["params"] = calibrated;
+    doc["params"] = split(calibrated, false);
+    if (!split(calibrated, true).empty()) doc["material"] = split(calibrated, true);
+    if (!m_truthCube.empty()) doc["truth_cube"] = m_truthCube;
     // The organs it was fitted on: a calibration applies to scenes of these organs only.
     ojson organs = ojson::array();
     for (const SceneInfo& sc : m_train)
@@ -711,13 +821,46 @@ class Calibrator {
 
  public:
   std::map<std::string, std::string> m_boundNotes;  ///< key -> why its range was narrowed
+  ojson m_truthCube = ojson::object();              ///< calibration.json's "truth_cube"
 };
+
+/// calibrate --truth-cube: writes the scene of every level for the model to DIR/scenes/ and adds
+/// the trained level's to `train`, the others' to `validate`. Returns calibration.json's
+/// "truth_cube".
+ojson truthCubeScenes(PluginLoader& loader, const CalibrateOptions& o,
+                      std::vector<std::string>& train, std::vector<std::string>& validate) {
+  if (o.metric != CalibMetric::MarkerRms)
+    throw InputError("--metric", calibMetricName(o.metric),
+                     "--truth-cube measures against the beads: marker_rms");
+  const TruthCubeModel m = truthCubeModel(loader, o.plugin, false);
+  if (!m.problem.empty()) throw InputError("--model", o.plugin, m.problem);
+  const std::vector<double> strains = truthCubeStrains(o.truthCubeData);
+  const size_t level = size_t(o.truthCubeLevel - 1);
+  if (o.truthCubeLevel < 1 || level >= strains.size())
+    throw InputError("--truth-cube", std::to_string(o.truthCubeLevel),
+                     "the data hold levels 1 to " + std::to_string(strains.size()));
+  std::vector<std::pair<fs::path, ojson>> scenes;
+  for (size_t l = 0; l < strains.size(); ++l)
+    scenes.emplace_back(
+        o.outDir / "scenes" / ("truth_cube_level_" + std::to_string(l + 1) + ".json"),
+        truthCubeLevelScene(o.truthCubeData, l, m, o.truthCubeContact, false));
+  fs::create_directories(o.outDir / "scenes");
+  for (size_t l = 0; l < scenes.size(); ++l) {
+    writeFileAtomic(scenes[l].first, scenes[l].second.dump(2) + "\n");
+    (l == level ? train : validate).push_back(scenes[l].first.string());
+  }
+  return {{"level", o.truthCubeLevel},
+          {"strain", strains[level]},
+          {"contact", o.truthCubeContact},
+          {"data", o.truthCubeData.empty() ? std::string("shipped") : o.truthCubeData}};
+}
 
 }  // namespace
 
 ojson runCalibration(PluginLoader& loader, const CalibrateOptions& o, Progress* progress) {
   if (o.budget < 1) throw InputError("--budget", "", "must be at least 1 (trials)");
-  if (o.train.empty()) throw InputError("calibrate", "", "name at least one training scene");
+  if (o.train.empty() && o.truthCubeLevel == 0)
+    throw InputError("calibrate", "", "name at least one training scene, or --truth-cube LEVEL");
   if (!o.cases.child)
     throw std::logic_error("runCalibration: trials run in child processes (cases.child)");
   const std::string why = pluginProblem(loader, o.plugin);
@@ -730,7 +873,15 @@ ojson runCalibration(PluginLoader& loader, const CalibrateOptions& o, Progress* 
       continue;
     dims.push_back({p.key, p.calibMin, p.calibMax, p.calibScale == ParamScale::Log});
   }
-  if (dims.empty() && o.params.empty())
+  for (const std::string& k : o.material) {
+    if (k != "young" && k != "poisson")
+      throw InputError("--material", k, "expected young or poisson");
+    if (o.metric != CalibMetric::MarkerRms)
+      throw InputError("--material", k,
+                       "the organ's material is fitted to measurements only (--metric "
+                       "marker_rms): fitted to a reference made of it, it would be circular");
+  }
+  if (dims.empty() && o.params.empty() && o.material.empty())
     throw InputError("--model", "",
                      "model '" + info.name + "' of plugin '" + o.plugin +
                          "' declares no calibratable parameter");
@@ -741,6 +892,13 @@ ojson runCalibration(PluginLoader& loader, const CalibrateOptions& o, Progress* 
                        "'" + k + "' is not a calibratable parameter of " + info.name +
                            " (see deformbench plugins)");
   }
+  std::vector<std::string> trainFiles = o.train, validateFiles = o.validate;
+  std::error_code ec;
+  fs::create_directories(o.outDir, ec);
+  if (ec) throw InputError(o.outDir.string(), "", "cannot create the output folder");
+  const ojson truthCube = o.truthCubeLevel != 0
+                              ? truthCubeScenes(loader, o, trainFiles, validateFiles)
+                              : ojson::object();
   std::vector<SceneInfo> train, validate;
   std::map<std::string, int> stems;
   const auto load = [&](const std::string& f) {
@@ -750,16 +908,25 @@ ojson runCalibration(PluginLoader& loader, const CalibrateOptions& o, Progress* 
     s.stem = stem;
     return s;
   };
-  for (const std::string& f : o.train) train.push_back(load(f));
-  for (const std::string& f : o.validate) validate.push_back(load(f));
+  for (const std::string& f : trainFiles) train.push_back(load(f));
+  for (const std::string& f : validateFiles) validate.push_back(load(f));
+  for (const std::string& k : o.material) {
+    const ojson& m = train[0].doc.contains("organ") ? train[0].doc["organ"] : ojson::object();
+    const ojson* v =
+        m.contains("material") && m["material"].contains(k) ? &m["material"][k] : nullptr;
+    if (!v || !v->is_number())
+      throw InputError(train[0].file, "/organ/material/" + k,
+                       "--material " + k + " starts from the scene's value: write it");
+    const double x = v->get<double>();
+    if (k == "young") dims.push_back({kMaterialPrefix + k, x / 10, x * 10, true});
+    if (k == "poisson") dims.push_back({kMaterialPrefix + k, 0.3, 0.4999, false, true});
+  }
   double extent = INFINITY;
   for (const SceneInfo& s : train) extent = std::min(extent, s.smallestExtent);
   const std::map<std::string, std::string> boundNotes = limitLengthsToOrgan(dims, info, extent);
-  std::error_code ec;
-  fs::create_directories(o.outDir, ec);
-  if (ec) throw InputError(o.outDir.string(), "", "cannot create the output folder");
   Calibrator c(loader, o, info, std::move(dims), std::move(train), std::move(validate));
   c.m_boundNotes = boundNotes;
+  c.m_truthCube = truthCube;
   return c.run(progress);
 }
 

@@ -228,6 +228,7 @@ json markersJson(const RunRecord& run) {
       if (s.markerRms >= 0) {
         one["rms_error_m"] = finite(s.markerRms);
         one["max_error_m"] = finite(s.markerMax);
+        one["rms_error_translation_m"] = finite(s.markerRmsTranslation);
       }
       at.push_back(one);
     }

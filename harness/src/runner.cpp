@@ -97,6 +97,7 @@ void putSnapshotExtras(ByteWriter& w, const SurfaceSnapshot& s) {
   w.matrix(s.markers);
   w.pod(s.markerRms);
   w.pod(s.markerMax);
+  w.pod(s.markerRmsTranslation);
 }
 
 SurfaceSnapshot getSnapshotExtras(ByteReader& r) {
@@ -114,6 +115,7 @@ SurfaceSnapshot getSnapshotExtras(ByteReader& r) {
   r.matrix(s.markers);
   s.markerRms = r.pod<double>();
   s.markerMax = r.pod<double>();
+  s.markerRmsTranslation = r.pod<double>();
   return s;
 }
 
@@ -326,11 +328,16 @@ SurfaceSnapshot comparedSnapshot(Model& model, const Scene& scene, bool withMark
   if (withMarkers) {
     snap.markers = model.markers();
     for (const MarkerFrame& m : scene.markers.measured) {
-      if (std::fabs(m.t - time) > 0.5 * scene.dt || snap.markers.rows() != m.points.rows())
-        continue;
-      const VecX d = (snap.markers - m.points).rowwise().norm();
-      snap.markerRms = d.size() ? std::sqrt(d.squaredNorm() / double(d.size())) : 0.0;
-      snap.markerMax = d.size() ? d.maxCoeff() : 0.0;
+      const bool now =
+          m.atEquilibrium ? scene.compareAtEquilibrium : std::fabs(m.t - time) <= 0.5 * scene.dt;
+      if (!now || snap.markers.rows() != m.points.rows() || m.points.rows() == 0) continue;
+      const MatX3 diff = snap.markers - m.points;
+      const VecX d = diff.rowwise().norm();
+      const double n = double(d.size());
+      snap.markerRms = std::sqrt(d.squaredNorm() / n);
+      snap.markerMax = d.maxCoeff();
+      const MatX3 registered = diff.rowwise() - diff.colwise().mean();
+      snap.markerRmsTranslation = std::sqrt(registered.squaredNorm() / n);
     }
   }
   return snap;

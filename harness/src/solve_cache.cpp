@@ -35,7 +35,8 @@ CacheKey solveKey(const std::string& sceneFile, const Scene& scene, const Organ&
   }
   CacheKey key;
   // /3: the validity rules of wave 3 (supports, instruments) changed what a stored valid means.
-  key.add("harness.reference_run/4").add(doc.dump());
+  // /5: the compared snapshots gained the registered marker error.
+  key.add("harness.reference_run/5").add(doc.dump());
   key.add(organ.surface.V).add(organ.surface.F);
   key.add(sha256File(loader.locate(p.spec.plugin))).add(p.info->name).add(p.info->version);
   key.add(paramsToJson(p.params).dump());

@@ -13,6 +13,12 @@
 #               --calibration shipped --calibrated-twins` runs the model and its twin
 #   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0:
 #               one stderr line each and exit 2
+#   measured    (PLUGINS also holds reference_fem) against measured markers, no reference:
+#               markers "measured" from reference_fem at nu 0.45 and shifted 1 mm (a scan not
+#               registered to the model), calibrate --metric marker_rms --material poisson from
+#               nu 0.3 finds 0.45 and the registered error vanishes; --material without
+#               marker_rms, marker_rms without measured positions and a Truth Cube level the
+#               data do not hold are refused in one line
 set -euo pipefail
 mode=$1 exe=$(readlink -f "$2") plugins=$3 work=$4
 here=$(cd "$(dirname "$0")" && pwd)
@@ -195,6 +201,72 @@ bad_input)
   check no_reference "needs a reference" "$here/toy_no_reference.json" --model toy --out "$work/x"
   check budget "--budget" "$here/toy_reference.json" --model toy --out "$work/x" --budget 0
   check metric "unknown metric" "$here/toy_reference.json" --model toy --out "$work/x" --metric max
+  ;;
+measured)
+  # A cube pressed 3 mm by a bonded plate; five interior markers; P1 tets, a second a run.
+  python3 - "$work" 0.45 <<'PY'
+import json, sys
+work, nu = sys.argv[1], float(sys.argv[2])
+scene = {
+  "organ": {"mesh": "phantom:cube", "resolution": 0.3,
+            "material": {"young": 5500, "poisson": nu, "density": 1000},
+            "fixed": {"box": [[-0.06, -0.06, -0.06], [0.06, 0.06, -0.049999]]}},
+  "gravity": [0, 0, 0], "dt": 1.0, "duration": 1.0,
+  "plates": [{"region": {"box": [[-0.06, -0.06, 0.049999], [0.06, 0.06, 0.06]]},
+              "trajectory": [{"t": 0, "offset": [0, 0, 0]}, {"t": 1, "offset": [0, 0, -0.006]}]}],
+  "markers": {"points": [[0.04, 0, 0], [-0.04, 0.02, 0.01], [0, 0.04, -0.02], [0.03, -0.035, 0.02],
+                         [0, 0, 0.03]]},
+  "models": [{"plugin": "reference_fem",
+              "params": {"elements": 300, "element_order": 1}}],
+  "output": {"surfaces": "none"}}
+json.dump(scene, open(work + "/truth.json", "w"))
+PY
+  "${db[@]}" run "$work/truth.json" --out "$work/truth" --no-cache >"$work/truth.txt" 2>&1 \
+    || { cat "$work/truth.txt"; fail "run of the truth"; }
+  python3 - "$work" <<'PY'
+import json, sys
+work = sys.argv[1]
+run = json.load(open(work + "/truth/results.json"))["runs"][0]
+assert run["markers"]["status"] == "ok", run["markers"]
+x = run["markers"]["at"][0]["positions_m"]
+scene = json.load(open(work + "/truth.json"))
+scene["organ"]["material"]["poisson"] = 0.3
+scene["markers"]["measured"] = [{"t": 1.0, "points": [[p[0] + 0.001, p[1], p[2]] for p in x]}]
+json.dump(scene, open(work + "/measured.json", "w"))
+del scene["markers"]["measured"]
+json.dump(scene, open(work + "/unmeasured.json", "w"))
+PY
+  "${db[@]}" calibrate "$work/measured.json" --model reference_fem --metric marker_rms \
+    --material poisson --budget 12 --out "$work/cal" --no-cache --jobs 2 >"$work/out.txt" 2>&1 \
+    || { cat "$work/out.txt"; fail "calibrate exited $?"; }
+  python3 - "$work/cal/calibration.json" <<'PY'
+import json, sys
+c = json.load(open(sys.argv[1]))
+assert c["metric"] == "marker_rms" and c["params"] == {}, c
+nu = c["material"]["poisson"]
+assert abs(nu - 0.45) < 0.01, f"nu {nu}, expected 0.45"
+assert c["defaults"] == {"material.poisson": 0.3}, c["defaults"]
+before, after = c["train"]["before"], c["train"]["after"]
+assert before > 5e-5 and after < 0.1 * before, c["train"]  # the 1 mm shift registered away
+print("nu", nu, "marker rms", before, "->", after)
+PY
+  grep -q "organ poisson = " "$work/out.txt" || { cat "$work/out.txt"; fail "no fitted nu printed"; }
+  check() {  # check NAME EXPECTED_TEXT ARGS...
+    local name=$1 text=$2
+    shift 2
+    set +e
+    "${db[@]}" calibrate "$@" >"$work/$name.out" 2>"$work/$name.err"
+    local code=$?
+    set -e
+    [[ $code == 2 ]] || fail "$name: exit $code, expected 2"
+    grep -qF -- "$text" "$work/$name.err" || { cat "$work/$name.err"; fail "$name: no '$text'"; }
+  }
+  check circular "fitted to measurements only" "$work/measured.json" --model reference_fem \
+    --material poisson --out "$work/x"
+  check unmeasured "needs measured marker positions" "$work/unmeasured.json" \
+    --model reference_fem --metric marker_rms --material poisson --out "$work/x"
+  check level "the data hold levels 1 to 2" --truth-cube 3 --model reference_fem \
+    --material poisson --out "$work/x"
   ;;
 *) fail "unknown mode $mode" ;;
 esac

@@ -838,7 +838,9 @@ TEST_F(TempDir, QuickTruthCubeTableWithoutTheSolversSaysWhy) {
   o.quick = true;
   o.outDir = m_dir / "out";
   o.cases.cacheDir = fs::path();
+  setenv("DEFORM_CALIBRATIONS_DIR", m_dir.c_str(), 1);  // no shipped calibration: no twin
   buildTables({"truth-cube"}, loader, o, nullptr);
+  unsetenv("DEFORM_CALIBRATIONS_DIR");
   const json doc = readJson(o.outDir / "truth-cube.json");
   // reference_fem (two volumetric terms) at 2 levels x 2 registrations, one row per other model.
   ASSERT_EQ(doc["rows"].size(), 8u + 6u);
@@ -869,6 +871,9 @@ TEST_F(TempDir, TruthCubeRunsADynamicModelOnItsVolumeNetworkInASettlingScenePerL
   PluginLoader loader({pluginSubset(m_dir / "plugins", {"pbd"}).string()});
   TablesOptions o;
   o.quick = true;
+  // No shipped calibration (an empty folder): no twin.
+  fs::create_directories(m_dir / "calibrations" / "truth-cube");
+  setenv("DEFORM_CALIBRATIONS_DIR", (m_dir / "calibrations").c_str(), 1);
   const tables::TableDef t = tables::truthCube(o, loader);
   ASSERT_EQ(t.cases.size(), 3u) << "the quasi-static scene and one settling scene per level";
   EXPECT_EQ(t.cases[1].id, "truth-cube/dynamic_1");
@@ -895,6 +900,39 @@ TEST_F(TempDir, TruthCubeRunsADynamicModelOnItsVolumeNetworkInASettlingScenePerL
   }
   o.truthCubeContact = "glued";
   EXPECT_THROW(tables::truthCube(o, loader), InputError);
+
+  // A shipped calibration of pbd on the Truth Cube that fits the organ's nu: its twin runs in
+  // scenes of its own (the organ's material replaced), one per level; its rows say which level
+  // it was trained on. A twin of the parameters alone runs beside its model.
+  o.truthCubeContact = "bonded";
+  const auto ship = [&](const json& extra) {
+    json c = {{"format", "deformbench-calibration/1"},
+              {"plugin", "pbd"},
+              {"model", "pbd"},
+              {"params", json::object()},
+              {"organs", {"phantom:cube, resolution 1, scale 0.8"}},
+              {"truth_cube", {{"level", 1}, {"strain", 0.05}, {"contact", "bonded"}}}};
+    c.update(extra);
+    std::ofstream(m_dir / "calibrations" / "truth-cube" / "pbd.json") << c.dump();
+  };
+  ship({{"material", {{"poisson", 0.45}}}});
+  const tables::TableDef tm = tables::truthCube(o, loader);
+  ASSERT_EQ(tm.cases.size(), 5u);
+  EXPECT_EQ(tm.cases[3].id, "truth-cube/dynamic_1_cal_pbd");
+  const Scene twin = parseScene(json::parse(tm.cases[4].scene.dump()), "twin.json");
+  ASSERT_EQ(twin.models.size(), 1u);
+  EXPECT_EQ(twin.models[0].label, "pbd+cal");
+  EXPECT_EQ(twin.organ.material.poisson, 0.45);
+  EXPECT_EQ(twin.models[0].params["network"], "volume");
+  ship({{"params", {{"damping", 3.0}}}});
+  const tables::TableDef tp = tables::truthCube(o, loader);
+  ASSERT_EQ(tp.cases.size(), 3u) << "the twin of the parameters runs beside its model";
+  const Scene beside = parseScene(json::parse(tp.cases[1].scene.dump()), "beside.json");
+  ASSERT_EQ(beside.models.size(), 2u);
+  EXPECT_EQ(beside.models[1].label, "pbd+cal");
+  EXPECT_EQ(beside.models[1].params["damping"], 3.0);
+  EXPECT_EQ(beside.organ.material.poisson, 0.499);
+  unsetenv("DEFORM_CALIBRATIONS_DIR");
 }
 
 TEST(Tables, UnknownTableIsAnInputError) {

@@ -20,6 +20,12 @@ TEST(Calibration, DimensionScalesRoundTrip) {
   EXPECT_NEAR(lg.unit(0.1), 0.5, 1e-12);
   EXPECT_DOUBLE_EQ(lin.unit(100), 1);  // clamped into the box
   EXPECT_DOUBLE_EQ(lg.unit(0), 0);
+  // A Poisson ratio: equal steps in log(0.5 - nu), 0.3 -> 0.4999 (0.2 -> 1e-4 from 1/2).
+  const CalibDimension nu{"nu", 0.3, 0.4999, false, true};
+  EXPECT_NEAR(nu.value(0.5), 0.5 - std::sqrt(0.2 * 1e-4), 1e-12);
+  EXPECT_NEAR(nu.unit(0.499), std::log(0.2 / 1e-3) / std::log(0.2 / 1e-4), 1e-12);
+  EXPECT_NEAR(nu.value(nu.unit(0.49)), 0.49, 1e-12);
+  EXPECT_DOUBLE_EQ(nu.unit(0.5), 1);  // clamped into the box
 }
 
 TEST(Calibration, HaltonPointsFillTheBox) {

@@ -603,6 +603,22 @@ TEST_F(SceneFiles, MarkersFromAListOrAFileWithMeasuredPositions) {
   bad = j;
   bad["markers"]["measured"][0]["points"] = {{0, 0, 0}};
   expectError(bad, "/markers/measured/0", "1 measured positions for 2 markers");
+  // A scene compared at equilibrium measures its one compared instant, "t": "equilibrium".
+  json eq = j;
+  eq["compare_at"] = "equilibrium";
+  eq["markers"]["measured"][0]["t"] = "equilibrium";
+  EXPECT_TRUE(parseScene(eq, "scene.json").markers.measured[0].atEquilibrium);
+  bad = eq;
+  bad["markers"]["measured"][0]["t"] = 1.0;
+  expectError(bad, "/markers/measured/0/t", "one frame at \"t\": \"equilibrium\"");
+  bad = eq;
+  bad["markers"]["measured"].push_back(eq["markers"]["measured"][0]);
+  expectError(bad, "/markers/measured/1/t", "must be the only one");
+  bad = j;
+  bad["markers"]["measured"][0]["t"] = "equilibrium";
+  expectError(bad, "/markers/measured/0/t", "needs \"compare_at\": \"equilibrium\"");
+  bad["markers"]["measured"][0]["t"] = "end";
+  expectError(bad, "/markers/measured/0/t", "expected a time in s or \"equilibrium\"");
   bad = j;
   bad["markers"]["file"] = "beads.csv";
   expectError(bad, "/markers", "exactly one of");

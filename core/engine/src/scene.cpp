@@ -483,7 +483,17 @@ MarkerSpec parseMarkers(const Ctx& c, const json& j, const std::string& path) {
       const std::string fp = mp + "/" + std::to_string(i);
       ObjectReader f((*v)[i], fp, c.file, {"t", "points", "file"});
       MarkerFrame frame;
-      frame.t = c.number(f.required("t"), f.child("t"));
+      const json& t = f.required("t");
+      if (t.is_string()) {
+        if (t.get<std::string>() != "equilibrium")
+          c.fail(f.child("t"),
+                 "expected a time in s or \"equilibrium\", got \"" + t.get<std::string>() + "\"");
+        frame.atEquilibrium = true;
+      } else {
+        frame.t = c.number(t, f.child("t"));
+      }
+      if (!m.measured.empty() && (frame.atEquilibrium || m.measured.back().atEquilibrium))
+        c.fail(f.child("t"), "a frame measured at \"equilibrium\" must be the only one");
       if (!m.measured.empty() && !(frame.t > m.measured.back().t))
         c.fail(f.child("t"), "instants must be strictly increasing, got " + num(frame.t) +
                                  " after " + num(m.measured.back().t));
@@ -610,16 +620,22 @@ Scene parseScene(const nlohmann::json& j, const std::string& file) {
     }
   }
   for (size_t i = 0; i < s.markers.measured.size(); ++i) {
+    const std::string path = "/markers/measured/" + std::to_string(i) + "/t";
+    if (s.markers.measured[i].atEquilibrium) {
+      if (!s.compareAtEquilibrium)
+        c.fail(path, "\"equilibrium\" needs \"compare_at\": \"equilibrium\"");
+      continue;
+    }
+    if (s.compareAtEquilibrium)
+      c.fail(path, "a scene compared at equilibrium takes one frame at \"t\": \"equilibrium\"");
     const Real t = s.markers.measured[i].t;
     const std::vector<Real> instants =
         s.compareAt.empty() ? std::vector<Real>{s.duration} : s.compareAt;
-    const bool found = !s.compareAtEquilibrium &&
-                       std::any_of(instants.begin(), instants.end(),
+    const bool found = std::any_of(instants.begin(), instants.end(),
                                    [&](Real x) { return std::fabs(x - t) <= 0.5 * s.dt; });
     if (!found)
-      c.fail("/markers/measured/" + std::to_string(i) + "/t",
-             "must be one of the compared instants (compare_at, or the duration " +
-                 num(s.duration) + " s without it), got " + num(t));
+      c.fail(path, "must be one of the compared instants (compare_at, or the duration " +
+                       num(s.duration) + " s without it), got " + num(t));
   }
   if (const json* v = r.optional("output")) {
     ObjectReader o(*v, "/output", file, {"surfaces"});

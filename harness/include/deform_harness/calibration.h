@@ -39,6 +39,9 @@ struct CalibDimension {
   std::string key;
   double lo = 0, hi = 1;
   bool log = false;
+  /// Log of the distance to 1/2 (a Poisson ratio, lo < hi < 0.5): equal steps from 0.3 to 0.49,
+  /// 0.499 and 0.4999, where the material's response changes most.
+  bool logToHalf = false;
 
   /// Unit coordinate u in [0, 1] -> parameter value, and back (clamped to the box).
   double value(double u) const;
@@ -89,9 +92,13 @@ std::vector<double> haltonPoint(long long i, int n);
 
 // ------------------------------------------------------------------------ the command
 
-enum class CalibMetric { RmseAll, Rmse50, LossRatio };
+/// rmse_all, rmse_50, loss_ratio: against the scene's reference. marker_rms: the markers' RMS
+/// distance to the scene's measured positions (markers.measured) after removing the
+/// least-squares rigid translation at each measured instant, averaged over those instants
+/// (results.json's rms_error_translation_m): against a physical measurement, no reference.
+enum class CalibMetric { RmseAll, Rmse50, LossRatio, MarkerRms };
 
-/// "rmse_all" | "rmse_50" | "loss_ratio"; false on anything else.
+/// "rmse_all" | "rmse_50" | "loss_ratio" | "marker_rms"; false on anything else.
 bool calibMetricFromName(const std::string& name, CalibMetric& out);
 const char* calibMetricName(CalibMetric m);
 
@@ -100,6 +107,17 @@ struct CalibrateOptions {
   std::string plugin;                        ///< --model: a plugin name
   std::string model;                         ///< model within the plugin ("" = the plugin's)
   std::vector<std::string> params;           ///< --param: a subset of the calibratable ones
+  /// --material: the organ's "young" and/or "poisson" fitted too (marker_rms only: fitting the
+  /// material to a reference made of it would be circular). Bounds: E / 10 .. 10 E (log) around
+  /// the first training scene's E; nu 0.3 .. 0.4999 (logToHalf).
+  std::vector<std::string> material;
+  /// --truth-cube LEVEL (1-based; 0: none): train on that compression level of the Truth Cube
+  /// (truthCubeLevelScene() of tables.h, written to DIR/scenes/), validate on every other level,
+  /// metric marker_rms. calibration.json keeps {"level", "strain", "contact", "data"} as
+  /// "truth_cube".
+  int truthCubeLevel = 0;
+  std::string truthCubeData;                ///< the bead file ("": the shipped data)
+  std::string truthCubeContact = "bonded";  ///< the plate: "bonded" or "sliding"
   std::filesystem::path outDir;
   CalibMetric metric = CalibMetric::RmseAll;
   int budget = 40;
@@ -110,7 +128,8 @@ struct CalibrateOptions {
 
 /// Checks the input (throws InputError, one line): the plugin loads and has calibratable
 /// parameters (or the --param keys are among them), budget >= 1, every scene parses and has a
-/// reference, rmse_50 needs nearest 50 in every scene. Then runs the calibration, writes
+/// reference (marker_rms: measured marker positions instead), rmse_50 needs nearest 50 in every
+/// scene. Then runs the calibration, writes
 /// DIR/calibration.json (format deformbench-calibration/1) and DIR/trials.csv (one row per
 /// trial) and returns the calibration.json document. progress may be null.
 nlohmann::ordered_json runCalibration(PluginLoader& loader, const CalibrateOptions& options,

@@ -33,6 +33,10 @@ struct SurfaceSnapshot {
   /// With measured marker positions at this instant: RMS and largest distance (m) of the
   /// model's markers to them; -1 otherwise.
   double markerRms = -1, markerMax = -1;
+  /// The same RMS after the least-squares rigid translation between the model's markers and the
+  /// measured ones is removed (their mean difference): the registration of scans that were not
+  /// registered to one another; -1 without measured positions.
+  double markerRmsTranslation = -1;
 };
 
 /// A snapshot in the byte records of run isolation and the solve cache (all its fields).

@@ -105,6 +105,13 @@ struct CalibrationParams {
   /// One of the project's shipped calibrations (`--calibration shipped`): on a scene of an organ
   /// it was not fitted on it is passed over in silence, where a file given by name is refused.
   bool shipped = false;
+  /// The organ's material fitted with it (calibrate --material), e.g. {"poisson": 0.4993}: it
+  /// applies to a whole scene, so no calibrated twin holds it (calibrationFor() passes it over);
+  /// `tables truth-cube` runs it in a case of its own. Empty: the model's parameters only.
+  nlohmann::json material = nlohmann::json::object();
+  /// calibrate --truth-cube: {"level": 1-based level trained on, "strain", "contact"}; else
+  /// empty.
+  nlohmann::json truthCube = nlohmann::json::object();
 };
 
 /// The parameters in which a run of c's model (its resolved params, as in results.json) differs

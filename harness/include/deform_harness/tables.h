@@ -75,4 +75,24 @@ std::vector<std::string> tableWarnings(const std::vector<Table>& tables);
 std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
                                const TablesOptions& options, Progress* progress);
 
+/// How a model replays the Truth Cube in `tables truth-cube`, and in `calibrate --truth-cube`.
+struct TruthCubeModel {
+  nlohmann::ordered_json entry;  ///< its scene entry: plugin, label (the plugin) and params
+  bool dynamic = false;          ///< settles in a scene per level; else all levels in one scene
+  std::string problem;           ///< why it cannot (a missing plugin, no markers); "" if it can
+};
+TruthCubeModel truthCubeModel(PluginLoader& loader, const std::string& plugin, bool quick);
+
+/// The compression levels (strains) of a bead file ("": the shipped data). InputError on bad
+/// data.
+std::vector<double> truthCubeStrains(const std::string& dataFile);
+
+/// The scene of one level (0-based) of the Truth Cube for one model, the beads measured at its
+/// compared instant (the plate moved in one quasi-static step, or over 1 s and held until the
+/// model settles): what `calibrate --truth-cube` trains and validates on. InputError on a level
+/// the data do not hold or an unknown contact.
+nlohmann::ordered_json truthCubeLevelScene(const std::string& dataFile, size_t level,
+                                           const TruthCubeModel& model, const std::string& contact,
+                                           bool quick);
+
 }  // namespace deform::harness

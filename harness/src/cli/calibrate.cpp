@@ -5,6 +5,7 @@
 #include <deform_harness/calibration.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/progress.h>
+#include <deform_harness/tables.h>
 
 #include <iomanip>
 #include <iostream>
@@ -15,9 +16,11 @@ namespace {
 
 struct CalibrateArgs {
   CommonArgs common;
-  std::vector<std::string> train, validate, params;
-  std::string model, metric = "rmse_all", label;
+  std::vector<std::string> train, validate, params, material;
+  std::string model, metric, label;
   int budget = 40;
+  int truthCubeLevel = 0;  ///< --truth-cube (1-based); 0: none
+  std::string truthCubeData, contact = "bonded";
   double timeout = 0;
   DispatchArgs dispatch;
 };
@@ -29,14 +32,30 @@ int cmdCalibrate(const CalibrateArgs& a);
 Verb addCalibrate(CLI::App& app) {
   auto args = std::make_shared<CalibrateArgs>();
   CalibrateArgs& cal = *args;
-  CLI::App* calibrate = app.add_subcommand(
-      "calibrate", "fit a model's calibratable parameters to the reference of training scenes");
-  calibrate->add_option("scenes", cal.train, "training scene files (with a reference)")->required();
+  CLI::App* calibrate =
+      app.add_subcommand("calibrate",
+                         "fit a model's calibratable parameters to the reference of training "
+                         "scenes, or to measured markers (--truth-cube)");
+  calibrate->add_option("scenes", cal.train,
+                        "training scene files (with a reference, or measured marker positions)");
   calibrate->add_option("--model", cal.model, "plugin to calibrate")->required();
   calibrate->add_option("--out", cal.common.out, "output folder (calibration.json)")->required();
   calibrate->add_option("--validate", cal.validate, "held-out scene (repeatable)")
       ->allow_extra_args(false);
-  calibrate->add_option("--metric", cal.metric, "rmse_all (default), rmse_50 or loss_ratio");
+  calibrate->add_option("--metric", cal.metric,
+                        "rmse_all (default), rmse_50, loss_ratio, or marker_rms (against measured "
+                        "markers; the default with --truth-cube)");
+  calibrate->add_option("--truth-cube", cal.truthCubeLevel,
+                        "train on this compression level of the Truth Cube (1-based), validate "
+                        "on the others; metric marker_rms");
+  calibrate->add_option("--truth-cube-data", cal.truthCubeData,
+                        "the bead file (default: data/truth-cube/uniaxial_positions.csv)");
+  calibrate->add_option("--contact", cal.contact,
+                        "the Truth Cube's plate: bonded (default) or sliding");
+  calibrate
+      ->add_option("--material", cal.material,
+                   "fit the organ's young or poisson too (repeatable; marker_rms only)")
+      ->allow_extra_args(false);
   calibrate->add_option("--budget", cal.budget, "trials at most (default 40)");
   calibrate->add_option("--label", cal.label, "free text kept in calibration.json");
   calibrate
@@ -64,14 +83,22 @@ int cmdCalibrate(const CalibrateArgs& a) {
   o.validate = a.validate;
   o.plugin = a.model;
   o.params = a.params;
+  o.material = a.material;
   o.label = a.label;
   o.budget = a.budget;
-  if (!calibMetricFromName(a.metric, o.metric))
-    throw InputError("--metric", "",
-                     "unknown metric '" + a.metric + "' (rmse_all, rmse_50 or loss_ratio)");
+  const std::string metric = !a.metric.empty()      ? a.metric
+                             : a.truthCubeLevel > 0 ? "marker_rms"
+                                                    : "rmse_all";
+  if (!calibMetricFromName(metric, o.metric))
+    throw InputError(
+        "--metric", "",
+        "unknown metric '" + metric + "' (rmse_all, rmse_50, loss_ratio or marker_rms)");
   if (a.budget < 1) throw InputError("--budget", "", "must be at least 1 (trials)");
   if (a.model.empty()) throw InputError("--model", "", "name the plugin to calibrate");
   o.outDir = makeOutDir(a.common.out);
+  o.truthCubeLevel = a.truthCubeLevel;
+  o.truthCubeData = a.truthCubeData;
+  o.truthCubeContact = a.contact;
   o.cases = caseOptions(a.common);
   if (!a.dispatch.slurm.empty())
     throw InputError("--slurm", "",
@@ -96,13 +123,17 @@ int cmdCalibrate(const CalibrateArgs& a) {
                                          : fmt(1e3 * v.get<double>(), 4) + " mm";
   };
   std::cout << "\n"
-            << doc["plugin"].get<std::string>() << " calibrated on " << a.train.size()
-            << " scene(s), " << doc["evaluations"].get<int>() << " trials, "
-            << fmt(doc["wall_s"].get<double>(), 3) << " s; metric "
+            << doc["plugin"].get<std::string>() << " calibrated on "
+            << doc["train"]["per_scene"].size() << " scene(s), " << doc["evaluations"].get<int>()
+            << " trials, " << fmt(doc["wall_s"].get<double>(), 3) << " s; metric "
             << doc["metric"].get<std::string>() << "\n";
   for (const auto& [k, v] : doc["params"].items())
     std::cout << "  " << k << " = " << fmt(v.get<double>(), 5) << " (default "
               << fmt(doc["defaults"][k].get<double>(), 5) << ")\n";
+  const nlohmann::ordered_json material = doc.value("material", nlohmann::ordered_json::object());
+  for (const auto& [k, v] : material.items())
+    std::cout << "  organ " << k << " = " << fmt(v.get<double>(), 5) << " (default "
+              << fmt(doc["defaults"]["material." + k].get<double>(), 5) << ")\n";
   for (const auto& w : doc["warnings"]) std::cout << "warning: " << w.get<std::string>() << "\n";
   for (const char* set : {"train", "validation"}) {
     for (const auto& p : doc[set]["per_scene"])

@@ -6,6 +6,8 @@
 
 #include <deform/sdk/error.h>
 #include <deform/sdk/registry.h>
+#include <deform_harness/calibration.h>
+#include <deform_harness/scripts.h>
 
 #include <algorithm>
 #include <cmath>
@@ -264,9 +266,38 @@ ojson truthCubeDynamicScene(const TruthCubeData& d, size_t level, const std::vec
   j["plates"][0]["trajectory"] =
       ojson::array({{{"t", 0.0}, {"offset", vecJson(Vec3::Zero())}},
                     {{"t", 1.0}, {"offset", vecJson(Vec3(0, 0, -d.strains[level] * kSide))}}});
-  j["markers"].erase("measured");  // measured positions need a compared instant given in time
+  // The beads of this level, measured at the one compared instant: equilibrium.
+  j["markers"]["measured"] = ojson::array(
+      {{{"t", "equilibrium"}, {"points", pointsJson(truthCubeSceneFrame(d, int(level + 1)))}}});
   j["compare_at"] = "equilibrium";
   return j;
+}
+
+/// The quasi-static scene of one level alone: the plate moved to the level's strain in one
+/// step, compared (and the beads measured) at t = 1.
+ojson truthCubeStaticLevelScene(const TruthCubeData& d, size_t level,
+                                const std::vector<ojson>& models, const std::string& contact) {
+  ojson j = truthCubeScene(d, models, contact);
+  j["name"] = "truth-cube-level-" + std::to_string(level + 1);
+  j["duration"] = 1.0;
+  j["plates"][0]["trajectory"] =
+      ojson::array({{{"t", 0.0}, {"offset", vecJson(Vec3::Zero())}},
+                    {{"t", 1.0}, {"offset", vecJson(Vec3(0, 0, -d.strains[level] * kSide))}}});
+  j["compare_at"] = ojson::array({1.0});
+  j["markers"]["measured"] =
+      ojson::array({{{"t", 1.0}, {"points", pointsJson(truthCubeSceneFrame(d, int(level + 1)))}}});
+  return j;
+}
+
+/// The reference's parameters in the table: quadratic Gmsh tets whose surface nodes are the
+/// organ's vertices (refine_surface off: the plate and the base hold every surface node of
+/// their faces, the midside nodes following).
+ojson femParams(bool quick) {
+  return {{"element_order", 2}, {"elements", quick ? 1000 : 6000}, {"refine_surface", false}};
+}
+
+double dynamicCap(bool quick) {
+  return quick ? 3.0 : 5.0;
 }
 
 /// The markers of run `label` at each compared instant, read from the case's results.json.
@@ -309,7 +340,21 @@ std::vector<MatX3> markersOf(const CaseResult& c, const std::string& label, std:
 struct Source {
   std::string label, plugin;
   std::vector<std::pair<std::string, size_t>> levels;
+  /// A calibrated twin: the level it was trained on (0-based; -1: not a Truth Cube calibration)
+  /// and its note (the file and the fitted values).
+  bool calibrated = false;
+  int trainLevel = -1;
+  std::string calibrationNote;
 };
+
+/// "fitted poisson = 0.4995, thickness = 0.01 (FILE)".
+std::string fittedNote(const CalibrationParams& c) {
+  std::string values;
+  for (const nlohmann::json* set : {&c.material, &c.params})
+    for (const auto& [k, v] : set->items())
+      appendTo(values, k + " = " + (v.is_number() ? formatG(v.get<double>()) : v.dump()));
+  return "fitted " + values + " (" + c.file + ")";
+}
 
 std::string layersMm(const std::vector<double>& v) {
   std::string s;
@@ -334,6 +379,7 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
   // Each source's markers per level (empty when absent) and why not; each case read once.
   std::map<std::pair<std::string, std::string>, std::pair<std::vector<MatX3>, std::string>> read;
   struct Computed {
+    Source source;
     std::string label, plugin;
     std::vector<const CaseResult*> cases;
     std::vector<MatX3> markers;  ///< per level; 0 rows when absent
@@ -341,7 +387,7 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
   };
   std::vector<Computed> computed;
   for (const Source& src : sources) {
-    Computed k{src.label, src.plugin, {}, {}, {}};
+    Computed k{src, src.label, src.plugin, {}, {}, {}};
     for (const auto& [caseId, index] : src.levels) {
       const CaseResult* c = res.count(caseId) ? &res.at(caseId) : nullptr;
       const auto key = std::make_pair(caseId, src.label);
@@ -367,7 +413,11 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
         row["plate_mm"] = 1e3 * data.strains[l] * kSide;
         row["registration"] = reg;
         row["contact"] = contact;
-        row["calibrated"] = false;
+        row["calibrated"] = k.source.calibrated;
+        row["calibration"] = !k.source.calibrated ? ""
+                             : k.source.trainLevel < 0
+                                 ? "not fitted to the beads"
+                                 : (int(l) == k.source.trainLevel ? "train" : "validation");
         const CaseResult* c = k.cases[l];
         const RunRecord* r = c ? c->run(k.label) : nullptr;
         const bool ok = r && r->status == RunStatus::Ok && r->valid && k.markers[l].rows() > 0;
@@ -427,6 +477,11 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
           row["note"] = note;
           if (row["status"] == "ok") row["status"] = "no bead figures";
         }
+        if (k.source.calibrated) {
+          std::string note = row["note"].get<std::string>();
+          appendTo(note, k.source.calibrationNote);
+          row["note"] = note;
+        }
         out.push_back(row);
       }
     }
@@ -450,7 +505,8 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
   }
   for (const auto& [name, why] : absent) {
     ojson row = {{"model", name},           {"level", nullptr},   {"plate_mm", nullptr},
-                 {"registration", nullptr}, {"contact", contact}, {"calibrated", false}};
+                 {"registration", nullptr}, {"contact", contact}, {"calibrated", false},
+                 {"calibration", ""}};
     for (const char* key : {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm",
                             "relative_error", "max_error_mm", "measured_rms_mm", "bulge_mm",
                             "measured_bulge_mm", "vs_calculix_pct", "run_s", "ms_per_step"})
@@ -460,6 +516,34 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
     row["scene"] = "";
     row["note"] = "";
     out.push_back(row);
+  }
+  return out;
+}
+
+}  // namespace
+
+namespace {
+
+/// The given calibrations, then each shipped one of calibrations/truth-cube/ for a model none of
+/// them names (a file given by name wins).
+std::vector<CalibrationParams> truthCubeCalibrations(const std::vector<CalibrationParams>& given) {
+  std::vector<CalibrationParams> out = given;
+  const std::string dir = shippedCalibrationsDir();
+  std::error_code ec;
+  const fs::path folder = fs::path(dir) / "truth-cube";
+  if (dir.empty() || !fs::is_directory(folder, ec)) return out;
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(folder, ec))
+    if (e.path().extension() == ".json") files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  for (const fs::path& f : files) {
+    CalibrationParams c = readCalibrationFile(f.string());
+    c.shipped = true;
+    c.file = "calibrations/truth-cube/" + f.filename().string();
+    if (std::none_of(out.begin(), out.end(), [&](const CalibrationParams& x) {
+          return x.plugin == c.plugin && x.model == c.model;
+        }))
+      out.push_back(std::move(c));
   }
   return out;
 }
@@ -485,6 +569,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
        {"measured_bulge_mm", "measured bulge mm"},
        {"vs_calculix_pct", "vs CalculiX %"},
        {"calibrated", "calibrated"},
+       {"calibration", "calibration level"},
        {"run_s", "run s"},
        {"ms_per_step", "ms/step"},
        {"status", "status"},
@@ -497,39 +582,54 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
     throw InputError("--contact", "", "expected bonded or sliding, got " + contact);
   const std::string calculixProblem = pluginProblem(loader, kCalculix);
   const bool withCalculix = calculixProblem.empty();
-  // Reference and CalculiX on one quadratic tet mesh (deform/geometry/organ_tets.h): the same Gmsh
-  // tets, whose surface nodes are the organ's vertices (refine_surface off: the plate and the base
-  // hold every surface node of their faces, the midside nodes following).
+  // Reference and CalculiX on one quadratic tet mesh (deform/geometry/organ_tets.h).
   const long long elements = o.quick ? 1000 : 6000;
-  const ojson femParams = {{"element_order", 2}, {"elements", elements}, {"refine_surface", false}};
-  ojson displacementParams = femParams;
+  ojson displacementParams = femParams(o.quick);
   displacementParams["volumetric"] = "displacement";
-  std::vector<ojson> models = {model("reference_fem", "reference_fem", femParams),
+  std::vector<ojson> models = {model("reference_fem", "reference_fem", femParams(o.quick)),
                                model("reference_fem", kDisplacementLabel, displacementParams)};
-  if (withCalculix) models.push_back(model(kCalculix, kCalculix, femParams));
-  // The other models: the quasi-static ones in the same scene, the dynamic ones (with their
-  // volume network where they have one) in a settling scene per level; the others get a row
-  // saying why they have no figure.
+  if (withCalculix) models.push_back(model(kCalculix, kCalculix, femParams(o.quick)));
+  // The other models: the quasi-static ones in the same scene, the dynamic ones in a settling
+  // scene per level; the others get a row saying why they have no figure.
   std::vector<std::pair<std::string, std::string>> absent;
   std::vector<ojson> dynamic;
   for (const std::string& name : kOtherModels) {
-    const std::string problem = pluginProblem(loader, name);
-    if (!problem.empty()) {
-      absent.emplace_back(name, "missing plugin " + name + ": " + problem);
-      continue;
-    }
-    const ModelInfo& info = loader.load(name, name);
-    if (!info.has(Capability::Markers)) {
-      absent.emplace_back(
-          name, "unsupported: " + name + " has no markers capability (no interior mapping yet)");
-    } else if (!info.has(Capability::QuasiStatic)) {
-      ojson params = ojson::object();
-      if (info.param("network")) params["network"] = "volume";
-      dynamic.push_back(model(name, name, params));
+    const TruthCubeModel m = truthCubeModel(loader, name, o.quick);
+    if (!m.problem.empty()) {
+      absent.emplace_back(name, m.problem);
     } else {
-      models.push_back(model(name, name));
+      (m.dynamic ? dynamic : models).push_back(m.entry);
     }
   }
+  // Calibrated twins ("+cal"): the shipped calibrations on the Truth Cube (calibrations/
+  // truth-cube/, fitted to the beads by calibrate --truth-cube) and any --calibration for it.
+  // A twin of the parameters runs beside its model; one of the organ's material runs alone.
+  const std::vector<CalibrationParams> calibrations = truthCubeCalibrations(o.calibrations);
+  const std::string organ = calibrationOrgan(truthCubeScene(data, {}, contact)["organ"]);
+  struct Twin {
+    ojson entry;
+    const CalibrationParams* calibration;
+    bool dynamic;
+  };
+  std::vector<Twin> twins;
+  for (bool isDynamic : {false, true}) {
+    for (const ojson& m : isDynamic ? dynamic : models) {
+      const std::string plugin = m["plugin"].get<std::string>();
+      if (m["label"] != plugin) continue;  // the default configuration only
+      const CalibrationParams* c = nullptr;
+      for (const CalibrationParams& x : calibrations)
+        if (!c && x.plugin == plugin && x.model == plugin && calibrationApplies(x, organ)) c = &x;
+      if (!c) continue;
+      ojson twin = m;
+      twin["label"] = plugin + "+cal";
+      ojson params = ojson::parse(c->params.dump());
+      for (const auto& [k, v] : m["params"].items()) params[k] = v;
+      twin["params"] = params;
+      twins.push_back({twin, c, isDynamic});
+    }
+  }
+  for (const Twin& tw : twins)
+    if (tw.calibration->material.empty()) (tw.dynamic ? dynamic : models).push_back(tw.entry);
   t.notes = {
       "Data: " + file + " (" + std::to_string(data.beads.size()) + " beads, " +
           std::to_string(data.strains.size()) +
@@ -553,38 +653,95 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
       "max over all beads; the measured RMS is the beads' own RMS displacement. The bulge is "
       "the mean outward lateral displacement of the outer columns' middle layers.",
       "For orientation, the issue's CalculiX figures from 8 x 8 x 8 20-node hexes: 0.60 / 0.80 "
-      "mm (translation), 0.90 / 1.18 mm (bottom layer) at 5% / 12.5%.",
-      "Not calibrated: every row is at the published material (calibrated = false)."};
+      "mm (translation), 0.90 / 1.18 mm (bottom layer) at 5% / 12.5%."};
+  if (twins.empty()) {
+    t.notes.push_back(
+        "Not calibrated: every row is at the published material (calibrated = false); "
+        "calibrations/truth-cube/ holds none for these models.");
+  } else {
+    std::string files;
+    for (const Twin& tw : twins) appendTo(files, tw.calibration->file);
+    t.notes.push_back(
+        "Calibrated twins (+cal, calibrated = true): each model's calibratable parameters fitted "
+        "to the beads of one level (`deformbench calibrate --truth-cube LEVEL`, metric "
+        "marker_rms: the bead RMS after the translation registration), the level it was "
+        "trained on marked \"train\", the others \"validation\". reference_fem's twin fits "
+        "the organ's nu (E does not move the beads when the plate's displacement is "
+        "prescribed) and runs in a case of its own. Files: " +
+        files + ".");
+  }
   if (!withCalculix) t.notes.push_back("CalculiX: not available: " + calculixProblem + ".");
   // Sliding runs are other cases (a --resume never mixes them with the bonded ones).
   const std::string suffix = contact == "sliding" ? "_sliding" : "";
   const std::string id = "truth-cube/cube" + suffix;
   t.cases.push_back({id, truthCubeScene(data, models, contact)});
+  const auto dynamicId = [&](size_t l, const std::string& tail) {
+    return "truth-cube/dynamic_" + std::to_string(l + 1) + tail + suffix;
+  };
   // Where each model's markers at each level are: (case, index of the compared instant).
   std::vector<Source> sources;
-  for (const ojson& m : models) {
+  const auto addSource = [&](const ojson& m, const std::function<std::string(size_t)>& caseOf,
+                             bool perLevelScene) {
     Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
-    for (size_t l = 0; l < data.strains.size(); ++l) src.levels.emplace_back(id, l);
+    for (const Twin& tw : twins) {
+      if (tw.entry["label"] != src.label) continue;
+      src.calibrated = true;
+      src.trainLevel = tw.calibration->truthCube.value("level", 0) - 1;
+      src.calibrationNote = fittedNote(*tw.calibration);
+    }
+    for (size_t l = 0; l < data.strains.size(); ++l)
+      src.levels.emplace_back(caseOf(l), perLevelScene ? 0 : l);
     sources.push_back(src);
-  }
+  };
+  for (const ojson& m : models)
+    addSource(
+        m, [&](size_t) { return id; }, false);
   if (!dynamic.empty()) {
     t.notes.push_back(
         "Dynamic models (their volume network where they have one, default parameters): one "
         "scene per level (scenes/truth-cube/dynamic_N.json, dt 1 ms), the plate moved over 1 s "
         "and held, compared once settled (\"compare_at\": \"equilibrium\", capped at " +
-        formatG(o.quick ? 3.0 : 5.0) + " s).");
-    for (size_t l = 0; l < data.strains.size(); ++l) {
-      const std::string dyn = "truth-cube/dynamic_" + std::to_string(l + 1) + suffix;
-      t.cases.push_back(
-          {dyn, truthCubeDynamicScene(data, l, dynamic, o.quick ? 3.0 : 5.0, contact)});
-    }
-    for (const ojson& m : dynamic) {
-      Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
+        formatG(dynamicCap(o.quick)) + " s).");
+    for (size_t l = 0; l < data.strains.size(); ++l)
+      t.cases.push_back({dynamicId(l, ""),
+                         truthCubeDynamicScene(data, l, dynamic, dynamicCap(o.quick), contact)});
+    for (const ojson& m : dynamic)
+      addSource(
+          m, [&](size_t l) { return dynamicId(l, ""); }, true);
+  }
+  // Twins of the organ's material: their own cases, the organ's material replaced.
+  for (const Twin& tw : twins) {
+    if (tw.calibration->material.empty()) continue;
+    const auto withMaterial = [&](ojson scene) {
+      for (const auto& [k, v] : tw.calibration->material.items())
+        scene["organ"]["material"][k] = v.get<double>();
+      return scene;
+    };
+    const std::string plugin = tw.entry["plugin"].get<std::string>();
+    if (!tw.dynamic) {
+      const std::string cid = "truth-cube/cube_cal_" + plugin + suffix;
+      t.cases.push_back({cid, withMaterial(truthCubeScene(data, {tw.entry}, contact))});
+      addSource(
+          tw.entry, [cid](size_t) { return cid; }, false);
+    } else {
       for (size_t l = 0; l < data.strains.size(); ++l)
-        src.levels.emplace_back("truth-cube/dynamic_" + std::to_string(l + 1) + suffix, 0);
-      sources.push_back(src);
+        t.cases.push_back({dynamicId(l, "_cal_" + plugin),
+                           withMaterial(truthCubeDynamicScene(data, l, {tw.entry},
+                                                              dynamicCap(o.quick), contact))});
+      addSource(
+          tw.entry, [&](size_t l) { return dynamicId(l, "_cal_" + plugin); }, true);
     }
   }
+  // Each twin's rows follow its model's.
+  std::vector<std::string> order;
+  for (const Source& src : sources)
+    if (!src.calibrated) order.push_back(src.label);
+  const auto rank = [&order](const Source& src) {
+    const std::string base = src.calibrated ? src.label.substr(0, src.label.size() - 4) : src.label;
+    return std::find(order.begin(), order.end(), base) - order.begin();
+  };
+  std::stable_sort(sources.begin(), sources.end(),
+                   [&rank](const Source& a, const Source& b) { return rank(a) < rank(b); });
   t.rows = [data, sources, absent, contact](const Results& res, const fs::path& dir) {
     return truthCubeRows(data, sources, absent, contact, res, dir);
   };
@@ -592,3 +749,48 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
 }
 
 }  // namespace deform::harness::tables
+
+namespace deform::harness {
+
+TruthCubeModel truthCubeModel(PluginLoader& loader, const std::string& plugin, bool quick) {
+  TruthCubeModel m;
+  const std::string problem = pluginProblem(loader, plugin);
+  if (!problem.empty()) {
+    m.problem = "missing plugin " + plugin + ": " + problem;
+    return m;
+  }
+  const ModelInfo& info = loader.load(plugin, plugin);
+  if (plugin == "reference_fem" || plugin == tables::kCalculix) {
+    m.entry = tables::model(plugin, plugin, tables::femParams(quick));
+  } else if (!info.has(Capability::Markers)) {
+    m.problem = "unsupported: " + plugin + " has no markers capability (no interior mapping yet)";
+  } else {
+    nlohmann::ordered_json params = nlohmann::ordered_json::object();
+    // Dynamic models with a volume network use it: the beads are inside.
+    if (!info.has(Capability::QuasiStatic) && info.param("network")) params["network"] = "volume";
+    m.entry = tables::model(plugin, plugin, params);
+    m.dynamic = !info.has(Capability::QuasiStatic);
+  }
+  return m;
+}
+
+std::vector<double> truthCubeStrains(const std::string& dataFile) {
+  return tables::readTruthCubeData(dataFile.empty() ? tables::defaultDataFile() : dataFile).strains;
+}
+
+nlohmann::ordered_json truthCubeLevelScene(const std::string& dataFile, size_t level,
+                                           const TruthCubeModel& m, const std::string& contact,
+                                           bool quick) {
+  const tables::TruthCubeData d =
+      tables::readTruthCubeData(dataFile.empty() ? tables::defaultDataFile() : dataFile);
+  if (level >= d.strains.size())
+    throw InputError("--truth-cube", std::to_string(level + 1),
+                     "the data hold levels 1 to " + std::to_string(d.strains.size()));
+  if (contact != "bonded" && contact != "sliding")
+    throw InputError("--contact", "", "expected bonded or sliding, got " + contact);
+  return m.dynamic ? tables::truthCubeDynamicScene(d, level, {m.entry}, tables::dynamicCap(quick),
+                                                   contact)
+                   : tables::truthCubeStaticLevelScene(d, level, {m.entry}, contact);
+}
+
+}  // namespace deform::harness

@@ -112,7 +112,9 @@ struct PlateSpec {
 /// through its own interior mapping (Model::bindMarkers), with optional measured positions at
 /// compared instants (then results.json gets their errors).
 struct MarkerFrame {
-  Real t = 0;    ///< s, one of the compared instants
+  Real t = 0;  ///< s, one of the compared instants
+  /// "t": "equilibrium": the one compared instant of a scene compared at equilibrium (t unused).
+  bool atEquilibrium = false;
   MatX3 points;  ///< #markers by 3, m
 };
 struct MarkerSpec {
