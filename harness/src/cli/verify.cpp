@@ -4,6 +4,7 @@
 #include <deform/engine/plugin_loader.h>
 #include <deform_harness/verify.h>
 
+#include <cmath>
 #include <iostream>
 
 namespace deform::harness::cli {
@@ -52,7 +53,13 @@ int cmdVerify(const std::string& scene, const CommonArgs& a, int steps) {
               << fmt(100 * in.rmsRelative) << "% RMS, " << fmt(100 * in.maxRelative)
               << "% max of the RMS displacement " << fmt(1e3 * in.referenceRms) << " mm ("
               << in.vertices << " vertices); reference_fem " << times(in.reference) << ", calculix "
-              << times(in.calculix) << "\n";
+              << times(in.calculix)
+              << (std::isnan(in.formulationRmsRelative)
+                      ? std::string()
+                      : "; the scene's mean-dilatation reference differs from reference_fem by " +
+                            fmt(100 * in.formulationRmsRelative) + "% RMS, " +
+                            fmt(100 * in.formulationMaxRelative) + "% max")
+              << "\n";
   for (const std::string& note : r.notes) std::cout << "note: " << note << "\n";
   if (!r.message.empty())
     std::cout << "warning: " << r.message << "\n";
