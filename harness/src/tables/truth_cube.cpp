@@ -654,6 +654,15 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
       "the mean outward lateral displacement of the outer columns' middle layers.",
       "For orientation, the issue's CalculiX figures from 8 x 8 x 8 20-node hexes: 0.60 / 0.80 "
       "mm (translation), 0.90 / 1.18 mm (bottom layer) at 5% / 12.5%."};
+  std::string untwinned;
+  for (const std::string& name : kOtherModels)
+    if (std::none_of(twins.begin(), twins.end(),
+                     [&](const Twin& tw) { return tw.entry["plugin"] == name; }) &&
+        std::none_of(absent.begin(), absent.end(), [&](const auto& a) { return a.first == name; }))
+      appendTo(untwinned, name);
+  if (!twins.empty() && !untwinned.empty())
+    t.notes.push_back("No calibrated twin (no fit in calibrations/truth-cube/): " + untwinned +
+                      ".");
   if (twins.empty()) {
     t.notes.push_back(
         "Not calibrated: every row is at the published material (calibrated = false); "
