@@ -267,6 +267,14 @@ PY
     --model reference_fem --metric marker_rms --material poisson --out "$work/x"
   check level "the data hold levels 1 to 2" --truth-cube 3 --model reference_fem \
     --material poisson --out "$work/x"
+  # A fit of the material is the scene's: `run --calibration` refuses it in one line.
+  set +e
+  "${db[@]}" run "$work/measured.json" --out "$work/run" --no-cache \
+    --calibration "$work/cal/calibration.json" >/dev/null 2>"$work/material.err"
+  code=$?
+  set -e
+  [[ $code == 2 ]] && grep -qF "/material: fits the organ's material" "$work/material.err" \
+    || { cat "$work/material.err"; fail "a material fit given to run --calibration"; }
   ;;
 *) fail "unknown mode $mode" ;;
 esac

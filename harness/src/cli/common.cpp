@@ -101,6 +101,13 @@ std::vector<CalibrationParams> readCalibrations(const std::vector<std::string>& 
   for (const auto& [f, shipped] : expandShipped(files)) {
     CalibrationParams c = readCalibrationFile(f);
     c.shipped = shipped;
+    // A fit of the organ's material is the whole scene's: no twin can hold it (shipped ones are
+    // read by tables truth-cube, and passed over elsewhere).
+    if (!shipped && !c.material.empty())
+      throw InputError(f, "/material",
+                       "fits the organ's material, which belongs to a whole scene, not to a "
+                       "model's calibrated twin: write it into the scene's organ (tables "
+                       "truth-cube reads such fits from calibrations/truth-cube/)");
     // One file per model and organ: calibrations of one model on different organs (a table
     // over several phantoms) each apply to their own organ's cases.
     for (const CalibrationParams& o : out) {
