@@ -213,29 +213,7 @@ TEST(BulletSoftBodyModel, ASlidingPlateLeavesTheTopFreeAlongItWhereABondedOneHol
     ASSERT_TRUE(r.ok);
     EXPECT_NEAR(r.drop, 0.002, 1e-9);
   }
-  const auto shear = [&](bool sliding) {
-    m.reset();
-    GraspInput g;
-    for (int v : press.top) g.vertices.push_back(v);
-    g.targets = o.surface.V(g.vertices, Eigen::all);
-    if (sliding) g.slideNormal = Vec3(0, 0, -1);
-    StepInput in;
-    in.dt = kDt;
-    in.grasps = {g};
-    for (int v : press.top) in.loads.push_back(PointLoad::onVertex(v, Vec3(0.01, 0, 0)));
-    Real dx = 0, dz = 0;
-    for (int s = 0; s < 100; ++s) EXPECT_EQ(m.step(in), StepStatus::Ok);
-    for (int v : press.top) {
-      dx += (m.surface()(v, 0) - o.surface.V(v, 0)) / Real(press.top.size());
-      dz = std::max(dz, std::abs(m.surface()(v, 2) - o.surface.V(v, 2)));
-    }
-    std::printf("bullet_softbody %s, 0.01 N along x on each top vertex: top moves %.4f mm\n",
-                sliding ? "sliding" : "bonded", 1e3 * dx);
-    EXPECT_LT(dz, 1e-12);
-    return dx;
-  };
-  EXPECT_GT(shear(true), 1e-4);
-  EXPECT_NEAR(shear(false), 0, 1e-12);
+  testing::expectSlidingLetsTheTopSlide(m, o, 0.01, 100, 1e-4, 1e-12, "bullet_softbody");
 }
 
 }  // namespace
