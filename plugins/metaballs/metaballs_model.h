@@ -23,8 +23,9 @@
 // skinning offsets do not change within the jaws: the carrying spheres keep their rotations of
 // the closing while held, as the jaws do not turn the tissue they hold; the radii still change,
 // measured residual 0.1-0.4 mm on the liver lift).
-// Sliding plates (GraspInput::slideNormal, along a coordinate axis a): the same correction on
-// coordinate a alone, dc_C,a = W_C^+ (t_a - v_a), gives each carrying sphere a target coordinate;
+// Sliding plates (GraspInput::slideNormal, along a coordinate axis a): a correction on coordinate
+// a alone, one shift of all carrying spheres fitted to the gaps t_a - v_a (the plate moves
+// rigidly; a minimum-norm W_C^+ pulled them apart), gives each carrying sphere a target;
 // the spheres stay free (their inverse mass kept) and their coordinate a is put on it after the
 // prediction and after every sweep, the other two left to the constraints; after the skinning the
 // correction along a is applied again as for a grasp (their radii and rotations kept too: the
@@ -89,7 +90,8 @@ class MetaballsModel final : public Model {
   /// fixed or carrying a bonded grasp are left out); rebuilds a plate's carrying set and W_C^+
   /// when its vertices or the bonded set change. After collectGrasps().
   void collectSliding(const StepInput& in);
-  /// dc_C,a = W_C^+ (t_a - v_a) of sliding set k for the current m_surface.
+  /// The carrying spheres' shift along the axis of sliding set k for the current m_surface (one
+  /// value for all of them, least squares over the vertices' gaps t_a - v_a).
   VecX slidingCorrection(size_t k) const;
   /// Puts the sliding spheres' axis coordinate in the padded rows P on their targets.
   void holdSliding(Real* P) const;
@@ -173,7 +175,7 @@ class MetaballsModel final : public Model {
     int axis = -1;
     VecX targets;
     std::vector<int> carry;
-    MatX pinv;
+    VecX share;                    // #verts: each vertex's total weight on the carrying spheres
     std::vector<Real> radii, rot;  // radii, rotations (9 each) at the closing
     VecX carryTarget;
   };

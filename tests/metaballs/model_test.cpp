@@ -43,26 +43,16 @@ Real rmsToRest(const MatX3& a, const MatX3& b) {
 }
 
 // A sliding plate (GraspInput::slideNormal): the spheres carrying the top stay free, their
-// vertical coordinate held on the plate through the skinning's correction. The 10 cm cube, its
-// bottom face fixed, pressed 2 mm: both plates push the top down by the travel; the bonded top
-// stays put laterally, the sliding one moves, outward at 150 spheres (+0.37 mm) but inward at
-// 250 and 900 (-0.11, -0.21 mm, steady over 0.6 s of hold): this sphere network under
-// compression draws its free top in (its stretch links alone: -0.28 mm at 900), it has no
-// Poisson coupling of its own. That the plate leaves the top free along it is checked with a
-// load along x on the top vertices: they slide under the sliding plate and stay under the
-// bonded one, on the plate either way (within the skinning's residual).
-TEST(MetaballsModel, ASlidingPlateLeavesTheTopFreeAlongItWhereABondedOneHoldsIt) {
+// vertical coordinate held on the plate (one shift of them all, fitted through the skinning). The
+// 10 cm cube, its bottom face fixed, pressed 2 mm: against a bonded plate the top spreads out
+// (0.43 mm at 150 spheres; 0.12 and 0.06 mm at 250 and 900) and a load along the plate slides it
+// (tests/support/plate.h; no reaction force to compare); on the plate either way within the
+// skinning's residual (the sliding top 1.943 mm down, the bonded one 1.987 mm).
+TEST(MetaballsModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
   const testing::CubePress press = testing::cubePress(0.5);
   Rig rig(press.organ.surface, {}, press.organ.fixed.boxes);
-  for (const bool sliding : {true, false}) {
-    const testing::PlateRun r =
-        testing::pressByPlate(rig.model, rig.organ, sliding, 0.002, 100, 100);
-    std::printf("metaballs %s: drop %.4f mm, outward %.4f mm\n", sliding ? "sliding" : "bonded",
-                1e3 * r.drop, 1e3 * r.outward);
-    ASSERT_TRUE(r.ok);
-    EXPECT_NEAR(r.drop, 0.002, 0.05 * 0.002);
-    if (!sliding) EXPECT_LT(std::abs(r.outward), 1e-6);
-  }
+  testing::expectSlidingSpreadsTheTopAndEasesThePlate(rig.model, rig.organ, 0.002, 100, 100,
+                                                      "metaballs");
   testing::expectSlidingLetsTheTopSlide(rig.model, rig.organ, 0.01, 100, 1e-4, 1e-4, "metaballs");
 }
 
