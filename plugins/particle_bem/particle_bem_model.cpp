@@ -361,6 +361,7 @@ void ParticleBemModel::reset() {
   m_carry.clear();
   m_carryCol.assign(size_t(m_rest.rows()), -1);
   m_sliding.clear();
+  m_slidingMask.assign(size_t(m_rest.rows()), 0);
 }
 
 Counts ParticleBemModel::counts() const {
@@ -501,6 +502,9 @@ void ParticleBemModel::prescribeSliding(const StepInput& in) {
     s.carryTarget = s.carryStart + dx;
   }
   m_sliding.resize(count);
+  m_slidingMask.assign(size_t(m_rest.rows()), 0);
+  for (const SlidingSet& s : m_sliding)
+    for (int i : s.carry) m_slidingMask[size_t(i)] = 1;
 }
 
 void ParticleBemModel::applySliding(const StepInput& in) {
@@ -624,8 +628,8 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
       const Real len = d.norm();
       if (!(len > 0) || len >= m_repulsionDistance) continue;
       const Vec3 f = m_repulsionStiffness * (m_repulsionDistance - len) * d / len;
-      if (!m_fixedMask[i]) m_P.add(i, f / m_nodalArea[i]);
-      if (!m_fixedMask[j]) m_P.add(j, -f / m_nodalArea[j]);
+      if (!m_fixedMask[i] && !m_slidingMask[i]) m_P.add(i, f / m_nodalArea[i]);
+      if (!m_fixedMask[j] && !m_slidingMask[j]) m_P.add(j, -f / m_nodalArea[j]);
       ++m_numeric["repulsion_pairs"];
     }
   }
