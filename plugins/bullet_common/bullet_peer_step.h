@@ -3,10 +3,15 @@
 // Not a plugin: a header both include (through the deform_bullet_double target).
 //
 // Before the step: grasped nodes become kinematic (Bullet inverse mass 0; the model gives them the
-// velocity that lands them on their targets), released nodes get their inverse mass back.
+// velocity that lands them on their targets), released nodes get their inverse mass back. Nodes
+// under a sliding plate (GraspInput::slideNormal) keep their mass: Bullet has no per-axis
+// constraint on a node, so their velocity along the plate's normal is set to land them on its
+// plane (aimSlidingNodes) and, after the step, their position and velocity along the normal are
+// set again (the solve moved them), the tangential components left to Bullet.
 //
 // After the step (finishBulletStep):
-//   1. grasped nodes are put exactly on their targets;
+//   1. grasped nodes are put exactly on their targets, sliding nodes on their plate's plane,
+//      moving with it along its normal;
 //   2. contact with the scene's rigid instruments (StepInput::contact) by the SDK's shared
 //      response, the same for every model (deform/sdk/contact.h, respondToContact()): each node is
 //      a sphere of the contact thickness; a penetrating node i with inverse mass w_i > 0 moves out,
@@ -24,10 +29,19 @@
 #include <deform/sdk/contact.h>
 #include <deform/sdk/model.h>
 
+#include <algorithm>
 #include <chrono>
 #include <vector>
 
 namespace deform::bullet_common {
+
+/// A node under a sliding plate in this step: n . x ends at `offset`, from `start` (n . x when
+/// the step began); free along the plate.
+struct SlidingNode {
+  int node;
+  Vec3 normal;
+  Real offset, start;
+};
 
 /// Per-model state of the shared step tail. Scratch members keep their capacity across steps.
 struct PeerStepState {
@@ -36,27 +50,57 @@ struct PeerStepState {
   std::vector<int> grasped;       ///< sorted nodes kinematic in the last step
   std::vector<int> graspScratch;
   std::vector<NodeGrasp> nodeGrasps;  ///< this step's grasps on the nodes carrying the vertices
+  std::vector<SlidingNode> sliding;   ///< this step's nodes under sliding plates (not bonded)
   MatX3 velocity;                     ///< #N by 3, m/s (contact only)
   VecX invMass;                       ///< #N, 1/kg (contact only)
   MatX3 before;                       ///< #N by 3, positions before the contact response
   std::chrono::steady_clock::time_point start;
 };
 
-/// Makes the nodes carrying the grasped surface vertices of `grasps` kinematic (inverse mass 0)
-/// and gives released nodes inverseMass back; records the step's start time. surfaceNode: the
-/// node of each organ surface vertex (empty: the identity). Returns true when the set changed
+/// Makes the nodes carrying the grasped surface vertices of bonded `grasps` kinematic (inverse
+/// mass 0) and gives released nodes inverseMass back; lists the nodes under sliding plates (a node
+/// a bonded grasp also holds stays bonded); records the step's start time. surfaceNode: the node
+/// of each organ surface vertex (empty: the identity). Returns true when the kinematic set changed
 /// (the caller refreshes whatever Bullet derives from the inverse masses).
 inline bool beginBulletStep(btSoftBody& b, const std::vector<btScalar>& inverseMass,
                             const std::vector<GraspInput>& grasps,
                             const std::vector<int>& surfaceNode, PeerStepState& s) {
   s.start = std::chrono::steady_clock::now();
   graspsOnNodes(grasps, surfaceNode, s.nodeGrasps);
-  graspedNodeSet(s.nodeGrasps, s.graspScratch);
+  s.graspScratch.clear();
+  for (const NodeGrasp& g : s.nodeGrasps)
+    if (!g.sliding()) s.graspScratch.insert(s.graspScratch.end(), g.nodes.begin(), g.nodes.end());
+  std::sort(s.graspScratch.begin(), s.graspScratch.end());
+  s.graspScratch.erase(std::unique(s.graspScratch.begin(), s.graspScratch.end()),
+                       s.graspScratch.end());
+  s.sliding.clear();
+  for (const NodeGrasp& g : s.nodeGrasps) {
+    if (!g.sliding()) continue;
+    const Vec3 n = g.slideNormal.normalized();
+    for (size_t k = 0; k < g.nodes.size(); ++k) {
+      const int i = g.nodes[k];
+      if (std::binary_search(s.graspScratch.begin(), s.graspScratch.end(), i)) continue;
+      const btVector3& x = b.m_nodes[i].m_x;
+      s.sliding.push_back({i, n, n.dot(g.targets.row(Eigen::Index(k)).transpose()),
+                           n.x() * x.x() + n.y() * x.y() + n.z() * x.z()});
+    }
+  }
   if (s.graspScratch == s.grasped) return false;
   for (int i : s.grasped) b.m_nodes[i].m_im = inverseMass[size_t(i)];
   for (int i : s.graspScratch) b.m_nodes[i].m_im = 0;
   s.grasped.swap(s.graspScratch);
   return true;
+}
+
+/// Gives the nodes under sliding plates the velocity along the normal that lands them on the
+/// plate's plane at the end of a step of dt (the tangential velocity kept).
+inline void aimSlidingNodes(btSoftBody& b, const PeerStepState& s, Real dt) {
+  for (const SlidingNode& h : s.sliding) {
+    btSoftBody::Node& node = b.m_nodes[h.node];
+    const btVector3 n(h.normal.x(), h.normal.y(), h.normal.z());
+    node.m_v += ((h.offset - h.start) / dt - n.dot(node.m_v)) * n;
+    node.m_vn = node.m_v;
+  }
 }
 
 /// Node positions of b into x (#N by 3).
@@ -75,8 +119,17 @@ inline StepStatus finishBulletStep(btSoftBody& b, const StepInput& in, Real dt, 
                                    MatX3* surface = nullptr) {
   using Clock = std::chrono::steady_clock;
   for (const NodeGrasp& g : s.nodeGrasps)
-    for (size_t k = 0; k < g.nodes.size(); ++k)
-      b.m_nodes[g.nodes[k]].m_x = btVector3(g.targets(k, 0), g.targets(k, 1), g.targets(k, 2));
+    if (!g.sliding())
+      for (size_t k = 0; k < g.nodes.size(); ++k)
+        b.m_nodes[g.nodes[k]].m_x = btVector3(g.targets(k, 0), g.targets(k, 1), g.targets(k, 2));
+  for (const SlidingNode& h : s.sliding) {
+    btSoftBody::Node& node = b.m_nodes[h.node];
+    const btVector3 n(h.normal.x(), h.normal.y(), h.normal.z());
+    node.m_x += (h.offset - n.dot(node.m_x)) * n;
+    node.m_v += ((h.offset - h.start) / dt - n.dot(node.m_v)) * n;
+    node.m_vn = node.m_v;
+  }
+  if (!s.sliding.empty()) b.updateNormals();  // the volume force of the next step reads them
   copyNodes(b, x);
 
   const auto c0 = Clock::now();

@@ -220,11 +220,12 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
       node.m_vn = node.m_v;
     }
   for (const NodeGrasp& gr : m_tail.nodeGrasps)
-    for (size_t k = 0; k < gr.nodes.size(); ++k) {
+    for (size_t k = 0; k < gr.nodes.size() && !gr.sliding(); ++k) {
       btSoftBody::Node& node = b.m_nodes[gr.nodes[k]];
       node.m_v = (btVector3(gr.targets(k, 0), gr.targets(k, 1), gr.targets(k, 2)) - node.m_x) / dt;
       node.m_vn = node.m_v;
     }
+  bullet_common::aimSlidingNodes(b, m_tail, dt);  // free along their plate (bullet_peer_step.h)
 
   w.world->stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
   return bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase, &m_surfaceNode,

@@ -179,11 +179,12 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
   if (bullet_common::beginBulletStep(b, w.inverseMass, in.grasps, {}, m_tail))
     b.updateLinkConstants();  // link c0 = (w_a + w_b) / kLST
   for (const NodeGrasp& g : m_tail.nodeGrasps)
-    for (size_t k = 0; k < g.nodes.size(); ++k) {
+    for (size_t k = 0; k < g.nodes.size() && !g.sliding(); ++k) {
       btSoftBody::Node& node = b.m_nodes[g.nodes[k]];
       const btVector3 target(g.targets(k, 0), g.targets(k, 1), g.targets(k, 2));
       node.m_v = (target - node.m_x) / dt;
     }
+  bullet_common::aimSlidingNodes(b, m_tail, dt);  // free along their plate (bullet_peer_step.h)
   for (const PointLoad& l : in.loads)
     for (size_t k = 0; k < l.vertices.size(); ++k) {
       const Vec3 f = l.weights[k] * l.force;

@@ -237,7 +237,8 @@ StepStatus MassSpringModel::stepLocalGlobal(const StepInput& in, Real h) {
   m_lgConstrained.assign(N, 0);
   for (int i = 0; i < N; ++i) m_lgConstrained[i] = m_invMass[i] == 0.0;
   for (const NodeGrasp& g : m_nodeGrasps)
-    for (int i : g.nodes) m_lgConstrained[i] = 1;
+    if (!g.sliding())
+      for (int i : g.nodes) m_lgConstrained[i] = 1;
   if (h != m_lgH || m_lgConstrained != m_lgFactoredFor) factorLocalGlobal(h);
   const unsigned char* fixed = m_lgConstrained.data();
   const std::vector<int>& perm = m_lgChol->perm();
@@ -256,7 +257,24 @@ StepStatus MassSpringModel::stepLocalGlobal(const StepInput& in, Real h) {
                    (h * h) * (m_f.row(i) * m_invMass[i] + in.gravity.transpose());
   }
   for (const NodeGrasp& g : m_nodeGrasps)
-    for (size_t k = 0; k < g.nodes.size(); ++k) m_lgY.row(g.nodes[k]) = g.targets.row(k);
+    if (!g.sliding())
+      for (size_t k = 0; k < g.nodes.size(); ++k) m_lgY.row(g.nodes[k]) = g.targets.row(k);
+  // Nodes under a sliding plate stay free in A; their normal coordinate is held on the plate's
+  // plane (y, every iterate) and their residual along it is zeroed before each solve. The fixed
+  // point is then the constrained one: a correction z = A^-1 r with r zero on the held
+  // coordinates, z nonzero only on them, would give z^T A z = z^T r = 0, so z = 0 and r = 0.
+  m_lgSliding.clear();
+  if (!m_sliding.empty()) {
+    std::vector<int> rowOf(static_cast<size_t>(N));
+    for (int k = 0; k < N; ++k) rowOf[size_t(perm[k])] = k;
+    for (const SlidingHold& sh : m_sliding) {
+      m_lgY(sh.node, sh.axis) = sh.offset;
+      m_lgSliding.push_back({rowOf[size_t(sh.node)], sh.axis, sh.offset});
+    }
+  }
+  const auto holdSlidingRows = [&](V4* X) {
+    for (const SlidingHold& sh : m_lgSliding) X[sh.node][sh.axis] = sh.offset;
+  };
 
   // In the factor's order: y, and the first iterate (y, or y plus the previous correction).
   m_lgY4.resize(N);
@@ -271,6 +289,7 @@ StepStatus MassSpringModel::stepLocalGlobal(const StepInput& in, Real h) {
     V4* X = rows(m_lgX);
     const V4* W = rows(m_lgWarm);
     for (int k = 0; k < N; ++k) X[k] += W[k];
+    holdSlidingRows(X);
   }
   m_lgXPrev = m_lgX;
   m_lgR.resize(N);
@@ -293,6 +312,7 @@ StepStatus MassSpringModel::stepLocalGlobal(const StepInput& in, Real h) {
     for (int k = 0; k < N; ++k) R[k] = rowMass[k] * (Y[k] - X[k]);
     m_degenerate += local(X, R, m_lgSprings.data(), m_lgSprings.size());
     for (int k : m_lgConstrainedRows) R[k] = V4{0, 0, 0, 0};
+    for (const SlidingHold& sh : m_lgSliding) R[sh.node][sh.axis] = 0;
     const auto b = Clock::now();
     m_lgChol->solveInPlace(m_lgR.data());  // R: the correction
     const auto c = Clock::now();
@@ -313,6 +333,7 @@ StepStatus MassSpringModel::stepLocalGlobal(const StepInput& in, Real h) {
         X[k] += R[k];
       }
     }
+    holdSlidingRows(X);
     localMs += std::chrono::duration<double, std::milli>(b - a).count();
     globalMs += std::chrono::duration<double, std::milli>(c - b).count();
   }

@@ -396,14 +396,43 @@ StepStatus MassSpringModel::checkDivergence() const {
   return (std::isfinite(sum) && far <= m_boxHalf) ? StepStatus::Ok : StepStatus::Diverged;
 }
 
-// Grasped nodes end the step on their targets, moving with the tool's velocity.
+// Grasped nodes end the step on their targets, moving with the tool's velocity; nodes under a
+// sliding plate end on its plane, moving with it along its normal (free along the plate).
 void MassSpringModel::applyConstraints(const StepInput& in, Real h, const MatX3& xOld) {
   for (const NodeGrasp& g : m_nodeGrasps) {
+    if (g.sliding()) continue;
     for (size_t k = 0; k < g.nodes.size(); ++k) {
       const int i = g.nodes[k];
       m_x.row(i) = g.targets.row(k);
       m_v.row(i) = (g.targets.row(k) - xOld.row(i)) / h;
     }
+  }
+  holdSliding(1, h, m_x.data(), 3, m_v.data(), 3);
+}
+
+void MassSpringModel::collectSliding() {
+  // m_graspMask marks the bonded grasps' nodes here: a node a bonded grasp holds stays bonded.
+  m_sliding.clear();
+  for (const NodeGrasp& g : m_nodeGrasps) {
+    if (!g.sliding()) continue;
+    int axis = -1;
+    for (int a = 0; a < 3; ++a)
+      if (std::abs(g.slideNormal[a]) == 1 && g.slideNormal.squaredNorm() == 1) axis = a;
+    if (axis < 0)
+      throw InputError("massspring", "grasp of tool " + std::to_string(g.tool),
+                       "a sliding plate's normal must lie along x, y or z");
+    for (size_t k = 0; k < g.nodes.size(); ++k)
+      if (!m_graspMask[size_t(g.nodes[k])])
+        m_sliding.push_back({g.nodes[k], axis, g.targets(Eigen::Index(k), axis)});
+  }
+}
+
+void MassSpringModel::holdSliding(Real t, Real h, Real* x, int xstride, Real* v,
+                                  int vstride) const {
+  for (const SlidingHold& s : m_sliding) {
+    const Real xo = m_xOld(s.node, s.axis);
+    x[size_t(xstride) * size_t(s.node) + size_t(s.axis)] = xo + t * (s.offset - xo);
+    if (v) v[size_t(vstride) * size_t(s.node) + size_t(s.axis)] = (s.offset - xo) / h;
   }
 }
 
@@ -417,7 +446,10 @@ StepStatus MassSpringModel::step(const StepInput& in) {
   loadsOnNodes(in.loads, m_surfaceRows, m_nodeForces);
   for (size_t i = 0; i < m_graspMask.size(); ++i) m_graspMask[i] = 0;
   for (const NodeGrasp& g : m_nodeGrasps)
-    for (int i : g.nodes) m_graspMask[i] = 1;
+    if (!g.sliding())
+      for (int i : g.nodes) m_graspMask[i] = 1;
+  collectSliding();
+  for (const SlidingHold& sh : m_sliding) m_graspMask[size_t(sh.node)] = 1;
   for (const NodeGrasp& g : m_nodeGrasps)
     for (int i : g.nodes) m_xOld.row(i) = m_x.row(i);
   const bool penalty = in.contact && in.contact->params().method == ContactMethod::Penalty;
@@ -489,6 +521,7 @@ StepStatus MassSpringModel::step(const StepInput& in) {
       if (sub + 1 < n) {
         const Real t = Real(sub + 1) / n;
         for (const NodeGrasp& g : m_nodeGrasps) {
+          if (g.sliding()) continue;
           for (size_t k = 0; k < g.nodes.size(); ++k) {
             const int i = g.nodes[k];
             for (int c = 0; c < 3; ++c) {
@@ -498,6 +531,7 @@ StepStatus MassSpringModel::step(const StepInput& in) {
             }
           }
         }
+        holdSliding(t, h, xv, 8, xv + 4, 8);
       }
     }
     {
@@ -590,12 +624,19 @@ StepStatus MassSpringModel::stepImplicit(const StepInput& in, Real h) {
     }
   }
   for (const NodeGrasp& g : m_nodeGrasps) {
+    if (g.sliding()) continue;
     for (size_t k = 0; k < g.nodes.size(); ++k) {
       const int i = g.nodes[k];
       for (int c = 0; c < 3; ++c) m_constrainedDof[3 * i + c] = 1;
       m_prescribed.segment<3>(3 * i) =
           ((g.targets.row(k) - m_x.row(i)) / h - m_v.row(i)).transpose();
     }
+  }
+  // A sliding plate prescribes the normal dof only.
+  for (const SlidingHold& sh : m_sliding) {
+    const int d = 3 * sh.node + sh.axis;
+    m_constrainedDof[size_t(d)] = 1;
+    m_prescribed[d] = (sh.offset - m_x(sh.node, sh.axis)) / h - m_v(sh.node, sh.axis);
   }
   rhs.noalias() -= m_A * m_prescribed;
   for (int col = 0; col < m_A.outerSize(); ++col) {
@@ -663,8 +704,14 @@ void MassSpringModel::computeGraspForces(const StepInput& in) {
     if (m_graspMask[s.a]) m_f.row(s.a) += fa.transpose();
     if (m_graspMask[s.b]) m_f.row(s.b) -= fa.transpose();
   }
-  for (size_t g = 0; g < in.grasps.size(); ++g)
+  for (size_t g = 0; g < in.grasps.size(); ++g) {
     for (int node : m_nodeGrasps[g].nodes) m_graspForces[g] += m_f.row(node).transpose();
+    // A sliding plate takes the normal component only (the tangential is left to the tissue).
+    if (m_nodeGrasps[g].sliding()) {
+      const Vec3 n = m_nodeGrasps[g].slideNormal;
+      m_graspForces[g] = n * n.dot(m_graspForces[g]);
+    }
+  }
 }
 
 Counts MassSpringModel::counts() const {

@@ -158,7 +158,22 @@ class MassSpringModel final : public Model {
 
   bool m_surfaceIdentity = true;
   std::vector<int> m_surfaceRows;
-  std::vector<NodeGrasp> m_nodeGrasps;             // this step's grasps on nodes
+  std::vector<NodeGrasp> m_nodeGrasps;  // this step's grasps on nodes
+  /// This step's nodes under a sliding plate (GraspInput::slideNormal) and not also held by a
+  /// bonded grasp: coordinate `axis` (the plate's normal) ends the step at `offset` and moves with
+  /// the plate; the other two are free (a frictionless plate).
+  struct SlidingHold {
+    int node;
+    int axis;
+    Real offset;
+  };
+  std::vector<SlidingHold> m_sliding;
+  /// m_sliding from m_nodeGrasps (throws InputError for a normal off the coordinate axes).
+  void collectSliding();
+  /// Puts the sliding nodes' normal coordinate at the fraction t of its way from the step's start
+  /// (m_xOld) to the plate and gives it the plate's velocity (x: rows of `stride` doubles, the
+  /// velocity at +velocityOffset; stride 3 and no velocity for an N x 3 matrix's data).
+  void holdSliding(Real t, Real h, Real* x, int stride, Real* v, int vstride) const;
   std::vector<std::pair<int, Vec3>> m_nodeForces;  // this step's load shares on nodes
   MatX3 m_surface;
   MatX3i m_contactF;     // surface triangles as node rows: the collision proxy
@@ -189,6 +204,7 @@ class MassSpringModel final : public Model {
   std::vector<Real> m_lgRowMass;         // node masses in the factor's order, 0 if constrained
   std::vector<int> m_lgConstrainedRows;  // constrained nodes' rows
   std::vector<Row4> m_lgR, m_lgX, m_lgXPrev, m_lgY4, m_lgWarm;
+  std::vector<SlidingHold> m_lgSliding;  // m_sliding with `node` the factor's row
   MatX3 m_lgY;
   long long m_lgFactorisations = 0;
 

@@ -94,7 +94,7 @@ DEFORM_PLUGIN(registry) {
       "2015, A Chebyshev semi-iterative approach for accelerating projective and position-based "
       "dynamics, ACM TOG 34(6) 246",
       {C::Grasp, C::PointForce, C::Gravity, C::ReactionForce, C::TetInput, C::Contact,
-       C::ContactReaction, C::Markers},
+       C::ContactReaction, C::Markers, C::Sliding},
       deform::massspring::paramSpecs());
   // What the harness's sweep, bench and stability run it with (registry.h).
   // On the organ's surface mesh (no resolution of its own); substeps 0 is the automatic

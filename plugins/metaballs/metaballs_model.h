@@ -23,6 +23,13 @@
 // skinning offsets do not change within the jaws: the carrying spheres keep their rotations of
 // the closing while held, as the jaws do not turn the tissue they hold; the radii still change,
 // measured residual 0.1-0.4 mm on the liver lift).
+// Sliding plates (GraspInput::slideNormal, along a coordinate axis a): a correction on coordinate
+// a alone, one shift of all carrying spheres fitted to the gaps t_a - v_a (the plate moves
+// rigidly; a minimum-norm W_C^+ pulled them apart), gives each carrying sphere a target;
+// the spheres stay free (their inverse mass kept) and their coordinate a is put on it after the
+// prediction and after every sweep, the other two left to the constraints; after the skinning the
+// correction along a is applied again as for a grasp (their radii and rotations kept too: the
+// plate holds the face it presses flat, so the tissue under it does not turn).
 #pragma once
 
 #include "construction.h"
@@ -79,6 +86,15 @@ class MetaballsModel final : public Model {
   void collectGrasps(const StepInput& in);
   /// dc_C = W_C^+ (t - v) for the current m_surface (into m_graspDc).
   void graspCorrection();
+  /// The sliding plates of `in` -> m_sliding (vertices a bonded grasp holds stay bonded; spheres
+  /// fixed or carrying a bonded grasp are left out); rebuilds a plate's carrying set and W_C^+
+  /// when its vertices or the bonded set change. After collectGrasps().
+  void collectSliding(const StepInput& in);
+  /// The carrying spheres' shift along the axis of sliding set k for the current m_surface (one
+  /// value for all of them, least squares over the vertices' gaps t_a - v_a).
+  VecX slidingCorrection(size_t k) const;
+  /// Puts the sliding spheres' axis coordinate in the padded rows P on their targets.
+  void holdSliding(Real* P) const;
   /// The step's parts (step() calls them in this order): the loads as sphere forces W^T f
   /// (m_f; the spheres they touch in m_contacted); the constraints' per-step constants and
   /// Laplacian targets; after the sweeps, the radii of eq. (12).
@@ -149,6 +165,21 @@ class MetaballsModel final : public Model {
   std::vector<Real> m_carryRot;   // #carrying*9: their rotations when the grasp closed
   std::vector<Real> m_carryR;     // #carrying: their radii when the grasp closed
   MatX3 m_graspGap, m_graspDc;
+  std::vector<GraspInput> m_bondedScratch;  // the bonded grasps of a step with sliding ones
+  bool m_bondedChanged = false;             // the bonded grasped set changed this step
+  /// A sliding plate (one grasp): its vertices, the axis of its normal and their targets along
+  /// it; the carrying spheres, W_C^+ and their radii at the closing (rebuilt on change); this
+  /// step's target coordinate of each carrying sphere.
+  struct SlidingSet {
+    std::vector<int> verts;
+    int axis = -1;
+    VecX targets;
+    std::vector<int> carry;
+    VecX share;                    // #verts: each vertex's total weight on the carrying spheres
+    std::vector<Real> radii, rot;  // radii, rotations (9 each) at the closing
+    VecX carryTarget;
+  };
+  std::vector<SlidingSet> m_sliding;
   Phases m_phases;
   long long m_degenerate = 0;
   bool m_simd = true;

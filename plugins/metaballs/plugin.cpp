@@ -64,7 +64,8 @@ DEFORM_PLUGIN(registry) {
       "organs for virtual surgery, The Visual Computer 31, doi:10.1007/s00371-015-1092-2",
       {deform::Capability::Grasp, deform::Capability::PointForce, deform::Capability::Gravity,
        deform::Capability::NeedsPrecompute, deform::Capability::Contact,
-       deform::Capability::ContactReaction, deform::Capability::Markers},
+       deform::Capability::ContactReaction, deform::Capability::Markers,
+       deform::Capability::Sliding},
       deform::metaballs::metaballsParams());
   // What the harness's sweep, bench and stability run it with (registry.h).
   info.resolution = {"spheres", {100LL, 250LL, 500LL, 900LL, 1600LL}, {100LL, 300LL, 900LL}};

@@ -135,15 +135,14 @@ void accumulateDisplacement(const MatX& M, const SparseTraction& P, VecX& U) {
     U.noalias() += M.middleCols<3>(3 * P.nodes[k]) * P.values[k];
 }
 
-bool GraspSolver::solve(const MatX& M, const std::vector<int>& nodes, const VecX& rhs,
+bool GraspSolver::solve(const MatX& M, const std::vector<int>& dofs, const VecX& rhs,
                         VecX& tractions) {
-  if (nodes != m_nodes) {
-    m_nodes = nodes;
-    const int g = int(nodes.size());
-    MatX Mgg(3 * g, 3 * g);
+  if (dofs != m_dofs) {
+    m_dofs = dofs;
+    const int g = int(dofs.size());
+    MatX Mgg(g, g);
     for (int a = 0; a < g; ++a)
-      for (int b = 0; b < g; ++b)
-        Mgg.block<3, 3>(3 * a, 3 * b) = M.block<3, 3>(3 * nodes[a], 3 * nodes[b]);
+      for (int b = 0; b < g; ++b) Mgg(a, b) = M(dofs[a], dofs[b]);
     m_lu.compute(Mgg);
     // Partial-pivot LU cannot report rank; a tiny |det| relative to the scale flags singular.
     const Real scale = Mgg.cwiseAbs().maxCoeff();

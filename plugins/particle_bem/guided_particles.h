@@ -144,16 +144,18 @@ struct SparseTraction {
 /// U += M P over the loaded columns (U: 3N).
 void accumulateDisplacement(const MatX& M, const SparseTraction& P, VecX& U);
 
-/// Tractions at the grasped nodes g (3 per node) that make U_g = target given the other loads:
-/// M_gg p_g = target - (M P_other)_g. The LU of M_gg is cached by the caller (GraspSolver).
+/// Tractions on the prescribed displacement components g that make U_g = target given the other
+/// loads: M_gg p_g = target - (M P_other)_g. A component is a dof 3 node + axis: a grasped node
+/// gives its three, a node under a sliding plate only the one along the plate's normal (no
+/// tangential traction: frictionless). The LU of M_gg is cached by the caller (GraspSolver).
 class GraspSolver {
  public:
   /// Returns false when M_gg is singular (e.g. every grasped node fixed).
-  bool solve(const MatX& M, const std::vector<int>& nodes, const VecX& targetMinusOther,
+  bool solve(const MatX& M, const std::vector<int>& dofs, const VecX& targetMinusOther,
              VecX& tractions);
 
  private:
-  std::vector<int> m_nodes;
+  std::vector<int> m_dofs;
   Eigen::PartialPivLU<MatX> m_lu;
   bool m_ok = false;
 };

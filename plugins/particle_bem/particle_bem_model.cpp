@@ -121,7 +121,7 @@ ModelInfo ParticleBemModel::info() {
       "in Real-Time Surgical Simulation (Image Guided Surgery and Therapy Lab, Shanghai Jiao Tong "
       "University; no DOI given in the paper)",
       {Capability::Grasp, Capability::PointForce, Capability::Gravity, Capability::NeedsPrecompute,
-       Capability::Contact, Capability::Markers},
+       Capability::Contact, Capability::Markers, Capability::Sliding},
       paramSpecs());
 }
 
@@ -360,6 +360,8 @@ void ParticleBemModel::reset() {
   m_mapVerts.clear();
   m_carry.clear();
   m_carryCol.assign(size_t(m_rest.rows()), -1);
+  m_sliding.clear();
+  m_slidingMask.assign(size_t(m_rest.rows()), 0);
 }
 
 Counts ParticleBemModel::counts() const {
@@ -397,7 +399,16 @@ std::vector<std::pair<int, Real>> ParticleBemModel::surfaceRow(int v) const {
 }
 
 void ParticleBemModel::prescribeGrasps(const StepInput& in) {
-  flattenGrasps(in.grasps, m_fineRest.rows(), m_graspVerts, m_graspTargets);
+  const bool anySliding = std::any_of(in.grasps.begin(), in.grasps.end(),
+                                      [](const GraspInput& g) { return g.sliding(); });
+  if (anySliding) {
+    m_bondedScratch.clear();
+    for (const GraspInput& g : in.grasps)
+      if (!g.sliding()) m_bondedScratch.push_back(g);
+  }
+  flattenGrasps(anySliding ? m_bondedScratch : in.grasps, m_fineRest.rows(), m_graspVerts,
+                m_graspTargets);
+  m_bondedChanged = m_graspVerts != m_mapVerts;
   if (m_graspVerts != m_mapVerts) {
     // The grasped set changed (a grasp closed or opened): the carrying set and J_C^+.
     m_mapVerts = m_graspVerts;
@@ -433,6 +444,81 @@ void ParticleBemModel::prescribeGrasps(const StepInput& in) {
   m_carryTarget.resize(Eigen::Index(m_carry.size()), 3);
   for (size_t c = 0; c < m_carry.size(); ++c)
     m_carryTarget.row(Eigen::Index(c)) = m_x.row(m_carry[c]) + m_graspDx.row(Eigen::Index(c));
+}
+
+void ParticleBemModel::prescribeSliding(const StepInput& in) {
+  size_t count = 0;
+  std::vector<int> bonded = m_graspVerts;
+  std::sort(bonded.begin(), bonded.end());
+  for (const GraspInput& g : in.grasps) {
+    if (!g.sliding()) continue;
+    const int axis = slideAxis(g);
+    if (axis < 0)
+      throw InputError("particle_bem", "grasp of tool " + std::to_string(g.tool),
+                       "a sliding plate's normal must lie along x, y or z");
+    if (m_sliding.size() <= count) m_sliding.emplace_back();
+    SlidingSet& s = m_sliding[count++];
+    std::vector<int> verts;
+    std::vector<Real> targets;
+    for (size_t k = 0; k < g.vertices.size(); ++k) {
+      const int v = g.vertices[k];
+      if (v < 0 || v >= m_fineRest.rows() || Eigen::Index(k) >= g.targets.rows() ||
+          std::binary_search(bonded.begin(), bonded.end(), v))
+        continue;
+      verts.push_back(v);
+      targets.push_back(g.targets(Eigen::Index(k), axis));
+    }
+    if (verts != s.verts || axis != s.axis || m_bondedChanged) {
+      s.verts = verts;
+      s.axis = axis;
+      s.carry.clear();
+      std::vector<std::vector<std::pair<int, Real>>> rowsJ;
+      for (int v : verts) {
+        rowsJ.push_back(surfaceRow(v));
+        for (const auto& [node, w] : rowsJ.back())
+          if (!m_fixedMask[size_t(node)] && m_carryCol[size_t(node)] < 0) s.carry.push_back(node);
+      }
+      std::sort(s.carry.begin(), s.carry.end());
+      s.carry.erase(std::unique(s.carry.begin(), s.carry.end()), s.carry.end());
+      s.col.assign(size_t(m_rest.rows()), -1);
+      for (size_t c = 0; c < s.carry.size(); ++c) s.col[size_t(s.carry[c])] = int(c);
+      MatX Jc = MatX::Zero(Eigen::Index(verts.size()), Eigen::Index(s.carry.size()));
+      for (size_t r = 0; r < rowsJ.size(); ++r)
+        for (const auto& [node, w] : rowsJ[r])
+          if (s.col[size_t(node)] >= 0) Jc(Eigen::Index(r), s.col[size_t(node)]) += w;
+      s.pinv = s.carry.empty() ? MatX(0, Jc.rows())
+               : m_guided ? MatX(Eigen::CompleteOrthogonalDecomposition<MatX>(Jc).pseudoInverse())
+                          : dampedInverse(Jc);
+    }
+    s.targets = Eigen::Map<const VecX>(targets.data(), Eigen::Index(targets.size()));
+    // dx_C,a = J_C^+ (t_a - x_s,a), from the surface at the step's start.
+    VecX gap(Eigen::Index(s.verts.size()));
+    for (Eigen::Index r = 0; r < gap.size(); ++r)
+      gap[r] = s.targets[r] - m_surface(s.verts[size_t(r)], s.axis);
+    const VecX dx = s.pinv * gap;
+    s.carryStart.resize(Eigen::Index(s.carry.size()));
+    for (size_t c = 0; c < s.carry.size(); ++c)
+      s.carryStart[Eigen::Index(c)] = m_x(s.carry[c], s.axis);
+    s.carryTarget = s.carryStart + dx;
+  }
+  m_sliding.resize(count);
+  m_slidingMask.assign(size_t(m_rest.rows()), 0);
+  for (const SlidingSet& s : m_sliding)
+    for (int i : s.carry) m_slidingMask[size_t(i)] = 1;
+}
+
+void ParticleBemModel::applySliding(const StepInput& in) {
+  for (const SlidingSet& s : m_sliding)
+    for (size_t c = 0; c < s.carry.size(); ++c) {
+      const int i = s.carry[c];
+      if (m_guided) {
+        m_v.row(i) = (m_target.row(i) - m_x.row(i)) / in.dt;
+        m_x.row(i) = m_target.row(i);
+      } else {
+        m_x(i, s.axis) = s.carryTarget[Eigen::Index(c)];
+        m_v(i, s.axis) = (s.carryTarget[Eigen::Index(c)] - s.carryStart[Eigen::Index(c)]) / in.dt;
+      }
+    }
 }
 
 const MatX& ParticleBemModel::loadResponse(const PointLoad& load) {
@@ -490,6 +576,8 @@ void ParticleBemModel::resolveParticleContacts(const StepInput& in) {
     invMass[i] = (m_fixedMask[i] || !(m > 0)) ? 0.0 : 1.0 / m;
   }
   for (int i : m_carry) invMass[i] = 0;
+  for (const SlidingSet& s : m_sliding)
+    for (int i : s.carry) invMass[i] = 0;
   VecX radii = VecX::Constant(n, 0.5 * m_spacing);
   if (m_guided) radii.head(m_coarse.numVertices()).setConstant(in.contact->params().thickness);
   ContactProxy proxy;
@@ -540,8 +628,8 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
       const Real len = d.norm();
       if (!(len > 0) || len >= m_repulsionDistance) continue;
       const Vec3 f = m_repulsionStiffness * (m_repulsionDistance - len) * d / len;
-      if (!m_fixedMask[i]) m_P.add(i, f / m_nodalArea[i]);
-      if (!m_fixedMask[j]) m_P.add(j, -f / m_nodalArea[j]);
+      if (!m_fixedMask[i] && !m_slidingMask[i]) m_P.add(i, f / m_nodalArea[i]);
+      if (!m_fixedMask[j] && !m_slidingMask[j]) m_P.add(j, -f / m_nodalArea[j]);
       ++m_numeric["repulsion_pairs"];
     }
   }
@@ -563,21 +651,40 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
     }
   }
   prescribeGrasps(in);
+  prescribeSliding(in);
   for (size_t c = 0; c < m_carry.size(); ++c) {
     const int i = m_carry[c];
     if (std::find(graspNodes.begin(), graspNodes.end(), i) != graspNodes.end()) continue;
     graspNodes.push_back(i);
     graspTargets.push_back(m_carryTarget.row(Eigen::Index(c)).transpose());
   }
-  if (!graspNodes.empty()) {
-    m_graspRhs.resize(3 * graspNodes.size());
-    for (size_t a = 0; a < graspNodes.size(); ++a)
-      m_graspRhs.segment<3>(3 * a) = graspTargets[a] - m_restCoarse.row(graspNodes[a]).transpose() -
-                                     m_U.segment<3>(3 * graspNodes[a]);
-    if (m_graspSolver.solve(m_bem.M, graspNodes, m_graspRhs, m_graspP)) {
+  // The prescribed components: three per grasped or contact node, then the normal one of each
+  // node under a sliding plate (not already held in full; one per node and axis).
+  std::vector<int> dofs;
+  std::vector<Real> dofTargets;  // m, the prescribed coordinate
+  for (size_t a = 0; a < graspNodes.size(); ++a)
+    for (int k = 0; k < 3; ++k) {
+      dofs.push_back(3 * graspNodes[a] + k);
+      dofTargets.push_back(graspTargets[a][k]);
+    }
+  for (const SlidingSet& s : m_sliding)
+    for (size_t c = 0; c < s.carry.size(); ++c) {
+      const int i = s.carry[c], d = 3 * i + s.axis;
+      if (std::find(graspNodes.begin(), graspNodes.end(), i) != graspNodes.end() ||
+          std::find(dofs.begin(), dofs.end(), d) != dofs.end())
+        continue;
+      dofs.push_back(d);
+      dofTargets.push_back(s.carryTarget[Eigen::Index(c)]);
+    }
+  if (!dofs.empty()) {
+    m_graspRhs.resize(Eigen::Index(dofs.size()));
+    for (size_t a = 0; a < dofs.size(); ++a)
+      m_graspRhs[Eigen::Index(a)] =
+          dofTargets[a] - m_restCoarse(dofs[a] / 3, dofs[a] % 3) - m_U[dofs[a]];
+    if (m_graspSolver.solve(m_bem.M, dofs, m_graspRhs, m_graspP)) {
       SparseTraction Pg;
-      for (size_t a = 0; a < graspNodes.size(); ++a)
-        Pg.add(graspNodes[a], m_graspP.segment<3>(3 * a));
+      for (size_t a = 0; a < dofs.size(); ++a)
+        Pg.add(dofs[a] / 3, m_graspP[Eigen::Index(a)] * Vec3::Unit(dofs[a] % 3));
       accumulateDisplacement(m_bem.M, Pg, m_U);
     } else {
       ++m_numeric["singular_grasp_systems"];
@@ -596,8 +703,11 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   }
   m_kinematic = m_fixedMask;
   for (int i : m_carry) m_kinematic[i] = 1;
+  for (const SlidingSet& s : m_sliding)
+    for (int i : s.carry) m_kinematic[size_t(i)] = 1;
   springCorrection(m_x, m_v, m_target, m_springK, m_springC, in.dt, m_kinematic);
   applyGrasps(in);
+  applySliding(in);
   if (in.contact) resolveParticleContacts(in);
   const auto t2 = Clock::now();
 
@@ -632,6 +742,7 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
       addVertexForce(l.vertices[k], l.weights[k] * l.force);
   }
   prescribeGrasps(in);
+  prescribeSliding(in);
   const auto t1 = Clock::now();
   const Real damp = 1 / (1 + in.dt * m_particleDamping);
   for (Eigen::Index i = 0; i < m_x.rows(); ++i) {
@@ -641,6 +752,7 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
     m_x.row(i) += in.dt * m_v.row(i);
   }
   applyGrasps(in);
+  applySliding(in);
   if (in.contact) resolveParticleContacts(in);
   const auto t2 = Clock::now();
   mlsDeformationGradients(m_mls, m_rest, m_x, m_F);
@@ -670,6 +782,24 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
         const int j = m_skinNodes[size_t(v)][a];
         if (j >= 0 && m_carryCol[size_t(j)] >= 0)
           m_surface.row(v) += m_skinWeights[size_t(v)][a] * m_graspDx.row(m_carryCol[size_t(j)]);
+      }
+  }
+  // The same along a sliding plate's axis alone.
+  for (const SlidingSet& s : m_sliding) {
+    if (s.carry.empty()) continue;
+    VecX gap(Eigen::Index(s.verts.size()));
+    for (Eigen::Index r = 0; r < gap.size(); ++r)
+      gap[r] = s.targets[r] - m_surface(s.verts[size_t(r)], s.axis);
+    const VecX dx = s.pinv * gap;
+    for (size_t c = 0; c < s.carry.size(); ++c) {
+      m_x(s.carry[c], s.axis) += dx[Eigen::Index(c)];
+      m_v(s.carry[c], s.axis) += dx[Eigen::Index(c)] / in.dt;
+    }
+    for (Eigen::Index v = 0; v < m_fineRest.rows(); ++v)
+      for (int a = 0; a < 8; ++a) {
+        const int j = m_skinNodes[size_t(v)][a];
+        if (j >= 0 && s.col[size_t(j)] >= 0)
+          m_surface(v, s.axis) += m_skinWeights[size_t(v)][a] * dx[s.col[size_t(j)]];
       }
   }
   if (in.contact) projectSurfaceOut(in);

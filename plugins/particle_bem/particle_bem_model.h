@@ -27,6 +27,12 @@
 //    vertices land on their targets; in the guided model the BEM solve then finds the tractions
 //    that hold C there. The pure model corrects C again after its skinning (F_j changed in the
 //    step), with the surface moved by exactly J dx.
+//  - Sliding plates (GraspInput::slideNormal, along a coordinate axis a): the same correction on
+//    coordinate a alone, dx_C,a = J_C^+ (t_a - x_s,a), prescribes the carrying nodes' coordinate
+//    a only. Guided: the traction solve holds that one component of U (a normal traction, no
+//    tangential one: a frictionless plate), the nodes follow the solved U in full. Pure: the
+//    nodes' coordinate a is set after the integration and corrected after the skinning, the
+//    other two integrate freely.
 #pragma once
 
 #include "bem_assembly.h"
@@ -85,6 +91,13 @@ class ParticleBemModel final : public Model {
   /// Grasped fine vertices of `in` -> m_graspVerts / m_graspTargets; rebuilds the carrying set
   /// and J_C^+ when the grasped set changes; prescribes C at x_C + J_C^+ (t - x_s) (m_carryTarget).
   void prescribeGrasps(const StepInput& in);
+  /// The sliding plates of `in` -> m_sliding (vertices a bonded grasp holds stay bonded; carrying
+  /// nodes a bonded grasp prescribes are left to it); prescribes the carrying nodes' coordinate
+  /// along the plate's axis (SlidingSet::carryTarget). After prescribeGrasps().
+  void prescribeSliding(const StepInput& in);
+  /// The nodes under sliding plates after the integration (guided: onto the solved target; pure:
+  /// their axis coordinate onto carryTarget).
+  void applySliding(const StepInput& in);
   /// The displacement response (3N x 3, m/N) of a load's J^T-mapped forces, cached per spread.
   const MatX& loadResponse(const PointLoad& load);
   /// Contact (deform/sdk/contact.h) on every particle, after the correction.
@@ -147,6 +160,27 @@ class ParticleBemModel final : public Model {
   MatX m_JcPinv;                // #carry x #grasped vertices
   MatX3 m_carryTarget, m_graspGap, m_graspDx;
   GraspSolver m_graspSolver;
+  std::vector<GraspInput> m_bondedScratch;  // the bonded grasps of a step with sliding ones
+  bool m_bondedChanged = false;             // the bonded grasped set changed this step
+  /// A sliding plate (one grasp) through the surface mapping: its fine vertices (those no bonded
+  /// grasp holds), the axis of its normal, their target coordinates along it; the carrying nodes
+  /// and J_C^+ (rebuilt when the vertices or the bonded set change); this step's prescribed
+  /// coordinate of each carrying node and its value at the step's start.
+  struct SlidingSet {
+    std::vector<int> verts;
+    int axis = -1;
+    VecX targets;
+    std::vector<int> carry;  // sorted
+    std::vector<int> col;    // node -> column in carry or -1
+    MatX pinv;               // #carry x #verts
+    VecX carryTarget, carryStart;
+  };
+  std::vector<SlidingSet> m_sliding;
+  /// The nodes m_sliding carries (as of the last step): the repulsion leaves them to the plate.
+  /// Pushed along it, the free tangential displacement of a carrying node fed the next step's
+  /// repulsion through U (a static response) and the particles never settled (the Truth Cube at
+  /// 12.5%: the repulsion list rebuilt on 2156 of 3000 steps).
+  std::vector<char> m_slidingMask;
   MatX3 m_coarseDisp;
 
   // pure particles

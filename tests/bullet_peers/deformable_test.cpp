@@ -1,5 +1,7 @@
 // bullet_deformable: parameter mapping and model properties (rest, sag, stiffness, grasp, reset,
 // no NaN).
+#include "../support/plate.h"
+#include "../support/press.h"
 #include "bullet_deformable_model.h"
 #include "test_support.h"
 
@@ -184,6 +186,25 @@ INSTANTIATE_TEST_SUITE_P(Forces, BulletDeformableForces,
                            return p.param == ElasticForce::NeoHookean ? "NeoHookean"
                                                                       : "LinearElasticity";
                          });
+
+// A sliding plate (GraspInput::slideNormal): the held nodes keep their mass, their position and
+// velocity along the normal are set before and after Bullet's implicit step
+// (bullet_peer_step.h); against a bonded plate the top spreads out (tests/support/plate.h; no
+// reaction force to compare). The cube tetrahedralised coarsely, its surface vertices the first
+// nodes, its bottom face pinned.
+TEST(BulletDeformableModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
+  const testing::CubePress press = testing::cubePress(0.5);
+  TetMeshOptions o;
+  o.targetElements = 500;
+  o.source = "phantom:cube";
+  const TetMesh mesh = tetrahedralize(press.organ.surface, o).mesh;
+  std::vector<int> surface(size_t(press.organ.surface.numVertices()));
+  std::iota(surface.begin(), surface.end(), 0);
+  BulletDeformableModel m;
+  m.init(mesh, surface, press.organ.material, DeformableConfig{}, kDt, bottomSlab(mesh.V, 1e-6));
+  testing::expectSlidingSpreadsTheTopAndEasesThePlate(m, press.organ, 0.002, 100, 100,
+                                                      "bullet_deformable");
+}
 
 }  // namespace
 }  // namespace deform::bullet_deformable

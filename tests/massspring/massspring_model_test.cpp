@@ -6,6 +6,7 @@
 #include "../support/grasp.h"
 #include "../support/meshes.h"
 #include "../support/network_model.h"
+#include "../support/plate.h"
 #include "../support/press.h"
 #include "explicit_rows.h"
 
@@ -394,6 +395,26 @@ TEST(MassSpringModel, VolumeNetworkIsPressedLikeASolid) {
   EXPECT_GT(c.at("elements"), 100);
   EXPECT_EQ(c.at("bending_springs"), 0);
   testing::expectPressedLikeASolidWithMarkers(m, press, "volume mass-spring");
+}
+
+// A sliding plate (GraspInput::slideNormal): the held nodes' normal coordinate follows the plate
+// (every substep, a prescribed dof of the implicit solve, or held through the local/global
+// iterations), the other two stay free; against a bonded plate the top spreads out and the
+// plate's force is lower (tests/support/plate.h). Each integrator, on the volume network.
+TEST(MassSpringModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
+  const testing::CubePress press = testing::cubePress(0.5);
+  for (const char* integrator : {"symplectic_euler", "implicit_euler", "local_global"}) {
+    ParamValues p = ParamValues::defaults(paramSpecs());
+    p.set("network", std::string("volume"));
+    p.set("volume_elements", 500LL);
+    p.set("mass_damping", 20.0);
+    p.set("integrator", std::string(integrator));
+    MassSpringModel m;
+    testing::initWithParams(m, press.organ, p);
+    const std::string label = std::string("mass-spring ") + integrator;
+    testing::expectSlidingSpreadsTheTopAndEasesThePlate(m, press.organ, 0.002, 200, 400,
+                                                        label.c_str());
+  }
 }
 
 TEST(MassSpringModel, ASurfaceNetworkHasNoInteriorForMarkers) {

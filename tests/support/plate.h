@@ -8,6 +8,7 @@
 #include <deform/sdk/model.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <vector>
@@ -84,6 +85,55 @@ inline void expectSlidingSpreadsTheTopAndEasesThePlate(Model& model, const Organ
     EXPECT_GT(sliding.force, 0) << label;
     EXPECT_LT(sliding.force, bonded.force) << label;
   }
+}
+
+/// Holds the top vertices of `organ` (as pressByPlate) with a plate at rest, bonded or sliding,
+/// and pushes each along +x with `force` (N) for `steps` steps of dt; the model is reset first.
+/// Returns the mean x displacement of the top vertices (m); heightMiss: the largest |z - z0|
+/// among them.
+inline Real shearUnderPlate(Model& model, const Organ& organ, bool sliding, Real force, int steps,
+                            Real& heightMiss, Real dt = 1e-3) {
+  model.reset();
+  const MatX3& rest = organ.surface.V;
+  const Real top = rest.col(2).maxCoeff(), eps = 1e-6;
+  GraspInput g;
+  for (Eigen::Index v = 0; v < rest.rows(); ++v)
+    if (rest(v, 2) > top - eps) g.vertices.push_back(int(v));
+  g.targets = rest(g.vertices, Eigen::all);
+  if (sliding) g.slideNormal = Vec3(0, 0, -1);
+  StepInput in;
+  in.dt = dt;
+  in.grasps = {g};
+  for (int v : g.vertices) in.loads.push_back(PointLoad::onVertex(v, Vec3(force, 0, 0)));
+  for (int s = 0; s < steps; ++s) {
+    in.time = s * dt;
+    EXPECT_EQ(model.step(in), StepStatus::Ok);
+  }
+  Real dx = 0;
+  heightMiss = 0;
+  for (int v : g.vertices) {
+    dx += (model.surface()(v, 0) - rest(v, 0)) / Real(g.vertices.size());
+    heightMiss = std::max(heightMiss, std::abs(model.surface()(v, 2) - rest(v, 2)));
+  }
+  return dx;
+}
+
+/// The sliding plate leaves the top free along it: a load along the plate moves the top along it
+/// by more than minSlide (m) under a sliding plate and by less than a tenth of that under a
+/// bonded one; the top stays on the plate (within heightTolerance, m) either way.
+inline void expectSlidingLetsTheTopSlide(Model& model, const Organ& organ, Real force, int steps,
+                                         Real minSlide, Real heightTolerance, const char* label) {
+  Real missSliding = 0, missBonded = 0;
+  const Real sliding = shearUnderPlate(model, organ, true, force, steps, missSliding);
+  const Real bonded = shearUnderPlate(model, organ, false, force, steps, missBonded);
+  std::printf(
+      "%s, %.3g N along x on each top vertex: top moves %.4f / %.4f mm, off the plate "
+      "%.2g / %.2g mm (sliding / bonded)\n",
+      label, force, 1e3 * sliding, 1e3 * bonded, 1e3 * missSliding, 1e3 * missBonded);
+  EXPECT_GT(sliding, minSlide) << label;
+  EXPECT_LT(std::abs(bonded), 0.1 * sliding) << label;
+  EXPECT_LT(missSliding, heightTolerance) << label;
+  EXPECT_LT(missBonded, heightTolerance) << label;
 }
 
 }  // namespace deform::testing
