@@ -347,13 +347,16 @@ struct Source {
   std::string calibrationNote;
 };
 
-/// "fitted poisson = 0.4995, thickness = 0.01 (FILE)".
-std::string fittedNote(const CalibrationParams& c) {
+/// "fitted poisson = 0.4995, thickness = 0.01 (FILE)", and the plate it was fitted with when it
+/// is not the table's.
+std::string fittedNote(const CalibrationParams& c, const std::string& contact) {
   std::string values;
   for (const nlohmann::json* set : {&c.material, &c.params})
     for (const auto& [k, v] : set->items())
       appendTo(values, k + " = " + (v.is_number() ? formatG(v.get<double>()) : v.dump()));
-  return "fitted " + values + " (" + c.file + ")";
+  const std::string fitted = c.truthCube.value("contact", std::string());
+  return "fitted " + values + " (" + c.file + ")" +
+         (!fitted.empty() && fitted != contact ? ", with a " + fitted + " plate" : "");
 }
 
 std::string layersMm(const std::vector<double>& v) {
@@ -696,7 +699,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
       if (tw.entry["label"] != src.label) continue;
       src.calibrated = true;
       src.trainLevel = tw.calibration->truthCube.value("level", 0) - 1;
-      src.calibrationNote = fittedNote(*tw.calibration);
+      src.calibrationNote = fittedNote(*tw.calibration, contact);
     }
     for (size_t l = 0; l < data.strains.size(); ++l)
       src.levels.emplace_back(caseOf(l), perLevelScene ? 0 : l);
