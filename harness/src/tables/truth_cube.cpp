@@ -31,7 +31,8 @@ constexpr const char* kCalculix = "calculix";
 constexpr const char* kDisplacementLabel = "reference_fem(volumetric=displacement)";
 /// The other models of the project: rows for them say why they have no bead figures.
 const std::vector<std::string> kOtherModels = {
-    "fem_hex", "hybrid_fem_pbd", "particle_bem", "metaballs", "pbd", "massspring"};
+    "fem_hex", "hybrid_fem_pbd", "particle_bem",    "metaballs",
+    "pbd",     "massspring",     "bullet_softbody", "bullet_deformable"};
 
 }  // namespace
 
