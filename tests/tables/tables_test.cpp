@@ -917,6 +917,11 @@ TEST_F(TempDir, TruthCubeRunsADynamicModelOnItsVolumeNetworkInASettlingScenePerL
     std::ofstream(m_dir / "calibrations" / "truth-cube" / "pbd.json") << c.dump();
   };
   ship({{"material", {{"poisson", 0.45}}}});
+  const tables::TableDef quick = tables::truthCube(o, loader);
+  EXPECT_EQ(quick.cases.size(), 3u) << "--quick leaves the material's twin out";
+  EXPECT_NE(json(quick.notes).dump().find("leaves out the twins whose fit holds the organ's nu"),
+            std::string::npos);
+  o.quick = false;
   const tables::TableDef tm = tables::truthCube(o, loader);
   ASSERT_EQ(tm.cases.size(), 5u);
   EXPECT_EQ(tm.cases[3].id, "truth-cube/dynamic_1_cal_pbd");

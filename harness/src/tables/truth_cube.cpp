@@ -616,6 +616,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
     bool dynamic;
   };
   std::vector<Twin> twins;
+  std::string skippedTwins;
   for (bool isDynamic : {false, true}) {
     for (const ojson& m : isDynamic ? dynamic : models) {
       const std::string plugin = m["plugin"].get<std::string>();
@@ -629,6 +630,12 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
       ojson params = ojson::parse(c->params.dump());
       for (const auto& [k, v] : m["params"].items()) params[k] = v;
       twin["params"] = params;
+      // --quick: a fit of the organ's material needs cases of its own; only the full table
+      // runs them.
+      if (o.quick && !c->material.empty()) {
+        appendTo(skippedTwins, twin["label"].get<std::string>());
+        continue;
+      }
       twins.push_back({twin, c, isDynamic});
     }
   }
@@ -662,7 +669,9 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
   for (const std::string& name : kOtherModels)
     if (std::none_of(twins.begin(), twins.end(),
                      [&](const Twin& tw) { return tw.entry["plugin"] == name; }) &&
-        std::none_of(absent.begin(), absent.end(), [&](const auto& a) { return a.first == name; }))
+        std::none_of(absent.begin(), absent.end(),
+                     [&](const auto& a) { return a.first == name; }) &&
+        skippedTwins.find(name + "+cal") == std::string::npos)
       appendTo(untwinned, name);
   if (!twins.empty() && !untwinned.empty())
     t.notes.push_back("No calibrated twin (no fit in calibrations/truth-cube/): " + untwinned +
@@ -683,6 +692,11 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
         "prescribed) and runs in a case of its own. Files: " +
         files + ".");
   }
+  if (!skippedTwins.empty())
+    t.notes.push_back(
+        "--quick leaves out the twins whose fit holds the organ's nu (they need "
+        "cases of their own; the full table runs them): " +
+        skippedTwins + ".");
   if (!withCalculix) t.notes.push_back("CalculiX: not available: " + calculixProblem + ".");
   // Sliding runs are other cases (a --resume never mixes them with the bonded ones).
   const std::string suffix = contact == "sliding" ? "_sliding" : "";
