@@ -684,12 +684,12 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
     std::string files;
     for (const Twin& tw : twins) appendTo(files, tw.calibration->file);
     t.notes.push_back(
-        "Calibrated twins (+cal, calibrated = true): each model's calibratable parameters fitted "
-        "to the beads of one level (`deformbench calibrate --truth-cube LEVEL`, metric "
-        "marker_rms: the bead RMS after the translation registration), the level it was "
-        "trained on marked \"train\", the others \"validation\". reference_fem's twin fits "
-        "the organ's nu (E does not move the beads when the plate's displacement is "
-        "prescribed) and runs in a case of its own. Files: " +
+        "Calibrated twins (+cal, calibrated = true): fitted to the beads of one level "
+        "(`deformbench calibrate --truth-cube LEVEL`, metric marker_rms: the bead RMS after the "
+        "translation registration), the level it was trained on marked \"train\", the others "
+        "\"validation\"; each row's note gives the fitted values. A fit of the organ's nu (E "
+        "does not move the beads when the plate's displacement is prescribed) runs in cases of "
+        "its own. Files: " +
         files + ".");
   }
   if (!skippedTwins.empty())
