@@ -12,6 +12,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <set>
 
 namespace deform::calculix {
 
@@ -90,12 +91,17 @@ class CalculixModel final : public Model {
     // A sliding plate (axis-aligned normal) prescribes the normal dof only.
     std::map<int, Vec3> held;
     std::map<std::pair<int, int>, Real> heldDof;
+    // Per grasp (then per node constraint), the nodes it holds: its force is the sum of their
+    // reactions.
+    std::vector<std::set<int>> holds;
     for (const GraspInput& g : in.grasps) {
+      std::set<int>& mine = holds.emplace_back();
       const int axis = slideAxis(g);
       if (g.sliding() && axis < 0)
         throw InputError("calculix", "grasp of tool " + std::to_string(g.tool),
                          "a sliding plate's normal must lie along x, y or z");
       const auto hold = [&](int node, const Vec3& target) {
+        mine.insert(node);
         const Vec3 u = target - m_model.nodes.row(node).transpose();
         if (axis >= 0)
           heldDof[{node, axis}] = u(axis);
@@ -118,11 +124,15 @@ class CalculixModel final : public Model {
         hold(h.node, target);
       }
     }
-    for (const NodeGrasp& g : in.nodeConstraints)
+    for (const NodeGrasp& g : in.nodeConstraints) {
+      std::set<int>& mine = holds.emplace_back();
       for (size_t k = 0; k < g.nodes.size(); ++k)
-        if (!isFixed(g.nodes[k]))
+        if (!isFixed(g.nodes[k])) {
+          mine.insert(g.nodes[k]);
           held[g.nodes[k]] = g.targets.row(Eigen::Index(k)).transpose() -
                              m_model.nodes.row(g.nodes[k]).transpose();
+        }
+    }
     loads.displacements.assign(held.begin(), held.end());
     loads.dofDisplacements.assign(heldDof.begin(), heldDof.end());
     for (const PointLoad& l : in.loads) {
@@ -146,6 +156,17 @@ class CalculixModel final : public Model {
     const MatX3 u = ccxLastDisplacements(run.dat, int(m_model.nodes.rows()), time);
     if (std::abs(time - 1.0) > 1e-6)
       throw std::runtime_error("ccx: the step stopped at " + std::to_string(time) + " of its load");
+    // The force on each grasp's tool: minus the reactions (RF, the force the prescribed
+    // displacements exert on the tissue) at the nodes it holds, as reference_fem's minus the
+    // energy gradient there. A sliding plate's free dofs carry no reaction (to ccx's tolerance).
+    double forceTime = 0;
+    const MatX3 rf = ccxLastReactionForces(run.dat, int(m_model.nodes.rows()), forceTime);
+    m_graspForces.clear();
+    for (const std::set<int>& nodes : holds) {
+      Vec3 f = Vec3::Zero();
+      for (int n : nodes) f -= rf.row(n).transpose();
+      m_graspForces.push_back(f);
+    }
     m_nodes = m_model.nodes + u;
     updateSurface();
     m_phase["solve"] =
@@ -156,11 +177,13 @@ class CalculixModel final : public Model {
   }
 
   const MatX3& nodes() const override { return m_nodes; }
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
   const MatX3& surface() const override { return m_surface; }
 
   void reset() override {
     m_nodes = m_model.nodes;
     m_runs = 0;
+    m_graspForces.clear();
     m_wallMs = m_cpuMs = 0;
     m_phase.clear();
     updateSurface();
@@ -232,6 +255,7 @@ class CalculixModel final : public Model {
   MatX3 m_restSurface;
   long long m_pinnedOutside = 0;
   MatX3 m_nodes, m_surface;
+  std::vector<Vec3> m_graspForces;  ///< N, per grasp then node constraint, of the last step
   long long m_runs = 0;
   double m_wallMs = 0, m_cpuMs = 0;
   PhaseTimes m_phase;

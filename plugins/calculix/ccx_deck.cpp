@@ -101,17 +101,22 @@ std::string ccxStepDeck(const CcxModel& model, const CcxLoads& loads, const CcxI
     s << "*DLOAD\nEALL, GRAV, " << num(g) << ", " << num(d(0)) << ", " << num(d(1)) << ", "
       << num(d(2)) << "\n";
   }
-  // FREQUENCY larger than any increment count: the table of the step's last increment only.
-  s << "*NODE PRINT, NSET=NALL, FREQUENCY=1000000\nU\n";
+  // FREQUENCY larger than any increment count: the tables of the step's last increment only.
+  // RF: the reaction force at every node (the force its constraints exert on the tissue; zero,
+  // to the solver's tolerance, at a free dof), from which the plates' forces are summed.
+  s << "*NODE PRINT, NSET=NALL, FREQUENCY=1000000\nU, RF\n";
   s << "*END STEP\n";
   return s.str();
 }
 
-MatX3 ccxLastDisplacements(const std::string& dat, int numNodes, double& time) {
-  const std::string head = "displacements (vx,vy,vz)";
+namespace {
+
+/// The last table headed `head` (see ccxLastDisplacements).
+MatX3 lastNodeTable(const std::string& dat, const std::string& head, const char* what, int numNodes,
+                    double& time) {
   const size_t at = dat.rfind(head);
   if (at == std::string::npos)
-    throw std::runtime_error("ccx's .dat file has no displacement table");
+    throw std::runtime_error(std::string("ccx's .dat file has no ") + what + " table");
   std::istringstream in(dat.substr(at));
   std::string line;
   std::getline(in, line);
@@ -137,6 +142,16 @@ MatX3 ccxLastDisplacements(const std::string& dat, int numNodes, double& time) {
     throw std::runtime_error("ccx's .dat table lists " + std::to_string(read) + " of " +
                              std::to_string(numNodes) + " nodes");
   return u;
+}
+
+}  // namespace
+
+MatX3 ccxLastDisplacements(const std::string& dat, int numNodes, double& time) {
+  return lastNodeTable(dat, "displacements (vx,vy,vz)", "displacement", numNodes, time);
+}
+
+MatX3 ccxLastReactionForces(const std::string& dat, int numNodes, double& time) {
+  return lastNodeTable(dat, "forces (fx,fy,fz)", "reaction force", numNodes, time);
 }
 
 }  // namespace deform::calculix

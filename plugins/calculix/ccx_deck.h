@@ -60,11 +60,15 @@ struct CcxIncrements {
 std::string ccxModelDeck(const CcxModel& model);
 
 /// One *STEP (NLGEOM for the Neo-Hookean material) with the loads, ramped from rest, and a
-/// *NODE PRINT of every node's displacement at the end of the step.
+/// *NODE PRINT of every node's displacement and reaction force (RF) at the end of the step.
 std::string ccxStepDeck(const CcxModel& model, const CcxLoads& loads, const CcxIncrements& inc);
 
 /// The last "displacements (vx,vy,vz) ... and time T" table of a .dat file as #N by 3 (m);
 /// `time` gets its T. Throws std::runtime_error when there is none or a node is missing.
 MatX3 ccxLastDisplacements(const std::string& dat, int numNodes, double& time);
+
+/// The last "forces (fx,fy,fz) ... and time T" table (RF: the force each node's constraints
+/// exert on the tissue, N) as #N by 3, as ccxLastDisplacements.
+MatX3 ccxLastReactionForces(const std::string& dat, int numNodes, double& time);
 
 }  // namespace deform::calculix

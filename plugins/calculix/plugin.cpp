@@ -53,7 +53,8 @@ DEFORM_PLUGIN(registry) {
   info.version = "1.0";
   info.capabilities = {Capability::Grasp,           Capability::PointForce, Capability::Gravity,
                        Capability::NeedsPrecompute, Capability::TetInput,   Capability::QuasiStatic,
-                       Capability::RollerSupport,   Capability::Markers,    Capability::Sliding};
+                       Capability::RollerSupport,   Capability::Markers,    Capability::Sliding,
+                       Capability::ReactionForce};
   info.params = calculixParams();
   info.create = [] { return deform::calculix::makeCalculixModel(); };
   // The conformance suite's scenes check (status and finiteness only): coarse linear tets, so

@@ -12,6 +12,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
+#include <map>
 #include <numeric>
 
 namespace deform::particle_bem {
@@ -121,7 +123,7 @@ ModelInfo ParticleBemModel::info() {
       "in Real-Time Surgical Simulation (Image Guided Surgery and Therapy Lab, Shanghai Jiao Tong "
       "University; no DOI given in the paper)",
       {Capability::Grasp, Capability::PointForce, Capability::Gravity, Capability::NeedsPrecompute,
-       Capability::Contact, Capability::Markers, Capability::Sliding},
+       Capability::Contact, Capability::Markers, Capability::Sliding, Capability::ReactionForce},
       paramSpecs());
 }
 
@@ -361,6 +363,7 @@ void ParticleBemModel::reset() {
   m_carry.clear();
   m_carryCol.assign(size_t(m_rest.rows()), -1);
   m_sliding.clear();
+  m_graspForces.clear();
   m_slidingMask.assign(size_t(m_rest.rows()), 0);
 }
 
@@ -444,6 +447,31 @@ void ParticleBemModel::prescribeGrasps(const StepInput& in) {
   m_carryTarget.resize(Eigen::Index(m_carry.size()), 3);
   for (size_t c = 0; c < m_carry.size(); ++c)
     m_carryTarget.row(Eigen::Index(c)) = m_x.row(m_carry[c]) + m_graspDx.row(Eigen::Index(c));
+}
+
+void ParticleBemModel::collectGraspForces(const StepInput& in,
+                                          const std::function<Vec3(int)>& nodeForce) {
+  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
+  std::vector<char> counted(size_t(m_x.rows()), 0);
+  size_t slidingIndex = 0;
+  for (size_t g = 0; g < in.grasps.size(); ++g) {
+    const GraspInput& grasp = in.grasps[g];
+    Vec3& f = m_graspForces[g];
+    if (grasp.sliding()) {
+      if (slidingIndex >= m_sliding.size()) continue;
+      const SlidingSet& s = m_sliding[slidingIndex++];
+      for (int i : s.carry) f(s.axis) += nodeForce(i)(s.axis);
+      continue;
+    }
+    for (int v : grasp.vertices) {
+      if (v < 0 || v >= m_fineRest.rows()) continue;
+      for (const auto& [node, w] : surfaceRow(v))
+        if (m_carryCol[size_t(node)] >= 0 && !counted[size_t(node)]) {
+          counted[size_t(node)] = 1;
+          f += nodeForce(node);
+        }
+    }
+  }
 }
 
 void ParticleBemModel::prescribeSliding(const StepInput& in) {
@@ -683,12 +711,26 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
           dofTargets[a] - m_restCoarse(dofs[a] / 3, dofs[a] % 3) - m_U[dofs[a]];
     if (m_graspSolver.solve(m_bem.M, dofs, m_graspRhs, m_graspP)) {
       SparseTraction Pg;
-      for (size_t a = 0; a < dofs.size(); ++a)
-        Pg.add(dofs[a] / 3, m_graspP[Eigen::Index(a)] * Vec3::Unit(dofs[a] % 3));
+      std::map<int, Vec3> traction;  // Pa, the grasp solve's traction at each held node
+      for (size_t a = 0; a < dofs.size(); ++a) {
+        const Vec3 t = m_graspP[Eigen::Index(a)] * Vec3::Unit(dofs[a] % 3);
+        Pg.add(dofs[a] / 3, t);
+        traction.emplace(dofs[a] / 3, Vec3::Zero()).first->second += t;
+      }
       accumulateDisplacement(m_bem.M, Pg, m_U);
+      // The plate's traction field is linear on the coarse triangles (nodal values t_i): its
+      // resultant is sum_i A_i t_i (A_i the node's third of its triangles' area), and the
+      // tissue pushes the tool with the opposite.
+      collectGraspForces(in, [&](int i) -> Vec3 {
+        const auto it = traction.find(i);
+        return it == traction.end() ? Vec3::Zero() : Vec3(-m_nodalArea[i] * it->second);
+      });
     } else {
       ++m_numeric["singular_grasp_systems"];
+      m_graspForces.clear();
     }
+  } else {
+    collectGraspForces(in, [](int) { return Vec3::Zero(); });
   }
   const auto t1 = Clock::now();
 
@@ -743,6 +785,11 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
   }
   prescribeGrasps(in);
   prescribeSliding(in);
+  // A carried particle's force on the tool: the elastic force of its neighbours on it, the loads
+  // on it and its weight, which the tool balances (as reference_fem's minus the energy gradient),
+  // at the step's start.
+  collectGraspForces(
+      in, [&](int i) -> Vec3 { return m_forces.row(i).transpose() + m_mass[i] * in.gravity; });
   const auto t1 = Clock::now();
   const Real damp = 1 / (1 + in.dt * m_particleDamping);
   for (Eigen::Index i = 0; i < m_x.rows(); ++i) {

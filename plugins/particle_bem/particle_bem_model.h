@@ -45,7 +45,7 @@
 #include <deform/sdk/registry.h>
 
 #include <array>
-
+#include <functional>
 #include <map>
 #include <memory>
 
@@ -64,6 +64,9 @@ class ParticleBemModel final : public Model {
   Counts counts() const override;
   PhaseTimes phaseTimes() const override { return m_times; }
   NumericCounters numericCounters() const override { return m_numeric; }
+  /// The force on each grasp's tool (see collectGraspForces); empty after a step whose grasp
+  /// traction system was singular.
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
   /// Markers: each follows the inverse-distance (Shepard) weighted displacement of its 8
   /// nearest particles at rest, the rule the guided model's interior particles follow.
   void bindMarkers(const MatX3& rest) override;
@@ -98,6 +101,11 @@ class ParticleBemModel final : public Model {
   /// The nodes under sliding plates after the integration (guided: onto the solved target; pure:
   /// their axis coordinate onto carryTarget).
   void applySliding(const StepInput& in);
+  /// m_graspForces, in the order of in.grasps: per grasp, the sum of nodeForce (the force the
+  /// tissue exerts on the tool through that node, N) over the nodes it carries (a node carried by
+  /// two bonded grasps counts for the first); a sliding plate's along its axis only (frictionless).
+  /// After prescribeGrasps() and prescribeSliding().
+  void collectGraspForces(const StepInput& in, const std::function<Vec3(int)>& nodeForce);
   /// The displacement response (3N x 3, m/N) of a load's J^T-mapped forces, cached per spread.
   const MatX& loadResponse(const PointLoad& load);
   /// Contact (deform/sdk/contact.h) on every particle, after the correction.
@@ -176,6 +184,7 @@ class ParticleBemModel final : public Model {
     VecX carryTarget, carryStart;
   };
   std::vector<SlidingSet> m_sliding;
+  std::vector<Vec3> m_graspForces;  ///< N, per grasp of the last step
   /// The nodes m_sliding carries (as of the last step): the repulsion leaves them to the plate.
   /// Pushed along it, the free tangential displacement of a carrying node fed the next step's
   /// repulsion through U (a static response) and the particles never settled (the Truth Cube at

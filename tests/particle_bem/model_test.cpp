@@ -308,7 +308,7 @@ TEST(ParticleModel, PointLoadPushesAlongTheLoad) {
 // A sliding plate (GraspInput::slideNormal): guided, the traction solve prescribes only the normal
 // component of the carrying nodes' displacement (a normal traction each, no tangential one);
 // pure, only their normal coordinate is set. Against a bonded plate the top spreads out
-// (tests/support/plate.h; no reaction force to compare). The 10 cm cube, its bottom face fixed.
+// (tests/support/plate.h) and the plate needs less force. The 10 cm cube, its bottom face fixed.
 // The pure model is checked over the first 20 steps (0.4 mm): held by a plate, bonded or
 // sliding, its particles blow up between 20 and 50 steps on this cube (the bonded plate too, with
 // or without this change; cause not investigated), a limit of that model's grasp.
@@ -318,12 +318,19 @@ TEST(GuidedModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
     Fixture fx(guided, 250, guided ? 150 : 300);
     fx.organ = press.organ;
     const auto m = fx.make();
-    if (guided)
+    // The bonded plate's force (reaction_force) against reference_fem's 1.1 N at 2 mm (0.22 N
+    // at 0.4 mm, linear), within the factor 2 these methods may miss by; sliding below it.
+    if (guided) {
       testing::expectSlidingSpreadsTheTopAndEasesThePlate(*m, press.organ, 0.002, 100, 100,
                                                           "particle_bem guided");
-    else
+      testing::expectBondedPlateForceNear(*m, press.organ, 0.002, 100, 100, 1.1, 2,
+                                          "particle_bem guided");
+    } else {
       testing::expectSlidingSpreadsTheTopAndEasesThePlate(*m, press.organ, 0.0004, 20, 0,
                                                           "particle_bem pure");
+      testing::expectBondedPlateForceNear(*m, press.organ, 0.0004, 20, 0, 0.22, 2,
+                                          "particle_bem pure");
+    }
   }
 }
 

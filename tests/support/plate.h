@@ -87,6 +87,22 @@ inline void expectSlidingSpreadsTheTopAndEasesThePlate(Model& model, const Organ
   }
 }
 
+/// A bonded plate's force (pressByPlate) is reported, positive along the press (the tissue pushes
+/// the plate back up, +z) and within a factor `factor` of `expected` (N; e.g. reference_fem's on
+/// the same cube and travel: 1.1 N for cubePress's 10 cm cube, E 5500 Pa, nu 0.3, at 2 mm).
+inline PlateRun expectBondedPlateForceNear(Model& model, const Organ& organ, Real press, int ramp,
+                                           int hold, Real expected, Real factor,
+                                           const char* label) {
+  const PlateRun bonded = pressByPlate(model, organ, false, press, ramp, hold);
+  std::printf("%s: bonded plate force %.4g N (expected %.4g N within a factor %.3g)\n", label,
+              bonded.force, expected, factor);
+  EXPECT_TRUE(bonded.ok) << label;
+  EXPECT_FALSE(std::isnan(bonded.force)) << label << ": no plate force reported";
+  EXPECT_GT(bonded.force, expected / factor) << label;
+  EXPECT_LT(bonded.force, expected * factor) << label;
+  return bonded;
+}
+
 /// Holds the top vertices of `organ` (as pressByPlate) with a plate at rest, bonded or sliding,
 /// and pushes each along +x with `force` (N) for `steps` steps of dt; the model is reset first.
 /// Returns the mean x displacement of the top vertices (m); heightMiss: the largest |z - z0|
