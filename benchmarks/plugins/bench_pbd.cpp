@@ -37,45 +37,42 @@ void runPbd(benchmark::State& state, pbd::PbdConfig cfg) {
   state.counters["constraints"] = static_cast<double>(c.at("constraints"));
 }
 
-void BM_PbdStretchVolume(benchmark::State& s) {
+// The default configuration with or without bending and the volume constraint.
+pbd::PbdConfig variant(bool bending, bool volume) {
   pbd::PbdConfig c;
-  c.bending = false;
-  runPbd(s, c);
+  c.bending = bending;
+  c.volume = volume;
+  return c;
+}
+
+pbd::PbdConfig withPrecision(pbd::PbdConfig c, pbd::Precision p) {
+  c.precision = p;
+  return c;
+}
+
+void BM_PbdStretchVolume(benchmark::State& s) {
+  runPbd(s, variant(false, true));
 }
 void BM_PbdStretchVolumeBending(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = true;
-  runPbd(s, c);
+  runPbd(s, variant(true, true));
 }
 void BM_PbdStretchVolumeDihedralBending(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = true;
+  pbd::PbdConfig c = variant(true, true);
   c.bendingModel = pbd::BendingModel::Dihedral;
   runPbd(s, c);
 }
 void BM_PbdStretchOnly(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = false;
-  c.volume = false;
-  runPbd(s, c);
+  runPbd(s, variant(false, false));
 }
 // The same two configurations with the double-precision solver (precision = float64).
 void BM_PbdStretchOnlyF64(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = false;
-  c.volume = false;
-  c.precision = pbd::Precision::Float64;
-  runPbd(s, c);
+  runPbd(s, withPrecision(variant(false, false), pbd::Precision::Float64));
 }
 void BM_PbdStretchVolumeF64(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = false;
-  c.precision = pbd::Precision::Float64;
-  runPbd(s, c);
+  runPbd(s, withPrecision(variant(false, true), pbd::Precision::Float64));
 }
 void BM_PbdClassicStretchVolume(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = false;
+  pbd::PbdConfig c = variant(false, true);
   c.mode = pbd::StiffnessMode::Classic;
   runPbd(s, c);
 }
