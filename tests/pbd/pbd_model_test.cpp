@@ -241,19 +241,15 @@ TEST(PbdModel, VolumeNetworkIsPressedLikeASolid) {
 TEST(PbdModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
   const testing::CubePress press = testing::cubePress(0.5);
   const ParamValues p = volumeNetworkParams();
-  Cache cache{std::filesystem::path()};
   PbdModel m;
-  m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
+  testing::initWithParams(m, press.organ, p);
   testing::expectSlidingSpreadsTheTopAndEasesThePlate(m, press.organ, 0.002, 200, 400,
                                                       "volume PBD");
 }
 
 TEST(PbdModel, ASurfaceNetworkHasNoInteriorForMarkers) {
-  const testing::CubePress press = testing::cubePress(0.5);
-  ParamValues p = ParamValues::defaults(paramSpecs());
   PbdModel m;
-  testing::initWithParams(m, press.organ, p);
-  testing::expectNoMarkersOnASurfaceNetwork(m);
+  testing::expectNoMarkersAtDefaults(m, paramSpecs());
 }
 
 }  // namespace
