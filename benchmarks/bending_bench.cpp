@@ -116,13 +116,7 @@ void BM_IsometricSweep(benchmark::State& state) {
     rest[j] = static_cast<T>(H.iso[i].rest);
     scale[j] = denom > 0 ? static_cast<T>(0.5 / denom) : T(0);
   }
-  pbd::IsometricBatch<T> b{{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
-                           {K[0].data(), K[1].data(), K[2].data(), K[3].data()},
-                           {wK[0].data(), wK[1].data(), wK[2].data(), wK[3].data()},
-                           rest.data(),
-                           at.data(),
-                           scale.data(),
-                           lambda.data()};
+  pbd::IsometricBatch<T> b = pbd::isometricBatch(p, K, wK, rest, at, scale, lambda);
   if (fixed) b.movable = movable.data();
   for (auto _ : state) {
     for (size_t c = 0; c + 1 < H.colours.size(); ++c)

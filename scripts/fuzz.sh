@@ -35,15 +35,8 @@ for p in PBD MASSSPRING REFERENCE_FEM FEM_HEX METABALLS PARTICLE_BEM HYBRID_FEM_
   BULLET_SOFTBODY BULLET_DEFORMABLE; do
   plugin_flags+=("-DDEFORM_WITH_${p}=OFF")
 done
-generator=()
-command -v ninja >/dev/null && [[ ! -f $build/CMakeCache.txt ]] && generator=(-G Ninja)
-launcher=()
-# ccache keyed on paths relative to the checkout (and not on the build folder, which -g would
-# hash), so that any clone built before on this machine is a cache hit.
-if command -v ccache >/dev/null; then
-  export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$PWD} CCACHE_NOHASHDIR=${CCACHE_NOHASHDIR:-1}
-  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
-fi
+source scripts/cmake_tools.sh
+cmake_tools "$build"  # generator, launcher
 cmake -S . -B "$build" "${generator[@]}" "${launcher[@]}" -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
   -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g" -DDEFORM_SANITIZE=ON \
   -DDEFORM_BUILD_FUZZERS=ON -DDEFORM_BUILD_TESTS=OFF -DDEFORM_BUILD_BENCHMARKS=OFF \

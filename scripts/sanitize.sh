@@ -51,15 +51,8 @@ plugins=${SANITIZE_PLUGINS-}
 compilers=()
 [[ -n ${SANITIZE_CC:-} ]] && compilers+=(-DCMAKE_C_COMPILER="$SANITIZE_CC")
 [[ -n ${SANITIZE_CXX:-} ]] && compilers+=(-DCMAKE_CXX_COMPILER="$SANITIZE_CXX")
-generator=()
-command -v ninja >/dev/null && [[ ! -f $build/CMakeCache.txt ]] && generator=(-G Ninja)
-launcher=()
-# ccache keyed on paths relative to the checkout (and not on the build folder, which -g would
-# hash), so that any clone built before on this machine is a cache hit.
-if command -v ccache >/dev/null; then
-  export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$PWD} CCACHE_NOHASHDIR=${CCACHE_NOHASHDIR:-1}
-  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
-fi
+source scripts/cmake_tools.sh
+cmake_tools "$build"  # generator, launcher
 # With a plugin subset the other plugins are not configured at all (the conformance program
 # depends on every configured plugin, so they would otherwise be built under ASan for nothing).
 with=()

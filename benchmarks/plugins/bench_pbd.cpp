@@ -3,6 +3,7 @@
 // paper's PBD baseline), + isometric bending (the default bending model), + dihedral bending,
 // classic stiffness; the default (float32) solver and,
 // for the first two, the double-precision one.
+#include "held_top.h"
 #include "pbd_model.h"
 #include "support/meshes.h"
 #include "support/organs.h"
@@ -20,62 +21,49 @@ void runPbd(benchmark::State& state, pbd::PbdConfig cfg) {
   const Organ o = testing::liverSizedOrgan();
   pbd::PbdModel m;
   m.init(o, cfg);
-  // A grasp on the top, moving slowly upwards: the realistic case (kinematic nodes).
   StepInput in = testing::heldTopInput(o, 1e-3);
-  for (int s = 0; s < 20; ++s) m.step(in);  // warm-up
-  std::map<std::string, double> phaseSum;
-  for (auto _ : state) {
-    in.grasps[0].targets.col(2).array() += 1e-6;
-    benchmark::DoNotOptimize(m.step(in));
-    for (const auto& [name, ms] : m.phaseTimes()) phaseSum[name] += ms;
-  }
-  // Mean wall time per phase (ms), to see where a step goes.
-  for (const auto& [name, ms] : phaseSum)
-    state.counters[name + "_ms"] = ms / static_cast<double>(state.iterations());
+  bench::timeHeldTopSteps(state, m, in, 1e-6);  // and where a step goes (<phase>_ms)
   const Counts c = m.counts();
   state.counters["nodes"] = static_cast<double>(c.at("nodes"));
   state.counters["constraints"] = static_cast<double>(c.at("constraints"));
 }
 
-void BM_PbdStretchVolume(benchmark::State& s) {
+// The default configuration with or without bending and the volume constraint.
+pbd::PbdConfig variant(bool bending, bool volume) {
   pbd::PbdConfig c;
-  c.bending = false;
-  runPbd(s, c);
+  c.bending = bending;
+  c.volume = volume;
+  return c;
+}
+
+pbd::PbdConfig withPrecision(pbd::PbdConfig c, pbd::Precision p) {
+  c.precision = p;
+  return c;
+}
+
+void BM_PbdStretchVolume(benchmark::State& s) {
+  runPbd(s, variant(false, true));
 }
 void BM_PbdStretchVolumeBending(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = true;
-  runPbd(s, c);
+  runPbd(s, variant(true, true));
 }
 void BM_PbdStretchVolumeDihedralBending(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = true;
+  pbd::PbdConfig c = variant(true, true);
   c.bendingModel = pbd::BendingModel::Dihedral;
   runPbd(s, c);
 }
 void BM_PbdStretchOnly(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = false;
-  c.volume = false;
-  runPbd(s, c);
+  runPbd(s, variant(false, false));
 }
 // The same two configurations with the double-precision solver (precision = float64).
 void BM_PbdStretchOnlyF64(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = false;
-  c.volume = false;
-  c.precision = pbd::Precision::Float64;
-  runPbd(s, c);
+  runPbd(s, withPrecision(variant(false, false), pbd::Precision::Float64));
 }
 void BM_PbdStretchVolumeF64(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = false;
-  c.precision = pbd::Precision::Float64;
-  runPbd(s, c);
+  runPbd(s, withPrecision(variant(false, true), pbd::Precision::Float64));
 }
 void BM_PbdClassicStretchVolume(benchmark::State& s) {
-  pbd::PbdConfig c;
-  c.bending = false;
+  pbd::PbdConfig c = variant(false, true);
   c.mode = pbd::StiffnessMode::Classic;
   runPbd(s, c);
 }

@@ -16,6 +16,17 @@ def pyplot_or_exit():
         sys.exit(NO_MATPLOTLIB)
 
 
+def plot_args(doc_string):
+    """The (json document, output path) of a plotting script's command line `IN.json OUT`; prints
+    the script's usage (doc_string) and exits 2 on any other."""
+    if len(sys.argv) != 3:
+        print(doc_string)
+        sys.exit(2)
+    import json
+    with open(sys.argv[1]) as f:
+        return json.load(f), sys.argv[2]
+
+
 STATUS_COLOURS = {
     "stable": "#4caf50",
     "diverged": "#ff9800",

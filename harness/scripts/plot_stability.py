@@ -8,12 +8,11 @@ step (cells coloured by verdict: accurate / inaccurate, with its reason / collap
 the step / failed / unchecked, with its reason; by status for a stability.json without verdicts), and a strip of the other
 cases (Poisson ratio, large forces, cantilever, scale, slivers, pull, invert, flatten).
 """
-import json
 import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from deform_plot_common import STATUS_COLOURS, pyplot_or_exit  # noqa: E402
+from deform_plot_common import STATUS_COLOURS, plot_args, pyplot_or_exit  # noqa: E402
 
 VERDICT_COLOURS = {
     "accurate": "#4caf50",
@@ -47,11 +46,7 @@ def label(r):
 
 
 def main():
-    if len(sys.argv) != 3:
-        print(__doc__)
-        return 2
-    with open(sys.argv[1]) as f:
-        doc = json.load(f)
+    doc, out = plot_args(__doc__)
     plt = pyplot_or_exit()
     from matplotlib.patches import Patch, Rectangle
 
@@ -98,7 +93,7 @@ def main():
         handles = [Patch(facecolor=c, label=s) for s, c in legend.items()]
         fig.legend(handles=handles, loc="lower center", ncol=5, fontsize=8)
         fig.tight_layout(rect=(0, 0.05, 1, 1))
-        path = os.path.join(sys.argv[2], "stability_%s.png" % model)
+        path = os.path.join(out, "stability_%s.png" % model)
         fig.savefig(path, dpi=100)
         plt.close(fig)
         written.append(path)

@@ -9,12 +9,12 @@ diamonds when calibrated, crosses when invalid), its Pareto front a line through
 when calibrated), and a reached floor a dotted level in its colour. Each point is labelled with its axis values; the 1 ms
 haptic budget is a red vertical line.
 """
-import json
 import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from deform_plot_common import model_colour, nearest_label, pyplot_or_exit  # noqa: E402
+from deform_plot_common import (model_colour, nearest_label, plot_args,  # noqa: E402
+                                pyplot_or_exit)
 
 
 def axis_text(p):
@@ -103,11 +103,7 @@ def draw_panel(ax, doc, points, key, title, budget):
 
 
 def main():
-    if len(sys.argv) != 3:
-        print(__doc__)
-        return 2
-    with open(sys.argv[1]) as f:
-        doc = json.load(f)
+    doc, out = plot_args(__doc__)
     plt = pyplot_or_exit()
     points = [p for p in doc["points"]
               if p["status"] == "ok" and p["ms_median"] is not None and p["rmse_50"] is not None]
@@ -122,8 +118,8 @@ def main():
     if skipped:
         fig.text(0.01, 0.01, "not plotted: " + "; ".join(skipped)[:300], fontsize=7)
     fig.tight_layout(rect=(0, 0.03, 1, 0.95))
-    fig.savefig(sys.argv[2], dpi=110)
-    print("plot: " + sys.argv[2])
+    fig.savefig(out, dpi=110)
+    print("plot: " + out)
     return 0
 
 

@@ -199,14 +199,15 @@ Prepared prepareCase(const SceneCase& sc, PluginLoader& loader) {
     p.task = caseTask(pruned, runScene, sc.outDir, options);
     return p;
   }
-  BenchmarkOptions o;
-  o.cacheDir = options.cacheDir;
-  o.outDir = sc.outDir;
-  o.run = options.run;
-  o.explain = options.explain;
-  o.progress = options.progress;
-  o.reuseReference = options.reuseReference || options.reuseModelSolves;
-  o.reuseModelSolves = options.reuseModelSolves;
+  const BenchmarkOptions o{.only = {},  // every model
+                           .cacheDir = options.cacheDir,
+                           .outDir = sc.outDir,
+                           .run = options.run,
+                           .explain = options.explain,
+                           .progress = options.progress,
+                           .reuseReference = options.reuseReference || options.reuseModelSolves,
+                           .reuseModelSolves = options.reuseModelSolves,
+                           .calibrations = {}};
   const auto start = Clock::now();
   try {
     c.result = runBenchmark(runScene.string(), loader, o);

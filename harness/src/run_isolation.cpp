@@ -55,26 +55,78 @@ void getMap(ByteReader& r, std::map<std::string, V>& m) {
   }
 }
 
-void putStrings(ByteWriter& w, const std::vector<std::string>& v) {
+// A list: its length, then put(element) for each element; get() reads one element back.
+template <class T, class Put>
+void putList(ByteWriter& w, const std::vector<T>& v, Put put) {
   w.pod(static_cast<long long>(v.size()));
-  for (const std::string& s : v) w.string(s);
+  for (const T& e : v) put(e);
+}
+
+template <class T, class Get>
+std::vector<T> getList(ByteReader& r, Get get) {
+  std::vector<T> v;
+  for (long long i = 0, n = r.pod<long long>(); i < n; ++i) v.push_back(get());
+  return v;
+}
+
+void putStrings(ByteWriter& w, const std::vector<std::string>& v) {
+  putList(w, v, [&](const std::string& s) { w.string(s); });
 }
 
 std::vector<std::string> getStrings(ByteReader& r) {
-  std::vector<std::string> v;
-  for (long long i = 0, n = r.pod<long long>(); i < n; ++i) v.push_back(r.string());
-  return v;
+  return getList<std::string>(r, [&] { return r.string(); });
 }
 
 void putSnapshots(ByteWriter& w, const std::vector<SurfaceSnapshot>& v) {
-  w.pod(static_cast<long long>(v.size()));
-  for (const SurfaceSnapshot& s : v) putSnapshotExtras(w, s);
+  putList(w, v, [&](const SurfaceSnapshot& s) { putSnapshotExtras(w, s); });
 }
 
 std::vector<SurfaceSnapshot> getSnapshots(ByteReader& r) {
-  std::vector<SurfaceSnapshot> v;
-  for (long long i = 0, n = r.pod<long long>(); i < n; ++i) v.push_back(getSnapshotExtras(r));
-  return v;
+  return getList<SurfaceSnapshot>(r, [&] { return getSnapshotExtras(r); });
+}
+
+void putCacheEvent(ByteWriter& w, const Cache::Event& e) {
+  w.string(e.kind);
+  w.string(e.key);
+  w.pod(static_cast<int>(e.what));
+  w.string(e.detail);
+}
+
+Cache::Event getCacheEvent(ByteReader& b) {
+  Cache::Event e;
+  e.kind = b.string();
+  e.key = b.string();
+  const int what = b.pod<int>();
+  if (what < 0 || what > static_cast<int>(Cache::EventKind::StoreFailed))
+    throw std::runtime_error("run record: bad cache event");
+  e.what = static_cast<Cache::EventKind>(what);
+  e.detail = b.string();
+  return e;
+}
+
+void putGraspForce(ByteWriter& w, const GraspForceSample& g) {
+  w.pod(g.step);
+  w.pod(g.tool);
+  putVec3(w, g.force);
+}
+
+// (A braced list is evaluated left to right: the fields are read in their order.)
+GraspForceSample getGraspForce(ByteReader& b) {
+  return {.step = b.pod<int>(), .tool = b.pod<int>(), .force = getVec3(b)};
+}
+
+void putHandForce(ByteWriter& w, const HandForceSample& h) {
+  w.pod(h.step);
+  w.pod(h.instrument);
+  putVec3(w, h.force);
+  putVec3(w, h.position);
+}
+
+HandForceSample getHandForce(ByteReader& b) {
+  return {.step = b.pod<int>(),
+          .instrument = b.pod<int>(),
+          .force = getVec3(b),
+          .position = getVec3(b)};
 }
 
 bool writeAll(int fd, const char* p, size_t n) {
@@ -125,8 +177,7 @@ std::vector<char> serializeRunRecord(const RunRecord& r) {
   putMap(w, r.phaseMs);
   putMap(w, r.numeric);
   w.pod(r.fixedNodes);
-  w.pod(static_cast<long long>(r.emptyGrasps.size()));
-  for (int v : r.emptyGrasps) w.pod(v);
+  putList(w, r.emptyGrasps, [&](int v) { w.pod(v); });
   w.pod(r.graspResidual);
   w.pod(r.graspTravel);
   w.pod(static_cast<int>(r.settledAt.has_value()));
@@ -139,35 +190,17 @@ std::vector<char> serializeRunRecord(const RunRecord& r) {
   w.pod(r.fixedDrift);
   w.pod(static_cast<int>(r.fixedRegion));
   w.pod(r.prescribedMotion);
-  w.pod(static_cast<long long>(r.cacheEvents.size()));
-  for (const Cache::Event& e : r.cacheEvents) {
-    w.string(e.kind);
-    w.string(e.key);
-    w.pod(static_cast<int>(e.what));
-    w.string(e.detail);
-  }
+  putList(w, r.cacheEvents, [&](const Cache::Event& e) { putCacheEvent(w, e); });
   w.matrix(r.finalSurface);
   w.matrix(r.finalFaces);
   putSnapshots(w, r.compared);
   putSnapshots(w, r.series);
-  w.pod(static_cast<long long>(r.graspForces.size()));
-  for (const GraspForceSample& g : r.graspForces) {
-    w.pod(g.step);
-    w.pod(g.tool);
-    putVec3(w, g.force);
-  }
+  putList(w, r.graspForces, [&](const GraspForceSample& g) { putGraspForce(w, g); });
   putStrings(w, r.worlds);
   putStrings(w, r.instruments);
-  w.pod(static_cast<long long>(r.handForces.size()));
-  for (const HandForceSample& h : r.handForces) {
-    w.pod(h.step);
-    w.pod(h.instrument);
-    putVec3(w, h.force);
-    putVec3(w, h.position);
-  }
+  putList(w, r.handForces, [&](const HandForceSample& h) { putHandForce(w, h); });
   w.pod(r.dt);
-  w.pod(static_cast<long long>(r.objectsFinal.size()));
-  for (const Vec3& p : r.objectsFinal) putVec3(w, p);
+  putList(w, r.objectsFinal, [&](const Vec3& p) { putVec3(w, p); });
   w.pod(r.contactPairs);
   w.pod(r.contacts);
   w.string(r.markerStatus);
@@ -213,7 +246,7 @@ RunRecord deserializeRunRecord(const std::vector<char>& bytes) {
   getMap(b, r.phaseMs);
   getMap(b, r.numeric);
   r.fixedNodes = b.pod<int>();
-  for (long long i = 0, n = b.pod<long long>(); i < n; ++i) r.emptyGrasps.push_back(b.pod<int>());
+  r.emptyGrasps = getList<int>(b, [&] { return b.pod<int>(); });
   r.graspResidual = b.pod<double>();
   r.graspTravel = b.pod<double>();
   const bool settled = b.pod<int>() != 0;
@@ -227,40 +260,17 @@ RunRecord deserializeRunRecord(const std::vector<char>& bytes) {
   r.fixedDrift = b.pod<double>();
   r.fixedRegion = b.pod<int>() != 0;
   r.prescribedMotion = b.pod<double>();
-  for (long long i = 0, n = b.pod<long long>(); i < n; ++i) {
-    Cache::Event e;
-    e.kind = b.string();
-    e.key = b.string();
-    const int what = b.pod<int>();
-    if (what < 0 || what > static_cast<int>(Cache::EventKind::StoreFailed))
-      throw std::runtime_error("run record: bad cache event");
-    e.what = static_cast<Cache::EventKind>(what);
-    e.detail = b.string();
-    r.cacheEvents.push_back(std::move(e));
-  }
+  r.cacheEvents = getList<Cache::Event>(b, [&] { return getCacheEvent(b); });
   b.matrix(r.finalSurface);
   b.matrix(r.finalFaces);
   r.compared = getSnapshots(b);
   r.series = getSnapshots(b);
-  for (long long i = 0, n = b.pod<long long>(); i < n; ++i) {
-    GraspForceSample g;
-    g.step = b.pod<int>();
-    g.tool = b.pod<int>();
-    g.force = getVec3(b);
-    r.graspForces.push_back(g);
-  }
+  r.graspForces = getList<GraspForceSample>(b, [&] { return getGraspForce(b); });
   r.worlds = getStrings(b);
   r.instruments = getStrings(b);
-  for (long long i = 0, n = b.pod<long long>(); i < n; ++i) {
-    HandForceSample h;
-    h.step = b.pod<int>();
-    h.instrument = b.pod<int>();
-    h.force = getVec3(b);
-    h.position = getVec3(b);
-    r.handForces.push_back(h);
-  }
+  r.handForces = getList<HandForceSample>(b, [&] { return getHandForce(b); });
   r.dt = b.pod<Real>();
-  for (long long i = 0, n = b.pod<long long>(); i < n; ++i) r.objectsFinal.push_back(getVec3(b));
+  r.objectsFinal = getList<Vec3>(b, [&] { return getVec3(b); });
   r.contactPairs = b.pod<long long>();
   r.contacts = b.pod<long long>();
   r.markerStatus = b.string();

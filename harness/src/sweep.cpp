@@ -227,13 +227,13 @@ std::vector<SweepModelSummary> summariseSweep(const std::vector<SweepPoint>& poi
                                out[i].calibrated == p.calibrated))
       ++i;
     if (i == out.size()) {
-      SweepModelSummary m;
-      m.model = p.model;
-      m.plugin = p.plugin;
-      m.calibrated = p.calibrated;
-      m.resolutionParam = p.resolutionParam;
-      m.effortParam = p.effortParam;
-      out.push_back(m);
+      out.push_back({.model = p.model,
+                     .plugin = p.plugin,
+                     .calibrated = p.calibrated,
+                     .resolutionParam = p.resolutionParam,
+                     .effortParam = p.effortParam,
+                     .rmse50 = {},  // summed up below
+                     .rmseAll = {}});
       curves.emplace_back();
     }
     curves[i].push_back(&p);
@@ -541,18 +541,20 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   // The points' outcomes (fillPoint), the reference's status, the results files.
   std::vector<SweepPoint> points;
   for (const Planned& p : planned) {
-    SweepPoint s;
-    s.model = p.model;
-    s.plugin = p.plugin;
-    s.label = p.label;
-    s.resolutionParam = p.resolutionParam;
-    s.effortParam = p.effortParam;
-    s.resolution = p.resolution;
-    s.effort = p.effort;
-    s.param = p.resolutionParam.empty() ? p.effortParam : p.resolutionParam;
-    s.value = p.resolutionParam.empty() ? p.effort : p.resolution;
-    s.calibrated = p.calibration != nullptr;
-    points.push_back(s);
+    // The outcome (status, timings, errors, validity, note) is filled in by fillPoint.
+    points.push_back({.model = p.model,
+                      .plugin = p.plugin,
+                      .label = p.label,
+                      .resolutionParam = p.resolutionParam,
+                      .effortParam = p.effortParam,
+                      .resolution = p.resolution,
+                      .effort = p.effort,
+                      .param = p.resolutionParam.empty() ? p.effortParam : p.resolutionParam,
+                      .value = p.resolutionParam.empty() ? p.effort : p.resolution,
+                      .status = {},
+                      .invalidReason = {},
+                      .calibrated = p.calibration != nullptr,
+                      .note = {}});
   }
   const auto fillPointOf = [&](size_t i, const CaseResult& c) {
     fillPoint(points[i], planned[i], c);

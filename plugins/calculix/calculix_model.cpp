@@ -36,13 +36,8 @@ class CalculixModel final : public Model {
     m_increments.residualTolerance = p.real("residual_tolerance");
     const Organ& organ = setup.organ;
 
-    OrganTetOptions meshOptions;  // the mesh reference_fem builds with the same parameters
-    meshOptions.edgeLength = p.real("edge_length");
-    meshOptions.targetElements = p.integer("elements");
-    meshOptions.refineSurface = p.flag("refine_surface");
-    meshOptions.conformFixed = p.flag("conform_fixed");
-    meshOptions.timeoutSeconds = p.real("mesh_timeout");
-    OrganTets tets = organTets(organ, meshOptions, setup.cache);
+    // The mesh reference_fem builds with the same parameters.
+    OrganTets tets = organTets(organ, organTetOptions(p), setup.cache);
     m_surfaceNode = std::move(tets.surfaceNode);
     m_numElements = tets.mesh.numTets();
     m_cornerTets = tets.mesh.T;

@@ -2,28 +2,19 @@
 // See README.md for the method, the parameters and the limits.
 #include "calculix_model.h"
 
+#include <deform/geometry/organ_tets.h>
 #include <deform/sdk/registry.h>
 
 namespace {
 
 std::vector<deform::ParamSpec> calculixParams() {
   using deform::ParamSpec;
-  return {
+  std::vector<ParamSpec> specs = {
       ParamSpec::choice("material", "neo_hookean", {"linear", "neo_hookean"},
                         "neo_hookean: *HYPERELASTIC, NEO HOOKE (C10 = mu/2, D1 = 2/K) with NLGEOM; "
                         "linear: *ELASTIC, small strain"),
       ParamSpec::integer("element_order", 2, 1, 2,
                          "2: C3D10 (reference_fem's 10-node tets); 1: C3D4 (its 4-node tets)"),
-      ParamSpec::integer("elements", 1000, 100, 5000000,
-                         "target number of tets (as reference_fem: the same value meshes the same "
-                         "tets)"),
-      ParamSpec::real("edge_length", "m", 0.0, 0.0, 1.0,
-                      "target interior tet edge length; 0: from elements"),
-      ParamSpec::flag("refine_surface", true, "as reference_fem's refine_surface"),
-      ParamSpec::flag("conform_fixed", true,
-                      "as reference_fem's conform_fixed: mesh the organ minus the fixed boxes"),
-      ParamSpec::real("mesh_timeout", "s", 600.0, 1.0, 86400.0,
-                      "wall-clock limit of the Gmsh child process"),
       ParamSpec::real("initial_increment", "1", 0.25, 1e-6, 1.0,
                       "ccx's first load increment, as a fraction of each solve (NLGEOM)"),
       ParamSpec::real("max_increment", "1", 1.0, 1e-6, 1.0, "ccx's largest load increment"),
@@ -37,6 +28,9 @@ std::vector<deform::ParamSpec> calculixParams() {
       ParamSpec::real("timeout", "s", 3600.0, 1.0, 604800.0,
                       "wall-clock limit of one ccx run (killed after it: a failed run)"),
   };
+  // reference_fem's tet mesh parameters after "element_order" (organ_tets.h): the same values
+  // mesh the same tets.
+  return deform::withOrganTetParams(std::move(specs), 2);
 }
 
 }  // namespace

@@ -20,6 +20,41 @@ double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+/// Calls fn(local, row, col) for each entry of an element's 24 x 24 stiffness that lands in the
+/// lower triangle of the reduced matrix (both nodes free, row >= col): local = 24 (3a + i) +
+/// 3b + j for nodes a, b and axes i, j, row and col the reduced dofs.
+template <class Fn>
+void forEachLowerEntry(const std::array<int, 8>& hex, const std::vector<int>& dofOfNode, Fn&& fn) {
+  for (int a = 0; a < 8; ++a) {
+    for (int b = 0; b < 8; ++b) {
+      const int da = dofOfNode[hex[a]], db = dofOfNode[hex[b]];
+      if (da < 0 || db < 0) continue;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j)
+          if (da + i >= db + j) fn((3 * a + i) * 24 + 3 * b + j, da + i, db + j);
+    }
+  }
+}
+
+/// An element's 24-vector u = a in - b rest at its eight nodes, rotated back by R^T when R is
+/// given (corotational); b = 0 skips the rest term.
+template <class Local>
+void gatherElement(const std::array<int, 8>& hex, const Mat3* R, const VecX& in, const MatX3& rest,
+                   Real a, Real b, Local&& u) {
+  if (R) {
+    const Mat3 Rt = R->transpose();
+    for (int i = 0; i < 8; ++i) {
+      u.template segment<3>(3 * i).noalias() = Rt * (a * in.segment<3>(3 * hex[i]));
+      if (b != 0) u.template segment<3>(3 * i) -= b * rest.row(hex[i]).transpose();
+    }
+  } else {
+    for (int i = 0; i < 8; ++i) {
+      u.template segment<3>(3 * i) = a * in.segment<3>(3 * hex[i]);
+      if (b != 0) u.template segment<3>(3 * i) -= b * rest.row(hex[i]).transpose();
+    }
+  }
+}
+
 }  // namespace
 
 std::vector<Real> cellFillFractions(const SurfaceMesh& surface, const VoxelGrid& voxels,
@@ -261,19 +296,9 @@ void HexFemModel::buildPattern() {
   const int E = m_grid.numHexes();
   std::vector<Triplet> trip;
   trip.reserve(static_cast<size_t>(E) * 300);
-  for (const auto& hex : m_grid.hexes) {
-    for (int a = 0; a < 8; ++a) {
-      for (int b = 0; b < 8; ++b) {
-        const int da = m_dofOfNode[hex[a]], db = m_dofOfNode[hex[b]];
-        if (da < 0 || db < 0) continue;
-        for (int i = 0; i < 3; ++i) {
-          for (int j = 0; j < 3; ++j) {
-            if (da + i >= db + j) trip.emplace_back(da + i, db + j, 1.0);
-          }
-        }
-      }
-    }
-  }
+  for (const auto& hex : m_grid.hexes)
+    forEachLowerEntry(hex, m_dofOfNode,
+                      [&](int, int row, int col) { trip.emplace_back(row, col, 1.0); });
   m_A.resize(m_numDofs, m_numDofs);
   m_A.setFromTriplets(trip.begin(), trip.end());
   m_A.makeCompressed();
@@ -284,23 +309,10 @@ void HexFemModel::buildPattern() {
     return static_cast<int>(it - m_A.innerIndexPtr());
   };
   m_valueIndex.assign(static_cast<size_t>(E) * 576, -1);
-  for (int e = 0; e < E; ++e) {
-    const auto& hex = m_grid.hexes[e];
-    for (int a = 0; a < 8; ++a) {
-      for (int b = 0; b < 8; ++b) {
-        const int da = m_dofOfNode[hex[a]], db = m_dofOfNode[hex[b]];
-        if (da < 0 || db < 0) continue;
-        for (int i = 0; i < 3; ++i) {
-          for (int j = 0; j < 3; ++j) {
-            if (da + i >= db + j) {
-              m_valueIndex[static_cast<size_t>(e) * 576 + (3 * a + i) * 24 + 3 * b + j] =
-                  position(da + i, db + j);
-            }
-          }
-        }
-      }
-    }
-  }
+  for (int e = 0; e < E; ++e)
+    forEachLowerEntry(m_grid.hexes[e], m_dofOfNode, [&](int local, int row, int col) {
+      m_valueIndex[static_cast<size_t>(e) * 576 + local] = position(row, col);
+    });
   m_diagIndex.resize(m_numDofs);
   m_nodeOfDof.resize(m_numDofs);
   for (int n = 0; n < m_grid.numNodes(); ++n) {
@@ -447,18 +459,7 @@ void HexFemModel::applyElements(const std::vector<int>* elems, const VecX& in, R
   for (int k = 0; k < count; ++k) {
     const int e = elems ? (*elems)[k] : k;
     const auto& hex = m_grid.hexes[e];
-    if (rotated) {
-      const Mat3 Rt = m_R[e].transpose();
-      for (int i = 0; i < 8; ++i) {
-        local.segment<3>(3 * i).noalias() = Rt * (a * in.segment<3>(3 * hex[i]));
-        if (b != 0) local.segment<3>(3 * i) -= b * m_rest.row(hex[i]).transpose();
-      }
-    } else {
-      for (int i = 0; i < 8; ++i) {
-        local.segment<3>(3 * i) = a * in.segment<3>(3 * hex[i]);
-        if (b != 0) local.segment<3>(3 * i) -= b * m_rest.row(hex[i]).transpose();
-      }
-    }
+    gatherElement(hex, rotated ? &m_R[e] : nullptr, in, m_rest, a, b, local);
     f.noalias() = m_fill[e] * (m_K0 * local);
     if (rotated) {
       const Mat3& R = m_R[e];
@@ -478,19 +479,7 @@ void HexFemModel::applyAllElements(const VecX& in, Real a, Real b, Real scale, V
   const int E = m_grid.numHexes();
   for (int e = 0; e < E; ++e) {
     const auto& hex = m_grid.hexes[e];
-    auto u = m_U.col(e);
-    if (rotated) {
-      const Mat3 Rt = m_R[e].transpose();
-      for (int i = 0; i < 8; ++i) {
-        u.segment<3>(3 * i).noalias() = Rt * (a * in.segment<3>(3 * hex[i]));
-        if (b != 0) u.segment<3>(3 * i) -= b * m_rest.row(hex[i]).transpose();
-      }
-    } else {
-      for (int i = 0; i < 8; ++i) {
-        u.segment<3>(3 * i) = a * in.segment<3>(3 * hex[i]);
-        if (b != 0) u.segment<3>(3 * i) -= b * m_rest.row(hex[i]).transpose();
-      }
-    }
+    gatherElement(hex, rotated ? &m_R[e] : nullptr, in, m_rest, a, b, m_U.col(e));
   }
   constexpr int kChunk = 128;
   for (int j = 0; j < E; j += kChunk) {

@@ -13,6 +13,20 @@
 
 namespace deform::hybrid_fem_pbd {
 
+#ifndef DEFORM_HYBRID_AVX2
+namespace batched {
+// Without the AVX2 unit (not x86-64): the vector ranges take nothing, the scalar lanes do all.
+template <class... Args>
+std::size_t stretchRangeAvx2(Args&&...) {
+  return 0;
+}
+template <class... Args>
+std::size_t bendRangeAvx2(Args&&...) {
+  return 0;
+}
+}  // namespace batched
+#endif
+
 namespace {
 
 // One constraint at a time: the reference for the AVX2 lanes and the tail of each colour.
@@ -25,6 +39,24 @@ bool avx2Supported() {
 #else
   return false;
 #endif
+}
+
+/// One sweep over the colours of a constraint list (colourStart: #colours + 1 offsets): each
+/// colour by vector groups first, range(begin, end, &degenerate) returning how many constraints
+/// it took (only with vec, and not in a last colour whose constraints share particles), the rest
+/// one at a time by one(i), which returns its degenerate count. Returns the degenerate count.
+template <class Range, class One>
+long long colourSweep(const std::vector<int>& colourStart, bool lastColourShared, bool vec,
+                      Range&& range, One&& one) {
+  const size_t nc = colourStart.size() - 1;
+  long long degenerate = 0;
+  for (size_t col = 0; col < nc; ++col) {
+    size_t i = static_cast<size_t>(colourStart[col]);
+    const size_t end = static_cast<size_t>(colourStart[col + 1]);
+    if (vec && !(lastColourShared && col + 1 == nc)) i += range(i, end, &degenerate);
+    for (; i < end; ++i) degenerate += one(i);
+  }
+  return degenerate;
 }
 
 }  // namespace
@@ -159,15 +191,9 @@ void addIsometricBending(SurfaceBatches& b, const MatX3& restV) {
 namespace {
 
 long long projectIsometricPass(Real* x4, const SurfaceBatches& b, bool simd) {
-  const pbd::IsometricBatch<Real> v{
-      {b.isoP[0].data(), b.isoP[1].data(), b.isoP[2].data(), b.isoP[3].data()},
-      {b.isoK[0].data(), b.isoK[1].data(), b.isoK[2].data(), b.isoK[3].data()},
-      {b.isoWK[0].data(), b.isoWK[1].data(), b.isoWK[2].data(), b.isoWK[3].data()},
-      b.isoRest.data(),
-      b.isoAlphaTilde.data(),
-      b.isoScale.data(),
-      b.isoLambda.data(),
-      b.hMovable.data()};
+  pbd::IsometricBatch<Real> v = pbd::isometricBatch(b.isoP, b.isoK, b.isoWK, b.isoRest,
+                                                    b.isoAlphaTilde, b.isoScale, b.isoLambda);
+  v.movable = b.hMovable.data();
   const size_t nhc = b.hColourStart.size() - 1;
   long long degenerate = 0;
   for (size_t col = 0; col < nhc; ++col) {
@@ -189,33 +215,20 @@ long long stretchPassF(float* x4, const SurfaceBatches& b, bool simd, float* mea
   static const bool kAvx2 = avx2Supported();
   const bool vec = simd && kAvx2;
   const batched::StretchViewF sv = b.stretchViewF();
-  const size_t nsc = b.sColourStart.size() - 1;
-  long long degenerate = 0;
-  for (size_t col = 0; col < nsc; ++col) {
-    size_t i = static_cast<size_t>(b.sColourStart[col]);
-    const size_t end = static_cast<size_t>(b.sColourStart[col + 1]);
-#ifdef DEFORM_HYBRID_AVX2
-    if (vec && !(b.sLastColourShared && col + 1 == nsc))
-      i += batched::stretchRangeAvx2(x4, sv, i, end, measure, &degenerate);
-#endif
-    for (; i < end; ++i) degenerate += batched::stretchGroup<ScalarLanesF>(x4, sv, i, measure);
-  }
-  (void)vec;
-  return degenerate;
+  return colourSweep(
+      b.sColourStart, b.sLastColourShared, vec,
+      [&](size_t i, size_t end, long long* degenerate) {
+        return batched::stretchRangeAvx2(x4, sv, i, end, measure, degenerate);
+      },
+      [&](size_t i) { return batched::stretchGroup<ScalarLanesF>(x4, sv, i, measure); });
 }
 
 // One single-precision isometric bending sweep (the shared float kernel); measure != nullptr:
 // the stencil lengths |v| instead.
 long long isometricPassF(float* x4, const SurfaceBatches& b, bool simd, float* measure) {
-  const pbd::IsometricBatch<float> v{
-      {b.isoP[0].data(), b.isoP[1].data(), b.isoP[2].data(), b.isoP[3].data()},
-      {b.fIsoK[0].data(), b.fIsoK[1].data(), b.fIsoK[2].data(), b.fIsoK[3].data()},
-      {b.fIsoWK[0].data(), b.fIsoWK[1].data(), b.fIsoWK[2].data(), b.fIsoWK[3].data()},
-      b.fIsoRest.data(),
-      b.fIsoAlphaTilde.data(),
-      b.fIsoScale.data(),
-      b.fIsoLambda.data(),
-      b.hMovable.data()};
+  pbd::IsometricBatch<float> v = pbd::isometricBatch(b.isoP, b.fIsoK, b.fIsoWK, b.fIsoRest,
+                                                     b.fIsoAlphaTilde, b.fIsoScale, b.fIsoLambda);
+  v.movable = b.hMovable.data();
   const size_t nhc = b.hColourStart.size() - 1;
   long long degenerate = 0;
   auto range = [&](size_t begin, size_t end) {
@@ -288,34 +301,26 @@ long long projectSurfaceBatches(Real* x4, const SurfaceBatches& b, int iteration
   const bool vec = simd && kAvx2;
   const batched::StretchView sv = b.stretchView();
   const batched::BendView hv = b.bendView();
-  const size_t nsc = b.sColourStart.size() - 1, nhc = b.hColourStart.size() - 1;
   long long degenerate = 0;
   for (int it = 0; it < iterations; ++it) {
-    for (size_t col = 0; col < nsc; ++col) {
-      size_t i = static_cast<size_t>(b.sColourStart[col]);
-      const size_t end = static_cast<size_t>(b.sColourStart[col + 1]);
-#ifdef DEFORM_HYBRID_AVX2
-      if (vec && !(b.sLastColourShared && col + 1 == nsc))
-        i += batched::stretchRangeAvx2(x4, sv, i, end, &degenerate);
-#endif
-      for (; i < end; ++i) degenerate += batched::stretchGroup<ScalarLanes>(x4, sv, i);
-    }
+    degenerate += colourSweep(
+        b.sColourStart, b.sLastColourShared, vec,
+        [&](size_t i, size_t end, long long* d) {
+          return batched::stretchRangeAvx2(x4, sv, i, end, d);
+        },
+        [&](size_t i) { return batched::stretchGroup<ScalarLanes>(x4, sv, i); });
     if (b.kBending <= 0) continue;
     if (b.isometric) {
       degenerate += projectIsometricPass(x4, b, simd);
       continue;
     }
-    for (size_t col = 0; col < nhc; ++col) {
-      size_t i = static_cast<size_t>(b.hColourStart[col]);
-      const size_t end = static_cast<size_t>(b.hColourStart[col + 1]);
-#ifdef DEFORM_HYBRID_AVX2
-      if (vec && !(b.hLastColourShared && col + 1 == nhc))
-        i += batched::bendRangeAvx2(x4, hv, i, end, &degenerate);
-#endif
-      for (; i < end; ++i) degenerate += batched::bendGroup<ScalarLanes>(x4, hv, i);
-    }
+    degenerate += colourSweep(
+        b.hColourStart, b.hLastColourShared, vec,
+        [&](size_t i, size_t end, long long* d) {
+          return batched::bendRangeAvx2(x4, hv, i, end, d);
+        },
+        [&](size_t i) { return batched::bendGroup<ScalarLanes>(x4, hv, i); });
   }
-  (void)vec;
   return degenerate;
 }
 

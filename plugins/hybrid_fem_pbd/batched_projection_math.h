@@ -20,6 +20,8 @@
 // std::atan2).
 #pragma once
 
+#include <deform/kernels/lane_length.h>
+
 #include <cstddef>
 
 namespace deform::hybrid_fem_pbd::batched {
@@ -51,8 +53,8 @@ struct BendView {
 
 namespace {  // internal linkage on purpose (see the header comment)
 
-constexpr double kTinyLength2 = 1e-24;  // tol::kDegenerateLength^2, m^2
-constexpr double kTinyArea2 = 1e-48;    // (tol::kDegenerateLength^2)^2, m^4
+using simd::kTinyLength2;
+constexpr double kTinyArea2 = 1e-48;  // (tol::kDegenerateLength^2)^2, m^4
 constexpr double kPi = 3.141592653589793238462643383279502884;
 
 // atan on [0, 1] by reduction to four intervals of width pi/16 around c_j = tan((2j+1) pi/32):
@@ -113,13 +115,9 @@ inline int stretchGroup(typename L::T* x4, const StretchViewT<typename L::T>& s,
   L::loadPoints(x4, s.b + i, bx, by, bz);
   const V dx = ax - bx, dy = ay - by, dz = az - bz;
   const V len2 = dx * dx + dy * dy + dz * dz;
-  const V tiny = L::set1(static_cast<T>(kTinyLength2));
-  const auto ok = L::gt(len2, tiny);
-  const V len = L::sqrt(L::max(len2, tiny));
-  if (measure != nullptr) {
-    L::store(measure + i, L::select(ok, len, L::set1(T(0))));
-    return 0;
-  }
+  typename L::M ok;
+  const V len = simd::clampedLength<L>(len2, ok);
+  if (simd::measureLength<L>(measure, i, ok, len)) return 0;
   const V f = L::select(ok, (L::load(s.rest + i) - len) / len, L::set1(T(0)));
   const V fa = L::load(s.sa + i) * f, fb = L::load(s.sb + i) * f;
   L::addPoints(x4, s.a + i, fa * dx, fa * dy, fa * dz);

@@ -185,16 +185,38 @@ StepStatus HybridModel::step(const StepInput& in) {
       merged.grasps.push_back({c.tool, c.nodes, c.targets});
     return step(merged);
   }
-  const int n = m_surf.numVertices();
-  const Real dt = in.dt;
   auto t = Clock::now();
-
   // 1. Load processing.
+  gatherLoads(in.loads);
+  gatherGrasps(in.grasps);
+  m_phase["load"] = msSince(t);
+
+  // 2. Coarse FEM.
+  t = Clock::now();
+  solveCoarse(in.gravity, in.grasps.size());
+  m_phase["fem"] = msSince(t);
+
+  // 3.-5. Fine surface PBD.
+  t = Clock::now();
+  refreshActiveConstraints();
+  predictSurface(in.dt, in.gravity);
+  m_numeric["degenerate_constraints"] += projectPrediction();
+  const Real damp = std::exp(-m_cfg.damping * in.dt);
+  const Real invDt = in.dt > 0 ? 1 / in.dt : 0;
+  m_v = (m_p - m_surf.x) * (invDt * damp);
+  m_surf.x.swap(m_p);
+  m_phase["pbd"] = msSince(t);
+  if (!m_surf.x.allFinite() || !m_volumeX.allFinite()) return StepStatus::Diverged;
+  return StepStatus::Ok;
+}
+
+void HybridModel::gatherLoads(const std::vector<PointLoad>& loads) {
+  const int n = m_surf.numVertices();
   m_nodal.clear();
   m_surfaceForces.clear();
   // Each share of the harness's pressure patch acts on the fine vertex that takes it and, through
   // the vertex's attachment to the coarse surface, on the coarse FEM.
-  for (const PointLoad& l : in.loads) {
+  for (const PointLoad& l : loads) {
     if (l.force.isZero()) continue;
     for (size_t s = 0; s < l.vertices.size(); ++s) {
       const int v = l.vertices[s];
@@ -206,14 +228,18 @@ StepStatus HybridModel::step(const StepInput& in) {
       if (m_cfg.surfaceLoad && m_controlOf[v] < 0) m_surfaceForces.emplace_back(v, share);
     }
   }
+}
+
+void HybridModel::gatherGrasps(const std::vector<GraspInput>& grasps) {
+  const int n = m_surf.numVertices();
   m_prescribed.clear();
   m_prescribedGrasp.clear();
   std::vector<char>& immovable = m_immovableStep;
   immovable.assign(n, 0);
   m_graspTargets.clear();
   m_graspTargetAxis.clear();
-  for (size_t gi = 0; gi < in.grasps.size(); ++gi) {
-    const GraspInput& g = in.grasps[gi];
+  for (size_t gi = 0; gi < grasps.size(); ++gi) {
+    const GraspInput& g = grasps[gi];
     // A sliding plate: its normal component only, in the coarse FEM and on the fine surface.
     const int axis = slideAxis(g);
     if (g.sliding() && axis < 0)
@@ -239,11 +265,10 @@ StepStatus HybridModel::step(const StepInput& in) {
       }
     }
   }
-  m_phase["load"] = msSince(t);
+}
 
-  // 2. Coarse FEM.
-  t = Clock::now();
-  m_fem.solve(m_nodal, in.gravity, m_prescribed, m_volumeU, &m_reactions);
+void HybridModel::solveCoarse(const Vec3& gravity, size_t numGrasps) {
+  m_fem.solve(m_nodal, gravity, m_prescribed, m_volumeU, &m_reactions);
   // Only the control nodes (MV's rows 0..#Vc-1) are computed; the interior rows stay at rest.
   const Eigen::Index nc = m_mesh.coarseSurface.numVertices();
   m_volumeX.topRows(nc) = m_mesh.volume.V.topRows(nc) + m_volumeU.topRows(nc);
@@ -251,7 +276,7 @@ StepStatus HybridModel::step(const StepInput& in) {
   if (m_markersBound && m_volumeU.rows() == m_volumeX.rows())
     m_volumeX = m_mesh.volume.V + m_volumeU;
   // Newton's third law: the multipliers are the forces the grasps apply to the tissue.
-  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
+  m_graspForces.assign(numGrasps, Vec3::Zero());
   for (size_t e = 0; e < m_prescribed.size(); ++e)
     m_graspForces[static_cast<size_t>(m_prescribedGrasp[e])] -= m_reactions[e];
   // A sliding plate's fine vertices follow the coarse surface along the plate (their attachment's
@@ -267,30 +292,32 @@ StepStatus HybridModel::step(const StepInput& in) {
     x[axis] = target[axis];
     target = x;
   }
-  m_phase["fem"] = msSince(t);
+}
 
-  // 3.-5. Fine surface PBD.
-  t = Clock::now();
+void HybridModel::refreshActiveConstraints() {
+  const int n = m_surf.numVertices();
+  std::vector<char>& immovable = m_immovableStep;
   for (int i = 0; i < n; ++i)
     if (m_controlOf[i] >= 0 || m_isFixedFine[i]) immovable[i] = 1;
-  if (!m_activeValid || immovable != m_immovable) {
-    m_immovable = immovable;
-    m_w.resize(n);
-    for (int i = 0; i < n; ++i) m_w[i] = immovable[i] || !(m_mass[i] > 0) ? 0 : 1 / m_mass[i];
-    m_active = activeConstraints(m_constraints, m_w);
-    m_batches = buildSurfaceBatches(m_constraints, m_active, m_w, m_cfg.stretchStiffness,
-                                    m_cfg.bendingStiffness, m_cfg.iterations);
-    if (m_cfg.bending == HybridBending::Isometric) {
-      addIsometricBending(m_batches, m_surf.rest);
-      if (m_cfg.precision == HybridPrecision::Float32 &&
-          m_cfg.projection != SurfaceProjection::Reference)
-        addSinglePrecision(m_batches, m_surf.rest, m_origin,
-                           m_cfg.projection == SurfaceProjection::Batched);
-    }
-    m_activeValid = true;
+  if (m_activeValid && immovable == m_immovable) return;
+  m_immovable = immovable;
+  m_w.resize(n);
+  for (int i = 0; i < n; ++i) m_w[i] = immovable[i] || !(m_mass[i] > 0) ? 0 : 1 / m_mass[i];
+  m_active = activeConstraints(m_constraints, m_w);
+  m_batches = buildSurfaceBatches(m_constraints, m_active, m_w, m_cfg.stretchStiffness,
+                                  m_cfg.bendingStiffness, m_cfg.iterations);
+  if (m_cfg.bending == HybridBending::Isometric) {
+    addIsometricBending(m_batches, m_surf.rest);
+    if (m_cfg.precision == HybridPrecision::Float32 &&
+        m_cfg.projection != SurfaceProjection::Reference)
+      addSinglePrecision(m_batches, m_surf.rest, m_origin,
+                         m_cfg.projection == SurfaceProjection::Batched);
   }
-  const Real damp = std::exp(-m_cfg.damping * dt);
-  const Vec3 g = in.gravity;
+  m_activeValid = true;
+}
+
+void HybridModel::predictSurface(Real dt, const Vec3& g) {
+  const int n = m_surf.numVertices();
   for (const auto& [i, f] : m_surfaceForces) m_v.row(i) += (dt * m_w[i] * f).transpose();
   m_p.resize(n, 3);
   for (int i = 0; i < n; ++i) {
@@ -307,12 +334,16 @@ StepStatus HybridModel::step(const StepInput& in) {
   }
   for (const auto& [i, target] : m_graspTargets)
     if (!m_isFixedFine[i]) m_p.row(i) = target.transpose();
+}
+
+long long HybridModel::projectPrediction() {
+  const int n = m_surf.numVertices();
+  if (m_cfg.projection == SurfaceProjection::Reference)
+    return projectSurfaceConstraints(m_p, m_w, m_constraints, m_active, m_cfg.stretchStiffness,
+                                     m_cfg.bendingStiffness, m_cfg.iterations);
+  const bool simd = m_cfg.projection == SurfaceProjection::Batched;
   long long degenerate = 0;
-  if (m_cfg.projection == SurfaceProjection::Reference) {
-    degenerate =
-        projectSurfaceConstraints(m_p, m_w, m_constraints, m_active, m_cfg.stretchStiffness,
-                                  m_cfg.bendingStiffness, m_cfg.iterations);
-  } else if (m_batches.singlePrecision) {
+  if (m_batches.singlePrecision) {
     // Projected in float relative to the organ's centre; the result is taken back as the float
     // correction added to the double prediction, so an unmoved particle keeps its double value.
     m_x4f.resize(4 * static_cast<size_t>(n));
@@ -321,8 +352,7 @@ StepStatus HybridModel::step(const StepInput& in) {
         m_x4f[4 * size_t(i) + a] = static_cast<float>(m_p(i, a) - m_origin[a]);
       m_x4f[4 * size_t(i) + 3] = 0.0f;
     }
-    degenerate = projectSurfaceBatchesF(m_x4f.data(), m_batches, m_cfg.iterations,
-                                        m_cfg.projection == SurfaceProjection::Batched);
+    degenerate = projectSurfaceBatchesF(m_x4f.data(), m_batches, m_cfg.iterations, simd);
     for (int i = 0; i < n; ++i)
       for (int a = 0; a < 3; ++a)
         m_p(i, a) += static_cast<Real>(m_x4f[4 * size_t(i) + a] -
@@ -331,18 +361,11 @@ StepStatus HybridModel::step(const StepInput& in) {
     m_x4.resize(4 * static_cast<size_t>(n));
     for (int i = 0; i < n; ++i)
       for (int a = 0; a < 4; ++a) m_x4[4 * size_t(i) + a] = a < 3 ? m_p(i, a) : 0.0;
-    degenerate = projectSurfaceBatches(m_x4.data(), m_batches, m_cfg.iterations,
-                                       m_cfg.projection == SurfaceProjection::Batched);
+    degenerate = projectSurfaceBatches(m_x4.data(), m_batches, m_cfg.iterations, simd);
     for (int i = 0; i < n; ++i)
       for (int a = 0; a < 3; ++a) m_p(i, a) = m_x4[4 * size_t(i) + a];
   }
-  m_numeric["degenerate_constraints"] += degenerate;
-  const Real invDt = dt > 0 ? 1 / dt : 0;
-  m_v = (m_p - m_surf.x) * (invDt * damp);
-  m_surf.x.swap(m_p);
-  m_phase["pbd"] = msSince(t);
-  if (!m_surf.x.allFinite() || !m_volumeX.allFinite()) return StepStatus::Diverged;
-  return StepStatus::Ok;
+  return degenerate;
 }
 
 void HybridModel::cut(const CutPath& path) {

@@ -126,6 +126,13 @@ class HybridModel final : public Model {
  private:
   void rebuildMasses();
   const CoarseAttachment& attachment(int fineVertex);
+  // The phases of step() (see the file comment).
+  void gatherLoads(const std::vector<PointLoad>& loads);     ///< 1: loads onto MV and MS
+  void gatherGrasps(const std::vector<GraspInput>& grasps);  ///< 1: grasp targets, prescribed
+  void solveCoarse(const Vec3& gravity, size_t numGrasps);   ///< 2: MV, grasp forces
+  void refreshActiveConstraints();  ///< inverse masses and batches when the immovable set changed
+  void predictSurface(Real dt, const Vec3& gravity);  ///< 3: m_p
+  long long projectPrediction();  ///< 4: projects m_p; returns the degenerate constraint count
   /// step() with StepInput::contact: contact as prescribed vertices (hybrid_contact.cpp).
   StepStatus stepWithContact(const StepInput& in);
   bool m_inContactStep = false;

@@ -124,27 +124,50 @@ void applyVolumeCorrection(T* x, Eigen::Index n, int stride, const Real* w, cons
 
 namespace {
 
-// One constraint on padded positions, the scalar reference of the SIMD path below.
-inline long long projectPaddedOne(Real* x4, const DistanceBatch& batch, size_t i) {
-  constexpr Real kTiny = tol::kDegenerateLength * tol::kDegenerateLength;
-  Real* xa = x4 + 4 * static_cast<size_t>(batch.a[i]);
-  Real* xb = x4 + 4 * static_cast<size_t>(batch.b[i]);
-  const Real d0 = xa[0] - xb[0], d1 = xa[1] - xb[1], d2 = xa[2] - xb[2];
-  const Real len2 = d0 * d0 + d1 * d1 + d2 * d2;
-  const bool ok = len2 > kTiny;
-  const Real len = std::sqrt(std::max(len2, kTiny));
-  const Real dl =
-      ok ? batch.scale[i] * (batch.rest[i] - len - batch.alphaTilde[i] * batch.lambda[i]) : 0.0;
+// One distance constraint on padded rows, in double or float: d = x_a - x_b and |d| (clamped
+// below by the degenerate length; ok says it was not clamped), then the XPBD update
+// dl = scale (rest - |d| - alphaTilde lambda) moving a and b along d. The scalar reference of the
+// SIMD paths below; lengthOne is also the rest length of the single-precision batches, so that a
+// constraint at rest sees C = 0 exactly.
+template <class T>
+inline T lengthOne(const T* xa, const T* xb, T d[3], bool& ok) {
+  constexpr T kTiny = static_cast<T>(tol::kDegenerateLength * tol::kDegenerateLength);
+  d[0] = xa[0] - xb[0];
+  d[1] = xa[1] - xb[1];
+  d[2] = xa[2] - xb[2];
+  const T len2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  ok = len2 > kTiny;
+  return std::sqrt(std::max(len2, kTiny));
+}
+
+template <class T, class Batch>
+inline long long projectPairOne(T* xa, T* xb, const Batch& batch, size_t i) {
+  T d[3];
+  bool ok;
+  const T len = lengthOne(xa, xb, d, ok);
+  const T dl =
+      ok ? batch.scale[i] * (batch.rest[i] - len - batch.alphaTilde[i] * batch.lambda[i]) : T(0);
   batch.lambda[i] += dl;
-  const Real s = dl / len;
-  const Real sa = batch.wa[i] * s, sb = batch.wb[i] * s;
-  xa[0] += sa * d0;
-  xa[1] += sa * d1;
-  xa[2] += sa * d2;
-  xb[0] -= sb * d0;
-  xb[1] -= sb * d1;
-  xb[2] -= sb * d2;
+  const T s = dl / len;
+  const T sa = batch.wa[i] * s, sb = batch.wb[i] * s;
+  for (int k = 0; k < 3; ++k) {
+    xa[k] += sa * d[k];
+    xb[k] -= sb * d[k];
+  }
   return ok ? 0 : 1;
+}
+
+// |x_a - x_b| as the projection measures it (the rest lengths of the float batches).
+inline float lengthOf(const float* xa, const float* xb) {
+  float d[3];
+  bool ok;
+  return lengthOne(xa, xb, d, ok);
+}
+
+// Double rows: the batch holds particle indices.
+inline long long projectPaddedOne(Real* x4, const DistanceBatch& batch, size_t i) {
+  return projectPairOne(x4 + 4 * static_cast<size_t>(batch.a[i]),
+                        x4 + 4 * static_cast<size_t>(batch.b[i]), batch, i);
 }
 
 #ifdef DEFORM_PBD_HAVE_AVX2_PATH
@@ -290,38 +313,9 @@ __attribute__((target("avx512f,avx512vl,avx512dq"))) long long projectPaddedAvx5
 }
 #endif
 
-// Single precision: the scalar reference of the AVX-512 path below. lengthOneF is shared with
-// distanceLengthsColourF (the rest lengths), so that a constraint at rest sees C = 0 exactly.
-constexpr float kTinyF = static_cast<float>(tol::kDegenerateLength * tol::kDegenerateLength);
-
-inline float lengthOneF(const float* xa, const float* xb, float& d0, float& d1, float& d2,
-                        bool& ok) {
-  d0 = xa[0] - xb[0];
-  d1 = xa[1] - xb[1];
-  d2 = xa[2] - xb[2];
-  const float len2 = d0 * d0 + d1 * d1 + d2 * d2;
-  ok = len2 > kTinyF;
-  return std::sqrt(std::max(len2, kTinyF));
-}
-
+// Single precision: the batch holds row offsets (4 * particle index).
 inline long long projectPaddedOneF(float* x4, const DistanceBatchF& batch, size_t i) {
-  float* xa = x4 + batch.a[i];
-  float* xb = x4 + batch.b[i];
-  float d0, d1, d2;
-  bool ok;
-  const float len = lengthOneF(xa, xb, d0, d1, d2, ok);
-  const float dl =
-      ok ? batch.scale[i] * (batch.rest[i] - len - batch.alphaTilde[i] * batch.lambda[i]) : 0.0f;
-  batch.lambda[i] += dl;
-  const float s = dl / len;
-  const float sa = batch.wa[i] * s, sb = batch.wb[i] * s;
-  xa[0] += sa * d0;
-  xa[1] += sa * d1;
-  xa[2] += sa * d2;
-  xb[0] -= sb * d0;
-  xb[1] -= sb * d1;
-  xb[2] -= sb * d2;
-  return ok ? 0 : 1;
+  return projectPairOne(x4 + batch.a[i], x4 + batch.b[i], batch, i);
 }
 
 #ifdef DEFORM_PBD_HAVE_AVX2_PATH
@@ -343,7 +337,8 @@ struct LengthsF16 {
 // each chunk then gives columns dx, dy, dz in constraint order. 1/|d| comes from rsqrt14 refined
 // by one Newton step, y <- y (3/2 - x y^2 / 2) (relative error ~2^-27, below float rounding).
 DEFORM_PBD_AVX512 LengthsF16 lengthsF16(const float* x4, const int* A, const int* B, __m128* d) {
-  const __m512 tiny = _mm512_set1_ps(kTinyF);
+  const __m512 tiny =
+      _mm512_set1_ps(static_cast<float>(tol::kDegenerateLength * tol::kDegenerateLength));
   const __m512 half = _mm512_set1_ps(0.5f), threeHalf = _mm512_set1_ps(1.5f);
 #pragma GCC unroll 16
   for (int k = 0; k < 16; ++k) d[k] = _mm_sub_ps(_mm_load_ps(x4 + A[k]), _mm_load_ps(x4 + B[k]));
@@ -433,14 +428,21 @@ __attribute__((target("avx512f,avx512vl,avx512dq"))) void lengthsF512(const floa
     __m128 d[16];
     _mm512_storeu_ps(len + i, lengthsF16(x4, a + i, b + i, d).len);
   }
-  float d0, d1, d2;
-  bool ok;
-  for (; i < end; ++i) len[i] = lengthOneF(x4 + a[i], x4 + b[i], d0, d1, d2, ok);
+  for (; i < end; ++i) len[i] = lengthOf(x4 + a[i], x4 + b[i]);
 }
 #undef DEFORM_PBD_AVX512
 #endif
 
 }  // namespace
+
+// The CPU's vector units, checked once per process by the callers (static locals).
+bool distanceSimdAvailable() {
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+  return __builtin_cpu_supports("avx2");
+#else
+  return false;
+#endif
+}
 
 bool distanceSimdFloatAvailable() {
 #ifdef DEFORM_PBD_HAVE_AVX2_PATH
@@ -449,6 +451,19 @@ bool distanceSimdFloatAvailable() {
 #else
   return false;
 #endif
+}
+
+long long projectDistanceColourPadded(Real* x4, const DistanceBatch& batch, size_t begin,
+                                      size_t end, bool simd) {
+#ifdef DEFORM_PBD_HAVE_AVX2_PATH
+  static const bool kAvx2 = distanceSimdAvailable();
+  static const bool kAvx512 = kAvx2 && distanceSimdFloatAvailable();  // AVX-512 F, VL, DQ
+  if (simd && kAvx512) return projectPaddedAvx512(x4, batch, begin, end);
+  if (simd && kAvx2) return projectPaddedAvx2(x4, batch, begin, end);
+#endif
+  long long degenerate = 0;
+  for (size_t i = begin; i < end; ++i) degenerate += projectPaddedOne(x4, batch, i);
+  return degenerate;
 }
 
 long long projectDistanceColourPaddedF(float* x4, const DistanceBatchF& batch, size_t begin,
@@ -468,32 +483,7 @@ void distanceLengthsColourF(const float* x4, const int* a, const int* b, size_t 
   static const bool kAvx512 = distanceSimdFloatAvailable();
   if (simd && kAvx512) return lengthsF512(x4, a, b, begin, end, len);
 #endif
-  float d0, d1, d2;
-  bool ok;
-  for (size_t i = begin; i < end; ++i) len[i] = lengthOneF(x4 + a[i], x4 + b[i], d0, d1, d2, ok);
-}
-
-bool distanceSimdAvailable() {
-#ifdef DEFORM_PBD_HAVE_AVX2_PATH
-  return __builtin_cpu_supports("avx2");
-#else
-  return false;
-#endif
-}
-
-long long projectDistanceColourPadded(Real* x4, const DistanceBatch& batch, size_t begin,
-                                      size_t end, bool simd) {
-#ifdef DEFORM_PBD_HAVE_AVX2_PATH
-  static const bool kAvx2 = distanceSimdAvailable();
-  static const bool kAvx512 = kAvx2 && __builtin_cpu_supports("avx512f") &&
-                              __builtin_cpu_supports("avx512vl") &&
-                              __builtin_cpu_supports("avx512dq");
-  if (simd && kAvx512) return projectPaddedAvx512(x4, batch, begin, end);
-  if (simd && kAvx2) return projectPaddedAvx2(x4, batch, begin, end);
-#endif
-  long long degenerate = 0;
-  for (size_t i = begin; i < end; ++i) degenerate += projectPaddedOne(x4, batch, i);
-  return degenerate;
+  for (size_t i = begin; i < end; ++i) len[i] = lengthOf(x4 + a[i], x4 + b[i]);
 }
 
 bool projectSurfaceVolume(const MatX3& x, const VecX& w, const MatX3i& F, Real restVolume,

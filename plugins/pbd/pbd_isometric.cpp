@@ -7,24 +7,6 @@
 
 namespace deform::pbd {
 
-namespace {
-
-template <class T>
-IsometricBatch<T> isoBatch(const std::vector<int>* p, const std::vector<T>* K,
-                           const std::vector<T>* wK, const std::vector<T>& rest,
-                           const std::vector<T>& alphaTilde, const std::vector<T>& scale,
-                           std::vector<T>& lambda) {
-  return {{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
-          {K[0].data(), K[1].data(), K[2].data(), K[3].data()},
-          {wK[0].data(), wK[1].data(), wK[2].data(), wK[3].data()},
-          rest.data(),
-          alphaTilde.data(),
-          scale.data(),
-          lambda.data()};
-}
-
-}  // namespace
-
 void PbdModel::initIsometric() {
   const size_t n = m_iso.size();
   for (int k = 0; k < 4; ++k) {
@@ -51,8 +33,8 @@ void PbdModel::initIsometric() {
     // Rest values measured by the batch kernel itself (as projectIsometric() will evaluate C).
     m_p = m_rest;
     packPositions();
-    const IsometricBatch<Real> b =
-        isoBatch(m_isoP, m_isoK, m_isoWK, m_isoRest, m_isoAlphaTilde, m_isoScale, m_lambdaIso);
+    const IsometricBatch<Real> b = isometricBatch(m_isoP, m_isoK, m_isoWK, m_isoRest,
+                                                  m_isoAlphaTilde, m_isoScale, m_lambdaIso);
     std::vector<Real> rest(n);
     for (size_t c = 0; c < nColours; ++c) {
       const size_t b0 = m_isoColours[c], e = m_isoColours[c + 1];
@@ -74,8 +56,8 @@ void PbdModel::initIsometric() {
     // projectIsometric() projects them: C = 0 exactly at rest.
     m_p = m_rest;
     packPositions();
-    const IsometricBatch<float> b = isoBatch(m_isoP, m_isoKF, m_isoWKF, m_isoRestF,
-                                             m_isoAlphaTildeF, m_isoScaleF, m_lambdaIsoF);
+    const IsometricBatch<float> b = isometricBatch(m_isoP, m_isoKF, m_isoWKF, m_isoRestF,
+                                                   m_isoAlphaTildeF, m_isoScaleF, m_lambdaIsoF);
     for (size_t c = 0; c < nColours; ++c) {
       const size_t b0 = m_isoColours[c], e = m_isoColours[c + 1];
       for (size_t i = b0; i < e; i = (c == 63 ? i + 1 : e))
@@ -119,11 +101,11 @@ void PbdModel::projectIsometric() {
     }
   };
   if (m_f32)
-    sweep(p4f(), isoBatch(m_isoP, m_isoKF, m_isoWKF, m_isoRestF, m_isoAlphaTildeF, m_isoScaleF,
-                          m_lambdaIsoF));
+    sweep(p4f(), isometricBatch(m_isoP, m_isoKF, m_isoWKF, m_isoRestF, m_isoAlphaTildeF,
+                                m_isoScaleF, m_lambdaIsoF));
   else
-    sweep(p4(),
-          isoBatch(m_isoP, m_isoK, m_isoWK, m_isoRest, m_isoAlphaTilde, m_isoScale, m_lambdaIso));
+    sweep(p4(), isometricBatch(m_isoP, m_isoK, m_isoWK, m_isoRest, m_isoAlphaTilde, m_isoScale,
+                               m_lambdaIso));
 }
 
 // g_k lambda / dt^2 on the grasped nodes of the hinges that touch one (as for the other

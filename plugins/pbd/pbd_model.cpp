@@ -69,6 +69,30 @@ std::vector<size_t> orderByColour(std::vector<C>& cs, int numNodes, NodesOf node
   return starts;
 }
 
+/// One Gauss-Seidel pass over four-particle constraints on positions p: project(c, x, w, lambda,
+/// dx) on each one's gathered positions and inverse masses (W, per particle), and dx added back;
+/// a constraint it reports degenerate (false) moves nothing. Returns the degenerate count.
+template <class Constraint, class Project>
+long long projectFourPoint(const std::vector<Constraint>& constraints, const Real* W,
+                           std::vector<Real>& lambda, MatX3& p, Project&& project) {
+  long long degenerate = 0;
+  for (size_t i = 0; i < constraints.size(); ++i) {
+    const Constraint& c = constraints[i];
+    Vec3 x[4], dx[4];
+    Real w[4];
+    for (int k = 0; k < 4; ++k) {
+      x[k] = p.row(c.p[k]);
+      w[k] = W[c.p[k]];
+    }
+    if (!project(c, x, w, lambda[i], dx)) {
+      ++degenerate;
+      continue;
+    }
+    for (int k = 0; k < 4; ++k) p.row(c.p[k]) += dx[k];
+  }
+  return degenerate;
+}
+
 }  // namespace
 
 void PbdModel::init(const ModelSetup& setup) {
@@ -457,36 +481,17 @@ void PbdModel::projectAll(Real dt) {
         m_hasVolume && (m_config.volumeEverySweep || it + 1 == m_config.iterations);
     if (!m_dihedral.empty() || !m_tet.empty()) {
       unpackPositions();
-      for (size_t i = 0; i < m_dihedral.size(); ++i) {
-        const DihedralConstraint& c = m_dihedral[i];
-        Vec3 x[4], dx[4];
-        Real w[4];
-        for (int k = 0; k < 4; ++k) {
-          x[k] = m_p.row(c.p[k]);
-          w[k] = W[c.p[k]];
-        }
-        if (!projectDihedral(x, w, c.restAngle, c.compliance * invDt2, m_kBend, m_lambdaBend[i],
-                             dx)) {
-          ++m_degenerate;
-          continue;
-        }
-        for (int k = 0; k < 4; ++k) m_p.row(c.p[k]) += dx[k];
-      }
-      for (size_t i = 0; i < m_tet.size(); ++i) {
-        const TetVolumeConstraint& c = m_tet[i];
-        Vec3 x[4], dx[4];
-        Real w[4];
-        for (int k = 0; k < 4; ++k) {
-          x[k] = m_p.row(c.p[k]);
-          w[k] = W[c.p[k]];
-        }
-        if (!projectTetVolume(x, w, c.restVolume, c.compliance * invDt2, m_kVolume, m_lambdaTet[i],
-                              dx)) {
-          ++m_degenerate;
-          continue;
-        }
-        for (int k = 0; k < 4; ++k) m_p.row(c.p[k]) += dx[k];
-      }
+      m_degenerate += projectFourPoint(
+          m_dihedral, W, m_lambdaBend, m_p,
+          [&](const DihedralConstraint& c, const Vec3* x, const Real* w, Real& lambda, Vec3* dx) {
+            return projectDihedral(x, w, c.restAngle, c.compliance * invDt2, m_kBend, lambda, dx);
+          });
+      m_degenerate += projectFourPoint(
+          m_tet, W, m_lambdaTet, m_p,
+          [&](const TetVolumeConstraint& c, const Vec3* x, const Real* w, Real& lambda, Vec3* dx) {
+            return projectTetVolume(x, w, c.restVolume, c.compliance * invDt2, m_kVolume, lambda,
+                                    dx);
+          });
       packed = false;
     }
     if (volumeNow) {

@@ -462,19 +462,25 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
   s.dxFree.resize(s.nf);
   s.step.resize(ndof);
 
-  if (!in && isUnloadedRest(x, fStart, fEnd, cdofs, target)) {
-    // The rest state is stress free, so under no load with every constrained node at rest it is
-    // the solution: zero Newton iterations, whatever the round-off of the internal forces there
-    // (~ kappa eps, above the tolerance of an unloaded solve at nu = 0.4999).
-    rep.converged = true;
-    rep.loadSteps = 1;  // the whole increment, accepted as it stands
-    objectiveGradient(x, fEnd, in, m_gradient);
+  // The report of a finished solve: the residual at the forces reached, the factorisation, the
+  // time.
+  const auto finish = [&](const VecX& fReached) {
+    objectiveGradient(x, fReached, in, m_gradient);
     rep.residual = residual(s, m_gradient, fEnd);
     rep.factorNonZeros = m_factorNonZeros;
     rep.factorFlops = m_factorFlops;
     rep.seconds = std::chrono::duration<double>(Clock::now() - start).count();
     m_report = nullptr;
     return rep;
+  };
+
+  if (!in && isUnloadedRest(x, fStart, fEnd, cdofs, target)) {
+    // The rest state is stress free, so under no load with every constrained node at rest it is
+    // the solution: zero Newton iterations, whatever the round-off of the internal forces there
+    // (~ kappa eps, above the tolerance of an unloaded solve at nu = 0.4999).
+    rep.converged = true;
+    rep.loadSteps = 1;  // the whole increment, accepted as it stands
+    return finish(fEnd);
   }
 
   // Load stepping: the forces and the constrained dofs' targets ramp from the start (s = 0) to
@@ -499,13 +505,7 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
     }
   }
   rep.converged = t >= 1;
-  objectiveGradient(x, fStart + t * (fEnd - fStart), in, m_gradient);
-  rep.residual = residual(s, m_gradient, fEnd);
-  rep.factorNonZeros = m_factorNonZeros;
-  rep.factorFlops = m_factorFlops;
-  rep.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  m_report = nullptr;
-  return rep;
+  return finish(fStart + t * (fEnd - fStart));
 }
 
 bool EquilibriumSolver::loadStep(Newton& s, VecX& xs, const VecX& f, const VecX& tgt) {

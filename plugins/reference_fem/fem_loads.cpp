@@ -17,41 +17,49 @@
 
 namespace deform::reference_fem {
 
-std::vector<std::pair<int, Vec3>> tractionForces(const TetMesh& mesh, const Vec3& traction,
-                                                 const std::function<bool(const Vec3&)>& select) {
+namespace {
+
+/// Nodal forces of a traction on the boundary triangles whose three corners select() takes:
+/// share(triangle, area, add) gives each triangle's forces by add(node, force); they are summed
+/// per node and returned in node order.
+template <class Share>
+std::vector<std::pair<int, Vec3>> spreadTraction(const TetMesh& mesh,
+                                                 const std::function<bool(const Vec3&)>& select,
+                                                 Share&& share) {
   const SurfaceMesh b = tetBoundary(mesh);
   std::map<int, Vec3> acc;
+  const auto add = [&](int node, const Vec3& f) {
+    auto [it, fresh] = acc.try_emplace(node, Vec3::Zero());
+    it->second += f;
+  };
   for (int f = 0; f < b.numFaces(); ++f) {
     const Vec3 p0 = mesh.V.row(b.F(f, 0)), p1 = mesh.V.row(b.F(f, 1)), p2 = mesh.V.row(b.F(f, 2));
     if (!select(p0) || !select(p1) || !select(p2)) continue;
-    const Real area = 0.5 * (p1 - p0).cross(p2 - p0).norm();
-    for (int k = 0; k < 3; ++k) {
-      auto [it, fresh] = acc.try_emplace(b.F(f, k), Vec3::Zero());
-      it->second += area / 3.0 * traction;
-    }
+    share(b.F.row(f), 0.5 * (p1 - p0).cross(p2 - p0).norm(), add);
   }
   return {acc.begin(), acc.end()};
+}
+
+}  // namespace
+
+std::vector<std::pair<int, Vec3>> tractionForces(const TetMesh& mesh, const Vec3& traction,
+                                                 const std::function<bool(const Vec3&)>& select) {
+  // The 3-node triangle's shape functions integrate to area / 3 at each corner.
+  return spreadTraction(mesh, select, [&](const auto& tri, Real area, const auto& add) {
+    for (int k = 0; k < 3; ++k) add(tri(k), area / 3.0 * traction);
+  });
 }
 
 std::vector<std::pair<int, Vec3>> tractionForces(const FemSystem& system, const Vec3& traction,
                                                  const std::function<bool(const Vec3&)>& select) {
   if (system.order() != ElementOrder::Quadratic)
     return tractionForces(system.rest(), traction, select);
-  const TetMesh& mesh = system.rest();
-  const SurfaceMesh b = tetBoundary(mesh);
-  std::map<int, Vec3> acc;
-  for (int f = 0; f < b.numFaces(); ++f) {
-    const Vec3 p0 = mesh.V.row(b.F(f, 0)), p1 = mesh.V.row(b.F(f, 1)), p2 = mesh.V.row(b.F(f, 2));
-    if (!select(p0) || !select(p1) || !select(p2)) continue;
-    const Real area = 0.5 * (p1 - p0).cross(p2 - p0).norm();
-    // integral of the 6-node triangle's shape functions: 0 at corners, area / 3 at midsides.
-    for (int k = 0; k < 3; ++k) {
-      const int m = system.edgeNode(b.F(f, k), b.F(f, (k + 1) % 3));
-      auto [it, fresh] = acc.try_emplace(m, Vec3::Zero());
-      it->second += area / 3.0 * traction;
-    }
-  }
-  return {acc.begin(), acc.end()};
+  // The 6-node triangle's shape functions integrate to 0 at the corners, area / 3 at the
+  // midsides.
+  return spreadTraction(system.rest(), select, [&](const auto& tri, Real area, const auto& add) {
+    for (int k = 0; k < 3; ++k)
+      add(system.edgeNode(tri(k), tri((k + 1) % 3)), area / 3.0 * traction);
+  });
 }
 
 PointLoadSpreader::PointLoadSpreader(const TetMesh& mesh)

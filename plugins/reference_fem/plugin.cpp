@@ -8,7 +8,7 @@
 namespace deform::reference_fem {
 
 std::vector<ParamSpec> paramSpecs() {
-  return {
+  std::vector<ParamSpec> specs = {
       ParamSpec::choice("solve", "quasi_static", {"quasi_static", "dynamic"},
                         "quasi_static: each step is an equilibrium solve; dynamic: implicit Euler "
                         "with the scene's dt"),
@@ -21,18 +21,6 @@ std::vector<ParamSpec> paramSpecs() {
                         "volumetric term of neo_hookean P2 tets: per quadrature point "
                         "(displacement) or on each element's volume (mean_dilatation, free of "
                         "volumetric locking as nu -> 0.5); auto: mean_dilatation at nu >= 0.45"),
-      ParamSpec::integer("elements", 1000, 100, 5000000,
-                         "target number of tets (used when edge_length is 0; an organ's surface "
-                         "vertices are all nodes, so a fine surface gives more)"),
-      ParamSpec::real("edge_length", "m", 0.0, 0.0, 1.0,
-                      "target interior tet edge length; 0: from elements"),
-      ParamSpec::flag("refine_surface", true,
-                      "split surface edges longer than the edge length before meshing (the "
-                      "input vertices stay nodes with their indices)"),
-      ParamSpec::flag("conform_fixed", true,
-                      "mesh the organ minus the fixed boxes (caps pinned, u = 0), so the clamped "
-                      "boundary is the same at every refinement; false: mesh the whole organ and "
-                      "pin the nodes that fall inside the boxes"),
       ParamSpec::real("newton_tolerance", "1", 1e-8, 1e-14, 1e-2,
                       "converged when |free residual| <= this * max(|external force|, |reaction|)"),
       ParamSpec::integer("max_newton_iterations", 100, 1, 10000, "Newton iterations per load step"),
@@ -42,9 +30,9 @@ std::vector<ParamSpec> paramSpecs() {
                       "mass-proportional damping (dynamic only)"),
       ParamSpec::real("rayleigh_beta", "s", 0.0, 0.0, 10.0,
                       "stiffness-proportional damping (dynamic only; K at the step start)"),
-      ParamSpec::real("mesh_timeout", "s", 600.0, 1.0, 86400.0,
-                      "wall-clock limit of the Gmsh child process"),
   };
+  // The tet mesh's parameters after "volumetric" (organ_tets.h), shared with calculix.
+  return withOrganTetParams(std::move(specs), 4);
 }
 
 ReferenceFemConfig configFromParams(const ParamValues& p) {
@@ -59,11 +47,7 @@ ReferenceFemConfig configFromParams(const ParamValues& p) {
   c.options.maxHalvings = int(p.integer("max_load_halvings"));
   c.rayleighAlpha = p.real("rayleigh_alpha");
   c.rayleighBeta = p.real("rayleigh_beta");
-  c.mesh.edgeLength = p.real("edge_length");
-  c.mesh.targetElements = p.integer("elements");
-  c.mesh.refineSurface = p.flag("refine_surface");
-  c.mesh.conformFixed = p.flag("conform_fixed");
-  c.mesh.timeoutSeconds = p.real("mesh_timeout");
+  c.mesh = organTetOptions(p);
   return c;
 }
 

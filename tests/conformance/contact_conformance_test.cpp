@@ -55,6 +55,11 @@ ProbeCase probeCase() {
   return pc;
 }
 
+/// One run of the model at its default parameters.
+RunRecord runAtDefaults(const ModelInfo& info, const Scene& scene, const Organ& organ) {
+  return runModel(info, ParamValues::defaults(info.params), scene, organ, conformanceCache());
+}
+
 class ContactConformance : public ::testing::TestWithParam<std::string> {
  protected:
   const std::vector<ModelInfo>& models() {
@@ -111,8 +116,7 @@ TEST_P(ContactConformance, ADynamicGrasperReportsAHandForceAndAnObjectRestsOnThe
     }
     if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
     ++tested;
-    const RunRecord rec =
-        runModel(info, ParamValues::defaults(info.params), scene, organ, conformanceCache());
+    const RunRecord rec = runAtDefaults(info, scene, organ);
     ASSERT_EQ(rec.status, RunStatus::Ok) << rec.message;
     ASSERT_EQ(rec.instruments.size(), 1u);
     EXPECT_EQ(rec.handForces.size(), static_cast<size_t>(scene.numSteps()));
@@ -158,8 +162,7 @@ TEST_P(ContactConformance, AFreeObjectRestsOnTheOrganOfEveryModelReportingItsCon
     SCOPED_TRACE(info.name);
     const std::string why = unsupportedReason(info, scene);
     if (!info.has(Capability::Contact) || !info.has(Capability::ContactReaction)) {
-      const RunRecord rec =
-          runModel(info, ParamValues::defaults(info.params), scene, organ, conformanceCache());
+      const RunRecord rec = runAtDefaults(info, scene, organ);
       EXPECT_EQ(rec.status, RunStatus::Unsupported);
       const char* needed = info.has(Capability::Contact) ? "contact_reaction" : "contact";
       EXPECT_NE(rec.message.find(needed), std::string::npos) << rec.message;
@@ -172,8 +175,7 @@ TEST_P(ContactConformance, AFreeObjectRestsOnTheOrganOfEveryModelReportingItsCon
     // held (liver_instruments in the conformance suite's scenes check).
     if (!why.empty() || info.has(Capability::QuasiStatic)) continue;
     ++tested;
-    const RunRecord rec =
-        runModel(info, ParamValues::defaults(info.params), scene, organ, conformanceCache());
+    const RunRecord rec = runAtDefaults(info, scene, organ);
     ASSERT_EQ(rec.status, RunStatus::Ok) << rec.message;
     ASSERT_EQ(rec.objectsFinal.size(), 1u);
     // The organ sags under its own weight too (the softer surface models by 3 cm in this time, 60 %

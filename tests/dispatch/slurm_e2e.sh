@@ -81,14 +81,19 @@ for _ in $(seq 100); do
 done
 sinfo -h -o %t | grep -q idle || { echo "slurm node not idle"; sinfo; cat "$work/slurmctld.log"; exit 1; }
 
+# Until the queue is empty, 5 minutes at most.
+wait_for_queue() {
+  for _ in $(seq 600); do
+    [ -z "$(squeue -h -o %i)" ] && break
+    sleep 0.5
+  done
+}
+
 common=(--plugin-dir "$work/plugins" tables hybrid-timing --quick --no-cache --no-reference-check)
 "$exe" "${common[@]}" --out "$work/serial" > "$work/serial.log" 2>&1
 "$exe" "${common[@]}" --out "$work/cluster" --slurm "$work/plan" > "$work/plan.log" 2>&1
 "$work/plan/submit.sh" > "$work/submit.log"
-for _ in $(seq 600); do
-  [ -z "$(squeue -h -o %i)" ] && break
-  sleep 0.5
-done
+wait_for_queue
 [ -z "$(squeue -h -o %i)" ] || { echo "jobs still queued"; squeue; exit 1; }
 [ -s "$work/cluster/hybrid-timing.json" ] || {
   echo "no table"; cat "$work/plan/logs/"* "$work/slurmctld.log"; exit 1
@@ -108,10 +113,7 @@ sweep=(--plugin-dir "$work/plugins" sweep "$here/sweep_toy.json" --quick --no-ca
 "$exe" "${sweep[@]}" --out "$work/sweep_serial" > "$work/sweep_serial.log" 2>&1
 "$exe" "${sweep[@]}" --out "$work/sweep_cluster" --slurm "$work/sweep_plan" > "$work/sweep_plan.log" 2>&1
 "$work/sweep_plan/submit.sh" > "$work/sweep_submit.log"
-for _ in $(seq 600); do
-  [ -z "$(squeue -h -o %i)" ] && break
-  sleep 0.5
-done
+wait_for_queue
 [ -s "$work/sweep_cluster/sweep.json" ] || {
   echo "no sweep"; cat "$work/sweep_plan/logs/"* "$work/slurmctld.log"; exit 1
 }

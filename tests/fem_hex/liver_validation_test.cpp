@@ -153,6 +153,15 @@ void printAndCheckRuns(const Comparison& c) {
   }
 }
 
+/// The shipped scene at 967 and 4000 hexahedra against the reference, its runs printed and
+/// checked (printAndCheckRuns; the caller returns on a fatal failure).
+Comparison compareShipped(const std::string& name) {
+  const fs::path file = shippedScene(name);
+  Comparison c = compare(readJson(file), file, {967, 4000});
+  printAndCheckRuns(c);
+  return c;
+}
+
 TEST(FemHexLiverValidation, ValidationScenesMatchTheShippedScenes) {
   // plugins/fem_hex/validation/*.json (for `deformbench run`, README) are the shipped scenes with
   // fem_hex as the models: organ, tools, loads, time and reference must stay identical.
@@ -210,13 +219,9 @@ TEST(FemHexLiverValidation, UnconvergedStepsMakeTheRunInvalid) {
 }
 
 TEST(FemHexLiverValidation, GraspLiftAgainstReference) {
-  const fs::path file = shippedScene("liver_grasp_lift");
-  const Comparison c = compare(readJson(file), file, {967, 4000});
-  printAndCheckRuns(c);
+  const Comparison c = compareShipped("liver_grasp_lift");
   if (HasFatalFailure()) return;
-  const RunRecord& ref = c.reference();
-  const RunRecord& hex = c.runs[0];
-  const RunRecord& fine = c.runs[1];
+  const RunRecord &ref = c.reference(), &hex = c.runs[0], &fine = c.runs[1];
   const MatX3& X = c.organ.surface.V;
   const Vec3 grasp = c.scene.tools[0].trajectory[1].pos;  // where the jaws close
   const Vec3 lift = c.scene.tools[0].trajectory.back().pos - grasp;
@@ -270,13 +275,9 @@ TEST(FemHexLiverValidation, GraspLiftAgainstReference) {
 }
 
 TEST(FemHexLiverValidation, PokeAgainstReference) {
-  const fs::path file = shippedScene("liver_poke");
-  const Comparison c = compare(readJson(file), file, {967, 4000});
-  printAndCheckRuns(c);
+  const Comparison c = compareShipped("liver_poke");
   if (HasFatalFailure()) return;
-  const RunRecord& ref = c.reference();
-  const RunRecord& hex = c.runs[0];
-  const RunRecord& fine = c.runs[1];
+  const RunRecord &ref = c.reference(), &hex = c.runs[0], &fine = c.runs[1];
   const MatX3& X = c.organ.surface.V;
   const Vec3 force = c.scene.loads[0].force;
   const int loaded = nearestVertices(X, c.scene.loads[0].at, 1)[0];

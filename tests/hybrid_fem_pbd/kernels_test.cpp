@@ -246,6 +246,20 @@ EdgeUse expectCleanCut(const CuttableSurface& s, int boundary, Real minTriangleA
   return use;
 }
 
+/// Vertex v of the cut surface is at p (to 1e-12).
+void expectVertexAt(const CuttableSurface& s, int v, const Vec3& p) {
+  EXPECT_LT((s.x.row(v) - p.transpose()).norm(), 1e-12) << "vertex " << v;
+}
+
+/// The cut's path points by kind and what it added.
+void expectCutCounts(const CutReport& r, int facetPoints, int edgePoints, int newVertices,
+                     int newFaces) {
+  EXPECT_EQ(r.facetPoints, facetPoints);
+  EXPECT_EQ(r.edgePoints, edgePoints);
+  EXPECT_EQ(r.newVertices, newVertices);
+  EXPECT_EQ(r.newFaces, newFaces);
+}
+
 TEST(Incision, EndToEdgeToEndOnTwoSquares) {
   // Path (0.6,0.3) -> (1.4,0.8): facet point in triangle (0,1,4), edge point on edge (1,4) at
   // y = 0.3 + 0.625 * 0.4 = 0.55, facet point in triangle (1,5,4). Insertions: face split +2
@@ -255,16 +269,13 @@ TEST(Incision, EndToEdgeToEndOnTwoSquares) {
   CuttableSurface s = cuttable(m);
   const CutReport r = cutAlong(s, {Vec3(0.6, 0.3, 0), Vec3(1.4, 0.8, 0)});
   ASSERT_TRUE(r.applied) << r.reason;
-  EXPECT_EQ(r.facetPoints, 2);
-  EXPECT_EQ(r.edgePoints, 1);
+  expectCutCounts(r, 2, 1, 4, 6);
   EXPECT_EQ(r.vertexPoints, 0);
-  EXPECT_EQ(r.newVertices, 4);
-  EXPECT_EQ(r.newFaces, 6);
   ASSERT_EQ(r.path.size(), 3u);
   ASSERT_EQ(r.duplicates.size(), 1u);
   const int e = r.path[1], copy = r.duplicates[0].second;
   EXPECT_EQ(r.duplicates[0].first, e);
-  EXPECT_LT((s.x.row(e) - Vec3(1, 0.55, 0).transpose()).norm(), 1e-12);
+  expectVertexAt(s, e, Vec3(1, 0.55, 0));
   EXPECT_EQ((s.x.row(copy) - s.x.row(e)).norm(), 0.0);
   // Original indices unchanged, new vertices appended.
   EXPECT_EQ((s.x.topRows(6) - m.V).norm(), 0.0);
@@ -281,14 +292,11 @@ TEST(Incision, ThroughTriangleOnThreeSquares) {
   CuttableSurface s = cuttable(patch(3));
   const CutReport r = cutAlong(s, {Vec3(0.6, 0.3, 0), Vec3(2.4, 0.7, 0)});
   ASSERT_TRUE(r.applied) << r.reason;
-  EXPECT_EQ(r.facetPoints, 2);
-  EXPECT_EQ(r.edgePoints, 3);
-  EXPECT_EQ(r.newVertices, 8);
-  EXPECT_EQ(r.newFaces, 10);
+  expectCutCounts(r, 2, 3, 8, 10);
   ASSERT_EQ(r.path.size(), 5u);
-  EXPECT_LT((s.x.row(r.path[1]) - Vec3(1, 7.0 / 18, 0).transpose()).norm(), 1e-12);
-  EXPECT_LT((s.x.row(r.path[2]) - Vec3(1.5, 0.5, 0).transpose()).norm(), 1e-12);
-  EXPECT_LT((s.x.row(r.path[3]) - Vec3(2, 11.0 / 18, 0).transpose()).norm(), 1e-12);
+  expectVertexAt(s, r.path[1], Vec3(1, 7.0 / 18, 0));
+  expectVertexAt(s, r.path[2], Vec3(1.5, 0.5, 0));
+  expectVertexAt(s, r.path[3], Vec3(2, 11.0 / 18, 0));
   expectCleanCut(s, 8 + 8, 1e-3);  // patch boundary 8, cut lips 2 x 4
   EXPECT_NEAR(surfaceArea(s.x, s.faces()), 3.0, 1e-12);
 }
@@ -369,22 +377,49 @@ TEST(BatchedProjection, PolynomialAtan2MatchesTheLibrary) {
   EXPECT_EQ(atan2Polynomial(-3.0, 0.0), -std::numbers::pi / 2);
 }
 
+/// A phantom's surface constraints, every third particle immovable and the others of inverse
+/// mass 1 +- 0.5, and a start state p0 moved randomly by up to h (0.3 of the mean edge scale).
+struct ProjectionCase {
+  SurfaceMesh surface;
+  SurfaceConstraints constraints;
+  VecX w;
+  Real h = 0;
+  MatX3 p0;
+};
+
+ProjectionCase projectionCase(const char* name, unsigned seed) {
+  ProjectionCase pc;
+  pc.surface = makePhantom(name, 0.5);
+  const SurfaceMesh& s = pc.surface;
+  pc.constraints = buildSurfaceConstraints(s.V, s.F);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const int n = s.numVertices();
+  pc.w.resize(n);
+  for (int i = 0; i < n; ++i) pc.w[i] = (i % 3 == 0) ? 0.0 : 1.0 + 0.5 * u(rng);
+  pc.h = 0.3 * std::sqrt(surfaceArea(s.V, s.F) / s.numFaces());
+  pc.p0 = s.V;
+  for (int i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) pc.p0(i, a) += pc.h * u(rng);
+  return pc;
+}
+
+/// Positions as padded rows (x, y, z, 0).
+std::vector<Real> padded(const MatX3& p) {
+  std::vector<Real> x4(4 * size_t(p.rows()), 0.0);
+  for (Eigen::Index i = 0; i < p.rows(); ++i)
+    for (int a = 0; a < 3; ++a) x4[4 * size_t(i) + size_t(a)] = p(i, a);
+  return x4;
+}
+
 // The batched projection (scalar and AVX2) does what the one-by-one reference does: same
 // constraints, stiffnesses and order, on a randomly deformed surface with immovable particles
 // mixed in (as control nodes are), including hinges far from their rest angle.
 TEST(BatchedProjection, MatchesTheReferenceProjection) {
   for (const char* name : {"sphere", "liver"}) {
-    const SurfaceMesh s = makePhantom(name, 0.5);
-    const SurfaceConstraints c = buildSurfaceConstraints(s.V, s.F);
-    std::mt19937 rng(11);
-    std::uniform_real_distribution<double> u(-1, 1);
+    const ProjectionCase pc = projectionCase(name, 11);
+    const auto& [s, c, w, h, p0] = pc;
     const int n = s.numVertices();
-    VecX w(n);
-    for (int i = 0; i < n; ++i) w[i] = (i % 3 == 0) ? 0.0 : 1.0 + 0.5 * u(rng);
-    const Real h = 0.3 * std::sqrt(surfaceArea(s.V, s.F) / s.numFaces());
-    MatX3 p0 = s.V;
-    for (int i = 0; i < n; ++i)
-      for (int a = 0; a < 3; ++a) p0(i, a) += h * u(rng);
     const ActiveConstraints act = activeConstraints(c, w);
     ASSERT_FALSE(act.stretchColourOverflow);
     ASSERT_FALSE(act.bendingColourOverflow);
@@ -392,9 +427,7 @@ TEST(BatchedProjection, MatchesTheReferenceProjection) {
     const long long degRef = projectSurfaceConstraints(ref, w, c, act, 1.0, 0.5, 10);
     const SurfaceBatches b = buildSurfaceBatches(c, act, w, 1.0, 0.5, 10);
     for (bool simd : {false, true}) {
-      std::vector<Real> x4(4 * n, 0.0);
-      for (int i = 0; i < n; ++i)
-        for (int a = 0; a < 3; ++a) x4[4 * i + a] = p0(i, a);
+      std::vector<Real> x4 = padded(p0);
       const long long deg = projectSurfaceBatches(x4.data(), b, 10, simd);
       EXPECT_EQ(deg, degRef);
       Real worst = 0, moved = 0;
@@ -420,23 +453,13 @@ TEST(BatchedProjection, MatchesTheReferenceProjection) {
 // nothing at rest (rest values measured with its own arithmetic), with and without AVX2.
 TEST(BatchedProjection, SinglePrecisionFollowsTheDoubleProjection) {
   for (const char* name : {"sphere", "liver"}) {
-    const SurfaceMesh s = makePhantom(name, 0.5);
-    const SurfaceConstraints c = buildSurfaceConstraints(s.V, s.F);
-    std::mt19937 rng(12);
-    std::uniform_real_distribution<double> u(-1, 1);
+    const ProjectionCase pc = projectionCase(name, 12);
+    const auto& [s, c, w, h, p0] = pc;
     const int n = s.numVertices();
-    VecX w(n);
-    for (int i = 0; i < n; ++i) w[i] = (i % 3 == 0) ? 0.0 : 1.0 + 0.5 * u(rng);
-    const Real h = 0.3 * std::sqrt(surfaceArea(s.V, s.F) / s.numFaces());
-    MatX3 p0 = s.V;
-    for (int i = 0; i < n; ++i)
-      for (int a = 0; a < 3; ++a) p0(i, a) += h * u(rng);
     const ActiveConstraints act = activeConstraints(c, w);
     SurfaceBatches b = buildSurfaceBatches(c, act, w, 1.0, 0.5, 10);
     addIsometricBending(b, s.V);
-    std::vector<Real> ref(4 * n, 0.0);
-    for (int i = 0; i < n; ++i)
-      for (int a = 0; a < 3; ++a) ref[4 * i + a] = p0(i, a);
+    std::vector<Real> ref = padded(p0);
     const long long degRef = projectSurfaceBatches(ref.data(), b, 10, true);
     const Vec3 origin = boundingBox(s.V).center();
     auto toFloat = [&](const MatX3& p) {

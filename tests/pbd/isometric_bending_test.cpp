@@ -23,6 +23,14 @@ void hinge(Real theta, Real a, Real b, Real s, Vec3 x[4]) {
   x[3] = s * Vec3(0, 0.5, 0);
 }
 
+/// C(x) of the hinge h.
+Real constraintValue(const Vec3 x[4], const IsometricHinge& h) {
+  Real C;
+  Vec3 g[4];
+  isometricBendingConstraint(x, h.K, h.rest, C, g);
+  return C;
+}
+
 Mat3 rotation(const Vec3& axis, Real angle) {
   return Eigen::AngleAxis<Real>(angle, axis.normalized()).toRotationMatrix();
 }
@@ -34,10 +42,7 @@ TEST(IsometricBending, StencilOfAFlatHingeSumsToZeroAndVanishes) {
   ASSERT_TRUE(isometricHinge(x, h));
   EXPECT_NEAR(h.K[0] + h.K[1] + h.K[2] + h.K[3], 0.0, 1e-12);
   EXPECT_LT(std::abs(h.rest), 1e-15);  // flat: zero at rest
-  Real C;
-  Vec3 g[4];
-  isometricBendingConstraint(x, h.K, h.rest, C, g);
-  EXPECT_LT(std::abs(C), 1e-15);
+  EXPECT_LT(std::abs(constraintValue(x, h)), 1e-15);
 }
 
 // For a hinge of the flat rest shape folded isometrically by theta, |v| = 2 |e| sin(theta / 2),
@@ -147,10 +152,7 @@ TEST(IsometricBending, ProjectionSatisfiesTheHardConstraint) {
     }
     EXPECT_LT(p.norm(), 1e-15);
   }
-  Real C;
-  Vec3 g[4];
-  isometricBendingConstraint(x, h.K, h.rest, C, g);
-  EXPECT_LT(std::abs(C), 1e-9 * h.rest);
+  EXPECT_LT(std::abs(constraintValue(x, h)), 1e-9 * h.rest);
 }
 
 // A strip of hinges that share no particle (one colour): the batch kernel, scalar and AVX2, in
@@ -163,15 +165,7 @@ struct Strip {
   std::vector<T> K[4], wK[4], rest, at, scale, lambda;
   std::vector<IsometricHinge> hinges;
   std::vector<std::array<Real, 4>> w;
-  IsometricBatch<T> batch() {
-    return {{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
-            {K[0].data(), K[1].data(), K[2].data(), K[3].data()},
-            {wK[0].data(), wK[1].data(), wK[2].data(), wK[3].data()},
-            rest.data(),
-            at.data(),
-            scale.data(),
-            lambda.data()};
-  }
+  IsometricBatch<T> batch() { return isometricBatch(p, K, wK, rest, at, scale, lambda); }
 };
 
 template <class T>

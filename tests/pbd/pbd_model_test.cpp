@@ -211,14 +211,20 @@ TEST(PbdModel, BadMaterialIsAnInputError) {
   EXPECT_THROW(m.init(o, PbdConfig{}), InputError);
 }
 
-// network = volume: the surface tetrahedralised (its vertices kept as the first nodes), tet edges
-// and volumes with compliances from E and nu; pressed, the cube drops as a solid does.
-TEST(PbdModel, VolumeNetworkIsPressedLikeASolid) {
-  const testing::CubePress press = testing::cubePress(0.5);
+/// network = volume at about 500 tets, damped at 20 / s: the pressed-cube tests' parameters.
+ParamValues volumeNetworkParams() {
   ParamValues p = ParamValues::defaults(paramSpecs());
   p.set("network", std::string("volume"));
   p.set("volume_elements", 500LL);
   p.set("damping", 20.0);
+  return p;
+}
+
+// network = volume: the surface tetrahedralised (its vertices kept as the first nodes), tet edges
+// and volumes with compliances from E and nu; pressed, the cube drops as a solid does.
+TEST(PbdModel, VolumeNetworkIsPressedLikeASolid) {
+  const testing::CubePress press = testing::cubePress(0.5);
+  const ParamValues p = volumeNetworkParams();
   PbdModel m;
   testing::initWithParams(m, press.organ, p);
   const Counts c = m.counts();
@@ -234,23 +240,16 @@ TEST(PbdModel, VolumeNetworkIsPressedLikeASolid) {
 // is lower (tests/support/plate.h).
 TEST(PbdModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
   const testing::CubePress press = testing::cubePress(0.5);
-  ParamValues p = ParamValues::defaults(paramSpecs());
-  p.set("network", std::string("volume"));
-  p.set("volume_elements", 500LL);
-  p.set("damping", 20.0);
-  Cache cache{std::filesystem::path()};
+  const ParamValues p = volumeNetworkParams();
   PbdModel m;
-  m.init(ModelSetup{press.organ, p, cache, 1e-3, Vec3::Zero()});
+  testing::initWithParams(m, press.organ, p);
   testing::expectSlidingSpreadsTheTopAndEasesThePlate(m, press.organ, 0.002, 200, 400,
                                                       "volume PBD");
 }
 
 TEST(PbdModel, ASurfaceNetworkHasNoInteriorForMarkers) {
-  const testing::CubePress press = testing::cubePress(0.5);
-  ParamValues p = ParamValues::defaults(paramSpecs());
   PbdModel m;
-  testing::initWithParams(m, press.organ, p);
-  testing::expectNoMarkersOnASurfaceNetwork(m);
+  testing::expectNoMarkersAtDefaults(m, paramSpecs());
 }
 
 }  // namespace

@@ -11,25 +11,20 @@ namespace {
 
 using namespace deform;
 
-class SegvModel final : public Model {
+class SegvModel final : public fixture::StillModel {
  public:
   void init(const ModelSetup& setup) override {
     m_at = setup.params.choice("at");
     if (m_at == "init") std::raise(SIGSEGV);
-    m_x = setup.organ.surface.V;
+    StillModel::init(setup);
   }
   StepStatus step(const StepInput&) override {
     if (m_at == "step") std::raise(SIGSEGV);
     return StepStatus::Ok;
   }
-  const MatX3& nodes() const override { return m_x; }
-  const MatX3& surface() const override { return m_x; }
-  void reset() override {}
-  Counts counts() const override { return {{"nodes", m_x.rows()}}; }
 
  private:
   std::string m_at;
-  MatX3 m_x;
 };
 
 }  // namespace

@@ -12,13 +12,28 @@
 
 namespace deform::fixture {
 
-class RigidFollowModel final : public Model {
+/// A model whose nodes (its organ's surface vertices) stay at rest: the base of the fixtures,
+/// which add what they do (follow the grasp, crash, hang).
+class StillModel : public Model {
+ public:
+  void init(const ModelSetup& setup) override { m_x = m_rest = setup.organ.surface.V; }
+  StepStatus step(const StepInput&) override { return StepStatus::Ok; }
+  const MatX3& nodes() const override { return m_x; }
+  const MatX3& surface() const override { return m_x; }
+  void reset() override { m_x = m_rest; }
+  Counts counts() const override { return {{"nodes", m_x.rows()}}; }
+
+ protected:
+  MatX3 m_x, m_rest;
+};
+
+/// The toy: rigid follow-the-grasp (see the file comment).
+class RigidFollowModel final : public StillModel {
  public:
   void init(const ModelSetup& setup) override {
-    m_rest = setup.organ.surface.V;
+    StillModel::init(setup);
     m_gain = setup.params.real("gain");
     m_divergeBelow = setup.params.real("diverge_below");
-    reset();
   }
   StepStatus step(const StepInput& in) override {
     Vec3 sum = Vec3::Zero();
@@ -34,13 +49,8 @@ class RigidFollowModel final : public Model {
     if (m_gain < m_divergeBelow) m_x(0, 0) = std::numeric_limits<Real>::quiet_NaN();
     return StepStatus::Ok;
   }
-  const MatX3& nodes() const override { return m_x; }
-  const MatX3& surface() const override { return m_x; }
-  void reset() override { m_x = m_rest; }
-  Counts counts() const override { return {{"nodes", m_x.rows()}}; }
 
  private:
-  MatX3 m_rest, m_x;
   Real m_gain = 1;
   Real m_divergeBelow = 0;
 };

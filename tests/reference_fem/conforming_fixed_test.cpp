@@ -5,6 +5,7 @@
 // their rest positions, a point load there is taken by the support; and conform_fixed = false
 // keeps the old mesh (surface vertex i is node i, the nodes inside the box pinned).
 #include "../support/fixtures.h"
+#include "../support/organs.h"
 
 #include <deform/engine/plugin_loader.h>
 #include <deform/geometry/phantom.h>
@@ -23,20 +24,10 @@ using deform::testing::loader;
 
 using deform::testing::cache;
 
+/// The cube phantom with its bottom 23% fixed: a plane between grid rows, so the box cuts
+/// triangles.
 Organ cubeOrgan() {
-  Organ o;
-  o.source = "phantom:cube";
-  o.surface = makePhantom("cube", 0.5);
-  o.material.young = 5500;
-  o.material.poisson = 0.3;
-  o.material.density = 1000;
-  const Box b = boundingBox(o.surface.V);
-  Box fixed;
-  fixed.lo = b.lo - Vec3::Constant(0.01);
-  // Bottom 23%: a plane between grid rows, so the box cuts triangles.
-  fixed.hi = Vec3(b.hi.x() + 0.01, b.hi.y() + 0.01, b.lo.z() + 0.23 * b.size().z());
-  o.fixed.boxes = {fixed};
-  return o;
+  return deform::testing::phantomWithFixedBottom("cube", 0.5, 0.23);
 }
 
 bool strictlyInside(const Box& b, const Vec3& p) {

@@ -41,19 +41,26 @@ inline MatX dense(const FemSystem& sys, const VecX& values) {
                                              P.innerIndexPtr(), values.data()));
 }
 
+/// The rest positions mapped by F, each node then moved by a deterministic jitter of up to
+/// `jitter` (m) per coordinate: a general deformed state.
+inline VecX deformedState(const FemSystem& sys, const Mat3& F, Real jitter) {
+  VecX x = sys.restPositions();
+  for (int i = 0; i < sys.numNodes(); ++i)
+    x.segment<3>(3 * i) =
+        F * x.segment<3>(3 * i) +
+        jitter * Vec3(std::sin(3.1 * i), std::cos(1.7 * i), std::sin(0.9 * i + 2));
+  return x;
+}
+
 /// At a general deformed state (an affine map plus a jitter of 0.4 mm): the elastic forces are
 /// the central differences of the energy and the stiffness those of the forces (within 1e-6
 /// relative), the stiffness is symmetric, and the projected stiffness is positive semi-definite.
 /// `label` names the case in a failure.
 inline void expectForcesAndStiffnessMatchDifferences(const FemSystem& sys,
                                                      const std::string& label) {
-  const int n = sys.numNodes();
-  VecX x = sys.restPositions();
   Mat3 F;
   F << 1.1, 0.08, -0.05, -0.04, 0.93, 0.06, 0.03, -0.02, 1.05;
-  for (int i = 0; i < n; ++i)
-    x.segment<3>(3 * i) = F * x.segment<3>(3 * i) +
-                          4e-4 * Vec3(std::sin(3.1 * i), std::cos(1.7 * i), std::sin(0.9 * i + 2));
+  const VecX x = deformedState(sys, F, 4e-4);
   VecX g;
   sys.elasticGradient(x, g);
   ASSERT_TRUE(g.allFinite());

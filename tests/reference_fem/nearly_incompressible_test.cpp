@@ -11,6 +11,7 @@
 //   converges.
 #include "../support/finite_difference.h"
 #include "../support/fixtures.h"
+#include "../support/organs.h"
 #include "fem_checks.h"
 #include "fem_solver.h"
 #include "mean_dilatation_tet.h"
@@ -30,15 +31,11 @@
 
 using namespace deform;
 using namespace deform::reference_fem;
-using deform::testing::centralDifferences;
-using deform::testing::numericGradient;
 
 namespace {
 
-using deform::testing::material;
-
-using deform::reference_fem::fem_checks::dense;
 using deform::reference_fem::fem_checks::jitteredBox;
+using deform::testing::material;
 
 FemSystem meanDilatationSystem(const TetMesh& mesh, Real poisson) {
   return FemSystem(mesh, material(5500, poisson), MaterialModel::NeoHookean,
@@ -240,16 +237,8 @@ using deform::testing::cache;
 
 TEST(ReferenceFemNearlyIncompressible, UnloadedGraspIsTheRestStateAndTheLiftConverges) {
   const ModelInfo& info = loader().load("reference_fem");
-  Organ o;
-  o.source = "phantom:cube";
-  o.surface = makePhantom("cube", 0.5);
-  o.material.young = 5500;
-  o.material.density = 1000;
+  Organ o = deform::testing::phantomWithFixedBottom("cube", 0.5, 0.2);
   const Box b = boundingBox(o.surface.V);
-  Box fixed;
-  fixed.lo = b.lo - Vec3::Constant(0.01);
-  fixed.hi = Vec3(b.hi.x() + 0.01, b.hi.y() + 0.01, b.lo.z() + 0.2 * b.size().z());
-  o.fixed.boxes = {fixed};
   // The grasped vertices: those within a quarter of the width of the top centre.
   const Vec3 top(b.center().x(), b.center().y(), b.hi.z());
   GraspInput grasp;

@@ -22,18 +22,10 @@
 
 using namespace deform;
 using namespace deform::reference_fem;
+using namespace deform::reference_fem::fem_checks;  // jittered boxes, dense stiffness
 using deform::testing::centralDifferences;
-using deform::testing::numericGradient;
-
-namespace {
-
 using deform::testing::material;
-
-using deform::reference_fem::fem_checks::dense;
-using deform::reference_fem::fem_checks::jitteredBox;
-using deform::reference_fem::fem_checks::onBoundaryOfBox;
-
-}  // namespace
+using deform::testing::numericGradient;
 
 TEST(QuadraticTet, ShapeFunctionsInterpolateAndIntegrate) {
   // Kronecker property at the nodes (corners: unit barycentric vectors, midsides: edge centres).
@@ -131,8 +123,7 @@ TEST(QuadraticTet, ForcesAndStiffnessMatchFiniteDifferences) {
   for (MaterialModel model :
        {MaterialModel::Linear, MaterialModel::Corotational, MaterialModel::NeoHookean}) {
     const FemSystem sys(mesh, material(5500, 0.45), model, ElementOrder::Quadratic);
-    deform::reference_fem::fem_checks::expectForcesAndStiffnessMatchDifferences(
-        sys, materialModelName(model));
+    expectForcesAndStiffnessMatchDifferences(sys, materialModelName(model));
   }
 }
 
@@ -144,13 +135,9 @@ TEST(QuadraticTet, NeoHookeanTangentMatchesDifferencesUnderStrongCompression) {
   const TetMesh mesh = jitteredBox(Vec3(0, 0, 0), Vec3(0.02, 0.015, 0.01), Vec3i(2, 1, 1));
   const FemSystem sys(mesh, material(5500, 0.3), MaterialModel::NeoHookean,
                       ElementOrder::Quadratic);
-  const int n = sys.numNodes();
-  VecX x = sys.restPositions();
   Mat3 F;
   F << 1.3, 0.35, 0.02, -0.05, 1.2, 0.03, 0.01, -0.02, 0.06;  // det F = 0.10
-  for (int i = 0; i < n; ++i)
-    x.segment<3>(3 * i) = F * x.segment<3>(3 * i) +
-                          2e-5 * Vec3(std::sin(3.1 * i), std::cos(1.7 * i), std::sin(0.9 * i + 2));
+  const VecX x = deformedState(sys, F, 2e-5);
   VecX g;
   sys.elasticGradient(x, g);
   ASSERT_TRUE(g.allFinite());

@@ -6,6 +6,7 @@
 
 #include "grasp.h"
 #include "meshes.h"
+#include "press.h"
 
 #include <deform/sdk/cache.h>
 #include <deform/sdk/mesh.h>
@@ -112,6 +113,13 @@ void expectGraspReactionBalancesTheWeight(ModelT& m, const Organ& o, int steps, 
 inline void initWithParams(Model& m, const Organ& o, const ParamValues& p) {
   Cache cache{std::filesystem::path()};
   m.init(ModelSetup{o, p, cache, 1e-3, Vec3::Zero()});
+}
+
+/// A surface network (the model at its default parameters, specs) has no interior: it refuses
+/// markers, naming why (on the pressed cube).
+inline void expectNoMarkersAtDefaults(Model& m, const std::vector<ParamSpec>& specs) {
+  initWithParams(m, cubePress(0.5).organ, ParamValues::defaults(specs));
+  expectNoMarkersOnASurfaceNetwork(m);
 }
 
 }  // namespace deform::testing

@@ -5,16 +5,17 @@
 #include <csignal>
 #include <thread>
 
+#include "../plugin_fixtures/toy_model.h"
+
 namespace {
 
 using namespace deform;
 
-class CrashingModel final : public Model {
+class CrashingModel final : public fixture::StillModel {
  public:
   void init(const ModelSetup& setup) override {
     m_mode = setup.params.choice("mode");
-    m_x = setup.organ.surface.V;
-    m_rest = m_x;
+    StillModel::init(setup);
   }
   StepStatus step(const StepInput&) override {
     if (++m_steps == 2) {
@@ -24,17 +25,13 @@ class CrashingModel final : public Model {
     }
     return StepStatus::Ok;
   }
-  const MatX3& nodes() const override { return m_x; }
-  const MatX3& surface() const override { return m_x; }
   void reset() override {
-    m_x = m_rest;
+    StillModel::reset();
     m_steps = 0;
   }
-  Counts counts() const override { return {{"nodes", m_x.rows()}}; }
 
  private:
   std::string m_mode;
-  MatX3 m_x, m_rest;
   int m_steps = 0;
 };
 

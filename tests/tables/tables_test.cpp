@@ -19,6 +19,7 @@
 
 #include <sys/wait.h>
 #include "../../harness/src/tables/table_kit.h"  // the tables' internal kit: status cells
+#include "../support/temp_dir.h"
 
 #include <cmath>
 #include <cstdio>
@@ -35,13 +36,7 @@ using json = nlohmann::json;
 
 class TempDir : public ::testing::Test {
  protected:
-  void SetUp() override {
-    m_dir = fs::temp_directory_path() /
-            ("deform_tables_" +
-             std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
-    fs::remove_all(m_dir);
-    fs::create_directories(m_dir);
-  }
+  void SetUp() override { m_dir = deform::testing::freshTestDir("deform_tables_"); }
   void TearDown() override {
     if (!HasFailure()) fs::remove_all(m_dir);
   }

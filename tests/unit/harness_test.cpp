@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "../support/temp_dir.h"
 #include "tet_lift_scene.h"
 
 namespace deform::harness {
@@ -728,13 +729,7 @@ namespace {
 
 class Pipeline : public ::testing::Test {
  protected:
-  void SetUp() override {
-    m_dir = fs::temp_directory_path() /
-            ("deform_pipeline_" +
-             std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
-    fs::remove_all(m_dir);
-    fs::create_directories(m_dir);
-  }
+  void SetUp() override { m_dir = deform::testing::freshTestDir("deform_pipeline_"); }
   void TearDown() override { fs::remove_all(m_dir); }
 
   /// Toy scene on the cube phantom: a grasp on the top face lifting 1 cm.

@@ -26,32 +26,32 @@ struct DefectCase {
   const char* expected;  ///< substring of the problem
 };
 
-std::string shifted(const std::string& faces, int by) {
+/// Each "f a b c" line of `faces` rewritten as face(a, b, c) gives it (a whole "f ..." line).
+template <class Face>
+std::string mapFaces(const std::string& faces, Face&& face) {
   std::string out;
   std::istringstream in(faces);
   for (std::string line; std::getline(in, line);) {
     std::istringstream l(line.substr(2));
     int a, b, c;
     l >> a >> b >> c;
-    out += "f " + std::to_string(a + by) + " " + std::to_string(b + by) + " " +
-           std::to_string(c + by) + "\n";
+    out += face(a, b, c);
   }
   return out;
 }
 
+std::string faceLine(int a, int b, int c) {
+  return "f " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(c) + "\n";
+}
+
+std::string shifted(const std::string& faces, int by) {
+  return mapFaces(faces, [by](int a, int b, int c) { return faceLine(a + by, b + by, c + by); });
+}
+
 std::vector<DefectCase> defectCases() {
   const std::string v = kVertices, f = kFaces;
-  std::string inverted;
-  {
-    std::istringstream in(f);
-    for (std::string line; std::getline(in, line);) {
-      std::istringstream l(line.substr(2));
-      int a, b, c;
-      l >> a >> b >> c;
-      inverted +=
-          "f " + std::to_string(a) + " " + std::to_string(c) + " " + std::to_string(b) + "\n";
-    }
-  }
+  const std::string inverted =
+      mapFaces(f, [](int a, int b, int c) { return faceLine(a, c, b); });  // every face flipped
   std::string farVertices;
   for (const char* p :
        {"v 4 0 0\n", "v 2 0 0\n", "v 3 1 0\n", "v 3 -1 0\n", "v 3 0 1\n", "v 3 0 -1\n"})

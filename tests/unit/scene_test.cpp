@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include "../support/temp_dir.h"
+
 namespace deform {
 namespace {
 
@@ -290,11 +292,9 @@ TEST(SceneErrors, ResolutionOnlyForPhantoms) {
 class SceneFiles : public ::testing::Test {
  protected:
   void SetUp() override {
-    m_dir =
-        fs::temp_directory_path() /
-        ("deform_scene_test_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
-         "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(m_dir);
+    m_dir = deform::testing::freshTestDir(
+        "deform_scene_test_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) +
+        "_");
     fs::create_directories(m_dir / "scenes");
   }
   void TearDown() override { fs::remove_all(m_dir); }

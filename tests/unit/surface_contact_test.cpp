@@ -36,6 +36,29 @@ Real patchDistance(const Patch& p, const Vec3& c) {
   return d;
 }
 
+/// Contact parameters with the 0.1 mm skin thickness of these tests.
+ContactParams withSkin() {
+  ContactParams params;
+  params.thickness = 1e-4;
+  return params;
+}
+
+/// A spherical probe tip of radius r, its centre placed at `at`; returns the body.
+int placeProbe(ContactWorld& w, Real r, const Vec3& at) {
+  const int b = w.addBody(probeShape(r, 0.0, 0.0, Vec3::UnitZ()));
+  w.setPose(b, at);
+  return b;
+}
+
+/// The impulse (N s) the vertices of `mass` kg received in a step of dt that moved them from
+/// `before` to `after`.
+Vec3 receivedImpulse(const MatX3& before, const MatX3& after, Real mass, Real dt) {
+  Vec3 impulse = Vec3::Zero();
+  for (Eigen::Index i = 0; i < after.rows(); ++i)
+    impulse += mass * (after.row(i) - before.row(i)).transpose() / dt;
+  return impulse;
+}
+
 /// The projection response on a surface proxy that is its own nodes.
 ContactResolution projectSurface(ContactWorld& w, MatX3& V, const MatX3i& F, const VecX& invMass,
                                  Real dt, const MatX3* atStepStart = nullptr) {
@@ -57,13 +80,9 @@ ContactResolution penaltyForces(ContactWorld& w, MatX3 V, const MatX3i& F, MatX3
 }
 
 TEST(TriangleContact, AThinTipInTheMiddleOfATriangleIsFoundWhereVerticesMissIt) {
-  ContactParams params;
-  params.thickness = 1e-4;
-  ContactWorld w(params);
-  const Real r = 1e-3;  // 2 mm tip, the triangle's legs are 10 mm
-  const int b = w.addBody(probeShape(r, 0.0, 0.0, Vec3::UnitZ()));
-  const Vec3 at(0.006, 0.002, r - 5e-4);  // 0.5 mm into the first triangle
-  w.setPose(b, at);
+  ContactWorld w(withSkin());
+  const Real r = 1e-3;                             // 2 mm tip, the triangle's legs are 10 mm
+  placeProbe(w, r, Vec3(0.006, 0.002, r - 5e-4));  // 0.5 mm into the first triangle
   const Patch p = squarePatch(0.01);
   EXPECT_TRUE(w.query(p.V).empty()) << "no vertex is near the tip";
   const std::vector<TriangleContact> c = w.queryTriangles(p.V, p.F);
@@ -107,13 +126,11 @@ TEST(TriangleContact, ShaftsAndBoxesAgainstATriangleGiveTheirDistance) {
 }
 
 TEST(ResolveSurfaceContacts, AThinTipLeavesNoTrianglePointInsideAndFeelsTheImpulse) {
-  ContactParams params;
-  params.thickness = 1e-4;
+  const ContactParams params = withSkin();
   ContactWorld w(params);
   const Real r = 1e-3;
-  const int b = w.addBody(probeShape(r, 0.0, 0.0, Vec3::UnitZ()));
   const Vec3 at(0.006, 0.002, r - 8e-4);
-  w.setPose(b, at);
+  const int b = placeProbe(w, r, at);
   Patch p = squarePatch(0.01);
   const MatX3 before = p.V;
   const VecX invMass = VecX::Constant(4, 1.0 / 0.002);  // 2 g vertices
@@ -130,8 +147,7 @@ TEST(ResolveSurfaceContacts, AThinTipLeavesNoTrianglePointInsideAndFeelsTheImpul
   EXPECT_NEAR(p.V(1, 2) / p.V(2, 2), 2.0, 1e-3);
   EXPECT_EQ(p.V(3, 2), 0.0);
   // Reaction: minus the impulse the vertices received, sum m dx / dt / dt, pushes the tool up.
-  Vec3 impulse = Vec3::Zero();
-  for (int i = 0; i < 4; ++i) impulse += 0.002 * (p.V.row(i) - before.row(i)).transpose() / dt;
+  const Vec3 impulse = receivedImpulse(before, p.V, 0.002, dt);
   EXPECT_TRUE(w.reactionForce(b).isApprox(-impulse / dt, 1e-9))
       << w.reactionForce(b).transpose() << " vs " << (-impulse / dt).transpose();
   EXPECT_GT(w.reactionForce(b).z(), 0);
@@ -140,8 +156,7 @@ TEST(ResolveSurfaceContacts, AThinTipLeavesNoTrianglePointInsideAndFeelsTheImpul
 // A body with dynamics takes its share: the tissue point (generalized inverse mass W) moves by
 // W / (W + 1/m) of the depth, and the reaction, applied for one step, moves the body by the rest.
 TEST(ResolveSurfaceContacts, ALightBodySharesTheCorrectionInProportionToInverseMasses) {
-  ContactParams params;
-  params.thickness = 1e-4;
+  const ContactParams params = withSkin();
   const Real r = 1e-3, dt = 1e-3;
   const Vec3 at(0.006, 0.002, r - 8e-4);
   const VecX invMass = VecX::Constant(4, 1.0 / 0.002);  // 2 g vertices
@@ -150,8 +165,7 @@ TEST(ResolveSurfaceContacts, ALightBodySharesTheCorrectionInProportionToInverseM
   for (const Real bodyMass : {0.0, 0.005, 0.0005}) {
     SCOPED_TRACE(bodyMass);
     ContactWorld w(params);
-    const int b = w.addBody(probeShape(r, 0.0, 0.0, Vec3::UnitZ()));
-    w.setPose(b, at);
+    const int b = placeProbe(w, r, at);
     if (bodyMass > 0) w.setInverseMass(b, 1.0 / bodyMass);
     EXPECT_EQ(w.inverseMass(b), bodyMass > 0 ? 1.0 / bodyMass : 0.0);
     Patch p = squarePatch(0.01);
@@ -170,20 +184,17 @@ TEST(ResolveSurfaceContacts, ALightBodySharesTheCorrectionInProportionToInverseM
       EXPECT_NEAR(dxBody.z(), (1 - share) * depth, tol);
       EXPECT_NEAR(dxBody.z() - pointMoved, depth, tol) << "together they separate by the depth";
     }
-    Vec3 impulse = Vec3::Zero();
-    for (int i = 0; i < 4; ++i) impulse += 0.002 * (p.V.row(i) - before.row(i)).transpose() / dt;
-    EXPECT_TRUE(w.reactionForce(b).isApprox(-impulse / dt, 1e-9)) << "action = reaction";
+    EXPECT_TRUE(w.reactionForce(b).isApprox(-receivedImpulse(before, p.V, 0.002, dt) / dt, 1e-9))
+        << "action = reaction";
   }
 }
 
 TEST(ResolveSurfaceContacts, EmbeddedTrianglesMoveTheirNodesAndRemoveTheInwardVelocity) {
-  ContactParams params;
-  params.thickness = 1e-4;
+  const ContactParams params = withSkin();
   ContactWorld w(params);
   const Real r = 1e-3;
-  const int b = w.addBody(probeShape(r, 0.0, 0.0, Vec3::UnitZ()));
   const Vec3 at(0.004, 0.004, r - 6e-4);
-  w.setPose(b, at);
+  placeProbe(w, r, at);
   // Surface vertex a is the mean of nodes a and a + 4, the latter 2 mm below: a two-layer patch.
   const Patch p0 = squarePatch(0.01);
   MatX3 nodes(8, 3);
@@ -235,15 +246,13 @@ TEST(ResolveSurfaceContacts, EmbeddedTrianglesMoveTheirNodesAndRemoveTheInwardVe
 }
 
 TEST(PenaltyContact, TheForceIsPressureStiffnessTimesAreaTimesDepthSpreadByBarycentricWeights) {
-  ContactParams params;
-  params.thickness = 1e-4;
+  ContactParams params = withSkin();
   params.method = ContactMethod::Penalty;
   params.stiffness = 2e6;
   params.damping = 0;
   ContactWorld w(params);
   const Real r = 1e-3;
-  const int b = w.addBody(probeShape(r, 0.0, 0.0, Vec3::UnitZ()));
-  w.setPose(b, Vec3(0.006, 0.002, r - 4e-4));
+  const int b = placeProbe(w, r, Vec3(0.006, 0.002, r - 4e-4));
   const Patch p = squarePatch(0.01);
   MatX3 f = MatX3::Zero(4, 3);
   const ContactResolution res = penaltyForces(w, p.V, p.F, nullptr, f);
@@ -259,7 +268,7 @@ TEST(PenaltyContact, TheForceIsPressureStiffnessTimesAreaTimesDepthSpreadByBaryc
   ContactParams damped = params;
   damped.damping = 500;
   ContactWorld w2(damped);
-  w2.setPose(w2.addBody(probeShape(r, 0.0, 0.0, Vec3::UnitZ())), Vec3(0.006, 0.002, r - 4e-4));
+  placeProbe(w2, r, Vec3(0.006, 0.002, r - 4e-4));
   MatX3 v = MatX3::Zero(4, 3);
   v.col(2).setConstant(0.1);
   MatX3 f2 = MatX3::Zero(4, 3);
@@ -270,8 +279,7 @@ TEST(PenaltyContact, TheForceIsPressureStiffnessTimesAreaTimesDepthSpreadByBaryc
 TEST(ContactFriction, StaticFrictionDragsTheTouchedPointAlongAndFrictionlessDoesNot) {
   // A round tool (3 mm sphere) resting 0.3 mm into the patch moves 0.2 mm along x in the step.
   const auto run = [](Real mu, Vec3* reaction) {
-    ContactParams params;
-    params.thickness = 1e-4;
+    ContactParams params = withSkin();
     params.friction = mu;
     ContactWorld w(params);
     const int b = w.addBody(probeShape(0.003, 0.0, 0.0, Vec3::UnitZ()));

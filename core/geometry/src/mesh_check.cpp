@@ -227,6 +227,172 @@ std::string formatVolume(Real v) {
   return buf;
 }
 
+void addIssue(MeshReport& report, MeshDefect d, long long count, std::string message) {
+  report.issues.push_back({d, static_cast<int>(count), std::move(message)});
+}
+
+// The checks of validateSurface, in the order of its report. Each message ends with the first
+// place (lowest index) where the defect occurs.
+
+/// Vertices with NaN or Inf coordinates; returns their number.
+int checkFinite(const MatX3& V, MeshReport& report) {
+  int nonFinite = 0, firstNonFinite = -1;
+  for (Eigen::Index i = 0; i < V.rows(); ++i) {
+    if (finiteRow(V, i)) continue;
+    if (nonFinite++ == 0) firstNonFinite = int(i);
+  }
+  if (nonFinite > 0) {
+    addIssue(report, MeshDefect::NonFinite, nonFinite,
+             counted(nonFinite, "vertex", "vertices") +
+                 " with NaN or Inf coordinates, first: vertex " + std::to_string(firstNonFinite));
+  }
+  return nonFinite;
+}
+
+/// The triangles usable for topology (indices in range and distinct), and what the scan saw.
+struct FaceScan {
+  std::vector<int> faces;
+  std::vector<char> referenced;  ///< per vertex: some in-range triangle names it
+  int outOfRange = 0, repeated = 0, firstDegenerate = -1;
+};
+
+FaceScan scanFaces(const MatX3i& F, int nv, MeshReport& report) {
+  const int nf = int(F.rows());
+  FaceScan s;
+  s.faces.reserve(size_t(nf));
+  s.referenced.assign(size_t(nv), 0);
+  int firstOutOfRange = -1;
+  for (int f = 0; f < nf; ++f) {
+    const int a = F(f, 0), b = F(f, 1), c = F(f, 2);
+    if (std::min({a, b, c}) < 0 || std::max({a, b, c}) >= nv) {
+      if (s.outOfRange++ == 0) firstOutOfRange = f;
+      continue;
+    }
+    s.referenced[size_t(a)] = s.referenced[size_t(b)] = s.referenced[size_t(c)] = 1;
+    if (a == b || b == c || a == c) {
+      if (s.repeated++ == 0) s.firstDegenerate = f;
+      continue;
+    }
+    s.faces.push_back(f);
+  }
+  if (s.outOfRange > 0) {
+    addIssue(report, MeshDefect::IndexOutOfRange, s.outOfRange,
+             counted(s.outOfRange, "triangle", "triangles") +
+                 " with a vertex index out of range (" + counted(nv, "vertex", "vertices") +
+                 "), first: triangle " + std::to_string(firstOutOfRange));
+  }
+  return s;
+}
+
+/// Vertices within the weld tolerance of an earlier one (finite coordinates only).
+void checkDuplicates(const MatX3& V, Real diag, MeshReport& report) {
+  const std::vector<int> rep = weldMap(V, finiteBox(V), tol::kRelativeWeld * diag);
+  int dup = 0, firstDup = -1;
+  for (int i = 0; i < int(V.rows()); ++i) {
+    if (rep[size_t(i)] == i) continue;
+    if (dup++ == 0) firstDup = i;
+  }
+  if (dup > 0)
+    addIssue(report, MeshDefect::DuplicateVertices, dup,
+             counted(dup, "duplicate vertex", "duplicate vertices") + ", first: vertex " +
+                 std::to_string(firstDup) + " (at vertex " + std::to_string(rep[size_t(firstDup)]) +
+                 ")");
+}
+
+/// Triangles with a repeated vertex (found by scanFaces) or, with finite coordinates, zero area.
+void checkDegenerate(const MatX3& V, const MatX3i& F, const FaceScan& scan, Real diag, bool finite,
+                     MeshReport& report) {
+  int zeroArea = 0, firstDegenerate = scan.firstDegenerate;
+  if (finite) {
+    const Real minArea = tol::kRelativeZeroArea * diag * diag;
+    for (int f : scan.faces) {
+      if (!(triangleArea(V, F(f, 0), F(f, 1), F(f, 2)) <= minArea)) continue;
+      if (zeroArea++ == 0 && (firstDegenerate < 0 || f < firstDegenerate)) firstDegenerate = f;
+    }
+  }
+  const int repeated = scan.repeated;
+  if (repeated + zeroArea == 0) return;
+  const std::string what =
+      repeated == 0 ? counted(zeroArea, "zero-area triangle", "zero-area triangles")
+                    : counted(repeated + zeroArea, "degenerate triangle", "degenerate triangles") +
+                          " (" + std::to_string(repeated) + " with a repeated vertex, " +
+                          std::to_string(zeroArea) + " zero-area)";
+  addIssue(report, MeshDefect::DegenerateTriangles, repeated + zeroArea,
+           what + ", first: triangle " + std::to_string(firstDegenerate));
+}
+
+/// Boundary, non-manifold and inconsistently oriented edges, and non-manifold vertices; returns
+/// whether the surface is closed, manifold along its edges and consistently oriented.
+bool checkEdges(const MatX3i& F, const std::vector<int>& faces, const std::vector<HalfEdge>& he,
+                MeshReport& report) {
+  int boundary = 0, nonManifold = 0, inconsistent = 0;
+  std::string firstBoundary, firstNonManifold, firstInconsistent;  // edges in sorted order
+  forEachEdge(he, [&](size_t b, size_t e) {
+    if (e - b == 1) {
+      if (boundary++ == 0) firstBoundary = edgeName(he[b].lo, he[b].hi);
+    } else if (e - b > 2) {
+      if (nonManifold++ == 0) firstNonManifold = edgeName(he[b].lo, he[b].hi);
+    } else if (he[b].forward == he[b + 1].forward) {
+      if (inconsistent++ == 0) firstInconsistent = edgeName(he[b].lo, he[b].hi);
+    }
+  });
+  if (boundary > 0) {
+    addIssue(
+        report, MeshDefect::BoundaryEdges, boundary,
+        counted(boundary, "boundary edge", "boundary edges") + " (holes), first: " + firstBoundary);
+  }
+  if (nonManifold > 0) {
+    addIssue(report, MeshDefect::NonManifoldEdges, nonManifold,
+             counted(nonManifold, "non-manifold edge", "non-manifold edges") +
+                 " (shared by more than two triangles), first: " + firstNonManifold);
+  }
+  int firstNmVertex = -1;
+  const int nmVertices = countNonManifoldVertices(F, faces, firstNmVertex);
+  if (nmVertices > 0) {
+    addIssue(report, MeshDefect::NonManifoldVertices, nmVertices,
+             counted(nmVertices, "non-manifold vertex", "non-manifold vertices") +
+                 " (triangles around it do not form one fan), first: vertex " +
+                 std::to_string(firstNmVertex));
+  }
+  if (inconsistent > 0) {
+    addIssue(report, MeshDefect::InconsistentOrientation, inconsistent,
+             counted(inconsistent, "edge", "edges") +
+                 " with inconsistent orientation (both triangles traverse it the same way), "
+                 "first: " +
+                 firstInconsistent);
+  }
+  return boundary == 0 && nonManifold == 0 && inconsistent == 0;
+}
+
+/// A closed, consistently oriented surface whose signed volume is negative faces inward.
+void checkInward(const MatX3& V, const MatX3i& F, const std::vector<int>& faces,
+                 MeshReport& report) {
+  Real vol = 0;
+  for (int f : faces) {
+    const Vec3 a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
+    vol += a.dot(b.cross(c)) / 6.0;
+  }
+  if (vol < 0) {
+    addIssue(report, MeshDefect::InwardOrientation, 1,
+             "inward-facing normals (signed volume " + formatVolume(vol) + " m^3)");
+  }
+}
+
+/// More than one edge-connected component.
+void checkComponents(const MatX3i& F, const std::vector<int>& faces,
+                     const std::vector<HalfEdge>& he, MeshReport& report) {
+  int numComp = 0;
+  const std::vector<int> comp = components(F, faces, he, numComp);
+  if (numComp <= 1) return;
+  // Component ids follow the order of first appearance: the first triangle with id 1 is the
+  // first one not connected to triangle faces[0].
+  const size_t second = size_t(std::find(comp.begin(), comp.end(), 1) - comp.begin());
+  addIssue(report, MeshDefect::MultipleComponents, numComp,
+           counted(numComp, "component", "components") + " (triangle " +
+               std::to_string(faces[second]) + " is not connected to triangle " +
+               std::to_string(faces[0]) + ")");
+}
+
 }  // namespace
 
 bool isWarning(MeshDefect d) {
@@ -248,149 +414,25 @@ MeshReport validateSurface(const SurfaceMesh& mesh) {
   const MatX3& V = mesh.V;
   const MatX3i& F = mesh.F;
   const int nv = mesh.numVertices(), nf = mesh.numFaces();
-  auto add = [&](MeshDefect d, long long count, std::string message) {
-    report.issues.push_back({d, static_cast<int>(count), std::move(message)});
-  };
   if (nv == 0 || nf == 0) {
-    add(MeshDefect::Empty, 0,
-        "empty mesh (" + counted(nv, "vertex", "vertices") + ", " +
-            counted(nf, "triangle", "triangles") + ")");
+    addIssue(report, MeshDefect::Empty, 0,
+             "empty mesh (" + counted(nv, "vertex", "vertices") + ", " +
+                 counted(nf, "triangle", "triangles") + ")");
     return report;
   }
-
-  // Each message ends with the first place (lowest index) where the defect occurs.
-  int nonFinite = 0, firstNonFinite = -1;
-  for (Eigen::Index i = 0; i < V.rows(); ++i) {
-    if (finiteRow(V, i)) continue;
-    if (nonFinite++ == 0) firstNonFinite = int(i);
-  }
-  if (nonFinite > 0) {
-    add(MeshDefect::NonFinite, nonFinite,
-        counted(nonFinite, "vertex", "vertices") + " with NaN or Inf coordinates, first: vertex " +
-            std::to_string(firstNonFinite));
-  }
-
-  // Triangles usable for topology: indices in range and distinct.
-  std::vector<int> faces;
-  faces.reserve(size_t(nf));
-  std::vector<char> referenced(size_t(nv), 0);
-  int outOfRange = 0, repeated = 0, firstOutOfRange = -1, firstDegenerate = -1;
-  for (int f = 0; f < nf; ++f) {
-    const int a = F(f, 0), b = F(f, 1), c = F(f, 2);
-    if (std::min({a, b, c}) < 0 || std::max({a, b, c}) >= nv) {
-      if (outOfRange++ == 0) firstOutOfRange = f;
-      continue;
-    }
-    referenced[size_t(a)] = referenced[size_t(b)] = referenced[size_t(c)] = 1;
-    if (a == b || b == c || a == c) {
-      if (repeated++ == 0) firstDegenerate = f;
-      continue;
-    }
-    faces.push_back(f);
-  }
-  if (outOfRange > 0) {
-    add(MeshDefect::IndexOutOfRange, outOfRange,
-        counted(outOfRange, "triangle", "triangles") + " with a vertex index out of range (" +
-            counted(nv, "vertex", "vertices") + "), first: triangle " +
-            std::to_string(firstOutOfRange));
-  }
-
+  const bool finite = checkFinite(V, report) == 0;
+  const FaceScan scan = scanFaces(F, nv, report);
   const Real diag = finiteBox(V).diagonal();
-  if (nonFinite == 0) {
-    const std::vector<int> rep = weldMap(V, finiteBox(V), tol::kRelativeWeld * diag);
-    int dup = 0, firstDup = -1;
-    for (int i = 0; i < nv; ++i) {
-      if (rep[size_t(i)] == i) continue;
-      if (dup++ == 0) firstDup = i;
-    }
-    if (dup > 0)
-      add(MeshDefect::DuplicateVertices, dup,
-          counted(dup, "duplicate vertex", "duplicate vertices") + ", first: vertex " +
-              std::to_string(firstDup) + " (at vertex " + std::to_string(rep[size_t(firstDup)]) +
-              ")");
-  }
-
-  int zeroArea = 0;
-  if (nonFinite == 0) {
-    const Real minArea = tol::kRelativeZeroArea * diag * diag;
-    for (int f : faces) {
-      if (!(triangleArea(V, F(f, 0), F(f, 1), F(f, 2)) <= minArea)) continue;
-      if (zeroArea++ == 0 && (firstDegenerate < 0 || f < firstDegenerate)) firstDegenerate = f;
-    }
-  }
-  if (repeated + zeroArea > 0) {
-    const std::string what =
-        repeated == 0
-            ? counted(zeroArea, "zero-area triangle", "zero-area triangles")
-            : counted(repeated + zeroArea, "degenerate triangle", "degenerate triangles") + " (" +
-                  std::to_string(repeated) + " with a repeated vertex, " +
-                  std::to_string(zeroArea) + " zero-area)";
-    add(MeshDefect::DegenerateTriangles, repeated + zeroArea,
-        what + ", first: triangle " + std::to_string(firstDegenerate));
-  }
-
-  const std::vector<HalfEdge> he = halfEdges(F, faces);
-  int boundary = 0, nonManifold = 0, inconsistent = 0;
-  std::string firstBoundary, firstNonManifold, firstInconsistent;  // edges in sorted order
-  forEachEdge(he, [&](size_t b, size_t e) {
-    if (e - b == 1) {
-      if (boundary++ == 0) firstBoundary = edgeName(he[b].lo, he[b].hi);
-    } else if (e - b > 2) {
-      if (nonManifold++ == 0) firstNonManifold = edgeName(he[b].lo, he[b].hi);
-    } else if (he[b].forward == he[b + 1].forward) {
-      if (inconsistent++ == 0) firstInconsistent = edgeName(he[b].lo, he[b].hi);
-    }
-  });
-  if (boundary > 0) {
-    add(MeshDefect::BoundaryEdges, boundary,
-        counted(boundary, "boundary edge", "boundary edges") + " (holes), first: " + firstBoundary);
-  }
-  if (nonManifold > 0) {
-    add(MeshDefect::NonManifoldEdges, nonManifold,
-        counted(nonManifold, "non-manifold edge", "non-manifold edges") +
-            " (shared by more than two triangles), first: " + firstNonManifold);
-  }
-  int firstNmVertex = -1;
-  const int nmVertices = countNonManifoldVertices(F, faces, firstNmVertex);
-  if (nmVertices > 0) {
-    add(MeshDefect::NonManifoldVertices, nmVertices,
-        counted(nmVertices, "non-manifold vertex", "non-manifold vertices") +
-            " (triangles around it do not form one fan), first: vertex " +
-            std::to_string(firstNmVertex));
-  }
-  if (inconsistent > 0) {
-    add(MeshDefect::InconsistentOrientation, inconsistent,
-        counted(inconsistent, "edge", "edges") +
-            " with inconsistent orientation (both triangles traverse it the same way), first: " +
-            firstInconsistent);
-  }
-  if (nonFinite == 0 && outOfRange == 0 && boundary == 0 && nonManifold == 0 && inconsistent == 0) {
-    Real vol = 0;
-    for (int f : faces) {
-      const Vec3 a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
-      vol += a.dot(b.cross(c)) / 6.0;
-    }
-    if (vol < 0) {
-      add(MeshDefect::InwardOrientation, 1,
-          "inward-facing normals (signed volume " + formatVolume(vol) + " m^3)");
-    }
-  }
-  int numComp = 0;
-  const std::vector<int> comp = components(F, faces, he, numComp);
-  if (numComp > 1) {
-    // Component ids follow the order of first appearance: the first triangle with id 1 is the
-    // first one not connected to triangle faces[0].
-    const size_t second = size_t(std::find(comp.begin(), comp.end(), 1) - comp.begin());
-    add(MeshDefect::MultipleComponents, numComp,
-        counted(numComp, "component", "components") + " (triangle " +
-            std::to_string(faces[second]) + " is not connected to triangle " +
-            std::to_string(faces[0]) + ")");
-  }
-
-  const auto unreferenced = std::count(referenced.begin(), referenced.end(), 0);
+  if (finite) checkDuplicates(V, diag, report);
+  checkDegenerate(V, F, scan, diag, finite, report);
+  const std::vector<HalfEdge> he = halfEdges(F, scan.faces);
+  const bool closedAndConsistent = checkEdges(F, scan.faces, he, report);
+  if (finite && scan.outOfRange == 0 && closedAndConsistent) checkInward(V, F, scan.faces, report);
+  checkComponents(F, scan.faces, he, report);
+  const auto unreferenced = std::count(scan.referenced.begin(), scan.referenced.end(), 0);
   if (unreferenced > 0) {
-    add(MeshDefect::UnreferencedVertices, unreferenced,
-        counted(unreferenced, "unreferenced vertex", "unreferenced vertices"));
+    addIssue(report, MeshDefect::UnreferencedVertices, unreferenced,
+             counted(unreferenced, "unreferenced vertex", "unreferenced vertices"));
   }
   return report;
 }

@@ -19,14 +19,8 @@ SurfaceMesh io::readObjData(std::string_view data, const std::string& path) {
     io::splitTokens(line, tok);
     if (tok.empty() || tok[0].front() == '#') continue;
     if (tok[0] == "v") {
-      if (tok.size() < 4) cur.fail("vertex needs 3 coordinates");
       double p[3];
-      for (int k = 0; k < 3; ++k) {
-        if (!io::parseReal(tok[1 + k], p[k])) {
-          cur.fail("bad vertex coordinate '" + std::string(tok[1 + k].substr(0, 40)) + "'");
-        }
-      }
-      io::requireFinite(cur, p[0], p[1], p[2]);
+      io::parseVertex(cur, tok, p);
       mesh.xyz.insert(mesh.xyz.end(), p, p + 3);
       if (mesh.numVertices() > io::kMaxCount) cur.fail("too many vertices");
     } else if (tok[0] == "f") {

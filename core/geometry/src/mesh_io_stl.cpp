@@ -89,14 +89,8 @@ SurfaceMesh readAsciiStl(io::Cursor& cur) {
       loop.clear();
     } else if (kw == "vertex") {
       if (!inLoop) cur.fail("'vertex' outside 'outer loop'");
-      if (tok.size() < 4) cur.fail("vertex needs 3 coordinates");
       double p[3];
-      for (int k = 0; k < 3; ++k) {
-        if (!io::parseReal(tok[1 + k], p[k])) {
-          cur.fail("bad vertex coordinate '" + std::string(tok[1 + k].substr(0, 40)) + "'");
-        }
-      }
-      io::requireFinite(cur, p[0], p[1], p[2]);
+      io::parseVertex(cur, tok, p);
       loop.push_back(merge.add(p[0], p[1], p[2]));
     } else if (kw == "endloop") {
       if (!inLoop) cur.fail("unexpected 'endloop'");

@@ -257,4 +257,14 @@ void requireFinite(const Cursor& c, double x, double y, double z) {
   }
 }
 
+void parseVertex(const Cursor& c, const std::vector<std::string_view>& tok, double p[3]) {
+  if (tok.size() < 4) c.fail("vertex needs 3 coordinates");
+  for (int k = 0; k < 3; ++k) {
+    if (!parseReal(tok[1 + k], p[k])) {
+      c.fail("bad vertex coordinate '" + std::string(tok[1 + k].substr(0, 40)) + "'");
+    }
+  }
+  requireFinite(c, p[0], p[1], p[2]);
+}
+
 }  // namespace deform::io

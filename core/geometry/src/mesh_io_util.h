@@ -136,4 +136,8 @@ LoadedMesh readMshData(std::string_view data, const std::string& file);
 /// Throws at the cursor's last place when x is NaN or Inf.
 void requireFinite(const Cursor& c, double x, double y, double z);
 
+/// The text formats' vertex line: tok[1..3] as a finite point p; throws at the cursor's last
+/// place naming what is wrong (too few coordinates, a bad or non-finite one).
+void parseVertex(const Cursor& c, const std::vector<std::string_view>& tok, double p[3]);
+
 }  // namespace deform::io

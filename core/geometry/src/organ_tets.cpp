@@ -21,12 +21,11 @@ constexpr const char* kMeshCacheVersion = "reference_fem.tets/4";
 
 std::vector<int> meshSurface(const Organ& organ, const OrganTetOptions& options, Cache& cache,
                              TetMesh& mesh) {
-  TetMeshOptions o;
-  o.edgeLength = options.edgeLength;
-  o.targetElements = options.targetElements;
-  o.refineSurface = options.refineSurface;
-  o.timeoutSeconds = options.timeoutSeconds;
-  o.source = organ.source;
+  const TetMeshOptions o{.edgeLength = options.edgeLength,
+                         .targetElements = options.targetElements,
+                         .refineSurface = options.refineSurface,
+                         .timeoutSeconds = options.timeoutSeconds,
+                         .source = organ.source};
   const int nv = organ.surface.numVertices();
   const bool conform = options.conformFixed && !organ.fixed.boxes.empty();
   CacheKey key;
@@ -86,6 +85,38 @@ std::vector<int> meshSurface(const Organ& organ, const OrganTetOptions& options,
 }
 
 }  // namespace
+
+std::vector<ParamSpec> withOrganTetParams(std::vector<ParamSpec> specs, size_t at) {
+  const std::vector<ParamSpec> mesh = {
+      ParamSpec::integer("elements", 1000, 100, 5000000,
+                         "target number of tets (used when edge_length is 0; an organ's surface "
+                         "vertices are all nodes, so a fine surface gives more)"),
+      ParamSpec::real("edge_length", "m", 0.0, 0.0, 1.0,
+                      "target interior tet edge length; 0: from elements"),
+      ParamSpec::flag("refine_surface", true,
+                      "split surface edges longer than the edge length before meshing (the "
+                      "input vertices stay nodes with their indices)"),
+      ParamSpec::flag("conform_fixed", true,
+                      "mesh the organ minus the fixed boxes (caps pinned, u = 0), so the clamped "
+                      "boundary is the same at every refinement; false: mesh the whole organ and "
+                      "pin the nodes that fall inside the boxes"),
+      ParamSpec::real("mesh_timeout", "s", 600.0, 1.0, 86400.0,
+                      "wall-clock limit of the Gmsh child process"),
+  };
+  specs.insert(specs.begin() + std::ptrdiff_t(std::min(at, specs.size())), mesh.begin(),
+               mesh.end());
+  return specs;
+}
+
+OrganTetOptions organTetOptions(const ParamValues& p) {
+  OrganTetOptions o;
+  o.edgeLength = p.real("edge_length");
+  o.targetElements = p.integer("elements");
+  o.refineSurface = p.flag("refine_surface");
+  o.conformFixed = p.flag("conform_fixed");
+  o.timeoutSeconds = p.real("mesh_timeout");
+  return o;
+}
 
 OrganTets organTets(const Organ& organ, const OrganTetOptions& options, Cache& cache) {
   OrganTets out;

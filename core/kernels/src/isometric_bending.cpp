@@ -30,20 +30,8 @@ bool stencil(const Vec3 x[4], const Real K[4], Vec3& v, Real& len) {
 }
 
 template <class T>
-isobatch::View<T> view(const IsometricBatch<T>& b) {
-  return {{b.p[0], b.p[1], b.p[2], b.p[3]},
-          {b.K[0], b.K[1], b.K[2], b.K[3]},
-          {b.wK[0], b.wK[1], b.wK[2], b.wK[3]},
-          b.rest,
-          b.alphaTilde,
-          b.scale,
-          b.lambda,
-          b.movable};
-}
-
-template <class T>
 long long run(T* x4, const IsometricBatch<T>& b, size_t begin, size_t end, T* measure, bool simd) {
-  const isobatch::View<T> v = view(b);
+  const isobatch::View<T>& v = b;
   long long degenerate = 0;
   size_t i = begin;
 #ifdef DEFORM_ISO_HAVE_AVX2

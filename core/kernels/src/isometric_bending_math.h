@@ -4,31 +4,24 @@
 // four doubles at a time (isometric_bending_avx2.cpp, compiled with -mavx2). Both files are
 // compiled with -ffp-contract=off, so that no multiply-add is fused on one path and not on the
 // other: the two give identical results. Plain pointers and builtin types only (this header is
-// compiled with and without -mavx2, so it includes no library header) and internal linkage
-// throughout.
+// compiled with and without -mavx2, so it includes no library header with inline functions) and
+// internal linkage throughout.
 #pragma once
+
+#include <deform/kernels/isometric_batch.h>
+#include <deform/kernels/lane_length.h>
 
 #include <cstddef>
 
 namespace deform::pbd::isobatch {
 
-/// The SoA view of IsometricBatch<T> (the same layout, repeated here so that this header
-/// includes nothing).
+/// The batch the kernels read (deform/kernels/isometric_batch.h, which includes nothing).
 template <class T>
-struct View {
-  const int* p[4];
-  const T* K[4];
-  const T* wK[4];
-  const T* rest;
-  const T* alphaTilde;
-  const T* scale;
-  T* lambda;
-  const unsigned char* movable;  ///< nullptr or bit k per hinge: slot k movable
-};
+using View = IsometricBatch<T>;
 
 namespace {  // internal linkage on purpose (see the header comment)
 
-constexpr double kTinyLength2 = 1e-24;  // tol::kDegenerateLength^2, m^2
+using simd::kTinyLength2;
 
 /// Hinges i .. i + L::kWidth - 1. measure == nullptr: project them, return the number of
 /// degenerate ones; otherwise store |v| (0 where degenerate) to measure[i..] and change nothing.
@@ -45,13 +38,9 @@ inline int hingeGroup(typename L::T* x4, const View<typename L::T>& b, std::size
   const V vy = K0 * y[0] + K1 * y[1] + K2 * y[2] + K3 * y[3];
   const V vz = K0 * z[0] + K1 * z[1] + K2 * z[2] + K3 * z[3];
   const V l2 = vx * vx + vy * vy + vz * vz;
-  const V tiny = L::set1(static_cast<T>(kTinyLength2));
-  const auto ok = L::gt(l2, tiny);
-  const V len = L::sqrt(L::max(l2, tiny));
-  if (measure != nullptr) {
-    L::store(measure + i, L::select(ok, len, L::set1(T(0))));
-    return 0;
-  }
+  typename L::M ok;
+  const V len = simd::clampedLength<L>(l2, ok);
+  if (simd::measureLength<L>(measure, i, ok, len)) return 0;
   const V rest = L::load(b.rest + i);
   V lambda = L::load(b.lambda + i);
   const V C = len - rest;

@@ -65,6 +65,26 @@ class BodyExchange {
   std::vector<Vec3> m_moved;
 };
 
+/// Moves node `node` of x by dx (its share of a correction along the contact normal n), removes
+/// the same share of its velocity into the body (vel: 3 #N node-major or nullptr), and gives the
+/// impulse it took (mass 1 / w) to the body: its predicted motion and the world's reaction.
+void correctNode(ContactWorld& world, BodyExchange& bodies, int body, const Vec3& n, Real share,
+                 Real w, Real dt, const Vec3& dx, MatX3& x, Eigen::Index node, Real* vel) {
+  x.row(node) += dx.transpose();
+  Vec3 impulsePerMass = dx / dt;
+  if (vel) {
+    Eigen::Map<Vec3> v(vel + 3 * node);
+    const Real vn = v.dot(n);
+    if (vn < 0) {
+      v -= share * vn * n;
+      impulsePerMass -= share * vn * n;
+    }
+  }
+  const Vec3 impulse = impulsePerMass / w;
+  bodies.push(body, impulse, dt);
+  world.addReaction(body, -impulse / dt, x.row(node).transpose());
+}
+
 /// Proxy spheres that are the nodes themselves (ContactResponse::Project without faces or
 /// embedding). vel: 3 #N node-major or nullptr.
 ContactResolution projectSpheres(ContactWorld& world, MatX3& x, const VecX& invMass, Real dt,
@@ -84,19 +104,7 @@ ContactResolution projectSpheres(ContactWorld& world, MatX3& x, const VecX& invM
       if (!(depth > 0)) continue;
       const Real share = bodies.tissueShare(c.body, w);
       const Vec3 dx = share * depth * c.normal;
-      x.row(c.proxy) += dx.transpose();
-      Vec3 impulsePerMass = dx / dt;
-      if (vel) {
-        Eigen::Map<Vec3> v(vel + 3 * c.proxy);
-        const Real vn = v.dot(c.normal);
-        if (vn < 0) {
-          v -= share * vn * c.normal;
-          impulsePerMass -= share * vn * c.normal;
-        }
-      }
-      const Vec3 impulse = impulsePerMass / w;
-      bodies.push(c.body, impulse, dt);
-      world.addReaction(c.body, -impulse / dt, x.row(c.proxy).transpose());
+      correctNode(world, bodies, c.body, c.normal, share, w, dt, dx, x, c.proxy, vel);
     }
   }
   return res;
@@ -148,19 +156,7 @@ ContactResolution projectEmbeddedSpheres(ContactWorld& world, MatX3& nodes,
         const Real w = invMass[a];
         if (!(w > 0) || weights(c.proxy, k) == 0) continue;
         const Vec3 dx = (share * weights(c.proxy, k) * depth / sumW2) * c.normal;
-        nodes.row(a) += dx.transpose();
-        Vec3 impulsePerMass = dx / dt;
-        if (nodeVelocity) {
-          Eigen::Map<Vec3> v(nodeVelocity + 3 * a);
-          const Real vn = v.dot(c.normal);
-          if (vn < 0) {
-            v -= share * vn * c.normal;
-            impulsePerMass -= share * vn * c.normal;
-          }
-        }
-        const Vec3 impulse = impulsePerMass / w;
-        bodies.push(c.body, impulse, dt);
-        world.addReaction(c.body, -impulse / dt, nodes.row(a).transpose());
+        correctNode(world, bodies, c.body, c.normal, share, w, dt, dx, nodes, a, nodeVelocity);
       }
     }
   }

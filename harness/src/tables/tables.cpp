@@ -115,12 +115,13 @@ std::vector<std::string> tableWarnings(const std::vector<Table>& tables) {
 
 namespace {
 
+/// Per case id: the (label, twin label) of each run that --calibration doubled.
+using Twins = std::map<std::string, std::vector<std::pair<std::string, std::string>>>;
+
 /// The "calibration" table (--calibration): every case model that a calibration file names, at
 /// its defaults and calibrated (its "+cal" twin, run in the same case), side by side.
-Table calibrationTable(
-    const std::vector<const Case*>& order,
-    const std::map<std::string, std::vector<std::pair<std::string, std::string>>>& twins,
-    const Results& results, const std::vector<CalibrationParams>& calibrations) {
+Table calibrationTable(const std::vector<const Case*>& order, const Twins& twins,
+                       const Results& results, const std::vector<CalibrationParams>& calibrations) {
   Table t;
   t.name = "calibration";
   t.title = "Default and calibrated parameters side by side (--calibration)";
@@ -190,10 +191,8 @@ Table calibrationTable(
   return t;
 }
 
-}  // namespace
-
-std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
-                               const TablesOptions& options, Progress* progress) {
+/// The tables named (`all` for every one), in order; an unknown name is an input error.
+std::vector<std::string> wantedTables(const std::vector<std::string>& names) {
   const auto all = tableNames();
   std::vector<std::string> wanted;
   for (const std::string& n : names) {
@@ -207,6 +206,134 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       wanted.push_back(n);
     }
   }
+  return wanted;
+}
+
+/// One progress line for a finished case: each run's status, the missing plugins.
+std::string caseSummary(const CaseResult& r, bool child) {
+  std::string summary;
+  if (!r.error.empty()) {
+    summary = "not run (" + r.error + ")";
+  } else {
+    for (const RunRecord& run : r.result->runs) {
+      std::string part = run.label + " " + statusName(run.status);
+      if (run.status == RunStatus::Failed && child) part += " (" + run.message + ")";
+      summary += (summary.empty() ? "" : ", ") + part;
+    }
+  }
+  for (const auto& [plugin, why] : r.missing)
+    summary += (summary.empty() ? "" : ", ") + plugin + " missing";
+  if (r.resumed) summary += " (resumed)";
+  return summary;
+}
+
+/// Runs every case (with its --calibration twins, recorded in `twins`) through the dispatcher
+/// (options.cases.dispatcher: serial, --jobs, MPI or Slurm); the results are keyed by case id, so
+/// the tables do not depend on the finishing order.
+Results runCases(const std::vector<const Case*>& order, PluginLoader& loader,
+                 const TablesOptions& options, Progress* progress, Twins& twins) {
+  Results results;
+  std::vector<SceneCase> sceneCases;
+  for (const Case* c : order) {
+    CaseOptions co = options.cases;
+    // Reference solves are shared through the cache by problem (runner.h, reuseReference):
+    // between tables that pose the same case, with the reference checks' finest levels, and
+    // with later commands on the same cache.
+    co.reuseReference = true;
+    if (c->noCache) co.cacheDir = fs::path();
+    ojson scene = c->scene;
+    twins[c->id] = addCalibratedTwins(scene, options.calibrations);
+    sceneCases.push_back({scene, options.outDir / "scenes" / (c->id + ".json"),
+                          options.outDir / "runs" / c->id, co});
+  }
+  runSceneCases(
+      sceneCases, loader, options.cases.dispatcher,
+      [&](size_t i) {
+        if (progress) progress->start(order[i]->id);
+      },
+      [&](size_t i, CaseResult&& r) {
+        const Case* c = order[i];
+        if (progress) progress->finish(c->id, caseSummary(r, options.cases.child.has_value()));
+        results.emplace(c->id, std::move(r));
+      });
+  return results;
+}
+
+/// Each distinct reference the tables check, once (the hybrid tables share theirs).
+std::map<std::string, ReferenceCheck> checkReferences(const std::vector<TableDef>& defs,
+                                                      const std::vector<const Case*>& order,
+                                                      const Results& results, PluginLoader& loader,
+                                                      const TablesOptions& options,
+                                                      Progress* progress) {
+  std::map<std::string, ReferenceCheck> checks;
+  if (!options.referenceCheck) return checks;
+  std::vector<const Case*> toCheck;
+  for (const TableDef& d : defs)
+    for (const std::string& id : d.checks)
+      if (!checks.count(id) && results.count(id)) {
+        checks[id] = {};
+        for (const Case* c : order)
+          if (c->id == id) toCheck.push_back(c);
+      }
+  if (progress) progress->addTotal(int(toCheck.size()));
+  for (const Case* c : toCheck)
+    checks[c->id] = checkReference(*c, results.at(c->id), loader, options, progress);
+  return checks;
+}
+
+/// A table from its definition, the results and the reference checks.
+Table assembleTable(const TableDef& d, const Results& results,
+                    const std::map<std::string, ReferenceCheck>& checks,
+                    const TablesOptions& options) {
+  Table t{.name = d.name,
+          .title = d.title,
+          .source = d.source,
+          .notes = d.notes,
+          .columns = d.columns,
+          .rows = {}};
+  if (!d.checks.empty() && !options.referenceCheck)
+    t.notes.push_back("reference: convergence not checked (--no-reference-check).");
+  for (const std::string& id : d.checks) {
+    if (!checks.count(id)) continue;
+    t.notes.push_back(checks.at(id).note);
+    if (!checks.at(id).warning.empty()) t.notes.push_back(checks.at(id).warning);
+  }
+  // Every row judged against a checked reference says which one and its estimated error.
+  const bool referenceColumn = !d.checks.empty() && options.referenceCheck;
+  if (referenceColumn) {
+    auto at = std::find_if(t.columns.begin(), t.columns.end(),
+                           [](const TableColumn& c) { return c.key == "status"; });
+    t.columns.insert(at, {"reference", "reference"});
+  }
+  for (ojson row : d.rows(results, options.outDir)) {
+    // A row whose reference is not shown converged to 1% is flagged in its status, not only
+    // noted under the table: the row of the checked case, and the rows sharing its reference
+    // set-up (the hybrid tables check one case per phantom).
+    for (const std::string& id : d.checks) {
+      if (!checks.count(id)) continue;
+      const std::string scene = row.value("scene", "");
+      const std::string phantom = row.value("phantom", "");
+      const bool covered = scene == "scenes/" + id + ".json" ||
+                           (!phantom.empty() && id.rfind("hybrid/" + phantom + "_", 0) == 0);
+      if (!covered) continue;
+      row["reference"] =
+          checks.at(id).cell + (scene == "scenes/" + id + ".json" ? "" : " (study of " + id + ")");
+      if (checks.at(id).warning.empty() || !row.contains("status")) continue;
+      std::string status = row["status"].is_string() ? row["status"].get<std::string>() : "";
+      appendTo(status, "reference not shown converged to 1% (see the notes)");
+      row["status"] = status;
+    }
+    if (referenceColumn && !row.contains("reference")) row["reference"] = nullptr;
+    t.rows.push_back(inColumnOrder(row, t.columns));
+  }
+  return t;
+}
+
+}  // namespace
+
+std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoader& loader,
+                               const TablesOptions& options, Progress* progress) {
+  const std::vector<std::string> wanted = wantedTables(names);
   const long long refElements =
       options.referenceElements > 0
           ? options.referenceElements
@@ -232,107 +359,14 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       if (ids.insert(c.id).second) order.push_back(&c);
   if (progress) progress->addTotal(int(order.size()));
 
-  // The cases go to the dispatcher (options.cases.dispatcher: serial, --jobs, MPI or Slurm);
-  // the results are keyed by case id, so the tables do not depend on the finishing order.
-  Results results;
-  std::vector<SceneCase> sceneCases;
-  std::map<std::string, std::vector<std::pair<std::string, std::string>>> twins;  // --calibration
-  for (const Case* c : order) {
-    CaseOptions co = options.cases;
-    // Reference solves are shared through the cache by problem (runner.h, reuseReference):
-    // between tables that pose the same case, with the reference checks' finest levels, and
-    // with later commands on the same cache.
-    co.reuseReference = true;
-    if (c->noCache) co.cacheDir = fs::path();
-    ojson scene = c->scene;
-    twins[c->id] = addCalibratedTwins(scene, options.calibrations);
-    sceneCases.push_back({scene, options.outDir / "scenes" / (c->id + ".json"),
-                          options.outDir / "runs" / c->id, co});
-  }
-  runSceneCases(
-      sceneCases, loader, options.cases.dispatcher,
-      [&](size_t i) {
-        if (progress) progress->start(order[i]->id);
-      },
-      [&](size_t i, CaseResult&& r) {
-        const Case* c = order[i];
-        std::string summary;
-        if (!r.error.empty()) {
-          summary = "not run (" + r.error + ")";
-        } else {
-          for (const RunRecord& run : r.result->runs) {
-            std::string part = run.label + " " + statusName(run.status);
-            if (run.status == RunStatus::Failed && options.cases.child)
-              part += " (" + run.message + ")";
-            summary += (summary.empty() ? "" : ", ") + part;
-          }
-        }
-        for (const auto& [plugin, why] : r.missing)
-          summary += (summary.empty() ? "" : ", ") + plugin + " missing";
-        if (r.resumed) summary += " (resumed)";
-        if (progress) progress->finish(c->id, summary);
-        results.emplace(c->id, std::move(r));
-      });
-
-  // Each distinct reference once (the hybrid tables share theirs).
-  std::map<std::string, ReferenceCheck> checks;
-  if (options.referenceCheck) {
-    std::vector<const Case*> toCheck;
-    for (const TableDef& d : defs)
-      for (const std::string& id : d.checks)
-        if (!checks.count(id) && results.count(id)) {
-          checks[id] = {};
-          for (const Case* c : order)
-            if (c->id == id) toCheck.push_back(c);
-        }
-    if (progress) progress->addTotal(int(toCheck.size()));
-    for (const Case* c : toCheck)
-      checks[c->id] = checkReference(*c, results.at(c->id), loader, options, progress);
-  }
+  Twins twins;  // --calibration
+  const Results results = runCases(order, loader, options, progress, twins);
+  const std::map<std::string, ReferenceCheck> checks =
+      checkReferences(defs, order, results, loader, options, progress);
 
   std::vector<Table> tables;
   for (const TableDef& d : defs) {
-    Table t;
-    t.name = d.name;
-    t.title = d.title;
-    t.source = d.source;
-    t.notes = d.notes;
-    if (!d.checks.empty() && !options.referenceCheck)
-      t.notes.push_back("reference: convergence not checked (--no-reference-check).");
-    for (const std::string& id : d.checks) {
-      if (!checks.count(id)) continue;
-      t.notes.push_back(checks.at(id).note);
-      if (!checks.at(id).warning.empty()) t.notes.push_back(checks.at(id).warning);
-    }
-    t.columns = d.columns;
-    // Every row judged against a checked reference says which one and its estimated error.
-    const bool referenceColumn = !d.checks.empty() && options.referenceCheck;
-    if (referenceColumn) {
-      auto at = std::find_if(t.columns.begin(), t.columns.end(),
-                             [](const TableColumn& c) { return c.key == "status"; });
-      t.columns.insert(at, {"reference", "reference"});
-    }
-    for (ojson row : d.rows(results, options.outDir)) {
-      // A row whose reference is not shown converged to 1% is flagged in its status, not only
-      // noted under the table: the row of the checked case, and the rows sharing its reference
-      // set-up (the hybrid tables check one case per phantom).
-      for (const std::string& id : d.checks) {
-        if (!checks.count(id)) continue;
-        const std::string scene = row.value("scene", "");
-        const std::string phantom = row.value("phantom", "");
-        const bool covered = scene == "scenes/" + id + ".json" ||
-                             (!phantom.empty() && id.rfind("hybrid/" + phantom + "_", 0) == 0);
-        if (!covered) continue;
-        row["reference"] = checks.at(id).cell +
-                           (scene == "scenes/" + id + ".json" ? "" : " (study of " + id + ")");
-        if (checks.at(id).warning.empty() || !row.contains("status")) continue;
-        std::string status = row["status"].is_string() ? row["status"].get<std::string>() : "";
-        appendTo(status, "reference not shown converged to 1% (see the notes)");
-        row["status"] = status;
-      }
-      if (referenceColumn && !row.contains("reference")) row["reference"] = nullptr;
-      t.rows.push_back(inColumnOrder(row, t.columns));
-    }
+    Table t = assembleTable(d, results, checks, options);
     writeTable(t, options.outDir);
     tables.push_back(std::move(t));
   }

@@ -19,6 +19,7 @@ constexpr double kGravity = 9.81;
 /// Every row's reference_fem figure must be within this of the row's value.
 constexpr double kTolerancePct = 2.0;
 constexpr const char* kCalculix = "calculix";
+constexpr double kBeamLength = 0.1;  ///< m, the beam phantom's length (x)
 
 /// What a row measures on the final surface: the mean displacement along `axis` (0 x, 1 y, 2 z;
 /// sign: +1 along the axis, -1 against it) of the rest surface vertices inside `where`.
@@ -71,51 +72,51 @@ ojson cantileverOrgan(double young) {
           {"fixed", {{"box", box(Vec3(-0.001, -0.01, -0.01), Vec3(1e-4, 0.01, 0.01))}}}};
 }
 
+/// A cantilever row (the beam phantom, length kBeamLength): its tip sag under gravity.
+VerificationRow cantileverRow(const std::string& name, std::string what, double sag,
+                              std::string source, double young, const std::string& description,
+                              bool withCalculix) {
+  VerificationRow r;
+  r.id = "verification/" + name;
+  r.what = std::move(what);
+  r.quantity = "tip sag";
+  r.value = sag;
+  r.source = std::move(source);
+  r.phantom = "beam";
+  r.probe = {Box{Vec3(kBeamLength - 1e-9, -1, -1), Vec3(1, 1, 1)}, 2, -1};
+  r.scene = verificationScene(name, description, cantileverOrgan(young), Vec3(0, 0, -kGravity),
+                              ojson::array(), withCalculix);
+  return r;
+}
+
 std::vector<VerificationRow> verificationRows(bool withCalculix) {
   std::vector<VerificationRow> rows;
-  const double L = 0.1, t = 0.01, rho = 1000, nu = 0.3;
-  const Probe tip{Box{Vec3(L - 1e-9, -1, -1), Vec3(1, 1, 1)}, 2, -1};
+  const double L = kBeamLength, t = 0.01, rho = 1000, nu = 0.3;
+  rows.push_back(cantileverRow(
+      "cantilever_small", "gravity cantilever, small deflection (E 10 MPa)",
+      cantileverSag(1e7, nu, rho, kGravity, L, t),
+      "beam theory: Euler-Bernoulli q L^4 / (8 E I) + Timoshenko shear q L^2 / (2 k G A), "
+      "k = 5/6",
+      1e7,
+      "Gravity cantilever 0.1 m x 10 mm x 10 mm, root face clamped, E 10 MPa, nu 0.3, "
+      "rho 1000: small deflection, against beam theory with shear.",
+      withCalculix));
   {
-    VerificationRow r;
-    r.id = "verification/cantilever_small";
-    r.what = "gravity cantilever, small deflection (E 10 MPa)";
-    r.quantity = "tip sag";
-    const double E = 1e7;
-    r.value = cantileverSag(E, nu, rho, kGravity, L, t);
-    r.source =
-        "beam theory: Euler-Bernoulli q L^4 / (8 E I) + Timoshenko shear q L^2 / (2 k G A), "
-        "k = 5/6";
-    r.phantom = "beam";
-    r.probe = tip;
-    r.scene = verificationScene(
-        "cantilever_small",
-        "Gravity cantilever 0.1 m x 10 mm x 10 mm, root face clamped, E 10 MPa, nu 0.3, "
-        "rho 1000: small deflection, against beam theory with shear.",
-        cantileverOrgan(E), Vec3(0, 0, -kGravity), ojson::array(), withCalculix);
-    rows.push_back(r);
-  }
-  {
-    VerificationRow r;
-    r.id = "verification/cantilever_large";
     // q L^3 / (E I) = 3: the tip sags about a third of the length.
     const double alpha = 3, q = rho * kGravity * t * t, I = t * t * t * t / 12;
     const double E = q * L * L * L / (alpha * I);
-    r.what = "gravity cantilever, large deflection (q L^3 / EI = 3, E " +
-             formatG(std::round(E / 100) / 10) + " kPa)";
-    r.quantity = "tip sag";
-    r.value = elasticaCantilever(L, E * I, q, 0).sag;
-    r.source =
+    rows.push_back(cantileverRow(
+        "cantilever_large",
+        "gravity cantilever, large deflection (q L^3 / EI = 3, E " +
+            formatG(std::round(E / 100) / 10) + " kPa)",
+        elasticaCantilever(L, E * I, q, 0).sag,
         "elastica under its own weight, computed here by shooting on EI theta'' = -q (L - s) "
         "cos theta (analytic.h; the solver reproduces Mattiasson 1981, IJNME 17:145, tip-load "
-        "table to 5 digits)";
-    r.phantom = "beam";
-    r.probe = tip;
-    r.scene = verificationScene(
-        "cantilever_large",
+        "table to 5 digits)",
+        E,
         "Gravity cantilever 0.1 m x 10 mm x 10 mm, root face clamped, nu 0.3, rho 1000, E such "
         "that q L^3 / EI = 3: large deflection, against the elastica under its own weight.",
-        cantileverOrgan(E), Vec3(0, 0, -kGravity), ojson::array(), withCalculix);
-    rows.push_back(r);
+        withCalculix));
   }
   {
     VerificationRow r;

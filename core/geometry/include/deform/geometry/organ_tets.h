@@ -30,6 +30,13 @@ struct OrganTetOptions {
   Real timeoutSeconds = 600;  ///< wall-clock limit of the Gmsh child process
 };
 
+/// A plugin's parameters with those of the organ's tet mesh inserted before position `at`: the
+/// same in every plugin that meshes through organTets() (reference_fem, calculix: the same values
+/// mesh the same tets): elements, edge_length, refine_surface, conform_fixed, mesh_timeout.
+std::vector<ParamSpec> withOrganTetParams(std::vector<ParamSpec> specs, size_t at);
+/// The options those parameters give.
+OrganTetOptions organTetOptions(const ParamValues& params);
+
 /// A corner (4-node) tet mesh of an organ and where its surface vertices are.
 struct OrganTets {
   TetMesh mesh;  ///< positively oriented tets (tetVolume > 0)

@@ -37,9 +37,11 @@
 // from the rest angles, also responds to large in-plane shear of the hinge.
 #pragma once
 
+#include <deform/kernels/isometric_batch.h>
 #include <deform/sdk/types.h>
 
 #include <cstddef>
+#include <vector>
 
 namespace deform::pbd {
 
@@ -71,26 +73,20 @@ bool isometricBendingConstraint(const Vec3 x[4], const Real K[4], Real rest, Rea
 bool projectIsometricBending(const Vec3 x[4], const Real w[4], const Real K[4], Real rest,
                              Real alphaTilde, Real k, Real& lambda, Vec3 dx[4]);
 
-/// A run of hinges as structure of arrays, the solvers' form. T = float or double, matching the
-/// padded positions x4 (four T per particle: x, y, z, 0). Per hinge: p[k] the row offset
-/// 4 * particle of slot k; K[k] the weights; wK[k] = w_k K_k (inverse mass times weight);
-/// rest = s0; alphaTilde = alpha / dt^2; scale = k / (sum_k w_k K_k^2 + alphaTilde), 0 when no
-/// particle is movable; lambda the multiplier. movable (optional, one byte per hinge): bit k set
-/// when slot k's particle is movable (w_k > 0); a vector group then skips the update of a slot
-/// that is immovable in all its hinges (an update of exactly zero, so the result is the same),
-/// which pays where many particles are immovable and the hinges of a colour are sorted by this
-/// pattern (the hybrid model's control nodes). nullptr: every slot is updated.
+/// The batch over hinge fields kept one vector each (p[4], K[4], wK[4]: arrays of four vectors).
 template <class T>
-struct IsometricBatch {
-  const int* p[4];
-  const T* K[4];
-  const T* wK[4];
-  const T* rest;
-  const T* alphaTilde;
-  const T* scale;
-  T* lambda;
-  const unsigned char* movable = nullptr;
-};
+IsometricBatch<T> isometricBatch(const std::vector<int>* p, const std::vector<T>* K,
+                                 const std::vector<T>* wK, const std::vector<T>& rest,
+                                 const std::vector<T>& alphaTilde, const std::vector<T>& scale,
+                                 std::vector<T>& lambda) {
+  return {{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
+          {K[0].data(), K[1].data(), K[2].data(), K[3].data()},
+          {wK[0].data(), wK[1].data(), wK[2].data(), wK[3].data()},
+          rest.data(),
+          alphaTilde.data(),
+          scale.data(),
+          lambda.data()};
+}
 
 /// Projects hinges [begin, end) of one colour: no two of them share a particle that moves (an
 /// immovable particle, wK = 0 in every hinge that holds it, may be shared), so projecting them

@@ -35,26 +35,22 @@ struct ScalarLanes {
   static int count(M m) { return m ? 1 : 0; }
   static unsigned orBytes(const unsigned char* m) { return *m; }
   static bool anyByte(const unsigned char* m) { return *m != 0; }
-  static void loadRows(const T* x4, const int* off, V& x, V& y, V& z) {
-    const T* p = x4 + *off;
-    x = p[0];
-    y = p[1];
-    z = p[2];
-  }
-  static void addRows(T* x4, const int* off, V dx, V dy, V dz) {
-    T* p = x4 + *off;
-    p[0] += dx;
-    p[1] += dy;
-    p[2] += dz;
-  }
+  static void loadRows(const T* x4, const int* off, V& x, V& y, V& z) { load3(x4 + *off, x, y, z); }
+  static void addRows(T* x4, const int* off, V dx, V dy, V dz) { add3(x4 + *off, dx, dy, dz); }
   static void loadPoints(const T* x4, const int* idx, V& x, V& y, V& z) {
-    const T* p = x4 + 4 * static_cast<long>(*idx);
-    x = p[0];
-    y = p[1];
-    z = p[2];
+    load3(x4 + 4 * static_cast<long>(*idx), x, y, z);
   }
   static void addPoints(T* x4, const int* idx, V dx, V dy, V dz) {
-    T* p = x4 + 4 * static_cast<long>(*idx);
+    add3(x4 + 4 * static_cast<long>(*idx), dx, dy, dz);
+  }
+
+ private:
+  static void load3(const T* p, V& x, V& y, V& z) {
+    x = p[0];
+    y = p[1];
+    z = p[2];
+  }
+  static void add3(T* p, V dx, V dy, V dz) {
     p[0] += dx;
     p[1] += dy;
     p[2] += dz;

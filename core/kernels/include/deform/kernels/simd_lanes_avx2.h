@@ -9,8 +9,41 @@
 
 namespace deform::simd {
 
+/// The 256-bit vector of T (a trait: a vector type passed as a template argument would lose its
+/// attributes).
+template <class T>
+struct Avx2Vector;
+template <>
+struct Avx2Vector<double> {
+  using type = __m256d;
+};
+template <>
+struct Avx2Vector<float> {
+  using type = __m256;
+};
+
+/// Row and point access of the AVX2 lanes (simd_lanes.h): rows (x, y, z, 0) at x4 + off[k], or
+/// the points idx[k] (rows at x4 + 4 idx[k]), <-> columns x, y, z of kWidth lanes. The points of
+/// an add are distinct or immovable (their lanes are then exactly zero).
+template <class T>
+struct Avx2Rows {
+  using V = typename Avx2Vector<T>::type;
+  static void loadRows(const T* x4, const int* off, V& x, V& y, V& z) {
+    gatherRows([&](int k) { return x4 + off[k]; }, x, y, z);
+  }
+  static void addRows(T* x4, const int* off, V dx, V dy, V dz) {
+    addToRows([&](int k) { return x4 + off[k]; }, dx, dy, dz);
+  }
+  static void loadPoints(const T* x4, const int* idx, V& x, V& y, V& z) {
+    gatherRows([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, x, y, z);
+  }
+  static void addPoints(T* x4, const int* idx, V dx, V dy, V dz) {
+    addToRows([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, dx, dy, dz);
+  }
+};
+
 /// Four double lanes per __m256d.
-struct Avx2Double4 {
+struct Avx2Double4 : Avx2Rows<double> {
   using T = double;
   using V = __m256d;
   using M = __m256d;
@@ -31,25 +64,10 @@ struct Avx2Double4 {
   static int count(M m) { return __builtin_popcount(_mm256_movemask_pd(m)); }
   static unsigned orBytes(const unsigned char* m) { return m[0] | m[1] | m[2] | m[3]; }
   static bool anyByte(const unsigned char* m) { return (m[0] | m[1] | m[2] | m[3]) != 0; }
-  // Rows (x, y, z, 0) at x4 + off[0..3] <-> columns x, y, z.
-  static void loadRows(const double* x4, const int* off, V& x, V& y, V& z) {
-    gatherRows4([&](int k) { return x4 + off[k]; }, x, y, z);
-  }
-  static void addRows(double* x4, const int* off, V dx, V dy, V dz) {
-    addToRows4([&](int k) { return x4 + off[k]; }, dx, dy, dz);
-  }
-  // The points idx[0..3] <-> lanes; the four points of an add are distinct or immovable (their
-  // lanes are then exactly zero).
-  static void loadPoints(const double* x4, const int* idx, V& x, V& y, V& z) {
-    gatherRows4([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, x, y, z);
-  }
-  static void addPoints(double* x4, const int* idx, V dx, V dy, V dz) {
-    addToRows4([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, dx, dy, dz);
-  }
 };
 
 /// Eight float lanes per __m256.
-struct Avx2Float8 {
+struct Avx2Float8 : Avx2Rows<float> {
   using T = float;
   using V = __m256;
   using M = __m256;
@@ -70,20 +88,6 @@ struct Avx2Float8 {
     unsigned char any = 0;
     for (int k = 0; k < 8; ++k) any |= m[k];
     return any != 0;
-  }
-  // Rows (x, y, z, 0) at x4 + off[0..7] <-> columns x, y, z.
-  static void loadRows(const float* x4, const int* off, V& x, V& y, V& z) {
-    gatherRows8([&](int k) { return x4 + off[k]; }, x, y, z);
-  }
-  static void addRows(float* x4, const int* off, V dx, V dy, V dz) {
-    addToRows8([&](int k) { return x4 + off[k]; }, dx, dy, dz);
-  }
-  // The points idx[0..7] <-> lanes, as in Avx2Double4.
-  static void loadPoints(const float* x4, const int* idx, V& x, V& y, V& z) {
-    gatherRows8([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, x, y, z);
-  }
-  static void addPoints(float* x4, const int* idx, V dx, V dy, V dz) {
-    addToRows8([&](int k) { return x4 + 4 * static_cast<long>(idx[k]); }, dx, dy, dz);
   }
 };
 

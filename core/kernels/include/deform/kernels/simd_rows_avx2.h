@@ -19,11 +19,12 @@ namespace deform::simd {
 
 // `row(k)` gives the address of lane k's row: the callers index their rows by offsets or by
 // particle indices, and a callable lets each keep its own address arithmetic in the inlined code.
+// The vector type picks the width: eight float rows per __m256, four double rows per __m256d.
 
 /// The rows row(0..7) (float x, y, z, 0 each) as columns x, y, z: rows k and k + 4 share a
 /// 256-bit register, then a 4 x 4 transpose inside each 128-bit half.
 template <class Row>
-__attribute__((always_inline)) inline void gatherRows8(Row row, __m256& x, __m256& y, __m256& z) {
+__attribute__((always_inline)) inline void gatherRows(Row row, __m256& x, __m256& y, __m256& z) {
   const __m256 r04 = _mm256_loadu2_m128(row(4), row(0));
   const __m256 r15 = _mm256_loadu2_m128(row(5), row(1));
   const __m256 r26 = _mm256_loadu2_m128(row(6), row(2));
@@ -40,7 +41,7 @@ __attribute__((always_inline)) inline void gatherRows8(Row row, __m256& x, __m25
 /// Adds lane k of (dx, dy, dz) to the row at row(k), one row after the other: two lanes may name
 /// the same row only when one of them adds exactly zero (an immovable particle).
 template <class Row>
-__attribute__((always_inline)) inline void addToRows8(Row row, __m256 dx, __m256 dy, __m256 dz) {
+__attribute__((always_inline)) inline void addToRows(Row row, __m256 dx, __m256 dy, __m256 dz) {
   const __m256 zero = _mm256_setzero_ps();
   const __m256 a = _mm256_unpacklo_ps(dx, dy);  // dx0 dy0 dx1 dy1 | dx4 dy4 dx5 dy5
   const __m256 b = _mm256_unpackhi_ps(dx, dy);  // dx2 dy2 dx3 dy3 | dx6 dy6 dx7 dy7
@@ -60,8 +61,7 @@ __attribute__((always_inline)) inline void addToRows8(Row row, __m256 dx, __m256
 
 /// The rows row(0..3) (double x, y, z, 0 each) as columns x, y, z.
 template <class Row>
-__attribute__((always_inline)) inline void gatherRows4(Row row, __m256d& x, __m256d& y,
-                                                       __m256d& z) {
+__attribute__((always_inline)) inline void gatherRows(Row row, __m256d& x, __m256d& y, __m256d& z) {
   const __m256d r0 = _mm256_loadu_pd(row(0)), r1 = _mm256_loadu_pd(row(1));
   const __m256d r2 = _mm256_loadu_pd(row(2)), r3 = _mm256_loadu_pd(row(3));
   const __m256d t0 = _mm256_unpacklo_pd(r0, r1);  // x0 x1 z0 z1
@@ -73,9 +73,9 @@ __attribute__((always_inline)) inline void gatherRows4(Row row, __m256d& x, __m2
   z = _mm256_permute2f128_pd(t0, t2, 0x31);
 }
 
-/// Adds lane k of (dx, dy, dz) to the row at row(k), as addToRows8().
+/// Adds lane k of (dx, dy, dz) to the row at row(k), as the float addToRows().
 template <class Row>
-__attribute__((always_inline)) inline void addToRows4(Row row, __m256d dx, __m256d dy, __m256d dz) {
+__attribute__((always_inline)) inline void addToRows(Row row, __m256d dx, __m256d dy, __m256d dz) {
   const __m256d zero = _mm256_setzero_pd();
   const __m256d t0 = _mm256_unpacklo_pd(dx, dy);  // dx0 dy0 dx2 dy2
   const __m256d t1 = _mm256_unpackhi_pd(dx, dy);  // dx1 dy1 dx3 dy3
