@@ -153,6 +153,84 @@ ojson solverJson(const VerifySolver& s) {
 
 }  // namespace
 
+/// The two solvers' parameters: the scene's reference's, the other solver taking the shared
+/// ones; reference_fem quasi-static; nearly incompressible, reference_fem compared in C3D10's
+/// formulation with the scene's own (`scene`) solved beside it.
+struct VerifyParams {
+  ParamValues reference, calculix, scene;
+  bool meanDilatation = false;  ///< the scene's reference has the mean-dilatation term
+  std::vector<std::string> notes;
+};
+
+VerifyParams verifyParams(const std::string& sceneFile, const Scene& scene,
+                          const ModelInfo& refInfo, const ModelInfo& ccxInfo) {
+  VerifyParams out;
+  const ModelSpec& spec = *scene.reference;
+  std::vector<std::string>& notes = out.notes;
+  // The scene's reference parameters; the other solver takes the shared ones.
+  nlohmann::json shared = nlohmann::json::object();
+  for (const char* k : kSharedParams)
+    if (spec.params.contains(k)) shared[k] = spec.params[k];
+  nlohmann::json refGiven = spec.plugin == "reference_fem" ? spec.params : shared;
+  const nlohmann::json ccxGiven = spec.plugin == "calculix" ? spec.params : shared;
+  if (refGiven.contains("solve") && refGiven["solve"] != "quasi_static") {
+    refGiven["solve"] = "quasi_static";
+    notes.push_back("reference_fem solved quasi-statically (the scene's reference is dynamic)");
+  }
+  if (refGiven.contains("material") && refGiven["material"] == "corotational")
+    throw InputError(sceneFile, spec.jsonPath + "/params/material",
+                     "calculix has no corotational material: verify compares linear or "
+                     "neo_hookean");
+  // Nearly incompressible: compare C3D10's formulation, and solve the scene's beside it.
+  out.scene = resolveParams(refInfo.params, refGiven, sceneFile, spec.jsonPath + "/params");
+  out.meanDilatation =
+      out.scene.integer("element_order") == 2 && out.scene.choice("material") == "neo_hookean" &&
+      (out.scene.choice("volumetric") == "mean_dilatation" ||
+       (out.scene.choice("volumetric") == "auto" && scene.organ.material.poisson >= 0.45));
+  if (out.meanDilatation) {
+    refGiven["volumetric"] = "displacement";
+    notes.push_back(
+        "nu " + formatG(scene.organ.material.poisson) +
+        ": reference_fem compared with volumetric = displacement, CalculiX's C3D10 formulation "
+        "(Debian's ccx has no hybrid elements); the scene's mean-dilatation reference was solved "
+        "too, and its difference from that run is formulation_rms_relative (not part of the "
+        "goal)");
+  }
+  out.reference = resolveParams(refInfo.params, refGiven, sceneFile, spec.jsonPath + "/params");
+  out.calculix = resolveParams(ccxInfo.params, ccxGiven, sceneFile, spec.jsonPath + "/params");
+  return out;
+}
+
+/// verify.json (format deformbench-verify/1) of a result.
+ojson verifyJson(const VerifyResult& result, const Scene& scene, const std::string& sceneFile,
+                 bool meanDilatation) {
+  ojson doc;
+  doc["format"] = "deformbench-verify/1";
+  doc["scene"] = {{"name", scene.name}, {"file", sceneFile}};
+  doc["goal_rms_relative"] = kVerifyGoal;
+  doc["agrees"] = result.agrees;
+  doc["message"] = result.message;
+  doc["notes"] = result.notes;
+  doc["solvers"] = {solverJson(result.reference), solverJson(result.calculix)};
+  if (meanDilatation) doc["formulation"] = solverJson(result.formulation);
+  doc["instants"] = ojson::array();
+  for (const VerifyInstant& in : result.instants)
+    doc["instants"].push_back(
+        {{"step", in.step},
+         {"time_s", in.time},
+         {"vertices", in.vertices},
+         {"reference_rms_displacement_m", in.referenceRms},
+         {"rms_difference_m", in.rmsDifference},
+         {"max_difference_m", in.maxDifference},
+         {"rms_relative", numberOrNull(in.rmsRelative)},
+         {"max_relative", numberOrNull(in.maxRelative)},
+         {"formulation_rms_relative", numberOrNull(in.formulationRmsRelative)},
+         {"formulation_max_relative", numberOrNull(in.formulationMaxRelative)},
+         {"reference_fem", timesJson(in.reference)},
+         {"calculix", timesJson(in.calculix)}});
+  return doc;
+}
+
 VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
                        const VerifyOptions& options) {
   VerifyResult result;
@@ -165,44 +243,11 @@ VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
   if (spec.plugin != "reference_fem" && spec.plugin != "calculix")
     throw InputError(sceneFile, spec.jsonPath + "/plugin",
                      "verify compares reference_fem and calculix; the reference is " + spec.plugin);
-  // The scene's reference parameters; the other solver takes the shared ones.
-  nlohmann::json shared = nlohmann::json::object();
-  for (const char* k : kSharedParams)
-    if (spec.params.contains(k)) shared[k] = spec.params[k];
-  nlohmann::json refGiven = spec.plugin == "reference_fem" ? spec.params : shared;
-  const nlohmann::json ccxGiven = spec.plugin == "calculix" ? spec.params : shared;
-  std::vector<std::string> notes;
-  if (refGiven.contains("solve") && refGiven["solve"] != "quasi_static") {
-    refGiven["solve"] = "quasi_static";
-    notes.push_back("reference_fem solved quasi-statically (the scene's reference is dynamic)");
-  }
-  if (refGiven.contains("material") && refGiven["material"] == "corotational")
-    throw InputError(sceneFile, spec.jsonPath + "/params/material",
-                     "calculix has no corotational material: verify compares linear or "
-                     "neo_hookean");
   const ModelInfo& refInfo = loader.load("reference_fem");
   const ModelInfo& ccxInfo = loader.load("calculix");
-  // Nearly incompressible: compare C3D10's formulation, and solve the scene's beside it.
-  const ParamValues sceneRefParams =
-      resolveParams(refInfo.params, refGiven, sceneFile, spec.jsonPath + "/params");
-  const bool meanDilatation =
-      sceneRefParams.integer("element_order") == 2 &&
-      sceneRefParams.choice("material") == "neo_hookean" &&
-      (sceneRefParams.choice("volumetric") == "mean_dilatation" ||
-       (sceneRefParams.choice("volumetric") == "auto" && scene.organ.material.poisson >= 0.45));
-  if (meanDilatation) {
-    refGiven["volumetric"] = "displacement";
-    notes.push_back(
-        "nu " + formatG(scene.organ.material.poisson) +
-        ": reference_fem compared with volumetric = displacement, CalculiX's C3D10 formulation "
-        "(Debian's ccx has no hybrid elements); the scene's mean-dilatation reference was solved "
-        "too, and its difference from that run is formulation_rms_relative (not part of the "
-        "goal)");
-  }
-  const ParamValues refParams =
-      resolveParams(refInfo.params, refGiven, sceneFile, spec.jsonPath + "/params");
-  const ParamValues ccxParams =
-      resolveParams(ccxInfo.params, ccxGiven, sceneFile, spec.jsonPath + "/params");
+  const VerifyParams params = verifyParams(sceneFile, scene, refInfo, ccxInfo);
+  const bool meanDilatation = params.meanDilatation;
+  std::vector<std::string> notes = params.notes;
 
   const Organ organ = loadOrgan(scene);
   std::error_code ec;
@@ -222,15 +267,15 @@ VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
     ref.rec.message = "not run: calculix cannot run this scene";
   } else {
     // reference_fem first: it meshes (or finds the mesh in the cache); calculix reads the same.
-    ref = solve(refInfo, refParams, scene, organ, cache, options);
-    ccx = solve(ccxInfo, ccxParams, scene, organ, cache, options);
+    ref = solve(refInfo, params.reference, scene, organ, cache, options);
+    ccx = solve(ccxInfo, params.calculix, scene, organ, cache, options);
   }
   SolverRun formulation;
   formulation.rec.model = refInfo.name;
   formulation.rec.status = RunStatus::Unsupported;
   formulation.rec.message = "not run: the compared run is the scene's formulation";
   if (meanDilatation && ref.rec.status == RunStatus::Ok)
-    formulation = solve(refInfo, sceneRefParams, scene, organ, cache, options);
+    formulation = solve(refInfo, params.scene, scene, organ, cache, options);
   result.reference = describe(ref);
   result.calculix = describe(ccx);
   result.formulation = describe(formulation);
@@ -306,31 +351,8 @@ VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
     }
   }
 
-  ojson doc;
-  doc["format"] = "deformbench-verify/1";
-  doc["scene"] = {{"name", scene.name}, {"file", sceneFile}};
-  doc["goal_rms_relative"] = kVerifyGoal;
-  doc["agrees"] = result.agrees;
-  doc["message"] = result.message;
   result.notes = notes;
-  doc["notes"] = notes;
-  doc["solvers"] = {solverJson(result.reference), solverJson(result.calculix)};
-  if (meanDilatation) doc["formulation"] = solverJson(result.formulation);
-  doc["instants"] = ojson::array();
-  for (const VerifyInstant& in : result.instants)
-    doc["instants"].push_back(
-        {{"step", in.step},
-         {"time_s", in.time},
-         {"vertices", in.vertices},
-         {"reference_rms_displacement_m", in.referenceRms},
-         {"rms_difference_m", in.rmsDifference},
-         {"max_difference_m", in.maxDifference},
-         {"rms_relative", numberOrNull(in.rmsRelative)},
-         {"max_relative", numberOrNull(in.maxRelative)},
-         {"formulation_rms_relative", numberOrNull(in.formulationRmsRelative)},
-         {"formulation_max_relative", numberOrNull(in.formulationMaxRelative)},
-         {"reference_fem", timesJson(in.reference)},
-         {"calculix", timesJson(in.calculix)}});
+  const ojson doc = verifyJson(result, scene, sceneFile, meanDilatation);
   result.jsonPath = options.outDir / "verify.json";
   writeFileAtomic(result.jsonPath, doc.dump(2) + "\n");
   return result;

@@ -479,18 +479,9 @@ void MetaballsModel::buildSkinTranspose() {
   }
 }
 
-StepStatus MetaballsModel::step(const StepInput& in) {
-  const int n = m_mb.spheres.size();
-  const Real dt = in.dt;
-  if (!(dt > 0)) return StepStatus::Ok;
-  auto t0 = Clock::now();
-
-  // External forces: W^T f, every per-vertex share of the harness's patch over the vertex's
-  // spheres by skinning weight (a load without a spread acts on its vertex alone).
-  applyLoads(in);
+void MetaballsModel::placeHeldSpheres(const StepInput& in, Real* P) {
   // Kinematic spheres: fixed ones stay at rest; the carrying spheres of the grasped vertices move
   // by dc_C = W_C^+ (t - v), from the surface at the step's start.
-  Real* P = m_p4.data();
   std::copy(m_fixed.begin(), m_fixed.end(), m_kin.begin());
   for (int i : m_fixedList)
     for (int c = 0; c < 3; ++c) P[4 * i + c] = m_x0(i, c);
@@ -515,6 +506,49 @@ StepStatus MetaballsModel::step(const StepInput& in) {
       m_contacted.push_back(s.carry[c]);
     }
   }
+}
+
+void MetaballsModel::correctHeldAfterSkinning(Real dt) {
+  if (!m_graspVerts.empty() && !m_carry.empty()) {
+    // The radii and rotations of this step moved the grasped vertices off W dc: correct the
+    // carrying spheres again; with the radii and rotations kept, the skinned surface changes by
+    // exactly W dc (the vertices of those spheres only).
+    graspCorrection();
+    for (size_t k = 0; k < m_carry.size(); ++k) {
+      const int i = m_carry[k];
+      const Eigen::RowVector3d dc = m_graspDc.row(Eigen::Index(k));
+      m_x.row(i) += dc;
+      m_v.row(i) += dc / dt;
+      for (int q = m_vertStart[size_t(i)]; q < m_vertStart[size_t(i) + 1]; ++q)
+        m_surface.row(m_vertOf[size_t(q)]) += m_vertW[size_t(q)] * dc;
+    }
+  }
+  // The same along each sliding plate's axis alone.
+  for (size_t k = 0; k < m_sliding.size(); ++k) {
+    const SlidingSet& s = m_sliding[k];
+    if (s.carry.empty()) continue;
+    const VecX dc = slidingCorrection(k);
+    for (size_t c = 0; c < s.carry.size(); ++c) {
+      const int i = s.carry[c];
+      m_x(i, s.axis) += dc[Eigen::Index(c)];
+      m_v(i, s.axis) += dc[Eigen::Index(c)] / dt;
+      for (int q = m_vertStart[size_t(i)]; q < m_vertStart[size_t(i) + 1]; ++q)
+        m_surface(m_vertOf[size_t(q)], s.axis) += m_vertW[size_t(q)] * dc[Eigen::Index(c)];
+    }
+  }
+}
+
+StepStatus MetaballsModel::step(const StepInput& in) {
+  const int n = m_mb.spheres.size();
+  const Real dt = in.dt;
+  if (!(dt > 0)) return StepStatus::Ok;
+  auto t0 = Clock::now();
+
+  // External forces: W^T f, every per-vertex share of the harness's patch over the vertex's
+  // spheres by skinning weight (a load without a spread acts on its vertex alone).
+  applyLoads(in);
+  Real* P = m_p4.data();
+  placeHeldSpheres(in, P);
   // Algorithm 3, lines 8-13: prediction with damping.
   const Real keep = std::max(Real(0), 1 - m_damping * dt);
   for (int i = 0; i < n; ++i) {
@@ -595,33 +629,7 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   const bool skinRot = m_skinFrame == Frame::Rotated;
   packSphereFrames(m_x, m_r, skinRot ? m_rot.data() : nullptr, m_frames);
   applySkinningFrames(m_skin, m_frames.data(), skinRot, m_surface, m_simd);
-  if (!m_graspVerts.empty() && !m_carry.empty()) {
-    // The radii and rotations of this step moved the grasped vertices off W dc: correct the
-    // carrying spheres again; with the radii and rotations kept, the skinned surface changes by
-    // exactly W dc (the vertices of those spheres only).
-    graspCorrection();
-    for (size_t k = 0; k < m_carry.size(); ++k) {
-      const int i = m_carry[k];
-      const Eigen::RowVector3d dc = m_graspDc.row(Eigen::Index(k));
-      m_x.row(i) += dc;
-      m_v.row(i) += dc / dt;
-      for (int q = m_vertStart[size_t(i)]; q < m_vertStart[size_t(i) + 1]; ++q)
-        m_surface.row(m_vertOf[size_t(q)]) += m_vertW[size_t(q)] * dc;
-    }
-  }
-  // The same along each sliding plate's axis alone.
-  for (size_t k = 0; k < m_sliding.size(); ++k) {
-    const SlidingSet& s = m_sliding[k];
-    if (s.carry.empty()) continue;
-    const VecX dc = slidingCorrection(k);
-    for (size_t c = 0; c < s.carry.size(); ++c) {
-      const int i = s.carry[c];
-      m_x(i, s.axis) += dc[Eigen::Index(c)];
-      m_v(i, s.axis) += dc[Eigen::Index(c)] / dt;
-      for (int q = m_vertStart[size_t(i)]; q < m_vertStart[size_t(i) + 1]; ++q)
-        m_surface(m_vertOf[size_t(q)], s.axis) += m_vertW[size_t(q)] * dc[Eigen::Index(c)];
-    }
-  }
+  correctHeldAfterSkinning(dt);
   // The skinned surface can bulge past the spheres: keep it out of the instruments too (display
   // level, no force: the spheres carried it).
   if (in.contact) {

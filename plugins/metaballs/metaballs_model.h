@@ -95,6 +95,14 @@ class MetaballsModel final : public Model {
   VecX slidingCorrection(size_t k) const;
   /// Puts the sliding spheres' axis coordinate in the padded rows P on their targets.
   void holdSliding(Real* P) const;
+  /// The step's kinematic spheres: fixed ones at rest; the carrying spheres of the grasped
+  /// vertices moved by dc_C = W_C^+ (t - v) from the surface at the step's start, into P; the
+  /// sliding plates' carrying spheres given their axis targets (holdSliding).
+  void placeHeldSpheres(const StepInput& in, Real* P);
+  /// After the skinning: the radii and rotations of the step moved the held vertices off their
+  /// targets, so the carrying spheres are corrected again (along each sliding plate's axis
+  /// alone); with the radii and rotations kept, the skinned surface changes by exactly W dc.
+  void correctHeldAfterSkinning(Real dt);
   /// The step's parts (step() calls them in this order): the loads as sphere forces W^T f
   /// (m_f; the spheres they touch in m_contacted); the constraints' per-step constants and
   /// Laplacian targets; after the sweeps, the radii of eq. (12).

@@ -26,6 +26,18 @@ rm -rf "$work"
 mkdir -p "$work"
 db=("$exe" --plugin-dir "$plugins")
 fail() { echo "FAIL: $*" >&2; exit 1; }
+# check NAME EXPECTED_TEXT ARGS...: `calibrate ARGS` exits 2 with one stderr line holding the text.
+check() {
+  local name=$1 text=$2
+  shift 2
+  set +e
+  "${db[@]}" calibrate "$@" >"$work/$name.out" 2>"$work/$name.err"
+  local code=$?
+  set -e
+  [[ $code == 2 ]] || fail "$name: exit $code, expected 2"
+  [[ $(wc -l <"$work/$name.err") == 1 ]] || { cat "$work/$name.err"; fail "$name: not one line"; }
+  grep -qF -- "$text" "$work/$name.err" || { cat "$work/$name.err"; fail "$name: no '$text'"; }
+}
 
 case $mode in
 recover)
@@ -184,17 +196,6 @@ PY
     || { cat "$work/twice.err"; fail "two calibrations of one model and organ accepted"; }
   ;;
 bad_input)
-  check() {  # check NAME EXPECTED_TEXT ARGS...
-    local name=$1 text=$2
-    shift 2
-    set +e
-    "${db[@]}" calibrate "$@" >"$work/$name.out" 2>"$work/$name.err"
-    local code=$?
-    set -e
-    [[ $code == 2 ]] || fail "$name: exit $code, expected 2"
-    [[ $(wc -l <"$work/$name.err") == 1 ]] || { cat "$work/$name.err"; fail "$name: not one line"; }
-    grep -qF -- "$text" "$work/$name.err" || { cat "$work/$name.err"; fail "$name: no '$text'"; }
-  }
   check unknown_model "no_such_plugin" "$here/toy_reference.json" --model no_such_plugin --out "$work/x"
   check no_calibratable "declares no calibratable parameter" "$here/toy_reference.json" \
     --model prefixed --out "$work/x"
@@ -251,16 +252,6 @@ assert before > 5e-5 and after < 0.1 * before, c["train"]  # the 1 mm shift regi
 print("nu", nu, "marker rms", before, "->", after)
 PY
   grep -q "organ poisson = " "$work/out.txt" || { cat "$work/out.txt"; fail "no fitted nu printed"; }
-  check() {  # check NAME EXPECTED_TEXT ARGS...
-    local name=$1 text=$2
-    shift 2
-    set +e
-    "${db[@]}" calibrate "$@" >"$work/$name.out" 2>"$work/$name.err"
-    local code=$?
-    set -e
-    [[ $code == 2 ]] || fail "$name: exit $code, expected 2"
-    grep -qF -- "$text" "$work/$name.err" || { cat "$work/$name.err"; fail "$name: no '$text'"; }
-  }
   check circular "fitted to measurements only" "$work/measured.json" --model reference_fem \
     --material poisson --out "$work/x"
   check unmeasured "needs measured marker positions" "$work/unmeasured.json" \

@@ -370,6 +370,25 @@ std::string layersMm(const std::vector<double>& v) {
   return s;
 }
 
+/// "run_s" (init plus the solves; a run read back from results.json keeps the statistics only)
+/// and "ms_per_step" (the mean wall time of a step; a quasi-static model's steps are its solves).
+void timeCells(ojson& row, const RunRecord* r) {
+  double seconds = NAN, msPerStep = NAN;
+  if (r && !r->stepMs.empty()) {
+    seconds = r->precomputeS;
+    msPerStep = 0;
+    for (double ms : r->stepMs) {
+      seconds += 1e-3 * ms;
+      msPerStep += ms / double(r->stepMs.size());
+    }
+  } else if (r) {
+    seconds = r->precomputeS + 1e-3 * r->stepStats.mean * r->stepStats.samples;
+    if (r->stepStats.samples > 0) msPerStep = r->stepStats.mean;
+  }
+  row["run_s"] = numberOrNull(seconds);
+  row["ms_per_step"] = numberOrNull(msPerStep);
+}
+
 /// The table's rows: each source per registration and level (its bead figures, or why it has
 /// none), the reference against CalculiX, and a row for each absent model.
 std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<Source>& sources,
@@ -448,26 +467,7 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
             row[key] = nullptr;
           row["layer_rms_mm"] = "";
         }
-        // init plus the solves (a run read back from results.json keeps the statistics only).
-        double seconds = NAN;
-        if (r) {
-          seconds = r->precomputeS;
-          if (!r->stepMs.empty()) {
-            for (double ms : r->stepMs) seconds += 1e-3 * ms;
-          } else {
-            seconds += 1e-3 * r->stepStats.mean * r->stepStats.samples;
-          }
-        }
-        row["run_s"] = numberOrNull(seconds);
-        // The mean wall time of a step (a quasi-static model's steps are its solves).
-        double msPerStep = NAN;
-        if (r && !r->stepMs.empty()) {
-          msPerStep = 0;
-          for (double ms : r->stepMs) msPerStep += ms / double(r->stepMs.size());
-        } else if (r && r->stepStats.samples > 0) {
-          msPerStep = r->stepStats.mean;
-        }
-        row["ms_per_step"] = numberOrNull(msPerStep);
+        timeCells(row, r);
         if (c) {
           caseCells(row, *c, k.plugin, r, dir, false);
         } else {
@@ -554,6 +554,184 @@ std::vector<CalibrationParams> truthCubeCalibrations(const std::vector<Calibrati
 
 }  // namespace
 
+namespace {
+
+/// A calibrated twin ("+cal") of a model: its scene entry and the fit it holds.
+struct Twin {
+  ojson entry;
+  CalibrationParams calibration;
+  bool dynamic = false;
+};
+
+/// Who runs where: the quasi-static models (one scene), the dynamic ones (a scene per level),
+/// the absent ones with why, and the calibrated twins (those --quick leaves out named).
+struct Lineup {
+  std::vector<ojson> models, dynamic;
+  std::vector<std::pair<std::string, std::string>> absent;
+  std::vector<Twin> twins;
+  std::string skippedTwins;
+};
+
+Lineup truthCubeLineup(const TablesOptions& o, PluginLoader& loader, const TruthCubeData& data,
+                       const std::string& contact, bool withCalculix) {
+  Lineup u;
+  // Reference and CalculiX on one quadratic tet mesh (deform/geometry/organ_tets.h).
+  ojson displacementParams = femParams(o.quick);
+  displacementParams["volumetric"] = "displacement";
+  u.models = {model("reference_fem", "reference_fem", femParams(o.quick)),
+              model("reference_fem", kDisplacementLabel, displacementParams)};
+  if (withCalculix) u.models.push_back(model(kCalculix, kCalculix, femParams(o.quick)));
+  // The other models: the quasi-static ones in the same scene, the dynamic ones in a settling
+  // scene per level; the others get a row saying why they have no figure.
+  for (const std::string& name : kOtherModels) {
+    const TruthCubeModel m = truthCubeModel(loader, name, o.quick);
+    if (!m.problem.empty()) {
+      u.absent.emplace_back(name, m.problem);
+    } else {
+      (m.dynamic ? u.dynamic : u.models).push_back(m.entry);
+    }
+  }
+  // Calibrated twins: the shipped calibrations on the Truth Cube (calibrations/truth-cube/,
+  // fitted to the beads by calibrate --truth-cube) and any --calibration for it. A twin of the
+  // parameters runs beside its model; one of the organ's material runs alone.
+  const std::vector<CalibrationParams> calibrations = truthCubeCalibrations(o.calibrations);
+  const std::string organ = calibrationOrgan(truthCubeScene(data, {}, contact)["organ"]);
+  for (bool isDynamic : {false, true}) {
+    for (const ojson& m : isDynamic ? u.dynamic : u.models) {
+      const std::string plugin = m["plugin"].get<std::string>();
+      if (m["label"] != plugin) continue;  // the default configuration only
+      const auto c = std::find_if(calibrations.begin(), calibrations.end(), [&](const auto& x) {
+        return x.plugin == plugin && x.model == plugin && calibrationApplies(x, organ);
+      });
+      if (c == calibrations.end()) continue;
+      ojson twin = m;
+      twin["label"] = plugin + "+cal";
+      ojson params = ojson::parse(c->params.dump());
+      for (const auto& [k, v] : m["params"].items()) params[k] = v;
+      twin["params"] = params;
+      // --quick: a fit of the organ's material needs cases of its own; only the full table
+      // runs them.
+      if (o.quick && !c->material.empty()) {
+        appendTo(u.skippedTwins, twin["label"].get<std::string>());
+        continue;
+      }
+      u.twins.push_back({twin, *c, isDynamic});
+    }
+  }
+  for (const Twin& tw : u.twins)
+    if (tw.calibration.material.empty()) (tw.dynamic ? u.dynamic : u.models).push_back(tw.entry);
+  return u;
+}
+
+/// The table's notes on its twins: which files, which models have none, what --quick left out.
+void twinNotes(const Lineup& u, std::vector<std::string>& notes) {
+  std::string untwinned;
+  for (const std::string& name : kOtherModels)
+    if (std::none_of(u.twins.begin(), u.twins.end(),
+                     [&](const Twin& tw) { return tw.entry["plugin"] == name; }) &&
+        std::none_of(u.absent.begin(), u.absent.end(),
+                     [&](const auto& a) { return a.first == name; }) &&
+        u.skippedTwins.find(name + "+cal") == std::string::npos)
+      appendTo(untwinned, name);
+  if (!u.twins.empty() && !untwinned.empty())
+    notes.push_back("No calibrated twin (no fit in calibrations/truth-cube/): " + untwinned + ".");
+  if (u.twins.empty()) {
+    notes.push_back(
+        "Not calibrated: every row is at the published material (calibrated = false); "
+        "calibrations/truth-cube/ holds none for these models.");
+  } else {
+    std::string files;
+    for (const Twin& tw : u.twins) appendTo(files, tw.calibration.file);
+    notes.push_back(
+        "Calibrated twins (+cal, calibrated = true): fitted to the beads of one level "
+        "(`deformbench calibrate --truth-cube LEVEL`, metric marker_rms: the bead RMS after the "
+        "translation registration), the level it was trained on marked \"train\", the others "
+        "\"validation\"; each row's note gives the fitted values. A fit of the organ's nu (E "
+        "does not move the beads when the plate's displacement is prescribed) runs in cases of "
+        "its own. Files: " +
+        files + ".");
+  }
+  if (!u.skippedTwins.empty())
+    notes.push_back(
+        "--quick leaves out the twins whose fit holds the organ's nu (they need cases of their "
+        "own; the full table runs them): " +
+        u.skippedTwins + ".");
+}
+
+/// The table's cases (the quasi-static scene, a settling scene per level, the material twins'
+/// own) and where each model's markers at each level are, each twin after its model.
+std::vector<Source> truthCubeCases(TableDef& t, const Lineup& u, const TruthCubeData& data,
+                                   const std::string& contact, bool quick) {
+  // Sliding runs are other cases (a --resume never mixes them with the bonded ones).
+  const std::string suffix = contact == "sliding" ? "_sliding" : "";
+  const std::string id = "truth-cube/cube" + suffix;
+  t.cases.push_back({id, truthCubeScene(data, u.models, contact)});
+  const auto dynamicId = [&](size_t l, const std::string& tail) {
+    return "truth-cube/dynamic_" + std::to_string(l + 1) + tail + suffix;
+  };
+  // (case, index of the compared instant) per level.
+  std::vector<Source> sources;
+  const auto addSource = [&](const ojson& m, const std::function<std::string(size_t)>& caseOf,
+                             bool perLevelScene) {
+    Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
+    for (const Twin& tw : u.twins) {
+      if (tw.entry["label"] != src.label) continue;
+      src.calibrated = true;
+      src.trainLevel = tw.calibration.truthCube.value("level", 0) - 1;
+      src.calibrationNote = fittedNote(tw.calibration, contact);
+    }
+    for (size_t l = 0; l < data.strains.size(); ++l)
+      src.levels.emplace_back(caseOf(l), perLevelScene ? 0 : l);
+    sources.push_back(src);
+  };
+  for (const ojson& m : u.models)
+    addSource(
+        m, [&](size_t) { return id; }, false);
+  if (!u.dynamic.empty()) {
+    for (size_t l = 0; l < data.strains.size(); ++l)
+      t.cases.push_back({dynamicId(l, ""),
+                         truthCubeDynamicScene(data, l, u.dynamic, dynamicCap(quick), contact)});
+    for (const ojson& m : u.dynamic)
+      addSource(
+          m, [&](size_t l) { return dynamicId(l, ""); }, true);
+  }
+  // Twins of the organ's material: their own cases, the organ's material replaced.
+  for (const Twin& tw : u.twins) {
+    if (tw.calibration.material.empty()) continue;
+    const auto withMaterial = [&](ojson scene) {
+      for (const auto& [k, v] : tw.calibration.material.items())
+        scene["organ"]["material"][k] = v.get<double>();
+      return scene;
+    };
+    const std::string plugin = tw.entry["plugin"].get<std::string>();
+    if (!tw.dynamic) {
+      const std::string cid = "truth-cube/cube_cal_" + plugin + suffix;
+      t.cases.push_back({cid, withMaterial(truthCubeScene(data, {tw.entry}, contact))});
+      addSource(
+          tw.entry, [cid](size_t) { return cid; }, false);
+    } else {
+      for (size_t l = 0; l < data.strains.size(); ++l)
+        t.cases.push_back(
+            {dynamicId(l, "_cal_" + plugin),
+             withMaterial(truthCubeDynamicScene(data, l, {tw.entry}, dynamicCap(quick), contact))});
+      addSource(
+          tw.entry, [&](size_t l) { return dynamicId(l, "_cal_" + plugin); }, true);
+    }
+  }
+  std::vector<std::string> order;
+  for (const Source& src : sources)
+    if (!src.calibrated) order.push_back(src.label);
+  const auto rank = [&order](const Source& src) {
+    const std::string base = src.calibrated ? src.label.substr(0, src.label.size() - 4) : src.label;
+    return std::find(order.begin(), order.end(), base) - order.begin();
+  };
+  std::stable_sort(sources.begin(), sources.end(),
+                   [&rank](const Source& a, const Source& b) { return rank(a) < rank(b); });
+  return sources;
+}
+
+}  // namespace
+
 TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
   TableDef t = tableDef(
       "truth-cube", "Every model against the Truth Cube's 343 beads (a physical experiment)",
@@ -585,62 +763,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
   if (contact != "bonded" && contact != "sliding")
     throw InputError("--contact", "", "expected bonded or sliding, got " + contact);
   const std::string calculixProblem = pluginProblem(loader, kCalculix);
-  const bool withCalculix = calculixProblem.empty();
-  // Reference and CalculiX on one quadratic tet mesh (deform/geometry/organ_tets.h).
-  const long long elements = o.quick ? 1000 : 6000;
-  ojson displacementParams = femParams(o.quick);
-  displacementParams["volumetric"] = "displacement";
-  std::vector<ojson> models = {model("reference_fem", "reference_fem", femParams(o.quick)),
-                               model("reference_fem", kDisplacementLabel, displacementParams)};
-  if (withCalculix) models.push_back(model(kCalculix, kCalculix, femParams(o.quick)));
-  // The other models: the quasi-static ones in the same scene, the dynamic ones in a settling
-  // scene per level; the others get a row saying why they have no figure.
-  std::vector<std::pair<std::string, std::string>> absent;
-  std::vector<ojson> dynamic;
-  for (const std::string& name : kOtherModels) {
-    const TruthCubeModel m = truthCubeModel(loader, name, o.quick);
-    if (!m.problem.empty()) {
-      absent.emplace_back(name, m.problem);
-    } else {
-      (m.dynamic ? dynamic : models).push_back(m.entry);
-    }
-  }
-  // Calibrated twins ("+cal"): the shipped calibrations on the Truth Cube (calibrations/
-  // truth-cube/, fitted to the beads by calibrate --truth-cube) and any --calibration for it.
-  // A twin of the parameters runs beside its model; one of the organ's material runs alone.
-  const std::vector<CalibrationParams> calibrations = truthCubeCalibrations(o.calibrations);
-  const std::string organ = calibrationOrgan(truthCubeScene(data, {}, contact)["organ"]);
-  struct Twin {
-    ojson entry;
-    const CalibrationParams* calibration;
-    bool dynamic;
-  };
-  std::vector<Twin> twins;
-  std::string skippedTwins;
-  for (bool isDynamic : {false, true}) {
-    for (const ojson& m : isDynamic ? dynamic : models) {
-      const std::string plugin = m["plugin"].get<std::string>();
-      if (m["label"] != plugin) continue;  // the default configuration only
-      const CalibrationParams* c = nullptr;
-      for (const CalibrationParams& x : calibrations)
-        if (!c && x.plugin == plugin && x.model == plugin && calibrationApplies(x, organ)) c = &x;
-      if (!c) continue;
-      ojson twin = m;
-      twin["label"] = plugin + "+cal";
-      ojson params = ojson::parse(c->params.dump());
-      for (const auto& [k, v] : m["params"].items()) params[k] = v;
-      twin["params"] = params;
-      // --quick: a fit of the organ's material needs cases of its own; only the full table
-      // runs them.
-      if (o.quick && !c->material.empty()) {
-        appendTo(skippedTwins, twin["label"].get<std::string>());
-        continue;
-      }
-      twins.push_back({twin, c, isDynamic});
-    }
-  }
-  for (const Twin& tw : twins)
-    if (tw.calibration->material.empty()) (tw.dynamic ? dynamic : models).push_back(tw.entry);
+  const Lineup u = truthCubeLineup(o, loader, data, contact, calculixProblem.empty());
   t.notes = {
       "Data: " + file + " (" + std::to_string(data.beads.size()) + " beads, " +
           std::to_string(data.strains.size()) +
@@ -654,7 +777,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
           " plate (sliding: its vertical displacement prescribed, the lateral free, --contact) "
           "moved down by strain x 80 mm; one compared instant per level. reference_fem and "
           "CalculiX solve the same " +
-          std::to_string(elements) +
+          std::to_string(femParams(o.quick)["elements"].get<long long>()) +
           "-target quadratic tet mesh: reference_fem with its default volumetric term at nu "
           "0.499 (mean dilatation, constant per element), and again with the volumetric term "
           "per quadrature point (volumetric = displacement, CalculiX's C3D10 formulation).",
@@ -665,110 +788,17 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
       "the mean outward lateral displacement of the outer columns' middle layers.",
       "For orientation, the issue's CalculiX figures from 8 x 8 x 8 20-node hexes: 0.60 / 0.80 "
       "mm (translation), 0.90 / 1.18 mm (bottom layer) at 5% / 12.5%."};
-  std::string untwinned;
-  for (const std::string& name : kOtherModels)
-    if (std::none_of(twins.begin(), twins.end(),
-                     [&](const Twin& tw) { return tw.entry["plugin"] == name; }) &&
-        std::none_of(absent.begin(), absent.end(),
-                     [&](const auto& a) { return a.first == name; }) &&
-        skippedTwins.find(name + "+cal") == std::string::npos)
-      appendTo(untwinned, name);
-  if (!twins.empty() && !untwinned.empty())
-    t.notes.push_back("No calibrated twin (no fit in calibrations/truth-cube/): " + untwinned +
-                      ".");
-  if (twins.empty()) {
-    t.notes.push_back(
-        "Not calibrated: every row is at the published material (calibrated = false); "
-        "calibrations/truth-cube/ holds none for these models.");
-  } else {
-    std::string files;
-    for (const Twin& tw : twins) appendTo(files, tw.calibration->file);
-    t.notes.push_back(
-        "Calibrated twins (+cal, calibrated = true): fitted to the beads of one level "
-        "(`deformbench calibrate --truth-cube LEVEL`, metric marker_rms: the bead RMS after the "
-        "translation registration), the level it was trained on marked \"train\", the others "
-        "\"validation\"; each row's note gives the fitted values. A fit of the organ's nu (E "
-        "does not move the beads when the plate's displacement is prescribed) runs in cases of "
-        "its own. Files: " +
-        files + ".");
-  }
-  if (!skippedTwins.empty())
-    t.notes.push_back(
-        "--quick leaves out the twins whose fit holds the organ's nu (they need "
-        "cases of their own; the full table runs them): " +
-        skippedTwins + ".");
-  if (!withCalculix) t.notes.push_back("CalculiX: not available: " + calculixProblem + ".");
-  // Sliding runs are other cases (a --resume never mixes them with the bonded ones).
-  const std::string suffix = contact == "sliding" ? "_sliding" : "";
-  const std::string id = "truth-cube/cube" + suffix;
-  t.cases.push_back({id, truthCubeScene(data, models, contact)});
-  const auto dynamicId = [&](size_t l, const std::string& tail) {
-    return "truth-cube/dynamic_" + std::to_string(l + 1) + tail + suffix;
-  };
-  // Where each model's markers at each level are: (case, index of the compared instant).
-  std::vector<Source> sources;
-  const auto addSource = [&](const ojson& m, const std::function<std::string(size_t)>& caseOf,
-                             bool perLevelScene) {
-    Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
-    for (const Twin& tw : twins) {
-      if (tw.entry["label"] != src.label) continue;
-      src.calibrated = true;
-      src.trainLevel = tw.calibration->truthCube.value("level", 0) - 1;
-      src.calibrationNote = fittedNote(*tw.calibration, contact);
-    }
-    for (size_t l = 0; l < data.strains.size(); ++l)
-      src.levels.emplace_back(caseOf(l), perLevelScene ? 0 : l);
-    sources.push_back(src);
-  };
-  for (const ojson& m : models)
-    addSource(
-        m, [&](size_t) { return id; }, false);
-  if (!dynamic.empty()) {
+  twinNotes(u, t.notes);
+  if (!calculixProblem.empty())
+    t.notes.push_back("CalculiX: not available: " + calculixProblem + ".");
+  if (!u.dynamic.empty())
     t.notes.push_back(
         "Dynamic models (their volume network where they have one, default parameters): one "
         "scene per level (scenes/truth-cube/dynamic_N.json, dt 1 ms), the plate moved over 1 s "
         "and held, compared once settled (\"compare_at\": \"equilibrium\", capped at " +
         formatG(dynamicCap(o.quick)) + " s).");
-    for (size_t l = 0; l < data.strains.size(); ++l)
-      t.cases.push_back({dynamicId(l, ""),
-                         truthCubeDynamicScene(data, l, dynamic, dynamicCap(o.quick), contact)});
-    for (const ojson& m : dynamic)
-      addSource(
-          m, [&](size_t l) { return dynamicId(l, ""); }, true);
-  }
-  // Twins of the organ's material: their own cases, the organ's material replaced.
-  for (const Twin& tw : twins) {
-    if (tw.calibration->material.empty()) continue;
-    const auto withMaterial = [&](ojson scene) {
-      for (const auto& [k, v] : tw.calibration->material.items())
-        scene["organ"]["material"][k] = v.get<double>();
-      return scene;
-    };
-    const std::string plugin = tw.entry["plugin"].get<std::string>();
-    if (!tw.dynamic) {
-      const std::string cid = "truth-cube/cube_cal_" + plugin + suffix;
-      t.cases.push_back({cid, withMaterial(truthCubeScene(data, {tw.entry}, contact))});
-      addSource(
-          tw.entry, [cid](size_t) { return cid; }, false);
-    } else {
-      for (size_t l = 0; l < data.strains.size(); ++l)
-        t.cases.push_back({dynamicId(l, "_cal_" + plugin),
-                           withMaterial(truthCubeDynamicScene(data, l, {tw.entry},
-                                                              dynamicCap(o.quick), contact))});
-      addSource(
-          tw.entry, [&](size_t l) { return dynamicId(l, "_cal_" + plugin); }, true);
-    }
-  }
-  // Each twin's rows follow its model's.
-  std::vector<std::string> order;
-  for (const Source& src : sources)
-    if (!src.calibrated) order.push_back(src.label);
-  const auto rank = [&order](const Source& src) {
-    const std::string base = src.calibrated ? src.label.substr(0, src.label.size() - 4) : src.label;
-    return std::find(order.begin(), order.end(), base) - order.begin();
-  };
-  std::stable_sort(sources.begin(), sources.end(),
-                   [&rank](const Source& a, const Source& b) { return rank(a) < rank(b); });
+  const std::vector<Source> sources = truthCubeCases(t, u, data, contact, o.quick);
+  const auto absent = u.absent;
   t.rows = [data, sources, absent, contact](const Results& res, const fs::path& dir) {
     return truthCubeRows(data, sources, absent, contact, res, dir);
   };
