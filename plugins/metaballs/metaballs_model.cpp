@@ -1,6 +1,7 @@
 #include "metaballs_model.h"
 
 #include <deform/sdk/contact.h>
+#include <deform/sdk/sliding_plate.h>
 #include "pbd_constraints.h"
 
 #include <Eigen/SVD>
@@ -274,23 +275,12 @@ void MetaballsModel::collectSliding(const StepInput& in) {
   const int K = m_skin.slots;
   for (const GraspInput& g : in.grasps) {
     if (!g.sliding()) continue;
-    const int axis = slideAxis(g);
-    if (axis < 0)
-      throw InputError("metaballs", "grasp of tool " + std::to_string(g.tool),
-                       "a sliding plate's normal must lie along x, y or z");
+    const SlidingPick pick = slidingPick(g, m_skin.numVertices, bonded, "metaballs");
+    const int axis = pick.axis;
+    const std::vector<int>& verts = pick.verts;
     if (m_sliding.size() <= count) m_sliding.emplace_back();
     SlidingSet& s = m_sliding[count++];
-    std::vector<int> verts;
-    std::vector<Real> targets;
-    for (size_t k = 0; k < g.vertices.size(); ++k) {
-      const int v = g.vertices[k];
-      if (v < 0 || v >= m_skin.numVertices || Eigen::Index(k) >= g.targets.rows() ||
-          std::binary_search(bonded.begin(), bonded.end(), v))
-        continue;
-      verts.push_back(v);
-      targets.push_back(g.targets(Eigen::Index(k), axis));
-    }
-    s.targets = Eigen::Map<const VecX>(targets.data(), Eigen::Index(targets.size()));
+    s.targets = pick.targets;
     if (verts == s.verts && axis == s.axis && !m_bondedChanged) continue;
     s.verts = verts;
     s.axis = axis;

@@ -1,6 +1,7 @@
 #include "particle_bem_model.h"
 
 #include <deform/sdk/contact.h>
+#include <deform/sdk/sliding_plate.h>
 #include "conforming_surface.h"
 #include "distance_field.h"
 #include "physics_points.h"
@@ -480,22 +481,11 @@ void ParticleBemModel::prescribeSliding(const StepInput& in) {
   std::sort(bonded.begin(), bonded.end());
   for (const GraspInput& g : in.grasps) {
     if (!g.sliding()) continue;
-    const int axis = slideAxis(g);
-    if (axis < 0)
-      throw InputError("particle_bem", "grasp of tool " + std::to_string(g.tool),
-                       "a sliding plate's normal must lie along x, y or z");
+    const SlidingPick pick = slidingPick(g, m_fineRest.rows(), bonded, "particle_bem");
+    const int axis = pick.axis;
+    const std::vector<int>& verts = pick.verts;
     if (m_sliding.size() <= count) m_sliding.emplace_back();
     SlidingSet& s = m_sliding[count++];
-    std::vector<int> verts;
-    std::vector<Real> targets;
-    for (size_t k = 0; k < g.vertices.size(); ++k) {
-      const int v = g.vertices[k];
-      if (v < 0 || v >= m_fineRest.rows() || Eigen::Index(k) >= g.targets.rows() ||
-          std::binary_search(bonded.begin(), bonded.end(), v))
-        continue;
-      verts.push_back(v);
-      targets.push_back(g.targets(Eigen::Index(k), axis));
-    }
     if (verts != s.verts || axis != s.axis || m_bondedChanged) {
       s.verts = verts;
       s.axis = axis;
@@ -518,7 +508,7 @@ void ParticleBemModel::prescribeSliding(const StepInput& in) {
                : m_guided ? MatX(Eigen::CompleteOrthogonalDecomposition<MatX>(Jc).pseudoInverse())
                           : dampedInverse(Jc);
     }
-    s.targets = Eigen::Map<const VecX>(targets.data(), Eigen::Index(targets.size()));
+    s.targets = pick.targets;
     // dx_C,a = J_C^+ (t_a - x_s,a), from the surface at the step's start.
     VecX gap(Eigen::Index(s.verts.size()));
     for (Eigen::Index r = 0; r < gap.size(); ++r)
