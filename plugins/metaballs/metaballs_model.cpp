@@ -219,14 +219,7 @@ PhaseTimes MetaballsModel::phaseTimes() const {
 }
 
 void MetaballsModel::collectGrasps(const StepInput& in) {
-  const bool anySliding = std::any_of(in.grasps.begin(), in.grasps.end(),
-                                      [](const GraspInput& g) { return g.sliding(); });
-  if (anySliding) {
-    m_bondedScratch.clear();
-    for (const GraspInput& g : in.grasps)
-      if (!g.sliding()) m_bondedScratch.push_back(g);
-  }
-  flattenGrasps(anySliding ? m_bondedScratch : in.grasps, m_skin.numVertices, m_graspVerts,
+  flattenGrasps(bondedGrasps(in.grasps, m_bondedScratch), m_skin.numVertices, m_graspVerts,
                 m_graspTargets);
   m_bondedChanged = m_graspVerts != m_mapVerts;
   if (m_graspVerts == m_mapVerts) return;

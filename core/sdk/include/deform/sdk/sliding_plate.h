@@ -11,6 +11,18 @@
 
 namespace deform {
 
+/// The bonded grasps of a step: `grasps` itself when none slides, else its bonded ones copied to
+/// scratch (kept by the model, so a step allocates only when a plate slides).
+inline const std::vector<GraspInput>& bondedGrasps(const std::vector<GraspInput>& grasps,
+                                                   std::vector<GraspInput>& scratch) {
+  if (std::none_of(grasps.begin(), grasps.end(), [](const GraspInput& g) { return g.sliding(); }))
+    return grasps;
+  scratch.clear();
+  for (const GraspInput& g : grasps)
+    if (!g.sliding()) scratch.push_back(g);
+  return scratch;
+}
+
 /// The vertices a sliding plate holds and their target coordinates along its axis.
 struct SlidingPick {
   int axis = -1;           ///< 0 x, 1 y, 2 z
