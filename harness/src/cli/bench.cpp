@@ -18,34 +18,20 @@ struct BenchArgs {
   int repeat = 3;
   int steps = 100;
   std::vector<std::string> only;
+
+  void declare(CLI::App* bench) {
+    bench->add_option("--out", common.out, "bench file to write (JSON)");
+    bench->add_option("--compare", compare, "OLD.json NEW.json: print ratios, exit 1 on slowdown")
+        ->expected(2);
+    bench->add_option("--threshold", threshold, "slowdown flagged above this fraction (0.25)")
+        ->check(CLI::NonNegativeNumber);
+    bench->add_option("--repeat", repeat, "runs per case (median taken)")
+        ->check(positiveValue(true));
+    bench->add_option("--steps", steps, "steps per run")->check(positiveValue(true));
+    bench->add_option("--only", only, "case id or plugin (repeatable)");
+    addCommon(bench, common, false);
+  }
 };
-
-int cmdBench(const BenchArgs& a);
-
-}  // namespace
-
-Verb addBench(CLI::App& app) {
-  auto args = std::make_shared<BenchArgs>();
-  BenchArgs& ba = *args;
-  CLI::App* bench = app.add_subcommand(
-      "bench", "time a fixed set of model x scene cases, or compare two such files");
-  bench->add_option("--out", ba.common.out, "bench file to write (JSON)");
-  bench->add_option("--compare", ba.compare, "OLD.json NEW.json: print ratios, exit 1 on slowdown")
-      ->expected(2);
-  bench->add_option("--threshold", ba.threshold, "slowdown flagged above this fraction (0.25)")
-      ->check(CLI::NonNegativeNumber);
-  bench->add_option("--repeat", ba.repeat, "runs per case (median taken)")
-      ->check(positiveValue(true));
-  bench->add_option("--steps", ba.steps, "steps per run")->check(positiveValue(true));
-  bench->add_option("--only", ba.only, "case id or plugin (repeatable)");
-  addCommon(bench, ba.common, false);
-  return {bench, [args](const std::vector<std::string>& pluginDirs) {
-            args->common.pluginDirs = pluginDirs;
-            return cmdBench(*args);
-          }};
-}
-
-namespace {
 
 int cmdBench(const BenchArgs& a) {
   if (!a.compare.empty()) {
@@ -74,5 +60,10 @@ int cmdBench(const BenchArgs& a) {
 }
 
 }  // namespace
+
+Verb addBench(CLI::App& app) {
+  return makeVerb<BenchArgs>(
+      app, "bench", "time a fixed set of model x scene cases, or compare two such files", cmdBench);
+}
 
 }  // namespace deform::harness::cli

@@ -23,58 +23,43 @@ struct CalibrateArgs {
   std::string truthCubeData, contact = "bonded";
   double timeout = 0;
   DispatchArgs dispatch;
+
+  void declare(CLI::App* calibrate) {
+    calibrate->add_option("scenes", train,
+                          "training scene files (with a reference, or measured marker positions)");
+    calibrate->add_option("--model", model, "plugin to calibrate")->required();
+    calibrate->add_option("--out", common.out, "output folder (calibration.json)")->required();
+    calibrate->add_option("--validate", validate, "held-out scene (repeatable)")
+        ->allow_extra_args(false);
+    calibrate->add_option(
+        "--metric", metric,
+        "rmse_all (default), rmse_50, loss_ratio, or marker_rms (against measured "
+        "markers; the default with --truth-cube)");
+    calibrate->add_option("--truth-cube", truthCubeLevel,
+                          "train on this compression level of the Truth Cube (1-based), validate "
+                          "on the others; metric marker_rms");
+    calibrate->add_option("--truth-cube-data", truthCubeData,
+                          "the bead file (default: data/truth-cube/uniaxial_positions.csv)");
+    calibrate->add_option("--contact", contact,
+                          "the Truth Cube's plate: bonded (default) or sliding");
+    calibrate
+        ->add_option("--material", material,
+                     "fit the organ's young or poisson too (repeatable; marker_rms only)")
+        ->allow_extra_args(false);
+    calibrate->add_option("--budget", budget, "trials at most (default 40)");
+    calibrate->add_option("--label", label, "free text kept in calibration.json");
+    calibrate
+        ->add_option("--param", params, "calibrate only this calibratable parameter (repeatable)")
+        ->allow_extra_args(false);
+    calibrate
+        ->add_option("--timeout", timeout,
+                     "seconds per model run, each in its own process "
+                     "(default 900)")
+        ->check(positiveValue(false));
+    addDispatch(calibrate, dispatch);
+    addCommon(calibrate, common, false);
+  }
 };
-
-int cmdCalibrate(const CalibrateArgs& a);
-
-}  // namespace
-
-Verb addCalibrate(CLI::App& app) {
-  auto args = std::make_shared<CalibrateArgs>();
-  CalibrateArgs& cal = *args;
-  CLI::App* calibrate =
-      app.add_subcommand("calibrate",
-                         "fit a model's calibratable parameters to the reference of training "
-                         "scenes, or to measured markers (--truth-cube)");
-  calibrate->add_option("scenes", cal.train,
-                        "training scene files (with a reference, or measured marker positions)");
-  calibrate->add_option("--model", cal.model, "plugin to calibrate")->required();
-  calibrate->add_option("--out", cal.common.out, "output folder (calibration.json)")->required();
-  calibrate->add_option("--validate", cal.validate, "held-out scene (repeatable)")
-      ->allow_extra_args(false);
-  calibrate->add_option("--metric", cal.metric,
-                        "rmse_all (default), rmse_50, loss_ratio, or marker_rms (against measured "
-                        "markers; the default with --truth-cube)");
-  calibrate->add_option("--truth-cube", cal.truthCubeLevel,
-                        "train on this compression level of the Truth Cube (1-based), validate "
-                        "on the others; metric marker_rms");
-  calibrate->add_option("--truth-cube-data", cal.truthCubeData,
-                        "the bead file (default: data/truth-cube/uniaxial_positions.csv)");
-  calibrate->add_option("--contact", cal.contact,
-                        "the Truth Cube's plate: bonded (default) or sliding");
-  calibrate
-      ->add_option("--material", cal.material,
-                   "fit the organ's young or poisson too (repeatable; marker_rms only)")
-      ->allow_extra_args(false);
-  calibrate->add_option("--budget", cal.budget, "trials at most (default 40)");
-  calibrate->add_option("--label", cal.label, "free text kept in calibration.json");
-  calibrate
-      ->add_option("--param", cal.params, "calibrate only this calibratable parameter (repeatable)")
-      ->allow_extra_args(false);
-  calibrate
-      ->add_option("--timeout", cal.timeout,
-                   "seconds per model run, each in its own process "
-                   "(default 900)")
-      ->check(positiveValue(false));
-  addDispatch(calibrate, cal.dispatch);
-  addCommon(calibrate, cal.common, false);
-  return {calibrate, [args](const std::vector<std::string>& pluginDirs) {
-            args->common.pluginDirs = pluginDirs;
-            return cmdCalibrate(*args);
-          }};
-}
-
-namespace {
 
 int cmdCalibrate(const CalibrateArgs& a) {
   PluginLoader loader(searchPath(a.common.pluginDirs));
@@ -150,5 +135,12 @@ int cmdCalibrate(const CalibrateArgs& a) {
 }
 
 }  // namespace
+
+Verb addCalibrate(CLI::App& app) {
+  return makeVerb<CalibrateArgs>(app, "calibrate",
+                                 "fit a model's calibratable parameters to the reference of "
+                                 "training scenes, or to measured markers (--truth-cube)",
+                                 cmdCalibrate);
+}
 
 }  // namespace deform::harness::cli

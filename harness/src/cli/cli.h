@@ -14,6 +14,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace deform::harness::cli {
@@ -46,6 +47,28 @@ Verb addConverge(CLI::App& app);
 Verb addVerify(CLI::App& app);
 Verb addWork(CLI::App& app);
 Verb addConformance(CLI::App& app);
+
+/// The verb `name` of the command line. Args holds its arguments and declares its options beside
+/// them (`void declare(CLI::App*)`); once parsed, Args receives the --plugin-dir folders (in
+/// `common.pluginDirs` or `pluginDirs`, where it has one) and run(args) runs the verb.
+/// A run that needs the parsed subcommand (which options were given) takes (Args&, const
+/// CLI::App&).
+template <class Args, class Run>
+Verb makeVerb(CLI::App& app, const std::string& name, const std::string& help, Run run) {
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(name, help);
+  args->declare(cmd);
+  return {cmd, [args, cmd, run](const std::vector<std::string>& pluginDirs) {
+            if constexpr (requires { args->common.pluginDirs; })
+              args->common.pluginDirs = pluginDirs;
+            else if constexpr (requires { args->pluginDirs; })
+              args->pluginDirs = pluginDirs;
+            if constexpr (std::is_invocable_v<Run, Args&, const CLI::App&>)
+              return run(*args, *cmd);
+            else
+              return run(*args);
+          }};
+}
 
 /// The command line as given, for the Slurm collect step (set in main()).
 extern std::vector<std::string> g_commandLine;
@@ -116,7 +139,7 @@ struct ChildArgs {
 };
 
 void addChildArgs(CLI::App* cmd, ChildArgs& c, const std::string& what);
-bool childArgsGiven(CLI::App* cmd);
+bool childArgsGiven(const CLI::App& cmd);
 
 /// The child-process options (nullopt: in this process) and the dispatcher of sweep / converge.
 std::optional<ChildCaseOptions> childOptions(const ChildArgs& c, PluginLoader& loader,

@@ -229,9 +229,9 @@ void addChildArgs(CLI::App* cmd, ChildArgs& c, const std::string& what) {
   addDispatch(cmd, c.dispatch);
 }
 
-bool childArgsGiven(CLI::App* cmd) {
+bool childArgsGiven(const CLI::App& cmd) {
   for (const char* o : {"--jobs", "--mpi", "--slurm", "--resume", "--timeout"})
-    if (cmd->get_option_no_throw(o) && cmd->count(o) > 0) return true;
+    if (cmd.get_option_no_throw(o) && cmd.count(o) > 0) return true;
   return false;
 }
 

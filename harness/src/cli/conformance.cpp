@@ -18,40 +18,27 @@ struct ConformanceArgs {
   std::string scenes;
   std::string cacheDir;
   bool noCache = false;
+  std::vector<std::string> pluginDirs;
+
+  void declare(CLI::App* conformance) {
+    conformance->add_option("--plugin", plugins, "plugin to check (repeatable; default: all)");
+    conformance->add_option("--model", models, "model to check (repeatable; default: all)");
+    conformance->add_option("--check", checks, "check to run (repeatable; default: all)");
+    conformance->add_option("--expect-fail", expectedFailures,
+                            "PLUGIN/CHECK or PLUGIN/MODEL/CHECK known to fail: reported xfail, "
+                            "and a failure if it passes (repeatable)");
+    conformance->add_option("--scenes", scenes,
+                            "folder of scenes for the 'scenes' check (default: the shipped ones)");
+    {
+      auto* cd = conformance->add_option("--cache-dir", cacheDir, "precomputation cache folder");
+      auto* nc = conformance->add_flag("--no-cache", noCache, "do not read or write the cache");
+      cd->excludes(nc);
+    }
+  }
 };
 
-int cmdConformance(const ConformanceArgs& a, const std::vector<std::string>& pluginDirs);
-
-}  // namespace
-
-Verb addConformance(CLI::App& app) {
-  auto args = std::make_shared<ConformanceArgs>();
-  ConformanceArgs& cf = *args;
-  CLI::App* conformance = app.add_subcommand(
-      "conformance",
-      "run the conformance checks on plugins (with --plugin-dir: the plugins in those folders); "
-      "one line per check, exit 0 only when none failed");
-  conformance->add_option("--plugin", cf.plugins, "plugin to check (repeatable; default: all)");
-  conformance->add_option("--model", cf.models, "model to check (repeatable; default: all)");
-  conformance->add_option("--check", cf.checks, "check to run (repeatable; default: all)");
-  conformance->add_option("--expect-fail", cf.expectedFailures,
-                          "PLUGIN/CHECK or PLUGIN/MODEL/CHECK known to fail: reported xfail, "
-                          "and a failure if it passes (repeatable)");
-  conformance->add_option("--scenes", cf.scenes,
-                          "folder of scenes for the 'scenes' check (default: the shipped ones)");
-  {
-    auto* cd = conformance->add_option("--cache-dir", cf.cacheDir, "precomputation cache folder");
-    auto* nc = conformance->add_flag("--no-cache", cf.noCache, "do not read or write the cache");
-    cd->excludes(nc);
-  }
-  return {conformance, [args](const std::vector<std::string>& pluginDirs) {
-            return cmdConformance(*args, pluginDirs);
-          }};
-}
-
-namespace {
-
-int cmdConformance(const ConformanceArgs& a, const std::vector<std::string>& pluginDirs) {
+int cmdConformance(const ConformanceArgs& a) {
+  const std::vector<std::string>& pluginDirs = a.pluginDirs;
   PluginLoader loader(searchPath(pluginDirs));
   ConformanceOptions o;
   o.plugins = a.plugins;
@@ -108,5 +95,13 @@ int cmdConformance(const ConformanceArgs& a, const std::vector<std::string>& plu
 }
 
 }  // namespace
+
+Verb addConformance(CLI::App& app) {
+  return makeVerb<ConformanceArgs>(
+      app, "conformance",
+      "run the conformance checks on plugins (with --plugin-dir: the plugins in those folders); "
+      "one line per check, exit 0 only when none failed",
+      cmdConformance);
+}
 
 }  // namespace deform::harness::cli

@@ -19,48 +19,38 @@ struct ConvergeArgs {
   double edgeLength = 0;
   bool ofReference = false;
   ChildArgs child;
+
+  void declare(CLI::App* converge) {
+    converge->add_option("scene", scene, "scene file with a reference")->required();
+    converge->add_option("--out", common.out, "output folder")->required();
+    converge
+        ->add_option("--edge-length", edgeLength,
+                     "coarsest level's edge length h in m (levels h, h/1.4, h/2; default: the "
+                     "reference's own)")
+        ->check(positiveValue(false));
+    converge
+        ->add_option("--elements", elements,
+                     "coarsest level's h as the edge length of about this many tets")
+        ->check(positiveValue(true));
+    converge->add_flag(
+        "--of-reference", ofReference,
+        "levels 2h, 1.4h and h of the reference's own size h: the estimate is the "
+        "error of the reference as the scene runs it (cached; `run` then prints it)");
+    addCommon(converge, common, false);
+    addChildArgs(converge, child, "level");
+  }
 };
 
-int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements,
-                double edgeLength, bool ofReference, const ChildArgs& ch);
-
-}  // namespace
-
-Verb addConverge(CLI::App& app) {
-  auto args = std::make_shared<ConvergeArgs>();
-  CLI::App* converge = app.add_subcommand(
-      "converge", "is the scene's reference converged? three mesh sizes + Richardson");
-  converge->add_option("scene", args->scene, "scene file with a reference")->required();
-  converge->add_option("--out", args->common.out, "output folder")->required();
-  converge
-      ->add_option("--edge-length", args->edgeLength,
-                   "coarsest level's edge length h in m (levels h, h/1.4, h/2; default: the "
-                   "reference's own)")
-      ->check(positiveValue(false));
-  converge
-      ->add_option("--elements", args->elements,
-                   "coarsest level's h as the edge length of about this many tets")
-      ->check(positiveValue(true));
-  converge->add_flag("--of-reference", args->ofReference,
-                     "levels 2h, 1.4h and h of the reference's own size h: the estimate is the "
-                     "error of the reference as the scene runs it (cached; `run` then prints it)");
-  addCommon(converge, args->common, false);
-  addChildArgs(converge, args->child, "level");
-  return {converge, [args, converge](const std::vector<std::string>& pluginDirs) {
-            ConvergeArgs& a = *args;
-            a.common.pluginDirs = pluginDirs;
-            a.child.given = childArgsGiven(converge);
-            if (a.elements > 0 && a.edgeLength > 0)
-              throw InputError("converge", "--elements",
-                               "give --elements or --edge-length, not both");
-            return cmdConverge(a.scene, a.common, a.elements, a.edgeLength, a.ofReference, a.child);
-          }};
-}
-
-namespace {
-
-int cmdConverge(const std::string& scene, const CommonArgs& a, long long elements,
-                double edgeLength, bool ofReference, const ChildArgs& ch) {
+int cmdConverge(ConvergeArgs& args, const CLI::App& cmd) {
+  args.child.given = childArgsGiven(cmd);
+  if (args.elements > 0 && args.edgeLength > 0)
+    throw InputError("converge", "--elements", "give --elements or --edge-length, not both");
+  const CommonArgs& a = args.common;
+  const ChildArgs& ch = args.child;
+  const std::string& scene = args.scene;
+  const long long elements = args.elements;
+  const double edgeLength = args.edgeLength;
+  const bool ofReference = args.ofReference;
   PluginLoader loader(searchPath(a.pluginDirs));
   ConvergeOptions o = ofReference ? referenceCheckOptions() : ConvergeOptions();
   o.outDir = makeOutDir(a.out);
@@ -137,5 +127,11 @@ int cmdConverge(const std::string& scene, const CommonArgs& a, long long element
 }
 
 }  // namespace
+
+Verb addConverge(CLI::App& app) {
+  return makeVerb<ConvergeArgs>(app, "converge",
+                                "is the scene's reference converged? three mesh sizes + Richardson",
+                                cmdConverge);
+}
 
 }  // namespace deform::harness::cli

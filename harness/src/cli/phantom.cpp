@@ -16,36 +16,26 @@ struct PhantomArgs {
   std::string name, out;
   double resolution = 1.0;
   bool list = false;
+
+  void declare(CLI::App* phantom) {
+    phantom->add_option("name", name, "phantom name (see --list)");
+    phantom->add_option("--out", out, "output mesh file (.obj, .off, .stl, .vtp)");
+    phantom->add_option("--resolution", resolution, "vertex-count scale (1 = default)")
+        ->check(positiveValue(false));
+    phantom->add_flag("--list", list, "list the phantoms");
+  }
 };
 
-int cmdPhantom(const std::string& name, const std::string& out, double resolution, bool list);
-
-}  // namespace
-
-Verb addPhantom(CLI::App& app) {
-  auto args = std::make_shared<PhantomArgs>();
-  CLI::App* phantom = app.add_subcommand("phantom", "write a built-in organ phantom mesh");
-  phantom->add_option("name", args->name, "phantom name (see --list)");
-  phantom->add_option("--out", args->out, "output mesh file (.obj, .off, .stl, .vtp)");
-  phantom->add_option("--resolution", args->resolution, "vertex-count scale (1 = default)")
-      ->check(positiveValue(false));
-  phantom->add_flag("--list", args->list, "list the phantoms");
-  return {phantom, [args](const std::vector<std::string>&) {
-            return cmdPhantom(args->name, args->out, args->resolution, args->list);
-          }};
-}
-
-namespace {
-
-int cmdPhantom(const std::string& name, const std::string& out, double resolution, bool list) {
-  if (list) {
+int cmdPhantom(const PhantomArgs& a) {
+  const std::string &name = a.name, &out = a.out;
+  if (a.list) {
     for (const std::string& n : phantomNames()) std::cout << phantomDescription(n) << "\n";
     return 0;
   }
   if (name.empty())
     throw InputError("phantom", "", "name a phantom (see deformbench phantom --list)");
   if (out.empty()) throw InputError("phantom", "", "--out FILE is required");
-  const SurfaceMesh mesh = makePhantom(name, resolution);
+  const SurfaceMesh mesh = makePhantom(name, a.resolution);
   std::string ext = fs::path(out).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return std::tolower(c); });
@@ -66,5 +56,9 @@ int cmdPhantom(const std::string& name, const std::string& out, double resolutio
 }
 
 }  // namespace
+
+Verb addPhantom(CLI::App& app) {
+  return makeVerb<PhantomArgs>(app, "phantom", "write a built-in organ phantom mesh", cmdPhantom);
+}
 
 }  // namespace deform::harness::cli

@@ -13,22 +13,10 @@ namespace {
 
 struct PluginsArgs {
   bool json = false;
+  std::vector<std::string> pluginDirs;
+
+  void declare(CLI::App* plugins) { plugins->add_flag("--json", json, "print JSON"); }
 };
-
-int cmdPlugins(bool asJson, const std::vector<std::string>& pluginDirs);
-
-}  // namespace
-
-Verb addPlugins(CLI::App& app) {
-  auto args = std::make_shared<PluginsArgs>();
-  CLI::App* plugins = app.add_subcommand("plugins", "list every plugin found, with its parameters");
-  plugins->add_flag("--json", args->json, "print JSON");
-  return {plugins, [args](const std::vector<std::string>& pluginDirs) {
-            return cmdPlugins(args->json, pluginDirs);
-          }};
-}
-
-namespace {
 
 std::string valueText(const json& v) {
   if (v.is_null()) return "";
@@ -38,8 +26,8 @@ std::string valueText(const json& v) {
 
 // ---------------------------------------------------------------------------------- plugins
 
-int cmdPlugins(bool asJson, const std::vector<std::string>& pluginDirs) {
-  PluginLoader loader(searchPath(pluginDirs));
+int cmdPlugins(const PluginsArgs& a) {
+  PluginLoader loader(searchPath(a.pluginDirs));
   json out = json::array();
   std::vector<std::string> failures;
   for (const std::string& name : loader.discover()) {
@@ -66,7 +54,7 @@ int cmdPlugins(bool asJson, const std::vector<std::string>& pluginDirs) {
     }
     out.push_back(entry);
   }
-  if (asJson) {
+  if (a.json) {
     std::cout << out.dump(2) << "\n";
   } else {
     if (out.empty()) {
@@ -123,5 +111,10 @@ int cmdPlugins(bool asJson, const std::vector<std::string>& pluginDirs) {
 }
 
 }  // namespace
+
+Verb addPlugins(CLI::App& app) {
+  return makeVerb<PluginsArgs>(app, "plugins", "list every plugin found, with its parameters",
+                               cmdPlugins);
+}
 
 }  // namespace deform::harness::cli

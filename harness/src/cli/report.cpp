@@ -11,25 +11,15 @@ namespace {
 
 struct ReportArgs {
   std::string dir, out;
+
+  void declare(CLI::App* report) {
+    report->add_option("dir", dir, "folder")->required();
+    report->add_option("--out", out, "HTML file (default DIR/report.html)");
+  }
 };
 
-int cmdReport(const std::string& dir, const std::string& out);
-
-}  // namespace
-
-Verb addReport(CLI::App& app) {
-  auto args = std::make_shared<ReportArgs>();
-  CLI::App* report = app.add_subcommand(
-      "report", "a self-contained HTML report of a results, tables, sweep or stability folder");
-  report->add_option("dir", args->dir, "folder")->required();
-  report->add_option("--out", args->out, "HTML file (default DIR/report.html)");
-  return {report,
-          [args](const std::vector<std::string>&) { return cmdReport(args->dir, args->out); }};
-}
-
-namespace {
-
-int cmdReport(const std::string& dir, const std::string& out) {
+int cmdReport(const ReportArgs& a) {
+  const std::string &dir = a.dir, &out = a.out;
   if (!fs::is_directory(dir)) throw InputError(dir, "", "not a folder");
   const std::string html = out.empty() ? (fs::path(dir) / "report.html").string() : out;
   const ScriptResult r = runScript("report.py", {dir, html});
@@ -42,5 +32,11 @@ int cmdReport(const std::string& dir, const std::string& out) {
 }
 
 }  // namespace
+
+Verb addReport(CLI::App& app) {
+  return makeVerb<ReportArgs>(
+      app, "report", "a self-contained HTML report of a results, tables, sweep or stability folder",
+      cmdReport);
+}
 
 }  // namespace deform::harness::cli

@@ -30,59 +30,46 @@ struct RunArgs {
   bool reuseModelSolves = false;
   bool writeCompared = false;
   bool inProcess = false;
+
+  void declare(CLI::App* run) {
+    run->add_option("scene", scene, "scene file (JSON)")->required();
+    run->add_option("--out", out, "output folder")->required();
+    run->add_flag(
+        "--explain", explain,
+        "say which plugins were loaded, which models built, cache use and what was skipped");
+    run->add_option("--only", only,
+                    "run only this model (label, model or plugin name; repeatable)");
+    run->add_flag("--no-reference", noReference, "do not run the scene's reference");
+    auto* cacheOpt = run->add_option("--cache-dir", cacheDir, "precomputation cache folder");
+    auto* noCacheOpt = run->add_flag("--no-cache", noCache, "do not read or write the cache");
+    cacheOpt->excludes(noCacheOpt);
+    run->add_option("--steps", steps, "stop every run after this many steps (quick tries)")
+        ->check(positiveValue(true));
+    run->add_option("--calibration", calibrations,
+                    "calibration.json of `deformbench calibrate`: its model takes those parameters "
+                    "where the scene writes none (repeatable, one file per model and organ; "
+                    "'shipped': the project's own, for the scene's organ)")
+        ->allow_extra_args(false);
+    run->add_flag("--calibrated-twins", calibratedTwins,
+                  "with --calibration: each calibrated model runs at the scene's parameters and "
+                  "calibrated (LABEL+cal), side by side");
+    run->add_flag("--reuse-reference", reuseReference,
+                  "read the reference from the cache when an earlier run with this flag solved "
+                  "the same problem (calibration trials, the tables; its timings are that run's)")
+        ->group("");
+    run->add_flag("--reuse-model-solves", reuseModelSolves,
+                  "with --reuse-reference: quasi-static models too (the tables' reference checks)")
+        ->group("");
+    run->add_flag("--write-compared", writeCompared,
+                  "also write each run's surface at its last compared instant (converge's levels)")
+        ->group("");
+    run->add_flag("--in-process", inProcess,
+                  "run the models in this process (a crash of one ends the command; debuggers)")
+        ->group("");
+    run->add_flag("--strict", strict,
+                  "exit 1 when a model failed (one stderr line each; results.json still written)");
+  }
 };
-
-int cmdRun(const RunArgs& a);
-
-}  // namespace
-
-Verb addRun(CLI::App& app) {
-  auto args = std::make_shared<RunArgs>();
-  RunArgs& ra = *args;
-  CLI::App* run = app.add_subcommand("run", "run every model of a scene and write results.json");
-  run->add_option("scene", ra.scene, "scene file (JSON)")->required();
-  run->add_option("--out", ra.out, "output folder")->required();
-  run->add_flag(
-      "--explain", ra.explain,
-      "say which plugins were loaded, which models built, cache use and what was skipped");
-  run->add_option("--only", ra.only,
-                  "run only this model (label, model or plugin name; repeatable)");
-  run->add_flag("--no-reference", ra.noReference, "do not run the scene's reference");
-  auto* cacheOpt = run->add_option("--cache-dir", ra.cacheDir, "precomputation cache folder");
-  auto* noCacheOpt = run->add_flag("--no-cache", ra.noCache, "do not read or write the cache");
-  cacheOpt->excludes(noCacheOpt);
-  run->add_option("--steps", ra.steps, "stop every run after this many steps (quick tries)")
-      ->check(positiveValue(true));
-  run->add_option("--calibration", ra.calibrations,
-                  "calibration.json of `deformbench calibrate`: its model takes those parameters "
-                  "where the scene writes none (repeatable, one file per model and organ; "
-                  "'shipped': the project's own, for the scene's organ)")
-      ->allow_extra_args(false);
-  run->add_flag("--calibrated-twins", ra.calibratedTwins,
-                "with --calibration: each calibrated model runs at the scene's parameters and "
-                "calibrated (LABEL+cal), side by side");
-  run->add_flag("--reuse-reference", ra.reuseReference,
-                "read the reference from the cache when an earlier run with this flag solved "
-                "the same problem (calibration trials, the tables; its timings are that run's)")
-      ->group("");
-  run->add_flag("--reuse-model-solves", ra.reuseModelSolves,
-                "with --reuse-reference: quasi-static models too (the tables' reference checks)")
-      ->group("");
-  run->add_flag("--write-compared", ra.writeCompared,
-                "also write each run's surface at its last compared instant (converge's levels)")
-      ->group("");
-  run->add_flag("--in-process", ra.inProcess,
-                "run the models in this process (a crash of one ends the command; debuggers)")
-      ->group("");
-  run->add_flag("--strict", ra.strict,
-                "exit 1 when a model failed (one stderr line each; results.json still written)");
-  return {run, [args](const std::vector<std::string>& pluginDirs) {
-            args->pluginDirs = pluginDirs;
-            return cmdRun(*args);
-          }};
-}
-
-namespace {
 
 void printTable(const BenchmarkResult& r) {
   const bool anyError = std::any_of(r.runs.begin(), r.runs.end(),
@@ -232,5 +219,9 @@ int cmdRun(const RunArgs& a) {
 }
 
 }  // namespace
+
+Verb addRun(CLI::App& app) {
+  return makeVerb<RunArgs>(app, "run", "run every model of a scene and write results.json", cmdRun);
+}
 
 }  // namespace deform::harness::cli

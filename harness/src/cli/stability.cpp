@@ -20,36 +20,22 @@ struct StabilityArgs {
   double timeout = 0;
   DispatchArgs dispatch;
   bool noPlot = false;
+
+  void declare(CLI::App* stability) {
+    stability->add_option("--out", common.out, "output folder")->required();
+    stability->add_flag("--resume", resume,
+                        "skip the cases already finished in --out (with the same scenes)");
+    stability->add_flag("--retry-failed", retryFailed,
+                        "with --resume (implied): run the cases that failed again");
+    stability->add_option("--model", models, "plugin to test (repeatable; default: all found)");
+    stability->add_option("--case", cases, "case id to run (repeatable; default: the set)");
+    stability->add_option("--timeout", timeout, "seconds per case (default 120, 60 with --quick)")
+        ->check(positiveValue(false));
+    addDispatch(stability, dispatch);
+    stability->add_flag("--no-plot", noPlot, "write the data only");
+    addCommon(stability, common, true);
+  }
 };
-
-int cmdStability(const StabilityArgs& a);
-
-}  // namespace
-
-Verb addStability(CLI::App& app) {
-  auto args = std::make_shared<StabilityArgs>();
-  StabilityArgs& st = *args;
-  CLI::App* stability = app.add_subcommand(
-      "stability", "every model over stiff and extreme cases, each in its own process");
-  stability->add_option("--out", st.common.out, "output folder")->required();
-  stability->add_flag("--resume", st.resume,
-                      "skip the cases already finished in --out (with the same scenes)");
-  stability->add_flag("--retry-failed", st.retryFailed,
-                      "with --resume (implied): run the cases that failed again");
-  stability->add_option("--model", st.models, "plugin to test (repeatable; default: all found)");
-  stability->add_option("--case", st.cases, "case id to run (repeatable; default: the set)");
-  stability->add_option("--timeout", st.timeout, "seconds per case (default 120, 60 with --quick)")
-      ->check(positiveValue(false));
-  addDispatch(stability, st.dispatch);
-  stability->add_flag("--no-plot", st.noPlot, "write the data only");
-  addCommon(stability, st.common, true);
-  return {stability, [args](const std::vector<std::string>& pluginDirs) {
-            args->common.pluginDirs = pluginDirs;
-            return cmdStability(*args);
-          }};
-}
-
-namespace {
 
 int cmdStability(const StabilityArgs& a) {
   for (const std::string& m : a.models) requirePluginName("--model", m);
@@ -94,5 +80,11 @@ int cmdStability(const StabilityArgs& a) {
 }
 
 }  // namespace
+
+Verb addStability(CLI::App& app) {
+  return makeVerb<StabilityArgs>(
+      app, "stability", "every model over stiff and extreme cases, each in its own process",
+      cmdStability);
+}
 
 }  // namespace deform::harness::cli

@@ -26,46 +26,31 @@ struct SweepArgs {
   int calibrateBudget = 12;
   std::string calibrateMetric = "rmse_50";
   ChildArgs child;
+
+  void declare(CLI::App* sweep) {
+    sweep->add_option("scene", scene, "scene file with a reference")->required();
+    sweep->add_option("--out", common.out, "output folder")->required();
+    sweep->add_flag("--no-plot", noPlot, "write the data only");
+    sweep
+        ->add_option("--calibration", calibrations,
+                     "calibration.json: its model is swept at its defaults and calibrated "
+                     "(repeatable)")
+        ->allow_extra_args(false);
+    sweep->add_flag("--calibrate", calibrate,
+                    "fit every point's calibratable parameters on the scene and run each point "
+                    "once more at its fit (+cal)");
+    sweep->add_option("--calibrate-budget", calibrateBudget,
+                      "--calibrate: trials per point (default 12)");
+    sweep->add_option("--calibrate-metric", calibrateMetric,
+                      "--calibrate: rmse_50 (default, the front's), rmse_all or loss_ratio");
+    sweep->add_flag("--explain", common.explain, "say what was loaded, built, cached, skipped");
+    addCommon(sweep, common, true);
+    addChildArgs(sweep, child, "point");
+  }
 };
 
-int cmdSweep(const SweepArgs& args);
-
-}  // namespace
-
-Verb addSweep(CLI::App& app) {
-  auto args = std::make_shared<SweepArgs>();
-  CLI::App* sweep = app.add_subcommand(
-      "sweep",
-      "error against run time: each model over its resolution and solver effort, with a plot");
-  sweep->add_option("scene", args->scene, "scene file with a reference")->required();
-  sweep->add_option("--out", args->common.out, "output folder")->required();
-  sweep->add_flag("--no-plot", args->noPlot, "write the data only");
-  sweep
-      ->add_option("--calibration", args->calibrations,
-                   "calibration.json: its model is swept at its defaults and calibrated "
-                   "(repeatable)")
-      ->allow_extra_args(false);
-  sweep->add_flag("--calibrate", args->calibrate,
-                  "fit every point's calibratable parameters on the scene and run each point "
-                  "once more at its fit (+cal)");
-  sweep->add_option("--calibrate-budget", args->calibrateBudget,
-                    "--calibrate: trials per point (default 12)");
-  sweep->add_option("--calibrate-metric", args->calibrateMetric,
-                    "--calibrate: rmse_50 (default, the front's), rmse_all or loss_ratio");
-  sweep->add_flag("--explain", args->common.explain, "say what was loaded, built, cached, skipped");
-  addCommon(sweep, args->common, true);
-  addChildArgs(sweep, args->child, "point");
-  return {sweep, [args, sweep](const std::vector<std::string>& pluginDirs) {
-            SweepArgs& a = *args;
-            a.common.pluginDirs = pluginDirs;
-            a.child.given = childArgsGiven(sweep);
-            return cmdSweep(a);
-          }};
-}
-
-namespace {
-
-int cmdSweep(const SweepArgs& args) {
+int cmdSweep(SweepArgs& args, const CLI::App& cmd) {
+  args.child.given = childArgsGiven(cmd);
   const CommonArgs& a = args.common;
   const ChildArgs& ch = args.child;
   const std::string& scene = args.scene;
@@ -138,5 +123,12 @@ int cmdSweep(const SweepArgs& args) {
 }
 
 }  // namespace
+
+Verb addSweep(CLI::App& app) {
+  return makeVerb<SweepArgs>(
+      app, "sweep",
+      "error against run time: each model over its resolution and solver effort, with a plot",
+      cmdSweep);
+}
 
 }  // namespace deform::harness::cli

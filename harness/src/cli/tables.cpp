@@ -27,69 +27,53 @@ struct TablesArgs {
   std::string truthCubeContact = "bonded";
   DispatchArgs dispatch;
   std::vector<std::string> calibrations;
+
+  void declare(CLI::App* tables) {
+    tables->add_option("name", names, "table name(s) or all")->required();
+    tables->add_option("--out", common.out, "output folder")->required();
+    tables
+        ->add_option(
+            "--reference-elements", referenceElements,
+            "target tets of the reference FEM, quadratic (default 20000; 4000 with --quick)")
+        ->check(positiveValue(true));
+    tables->add_flag("--no-reference-check", noReferenceCheck,
+                     "skip the convergence study of each table's reference (three solves at 2, "
+                     "1.4 and 1 x its edge length; cached)");
+    tables->add_flag("--surface-baselines", surfaceBaselines,
+                     "hybrid tables: PBD and mass-spring on the organ's surface mesh alone, as the "
+                     "paper ran them (default: on its volume, network = volume)");
+    tables->add_option(
+        "--data", truthCubeData,
+        "truth-cube: a bead file of the layout of data/truth-cube/uniaxial_positions.csv "
+        "(default: that file)");
+    tables
+        ->add_option("--contact", truthCubeContact,
+                     "truth-cube: the plate's contact, bonded (default) or sliding (the normal "
+                     "displacement prescribed, the tangential free: a lubricated plate)")
+        ->check(CLI::IsMember({"bonded", "sliding"}));
+    tables->add_flag("--explain", common.explain,
+                     "say what each case loaded, built, cached, skipped");
+    tables
+        ->add_option("--timeout", timeout,
+                     "seconds per case, each case running in its own process (default 900)")
+        ->check(positiveValue(false));
+    auto* tablesResume =
+        tables->add_flag("--resume", resume, "reuse the cases already finished in --out");
+    tables
+        ->add_flag("--retry-failed", retryFailed,
+                   "with --resume: run the cases with a failed run (crash, timeout) again")
+        ->needs(tablesResume);
+    tables->add_flag("--in-process", inProcess,
+                     "run the cases in this process (no time limit, a crash ends the command)");
+    addCommon(tables, common, true);
+    addDispatch(tables, dispatch);
+    tables
+        ->add_option("--calibration", calibrations,
+                     "calibration.json: its model runs at its defaults and calibrated in every "
+                     "case, and the table 'calibration' shows both (repeatable)")
+        ->allow_extra_args(false);
+  }
 };
-
-int cmdTables(const TablesArgs& ta);
-
-}  // namespace
-
-Verb addTables(CLI::App& app) {
-  auto args = std::make_shared<TablesArgs>();
-  TablesArgs& ta = *args;
-  CLI::App* tables = app.add_subcommand(
-      "tables",
-      "regenerate the papers' tables (metaballs-construction, method-comparison, "
-      "bem-timing, bem-accuracy, hybrid-accuracy, hybrid-timing, verification, truth-cube, "
-      "or all)");
-  tables->add_option("name", ta.names, "table name(s) or all")->required();
-  tables->add_option("--out", ta.common.out, "output folder")->required();
-  tables
-      ->add_option("--reference-elements", ta.referenceElements,
-                   "target tets of the reference FEM, quadratic (default 20000; 4000 with --quick)")
-      ->check(positiveValue(true));
-  tables->add_flag("--no-reference-check", ta.noReferenceCheck,
-                   "skip the convergence study of each table's reference (three solves at 2, "
-                   "1.4 and 1 x its edge length; cached)");
-  tables->add_flag("--surface-baselines", ta.surfaceBaselines,
-                   "hybrid tables: PBD and mass-spring on the organ's surface mesh alone, as the "
-                   "paper ran them (default: on its volume, network = volume)");
-  tables->add_option(
-      "--data", ta.truthCubeData,
-      "truth-cube: a bead file of the layout of data/truth-cube/uniaxial_positions.csv "
-      "(default: that file)");
-  tables
-      ->add_option("--contact", ta.truthCubeContact,
-                   "truth-cube: the plate's contact, bonded (default) or sliding (the normal "
-                   "displacement prescribed, the tangential free: a lubricated plate)")
-      ->check(CLI::IsMember({"bonded", "sliding"}));
-  tables->add_flag("--explain", ta.common.explain,
-                   "say what each case loaded, built, cached, skipped");
-  tables
-      ->add_option("--timeout", ta.timeout,
-                   "seconds per case, each case running in its own process (default 900)")
-      ->check(positiveValue(false));
-  auto* tablesResume =
-      tables->add_flag("--resume", ta.resume, "reuse the cases already finished in --out");
-  tables
-      ->add_flag("--retry-failed", ta.retryFailed,
-                 "with --resume: run the cases with a failed run (crash, timeout) again")
-      ->needs(tablesResume);
-  tables->add_flag("--in-process", ta.inProcess,
-                   "run the cases in this process (no time limit, a crash ends the command)");
-  addCommon(tables, ta.common, true);
-  addDispatch(tables, ta.dispatch);
-  tables
-      ->add_option("--calibration", ta.calibrations,
-                   "calibration.json: its model runs at its defaults and calibrated in every "
-                   "case, and the table 'calibration' shows both (repeatable)")
-      ->allow_extra_args(false);
-  return {tables, [args](const std::vector<std::string>& pluginDirs) {
-            args->common.pluginDirs = pluginDirs;
-            return cmdTables(*args);
-          }};
-}
-
-namespace {
 
 int cmdTables(const TablesArgs& ta) {
   const CommonArgs& a = ta.common;
@@ -140,5 +124,13 @@ int cmdTables(const TablesArgs& ta) {
 }
 
 }  // namespace
+
+Verb addTables(CLI::App& app) {
+  return makeVerb<TablesArgs>(
+      app, "tables",
+      "regenerate the papers' tables (metaballs-construction, method-comparison, bem-timing, "
+      "bem-accuracy, hybrid-accuracy, hybrid-timing, verification, truth-cube, or all)",
+      cmdTables);
+}
 
 }  // namespace deform::harness::cli

@@ -15,36 +15,23 @@ struct VerifyArgs {
   std::string scene;
   CommonArgs common;
   int steps = -1;
+
+  void declare(CLI::App* verify) {
+    verify->add_option("scene", scene, "scene file with a reference")->required();
+    verify->add_option("--out", common.out, "output folder (verify.json)")->required();
+    verify->add_option("--steps", steps, "stop after this many steps")->check(CLI::PositiveNumber);
+    addCommon(verify, common, false);
+  }
 };
 
-int cmdVerify(const std::string& scene, const CommonArgs& a, int steps);
-
-}  // namespace
-
-Verb addVerify(CLI::App& app) {
-  auto args = std::make_shared<VerifyArgs>();
-  CLI::App* verify = app.add_subcommand(
-      "verify", "the scene's reference solved by reference_fem and by CalculiX (ccx) on one mesh");
-  verify->add_option("scene", args->scene, "scene file with a reference")->required();
-  verify->add_option("--out", args->common.out, "output folder (verify.json)")->required();
-  verify->add_option("--steps", args->steps, "stop after this many steps")
-      ->check(CLI::PositiveNumber);
-  addCommon(verify, args->common, false);
-  return {verify, [args](const std::vector<std::string>& pluginDirs) {
-            args->common.pluginDirs = pluginDirs;
-            return cmdVerify(args->scene, args->common, args->steps);
-          }};
-}
-
-namespace {
-
-int cmdVerify(const std::string& scene, const CommonArgs& a, int steps) {
+int cmdVerify(const VerifyArgs& v) {
+  const CommonArgs& a = v.common;
   PluginLoader loader(searchPath(a.pluginDirs));
   VerifyOptions o;
   o.outDir = makeOutDir(a.out);
   o.cacheDir = cacheChoice(a);
-  o.maxSteps = steps;
-  const VerifyResult r = runVerify(scene, loader, o);
+  o.maxSteps = v.steps;
+  const VerifyResult r = runVerify(v.scene, loader, o);
   const auto times = [](const VerifySolverTimes& t) {
     return fmt(t.wallS) + " s wall, " + fmt(t.cpuS) + " s CPU";
   };
@@ -71,5 +58,11 @@ int cmdVerify(const std::string& scene, const CommonArgs& a, int steps) {
 }
 
 }  // namespace
+
+Verb addVerify(CLI::App& app) {
+  return makeVerb<VerifyArgs>(
+      app, "verify",
+      "the scene's reference solved by reference_fem and by CalculiX (ccx) on one mesh", cmdVerify);
+}
 
 }  // namespace deform::harness::cli

@@ -10,22 +10,12 @@ namespace {
 
 struct WorkArgs {
   std::vector<std::string> tasks;
+
+  void declare(CLI::App* work) {
+    work->group("");  // internal: the Slurm array's command
+    work->add_option("task", tasks, "task file (JSON)")->required();
+  }
 };
-
-int cmdWork(const WorkArgs& a);
-
-}  // namespace
-
-Verb addWork(CLI::App& app) {
-  auto args = std::make_shared<WorkArgs>();
-  CLI::App* work =
-      app.add_subcommand("work", "run task files written by --slurm (one array task each)");
-  work->group("");  // internal: the Slurm array's command
-  work->add_option("task", args->tasks, "task file (JSON)")->required();
-  return {work, [args](const std::vector<std::string>&) { return cmdWork(*args); }};
-}
-
-namespace {
 
 int cmdWork(const WorkArgs& a) {
   for (const std::string& f : a.tasks) {
@@ -47,5 +37,10 @@ int cmdWork(const WorkArgs& a) {
 }
 
 }  // namespace
+
+Verb addWork(CLI::App& app) {
+  return makeVerb<WorkArgs>(app, "work", "run task files written by --slurm (one array task each)",
+                            cmdWork);
+}
 
 }  // namespace deform::harness::cli
