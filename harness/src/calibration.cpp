@@ -14,6 +14,7 @@
 #include <nlopt.hpp>
 #include <set>
 #include <sstream>
+#include <utility>
 
 namespace deform::harness {
 
@@ -160,32 +161,29 @@ OptimiserResult minimiseInBox(
 
 // ------------------------------------------------------------------------ metrics and files
 
+namespace {
+
+/// Each metric and its name in calibration.json and on the command line.
+constexpr std::pair<CalibMetric, const char*> kMetricNames[] = {
+    {CalibMetric::RmseAll, "rmse_all"},
+    {CalibMetric::Rmse50, "rmse_50"},
+    {CalibMetric::LossRatio, "loss_ratio"},
+    {CalibMetric::MarkerRms, "marker_rms"}};
+
+}  // namespace
+
 bool calibMetricFromName(const std::string& name, CalibMetric& out) {
-  if (name == "rmse_all") {
-    out = CalibMetric::RmseAll;
-  } else if (name == "rmse_50") {
-    out = CalibMetric::Rmse50;
-  } else if (name == "loss_ratio") {
-    out = CalibMetric::LossRatio;
-  } else if (name == "marker_rms") {
-    out = CalibMetric::MarkerRms;
-  } else {
-    return false;
-  }
-  return true;
+  for (const auto& [metric, text] : kMetricNames)
+    if (name == text) {
+      out = metric;
+      return true;
+    }
+  return false;
 }
 
 const char* calibMetricName(CalibMetric m) {
-  switch (m) {
-    case CalibMetric::RmseAll:
-      return "rmse_all";
-    case CalibMetric::Rmse50:
-      return "rmse_50";
-    case CalibMetric::LossRatio:
-      return "loss_ratio";
-    case CalibMetric::MarkerRms:
-      return "marker_rms";
-  }
+  for (const auto& [metric, text] : kMetricNames)
+    if (m == metric) return text;
   return "?";
 }
 

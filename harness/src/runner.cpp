@@ -313,7 +313,7 @@ void startRecord(const Scene& scene, int n, RunRecord& rec) {
 /// A compared instant: the surface, the plates' reaction forces, the markers and their errors.
 SurfaceSnapshot comparedSnapshot(Model& model, const Scene& scene, bool withMarkers, int step,
                                  Real time, const MatX3& surface, const StepInput& in) {
-  SurfaceSnapshot snap{step, time, surface};
+  SurfaceSnapshot snap = snapshotAt(step, time, surface);
   if (!scene.plates.empty()) {
     const std::vector<Vec3> forces = model.graspForces();
     if (forces.size() >= in.grasps.size()) {
@@ -440,7 +440,7 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
   const std::vector<int> solveSteps = sparse ? quasiStaticSolveSteps(scene, n) : std::vector<int>{};
   rec.solvedSteps = sparse ? 0 : -1;
   const int warmup = sparse ? 0 : static_cast<int>(std::floor(options.warmupFraction * n));
-  if (every > 0) rec.series.push_back({0, 0.0, model.surface()});
+  if (every > 0) rec.series.push_back(snapshotAt(0, 0.0, model.surface()));
 
   // Equilibrium comparisons: a dynamic model stops once it settled after the interaction stopped
   // changing; a quasi-static one is at equilibrium at its (last) solve.
@@ -540,7 +540,7 @@ void simulate(Model& model, const Scene& scene, const Organ& organ, const RunOpt
       for (size_t g = 0; g < forces.size() && g < in.grasps.size(); ++g)
         rec.graspForces.push_back({k + 1, in.grasps[g].tool, forces[g]});
     }
-    if (every > 0 && (k + 1) % every == 0) rec.series.push_back({k + 1, tEnd, surface});
+    if (every > 0 && (k + 1) % every == 0) rec.series.push_back(snapshotAt(k + 1, tEnd, surface));
     if (equilibrium && !sparse) {
       const Real speed =
           (surface.topRows(nv) - previous.topRows(nv)).rowwise().norm().maxCoeff() / scene.dt;

@@ -39,6 +39,15 @@ struct SurfaceSnapshot {
   double markerRmsTranslation = -1;
 };
 
+/// The surface at an instant, with nothing else measured yet.
+inline SurfaceSnapshot snapshotAt(int step, Real time, const MatX3& positions) {
+  SurfaceSnapshot s;
+  s.step = step;
+  s.time = time;
+  s.positions = positions;
+  return s;
+}
+
 /// A snapshot in the byte records of run isolation and the solve cache (all its fields).
 void putSnapshotExtras(ByteWriter& w, const SurfaceSnapshot& s);
 SurfaceSnapshot getSnapshotExtras(ByteReader& r);

@@ -673,7 +673,9 @@ std::vector<Source> truthCubeCases(TableDef& t, const Lineup& u, const TruthCube
   std::vector<Source> sources;
   const auto addSource = [&](const ojson& m, const std::function<std::string(size_t)>& caseOf,
                              bool perLevelScene) {
-    Source src{m["label"].get<std::string>(), m["plugin"].get<std::string>(), {}};
+    Source src;
+    src.label = m["label"].get<std::string>();
+    src.plugin = m["plugin"].get<std::string>();
     for (const Twin& tw : u.twins) {
       if (tw.entry["label"] != src.label) continue;
       src.calibrated = true;
