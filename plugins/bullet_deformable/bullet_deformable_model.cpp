@@ -197,6 +197,7 @@ void BulletDeformableModel::build() {
                                m_config.krylovTolerance);
 
   m_tail.grasped.clear();
+  m_graspForces.clear();
   bullet_common::copyNodes(b, m_x);
   m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
   for (size_t i = 0; i < m_surfaceNode.size(); ++i)
@@ -227,9 +228,67 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
     }
   bullet_common::aimSlidingNodes(b, m_tail, dt);  // free along their plate (bullet_peer_step.h)
 
-  w.world->stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
-  return bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase, &m_surfaceNode,
-                                         &m_surface);
+  w.world->stepSimulation(dt, 0, dt);        // exactly one internal step of length dt
+  slidingPlateForces(in.grasps.size(), dt);  // before finishBulletStep puts them back on the plate
+  const StepStatus status =
+      bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase, &m_surfaceNode, &m_surface);
+  computeGraspForces(in.grasps.size());
+  return status;
+}
+
+void BulletDeformableModel::slidingPlateForces(std::size_t numGrasps, Real dt) {
+  m_slidingForces.assign(numGrasps, Vec3::Zero());
+  const btSoftBody& b = *m_world->body;
+  // m_tail.sliding lists, grasp by grasp, the sliding grasps' nodes no bonded grasp holds.
+  size_t next = 0;
+  for (size_t g = 0; g < numGrasps && g < m_tail.nodeGrasps.size(); ++g) {
+    const NodeGrasp& gr = m_tail.nodeGrasps[g];
+    if (!gr.sliding()) continue;
+    for (int node : gr.nodes) {
+      if (std::binary_search(m_tail.grasped.begin(), m_tail.grasped.end(), node)) continue;
+      const bullet_common::SlidingNode& h = m_tail.sliding[next++];
+      const btSoftBody::Node& nd = b.m_nodes[h.node];
+      if (!(nd.m_im > 0)) continue;
+      const btVector3 n(h.normal.x(), h.normal.y(), h.normal.z());
+      // The plate takes back the normal velocity the step gave the node beyond the plate's own.
+      m_slidingForces[g] +=
+          h.normal * ((n.dot(nd.m_v) - (h.offset - h.start) / dt) / (nd.m_im * dt));
+    }
+  }
+}
+
+void BulletDeformableModel::computeGraspForces(std::size_t numGrasps) {
+  m_graspForces.assign(numGrasps, Vec3::Zero());
+  if (numGrasps == 0) return;
+  World& w = *m_world;
+  btSoftBody& b = *w.body;
+  // F of every tet at the final positions (grasped nodes on their targets); Bullet's scratches
+  // are restored afterwards so that its next step starts from exactly what it left.
+  const btAlignedObjectArray<btSoftBody::TetraScratch> saved = b.m_tetraScratches;
+  b.updateDeformation();
+  btAlignedObjectArray<btVector3> f;
+  f.resize(b.m_nodes.size(), btVector3(0, 0, 0));
+  w.elastic->addScaledForces(1.0, f);  // elastic + damping: f_i = -dPsi/dx_i - D v_i
+  b.m_tetraScratches = saved;
+  for (size_t g = 0; g < numGrasps && g < m_tail.nodeGrasps.size(); ++g) {
+    const NodeGrasp& gr = m_tail.nodeGrasps[g];
+    Vec3& sum = m_graspForces[g];
+    if (gr.sliding()) {
+      sum = m_slidingForces[g];
+      // Nodes a bonded grasp also holds are kinematic: their elastic force, along the normal.
+      const Vec3 n = gr.slideNormal.normalized();
+      for (int node : gr.nodes)
+        if (std::binary_search(m_tail.grasped.begin(), m_tail.grasped.end(), node)) {
+          const btVector3& fi = f[b.m_nodes[node].index];
+          sum += n * n.dot(Vec3(fi.x(), fi.y(), fi.z()));
+        }
+      continue;
+    }
+    for (int node : gr.nodes) {
+      const btVector3& fi = f[b.m_nodes[node].index];
+      sum += Vec3(fi.x(), fi.y(), fi.z());
+    }
+  }
 }
 
 void BulletDeformableModel::reset() {

@@ -24,6 +24,14 @@
 // equals a constant external force in the backward Euler step above. Contact with instruments:
 // the SDK's shared response on the tet nodes after Bullet's step (bullet_common/bullet_peer_step.h;
 // README.md, "Contact with instruments").
+//
+// Reaction force (graspForces): the force the tissue exerts on a grasp or plate is the force its
+// elements exert on the held nodes, f_i = -dPsi/dx_i - D v_i, summed over the grasp's nodes, with
+// Bullet's own force objects (addScaledForces at scale 1) evaluated at the end-of-step positions
+// (the deformation gradients refreshed for it and Bullet's copies restored, so the dynamics do not
+// change). A sliding plate's nodes keep their mass and are put back on the plate after the step,
+// so the elastic force there is not what the body transmits; its force is the normal momentum the
+// plate takes back from them, m (v . n - v_plate) / dt per node, along the normal (frictionless).
 #pragma once
 
 #include <bullet_peer_step.h>
@@ -73,6 +81,10 @@ class BulletDeformableModel final : public Model {
   void reset() override;
   Counts counts() const override;
   PhaseTimes phaseTimes() const override { return m_phase; }
+  /// Per grasp: the elastic and damping forces Bullet's force object computes at the held nodes
+  /// (positions at the end of the step), summed; a sliding plate: the normal momentum it takes
+  /// back per step / dt (header comment).
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
   const TetMesh& mesh() const { return m_mesh; }
   const VecX& masses() const { return m_mass; }
@@ -80,6 +92,8 @@ class BulletDeformableModel final : public Model {
  private:
   struct World;
   void build();
+  void slidingPlateForces(std::size_t numGrasps, Real dt);
+  void computeGraspForces(std::size_t numGrasps);
 
   DeformableConfig m_config;
   Real m_dt = 0;
@@ -96,6 +110,8 @@ class BulletDeformableModel final : public Model {
   MatX3 m_x;
   MatX3 m_surface;
   PhaseTimes m_phase;
+  std::vector<Vec3> m_graspForces;    ///< N, per grasp of the last step
+  std::vector<Vec3> m_slidingForces;  ///< N, per grasp: the sliding plates' normal impulse / dt
 };
 
 }  // namespace deform::bullet_deformable

@@ -96,6 +96,7 @@ void BulletSoftBodyModel::init(const Organ& organ, const SoftBodyConfig& config,
     for (int k = 0; k < 2; ++k)
       if (ef(e, k) >= 0) m_edgeArea(e) += faceArea(ef(e, k));
   }
+  m_holder.assign(size_t(s.numVertices()), -1);
   const Real totalMass = organ.material.density * m_restVolume;
   m_mass = nodeArea * (totalMass / nodeArea.sum());
 
@@ -165,6 +166,7 @@ void BulletSoftBodyModel::build() {
   w.world.addSoftBody(&b);
 
   m_tail.grasped.clear();
+  m_graspForces.clear();
   bullet_common::copyNodes(b, m_x);
 }
 
@@ -191,8 +193,74 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
       b.addForce(btVector3(f.x(), f.y(), f.z()), l.vertices[k]);
     }
 
-  w.world.stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
-  return bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);
+  w.world.stepSimulation(dt, 0, dt);         // exactly one internal step of length dt
+  slidingPlateForces(in.grasps.size(), dt);  // before finishBulletStep puts them back on the plate
+  const StepStatus status = bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);
+  computeGraspForces(in.grasps.size(), dt);
+  return status;
+}
+
+void BulletSoftBodyModel::slidingPlateForces(std::size_t numGrasps, Real dt) {
+  m_slidingForces.assign(numGrasps, Vec3::Zero());
+  const btSoftBody& b = *m_world->body;
+  // m_tail.sliding lists, grasp by grasp, the sliding grasps' nodes no bonded grasp holds.
+  size_t next = 0;
+  for (size_t g = 0; g < numGrasps && g < m_tail.nodeGrasps.size(); ++g) {
+    const NodeGrasp& gr = m_tail.nodeGrasps[g];
+    if (!gr.sliding()) continue;
+    for (int node : gr.nodes) {
+      if (std::binary_search(m_tail.grasped.begin(), m_tail.grasped.end(), node)) continue;
+      const bullet_common::SlidingNode& h = m_tail.sliding[next++];
+      const btSoftBody::Node& nd = b.m_nodes[h.node];
+      if (!(nd.m_im > 0)) continue;
+      const btVector3 n(h.normal.x(), h.normal.y(), h.normal.z());
+      // The plate takes back the normal velocity the step gave the node beyond the plate's own.
+      m_slidingForces[g] +=
+          h.normal * ((n.dot(nd.m_v) - (h.offset - h.start) / dt) / (nd.m_im * dt));
+    }
+  }
+}
+
+void BulletSoftBodyModel::computeGraspForces(std::size_t numGrasps, Real dt) {
+  m_graspForces.clear();
+  if (m_config.mapping != StiffnessMapping::Xpbd) return;  // no physical stiffness to report
+  m_graspForces.assign(numGrasps, Vec3::Zero());
+  if (numGrasps == 0) return;
+  const btSoftBody& b = *m_world->body;
+  const size_t ng = std::min(numGrasps, m_tail.nodeGrasps.size());
+  for (size_t g = 0; g < ng; ++g)
+    for (int node : m_tail.nodeGrasps[g].nodes)
+      if (m_holder[size_t(node)] < 0 && b.m_nodes[node].m_im == 0) m_holder[size_t(node)] = int(g);
+  // Links: one projection of link (a, c) moves c by w_c kappa d and a by -w_a kappa d,
+  // kappa = kLST (L0^2 - |d|^2) / ((w_a + w_c) (L0^2 + |d|^2)), d = x_c - x_a: the momentum it
+  // gives a is -kappa d whatever w_a (0 for a kinematic node: then that is what the node, held by
+  // the tool, gives c back). Near a steady state the constraint error hardly changes over the
+  // sweeps of a step, so the `iterations` sweeps give a -N kappa d per step: a force -N kappa d /
+  // dt^2 on the held end.
+  const Real sweeps = Real(b.m_cfg.piterations) / (dt * dt);
+  const btSoftBody::Node* first = &b.m_nodes[0];
+  for (int e = 0; e < b.m_links.size(); ++e) {  // structural, then bending links
+    const btSoftBody::Link& l = b.m_links[e];
+    const int a = int(l.m_n[0] - first), c = int(l.m_n[1] - first);
+    const int ga = m_holder[size_t(a)], gc = m_holder[size_t(c)];
+    if (ga < 0 && gc < 0) continue;
+    const Real w = l.m_n[0]->m_im + l.m_n[1]->m_im;
+    if (!(w > 0)) continue;  // both ends immovable: Bullet skips the link
+    const Vec3 d = m_x.row(c) - m_x.row(a);
+    const Real l2 = d.squaredNorm(), r2 = l.m_rl * l.m_rl;
+    const Real kappa = l.m_material->m_kLST * (r2 - l2) / (w * (r2 + l2));
+    const Vec3 f = (-sweeps * kappa) * d;  // on a
+    if (ga >= 0) m_graspForces[size_t(ga)] += f;
+    if (gc >= 0) m_graspForces[size_t(gc)] -= f;
+  }
+  for (size_t g = 0; g < ng; ++g) {
+    const NodeGrasp& gr = m_tail.nodeGrasps[g];
+    if (!gr.sliding()) continue;
+    const Vec3 n = gr.slideNormal.normalized();
+    m_graspForces[g] = n * n.dot(m_graspForces[g]) + m_slidingForces[g];
+  }
+  for (size_t g = 0; g < ng; ++g)
+    for (int node : m_tail.nodeGrasps[g].nodes) m_holder[size_t(node)] = -1;
 }
 
 void BulletSoftBodyModel::reset() {

@@ -26,6 +26,18 @@
 // them onto their targets in the step (kinematic), their mass is restored on release. Contact
 // with instruments: the SDK's shared response on the nodes after Bullet's step
 // (bullet_common/bullet_peer_step.h; README.md, "Contact with instruments").
+//
+// Reaction force (graspForces, "xpbd" mapping only): what Bullet's step transmits between the
+// tool and the tissue. A bonded grasp's kinematic nodes push their free neighbours only through
+// the links: one projection of link (a, c) gives a the momentum -kappa d (d = x_c - x_a, kappa =
+// kLST (L0^2 - |d|^2) / ((w_a + w_c) (L0^2 + |d|^2)), whatever w_a), so near a steady state the
+// `iterations` sweeps of a step give the held end the force -N kappa d / dt^2, summed over its
+// links at the end of the step (links inside one grasp cancel; bending links too, as Bullet
+// projects them).
+// Bullet applies no volume force to kinematic nodes, so none is added. A sliding plate's nodes
+// keep their mass and are put back on the plate after the step: its force is the normal momentum
+// it takes back, m (v . n - v_plate) / dt per node. Under the "fixed" mapping the links have no
+// physical stiffness and graspForces() is empty.
 #pragma once
 
 #include <bullet_peer_step.h>
@@ -82,6 +94,8 @@ class BulletSoftBodyModel final : public Model {
   void reset() override;
   Counts counts() const override;
   PhaseTimes phaseTimes() const override { return m_phase; }
+  /// Per grasp, see the header comment; empty under the "fixed" mapping.
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
   const SoftBodyConfig& config() const { return m_config; }
   /// Node masses (kg) before pinning.
@@ -95,6 +109,8 @@ class BulletSoftBodyModel final : public Model {
  private:
   struct World;  // the Bullet objects, rebuilt by reset()
   void build();
+  void slidingPlateForces(std::size_t numGrasps, Real dt);
+  void computeGraspForces(std::size_t numGrasps, Real dt);
 
   SoftBodyConfig m_config;
   Real m_dt = 0;
@@ -111,6 +127,9 @@ class BulletSoftBodyModel final : public Model {
   bullet_common::PeerStepState m_tail;  // grasped set, divergence box, contact scratch
   MatX3 m_x;
   PhaseTimes m_phase;
+  std::vector<Vec3> m_graspForces;    // N, per grasp of the last step (xpbd mapping)
+  std::vector<Vec3> m_slidingForces;  // N, per grasp: the sliding plates' normal impulse / dt
+  std::vector<int> m_holder;  // #V, bonded grasp holding each kinematic node (scratch), or -1
 };
 
 }  // namespace deform::bullet_softbody

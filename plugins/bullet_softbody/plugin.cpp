@@ -59,7 +59,8 @@ DEFORM_PLUGIN(registry) {
       "Bullet Physics SDK 3.24, E. Coumans et al., https://github.com/bulletphysics/bullet3 "
       "(btSoftBody by N. Presson); method family: Mueller, Heidelberger, Hennix, Ratcliff 2007, "
       "Position based dynamics, doi:10.1016/j.jvcir.2007.01.005",
-      {C::Grasp, C::PointForce, C::Gravity, C::Contact, C::ContactReaction, C::Sliding},
+      {C::Grasp, C::PointForce, C::Gravity, C::Contact, C::ContactReaction, C::Sliding,
+       C::ReactionForce},
       deform::bullet_softbody::paramSpecs());
   info.effort = {"iterations", {2LL, 5LL, 10LL, 20LL, 40LL}, {5LL, 20LL}};
   registry.add(std::move(info));

@@ -587,6 +587,7 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   }
   tStretch += msSince(ts);
   m_degenerate += degenerate;
+  computeGraspForces(in, dt);
 
   // Eq. (12) on the spheres under interaction and their linked spheres.
   ts = Clock::now();
@@ -625,6 +626,83 @@ StepStatus MetaballsModel::step(const StepInput& in) {
   m_phases = {tStretch, tLap, tVol, tRot, tSkin};
   if (!m_x.allFinite() || !m_surface.allFinite() || !m_r.allFinite()) return StepStatus::Diverged;
   return StepStatus::Ok;
+}
+
+void MetaballsModel::computeGraspForces(const StepInput& in, Real dt) {
+  m_graspForces.assign(in.grasps.size(), Vec3::Zero());
+  if (in.grasps.empty()) return;
+  const int n = m_mb.spheres.size();
+  if (m_heldForce.rows() != n) m_heldForce.setZero(n, 3);
+  m_heldList.assign(m_carry.begin(), m_carry.end());
+  if (m_graspVerts.empty()) m_heldList.clear();
+  for (const SlidingSet& sl : m_sliding)
+    m_heldList.insert(m_heldList.end(), sl.carry.begin(), sl.carry.end());
+  if (m_heldList.empty()) return;
+  std::vector<uint8_t> held(size_t(n), 0);
+  for (int i : m_heldList) held[size_t(i)] = 1;
+  const Real invDt2 = 1.0 / (dt * dt);
+  // Links: lambda pushes a along (c_a - c_b) / |c_a - c_b| and b the other way.
+  for (int j = 0; j < m_batches.size(); ++j) {
+    if (m_batches.link[size_t(j)] < 0) continue;
+    const int a = m_batches.a[size_t(j)], b = m_batches.b[size_t(j)];
+    if (!held[size_t(a)] && !held[size_t(b)]) continue;
+    const Vec3 d = (m_x.row(a) - m_x.row(b)).transpose();
+    const Real len = d.norm();
+    if (len <= 1e-12) continue;
+    const Vec3 f = (m_sdata.lambda[size_t(j)] * invDt2 / len) * d;
+    if (held[size_t(a)]) m_heldForce.row(a) += f.transpose();
+    if (held[size_t(b)]) m_heldForce.row(b) -= f.transpose();
+  }
+  // Laplacian constraints: lambda_m pushes m by +1 and each of its n neighbours by -1/n.
+  if (m_laplacian)
+    for (int i : m_heldList) {
+      const auto lam = [&](int m) {
+        return Vec3(m_ldata.lambda[4 * size_t(m)], m_ldata.lambda[4 * size_t(m) + 1],
+                    m_ldata.lambda[4 * size_t(m) + 2]);
+      };
+      Vec3 f = m_ldata.W[size_t(i)] > 0 ? lam(i) : Vec3::Zero();
+      for (int k = m_adjStart[size_t(i)]; k < m_adjStart[size_t(i) + 1]; ++k) {
+        const int m = m_adj[size_t(k)];
+        const int cnt = m_adjStart[size_t(m) + 1] - m_adjStart[size_t(m)];
+        if (m_ldata.W[size_t(m)] > 0 && cnt > 0) f -= lam(m) / Real(cnt);
+      }
+      m_heldForce.row(i) += (invDt2 * f).transpose();
+    }
+  // Bonded grasps: each carrying sphere's force shared by its skinning weight on each grasp's
+  // vertices. Sliding plates: the axis component of their carrying spheres' forces.
+  const int K = m_skin.slots;
+  std::vector<std::vector<Real>> share(in.grasps.size());
+  std::vector<Real> total(m_carry.size(), 0.0);
+  size_t slide = 0;
+  for (size_t g = 0; g < in.grasps.size(); ++g) {
+    const GraspInput& gr = in.grasps[g];
+    if (gr.sliding()) {
+      if (slide >= m_sliding.size()) continue;
+      const SlidingSet& sl = m_sliding[slide++];
+      if (sl.axis < 0) continue;
+      for (int i : sl.carry) m_graspForces[g][sl.axis] += m_heldForce(i, sl.axis);
+      continue;
+    }
+    if (m_graspVerts.empty()) continue;
+    share[g].assign(m_carry.size(), 0.0);
+    for (int v : gr.vertices) {
+      if (v < 0 || v >= m_skin.numVertices) continue;
+      for (int k = 0; k < m_skin.count[size_t(v)]; ++k) {
+        const size_t slot = size_t(v) * size_t(K) + size_t(k);
+        const auto it = std::lower_bound(m_carry.begin(), m_carry.end(), m_skin.sphere[slot]);
+        if (it != m_carry.end() && *it == m_skin.sphere[slot]) {
+          share[g][size_t(it - m_carry.begin())] += m_skin.weight[slot];
+          total[size_t(it - m_carry.begin())] += m_skin.weight[slot];
+        }
+      }
+    }
+  }
+  for (size_t g = 0; g < in.grasps.size(); ++g)
+    for (size_t k = 0; k < share[g].size(); ++k)
+      if (total[k] > 0)
+        m_graspForces[g] += (share[g][k] / total[k]) * m_heldForce.row(m_carry[k]).transpose();
+
+  for (int i : m_heldList) m_heldForce.row(i).setZero();
 }
 
 Counts MetaballsModel::counts() const {

@@ -30,6 +30,14 @@
 // prediction and after every sweep, the other two left to the constraints; after the skinning the
 // correction along a is applied again as for a grasp (their radii and rotations kept too: the
 // plate holds the face it presses flat, so the tissue under it does not turn).
+// Reaction force (graspForces): the constraints keep their accumulated multipliers over a step's
+// sweeps (XPBD, and the same sums in classic mode), so the force each constraint exerts on a
+// sphere is g lambda / dt^2 (g its gradient there: a link's unit direction, +-1; a Laplacian
+// constraint's +1 on its centre, -1/n on each neighbour), exactly the momentum it gave the free
+// spheres per step, over dt, with the sign of Newton's third law (as pbd's computeGraspForces).
+// A grasp's force is the sum over its carrying spheres (a sphere carrying several grasps' vertices
+// is shared by its skinning weights on them); a sliding plate's is the axis component over its
+// carrying spheres (the plate holds that coordinate only).
 #pragma once
 
 #include "construction.h"
@@ -64,6 +72,8 @@ class MetaballsModel final : public Model {
   /// the spheres whose field reaches it, with its offset from their weighted centre.
   void bindMarkers(const MatX3& rest) override;
   MatX3 markers() const override;
+  /// Per grasp of the last step: the constraint forces on its carrying spheres (header comment).
+  std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
   const Metaballs& metaballs() const { return m_mb; }
   const VecX& radii() const { return m_r; }
@@ -111,6 +121,8 @@ class MetaballsModel final : public Model {
   void updateRadii();
   /// m_vertStart / m_vertOf / m_vertW: the vertices each sphere skins (the transpose of W).
   void buildSkinTranspose();
+  /// m_graspForces from the multipliers of the step's sweeps (after them, at the new centres).
+  void computeGraspForces(const StepInput& in, Real dt);
 
   Metaballs m_mb;
   Skinning m_skin;
@@ -188,6 +200,9 @@ class MetaballsModel final : public Model {
     VecX carryTarget;
   };
   std::vector<SlidingSet> m_sliding;
+  std::vector<Vec3> m_graspForces;  // N, per grasp of the last step
+  MatX3 m_heldForce;                // #S by 3 scratch: constraint force on each held sphere
+  std::vector<int> m_heldList;      // the carrying spheres of this step (bonded, then sliding)
   Phases m_phases;
   long long m_degenerate = 0;
   bool m_simd = true;

@@ -65,7 +65,7 @@ DEFORM_PLUGIN(registry) {
       {deform::Capability::Grasp, deform::Capability::PointForce, deform::Capability::Gravity,
        deform::Capability::NeedsPrecompute, deform::Capability::Contact,
        deform::Capability::ContactReaction, deform::Capability::Markers,
-       deform::Capability::Sliding},
+       deform::Capability::Sliding, deform::Capability::ReactionForce},
       deform::metaballs::metaballsParams());
   // What the harness's sweep, bench and stability run it with (registry.h).
   info.resolution = {"spheres", {100LL, 250LL, 500LL, 900LL, 1600LL}, {100LL, 300LL, 900LL}};

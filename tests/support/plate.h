@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <utility>
 #include <vector>
 
 namespace deform::testing {
@@ -20,6 +21,8 @@ struct PlateRun {
   Real outward = 0;  ///< m, mean outward lateral displacement of the top vertices
   Real force = 0;    ///< N, the plate's force along +z (NaN when the model reports none)
   bool ok = true;    ///< every step returned Ok
+  /// N, the plate's whole force vector (NaN when the model reports none)
+  Vec3 forceVector = Vec3::Constant(std::nan(""));
 };
 
 /// Moves a plate holding the top vertices of `organ` (model initialised on it, at rest) down by
@@ -58,6 +61,7 @@ inline PlateRun pressByPlate(Model& model, const Organ& organ, bool sliding, Rea
   r.outward /= std::max(n, 1);
   const std::vector<Vec3> f = model.graspForces();
   r.force = f.empty() ? std::nan("") : f[0].z();
+  if (!f.empty()) r.forceVector = f[0];
   return r;
 }
 
@@ -101,6 +105,32 @@ inline PlateRun expectBondedPlateForceNear(Model& model, const Organ& organ, Rea
   EXPECT_GT(bonded.force, expected / factor) << label;
   EXPECT_LT(bonded.force, expected * factor) << label;
   return bonded;
+}
+
+/// Both plates' forces (pressByPlate, sliding then bonded): each reported; the bonded one
+/// positive along the press and within a factor `factor` of `expected` (N, as
+/// expectBondedPlateForceNear); the sliding one positive, not above the bonded one, and with no
+/// component along the plate (a frictionless platen: below 1e-9 of its normal force). Returns
+/// {sliding, bonded}.
+inline std::pair<PlateRun, PlateRun> expectPlateForcesNear(Model& model, const Organ& organ,
+                                                           Real press, int ramp, int hold,
+                                                           Real expected, Real factor,
+                                                           const char* label) {
+  const PlateRun sliding = pressByPlate(model, organ, true, press, ramp, hold);
+  const PlateRun bonded = pressByPlate(model, organ, false, press, ramp, hold);
+  std::printf(
+      "%s: plate force %.4g / %.4g N (sliding / bonded; expected %.4g N within a factor %.3g), "
+      "sliding tangential %.3g N\n",
+      label, sliding.force, bonded.force, expected, factor, sliding.forceVector.head<2>().norm());
+  EXPECT_TRUE(sliding.ok && bonded.ok) << label;
+  EXPECT_FALSE(std::isnan(bonded.force)) << label << ": no bonded plate force reported";
+  EXPECT_FALSE(std::isnan(sliding.force)) << label << ": no sliding plate force reported";
+  EXPECT_GT(bonded.force, expected / factor) << label;
+  EXPECT_LT(bonded.force, expected * factor) << label;
+  EXPECT_GT(sliding.force, 0) << label;
+  EXPECT_LE(sliding.force, bonded.force) << label;
+  EXPECT_LE(sliding.forceVector.head<2>().norm(), 1e-9 * std::abs(sliding.force)) << label;
+  return {sliding, bonded};
 }
 
 /// Holds the top vertices of `organ` (as pressByPlate) with a plate at rest, bonded or sliding,
