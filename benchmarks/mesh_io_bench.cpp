@@ -65,11 +65,15 @@ std::string liverStl() {
       .string();
 }
 
+/// True, with the benchmark skipped as an error, when the mesh file is not there.
+bool skipMissing(benchmark::State& state, const std::string& path) {
+  if (std::filesystem::exists(path)) return false;
+  state.SkipWithError(("missing " + path).c_str());
+  return true;
+}
+
 void readAndValidate(benchmark::State& state, const std::string& path) {
-  if (!std::filesystem::exists(path)) {
-    state.SkipWithError(("missing " + path).c_str());
-    return;
-  }
+  if (skipMissing(state, path)) return;
   for (auto _ : state) {
     const LoadedMesh m = readMesh(path);
     const MeshReport r = validateSurface(m.surface);
@@ -78,27 +82,18 @@ void readAndValidate(benchmark::State& state, const std::string& path) {
 }
 
 void readOnly(benchmark::State& state, const std::string& path) {
-  if (!std::filesystem::exists(path)) {
-    state.SkipWithError(("missing " + path).c_str());
-    return;
-  }
+  if (skipMissing(state, path)) return;
   for (auto _ : state) benchmark::DoNotOptimize(readMesh(path).surface.numFaces());
 }
 
 void validateOnly(benchmark::State& state, const std::string& path) {
-  if (!std::filesystem::exists(path)) {
-    state.SkipWithError(("missing " + path).c_str());
-    return;
-  }
+  if (skipMissing(state, path)) return;
   const SurfaceMesh m = readMesh(path).surface;
   for (auto _ : state) benchmark::DoNotOptimize(validateSurface(m).issues.size());
 }
 
 void repairOnly(benchmark::State& state, const std::string& path) {
-  if (!std::filesystem::exists(path)) {
-    state.SkipWithError(("missing " + path).c_str());
-    return;
-  }
+  if (skipMissing(state, path)) return;
   const SurfaceMesh m = readMesh(path).surface;
   for (auto _ : state) {
     SurfaceMesh copy = m;

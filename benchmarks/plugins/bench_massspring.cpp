@@ -1,10 +1,9 @@
 // Google Benchmark: one mass-spring step on a liver-sized closed surface (~2.2k nodes, ~6.6k edge
 // springs, as in the metaballs paper's Table 2 row with 6427 springs), under gravity with a grasp.
 #include "explicit_rows.h"
+#include "held_top.h"
 #include "massspring_model.h"
 #include "node_cholesky.h"
-#include "support/meshes.h"
-#include "support/organs.h"
 
 #include <deform/geometry/phantom.h>
 
@@ -20,15 +19,8 @@ namespace {
 using namespace deform;
 
 void runMassSpring(benchmark::State& state, massspring::MassSpringConfig cfg) {
-  const Organ o = testing::liverSizedOrgan();
   massspring::MassSpringModel m;
-  m.init(o, cfg);
-  StepInput in = testing::heldTopInput(o, 1e-4);
-  for (int s = 0; s < 20; ++s) m.step(in);
-  for (auto _ : state) {
-    in.grasps[0].targets.col(2).array() += 1e-7;
-    benchmark::DoNotOptimize(m.step(in));
-  }
+  bench::timeLiverHeldTop(state, m, cfg, 1e-4, 1e-7);  // and where a step goes (<phase>_ms)
   state.counters["springs"] = static_cast<double>(m.counts().at("springs"));
 }
 

@@ -5,8 +5,6 @@
 // for the first two, the double-precision one.
 #include "held_top.h"
 #include "pbd_model.h"
-#include "support/meshes.h"
-#include "support/organs.h"
 
 #include <benchmark/benchmark.h>
 
@@ -18,11 +16,8 @@ namespace {
 using namespace deform;
 
 void runPbd(benchmark::State& state, pbd::PbdConfig cfg) {
-  const Organ o = testing::liverSizedOrgan();
   pbd::PbdModel m;
-  m.init(o, cfg);
-  StepInput in = testing::heldTopInput(o, 1e-3);
-  bench::timeHeldTopSteps(state, m, in, 1e-6);  // and where a step goes (<phase>_ms)
+  bench::timeLiverHeldTop(state, m, cfg, 1e-3, 1e-6);  // and where a step goes (<phase>_ms)
   const Counts c = m.counts();
   state.counters["nodes"] = static_cast<double>(c.at("nodes"));
   state.counters["constraints"] = static_cast<double>(c.at("constraints"));

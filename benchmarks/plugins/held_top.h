@@ -4,6 +4,8 @@
 // wall time per phase as the counters <phase>_ms.
 #pragma once
 
+#include "support/organs.h"
+
 #include <deform/sdk/model.h>
 
 #include <benchmark/benchmark.h>
@@ -23,6 +25,17 @@ inline void timeHeldTopSteps(benchmark::State& state, Model& m, StepInput& in, R
   }
   for (const auto& [name, ms] : phaseSum)
     state.counters[name + "_ms"] = ms / static_cast<double>(state.iterations());
+}
+
+/// m initialised by its init(organ, config) on the liver-sized organ, held at its top and
+/// stepped by dt (testing::heldTopInput), then timed by timeHeldTopSteps.
+template <class NodeModel, class Config>
+void timeLiverHeldTop(benchmark::State& state, NodeModel& m, const Config& config, Real dt,
+                      Real rise) {
+  const Organ o = testing::liverSizedOrgan();
+  m.init(o, config);
+  StepInput in = testing::heldTopInput(o, dt);
+  timeHeldTopSteps(state, m, in, rise);
 }
 
 }  // namespace deform::bench

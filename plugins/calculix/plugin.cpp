@@ -36,21 +36,15 @@ std::vector<deform::ParamSpec> calculixParams() {
 }  // namespace
 
 DEFORM_PLUGIN(registry) {
-  using namespace deform;
-  ModelInfo info;
-  info.name = "calculix";
-  info.description =
-      "Independent reference: CalculiX ccx (C3D10, Neo-Hookean, NLGEOM) on reference_fem's mesh";
-  info.citation =
+  using C = deform::Capability;
+  deform::ModelInfo info = deform::modelInfo(
+      "calculix",
+      "Independent reference: CalculiX ccx (C3D10, Neo-Hookean, NLGEOM) on reference_fem's mesh",
       "CalculiX: G. Dhondt, The Finite Element Method for Three-Dimensional Thermomechanical "
-      "Applications, Wiley 2004, doi:10.1002/0470021217; www.calculix.de";
-  info.version = "1.0";
-  info.capabilities = {Capability::Grasp,           Capability::PointForce, Capability::Gravity,
-                       Capability::NeedsPrecompute, Capability::TetInput,   Capability::QuasiStatic,
-                       Capability::RollerSupport,   Capability::Markers,    Capability::Sliding,
-                       Capability::ReactionForce};
-  info.params = calculixParams();
-  info.create = [] { return deform::calculix::makeCalculixModel(); };
+      "Applications, Wiley 2004, doi:10.1002/0470021217; www.calculix.de",
+      {C::Grasp, C::PointForce, C::Gravity, C::NeedsPrecompute, C::TetInput, C::QuasiStatic,
+       C::RollerSupport, C::Markers, C::Sliding, C::ReactionForce},
+      calculixParams(), deform::calculix::makeCalculixModel);
   // The conformance suite's scenes check (status and finiteness only): coarse linear tets, so
   // that four liver/gallbladder scenes stay within the suite's budget (P2 at 300 tets took
   // 1200 s on the loaded 2-core machine).

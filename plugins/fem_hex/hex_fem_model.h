@@ -232,14 +232,12 @@ class HexFemModel : public Model {
   /// The collision proxy: the organ's triangles, embedded in the grid nodes by the trilinear
   /// weights (deform/sdk/contact.h).
   ContactProxy contactProxy() {
-    ContactProxy p;
-    p.nodes = &m_x;
-    p.invMass = &m_contactInvMass;
-    p.velocity = m_v.data();
-    p.atStepStart = &m_stepStart;
-    p.faces = &m_surfaceF;
-    p.embedding = embeddingOf(m_embedding.nodeIds, m_embedding.weights);
-    return p;
+    return {.nodes = &m_x,
+            .invMass = &m_contactInvMass,
+            .velocity = m_v.data(),
+            .atStepStart = &m_stepStart,
+            .faces = &m_surfaceF,
+            .embedding = embeddingOf(m_embedding.nodeIds, m_embedding.weights)};
   }
 
   // Per-step work (allocated once).

@@ -1,5 +1,7 @@
 #include "response_product.h"
 
+#include "batched_projection.h"
+
 #include <algorithm>
 
 #ifdef DEFORM_HYBRID_AVX2
@@ -39,11 +41,7 @@ void BlockedResponse::multiply(const double* lambda, double* y, bool simd) const
 }
 
 bool responseSimdAvailable() {
-#ifdef DEFORM_HYBRID_AVX2
-  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-#else
-  return false;
-#endif
+  return surfaceSimdAvailable();  // the same AVX2 + FMA build and CPU check
 }
 
 }  // namespace deform::hybrid_fem_pbd

@@ -30,14 +30,7 @@ void addSpringForcesScalar(const double* xv, const SpringArrays& s, std::size_t 
     const double il = 1.0 / l;
     const double vn = ((xb[4] - xa[4]) * d0 + (xb[5] - xa[5]) * d1 + (xb[6] - xa[6]) * d2) * il;
     const double m = (s.k[i] * (l - s.rest[i]) + s.c[i] * vn) * il;
-    double* fa = f4 + s.a[i] / 2;
-    double* fb = f4 + s.b[i] / 2;
-    fa[0] += m * d0;
-    fa[1] += m * d1;
-    fa[2] += m * d2;
-    fb[0] -= m * d0;
-    fb[1] -= m * d1;
-    fb[2] -= m * d2;
+    addSpringPair(f4 + s.a[i] / 2, f4 + s.b[i] / 2, m, d0, d1, d2);
   }
 }
 

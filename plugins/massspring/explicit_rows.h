@@ -25,6 +25,19 @@ struct SpringArrays {
   std::size_t n;
 };
 
+/// f_a += m d and f_b -= m d for one spring (d = x_b - x_a, m its force factor): the equal and
+/// opposite pair of the scalar loops (here and MassSpringModel::springForces()). Internal linkage,
+/// so that the AVX-512 unit's flags never reach another unit's copy.
+static inline void addSpringPair(double* fa, double* fb, double m, double d0, double d1,
+                                 double d2) {
+  fa[0] += m * d0;
+  fa[1] += m * d1;
+  fa[2] += m * d2;
+  fb[0] -= m * d0;
+  fb[1] -= m * d1;
+  fb[2] -= m * d2;
+}
+
 /// f4 (4 doubles per node) += the spring forces (elastic + axial dashpot) at the positions and
 /// velocities in xv (8 doubles per node): per spring, with d = x_b - x_a, l = |d|,
 /// m = (k (l - L) + c (v_b - v_a) . d / l) / l, f_a += m d and f_b -= m d, in spring order.

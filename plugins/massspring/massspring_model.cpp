@@ -142,6 +142,7 @@ void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
   m_setupDt = 0;
   m_springs.clear();
   m_tets.resize(0, 4);
+  m_surfaceRows.clear();  // a surface network keeps it empty (vertex i is node i)
   m_edgeSprings = m_bendingSprings = 0;
   if (organ.volume) {
     buildTets(organ);
@@ -149,10 +150,7 @@ void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
     buildSurface(organ);
   }
   const int N = static_cast<int>(m_rest.rows());
-  m_contactF = organ.surface.F;
-  if (!m_surfaceIdentity)
-    for (Eigen::Index f = 0; f < m_contactF.rows(); ++f)
-      for (int k = 0; k < 3; ++k) m_contactF(f, k) = m_surfaceRows.at(m_contactF(f, k));
+  m_contactF = facesOnNodes(organ.surface.F, m_surfaceRows);
   for (Spring& s : m_springs)
     s.c = springDamping(m_config.dampingRatio, s.k, m_mass[s.a], m_mass[s.b]);
   // Springs in the order of their first node: neighbouring springs then touch nearby memory.
@@ -162,9 +160,7 @@ void MassSpringModel::init(const Organ& organ, const MassSpringConfig& config) {
 
   m_fixed.clear();
   if (!organ.fixed.empty()) m_fixed = fixedNodeIndices(m_rest, organ.fixed, organ.surface);
-  m_invMass.resize(N);
-  for (int i = 0; i < N; ++i) m_invMass[i] = m_mass[i] > 0 ? 1.0 / m_mass[i] : 0.0;
-  for (int i : m_fixed) m_invMass[i] = 0.0;
+  m_invMass = inverseMasses(m_mass, m_fixed);
   m_stableStep = computeStableStep();  // springs and masses are fixed from here on
   buildSpringArrays();
 
@@ -360,14 +356,7 @@ void MassSpringModel::springForces(const MatX3& x, const MatX3& v, MatX3& f) {
     const Real vn = ((vb[0] - va[0]) * d0 + (vb[1] - va[1]) * d1 + (vb[2] - va[2]) * d2) * il;
     // springForce(): (k (l - L) + c (vb - va).n) n, with n = d / l folded into one factor.
     const Real m = (s.k * (l - s.rest) + s.c * vn) * il;
-    Real* fa = Fp + 3 * s.a;
-    Real* fb = Fp + 3 * s.b;
-    fa[0] += m * d0;
-    fa[1] += m * d1;
-    fa[2] += m * d2;
-    fb[0] -= m * d0;
-    fb[1] -= m * d1;
-    fb[2] -= m * d2;
+    rows::addSpringPair(Fp + 3 * s.a, Fp + 3 * s.b, m, d0, d1, d2);
   }
 }
 
@@ -457,10 +446,7 @@ StepStatus MassSpringModel::step(const StepInput& in) {
   if (penalty) {
     // Penalty contact: a force on the surface triangles for this step (explicit in the contact).
     m_contactForce.setZero(m_x.rows(), 3);
-    ContactProxy proxy;
-    proxy.nodes = &m_x;
-    proxy.velocity = m_v.data();
-    proxy.faces = &m_contactF;
+    const ContactProxy proxy{.nodes = &m_x, .velocity = m_v.data(), .faces = &m_contactF};
     respondToContact(*in.contact, proxy, ContactResponse::Penalty, h, m_contactForce.data());
   }
 
@@ -559,12 +545,11 @@ StepStatus MassSpringModel::step(const StepInput& in) {
     m_contactInvMass = m_invMass;
     for (const NodeGrasp& g : m_nodeGrasps)
       for (int i : g.nodes) m_contactInvMass[i] = 0;
-    ContactProxy proxy;
-    proxy.nodes = &m_x;
-    proxy.invMass = &m_contactInvMass;
-    proxy.velocity = m_v.data();
-    proxy.atStepStart = &m_stepStart;
-    proxy.faces = &m_contactF;
+    const ContactProxy proxy{.nodes = &m_x,
+                             .invMass = &m_contactInvMass,
+                             .velocity = m_v.data(),
+                             .atStepStart = &m_stepStart,
+                             .faces = &m_contactF};
     respondToContact(*in.contact, proxy, ContactResponse::Project, h);
   }
   if (!m_surfaceIdentity)

@@ -34,30 +34,38 @@ inline Real springEnergy(const Vec3& xa, const Vec3& xb, Real k, Real rest) {
   return 0.5 * k * s * s;
 }
 
+/// The spring's length l = |x_b - x_a| and direction n = (x_b - x_a) / l; false (n, l unset)
+/// when it has (near) zero length and no direction.
+inline bool springDirection(const Vec3& xa, const Vec3& xb, Vec3& n, Real& l) {
+  const Vec3 d = xb - xa;
+  l = d.norm();
+  if (l <= tol::kDegenerateLength) return false;
+  n = d / l;
+  return true;
+}
+
 /// Force on particle a (the force on b is its negative). False, with fa = 0, when the spring has
 /// (near) zero length and no direction.
 inline bool springForce(const Vec3& xa, const Vec3& xb, const Vec3& va, const Vec3& vb, Real k,
                         Real c, Real rest, Vec3& fa) {
-  const Vec3 d = xb - xa;
-  const Real l = d.norm();
-  if (l <= tol::kDegenerateLength) {
+  Vec3 n;
+  Real l;
+  if (!springDirection(xa, xb, n, l)) {
     fa.setZero();
     return false;
   }
-  const Vec3 n = d / l;
   fa = (k * (l - rest) + c * (vb - va).dot(n)) * n;
   return true;
 }
 
 /// The 3x3 block K of the stiffness (see the header comment); psd clamps the transverse term.
 inline bool springStiffness(const Vec3& xa, const Vec3& xb, Real k, Real rest, bool psd, Mat3& K) {
-  const Vec3 d = xb - xa;
-  const Real l = d.norm();
-  if (l <= tol::kDegenerateLength) {
+  Vec3 n;
+  Real l;
+  if (!springDirection(xa, xb, n, l)) {
     K.setZero();
     return false;
   }
-  const Vec3 n = d / l;
   Real t = 1.0 - rest / l;
   if (psd) t = std::max<Real>(t, 0.0);
   const Mat3 nn = n * n.transpose();

@@ -16,13 +16,6 @@ VecX gaussianTraction(const MatX3& V, const LossRatioCase& c) {
   return p;
 }
 
-std::vector<int> nodesInBox(const MatX3& V, const Box& b) {
-  std::vector<int> out;
-  for (Eigen::Index j = 0; j < V.rows(); ++j)
-    if (b.contains(V.row(j).transpose())) out.push_back(int(j));
-  return out;
-}
-
 LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
                              const Material& material, const LossRatioCase& c,
                              const BemQuadrature& q) {
@@ -83,7 +76,7 @@ LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
   // (their tractions are unknowns), which G p did implicitly by zeroing them.
   const auto ratio = [&](const Box& box, bool nodal, FixedSupport support, bool keepStats) {
     const auto solve = [&](const Side& side, int& nFixed) {
-      const std::vector<int> fixed = nodesInBox(side.s->V, box);
+      const std::vector<int> fixed = rowsInBox(side.s->V, box);
       nFixed = int(fixed.size());
       if (support == FixedSupport::Partial && !nodal)
         return solveBemPartial(side.bem, *side.s, fixedFractions(*side.s, box), material.young,

@@ -71,8 +71,6 @@ struct LossRatioResult {
 
 /// Nodal tractions (3N) of the case's field at the rows of V.
 VecX gaussianTraction(const MatX3& V, const LossRatioCase& c);
-/// Indices of the rows of V inside the box.
-std::vector<int> nodesInBox(const MatX3& V, const Box& b);
 
 LossRatioResult bemLossRatio(const SurfaceMesh& coarse, const SurfaceMesh& fine,
                              const Material& material, const LossRatioCase& c,

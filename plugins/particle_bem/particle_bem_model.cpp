@@ -11,6 +11,7 @@
 #include <Eigen/SVD>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -26,6 +27,12 @@ constexpr const char* kMatrixVersion = "particle_bem.M/4";  // 4: with the numer
 using Clock = std::chrono::steady_clock;
 double ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+/// The wall times (ms) of a step's three phases: phases[k] from t[k] to t[k + 1].
+void recordPhases(PhaseTimes& times, const std::array<const char*, 3>& phases,
+                  const std::array<Clock::time_point, 4>& t) {
+  for (size_t k = 0; k < phases.size(); ++k) times[phases[k]] = ms(t[k], t[k + 1]);
 }
 
 // The k (<= 8) rows of P nearest to p, nearest first; unused slots get index -1.
@@ -742,10 +749,7 @@ StepStatus ParticleBemModel::stepGuided(const StepInput& in) {
   else
     interpolateDisplacement(m_map, m_coarse.F, m_fineRest, m_coarseDisp, m_surface);
   if (in.contact) projectSurfaceOut(in);
-  const auto t3 = Clock::now();
-  m_times["surface"] = ms(t0, t1);
-  m_times["correction"] = ms(t1, t2);
-  m_times["interpolation"] = ms(t2, t3);
+  recordPhases(m_times, {"surface", "correction", "interpolation"}, {t0, t1, t2, Clock::now()});
   return StepStatus::Ok;
 }
 
@@ -833,10 +837,7 @@ StepStatus ParticleBemModel::stepParticles(const StepInput& in) {
       }
   }
   if (in.contact) projectSurfaceOut(in);
-  const auto t3 = Clock::now();
-  m_times["forces"] = ms(t0, t1);
-  m_times["integration"] = ms(t1, t2);
-  m_times["skinning"] = ms(t2, t3);
+  recordPhases(m_times, {"forces", "integration", "skinning"}, {t0, t1, t2, Clock::now()});
   return StepStatus::Ok;
 }
 

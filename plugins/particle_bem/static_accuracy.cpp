@@ -26,13 +26,6 @@ Box bottomBox(const MatX3& V, Real fraction) {
   return f;
 }
 
-int topVertex(const MatX3& V) {
-  int t = 0;
-  for (int i = 0; i < V.rows(); ++i)
-    if (V(i, 2) > V(t, 2)) t = i;
-  return t;
-}
-
 /// The load case on `organ`: a 500 Pa downward traction over 15% of the largest extent around
 /// the top vertex, the bottom 15% fixed.
 LossRatioCase tableLoadCase(const SurfaceMesh& organ) {
@@ -46,6 +39,13 @@ LossRatioCase tableLoadCase(const SurfaceMesh& organ) {
 }
 
 }  // namespace
+
+int topVertex(const MatX3& V) {
+  int t = 0;
+  for (int i = 0; i < V.rows(); ++i)
+    if (V(i, 2) > V(t, 2)) t = i;
+  return t;
+}
 
 nlohmann::json bemStaticAccuracy(const SurfaceMesh& organ,
                                  const std::vector<std::pair<int, int>>& rows,

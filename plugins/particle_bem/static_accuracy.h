@@ -19,6 +19,10 @@
 
 namespace deform::particle_bem {
 
+/// The organ's top vertex, where the measure's load patch is centred: the first row of V with
+/// the largest z.
+int topVertex(const MatX3& V);
+
 /// One object per (coarse, fine) pair: coarse_vertices / fine_vertices (the requested counts),
 /// coarse_surface_vertices / fine_surface_vertices (the solved, conforming meshes), vertex_ratio
 /// (fine / coarse solved), loss_ratio, displacement_ratio, seconds, cached. Each row is cached

@@ -118,6 +118,7 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
   m_iso.clear();
   m_tet.clear();
   m_tets.resize(0, 4);
+  m_surfaceRows.clear();  // a surface network keeps it empty (vertex i is node i)
   m_hasVolume = false;
 
   if (organ.volume) {
@@ -126,10 +127,7 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
     buildSurface(organ);
   }
   const int N = static_cast<int>(m_rest.rows());
-  m_contactF = organ.surface.F;
-  if (!m_surfaceIdentity)
-    for (Eigen::Index f = 0; f < m_contactF.rows(); ++f)
-      for (int k = 0; k < 3; ++k) m_contactF(f, k) = m_surfaceRows.at(m_contactF(f, k));
+  m_contactF = facesOnNodes(organ.surface.F, m_surfaceRows);
 
   // Colour 63 collects every constraint once 63 colours are used: it is not independent, so it
   // is projected one by one (see projectAll()).
@@ -149,9 +147,7 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
   // Immovable nodes: the fixed region, and nodes without mass (unreferenced tet nodes).
   m_fixed.clear();
   if (!organ.fixed.empty()) m_fixed = fixedNodeIndices(m_rest, organ.fixed, organ.surface);
-  m_w0.resize(N);
-  for (int i = 0; i < N; ++i) m_w0[i] = m_mass[i] > 0 ? 1.0 / m_mass[i] : 0.0;
-  for (int i : m_fixed) m_w0[i] = 0.0;
+  m_w0 = inverseMasses(m_mass, m_fixed);
 
   const Box box = boundingBox(m_rest);
   m_boxCenter = box.center();
@@ -605,11 +601,8 @@ StepStatus PbdModel::step(const StepInput& in) {
   // instrument; the correction (friction included, measured from the step's start m_x) enters
   // the velocity like any other projection (w = 0 for fixed and grasped nodes).
   if (in.contact) {
-    ContactProxy proxy;
-    proxy.nodes = &m_p;
-    proxy.invMass = &m_w;
-    proxy.atStepStart = &m_x;
-    proxy.faces = &m_contactF;
+    const ContactProxy proxy{
+        .nodes = &m_p, .invMass = &m_w, .atStepStart = &m_x, .faces = &m_contactF};
     respondToContact(*in.contact, proxy, ContactResponse::Project, dt);
   }
   const auto t2 = Clock::now();

@@ -62,16 +62,7 @@ void evaluateMeanDilatationTet(const MeanDilatationNeoHookean& material,
     Mat9 D = material.isochoric.stressDerivative(F[size_t(q)]);
     addCofactorDerivative(p, F[size_t(q)], D);
     if (projectSpd) D = projectedIfNeeded(D);
-    // As in evaluateQuadraticTet: K(3 a + i, 3 b + k) += w sum_jl G(j, a) D(i + 3 j, k + 3 l)
-    // G(l, b).
-    Eigen::Matrix<Real, 9, 30> DG;
-    for (int c = 0; c < 10; ++c)
-      for (int k = 0; k < 3; ++k)
-        DG.col(3 * c + k) = D.col(k) * G(0, c) + D.col(k + 3) * G(1, c) + D.col(k + 6) * G(2, c);
-    for (int a = 0; a < 10; ++a)
-      for (int i = 0; i < 3; ++i)
-        out.stiffness.row(3 * a + i) +=
-            w * (G(0, a) * DG.row(i) + G(1, a) * DG.row(i + 3) + G(2, a) * DG.row(i + 6));
+    addPointStiffness(D, G, w, out.stiffness);
   }
   if (mode == TetEvalMode::Stiffness)
     out.stiffness.noalias() += (rest.volume * material.kappa) * b * b.transpose();

@@ -54,23 +54,16 @@ ReferenceFemConfig configFromParams(const ParamValues& p) {
 }  // namespace deform::reference_fem
 
 DEFORM_PLUGIN(registry) {
-  using namespace deform;
-  ModelInfo info;
-  info.name = "reference_fem";
-  info.description =
-      "Converged reference: quadratic tets (Gmsh), linear/corotational/Neo-Hookean, Newton solves";
-  info.citation =
+  using C = deform::Capability;
+  deform::ModelInfo info = deform::modelInfo(
+      "reference_fem",
+      "Converged reference: quadratic tets (Gmsh), linear/corotational/Neo-Hookean, Newton solves",
       "Gmsh: Geuzaine & Remacle, IJNME 79(11) 2009, doi:10.1002/nme.2579; corotational: Mueller & "
       "Gross, Graphics Interface 2004; Neo-Hookean (isochoric/volumetric split): Bonet & Wood, "
-      "Nonlinear Continuum Mechanics for FEA, 2nd ed. 2008, doi:10.1017/CBO9780511755446";
-  info.version = "1.0";
-  info.capabilities = {
-      Capability::Grasp,         Capability::PointForce,      Capability::Gravity,
-      Capability::ReactionForce, Capability::NeedsPrecompute, Capability::TetInput,
-      Capability::QuasiStatic,   Capability::Contact,         Capability::ContactReaction,
-      Capability::RollerSupport, Capability::Markers,         Capability::Sliding};
-  info.params = reference_fem::paramSpecs();
-  info.create = [] { return reference_fem::makeReferenceFemModel(); };
+      "Nonlinear Continuum Mechanics for FEA, 2nd ed. 2008, doi:10.1017/CBO9780511755446",
+      {C::Grasp, C::PointForce, C::Gravity, C::ReactionForce, C::NeedsPrecompute, C::TetInput,
+       C::QuasiStatic, C::Contact, C::ContactReaction, C::RollerSupport, C::Markers, C::Sliding},
+      deform::reference_fem::paramSpecs(), deform::reference_fem::makeReferenceFemModel);
   // No other presets: every command (stability, tables, calibrate, sweep) uses the reference at
   // its defaults, quadratic tets (issue 33), and `stability` judges against exactly those. The
   // conformance suite's "scenes" check runs linear tets: in a scene with dynamics

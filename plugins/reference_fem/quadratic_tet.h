@@ -79,6 +79,21 @@ struct QuadraticTetEvaluation {
 
 /// W, dW/dx and d^2W/dx^2 of one P2 tet at nodal positions x (columns x_0..x_9). energy is +inf
 /// (and nothing else is filled) when psi is +inf at a quadrature point.
+/// K += w G^T D G, the stiffness of one quadrature point of weight w (m^3) with shape gradients G
+/// and stress derivative D = dP/dF (vec(F)(i + 3 j) = F(i, j)). vec(F)(i + 3 j) depends on
+/// x_b(k) through delta_ik G(j, b): DG(r, 3 b + k) = sum_l D(r, k + 3 l) G(l, b), and
+/// K(3 a + i, .) += w sum_j G(j, a) DG(i + 3 j, .).
+inline void addPointStiffness(const Mat9& D, const Mat3x10& G, Real w, Mat30& K) {
+  Eigen::Matrix<Real, 9, 30> DG;
+  for (int b = 0; b < 10; ++b)
+    for (int k = 0; k < 3; ++k)
+      DG.col(3 * b + k) = D.col(k) * G(0, b) + D.col(k + 3) * G(1, b) + D.col(k + 6) * G(2, b);
+  for (int a = 0; a < 10; ++a)
+    for (int i = 0; i < 3; ++i)
+      K.row(3 * a + i) +=
+          w * (G(0, a) * DG.row(i) + G(1, a) * DG.row(i + 3) + G(2, a) * DG.row(i + 6));
+}
+
 template <class Material>
 void evaluateQuadraticTet(const Material& material, const QuadraticTetRest& rest, const Mat3x10& x,
                           TetEvalMode mode, QuadraticTetEvaluation& out, bool projectSpd = false) {
@@ -99,17 +114,7 @@ void evaluateQuadraticTet(const Material& material, const QuadraticTetRest& rest
     const Mat3x10 PG = (w * material.stress(F)) * G;
     for (int a = 0; a < 10; ++a) out.gradient.segment<3>(3 * a) += PG.col(a);
     if (mode != TetEvalMode::Stiffness) continue;
-    const Mat9 D = stressDerivativeAt(material, F, projectSpd);
-    // vec(F)(i + 3 j) depends on x_b(k) through delta_ik G(j, b):
-    // DG(r, 3 b + k) = sum_l D(r, k + 3 l) G(l, b);  K(3 a + i, .) = w sum_j G(j, a) DG(i + 3 j, .)
-    Eigen::Matrix<Real, 9, 30> DG;
-    for (int b = 0; b < 10; ++b)
-      for (int k = 0; k < 3; ++k)
-        DG.col(3 * b + k) = D.col(k) * G(0, b) + D.col(k + 3) * G(1, b) + D.col(k + 6) * G(2, b);
-    for (int a = 0; a < 10; ++a)
-      for (int i = 0; i < 3; ++i)
-        out.stiffness.row(3 * a + i) +=
-            w * (G(0, a) * DG.row(i) + G(1, a) * DG.row(i + 3) + G(2, a) * DG.row(i + 6));
+    addPointStiffness(stressDerivativeAt(material, F, projectSpd), G, w, out.stiffness);
   }
 }
 

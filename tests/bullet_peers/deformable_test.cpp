@@ -17,7 +17,6 @@ namespace {
 
 using deform::testing::bottomSlab;
 using deform::testing::maxDisplacement;
-using deform::testing::topGrasp;
 
 constexpr Real kDt = 1e-3;
 
@@ -124,26 +123,8 @@ TEST_P(BulletDeformableForces, GraspedNodesFollowTheirTargets) {
   const TetMesh& t = liverTets();
   BulletDeformableModel m;
   initModel(m, bottomSlab(t.V, 0.15));
-  StepInput in = gravityInput();
-  in.grasps.push_back(topGrasp(t.V, 6, 0.0));
-  const MatX3 start = in.grasps[0].targets;
-  for (int s = 1; s <= 100; ++s) {
-    in.grasps[0].targets = start;
-    in.grasps[0].targets.col(2).array() += 2e-4 * s;
-    ASSERT_EQ(m.step(in), StepStatus::Ok);
-    for (size_t k = 0; k < in.grasps[0].vertices.size(); ++k)
-      ASSERT_EQ(m.nodes().row(in.grasps[0].vertices[k]), in.grasps[0].targets.row(Eigen::Index(k)));
-  }
-  const std::vector<int> near = nearestVertices(t.V, t.V.row(in.grasps[0].vertices[0]), 20);
-  Real rise = 0;
-  for (int v : near) rise += m.nodes()(v, 2) - t.V(v, 2);
-  EXPECT_GT(rise / near.size(), 0.005);
   // Released: the node is dynamic again and no longer held at the target.
-  const int held = in.grasps[0].vertices[0];
-  const Real zHeld = m.nodes()(held, 2);
-  in.grasps.clear();
-  for (int s = 0; s < 40; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
-  EXPECT_LT(m.nodes()(held, 2), zHeld - 1e-4);
+  testing::expectGraspFollowedThenReleased(m, t.V, kDt, &Model::nodes, 40);
 }
 
 TEST_P(BulletDeformableForces, PointForceMovesTheLoadedVertexAlongTheForce) {

@@ -15,7 +15,6 @@ namespace {
 
 using deform::testing::bottomSlab;
 using deform::testing::maxDisplacement;
-using deform::testing::topGrasp;
 
 constexpr Real kDt = 1e-3;
 
@@ -116,28 +115,8 @@ TEST(BulletSoftBodyModel, GraspedNodesFollowTheirTargetsAndReleaseRestoresMass) 
   const Organ o = organOf("liver", 0.27);
   BulletSoftBodyModel m;
   m.init(o, SoftBodyConfig{}, kDt, bottomSlab(o.surface.V, 0.15));
-  StepInput in = gravityInput();
-  in.grasps.push_back(topGrasp(o.surface.V, 6, 0.0));
-  const MatX3 start = in.grasps[0].targets;
-  for (int s = 1; s <= 100; ++s) {
-    in.grasps[0].targets = start;
-    in.grasps[0].targets.col(2).array() += 2e-4 * s;  // 0.2 m/s up
-    ASSERT_EQ(m.step(in), StepStatus::Ok);
-    for (size_t k = 0; k < in.grasps[0].vertices.size(); ++k)
-      ASSERT_EQ(m.nodes().row(in.grasps[0].vertices[k]), in.grasps[0].targets.row(Eigen::Index(k)));
-  }
-  // Neighbours were dragged up with the grasp.
-  const std::vector<int> near =
-      nearestVertices(o.surface.V, o.surface.V.row(in.grasps[0].vertices[0]), 20);
-  Real rise = 0;
-  for (int v : near) rise += m.surface()(v, 2) - o.surface.V(v, 2);
-  EXPECT_GT(rise / near.size(), 0.005);
-  // Released: the node falls under gravity again (its mass is back).
-  const int held = in.grasps[0].vertices[0];
-  const Real zHeld = m.nodes()(held, 2);
-  in.grasps.clear();
-  for (int s = 0; s < 100; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
-  EXPECT_LT(m.nodes()(held, 2), zHeld - 1e-4);
+  // Neighbours dragged up with the grasp; released, the node falls under gravity again.
+  testing::expectGraspFollowedThenReleased(m, o.surface.V, kDt, &Model::surface, 100);
 }
 
 TEST(BulletSoftBodyModel, PointForceMovesTheLoadedVertexAlongTheForce) {

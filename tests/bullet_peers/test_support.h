@@ -120,6 +120,33 @@ inline void expectPointForceLiftsItsVertex(Model& m, const Box& box, const MatX3
   EXPECT_GT(m.surface()(l.surfaceVertex, 2) - rest(l.surfaceVertex, 2), 1e-4);
 }
 
+/// A grasp of the 6 top nodes of `rest` raised 0.2 mm a step of dt under gravity for 100 steps:
+/// the grasped nodes on their targets exactly at every step, and the 20 rest vertices nearest
+/// the first of them dragged up 5 mm on average (their rows of `positions`). Released, that node
+/// is free again (its mass back): within releaseSteps it falls more than 0.1 mm.
+inline void expectGraspFollowedThenReleased(Model& m, const MatX3& rest, Real dt,
+                                            Positions positions, int releaseSteps) {
+  StepInput in = gravityInput(dt);
+  in.grasps.push_back(topGrasp(rest, 6, 0.0));
+  const MatX3 start = in.grasps[0].targets;
+  for (int s = 1; s <= 100; ++s) {
+    in.grasps[0].targets = start;
+    in.grasps[0].targets.col(2).array() += 2e-4 * s;  // 0.2 m/s up at 1 ms steps
+    ASSERT_EQ(m.step(in), StepStatus::Ok);
+    for (size_t k = 0; k < in.grasps[0].vertices.size(); ++k)
+      ASSERT_EQ(m.nodes().row(in.grasps[0].vertices[k]), in.grasps[0].targets.row(Eigen::Index(k)));
+  }
+  const std::vector<int> near = nearestVertices(rest, rest.row(in.grasps[0].vertices[0]), 20);
+  Real rise = 0;
+  for (int v : near) rise += (m.*positions)()(v, 2) - rest(v, 2);
+  EXPECT_GT(rise / near.size(), 0.005);
+  const int held = in.grasps[0].vertices[0];
+  const Real zHeld = m.nodes()(held, 2);
+  in.grasps.clear();
+  for (int s = 0; s < releaseSteps; ++s) ASSERT_EQ(m.step(in), StepStatus::Ok);
+  EXPECT_LT(m.nodes()(held, 2), zHeld - 1e-4);
+}
+
 /// A run of `steps` steps of dt under gravity with a grasp of the 5 top nodes of `rest` sliding
 /// along y until step `release`; reset() returns to `rest` and the same run again gives the same
 /// positions bit for bit, more than 0.1 mm from rest.

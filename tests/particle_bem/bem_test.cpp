@@ -199,7 +199,7 @@ TEST(DeformationMatrix, ReciprocityAndGravitySag) {
   Box bottom;
   bottom.lo = Vec3(-1, -1, -1);
   bottom.hi = Vec3(1, 1, -0.02);
-  const std::vector<int> fixed = nodesInBox(s.V, bottom);
+  const std::vector<int> fixed = rowsInBox(s.V, bottom);
   ASSERT_GE(fixed.size(), 3u);
   const DeformationMatrix dm = computeDeformationMatrix(
       assembleBem(s, 5000, 0.3), s, vertexNormals(s.V, s.F), fixed, 5000, 0.3, 1000);

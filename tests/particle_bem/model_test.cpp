@@ -5,6 +5,7 @@
 #include "../support/press.h"
 #include "conforming_surface.h"
 #include "particle_bem_model.h"
+#include "static_accuracy.h"
 
 #include <deform/engine/interaction.h>
 #include <gtest/gtest.h>
@@ -46,13 +47,6 @@ struct Fixture {
     return m;
   }
 };
-
-int topVertex(const MatX3& V) {
-  int t = 0;
-  for (int i = 0; i < V.rows(); ++i)
-    if (V(i, 2) > V(t, 2)) t = i;
-  return t;
-}
 
 StepInput input(int step) {
   StepInput in;

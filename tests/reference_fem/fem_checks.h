@@ -15,6 +15,49 @@
 
 namespace deform::reference_fem::fem_checks {
 
+/// The 0.1 x 0.01 x 0.01 m cantilever of the solver and element tests, clamped at x = 0
+/// (E = 100 kPa, nu = 0.3, 1000 kg/m^3), and Timoshenko's tip deflections of it.
+namespace cantilever {
+
+inline constexpr Real kL = 0.1, kB = 0.01, kH = 0.01, kE = 1e5, kNu = 0.3, kRho = 1000;
+inline constexpr Real kI = kB * kH * kH * kH / 12, kA = kB * kH, kG = kE / (2 * (1 + kNu)),
+                      kKappa = 5.0 / 6.0;
+
+/// Tip deflection (m, down) under a tip load P (N): P L^3 / (3 E I) + P L / (kappa G A).
+inline Real timoshenkoTipLoad(Real P) {
+  return P * kL * kL * kL / (3 * kE * kI) + P * kL / (kKappa * kG * kA);
+}
+
+/// Tip deflection (m, down) under the beam's weight at gravity g (m/s^2), q = rho g A:
+/// q L^4 / (8 E I) + q L^2 / (2 kappa G A).
+inline Real timoshenkoGravity(Real g) {
+  const Real q = kRho * g * kA;
+  return q * std::pow(kL, 4) / (8 * kE * kI) + q * kL * kL / (2 * kKappa * kG * kA);
+}
+
+/// The nodal forces of a uniform downward traction over the tip face x = L carrying tipLoad (N)
+/// on the full section (a half-width mesh carries half of it); mesh: a TetMesh or a FemSystem.
+template <class Mesh>
+std::vector<std::pair<int, Vec3>> tipForces(const Mesh& mesh, Real tipLoad) {
+  return tractionForces(mesh, Vec3(0, 0, -tipLoad / kA),
+                        [](const Vec3& p) { return std::abs(p(0) - kL) < 1e-12; });
+}
+
+/// Mean z-deflection (m, positive down) of the first `count` rows of rest on the tip face x = L,
+/// x the solved positions (3 per node).
+inline Real tipDeflection(const MatX3& rest, int count, const VecX& x) {
+  Real s = 0;
+  int n = 0;
+  for (int i = 0; i < count; ++i)
+    if (std::abs(rest(i, 0) - kL) < 1e-12) {
+      s += rest(i, 2) - x(3 * i + 2);
+      ++n;
+    }
+  return s / n;
+}
+
+}  // namespace cantilever
+
 inline bool onBoundaryOfBox(const Vec3& p, const Vec3& lo, const Vec3& hi) {
   const Real e = 1e-12;
   for (int k = 0; k < 3; ++k)

@@ -159,41 +159,28 @@ TEST(ReferenceFemSolve, NeoHookeanUniaxialStretchMatchesClosedForm) {
 namespace {
 
 // Cantilever 0.1 x 0.01 x 0.01 m clamped at x = 0.
-constexpr Real kL = 0.1, kB = 0.01, kH = 0.01, kE = 1e5, kNu = 0.3, kRho = 1000;
-const Real kI = kB * kH * kH * kH / 12, kA = kB * kH, kG = kE / (2 * (1 + kNu)), kKappa = 5.0 / 6.0;
+using namespace deform::reference_fem::fem_checks::cantilever;
 
 LoadCase cantileverLoads(const TetMesh& m, Real tipLoad, Real gravity) {
   LoadCase lc;
   for (int i = 0; i < m.numVertices(); ++i)
     if (std::abs(m.V(i, 0)) < 1e-12) lc.fixedNodes.push_back(i);
   lc.gravity = Vec3(0, 0, -gravity);
-  if (tipLoad != 0)
-    lc.nodeForces = tractionForces(m, Vec3(0, 0, -tipLoad / kA),
-                                   [](const Vec3& p) { return std::abs(p(0) - kL) < 1e-12; });
+  if (tipLoad != 0) lc.nodeForces = tipForces(m, tipLoad);
   return lc;
 }
 
 /// Mean z-deflection (positive down) of the nodes on the tip face.
 Real tipDeflection(const TetMesh& m, const VecX& x) {
-  Real s = 0;
-  int n = 0;
-  for (int i = 0; i < m.numVertices(); ++i)
-    if (std::abs(m.V(i, 0) - kL) < 1e-12) {
-      s += m.V(i, 2) - x(3 * i + 2);
-      ++n;
-    }
-  return s / n;
+  return fem_checks::cantilever::tipDeflection(m.V, m.numVertices(), x);
 }
 
 }  // namespace
 
 TEST(ReferenceFemSolve, CantileverMatchesTimoshenkoAndConvergesUnderRefinement) {
   const Real P = 1e-3;  // N
-  const Real g = 9.81;  // m/s^2, q = rho g A
-  const Real q = kRho * g * kA;
-  const Real tipExpected = P * kL * kL * kL / (3 * kE * kI) + P * kL / (kKappa * kG * kA);
-  const Real gravExpected =
-      q * std::pow(kL, 4) / (8 * kE * kI) + q * kL * kL / (2 * kKappa * kG * kA);
+  const Real g = 9.81;  // m/s^2
+  const Real tipExpected = timoshenkoTipLoad(P), gravExpected = timoshenkoGravity(g);
   Real prevTipErr = 1e9, prevGravErr = 1e9;
   // Half beam y >= 0 with symmetry rollers (u_y = 0) on y = 0, to halve the cost; the end
   // traction P / A on the half face carries P / 2.
@@ -314,7 +301,7 @@ TEST(ReferenceFemConvergence, BeamRichardsonOnGmshMeshes) {
   const SurfaceMesh beam =
       boxSurface(Vec3(0, -kB / 2, -kH / 2), Vec3(kL, kB / 2, kH / 2), Vec3i(10, 1, 1));
   const Real P = 1e-3;
-  const Real tipExpected = P * kL * kL * kL / (3 * kE * kI) + P * kL / (kKappa * kG * kA);
+  const Real tipExpected = timoshenkoTipLoad(P);
   const ConvergenceStudy s = runConvergenceStudy(
       beam, material(kE, kNu, kRho), MaterialModel::Linear,
       [&](const FemSystem& sys) { return cantileverLoads(sys.rest(), P, 0); }, {3000, 8400, 24000});

@@ -1,5 +1,9 @@
 #include <deform/sdk/mesh.h>
+#include <deform/sdk/model.h>
 #include <gtest/gtest.h>
+
+#include <stdexcept>
+#include <vector>
 
 namespace deform {
 namespace {
@@ -46,6 +50,28 @@ TEST(MeshBasics, NearestVerticesDeterministicTies) {
   EXPECT_EQ(idx[1], 0);  // tie between 0 and 1 broken by index
   EXPECT_EQ(idx[2], 1);
   EXPECT_EQ(nearestVertex(V, Vec3(0, 1.9, 0)), 2);
+}
+
+TEST(MeshBasics, RowsInBoxKeepTheBoundaryInAscendingOrder) {
+  MatX3 V(4, 3);
+  V << 1, 1, 1, 0.5, 0.5, 0.5, 2, 0, 0, 0, 0, 0;
+  const Box b{Vec3::Zero(), Vec3::Ones()};
+  EXPECT_EQ(rowsInBox(V, b), (std::vector<int>{0, 1, 3}));
+  EXPECT_TRUE(rowsInBox(V, Box{Vec3::Constant(3), Vec3::Constant(4)}).empty());
+}
+
+TEST(ModelHelpers, FacesOnNodesAndInverseMasses) {
+  MatX3i F(2, 3);
+  F << 0, 1, 2, 2, 1, 3;
+  EXPECT_EQ(facesOnNodes(F, {}), F);  // vertex i is node i
+  MatX3i onNodes(2, 3);
+  onNodes << 7, 5, 6, 6, 5, 4;
+  EXPECT_EQ(facesOnNodes(F, {7, 5, 6, 4}), onNodes);
+  EXPECT_THROW(facesOnNodes(F, {7, 5, 6}), std::out_of_range);
+  VecX mass(4);
+  mass << 2, 0, 4, 0.5;
+  const VecX w = inverseMasses(mass, {2});
+  EXPECT_EQ(w, (VecX(4) << 0.5, 0, 0, 2).finished());  // massless and fixed nodes immovable
 }
 
 }  // namespace

@@ -377,10 +377,7 @@ std::vector<Real> Interaction::graspTravel() const {
 }
 
 std::vector<int> plateSurfaceVertices(const MatX3& rest, const Box& region) {
-  std::vector<int> out;
-  for (Eigen::Index v = 0; v < rest.rows(); ++v)
-    if (region.contains(rest.row(v).transpose())) out.push_back(int(v));
-  return out;
+  return rowsInBox(rest, region);
 }
 
 SurfacePatch regionPatch(const SurfaceMesh& rest, const Box& box) {

@@ -213,6 +213,17 @@ CouplingParams parseCoupling(const Ctx& c, const ObjectReader& r, CouplingParams
   return p;
 }
 
+/// An optional list of the scene (v: nullptr when absent) at path: each element read by
+/// parse(c, element, path + "/" + index) and appended to out, in order.
+template <class Parse, class T>
+void appendList(const Ctx& c, const json* v, const std::string& path, Parse parse,
+                std::vector<T>& out) {
+  if (!v) return;
+  c.array(*v, path);
+  for (size_t i = 0; i < v->size(); ++i)
+    out.push_back(parse(c, (*v)[i], path + "/" + std::to_string(i)));
+}
+
 ToolSpec parseTool(const Ctx& c, const json& j, const std::string& path) {
   ObjectReader r(j, path, c.file, {"type", "radius", "trajectory", "shaft", "dynamics"});
   ToolSpec t;
@@ -550,27 +561,11 @@ Scene parseScene(const nlohmann::json& j, const std::string& file) {
   }
   if (steps > 1e9) c.fail("/duration", "more than 1e9 steps (" + num(steps) + ")");
 
-  if (const json* v = r.optional("tools")) {
-    c.array(*v, "/tools");
-    for (size_t i = 0; i < v->size(); ++i)
-      s.tools.push_back(parseTool(c, (*v)[i], "/tools/" + std::to_string(i)));
-  }
-  if (const json* v = r.optional("objects")) {
-    c.array(*v, "/objects");
-    for (size_t i = 0; i < v->size(); ++i)
-      s.objects.push_back(parseObject(c, (*v)[i], "/objects/" + std::to_string(i)));
-  }
+  appendList(c, r.optional("tools"), "/tools", parseTool, s.tools);
+  appendList(c, r.optional("objects"), "/objects", parseObject, s.objects);
   if (const json* v = r.optional("contact")) s.contact = parseContact(c, *v, "/contact");
-  if (const json* v = r.optional("loads")) {
-    c.array(*v, "/loads");
-    for (size_t i = 0; i < v->size(); ++i)
-      s.loads.push_back(parseLoad(c, (*v)[i], "/loads/" + std::to_string(i)));
-  }
-  if (const json* v = r.optional("plates")) {
-    c.array(*v, "/plates");
-    for (size_t i = 0; i < v->size(); ++i)
-      s.plates.push_back(parsePlate(c, (*v)[i], "/plates/" + std::to_string(i)));
-  }
+  appendList(c, r.optional("loads"), "/loads", parseLoad, s.loads);
+  appendList(c, r.optional("plates"), "/plates", parsePlate, s.plates);
   if (const json* v = r.optional("markers")) s.markers = parseMarkers(c, *v, "/markers");
   checkCouplingStability(s);
   const json& models = c.array(r.required("models"), "/models");
@@ -807,23 +802,21 @@ nlohmann::json paramsToJson(const ParamValues& values) {
   return j;
 }
 
+namespace {
+
+/// The type's name in the JSON of a parameter specification.
+const char* paramTypeName(ParamType type) {
+  // In ParamType's order.
+  static constexpr const char* kNames[] = {"real", "int", "bool", "choice"};
+  return kNames[static_cast<int>(type)];
+}
+
+}  // namespace
+
 nlohmann::json paramSpecToJson(const ParamSpec& spec) {
   json j;
   j["key"] = spec.key;
-  switch (spec.type) {
-    case ParamType::Real:
-      j["type"] = "real";
-      break;
-    case ParamType::Int:
-      j["type"] = "int";
-      break;
-    case ParamType::Bool:
-      j["type"] = "bool";
-      break;
-    case ParamType::Choice:
-      j["type"] = "choice";
-      break;
-  }
+  j["type"] = paramTypeName(spec.type);
   j["unit"] = spec.unit;
   std::visit([&](const auto& x) { j["default"] = x; }, spec.defaultValue);
   if (spec.type == ParamType::Real || spec.type == ParamType::Int) {

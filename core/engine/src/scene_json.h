@@ -105,20 +105,23 @@ struct Ctx {
     if (!j.is_array()) fail(path, "expected an array, got " + typeName(j));
     return j;
   }
-  Vec3 vec3(const json& j, const std::string& path) const {
-    if (!j.is_array() || j.size() != 3) {
-      fail(path, "expected an array of 3 numbers, got " +
+  /// j as an array of n elements; what it expected (expected) and got otherwise.
+  const json& arrayOf(const json& j, size_t n, const std::string& expected,
+                      const std::string& path) const {
+    if (!j.is_array() || j.size() != n) {
+      fail(path, "expected " + expected + ", got " +
                      (j.is_array() ? "an array of " + std::to_string(j.size()) : typeName(j)));
     }
+    return j;
+  }
+  Vec3 vec3(const json& j, const std::string& path) const {
+    arrayOf(j, 3, "an array of 3 numbers", path);
     Vec3 v;
     for (int i = 0; i < 3; ++i) v[i] = number(j[i], path + "/" + std::to_string(i));
     return v;
   }
   Box box(const json& j, const std::string& path) const {
-    if (!j.is_array() || j.size() != 2) {
-      fail(path, "expected a box [[xlo, ylo, zlo], [xhi, yhi, zhi]], got " +
-                     (j.is_array() ? "an array of " + std::to_string(j.size()) : typeName(j)));
-    }
+    arrayOf(j, 2, "a box [[xlo, ylo, zlo], [xhi, yhi, zhi]]", path);
     Box b;
     b.lo = vec3(j[0], path + "/0");
     b.hi = vec3(j[1], path + "/1");

@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
+#include <type_traits>
 
 namespace deform {
 namespace {
@@ -124,6 +125,26 @@ void appendPointsXml(std::string& s, const MatX3& V,
   s += "</DataArray>\n</Points>\n";
 }
 
+/// The row's entries, each after a space (indices plus `offset`), then a newline.
+template <class Row>
+void appendSpacedRow(std::string& s, const Row& row, int offset = 0) {
+  for (Eigen::Index k = 0; k < row.size(); ++k) {
+    s += ' ';
+    if constexpr (std::is_integral_v<typename Row::Scalar>)
+      appendInt(s, row(k) + offset);
+    else
+      appendReal(s, row(k));
+  }
+  s += '\n';
+}
+
+/// The XML declaration and the root of a VTK XML file of `type` (PolyData, UnstructuredGrid),
+/// opened down to the element of that type.
+std::string vtkXmlHead(const std::string& type) {
+  return "<?xml version=\"1.0\"?>\n<VTKFile type=\"" + type +
+         "\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<" + type + ">\n";
+}
+
 /// connectivity + offsets arrays of equal-size cells (rows of an index matrix).
 template <class IndexMatrix>
 void appendCellsXml(std::string& s, const IndexMatrix& cells) {
@@ -150,19 +171,11 @@ void writeObj(const std::string& path, const SurfaceMesh& mesh) {
   s.reserve(size_t(40) * size_t(mesh.numVertices() + mesh.numFaces()));
   for (Eigen::Index i = 0; i < mesh.V.rows(); ++i) {
     s += 'v';
-    for (int k = 0; k < 3; ++k) {
-      s += ' ';
-      appendReal(s, mesh.V(i, k));
-    }
-    s += '\n';
+    appendSpacedRow(s, mesh.V.row(i));
   }
   for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
     s += 'f';
-    for (int k = 0; k < 3; ++k) {
-      s += ' ';
-      appendInt(s, mesh.F(f, k) + 1);
-    }
-    s += '\n';
+    appendSpacedRow(s, mesh.F.row(f), 1);  // OBJ counts from 1
   }
   writeAtomically(path, s);
 }
@@ -181,11 +194,7 @@ void writeOff(const std::string& path, const SurfaceMesh& mesh) {
   }
   for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
     s += '3';
-    for (int k = 0; k < 3; ++k) {
-      s += ' ';
-      appendInt(s, mesh.F(f, k));
-    }
-    s += '\n';
+    appendSpacedRow(s, mesh.F.row(f));
   }
   writeAtomically(path, s);
 }
@@ -211,10 +220,7 @@ void writeStl(const std::string& path, const SurfaceMesh& mesh) {
 void writeVtp(const std::string& path, const SurfaceMesh& mesh,
               const std::vector<std::pair<std::string, VecX>>& pointScalars) {
   checkScalars(pointScalars, mesh.V.rows());
-  std::string s =
-      "<?xml version=\"1.0\"?>\n"
-      "<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" "
-      "header_type=\"UInt64\">\n<PolyData>\n";
+  std::string s = vtkXmlHead("PolyData");
   s += "<Piece NumberOfPoints=\"" + std::to_string(mesh.numVertices()) +
        "\" NumberOfVerts=\"0\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"" +
        std::to_string(mesh.numFaces()) + "\">\n";
@@ -228,10 +234,7 @@ void writeVtp(const std::string& path, const SurfaceMesh& mesh,
 void writeVtu(const std::string& path, const TetMesh& mesh,
               const std::vector<std::pair<std::string, VecX>>& pointScalars) {
   checkScalars(pointScalars, mesh.V.rows());
-  std::string s =
-      "<?xml version=\"1.0\"?>\n"
-      "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" "
-      "header_type=\"UInt64\">\n<UnstructuredGrid>\n";
+  std::string s = vtkXmlHead("UnstructuredGrid");
   s += "<Piece NumberOfPoints=\"" + std::to_string(mesh.numVertices()) + "\" NumberOfCells=\"" +
        std::to_string(mesh.numTets()) + "\">\n";
   appendPointsXml(s, mesh.V, pointScalars);
@@ -249,11 +252,7 @@ void writeMsh(const std::string& path, const TetMesh& mesh) {
   s += '\n';
   for (Eigen::Index i = 0; i < mesh.V.rows(); ++i) {
     appendInt(s, i + 1);
-    for (int k = 0; k < 3; ++k) {
-      s += ' ';
-      appendReal(s, mesh.V(i, k));
-    }
-    s += '\n';
+    appendSpacedRow(s, mesh.V.row(i));
   }
   s += "$EndNodes\n$Elements\n";
   appendInt(s, mesh.numTets());
@@ -261,11 +260,7 @@ void writeMsh(const std::string& path, const TetMesh& mesh) {
   for (Eigen::Index t = 0; t < mesh.T.rows(); ++t) {
     appendInt(s, t + 1);
     s += " 4 2 1 1";  // type 4 (tet), two tags: physical 1, elementary 1
-    for (int k = 0; k < 4; ++k) {
-      s += ' ';
-      appendInt(s, mesh.T(t, k) + 1);
-    }
-    s += '\n';
+    appendSpacedRow(s, mesh.T.row(t), 1);
   }
   s += "$EndElements\n";
   writeAtomically(path, s);

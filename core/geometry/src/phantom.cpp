@@ -60,6 +60,17 @@ Vec3 liverPoint(const Vec3& d) {
   return Vec3(x, y, z);
 }
 
+// A flattened bag swept along spec.path: half-width width(s), half-thickness flatten x width(s)
+// (front to back), meshed from defaultCount vertices at the resolution, recentred.
+SurfaceMesh flattenedSweep(SweepSpec spec, const std::function<Real(Real)>& width, Real flatten,
+                           int defaultCount, Real res) {
+  spec.halfWidth = width;
+  spec.halfThickness = [width, flatten](Real s) { return flatten * width(s); };
+  SurfaceMesh m = capsuleMesh(sweepShape(spec), defaultCount, res);
+  recentre(&m);
+  return m;
+}
+
 SurfaceMesh makeLiver(Real res) {
   // Mapping the uniform sphere straight through liverPoint stretches triangles up to 8:1 along
   // the thin rim of the left lobe. Pre-warping the directions by diag(A, B, C)^-0.7, (A, B, C)
@@ -86,11 +97,7 @@ SurfaceMesh makeGallbladder(Real res) {
     const Real t = std::clamp(s / kLength, Real(0), Real(1));
     return kNeck + (kFundus - kNeck) * 0.5 * (1 + std::cos(kPi * std::pow(t, 1.3)));
   };
-  spec.halfWidth = width;
-  spec.halfThickness = [width](Real s) { return 0.85 * width(s); };
-  SurfaceMesh m = capsuleMesh(sweepShape(spec), 1461, res);
-  recentre(&m);
-  return m;
+  return flattenedSweep(spec, width, 0.85, 1461, res);
 }
 
 // Stomach: J-shaped bag. The centreline runs down 40 mm from the fundus, then turns 150 degrees
@@ -105,11 +112,7 @@ SurfaceMesh makeStomach(Real res) {
     return 0.011 + 0.031 * 0.5 * (1 + std::cos(kPi * std::pow(t, 1.5))) +
            0.006 * std::exp(-(t / 0.12) * (t / 0.12));
   };
-  spec.halfWidth = width;
-  spec.halfThickness = [width](Real s) { return 0.62 * width(s); };
-  SurfaceMesh m = capsuleMesh(sweepShape(spec), 3349, res);
-  recentre(&m);
-  return m;
+  return flattenedSweep(spec, width, 0.62, 3349, res);
 }
 
 // Intestine: a round tube of radius 13.5 mm along an S of two 45 mm-radius arcs of 100 degrees.

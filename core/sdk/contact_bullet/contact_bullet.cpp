@@ -89,6 +89,18 @@ struct ClosestCallback : btCollisionWorld::ContactResultCallback {
   }
 };
 
+/// Keeps the deepest contact of each key(contact) (a proxy or triangle index), in key order (the
+/// pair cache's order is not part of the contract).
+template <class C, class Key>
+void keepDeepestPerKey(std::vector<C>& out, Key key) {
+  std::sort(out.begin(), out.end(), [&](const C& x, const C& y) {
+    return key(x) != key(y) ? key(x) < key(y) : x.depth > y.depth;
+  });
+  out.erase(
+      std::unique(out.begin(), out.end(), [&](const C& x, const C& y) { return key(x) == key(y); }),
+      out.end());
+}
+
 }  // namespace
 
 class BulletContactBackend final : public ContactBackend {
@@ -177,6 +189,20 @@ class BulletContactBackend final : public ContactBackend {
         continue;
       fn(a, b);
     }
+  }
+
+  /// The contact test of every proxy-instrument pair (forEachProxyBodyPair), counted in
+  /// pairsTested, each with a copy of `prototype` pointed at the proxy: a pair with a result goes
+  /// to found(proxy user index, instrument part index, callback).
+  template <class Callback, class Found>
+  void testProxyBodyPairs(const Callback& prototype, long long& pairsTested, Found&& found) {
+    forEachProxyBodyPair([&](btCollisionObject* a, btCollisionObject* b) {
+      ++pairsTested;
+      Callback cb = prototype;
+      cb.proxy = a;
+      world.contactPairTest(a, b, cb);
+      if (cb.found) found(a->getUserIndex(), -1 - b->getUserIndex(), cb);
+    });
   }
 
   // The same pool for surface triangles; their broadphase boxes are padded by the thickness.
@@ -294,27 +320,17 @@ class BulletContactBackend final : public ContactBackend {
       w.addProxy(static_cast<int>(i), c, r);
     }
     std::vector<Contact> out;
-    w.forEachProxyBodyPair([&](btCollisionObject* a, btCollisionObject* b) {
-      ++pairsTested;
-      DeepestCallback cb;
-      cb.proxy = a;
-      w.world.contactPairTest(a, b, cb);
-      if (!cb.found) return;
-      Contact c;
-      c.proxy = a->getUserIndex();
-      c.body = -1 - b->getUserIndex();
-      c.depth = -cb.deepest;
-      c.normal = cb.normal;
-      out.push_back(c);
-    });
+    w.testProxyBodyPairs(DeepestCallback{}, pairsTested,
+                         [&](int proxy, int body, const DeepestCallback& cb) {
+                           Contact c;
+                           c.proxy = proxy;
+                           c.body = body;
+                           c.depth = -cb.deepest;
+                           c.normal = cb.normal;
+                           out.push_back(c);
+                         });
     w.removeProxies();
-    // Deepest per proxy, in proxy order (the pair cache's order is not part of the contract).
-    std::sort(out.begin(), out.end(), [](const Contact& x, const Contact& y) {
-      return x.proxy != y.proxy ? x.proxy < y.proxy : x.depth > y.depth;
-    });
-    out.erase(std::unique(out.begin(), out.end(),
-                          [](const Contact& x, const Contact& y) { return x.proxy == y.proxy; }),
-              out.end());
+    keepDeepestPerKey(out, [](const Contact& c) { return c.proxy; });
     return out;
   }
 
@@ -339,33 +355,23 @@ class BulletContactBackend final : public ContactBackend {
       w.addTriangle(static_cast<int>(f), a, b, c, t);
     }
     std::vector<TriangleContact> out;
-    w.forEachProxyBodyPair([&](btCollisionObject* a, btCollisionObject* b) {
-      ++pairsTested;
-      ClosestCallback cb;
-      cb.proxy = a;
-      cb.m_closestDistanceThreshold = t;
-      w.world.contactPairTest(a, b, cb);
-      if (!cb.found) return;
-      TriangleContact c;
-      c.triangle = a->getUserIndex();
-      c.body = -1 - b->getUserIndex();
-      c.depth = t - cb.closest;
-      c.normal = cb.normal;
-      const int f = c.triangle;
-      c.bary = closestPointOnTriangle(cb.point, V.row(F(f, 0)).transpose(),
-                                      V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose())
-                   .bary;
-      out.push_back(c);
-    });
+    ClosestCallback within;
+    within.m_closestDistanceThreshold = t;
+    w.testProxyBodyPairs(
+        within, pairsTested, [&](int triangle, int body, const ClosestCallback& cb) {
+          TriangleContact c;
+          c.triangle = triangle;
+          c.body = body;
+          c.depth = t - cb.closest;
+          c.normal = cb.normal;
+          const int f = c.triangle;
+          c.bary = closestPointOnTriangle(cb.point, V.row(F(f, 0)).transpose(),
+                                          V.row(F(f, 1)).transpose(), V.row(F(f, 2)).transpose())
+                       .bary;
+          out.push_back(c);
+        });
     w.removeTriangles();
-    std::sort(out.begin(), out.end(), [](const TriangleContact& x, const TriangleContact& y) {
-      return x.triangle != y.triangle ? x.triangle < y.triangle : x.depth > y.depth;
-    });
-    out.erase(std::unique(out.begin(), out.end(),
-                          [](const TriangleContact& x, const TriangleContact& y) {
-                            return x.triangle == y.triangle;
-                          }),
-              out.end());
+    keepDeepestPerKey(out, [](const TriangleContact& c) { return c.triangle; });
     return out;
   }
 };

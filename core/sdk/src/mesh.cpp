@@ -15,6 +15,13 @@ Box boundingBox(const MatX3& V) {
   return b;
 }
 
+std::vector<int> rowsInBox(const MatX3& V, const Box& box) {
+  std::vector<int> out;
+  for (Eigen::Index v = 0; v < V.rows(); ++v)
+    if (box.contains(V.row(v).transpose())) out.push_back(int(v));
+  return out;
+}
+
 MatX2i uniqueEdges(const MatX3i& F) {
   std::vector<std::pair<int, int>> e;
   e.reserve(3 * F.rows());

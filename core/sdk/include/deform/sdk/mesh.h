@@ -43,6 +43,9 @@ struct Box {
 /// Bounding box of the rows of V (an empty V gives a zero box at the origin).
 Box boundingBox(const MatX3& V);
 
+/// Indices of the rows of V inside the box (boundary included), ascending.
+std::vector<int> rowsInBox(const MatX3& V, const Box& box);
+
 /// Unique undirected edges of a triangle list, each as (min index, max index), sorted
 /// lexicographically. #E by 2.
 MatX2i uniqueEdges(const MatX3i& F);

@@ -165,6 +165,26 @@ inline void graspsOnNodes(const std::vector<GraspInput>& grasps, const std::vect
   }
 }
 
+/// The organ surface's triangles F in terms of the nodes that carry their vertices: the
+/// collision proxy of a model whose nodes include the surface vertices. vertexNode as in
+/// graspsOnNodes (empty: vertex i is node i); a vertex outside it throws std::out_of_range.
+inline MatX3i facesOnNodes(const MatX3i& F, const std::vector<int>& vertexNode) {
+  MatX3i out = F;
+  if (!vertexNode.empty())
+    for (Eigen::Index f = 0; f < out.rows(); ++f)
+      for (int k = 0; k < 3; ++k) out(f, k) = vertexNode.at(size_t(out(f, k)));
+  return out;
+}
+
+/// The inverse masses of a model's nodes: 1 / mass, 0 for a node without mass and for the fixed
+/// nodes (immovable). fixed: node indices, as fixedNodeIndices gives them.
+inline VecX inverseMasses(const VecX& mass, const std::vector<int>& fixed) {
+  VecX w(mass.size());
+  for (Eigen::Index i = 0; i < mass.size(); ++i) w[i] = mass[i] > 0 ? 1.0 / mass[i] : 0.0;
+  for (int i : fixed) w[i] = 0.0;
+  return w;
+}
+
 /// The organ surface vertices a grasp closing at p with jaw radius r holds: every rest-surface
 /// vertex (rest: #V by 3) within r of p (sorted), or the nearest vertex alone when none is. The
 /// one definition of the grasped set (the harness's interaction, rmse_k's exclusion and

@@ -124,11 +124,12 @@ struct ModelInfo {
 };
 
 /// The fields every plugin's ModelInfo sets: name, description, citation, version "1.0",
-/// capabilities, parameter declarations and create() default-constructing ModelT. The plugin
-/// adds knob, presets, measures, resolution and effort itself.
-template <class ModelT>
-ModelInfo modelInfo(std::string name, std::string description, std::string citation,
-                    std::vector<Capability> capabilities, std::vector<ParamSpec> params) {
+/// capabilities, parameter declarations and create(), the model's factory (for a model class
+/// its plugin keeps in one source file). The plugin adds knob, presets, measures, resolution and
+/// effort itself.
+inline ModelInfo modelInfo(std::string name, std::string description, std::string citation,
+                           std::vector<Capability> capabilities, std::vector<ParamSpec> params,
+                           std::function<std::unique_ptr<Model>()> create) {
   ModelInfo info;
   info.name = std::move(name);
   info.description = std::move(description);
@@ -136,8 +137,17 @@ ModelInfo modelInfo(std::string name, std::string description, std::string citat
   info.version = "1.0";
   info.capabilities = std::move(capabilities);
   info.params = std::move(params);
-  info.create = [] { return std::make_unique<ModelT>(); };
+  info.create = std::move(create);
   return info;
+}
+
+/// The same with create() default-constructing ModelT.
+template <class ModelT>
+ModelInfo modelInfo(std::string name, std::string description, std::string citation,
+                    std::vector<Capability> capabilities, std::vector<ParamSpec> params) {
+  return modelInfo(std::move(name), std::move(description), std::move(citation),
+                   std::move(capabilities), std::move(params),
+                   [] { return std::make_unique<ModelT>(); });
 }
 
 class Registry {
