@@ -394,6 +394,8 @@ void finishRecord(Model& model, const Scene& scene, const Organ& organ, Interact
   rec.phaseMs.clear();
   for (auto& [phase, v] : phases) rec.phaseMs[phase] = median(v);
   rec.numeric = model.numericCounters();
+  if (const int n = interaction.forcelessGraspSteps(); n > 0)
+    rec.numeric["forceless_grasp_steps"] = n;
   rec.finalSurface = model.surface();
   const MatX3i faces = model.surfaceFaces();
   rec.finalFaces = faces.rows() > 0 ? faces : organ.surface.F;
@@ -615,6 +617,11 @@ void assessValidity(const Scene& scene, RunRecord& rec) {
   };
   if (rec.status != RunStatus::Ok) invalid(notRunReason(rec));
   if (!rec.emptyGrasps.empty()) invalid("grasp held nothing");
+  // A dynamic instrument is moved by the tissue's force on its grasp: without one it felt none.
+  if (const auto it = rec.numeric.find("forceless_grasp_steps");
+      it != rec.numeric.end() && it->second > 0)
+    invalid("the model reported no force for a grasp of a dynamic instrument (" +
+            std::to_string(it->second) + " steps): the instrument felt no tissue");
   // Scale of the residual test: the tool's travel, at least its jaw radius (a grasp that holds
   // still is judged against the size of what it holds).
   Real radius = 0;

@@ -394,6 +394,19 @@ TEST(Worlds, ADynamicGrasperReportsTheCouplingForceEveryStep) {
   EXPECT_EQ(rec.worlds.size(), 1u);
   // The hand moves up: the coupling pulls the tool up.
   EXPECT_GT(rec.handForces[1].force.z(), 0);
+  // This model reports no grasp force: the instrument felt no tissue, and the run says so.
+  ASSERT_FALSE(model.inputs.empty());
+  ASSERT_FALSE(model.inputs.back().grasps.empty()) << "the grasp holds vertices";
+  EXPECT_EQ(rec.numeric.count("forceless_grasp_steps"), 1u);
+  harness::assessValidity(s, rec);
+  EXPECT_FALSE(rec.valid);
+  EXPECT_NE(rec.invalidReason.find("no force for a grasp"), std::string::npos) << rec.invalidReason;
+  // One that reports a force (zero here) is not flagged.
+  model.graspForce = true;
+  model.reset();
+  harness::RunRecord withForce;
+  harness::simulate(model, s, organ, harness::RunOptions{}, withForce);
+  EXPECT_EQ(withForce.numeric.count("forceless_grasp_steps"), 0u);
 }
 
 nlohmann::json instrumentScene() {

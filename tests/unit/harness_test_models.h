@@ -27,6 +27,7 @@ class RigidTestModel : public Model {
   long long elements = 0;         ///< > 0: reported as counts "elements"
   long long fixedNodes = -1;      ///< >= 0: reported as counts "fixed_nodes" (its own rule)
   bool shortSurface = false;      ///< surface() has one row too few (a broken mapping)
+  bool graspForce = false;        ///< graspForces(): a zero force per grasp (else none)
   std::vector<StepInput> inputs;  ///< every input received
   std::vector<StepInput>* recordInto = nullptr;  ///< also appended here when set (outlives runs)
 
@@ -58,6 +59,10 @@ class RigidTestModel : public Model {
     return m_steps == reportDivergedAtStep ? StepStatus::Diverged : StepStatus::Ok;
   }
   const MatX3& nodes() const override { return m_x; }
+  std::vector<Vec3> graspForces() const override {
+    return std::vector<Vec3>(graspForce && !inputs.empty() ? inputs.back().grasps.size() : 0,
+                             Vec3::Zero());
+  }
   const MatX3& surface() const override { return shortSurface ? m_short : m_x; }
   void reset() override {
     m_x = m_rest;

@@ -61,6 +61,7 @@ Interaction::~Interaction() = default;
 void Interaction::reset() {
   m_attach.assign(m_scene.tools.size(), Attachment{});
   m_emptyGrasps.clear();
+  m_forcelessGraspSteps = 0;
   buildWorlds();
 }
 
@@ -206,11 +207,16 @@ void Interaction::finishStep(const StepInput& in, const Model& model) {
     }
   }
   const std::vector<Vec3> grasp = model.graspForces();
-  for (size_t g = 0; g < in.grasps.size() && g < grasp.size(); ++g) {
+  bool forceless = false;
+  for (size_t g = 0; g < in.grasps.size(); ++g) {
     const int tool = in.grasps[g].tool;
-    if (tool >= 0 && tool < int(m_toolDynBody.size()) && m_toolDynBody[tool] >= 0)
+    if (tool < 0 || tool >= int(m_toolDynBody.size()) || m_toolDynBody[tool] < 0) continue;
+    if (g < grasp.size())
       m_reactionForce[m_toolDynBody[tool]] += grasp[g];
+    else
+      forceless = true;
   }
+  m_forcelessGraspSteps += forceless;
 }
 
 StepInput Interaction::prepare(Real t, Real dt, const Model& model) {

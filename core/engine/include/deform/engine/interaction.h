@@ -89,6 +89,9 @@ class Interaction {
   Vec3 focusPoint() const;
   /// Grasps that closed on no surface vertex so far (tool indices), for warnings.
   const std::vector<int>& emptyGrasps() const { return m_emptyGrasps; }
+  /// Steps at which a grasp of a dynamic instrument got no force from the model (graspForces()
+  /// shorter than the grasps): that instrument felt no tissue.
+  int forcelessGraspSteps() const { return m_forcelessGraspSteps; }
   /// The pressure patch of each load, in scene order.
   const std::vector<SurfacePatch>& loadPatches() const { return m_loadPatches; }
   /// Tool travel while grasping: for each grasper, the largest distance its position reaches
@@ -117,6 +120,7 @@ class Interaction {
   std::vector<SurfacePatch> m_loadPatches;
   std::vector<Attachment> m_attach;
   std::vector<int> m_emptyGrasps;
+  int m_forcelessGraspSteps = 0;
   std::vector<std::vector<int>> m_plateVertices;
 
   std::unique_ptr<ContactWorld> m_contact;
