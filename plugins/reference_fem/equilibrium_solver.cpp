@@ -501,7 +501,7 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
     } else {
       ++rep.failedLoadSteps;
       dt = 0.5 * (tn - t);  // half of the increment that failed (not of a doubled one)
-      if (dt < minStep) break;
+      if (dt < minStep || rep.failedLoadSteps >= opt.maxFailedLoadSteps) break;
     }
   }
   rep.converged = t >= 1;

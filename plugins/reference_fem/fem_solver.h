@@ -117,6 +117,10 @@ struct SolveOptions {
   Real tolerance = 1e-8;    ///< |residual_free| <= tolerance * force scale (see SolveReport)
   int maxIterations = 100;  ///< Newton iterations per load step
   int maxHalvings = 10;     ///< load step may shrink to 2^-maxHalvings of the increment
+  /// Rejected load steps after which a solve gives up (not converged), however far it got: a
+  /// load with no equilibrium in reach otherwise alternates accepted and rejected increments
+  /// near the smallest step for as long as it is left to (no answer in 900 s, issue H1).
+  int maxFailedLoadSteps = 40;
 };
 
 struct SolveReport {

@@ -445,3 +445,26 @@ TEST(ReferenceFemSolve, ProjectedStepsReuseTheProjectedFactor) {
   EXPECT_GE(rep.projectedSteps, 4);
   EXPECT_LE(2 * rep.spdFallbacks, rep.projectedSteps);
 }
+
+// A solve that cannot finish gives up after SolveOptions::maxFailedLoadSteps rejected load
+// steps, however much of the smallest step is left: one Newton iteration per load step never
+// meets the tolerance on a nonlinear problem, so every increment is rejected.
+TEST(ReferenceFemSolve, GivesUpAfterTheRejectedLoadStepsAllowed) {
+  const TetMesh mesh = structuredBoxTets(Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01), Vec3i(2, 2, 2));
+  const FemSystem sys(mesh, material(5500, 0.3), MaterialModel::NeoHookean);
+  LoadCase lc;
+  for (int i = 0; i < sys.numNodes(); ++i)
+    if (sys.rest().V(i, 2) < 1e-12) lc.fixedNodes.push_back(i);
+  lc.nodeForces = tractionForces(sys, Vec3(0, 0, 2000),
+                                 [](const Vec3& p) { return std::abs(p(2) - 0.01) < 1e-12; });
+  SolveOptions opt;
+  opt.maxIterations = 1;
+  for (int allowed : {3, 40}) {
+    opt.maxFailedLoadSteps = allowed;
+    SolveReport rep;
+    solveEquilibrium(sys, lc, opt, &rep);
+    EXPECT_FALSE(rep.converged);
+    // 40 is more than the halvings allowed: the smallest step ends it first.
+    EXPECT_EQ(rep.failedLoadSteps, std::min(allowed, opt.maxHalvings + 1)) << allowed;
+  }
+}
