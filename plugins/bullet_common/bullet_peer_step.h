@@ -176,4 +176,28 @@ inline StepStatus finishBulletStep(btSoftBody& b, const StepInput& in, Real dt, 
   return StepStatus::Ok;
 }
 
+/// After Bullet's step, before finishBulletStep() puts the sliding plates' nodes back on their
+/// plates: per grasp, the force a sliding plate takes from its nodes (the normal momentum the step
+/// gave them beyond the plate's own motion, per step; zero for a bonded grasp).
+inline std::vector<Vec3> slidingPlateForces(const btSoftBody& b, const PeerStepState& s,
+                                            std::size_t numGrasps, Real dt) {
+  std::vector<Vec3> forces(numGrasps, Vec3::Zero());
+  // s.sliding lists, grasp by grasp, the sliding grasps' nodes no bonded grasp holds.
+  size_t next = 0;
+  for (size_t g = 0; g < numGrasps && g < s.nodeGrasps.size(); ++g) {
+    const NodeGrasp& gr = s.nodeGrasps[g];
+    if (!gr.sliding()) continue;
+    for (int node : gr.nodes) {
+      if (std::binary_search(s.grasped.begin(), s.grasped.end(), node)) continue;
+      const bullet_common::SlidingNode& h = s.sliding[next++];
+      const btSoftBody::Node& nd = b.m_nodes[h.node];
+      if (!(nd.m_im > 0)) continue;
+      const btVector3 n(h.normal.x(), h.normal.y(), h.normal.z());
+      // The plate takes back the normal velocity the step gave the node beyond the plate's own.
+      forces[g] += h.normal * ((n.dot(nd.m_v) - (h.offset - h.start) / dt) / (nd.m_im * dt));
+    }
+  }
+  return forces;
+}
+
 }  // namespace deform::bullet_common

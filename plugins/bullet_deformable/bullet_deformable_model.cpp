@@ -228,33 +228,13 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
     }
   bullet_common::aimSlidingNodes(b, m_tail, dt);  // free along their plate (bullet_peer_step.h)
 
-  w.world->stepSimulation(dt, 0, dt);        // exactly one internal step of length dt
-  slidingPlateForces(in.grasps.size(), dt);  // before finishBulletStep puts them back on the plate
+  w.world->stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
+  // Before finishBulletStep puts them back on the plate.
+  m_slidingForces = bullet_common::slidingPlateForces(*m_world->body, m_tail, in.grasps.size(), dt);
   const StepStatus status =
       bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase, &m_surfaceNode, &m_surface);
   computeGraspForces(in.grasps.size());
   return status;
-}
-
-void BulletDeformableModel::slidingPlateForces(std::size_t numGrasps, Real dt) {
-  m_slidingForces.assign(numGrasps, Vec3::Zero());
-  const btSoftBody& b = *m_world->body;
-  // m_tail.sliding lists, grasp by grasp, the sliding grasps' nodes no bonded grasp holds.
-  size_t next = 0;
-  for (size_t g = 0; g < numGrasps && g < m_tail.nodeGrasps.size(); ++g) {
-    const NodeGrasp& gr = m_tail.nodeGrasps[g];
-    if (!gr.sliding()) continue;
-    for (int node : gr.nodes) {
-      if (std::binary_search(m_tail.grasped.begin(), m_tail.grasped.end(), node)) continue;
-      const bullet_common::SlidingNode& h = m_tail.sliding[next++];
-      const btSoftBody::Node& nd = b.m_nodes[h.node];
-      if (!(nd.m_im > 0)) continue;
-      const btVector3 n(h.normal.x(), h.normal.y(), h.normal.z());
-      // The plate takes back the normal velocity the step gave the node beyond the plate's own.
-      m_slidingForces[g] +=
-          h.normal * ((n.dot(nd.m_v) - (h.offset - h.start) / dt) / (nd.m_im * dt));
-    }
-  }
 }
 
 void BulletDeformableModel::computeGraspForces(std::size_t numGrasps) {

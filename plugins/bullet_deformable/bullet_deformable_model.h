@@ -92,7 +92,6 @@ class BulletDeformableModel final : public Model {
  private:
   struct World;
   void build();
-  void slidingPlateForces(std::size_t numGrasps, Real dt);
   void computeGraspForces(std::size_t numGrasps);
 
   DeformableConfig m_config;

@@ -193,32 +193,12 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
       b.addForce(btVector3(f.x(), f.y(), f.z()), l.vertices[k]);
     }
 
-  w.world.stepSimulation(dt, 0, dt);         // exactly one internal step of length dt
-  slidingPlateForces(in.grasps.size(), dt);  // before finishBulletStep puts them back on the plate
+  w.world.stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
+  // Before finishBulletStep puts them back on the plate.
+  m_slidingForces = bullet_common::slidingPlateForces(*m_world->body, m_tail, in.grasps.size(), dt);
   const StepStatus status = bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);
   computeGraspForces(in.grasps.size(), dt);
   return status;
-}
-
-void BulletSoftBodyModel::slidingPlateForces(std::size_t numGrasps, Real dt) {
-  m_slidingForces.assign(numGrasps, Vec3::Zero());
-  const btSoftBody& b = *m_world->body;
-  // m_tail.sliding lists, grasp by grasp, the sliding grasps' nodes no bonded grasp holds.
-  size_t next = 0;
-  for (size_t g = 0; g < numGrasps && g < m_tail.nodeGrasps.size(); ++g) {
-    const NodeGrasp& gr = m_tail.nodeGrasps[g];
-    if (!gr.sliding()) continue;
-    for (int node : gr.nodes) {
-      if (std::binary_search(m_tail.grasped.begin(), m_tail.grasped.end(), node)) continue;
-      const bullet_common::SlidingNode& h = m_tail.sliding[next++];
-      const btSoftBody::Node& nd = b.m_nodes[h.node];
-      if (!(nd.m_im > 0)) continue;
-      const btVector3 n(h.normal.x(), h.normal.y(), h.normal.z());
-      // The plate takes back the normal velocity the step gave the node beyond the plate's own.
-      m_slidingForces[g] +=
-          h.normal * ((n.dot(nd.m_v) - (h.offset - h.start) / dt) / (nd.m_im * dt));
-    }
-  }
 }
 
 void BulletSoftBodyModel::computeGraspForces(std::size_t numGrasps, Real dt) {

@@ -109,7 +109,6 @@ class BulletSoftBodyModel final : public Model {
  private:
   struct World;  // the Bullet objects, rebuilt by reset()
   void build();
-  void slidingPlateForces(std::size_t numGrasps, Real dt);
   void computeGraspForces(std::size_t numGrasps, Real dt);
 
   SoftBodyConfig m_config;

@@ -168,6 +168,22 @@ INSTANTIATE_TEST_SUITE_P(Forces, BulletDeformableForces,
                                                                       : "LinearElasticity";
                          });
 
+/// The plate tests' cube tetrahedralised coarsely (500 target tets), its surface vertices the
+/// first nodes.
+TetMesh coarseCube(const testing::CubePress& press) {
+  TetMeshOptions o;
+  o.targetElements = 500;
+  o.source = "phantom:cube";
+  return tetrahedralize(press.organ.surface, o).mesh;
+}
+
+/// Surface vertex i is node i, for the first n.
+std::vector<int> firstNodes(int n) {
+  std::vector<int> surface(size_t(n), 0);
+  std::iota(surface.begin(), surface.end(), 0);
+  return surface;
+}
+
 // A sliding plate (GraspInput::slideNormal): the held nodes keep their mass, their position and
 // velocity along the normal are set before and after Bullet's implicit step
 // (bullet_peer_step.h); against a bonded plate the top spreads out and the plate needs less
@@ -175,12 +191,8 @@ INSTANTIATE_TEST_SUITE_P(Forces, BulletDeformableForces,
 // nodes, its bottom face pinned.
 TEST(BulletDeformableModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
   const testing::CubePress press = testing::cubePress(0.5);
-  TetMeshOptions o;
-  o.targetElements = 500;
-  o.source = "phantom:cube";
-  const TetMesh mesh = tetrahedralize(press.organ.surface, o).mesh;
-  std::vector<int> surface(size_t(press.organ.surface.numVertices()));
-  std::iota(surface.begin(), surface.end(), 0);
+  const TetMesh mesh = coarseCube(press);
+  const std::vector<int> surface = firstNodes(press.organ.surface.numVertices());
   BulletDeformableModel m;
   m.init(mesh, surface, press.organ.material, DeformableConfig{}, kDt, bottomSlab(mesh.V, 1e-6));
   testing::expectSlidingSpreadsTheTopAndEasesThePlate(m, press.organ, 0.002, 100, 100,
@@ -193,12 +205,8 @@ TEST(BulletDeformableModel, ASlidingPlateSpreadsTheTopWhereABondedOneHoldsIt) {
 // measured 1.21 / 1.04 N (Neo-Hookean), 1.19 / 1.05 N (linear). Asserted within a factor 2.
 TEST(BulletDeformableModel, APlatesForceIsWhatTheTissueTransmitsToTheHeldNodes) {
   const testing::CubePress press = testing::cubePress(0.5);
-  TetMeshOptions o;
-  o.targetElements = 500;
-  o.source = "phantom:cube";
-  const TetMesh mesh = tetrahedralize(press.organ.surface, o).mesh;
-  std::vector<int> surface(size_t(press.organ.surface.numVertices()));
-  std::iota(surface.begin(), surface.end(), 0);
+  const TetMesh mesh = coarseCube(press);
+  const std::vector<int> surface = firstNodes(press.organ.surface.numVertices());
   for (ElasticForce force : {ElasticForce::NeoHookean, ElasticForce::LinearElasticity}) {
     DeformableConfig c;
     c.force = force;
