@@ -315,12 +315,19 @@ json runJson(const RunRecord& run) {
     for (const auto& s : run.compared) at.push_back(s.time);
     j["compared_at"] = at;
   }
-  // Plates: the force the tissue exerts on each, at the last compared instant.
-  if (!run.compared.empty() && !run.compared.back().plateForces.empty()) {
+  // Plates: the force the tissue exerts on each, at the last compared instant and at each.
+  const auto plateForces = [&](const SurfaceSnapshot& s) {
     json forces = json::array();
-    for (const Vec3& f : run.compared.back().plateForces)
+    for (const Vec3& f : s.plateForces)
       forces.push_back({finite(f.x()), finite(f.y()), finite(f.z())});
-    j["plate_force_N"] = forces;
+    return forces;
+  };
+  if (!run.compared.empty() && !run.compared.back().plateForces.empty()) {
+    j["plate_force_N"] = plateForces(run.compared.back());
+    json at = json::array();
+    for (const SurfaceSnapshot& s : run.compared)
+      if (!s.plateForces.empty()) at.push_back({{"t", s.time}, {"plate_force_N", plateForces(s)}});
+    j["plate_force_at"] = at;
   }
   if (!run.markerStatus.empty()) j["markers"] = markersJson(run);
   if (!run.emptyGrasps.empty()) j["empty_grasps"] = run.emptyGrasps;

@@ -301,9 +301,30 @@ double dynamicCap(bool quick) {
   return quick ? 3.0 : 5.0;
 }
 
+/// What the table reads of one run: at each compared instant with markers, their positions and
+/// the force the tissue exerts on the plate along +z (N; NaN when the model reports none).
+struct Readout {
+  std::vector<MatX3> markers;
+  std::vector<double> plateForce;
+  std::string why;  ///< why there are no markers
+};
+
+/// The plate's force (+z) of a run's results.json entry at each instant it was written.
+std::map<double, double> plateForceAt(const nlohmann::json& run) {
+  std::map<double, double> out;
+  if (!run.contains("plate_force_at")) return out;
+  for (const auto& at : run["plate_force_at"]) {
+    const auto& f = at.at("plate_force_N");
+    if (!f.empty() && f[0].size() == 3 && f[0][2].is_number())
+      out[at.at("t").get<double>()] = f[0][2].get<double>();
+  }
+  return out;
+}
+
 /// The markers of run `label` at each compared instant, read from the case's results.json.
-std::vector<MatX3> markersOf(const CaseResult& c, const std::string& label, std::string& why) {
-  std::vector<MatX3> out;
+Readout readRun(const CaseResult& c, const std::string& label) {
+  Readout out;
+  std::string& why = out.why;
   try {
     std::ifstream in(c.outDir / "results.json");
     const nlohmann::json doc = nlohmann::json::parse(in);
@@ -318,14 +339,17 @@ std::vector<MatX3> markersOf(const CaseResult& c, const std::string& label, std:
         why = "markers unsupported: " + m.value("reason", std::string("?"));
         return out;
       }
+      const std::map<double, double> force = plateForceAt(r);
       for (const auto& at : m.at("at")) {
+        const auto f = force.find(at.value("t", NAN));
+        out.plateForce.push_back(f == force.end() ? NAN : f->second);
         const auto& p = at.at("positions_m");
         MatX3 x(Eigen::Index(p.size()), 3);
         for (size_t i = 0; i < p.size(); ++i)
           for (int k = 0; k < 3; ++k)
             x(Eigen::Index(i), k) =
                 p[i][size_t(k)].is_number() ? p[i][size_t(k)].get<double>() : NAN;
-        out.push_back(std::move(x));
+        out.markers.push_back(std::move(x));
       }
       return out;
     }
@@ -400,29 +424,28 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
   // CalculiX's figures, for the reference's comparison column.
   std::map<std::pair<std::string, size_t>, double> calculix;
   // Each source's markers per level (empty when absent) and why not; each case read once.
-  std::map<std::pair<std::string, std::string>, std::pair<std::vector<MatX3>, std::string>> read;
+  std::map<std::pair<std::string, std::string>, Readout> read;
   struct Computed {
     Source source;
     std::string label, plugin;
     std::vector<const CaseResult*> cases;
-    std::vector<MatX3> markers;  ///< per level; 0 rows when absent
+    std::vector<MatX3> markers;      ///< per level; 0 rows when absent
+    std::vector<double> plateForce;  ///< per level, N along +z; NaN when absent
     std::vector<std::string> why;
   };
   std::vector<Computed> computed;
   for (const Source& src : sources) {
-    Computed k{src, src.label, src.plugin, {}, {}, {}};
+    Computed k{src, src.label, src.plugin, {}, {}, {}, {}};
     for (const auto& [caseId, index] : src.levels) {
       const CaseResult* c = res.count(caseId) ? &res.at(caseId) : nullptr;
       const auto key = std::make_pair(caseId, src.label);
-      if (c && !read.count(key)) {
-        std::string why;
-        std::vector<MatX3> m = markersOf(*c, src.label, why);
-        read[key] = {std::move(m), why};
-      }
-      const auto* m = c ? &read[key] : nullptr;
+      if (c && !read.count(key)) read[key] = readRun(*c, src.label);
+      const Readout* m = c ? &read[key] : nullptr;
+      const bool has = m && index < m->markers.size();
       k.cases.push_back(c);
-      k.markers.push_back(m && index < m->first.size() ? m->first[index] : MatX3());
-      k.why.push_back(m ? m->second : std::string());
+      k.markers.push_back(has ? m->markers[index] : MatX3());
+      k.plateForce.push_back(has ? m->plateForce[index] : NAN);
+      k.why.push_back(m ? m->why : std::string());
     }
     computed.push_back(std::move(k));
   }
@@ -434,6 +457,7 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
         row["model"] = k.label;
         row["level"] = data.strains[l];
         row["plate_mm"] = 1e3 * data.strains[l] * kSide;
+        row["plate_force_N"] = numberOrNull(k.plateForce[l]);
         row["registration"] = reg;
         row["contact"] = contact;
         row["calibrated"] = k.source.calibrated;
@@ -508,9 +532,10 @@ std::vector<ojson> truthCubeRows(const TruthCubeData& data, const std::vector<So
     }
   }
   for (const auto& [name, why] : absent) {
-    ojson row = {{"model", name},           {"level", nullptr},   {"plate_mm", nullptr},
-                 {"registration", nullptr}, {"contact", contact}, {"calibrated", false},
-                 {"calibration", ""}};
+    ojson row = {{"model", name},           {"level", nullptr},
+                 {"plate_mm", nullptr},     {"plate_force_N", nullptr},
+                 {"registration", nullptr}, {"contact", contact},
+                 {"calibrated", false},     {"calibration", ""}};
     for (const char* key : {"rms_error_m", "max_error_m", "measured_rms_m", "rms_error_mm",
                             "relative_error", "max_error_mm", "measured_rms_mm", "bulge_mm",
                             "measured_bulge_mm", "vs_calculix_pct", "run_s", "ms_per_step"})
@@ -742,6 +767,7 @@ TableDef truthCube(const TablesOptions& o, PluginLoader& loader) {
       {{"model", "model"},
        {"level", "strain"},
        {"plate_mm", "plate mm"},
+       {"plate_force_N", "plate force N"},
        {"registration", "registration"},
        {"contact", "plate"},
        {"rms_error_mm", "bead RMS error mm"},
