@@ -88,6 +88,23 @@ TEST(Metrics, ReferenceDisplacementOverTheSamplesOnly) {
   EXPECT_EQ(back.error->rmseNearest, e.rmseNearest) << "rmse_k is not confused with them";
 }
 
+TEST(Results, PlateForcesAtEveryComparedInstant) {
+  // Two compared instants, the first without a force (a model that reports none then).
+  RunRecord r;
+  r.compared.push_back(snapshotAt(10, 0.5, MatX3()));
+  r.compared.push_back(snapshotAt(20, 1.0, MatX3()));
+  r.compared[1].plateForces = {Vec3(0, 0, 2.5), Vec3(0.1, 0, -1)};
+  SurfaceSnapshot both = snapshotAt(30, 1.5, MatX3());
+  both.plateForces = {Vec3(0, 0, 3), Vec3(0, 0, -3)};
+  r.compared.push_back(both);
+  const auto j = runJson(r);
+  ASSERT_EQ(j["plate_force_at"].size(), 2u);
+  EXPECT_EQ(j["plate_force_at"][0]["t"].get<double>(), 1.0);
+  EXPECT_EQ(j["plate_force_at"][0]["plate_force_N"][1][0].get<double>(), 0.1);
+  EXPECT_EQ(j["plate_force_at"][1]["plate_force_N"][0][2].get<double>(), 3.0);
+  EXPECT_EQ(j["plate_force_N"], j["plate_force_at"][1]["plate_force_N"]) << "the last instant";
+}
+
 TEST(Metrics, LossRatioWhenTheReferenceDoesNotMove) {
   const MatX3 rest = rows({Vec3(0, 0, 0), Vec3(1, 0, 0)});
   EXPECT_EQ(computeErrors(rest, rest, rest, Vec3::Zero(), {}).lossRatio, 0.0);
