@@ -13,7 +13,7 @@ import sys
 
 
 def timing(key):
-    return not key.startswith("paper_") and (key == "ms" or key.endswith("_ms") or key.endswith("_s"))
+    return not key.startswith("paper_") and (key == "ms" or key.startswith("ms_") or key.endswith("_ms") or key.endswith("_s"))
 
 
 def main(before, after):

@@ -341,7 +341,7 @@ Readout readRun(const CaseResult& c, const std::string& label) {
       }
       const std::map<double, double> force = plateForceAt(r);
       for (const auto& at : m.at("at")) {
-        const auto f = force.find(at.value("t", NAN));
+        const auto f = force.find(at.value("t", std::nan("")));
         out.plateForce.push_back(f == force.end() ? NAN : f->second);
         const auto& p = at.at("positions_m");
         MatX3 x(Eigen::Index(p.size()), 3);
