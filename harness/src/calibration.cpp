@@ -170,6 +170,16 @@ constexpr std::pair<CalibMetric, const char*> kMetricNames[] = {
     {CalibMetric::LossRatio, "loss_ratio"},
     {CalibMetric::MarkerRms, "marker_rms"}};
 
+/// Why a trial's run has no error figure: the case's reference run when it failed (a child that
+/// timed out with it, say; the model then ran without it), else the run's own last note.
+std::string noErrorWhy(const CaseResult& c, const RunRecord& run) {
+  if (c.result)
+    for (const RunRecord& r : c.result->runs)
+      if (r.isReference && r.status != RunStatus::Ok)
+        return ": the reference " + r.label + " " + notRunReason(r);
+  return run.notes.empty() ? "" : ": " + run.notes.back();
+}
+
 }  // namespace
 
 bool calibMetricFromName(const std::string& name, CalibMetric& out) {
@@ -535,7 +545,7 @@ class Calibrator {
             if (!run->valid) why = "invalid: " + run->invalidReason;
             r.status = std::isfinite(r.value) ? "ok" : why;
           } else if (!run->error) {
-            r.status = "no error" + (run->notes.empty() ? "" : ": " + run->notes.back());
+            r.status = "no error" + noErrorWhy(c, *run);
           } else {
             r.value = metricOf(*run->error, m_o.metric);
             r.status = std::isfinite(r.value) ? "ok" : "no metric";
@@ -694,7 +704,9 @@ class Calibrator {
     const std::vector<double> defaults = defaultValues();
     int trialNo = 0;
     double best = INFINITY;
-    int failedRuns = 0;
+    int failedRuns = 0, scoredRuns = 0;
+    size_t failedScene = 0;  ///< a scene whose run failed, and why (the last such run)
+    std::string failedWhy;
     const auto record = [&](const std::vector<double>& values,
                             const std::vector<RunOutcome>& runs) {
       double sum = 0;
@@ -704,6 +716,10 @@ class Calibrator {
         if (!std::isfinite(runs[s].value)) {
           ++failedRuns;
           status = m_train[s].stem + ": " + runs[s].status;
+          failedScene = s;
+          failedWhy = runs[s].status;
+        } else {
+          ++scoredRuns;
         }
       }
       const double f = sum / double(runs.size());
@@ -759,6 +775,11 @@ class Calibrator {
     OptimiserOptions oo;
     oo.budget = m_o.budget;
     const OptimiserResult res = minimiseInBox(m_dims, defaults, objective, oo);
+    // Not one run measured: a "best" trial would be the start, fitted to nothing.
+    if (scoredRuns == 0)
+      throw InputError(m_train[failedScene].file, "",
+                       "no trial run could be scored (" + failedWhy + "); see " +
+                           (m_o.outDir / "trials.csv").string());
     const ojson calibrated = pointParams(res.best);
 
     // Validation (and the per-scene values of the best trial): defaults and calibrated.

@@ -11,8 +11,10 @@
 #               point of the calibrated model with another value of one gets a note; `sweep
 #               --calibrate` fits the point itself (and refuses --calibration beside it); `run
 #               --calibration shipped --calibrated-twins` runs the model and its twin
-#   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0:
-#               one stderr line each and exit 2
+#   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0,
+#               a reference that crashes in every trial (CRASHING_PLUGIN_DIR, the optional fifth
+#               argument: no trial can be scored, so nothing is fitted): one stderr line each and
+#               exit 2
 #   measured    (PLUGINS also holds reference_fem) against measured markers, no reference:
 #               markers "measured" from reference_fem at nu 0.45 and shifted 1 mm (a scan not
 #               registered to the model), calibrate --metric marker_rms --material poisson from
@@ -202,6 +204,25 @@ bad_input)
   check no_reference "needs a reference" "$here/toy_no_reference.json" --model toy --out "$work/x"
   check budget "--budget" "$here/toy_reference.json" --model toy --out "$work/x" --budget 0
   check metric "unknown metric" "$here/toy_reference.json" --model toy --out "$work/x" --metric max
+  if [[ -n ${5:-} ]]; then
+    python3 - "$here/toy_reference.json" "$work/segv_reference.json" <<'PY'
+import json, sys
+scene = json.load(open(sys.argv[1]))
+scene["reference"] = {"plugin": "segv", "params": {"at": "step"}}
+json.dump(scene, open(sys.argv[2], "w"))
+PY
+    db+=(--plugin-dir "$5")
+    # The trials' progress lines come first on stderr; the error is the last line.
+    set +e
+    "${db[@]}" calibrate "$work/segv_reference.json" --model toy --out "$work/segv" --budget 2 \
+      --no-cache >"$work/segv.out" 2>"$work/segv.err"
+    code=$?
+    set -e
+    [[ $code == 2 ]] || fail "reference_crashes: exit $code, expected 2"
+    tail -n 1 "$work/segv.err" | grep -qF "no trial run could be scored (no error: the reference segv" \
+      || { cat "$work/segv.err"; fail "reference_crashes: no reason"; }
+    [[ ! -e $work/segv/calibration.json ]] || fail "reference_crashes: calibration.json written"
+  fi
   ;;
 measured)
   # A cube pressed 3 mm by a bonded plate; five interior markers; P1 tets, a second a run.
