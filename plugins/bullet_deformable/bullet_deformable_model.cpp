@@ -198,6 +198,7 @@ void BulletDeformableModel::build() {
 
   m_tail.grasped.clear();
   m_graspForces.clear();
+  m_graspForcesStale = false;
   bullet_common::copyNodes(b, m_x);
   m_surface.resize(Eigen::Index(m_surfaceNode.size()), 3);
   for (size_t i = 0; i < m_surfaceNode.size(); ++i)
@@ -230,14 +231,22 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
 
   w.world->stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
   // Before finishBulletStep puts them back on the plate.
-  m_slidingForces = bullet_common::slidingPlateForces(*m_world->body, m_tail, in.grasps.size(), dt);
-  const StepStatus status =
-      bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase, &m_surfaceNode, &m_surface);
-  computeGraspForces(in.grasps.size());
-  return status;
+  m_slidingForces = bullet_common::slidingPlateForces(b, m_tail, in.grasps.size(), dt);
+  m_stepGrasps = in.grasps.size();
+  m_graspForcesStale = true;
+  return bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase, &m_surfaceNode,
+                                         &m_surface);
 }
 
-void BulletDeformableModel::computeGraspForces(std::size_t numGrasps) {
+std::vector<Vec3> BulletDeformableModel::graspForces() const {
+  if (m_graspForcesStale) {
+    computeGraspForces(m_stepGrasps);
+    m_graspForcesStale = false;
+  }
+  return m_graspForces;
+}
+
+void BulletDeformableModel::computeGraspForces(std::size_t numGrasps) const {
   m_graspForces.assign(numGrasps, Vec3::Zero());
   if (numGrasps == 0) return;
   World& w = *m_world;

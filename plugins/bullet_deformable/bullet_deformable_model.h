@@ -83,8 +83,9 @@ class BulletDeformableModel final : public Model {
   PhaseTimes phaseTimes() const override { return m_phase; }
   /// Per grasp: the elastic and damping forces Bullet's force object computes at the held nodes
   /// (positions at the end of the step), summed; a sliding plate: the normal momentum it takes
-  /// back per step / dt (header comment).
-  std::vector<Vec3> graspForces() const override { return m_graspForces; }
+  /// back per step / dt (header comment). Computed when first asked after a step (one more
+  /// evaluation of Bullet's forces, kept off the step for runs that never ask).
+  std::vector<Vec3> graspForces() const override;
 
   const TetMesh& mesh() const { return m_mesh; }
   const VecX& masses() const { return m_mass; }
@@ -92,7 +93,7 @@ class BulletDeformableModel final : public Model {
  private:
   struct World;
   void build();
-  void computeGraspForces(std::size_t numGrasps);
+  void computeGraspForces(std::size_t numGrasps) const;
 
   DeformableConfig m_config;
   Real m_dt = 0;
@@ -109,7 +110,9 @@ class BulletDeformableModel final : public Model {
   MatX3 m_x;
   MatX3 m_surface;
   PhaseTimes m_phase;
-  std::vector<Vec3> m_graspForces;    ///< N, per grasp of the last step
+  mutable std::vector<Vec3> m_graspForces;  ///< N, per grasp of the last step
+  mutable bool m_graspForcesStale = false;  ///< the last step's are not computed yet
+  std::size_t m_stepGrasps = 0;             ///< the last step's number of grasps
   std::vector<Vec3> m_slidingForces;  ///< N, per grasp: the sliding plates' normal impulse / dt
 };
 

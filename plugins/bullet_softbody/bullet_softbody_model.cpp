@@ -195,7 +195,7 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
 
   w.world.stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
   // Before finishBulletStep puts them back on the plate.
-  m_slidingForces = bullet_common::slidingPlateForces(*m_world->body, m_tail, in.grasps.size(), dt);
+  m_slidingForces = bullet_common::slidingPlateForces(b, m_tail, in.grasps.size(), dt);
   const StepStatus status = bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);
   computeGraspForces(in.grasps.size(), dt);
   return status;
