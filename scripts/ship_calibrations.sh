@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerates the shipped calibrations, calibrations/<organ>/<model>.json (issue H4): for each
 # built-in phantom with a training set, scripts/calibration_study.sh fits every calibratable model
-# on it, and each model's calibration.json is copied in with its scene paths made relative to
+# (every model found with a parameter marked calibratable, or those of --model) on it, and each model's calibration.json is copied in with its scene paths made relative to
 # the checkout. `deformbench run --calibration shipped --calibrated-twins` (scripts/setup.sh)
 # then shows each model beside its calibrated twin.
 #
@@ -55,11 +55,24 @@ while [[ $# -gt 0 ]]; do
   esac
 done
 [[ ${#organs[@]} -gt 0 ]] || organs=(liver gallbladder cube)
+# Without --model: every model a plugin found here declares a calibratable parameter of (the
+# reference solvers declare none). The Truth Cube's list is its own (below).
+chosen=("${models[@]}")
+if [[ ${#models[@]} -eq 0 ]]; then
+  for m in $("${exe[1]:-$here/build/bin/deformbench}" plugins --json | python3 -c '
+import json, sys
+for p in json.load(sys.stdin):
+    for m in p.get("models", []):
+        if any("calibrate" in q for q in m.get("parameters", [])):
+            print(m["name"])'); do
+    models+=(--model "$m")
+  done
+fi
 for organ in "${organs[@]}"; do
   if [[ $organ == truth-cube ]]; then
     bin=${exe[1]:-$here/build/bin/deformbench}
     list=(reference_fem fem_hex pbd hybrid_fem_pbd particle_bem metaballs massspring)
-    [[ ${#models[@]} -gt 0 ]] && list=($(printf '%s\n' "${models[@]}" | grep -v '^--model$'))
+    [[ ${#chosen[@]} -gt 0 ]] && list=($(printf '%s\n' "${chosen[@]}" | grep -v '^--model$'))
     mkdir -p "$here/calibrations/truth-cube"
     for m in "${list[@]}"; do
       # shellcheck disable=SC2046  # the flags split on purpose
