@@ -74,7 +74,7 @@ void CoarseLinearFem::init(const TetMesh& mesh, const Material& material,
 const MatX& CoarseLinearFem::nodeColumns(int node) {
   auto it = m_columns.find(node);
   if (it != m_columns.end()) return it->second;
-  if (m_columns.size() >= 512) m_columns.clear();  // bound the memory; recomputed on demand
+  if (m_columns.size() >= kColumnCacheSize) m_columns.clear();  // bounded; recomputed on demand
   MatX rhs = MatX::Zero(m_numFree, 3);
   for (int a = 0; a < 3; ++a) {
     const int d = m_dof[3 * node + a];
@@ -115,9 +115,25 @@ void CoarseLinearFem::solve(const std::vector<NodalForce>& forces, const Vec3& g
     }
     x = m_gravityU;
   }
-  for (const NodalForce& nf : forces) {
-    if (nf.force.isZero()) continue;
-    x.noalias() += nodeColumns(nf.node) * nf.force;
+  // Nodal forces through each node's column of K^-1 (cached): a few solves, once. A load on more
+  // nodes than the cache holds (a pressure patch of a few cm on a liver's coarse mesh) would
+  // clear and refill it, one solve per node, every step: one solve of the assembled forces then.
+  size_t loaded = 0;
+  for (const NodalForce& nf : forces) loaded += nf.force.isZero() ? 0 : 1;
+  if (loaded > kColumnCacheSize && m_numFree > 0) {
+    VecX& f = m_forceScratch;
+    f.setZero(m_numFree);
+    for (const NodalForce& nf : forces)
+      for (int a = 0; a < 3; ++a) {
+        const int d = m_dof[3 * nf.node + a];
+        if (d >= 0) f[d] += nf.force[a];
+      }
+    x.noalias() += m_chol->solve(f);
+  } else {
+    for (const NodalForce& nf : forces) {
+      if (nf.force.isZero()) continue;
+      x.noalias() += nodeColumns(nf.node) * nf.force;
+    }
   }
 
   // Prescribed rows: rebuild Z and S only when the rows (nodes, weights, axes) change.

@@ -94,7 +94,8 @@ class CoarseLinearFem {
   std::vector<int> m_dof;  ///< node * 3 + axis -> free dof or -1
   SparseMatrix m_K;
   std::unique_ptr<SparseCholesky> m_chol;
-  VecX m_nodeMass;  ///< lumped, kg
+  VecX m_nodeMass;                                 ///< lumped, kg
+  static constexpr size_t kColumnCacheSize = 512;  ///< nodes whose columns m_columns keeps
   std::map<int, MatX> m_columns;
   Vec3 m_gravity = Vec3::Zero();
   VecX m_gravityU;
@@ -106,7 +107,7 @@ class CoarseLinearFem {
   Eigen::CompleteOrthogonalDecomposition<MatX> m_S;
   std::vector<int> m_rowAxis;
   std::vector<CoarseAttachment> m_rowAt;
-  VecX m_scratch, m_rhs, m_lambda, m_zl;
+  VecX m_scratch, m_forceScratch, m_rhs, m_lambda, m_zl;
   int m_outputNodes = -1;
   std::vector<int> m_outDofs;  ///< free dofs of nodes [0, m_outputNodes)
   MatX m_Zout;                 ///< m_Z's rows at m_outDofs (double response)
