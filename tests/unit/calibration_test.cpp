@@ -1,12 +1,14 @@
 // The calibration's optimiser layer (calibration.h) on cheap synthetic objectives, the
 // calibration declarations of ParamSpec, and the calibration file / twin helpers. The end-to-end
-// runs of `deformbench calibrate` are in tests/calibration.
+// runs of `deformbench calibrate` are in tests/calibration. Last, the shipped calibrations.
+#include <deform/engine/plugin_loader.h>
 #include <deform_harness/calibration.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <set>
 
 using namespace deform;
 using namespace deform::harness;
@@ -250,6 +252,77 @@ TEST(Calibration, HeldParametersNameWhatARunChanged) {
     EXPECT_NE(std::string(e.what()).find("/held"), std::string::npos) << e.what();
   }
   std::filesystem::remove_all(dir);
+}
+
+// The shipped calibrations (calibrations/<organ>/, scripts/ship_calibrations.sh): every phantom
+// with a training set ships a fit of every calibratable model built here, made on that organ at
+// resolution 1 from exactly the folder's training scenes, validated on its held-out ones, and no
+// worse on the training set than the model's defaults.
+TEST(ShippedCalibrations, EveryPhantomWithATrainingSetHasEveryCalibratableModel) {
+  namespace fs = std::filesystem;
+  const fs::path src = DEFORM_SOURCE_DIR;
+  deform::PluginLoader loader({DEFORM_BUILD_PLUGIN_DIR});
+  std::vector<std::string> calibratable;
+  for (const std::string& plugin : loader.discover()) {
+    try {
+      const ModelInfo& info = loader.load(plugin);
+      for (const ParamSpec& p : info.params)
+        if (p.calibratable) {
+          calibratable.push_back(plugin);
+          break;
+        }
+    } catch (const std::exception&) {
+      // a plugin that does not load here (a missing library) has nothing to calibrate
+    }
+  }
+  ASSERT_FALSE(calibratable.empty());
+  const auto scenesOf = [&](const fs::path& dir, const std::string& prefix) {
+    std::set<std::string> out;
+    for (const auto& e : fs::directory_iterator(dir)) {
+      const std::string name = e.path().filename().string();
+      if (name.rfind(prefix, 0) == 0 && e.path().extension() == ".json")
+        out.insert(fs::relative(e.path(), src).string());
+    }
+    return out;
+  };
+  // Not fitted yet, and why (docs/notes/h4-shipped-calibrations.md): bullet_deformable takes
+  // 0.8 s per step on the liver's 31k tets, so a 16-trial fit on three 300-step scenes and its
+  // validation take ~3.5 h of one core.
+  const std::set<std::pair<std::string, std::string>> notYet = {{"liver", "bullet_deformable"}};
+  int checked = 0, skipped = 0;
+  for (const std::string organ : {"liver", "gallbladder", "cube"}) {
+    const fs::path scenes = src / "scenes" / "calibration" / (organ == "liver" ? "" : organ);
+    const std::set<std::string> train = scenesOf(scenes, "train_");
+    const std::set<std::string> validate = scenesOf(scenes, "validate_");
+    ASSERT_GE(train.size(), 3u) << organ;
+    ASSERT_GE(validate.size(), 2u) << organ;
+    for (const std::string& plugin : calibratable) {
+      SCOPED_TRACE(organ + "/" + plugin);
+      const fs::path file = src / "calibrations" / organ / (plugin + ".json");
+      if (notYet.count({organ, plugin})) {
+        EXPECT_FALSE(fs::exists(file)) << "shipped now: drop it from the list";
+        ++skipped;
+        continue;
+      }
+      ASSERT_TRUE(fs::exists(file)) << "scripts/ship_calibrations.sh --organ " << organ
+                                    << " --model " << plugin << " writes it";
+      const CalibrationParams c = readCalibrationFile(file.string());
+      EXPECT_EQ(c.plugin, plugin);
+      EXPECT_EQ(c.organs, std::vector<std::string>{calibrationOrgan("phantom:" + organ, 1, 1)});
+      std::ifstream in(file);
+      const nlohmann::json doc = nlohmann::json::parse(in);
+      std::set<std::string> trained, validated;
+      for (const auto& s : doc["train"]["per_scene"]) trained.insert(s["scene"]);
+      for (const auto& s : doc["validation"]["per_scene"]) validated.insert(s["scene"]);
+      EXPECT_EQ(trained, train) << "the folder's training scenes, paths relative to the checkout";
+      EXPECT_EQ(validated, validate);
+      ASSERT_TRUE(doc["train"]["before"].is_number() && doc["train"]["after"].is_number())
+          << doc["train"].dump();
+      EXPECT_LE(doc["train"]["after"].get<double>(), doc["train"]["before"].get<double>());
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked + skipped, 3 * static_cast<int>(calibratable.size()));
 }
 
 }  // namespace
