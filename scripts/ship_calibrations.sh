@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Regenerates the shipped calibrations, calibrations/<organ>/<model>.json (issue H4): for each
 # built-in phantom with a training set, scripts/calibration_study.sh fits every calibratable model
-# (every model found with a parameter marked calibratable, or those of --model) on it, and each model's calibration.json is copied in with its scene paths made relative to
-# the checkout. `deformbench run --calibration shipped --calibrated-twins` (scripts/setup.sh)
-# then shows each model beside its calibrated twin.
+# (every model found with a parameter marked calibratable, or those of --model) on it, and each
+# model's calibration.json is copied in with its scene paths made relative to the checkout.
+# `deformbench run --calibration shipped --calibrated-twins` (scripts/setup.sh) then shows each
+# model beside its calibrated twin.
 #
 #   scripts/ship_calibrations.sh [--budget N] [--jobs N] [--work DIR] [--organ NAME]...
 #                                [--model M]... [--deformbench PATH]
