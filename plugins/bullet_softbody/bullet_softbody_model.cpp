@@ -167,6 +167,7 @@ void BulletSoftBodyModel::build() {
 
   m_tail.grasped.clear();
   m_graspForces.clear();
+  m_graspForcesStale = false;
   bullet_common::copyNodes(b, m_x);
 }
 
@@ -196,12 +197,21 @@ StepStatus BulletSoftBodyModel::step(const StepInput& in) {
   w.world.stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
   // Before finishBulletStep puts them back on the plate.
   m_slidingForces = bullet_common::slidingPlateForces(b, m_tail, in.grasps.size(), dt);
-  const StepStatus status = bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);
-  computeGraspForces(in.grasps.size(), dt);
-  return status;
+  m_stepGrasps = in.grasps.size();
+  m_stepDt = dt;
+  m_graspForcesStale = true;
+  return bullet_common::finishBulletStep(b, in, dt, m_tail, m_x, m_phase);
 }
 
-void BulletSoftBodyModel::computeGraspForces(std::size_t numGrasps, Real dt) {
+std::vector<Vec3> BulletSoftBodyModel::graspForces() const {
+  if (m_graspForcesStale) {
+    computeGraspForces(m_stepGrasps, m_stepDt);
+    m_graspForcesStale = false;
+  }
+  return m_graspForces;
+}
+
+void BulletSoftBodyModel::computeGraspForces(std::size_t numGrasps, Real dt) const {
   m_graspForces.clear();
   if (m_config.mapping != StiffnessMapping::Xpbd) return;  // no physical stiffness to report
   m_graspForces.assign(numGrasps, Vec3::Zero());

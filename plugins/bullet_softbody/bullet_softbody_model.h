@@ -94,8 +94,9 @@ class BulletSoftBodyModel final : public Model {
   void reset() override;
   Counts counts() const override;
   PhaseTimes phaseTimes() const override { return m_phase; }
-  /// Per grasp, see the header comment; empty under the "fixed" mapping.
-  std::vector<Vec3> graspForces() const override { return m_graspForces; }
+  /// Per grasp, see the header comment; empty under the "fixed" mapping. Computed when first
+  /// asked after a step (a pass over the links, kept off the step for runs that never ask).
+  std::vector<Vec3> graspForces() const override;
 
   const SoftBodyConfig& config() const { return m_config; }
   /// Node masses (kg) before pinning.
@@ -109,7 +110,7 @@ class BulletSoftBodyModel final : public Model {
  private:
   struct World;  // the Bullet objects, rebuilt by reset()
   void build();
-  void computeGraspForces(std::size_t numGrasps, Real dt);
+  void computeGraspForces(std::size_t numGrasps, Real dt) const;
 
   SoftBodyConfig m_config;
   Real m_dt = 0;
@@ -126,9 +127,12 @@ class BulletSoftBodyModel final : public Model {
   bullet_common::PeerStepState m_tail;  // grasped set, divergence box, contact scratch
   MatX3 m_x;
   PhaseTimes m_phase;
-  std::vector<Vec3> m_graspForces;    // N, per grasp of the last step (xpbd mapping)
-  std::vector<Vec3> m_slidingForces;  // N, per grasp: the sliding plates' normal impulse / dt
-  std::vector<int> m_holder;  // #V, bonded grasp holding each kinematic node (scratch), or -1
+  mutable std::vector<Vec3> m_graspForces;  // N, per grasp of the last step (xpbd mapping)
+  mutable bool m_graspForcesStale = false;  // the last step's are not computed yet
+  std::size_t m_stepGrasps = 0;             // the last step's number of grasps
+  Real m_stepDt = 0;                        // and its time step, s
+  std::vector<Vec3> m_slidingForces;        // N, per grasp: the sliding plates' normal impulse / dt
+  mutable std::vector<int> m_holder;        // #V, bonded grasp holding each kinematic node, or -1
 };
 
 }  // namespace deform::bullet_softbody

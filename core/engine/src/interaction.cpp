@@ -206,11 +206,15 @@ void Interaction::finishStep(const StepInput& in, const Model& model) {
       m_reactionTorque[m_objectDynBody[j]] += m_contact->reactionTorque(m_objectContactBody[j]);
     }
   }
-  const std::vector<Vec3> grasp = model.graspForces();
-  bool forceless = false;
+  // The model's grasp forces only where a dynamic instrument holds one (a model may compute
+  // them when asked).
+  std::vector<Vec3> grasp;
+  bool asked = false, forceless = false;
   for (size_t g = 0; g < in.grasps.size(); ++g) {
     const int tool = in.grasps[g].tool;
     if (tool < 0 || tool >= int(m_toolDynBody.size()) || m_toolDynBody[tool] < 0) continue;
+    if (!asked) grasp = model.graspForces();
+    asked = true;
     if (g < grasp.size())
       m_reactionForce[m_toolDynBody[tool]] += grasp[g];
     else
