@@ -274,7 +274,8 @@ Counts HexFemModel::counts() const {
           {"dofs", m_numDofs},
           {"cholesky_factor_nonzeros", m_factorNonZeros},
           {"cholesky_flops_per_factor_nonzero", std::llround(m_flopsPerFactorNonZero)},
-          {"cholesky_supernodal", m_chol.isSupernodal() ? 1 : 0}};
+          {"cholesky_supernodal", m_chol.isSupernodal() ? 1 : 0},
+          {"preconditioner_float32", m_chol.hasFloatFactor() ? 1 : 0}};
 }
 
 PhaseTimes HexFemModel::phaseTimes() const {
@@ -421,17 +422,24 @@ void HexFemModel::factorize(bool withGrasps) {
     m_chol.factorize(m_A);
   }
   m_factorOk = m_chol.info() == Eigen::Success;
+  const bool pcg =
+      m_config.elastic == ElasticModel::Corotational && m_config.solver == CorotationalSolver::Pcg;
+  if (pcg && m_config.floatPreconditioner) m_chol.buildFloatFactor();  // none if it failed
   m_factorNonZeros = static_cast<long long>(m_chol.cholmod().lnz);
   m_factorVerts = withGrasps ? m_graspVerts : std::vector<int>{};
 }
 
-bool HexFemModel::precondition(const VecX& r, VecX& z) {
+bool HexFemModel::precondition(const VecX& r, VecX& z, bool approximate) {
   const int N = m_grid.numNodes();
   for (int n = 0; n < N; ++n) {
     const int d = m_dofOfNode[n];
     if (d >= 0) m_rd.segment<3>(d) = r.segment<3>(3 * n);
   }
-  if (!m_chol.solveInto(m_rd, m_zd)) return false;
+  if (approximate && m_config.floatPreconditioner && m_chol.hasFloatFactor()) {
+    m_chol.solveFloatInto(m_rd, m_zd);
+  } else if (!m_chol.solveInto(m_rd, m_zd)) {
+    return false;
+  }
   for (int n = 0; n < N; ++n) {
     const int d = m_dofOfNode[n];
     if (d >= 0) {
@@ -757,7 +765,7 @@ StepStatus HexFemModel::step(const StepInput& in) {
       bool converged = false;
       Real rz = 0;
       for (int it = 0; ok && !converged && it < m_config.pcgMaxIterations; ++it) {
-        ok = precondition(m_r, m_z);
+        ok = precondition(m_r, m_z, true);
         const Real rzNew = m_r.dot(m_z);
         if (it == 0) {
           m_p = m_z;

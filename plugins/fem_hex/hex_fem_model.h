@@ -83,6 +83,9 @@ struct HexFemConfig {
   Real rayleighStiffness = 0;  ///< beta, s
   Real pcgTolerance = 1e-3;    ///< relative CG residual (see step()), D^-1 norm, D = diag(A0)
   int pcgMaxIterations = 50;
+  /// The PCG preconditioner's triangular solves in float (a float copy of a supernodal factor);
+  /// direct solves (linear, refactor) always use the double factor.
+  bool floatPreconditioner = true;
   PcgPreconditioner pcgPreconditioner = PcgPreconditioner::Rest;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
   Clamp clamp = Clamp::Points;
@@ -166,7 +169,9 @@ class HexFemModel : public Model {
   void applyHeld(const VecX& in, Real scale, VecX& out) const;
   /// out += h kp J_H^T (t - J_H (x + h v0)) over the held points.
   void addHeldResidual(const VecX& v0, VecX& out) const;
-  bool precondition(const VecX& r, VecX& z);
+  /// z = A0^-1 r on the free dofs (0 on the others); approximate: by the float factor where
+  /// the config asks for it and the factor has one.
+  bool precondition(const VecX& r, VecX& z, bool approximate = false);
   /// out += scale * sum_e R_e K0 (R_e^T (a in_e) - b X_e) over elements (all when elems is null).
   void applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b, Real scale,
                      VecX& out) const;

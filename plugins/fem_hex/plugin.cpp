@@ -41,6 +41,10 @@ std::vector<ParamSpec> paramSpecs() {
                         "refactorised when the grasped set changes; rest_grasped: the same (kept "
                         "for scenes that name it)"),
       ParamSpec::integer("pcg_max_iterations", 50, 1, 100000, "CG iteration cap per step"),
+      ParamSpec::choice("preconditioner_precision", "float32", {"float32", "float64"},
+                        "number type of the PCG preconditioner's two triangular solves (float32: "
+                        "a float copy of a supernodal factor, half its memory traffic; the CG "
+                        "itself and every direct solve stay in double)"),
       ParamSpec::integer("rotation_iterations", 8, 1, 1000,
                          "cap of the warm-started Newton steps of the element rotation extraction "
                          "(1e-9 rad); past it the rotation comes from the SVD of F (numeric "
@@ -64,6 +68,7 @@ std::vector<ParamSpec> paramSpecs() {
 HexFemConfig configFromParams(const ParamValues& p) {
   HexFemConfig c;
   c.elements = p.integer("elements");
+  c.floatPreconditioner = p.choice("preconditioner_precision") == "float32";
   c.cellSize = p.real("cell_size");
   c.elastic = p.choiceAs<ElasticModel>("formulation", {{"corotational", ElasticModel::Corotational},
                                                        {"linear", ElasticModel::Linear}});
