@@ -4,7 +4,8 @@
 # (x PBD) and the machine's load, then compares it with the baseline kept in the repository
 # (.ci/bench-baseline.json): by those ratios, and by absolute times only when the baseline's
 # machine matches (same CPU and cores, both runs idle). The comparison only warns: a slower case
-# never fails the run. Exit 1 only when the bench itself cannot run.
+# never fails the run. Exit 1 only when the bench itself cannot run. Then, where it was built,
+# bench_native_softbody's ratio of our PBD to btSoftBody driven natively (about 25 s).
 #
 # Refresh the baseline (on an idle machine, after a change that moves the timings on purpose):
 #   ./build/bin/deformbench bench --out .ci/bench-baseline.json
@@ -32,6 +33,12 @@ for c in doc["cases"]:
     print(f"{c['id']:40s} {c['status']:9s} {f('ms_median'):>10s} {f('ms_min'):>8s} {f('ms_max'):>8s}"
           f" {f('x_pbd', 2):>7s}")
 PY
+# PBD against btSoftBody driven natively (issue 38 item 5), in this run: the ratio lines only.
+native=./build/benchmarks/bench_native_softbody
+if [[ -x $native ]]; then
+  echo "pbd against native btSoftBody (10 iterations, interleaved repetitions):"
+  "$native" 2>/dev/null | grep "faster" || echo "ci-bench.sh: WARNING: $native did not run"
+fi
 if [[ -f $baseline ]]; then
   if ! "$bin" bench --compare "$baseline" "$out"; then
     echo "ci-bench.sh: WARNING: some case is slower than $baseline (not a failure: noisy machines)"
