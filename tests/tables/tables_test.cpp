@@ -10,6 +10,7 @@
 #include <deform_harness/cases.h>
 #include <deform_harness/child_process.h>
 #include <deform_harness/convergence.h>
+#include <deform_harness/dispatch.h>
 #include <deform_harness/progress.h>
 #include <deform_harness/scripts.h>
 #include <deform_harness/stability.h>
@@ -408,6 +409,28 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
   EXPECT_EQ(cached.rms12, study["rms_d12_m"].get<double>());
   EXPECT_FALSE(fs::exists(co.outDir / "level_0")) << "nothing was run";
   EXPECT_EQ(readJson(co.outDir / "convergence.json")["cached"], true);
+
+  // The table again with its cases and the study's levels in child processes, two at a time
+  // (tables --jobs 2), from a cold cache: the same study.
+  TablesOptions oj = o;
+  oj.outDir = m_dir / "out_jobs";
+  oj.cases.cacheDir = m_dir / "cache_jobs";
+  ChildCaseOptions child;
+  child.executable = DEFORMBENCH_EXE;
+  child.pluginArgs = pluginDirArgs(loader.searchPath());
+  child.timeoutS = 300;
+  oj.cases.child = child;
+  const auto jobs = localDispatcher(2);
+  oj.cases.dispatcher = jobs.get();
+  buildTables({"hybrid-accuracy"}, loader, oj, nullptr);
+  const fs::path jobsStudy = oj.outDir / "convergence/hybrid/cube_down_20N";
+  const json viaJobs = readJson(jobsStudy / "convergence.json");
+  ASSERT_EQ(viaJobs["levels"].size(), 4u);
+  for (size_t k = 0; k < 4; ++k)
+    EXPECT_EQ(viaJobs["levels"][k]["elements"], study["levels"][k]["elements"]) << k;
+  EXPECT_EQ(viaJobs["d01_m"], study["d01_m"]);
+  EXPECT_EQ(viaJobs["d12_m"], study["d12_m"]);
+  EXPECT_TRUE(fs::exists(jobsStudy / "level_0/case.json")) << "level 0 ran in a child";
 }
 
 TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) {

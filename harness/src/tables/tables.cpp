@@ -64,6 +64,10 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
   co.outDir = o.outDir / "convergence" / c.id;
   co.cacheDir = o.cases.cacheDir;
   co.reuseSolves = true;  // the finest level is the case's reference, solved once
+  // The levels run as the cases ran: child processes through the tables' dispatcher (two at a
+  // time with --jobs 2, on the ranks with --mpi), or in this process with --in-process.
+  co.child = o.cases.child;
+  co.dispatcher = o.cases.dispatcher;
   const fs::path sceneFile = o.outDir / "scenes" / (c.id + ".json");
   if (progress) progress->start("reference check " + c.id);
   ConvergenceResult res;
