@@ -28,13 +28,18 @@ SparseMatrix gridLaplacian(int n, Real shift) {
   return A;
 }
 
-TEST(CholeskySolver, FloatSolveOfASupernodalFactorMatchesTheDoubleSolve) {
-  const SparseMatrix A = gridLaplacian(12, 0.01);
-  CholeskySolver chol;
-  chol.setKind(CholeskySolver::Kind::Supernodal);
+/// Analyses and factorises A with the given kind of factor.
+void factorise(CholeskySolver& chol, const SparseMatrix& A, CholeskySolver::Kind kind) {
+  chol.setKind(kind);
   chol.analyzePattern(A);
   chol.factorize(A);
   ASSERT_EQ(chol.info(), Eigen::Success);
+}
+
+TEST(CholeskySolver, FloatSolveOfASupernodalFactorMatchesTheDoubleSolve) {
+  const SparseMatrix A = gridLaplacian(12, 0.01);
+  CholeskySolver chol;
+  ASSERT_NO_FATAL_FAILURE(factorise(chol, A, CholeskySolver::Kind::Supernodal));
   ASSERT_TRUE(chol.buildFloatFactor());
   std::mt19937 rng(7);
   std::uniform_real_distribution<Real> u(-1, 1);
@@ -53,10 +58,7 @@ TEST(CholeskySolver, FloatSolveOfASupernodalFactorMatchesTheDoubleSolve) {
 TEST(CholeskySolver, NoFloatCopyOfASimplicialFactor) {
   const SparseMatrix A = gridLaplacian(5, 1.0);
   CholeskySolver chol;
-  chol.setKind(CholeskySolver::Kind::Simplicial);
-  chol.analyzePattern(A);
-  chol.factorize(A);
-  ASSERT_EQ(chol.info(), Eigen::Success);
+  ASSERT_NO_FATAL_FAILURE(factorise(chol, A, CholeskySolver::Kind::Simplicial));
   EXPECT_FALSE(chol.buildFloatFactor());
   EXPECT_FALSE(chol.hasFloatFactor());
 }
