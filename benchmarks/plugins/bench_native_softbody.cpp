@@ -230,6 +230,7 @@ int main(int argc, char** argv) {
     args.push_back(mix.data());
   }
   int n = int(args.size());
+  args.push_back(nullptr);  // argv[argc]
   benchmark::Initialize(&n, args.data());
   if (benchmark::ReportUnrecognizedArguments(n, args.data())) return 1;
   benchmark::RunSpecifiedBenchmarks();
