@@ -435,7 +435,7 @@ bool HexFemModel::precondition(const VecX& r, VecX& z, bool approximate) {
     const int d = m_dofOfNode[n];
     if (d >= 0) m_rd.segment<3>(d) = r.segment<3>(3 * n);
   }
-  if (approximate && m_config.floatPreconditioner && m_chol.hasFloatFactor()) {
+  if (approximate && m_chol.hasFloatFactor()) {  // built only when the config asks for it
     m_chol.solveFloatInto(m_rd, m_zd);
   } else if (!m_chol.solveInto(m_rd, m_zd)) {
     return false;

@@ -169,8 +169,8 @@ class HexFemModel : public Model {
   void applyHeld(const VecX& in, Real scale, VecX& out) const;
   /// out += h kp J_H^T (t - J_H (x + h v0)) over the held points.
   void addHeldResidual(const VecX& v0, VecX& out) const;
-  /// z = A0^-1 r on the free dofs (0 on the others); approximate: by the float factor where
-  /// the config asks for it and the factor has one.
+  /// z = A0^-1 r on the free dofs (0 on the others); approximate: by the float copy of the
+  /// factor where there is one (factorize() builds it for the PCG when the config asks).
   bool precondition(const VecX& r, VecX& z, bool approximate = false);
   /// out += scale * sum_e R_e K0 (R_e^T (a in_e) - b X_e) over elements (all when elems is null).
   void applyElements(const std::vector<int>* elems, const VecX& in, Real a, Real b, Real scale,
