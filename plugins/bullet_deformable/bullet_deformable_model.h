@@ -35,6 +35,7 @@
 #pragma once
 
 #include <bullet_peer_step.h>
+#include <deform/geometry/tet_embedding.h>
 #include <deform/sdk/model.h>
 #include <deform/sdk/params.h>
 
@@ -86,6 +87,12 @@ class BulletDeformableModel final : public Model {
   /// back per step / dt (header comment). Computed when first asked after a step (one more
   /// evaluation of Bullet's forces, kept off the step for runs that never ask).
   std::vector<Vec3> graspForces() const override;
+  /// Markers: barycentric coordinates in the rest tet that contains each point, following that
+  /// tet's nodes (deform/geometry/tet_embedding.h, as pbd's and massspring's volume networks).
+  void bindMarkers(const MatX3& rest) override {
+    m_markerEmbedding = embedInTets(m_mesh.V, m_mesh.T, rest);
+  }
+  MatX3 markers() const override { return embeddedPositions(m_markerEmbedding, m_x, m_mesh.T); }
 
   const TetMesh& mesh() const { return m_mesh; }
   const VecX& masses() const { return m_mass; }
@@ -114,6 +121,7 @@ class BulletDeformableModel final : public Model {
   mutable bool m_graspForcesStale = false;  ///< the last step's are not computed yet
   std::size_t m_stepGrasps = 0;             ///< the last step's number of grasps
   std::vector<Vec3> m_slidingForces;  ///< N, per grasp: the sliding plates' normal impulse / dt
+  TetEmbedding m_markerEmbedding;     ///< bindMarkers()
 };
 
 }  // namespace deform::bullet_deformable

@@ -61,7 +61,7 @@ DEFORM_PLUGIN(registry) {
       "(deformable solver by Xuchen Han, 2019); stable Neo-Hookean: Smith, de Goes, Kim 2018, "
       "ACM TOG 37(2), doi:10.1145/3180491",
       {C::Grasp, C::PointForce, C::Gravity, C::TetInput, C::NeedsPrecompute, C::Contact,
-       C::ContactReaction, C::Sliding, C::ReactionForce},
+       C::ContactReaction, C::Sliding, C::ReactionForce, C::Markers},
       deform::bullet_deformable::paramSpecs());
   // The conformance suite runs every shipped scene: 1500 tets instead of 6000 keep it to seconds.
   info.presets["conformance"] = {{{"tets", 1500LL}}};

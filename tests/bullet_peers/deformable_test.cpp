@@ -220,5 +220,25 @@ TEST(BulletDeformableModel, APlatesForceIsWhatTheTissueTransmitsToTheHeldNodes) 
   }
 }
 
+// Interior markers (capability "markers") ride in Bullet's rest tets by their barycentric
+// coordinates: at rest they are the points; with the bottom fixed and a bonded plate pressing the
+// top 2 mm, the centre and a point off the axis at mid-height drop about half the travel.
+TEST(BulletDeformableModel, MarkersAtMidHeightDropHalfThePlatesTravel) {
+  const testing::CubePress press = testing::cubePress(0.5);
+  const TetMesh mesh = coarseCube(press);
+  BulletDeformableModel m;
+  m.init(mesh, firstNodes(press.organ.surface.numVertices()), press.organ.material,
+         DeformableConfig{}, kDt, bottomSlab(mesh.V, 1e-6));
+  MatX3 markers(2, 3);
+  markers << 0, 0, 0, 0.02, -0.02, 0.0;
+  m.bindMarkers(markers);
+  EXPECT_LT((m.markers() - markers).cwiseAbs().maxCoeff(), 1e-12);
+  const Real travel = 0.002;
+  ASSERT_TRUE(testing::pressByPlate(m, press.organ, false, travel, 100, 100).ok);
+  const MatX3 moved = m.markers();
+  for (Eigen::Index k = 0; k < 2; ++k)
+    EXPECT_NEAR(markers(k, 2) - moved(k, 2), 0.5 * travel, 0.1 * travel) << "marker " << k;
+}
+
 }  // namespace
 }  // namespace deform::bullet_deformable
