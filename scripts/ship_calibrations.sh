@@ -20,7 +20,9 @@
 # --truth-cube 1`, metric marker_rms): the organ's nu where the model uses it (E does not move
 # the beads under a prescribed plate) with the model's calibratable parameters, metaballs'
 # laplacian_stiffness, and massspring's thickness and bending_ratio, which turn out not to act on
-# its volume network (its twin equals its default: the table shows that the fit cannot help).
+# its volume network (its twin equals its default: the table shows that the fit cannot help);
+# bullet_deformable fits nu alone (its calibratable parameters are dampings, which do not move a
+# settled state).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 budget=16 jobs=1 work=$here/out/ship_calibrations organs=() models=() exe=()
@@ -28,7 +30,7 @@ budget=16 jobs=1 work=$here/out/ship_calibrations organs=() models=() exe=()
 # What each model fits on the Truth Cube (calibrate flags).
 truth_cube_fit() {
   case $1 in
-    reference_fem | fem_hex | pbd | hybrid_fem_pbd) echo "--material poisson" ;;
+    reference_fem | fem_hex | pbd | hybrid_fem_pbd | bullet_deformable) echo "--material poisson" ;;
     particle_bem) echo "--material poisson --param spring_stiffness" ;;
     metaballs) echo "--param laplacian_stiffness" ;;
     massspring) echo "--param thickness --param bending_ratio" ;;
@@ -74,7 +76,7 @@ fi
 for organ in "${organs[@]}"; do
   if [[ $organ == truth-cube ]]; then
     bin=${exe[1]:-$here/build/bin/deformbench}
-    list=(reference_fem fem_hex pbd hybrid_fem_pbd particle_bem metaballs massspring)
+    list=(reference_fem fem_hex pbd hybrid_fem_pbd particle_bem metaballs massspring bullet_deformable)
     [[ ${#chosen[@]} -gt 0 ]] && list=($(printf '%s\n' "${chosen[@]}" | grep -v '^--model$'))
     mkdir -p "$here/calibrations/truth-cube"
     for m in "${list[@]}"; do
