@@ -883,30 +883,20 @@ TEST_F(TempDir, QuickTruthCubeTableWithoutTheSolversSaysWhy) {
   EXPECT_NEAR(s.plates[0].trajectory.back().pos.z(), -0.010, 1e-12);
 }
 
-// A model that meshes its own tets (bullet_deformable) settles at the reference's quick size under
-// --quick, at its own default otherwise.
-TEST_F(TempDir, TruthCubeQuickGivesASelfMeshingModelTheReferencesQuickSize) {
+// A model that meshes its own tets (bullet_deformable) is left out of --quick with a row saying
+// so, and settles at its own defaults in the full table.
+TEST_F(TempDir, TruthCubeQuickLeavesOutASelfMeshingModelAndSaysSo) {
   PluginLoader probe({DEFORM_BUILD_PLUGIN_DIR});
   const auto found = probe.discover();
   if (std::find(found.begin(), found.end(), std::string("bullet_deformable")) == found.end())
     GTEST_SKIP() << "bullet_deformable is not built";
   PluginLoader loader({pluginSubset(m_dir / "plugins", {"bullet_deformable"}).string()});
-  fs::create_directories(m_dir / "calibrations" / "truth-cube");
-  setenv("DEFORM_CALIBRATIONS_DIR", (m_dir / "calibrations").c_str(), 1);
-  TablesOptions o;
-  for (bool quick : {true, false}) {
-    o.quick = quick;
-    const tables::TableDef t = tables::truthCube(o, loader);
-    ASSERT_EQ(t.cases.size(), 3u);
-    const Scene s = parseScene(json::parse(t.cases[1].scene.dump()), "dynamic_1.json");
-    ASSERT_EQ(s.models.size(), 1u);
-    EXPECT_EQ(s.models[0].plugin, "bullet_deformable");
-    if (quick)
-      EXPECT_EQ(s.models[0].params["tets"], 1000);
-    else
-      EXPECT_FALSE(s.models[0].params.contains("tets"));
-  }
-  unsetenv("DEFORM_CALIBRATIONS_DIR");
+  const TruthCubeModel quick = truthCubeModel(loader, "bullet_deformable", true);
+  EXPECT_NE(quick.problem.find("left out by --quick"), std::string::npos) << quick.problem;
+  const TruthCubeModel full = truthCubeModel(loader, "bullet_deformable", false);
+  EXPECT_EQ(full.problem, "");
+  EXPECT_TRUE(full.dynamic);
+  EXPECT_TRUE(full.entry["params"].empty()) << full.entry.dump();
 }
 
 TEST_F(TempDir, TruthCubeRunsADynamicModelOnItsVolumeNetworkInASettlingScenePerLevel) {
