@@ -36,7 +36,7 @@ Organ liver() {
 
 struct Setup {
   Organ organ = liver();
-  ParamValues params = ParamValues::defaults(ParticleBemModel::paramSpecs());
+  ParamValues params = ParamValues::defaults(paramSpecs());
   Cache cache{Cache::defaultDir()};
   ParticleBemModel model;
   GraspInput grasp;

@@ -51,11 +51,11 @@
 
 namespace deform::particle_bem {
 
+/// The plugin's parameters (plugin.cpp): units, ranges and meaning.
+std::vector<ParamSpec> paramSpecs();
+
 class ParticleBemModel final : public Model {
  public:
-  static std::vector<ParamSpec> paramSpecs();
-  static ModelInfo info();
-
   void init(const ModelSetup& setup) override;
   StepStatus step(const StepInput& in) override;
   const MatX3& nodes() const override { return m_x; }

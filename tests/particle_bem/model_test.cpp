@@ -36,7 +36,7 @@ struct Fixture {
     b.lo = Vec3(-1, -1, -1);
     b.hi = Vec3(1, 1, -0.015);
     organ.fixed.boxes.push_back(b);
-    params = ParamValues::defaults(ParticleBemModel::paramSpecs());
+    params = ParamValues::defaults(paramSpecs());
     params.set("guidance", guided);
     params.set("coarse_vertices", (long long)coarse);
     params.set("points", (long long)points);
