@@ -69,7 +69,6 @@ DEFORM_PLUGIN(registry) {
       {C::Grasp, C::PointForce, C::Gravity, C::NeedsPrecompute, C::Contact, C::Markers, C::Sliding,
        C::ReactionForce},
       deform::particle_bem::paramSpecs());
-  ;
   // What the harness's sweep, bench and stability run it with (registry.h).
   // The BEM surface's resolution; the particles follow it with no iterative solve (no effort).
   info.resolution = {"coarse_vertices", {150LL, 300LL, 600LL, 1200LL}, {150LL, 300LL, 600LL}};
