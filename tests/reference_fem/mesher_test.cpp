@@ -103,6 +103,43 @@ TEST(TetMesher, RefineSurfaceEdgesIsClosedAndDeterministic) {
   EXPECT_EQ(a.V.topRows(s.numVertices()), s.V);
 }
 
+TEST(TetMesher, GradedMeshIsFineAtTheFocusOnlyOnTheSurfaceAndInside) {
+  // A 30 mm sphere at h = 10 mm, graded toward its north pole: 3 mm within 5 mm of it.
+  const SurfaceMesh s = icosphere(2, 0.03);
+  TetMeshOptions o;
+  o.edgeLength = 0.01;
+  o.refineSurface = true;
+  o.grading = {.centre = Vec3(0, 0, 0.03), .radius = 0.005, .ratio = 0.3, .growth = 0.3};
+  const TetMeshResult r = tetrahedralize(s, o);
+  checkMesh(s, r);
+  const MatX2i E = uniqueEdges(r.boundary.F);
+  for (int e = 0; e < E.rows(); ++e) {
+    const Vec3 a = r.boundary.V.row(E(e, 0)), b = r.boundary.V.row(E(e, 1));
+    EXPECT_LE((a - b).norm(), o.grading.size(0.5 * (a + b), o.edgeLength) + 1e-12);
+  }
+  // Mean tet edge near the pole and in the southern half.
+  double nearSum = 0, farSum = 0;
+  int nearCount = 0, farCount = 0;
+  for (int t = 0; t < r.mesh.numTets(); ++t) {
+    Vec3 c = Vec3::Zero();
+    double edges = 0;
+    for (int i = 0; i < 4; ++i) {
+      c += 0.25 * r.mesh.V.row(r.mesh.T(t, i)).transpose();
+      for (int j = i + 1; j < 4; ++j)
+        edges += (r.mesh.V.row(r.mesh.T(t, i)) - r.mesh.V.row(r.mesh.T(t, j))).norm() / 6;
+    }
+    if ((c - o.grading.centre).norm() < 0.008) nearSum += edges, ++nearCount;
+    if (c.z() < -0.005) farSum += edges, ++farCount;
+  }
+  ASSERT_GT(nearCount, 0);
+  ASSERT_GT(farCount, 0);
+  EXPECT_LT(nearSum / nearCount, 0.5 * o.edgeLength);
+  EXPECT_GT(farSum / farCount, 2.0 * nearSum / nearCount);
+  TetMeshOptions uniform = o;
+  uniform.grading = {};
+  EXPECT_GT(r.mesh.numTets(), 2 * tetrahedralize(s, uniform).mesh.numTets());
+}
+
 TEST(TetMesher, OpenSurfaceIsInputErrorNamingTheSource) {
   SurfaceMesh s = icosphere(2, 0.03);
   s.F.conservativeResize(s.numFaces() - 1, 3);

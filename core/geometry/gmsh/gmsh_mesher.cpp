@@ -21,7 +21,7 @@ std::string gmshLastError() {
   return e;
 }
 
-GmshOutput runGmsh(const SurfaceMesh& s, Real h) {
+GmshOutput runGmsh(const SurfaceMesh& s, Real h, const GmshSize& size) {
   GmshOutput out;
   gmsh::initialize(0, nullptr, false);
   try {
@@ -46,9 +46,12 @@ GmshOutput runGmsh(const SurfaceMesh& s, Real h) {
     const int loop = gmsh::model::geo::addSurfaceLoop({1});
     gmsh::model::geo::addVolume({loop});
     gmsh::model::geo::synchronize();
-    // Uniform size h inside; the discrete surface has no parametrisation, so Gmsh keeps its
-    // triangles as they are (no boundary remeshing).
+    // Size h inside (or the given field below h); the discrete surface has no
+    // parametrisation, so Gmsh keeps its triangles as they are (no boundary remeshing).
     gmsh::option::setNumber("Mesh.MeshSizeMax", h);
+    if (size)
+      gmsh::model::mesh::setSizeCallback(
+          [&size](int, int, double x, double y, double z) { return double(size(Vec3(x, y, z))); });
     gmsh::option::setNumber("Mesh.MeshSizeMin", 0.0);
     gmsh::option::setNumber("Mesh.MeshSizeExtendFromBoundary", 0);
     gmsh::option::setNumber("Mesh.MeshSizeFromPoints", 0);
@@ -129,7 +132,8 @@ GmshOutput runGmsh(const SurfaceMesh& s, Real h) {
 
 }  // namespace deform
 
-extern "C" __attribute__((visibility("default"))) void deform_gmsh_tetrahedralize(
-    const deform::SurfaceMesh& s, deform::Real h, deform::GmshOutput& out) {
-  out = deform::runGmsh(s, h);
+extern "C" __attribute__((visibility("default"))) void deform_gmsh_tetrahedralize_sized(
+    const deform::SurfaceMesh& s, deform::Real h, const deform::GmshSize& size,
+    deform::GmshOutput& out) {
+  out = deform::runGmsh(s, h, size);
 }

@@ -5,6 +5,7 @@
 
 #include <deform/sdk/mesh.h>
 
+#include <functional>
 #include <string>
 
 namespace deform {
@@ -15,12 +16,17 @@ struct GmshOutput {
   std::string error;  // empty on success
 };
 
+/// The target edge length (m) at a point; empty: uniform.
+using GmshSize = std::function<Real(const Vec3& x)>;
+
 /// The back end's shared object (in the SDK library's folder) and its entry point
-/// `void deform_gmsh_tetrahedralize(const SurfaceMesh& s, Real h, GmshOutput& out)`: Gmsh's
-/// Delaunay tets of the closed surface s at uniform size h (m) inside, the input vertices first
-/// and unmoved; out.error says why not.
+/// `void deform_gmsh_tetrahedralize_sized(const SurfaceMesh& s, Real h, const GmshSize& size,
+/// GmshOutput& out)`: Gmsh's Delaunay tets of the closed surface s at size h (m) inside, or
+/// min(h, size(x)) where size is given, the input vertices first and unmoved; out.error says
+/// why not.
 inline constexpr const char* kGmshLibrary = "libdeform_gmsh.so";
-inline constexpr const char* kGmshEntry = "deform_gmsh_tetrahedralize";
-using GmshTetrahedralize = void (*)(const SurfaceMesh& s, Real h, GmshOutput& out);
+inline constexpr const char* kGmshEntry = "deform_gmsh_tetrahedralize_sized";
+using GmshTetrahedralize = void (*)(const SurfaceMesh& s, Real h, const GmshSize& size,
+                                    GmshOutput& out);
 
 }  // namespace deform

@@ -24,6 +24,7 @@ std::vector<int> meshSurface(const Organ& organ, const OrganTetOptions& options,
   const TetMeshOptions o{.edgeLength = options.edgeLength,
                          .targetElements = options.targetElements,
                          .refineSurface = options.refineSurface,
+                         .grading = options.grading,
                          .timeoutSeconds = options.timeoutSeconds,
                          .source = organ.source};
   const int nv = organ.surface.numVertices();
@@ -32,6 +33,11 @@ std::vector<int> meshSurface(const Organ& organ, const OrganTetOptions& options,
   key.add(kMeshCacheVersion).add(organ.surface.V).add(organ.surface.F);
   key.add(o.edgeLength).add(o.targetElements).add((long long)o.refineSurface);
   key.add((long long)conform);
+  if (o.grading.active()) {  // added only when graded: the uniform meshes' keys are unchanged
+    key.add("graded");
+    for (int k = 0; k < 3; ++k) key.add(o.grading.centre(k));
+    key.add(o.grading.radius).add(o.grading.ratio).add(o.grading.growth);
+  }
   if (conform)
     for (const Box& b : organ.fixed.boxes)
       for (int k = 0; k < 3; ++k) key.add(b.lo[k]).add(b.hi[k]);
@@ -102,6 +108,19 @@ std::vector<ParamSpec> withOrganTetParams(std::vector<ParamSpec> specs, size_t a
                       "pin the nodes that fall inside the boxes"),
       ParamSpec::real("mesh_timeout", "s", 600.0, 1.0, 86400.0,
                       "wall-clock limit of the Gmsh child process"),
+      ParamSpec::real("focus_x", "m", 0.0, -1e3, 1e3,
+                      "x of the point the mesh is graded toward (see focus_radius)"),
+      ParamSpec::real("focus_y", "m", 0.0, -1e3, 1e3, "y of the point the mesh is graded toward"),
+      ParamSpec::real("focus_z", "m", 0.0, -1e3, 1e3, "z of the point the mesh is graded toward"),
+      ParamSpec::real("focus_radius", "m", 0.0, 0.0, 1e3,
+                      "within this distance of the focus point, tet and (with refine_surface) "
+                      "surface edges are focus_ratio x the edge length, growing by focus_growth "
+                      "per m beyond; 0: uniform size (a grasp's or a load's region is where a "
+                      "reference's error is: grading refines it at every convergence level)"),
+      ParamSpec::real("focus_ratio", "1", 0.35, 0.05, 1.0,
+                      "edge length near the focus point over the edge length"),
+      ParamSpec::real("focus_growth", "1", 0.3, 0.01, 10.0,
+                      "increase of the edge length per distance beyond focus_radius"),
   };
   specs.insert(specs.begin() + std::ptrdiff_t(std::min(at, specs.size())), mesh.begin(),
                mesh.end());
@@ -115,6 +134,10 @@ OrganTetOptions organTetOptions(const ParamValues& p) {
   o.refineSurface = p.flag("refine_surface");
   o.conformFixed = p.flag("conform_fixed");
   o.timeoutSeconds = p.real("mesh_timeout");
+  o.grading.centre = Vec3(p.real("focus_x"), p.real("focus_y"), p.real("focus_z"));
+  o.grading.radius = p.real("focus_radius");
+  o.grading.ratio = p.real("focus_ratio");
+  o.grading.growth = p.real("focus_growth");
   return o;
 }
 

@@ -60,9 +60,9 @@ std::string closednessProblem(const SurfaceMesh& s) {
 
 #ifdef DEFORM_HAVE_GMSH
 /// Gmsh's tets of s at size h, from the back end's shared object.
-GmshOutput runGmsh(GmshTetrahedralize mesh, const SurfaceMesh& s, Real h) {
+GmshOutput runGmsh(GmshTetrahedralize mesh, const SurfaceMesh& s, Real h, const GmshSize& size) {
   GmshOutput out;
-  mesh(s, h, out);
+  mesh(s, h, size, out);
   return out;
 }
 #endif
@@ -90,9 +90,10 @@ bool writeAll(int fd, const char* p, size_t n) {
 
 /// Runs Gmsh in a forked child with a wall-clock limit. Falls back to running in-process when
 /// fork() is unavailable.
-GmshOutput runGmshIsolated(const SurfaceMesh& s, Real h, Real timeoutSeconds) {
+GmshOutput runGmshIsolated(const SurfaceMesh& s, Real h, const GmshSize& sizeAt,
+                           Real timeoutSeconds) {
 #ifndef DEFORM_HAVE_GMSH
-  (void)s, (void)h, (void)timeoutSeconds;
+  (void)s, (void)h, (void)sizeAt, (void)timeoutSeconds;
   GmshOutput o;
   o.error = "deformbench was built without Gmsh";
   return o;
@@ -110,12 +111,12 @@ GmshOutput runGmshIsolated(const SurfaceMesh& s, Real h, Real timeoutSeconds) {
     return o;
   }
   int fds[2];
-  if (::pipe(fds) != 0) return runGmsh(mesh, s, h);
+  if (::pipe(fds) != 0) return runGmsh(mesh, s, h, sizeAt);
   const pid_t pid = ::fork();
   if (pid < 0) {
     ::close(fds[0]);
     ::close(fds[1]);
-    return runGmsh(mesh, s, h);
+    return runGmsh(mesh, s, h, sizeAt);
   }
   if (pid == 0) {
     ::close(fds[0]);
@@ -124,7 +125,7 @@ GmshOutput runGmshIsolated(const SurfaceMesh& s, Real h, Real timeoutSeconds) {
       ::dup2(devnull, 1);
       ::dup2(devnull, 2);
     }
-    const std::vector<char> bytes = serialise(runGmsh(mesh, s, h));
+    const std::vector<char> bytes = serialise(runGmsh(mesh, s, h, sizeAt));
     const long long size = static_cast<long long>(bytes.size());
     const bool ok = writeAll(fds[1], reinterpret_cast<const char*>(&size), sizeof size) &&
                     writeAll(fds[1], bytes.data(), bytes.size());
@@ -223,7 +224,8 @@ Real edgeLengthForElements(Real volume, long long elements) {
   return std::cbrt(kTetsPerCube * std::max<Real>(volume, 0) / Real(std::max(1LL, elements)));
 }
 
-SurfaceMesh refineSurfaceEdges(const SurfaceMesh& surface, Real maxEdge) {
+SurfaceMesh refineSurfaceEdges(const SurfaceMesh& surface, Real maxEdge,
+                               const MeshGrading& grading) {
   std::vector<Vec3> V;
   V.reserve(size_t(surface.numVertices()));
   for (int i = 0; i < surface.numVertices(); ++i) V.push_back(surface.V.row(i).transpose());
@@ -249,7 +251,8 @@ SurfaceMesh refineSurfaceEdges(const SurfaceMesh& surface, Real maxEdge) {
   std::priority_queue<Item, std::vector<Item>, decltype(cmp)> queue(cmp);
   auto push = [&](int a, int b) {
     const Real l = (V[size_t(a)] - V[size_t(b)]).norm();
-    if (l > maxEdge) queue.emplace(l, edgeKey(a, b));
+    if (l > grading.size(0.5 * (V[size_t(a)] + V[size_t(b)]), maxEdge))
+      queue.emplace(l, edgeKey(a, b));
   };
   for (const auto& [key, faces] : edgeFacesMap) push(int(key >> 32), int(key & 0xffffffffu));
   while (!queue.empty()) {
@@ -389,9 +392,14 @@ TetMeshResult tetrahedralize(const SurfaceMesh& input, const TetMeshOptions& opt
                           : edgeLengthForElements(volume, options.targetElements);
   if (!(result.edgeLength > 0) || !std::isfinite(result.edgeLength))
     throw fail("invalid target edge length");
-  result.boundary = options.refineSurface ? refineSurfaceEdges(input, result.edgeLength) : input;
+  if (options.grading.active() && !(options.grading.ratio > 0)) throw fail("invalid grading ratio");
+  result.boundary =
+      options.refineSurface ? refineSurfaceEdges(input, result.edgeLength, options.grading) : input;
 
-  GmshOutput g = runGmshIsolated(result.boundary, result.edgeLength, options.timeoutSeconds);
+  GmshSize size;
+  if (options.grading.active())
+    size = [g = options.grading, h = result.edgeLength](const Vec3& x) { return g.size(x, h); };
+  GmshOutput g = runGmshIsolated(result.boundary, result.edgeLength, size, options.timeoutSeconds);
   if (!g.error.empty()) throw fail(g.error);
 
   result.mesh.V = std::move(g.V);

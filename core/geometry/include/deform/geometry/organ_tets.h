@@ -5,6 +5,7 @@
 // midpoint of every edge.
 #pragma once
 
+#include <deform/geometry/tet_mesher.h>
 #include <deform/sdk/model.h>
 
 #include <array>
@@ -24,6 +25,7 @@ struct OrganTetOptions {
   Real edgeLength = 0;              ///< target interior edge length, m; 0: from targetElements
   long long targetElements = 1000;  ///< target number of tets when edgeLength is 0
   bool refineSurface = true;        ///< split long surface edges first (TetMeshOptions)
+  MeshGrading grading;              ///< finer near a point (TetMeshOptions)
   /// Mesh the organ minus the fixed boxes (the caps are clamped, the same at every refinement);
   /// false: the whole organ (the nodes inside the boxes are pinned by fixedNodeIndices).
   bool conformFixed = true;
@@ -32,7 +34,8 @@ struct OrganTetOptions {
 
 /// A plugin's parameters with those of the organ's tet mesh inserted before position `at`: the
 /// same in every plugin that meshes through organTets() (reference_fem, calculix: the same values
-/// mesh the same tets): elements, edge_length, refine_surface, conform_fixed, mesh_timeout.
+/// mesh the same tets): elements, edge_length, refine_surface, conform_fixed, mesh_timeout and
+/// the grading's focus_x, focus_y, focus_z, focus_radius, focus_ratio, focus_growth.
 std::vector<ParamSpec> withOrganTetParams(std::vector<ParamSpec> specs, size_t at);
 /// The options those parameters give.
 OrganTetOptions organTetOptions(const ParamValues& params);
