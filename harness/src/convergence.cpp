@@ -197,6 +197,7 @@ ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   doc["rms_converged"] = r.rmsConverged;
   doc["cached"] = r.cached;
   doc["finer_level_added"] = r.finerLevelAdded;
+  doc["graded"] = r.graded;
   doc["estimated_level"] = r.estimatedLevel;
   return doc;
 }
@@ -234,6 +235,7 @@ ConvergenceResult fromJson(const ojson& doc) {
   r.rmsRelativeError = numberOrNaN(doc, "rms_relative_error");
   r.rmsConverged = doc.at("rms_converged").get<bool>();
   r.finerLevelAdded = doc.value("finer_level_added", false);
+  r.graded = doc.value("graded", false);
   r.estimatedLevel = doc.value("estimated_level", int(r.levels.size()) - 1);
   return r;
 }
@@ -333,6 +335,8 @@ struct PreparedStudy {
   bool byEdgeLength = false;  ///< the plugin takes `edge_length`
   /// h is the reference's own: a level at ratio 1 keeps the reference's params unchanged.
   bool ownSize = false;
+  /// The reference's params grade its mesh toward a point (ConvergenceResult::graded).
+  bool graded = false;
   Organ organ;
   double volume = 0, exclude = 0;
   std::optional<CacheKey> key;
@@ -369,6 +373,10 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
       ownH = params["edge_length"].get<double>();
     if (params.contains("elements") && params["elements"].is_number_integer())
       ownN = params["elements"].get<long long>();
+    p.graded = params.contains("focus_radius") && params["focus_radius"].is_number() &&
+               params["focus_radius"].get<double>() > 0 &&
+               !(params.contains("focus_ratio") && params["focus_ratio"].is_number() &&
+                 params["focus_ratio"].get<double>() >= 1);
   }
   try {
     for (const ParamSpec& spec : loader.load(ref.value("plugin", "")).params) {
@@ -548,7 +556,7 @@ void estimateFromLevels(const std::vector<MatX3>& displacement, const std::vecto
 /// Runs the level cases (ids[k] is level first + k of out.levels) and appends each level's
 /// surface displacement to `displacement` where it ran to its compared instant.
 void runLevels(std::vector<SceneCase>& cases, const std::vector<std::string>& ids, size_t first,
-               const Organ& organ, double volume, PluginLoader& loader,
+               const Organ& organ, double volume, bool graded, PluginLoader& loader,
                const ConvergeOptions& options, Progress* progress, ConvergenceResult& out,
                std::vector<MatX3>& displacement) {
   if (progress) progress->addTotal(int(cases.size()));
@@ -602,7 +610,8 @@ void runLevels(std::vector<SceneCase>& cases, const std::vector<std::string>& id
     if (!surfaces[k] || surfaces[k]->rows() < organ.surface.numVertices()) continue;
     const MatX3 u = surfaces[k]->topRows(organ.surface.numVertices()) - organ.surface.V;
     displacement.push_back(u);
-    level.h = std::cbrt(volume / double(level.elements));
+    level.h =
+        graded && level.targetH > 0 ? level.targetH : std::cbrt(volume / double(level.elements));
     level.peakDisplacement = u.rowwise().norm().maxCoeff();
   }
 }
@@ -635,7 +644,9 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
   std::vector<MatX3> displacement;
   std::vector<std::string> ids;
   std::vector<SceneCase> cases = levelCases(prepared, options, options.hRatios, 0, out, ids);
-  runLevels(cases, ids, 0, organ, prepared.volume, loader, options, progress, out, displacement);
+  out.graded = prepared.graded && prepared.byEdgeLength;
+  runLevels(cases, ids, 0, organ, prepared.volume, out.graded, loader, options, progress, out,
+            displacement);
   size_t expected = 3;
   if (displacement.size() == 3) {
     estimateFromLevels(displacement, include, out);
@@ -646,8 +657,8 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
       std::vector<std::string> finerIds;
       std::vector<SceneCase> finer = levelCases(
           prepared, options, {options.hRatios.back() / kFinerLevelStep}, 3, out, finerIds);
-      runLevels(finer, finerIds, 3, organ, prepared.volume, loader, options, progress, out,
-                displacement);
+      runLevels(finer, finerIds, 3, organ, prepared.volume, out.graded, loader, options, progress,
+                out, displacement);
       expected = 4;
       if (displacement.size() == 4) {
         out.finerLevelAdded = true;

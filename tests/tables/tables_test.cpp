@@ -543,6 +543,26 @@ TEST_F(TempDir, ConvergeLevelsRefineByEdgeLength) {
   EXPECT_EQ(readJson(own.outDir / "convergence.json")["reason"], "levels_too_close");
   EXPECT_NE(convergenceSummary(c).find("too close in size"), std::string::npos)
       << convergenceSummary(c);
+  // Graded toward the top face's centre, the same check's levels refine there by 2 and 1.4
+  // where the surface bounds the uniform ones: h is the size field's scale and Richardson applies.
+  nlohmann::ordered_json gradedScene = scene;
+  gradedScene["reference"]["params"].update(
+      {{"focus_z", 0.05}, {"focus_radius", 0.01}, {"focus_ratio", 0.3}});
+  ConvergeOptions graded = own;
+  graded.outDir = m_dir / "graded";
+  const ConvergenceResult g =
+      runConvergence(gradedScene, (m_dir / "graded.json").string(), loader, graded, nullptr);
+  ASSERT_EQ(g.levels.size(), 3u);
+  EXPECT_TRUE(g.graded);
+  EXPECT_EQ(readJson(graded.outDir / "convergence.json")["graded"], true);
+  for (size_t k = 0; k < 3; ++k) {
+    EXPECT_EQ(g.levels[k].status, "ok");
+    EXPECT_DOUBLE_EQ(g.levels[k].h, g.levels[k].targetH);
+    EXPECT_GT(g.levels[k].elements, c.levels[k].elements) << k;
+  }
+  EXPECT_GT(g.levels[1].elements, g.levels[0].elements);
+  EXPECT_GT(g.levels[2].elements, g.levels[1].elements);
+  EXPECT_NE(g.reason, "levels_too_close") << g.message;
   // The check the tables run adds a level finer than the reference (h / 1.4) when the surface
   // bounds the coarse ones, and estimates the reference's error (level 2) from the last three.
   ASSERT_FALSE(c.converged);

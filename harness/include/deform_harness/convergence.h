@@ -80,6 +80,11 @@ struct ConvergenceResult {
   /// A level finer than the reference was added (ConvergeOptions::finerWhenBound): the
   /// estimate comes from the last three levels and is the error of the one before the last.
   bool finerLevelAdded = false;
+  /// The reference's mesh is graded toward a point (focus_radius > 0): each level's h is its
+  /// size field's scale, the target edge length, which scales the mesh near the interaction by
+  /// the level ratios; (V / tets)^(1/3) would not, since the far field stays as coarse as the
+  /// organ's surface.
+  bool graded = false;
   /// Index into `levels` of the level whose error errorEstimate is (-1: not set).
   int estimatedLevel = -1;
   /// estimatedLevel where it is set, else the last level (a result built by hand).

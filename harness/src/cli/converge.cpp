@@ -78,7 +78,8 @@ int cmdConverge(ConvergeArgs& args, const CLI::App& cmd) {
       std::cout << l.targetElements << " target elements";
     }
     std::cout << ": " << l.elements << " elements, h = " << fmt(1e3 * l.h)
-              << " mm, peak |u| = " << fmt(1e3 * l.peakDisplacement) << " mm, " << l.status << ", "
+              << (r.graded ? " mm (the graded size field's scale)" : " mm")
+              << ", peak |u| = " << fmt(1e3 * l.peakDisplacement) << " mm, " << l.status << ", "
               << fmt(l.solveS) << " s\n";
   }
   if (r.cached)

@@ -80,6 +80,7 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
   if (run->counts.count("elements"))
     elements = std::to_string(run->counts.at("elements")) + " tets";
   out.cell = order + ", " + elements + ", ";
+  if (res.graded) out.cell += "graded toward the interaction, ";
   if (std::isfinite(res.relativeError)) {
     out.cell += "error " + percentCell(res.relativeError) + " (est.)";
     if (!res.asymptotic) out.cell += ", " + reasonWords(res.reason);
