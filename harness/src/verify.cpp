@@ -24,9 +24,10 @@ namespace {
 
 /// The parameters that fix the mesh and the constitutive model: both plugins declare them with
 /// the same meaning, so the same values give the same tets.
-const char* const kSharedParams[] = {"material",    "element_order",  "elements",
-                                     "edge_length", "refine_surface", "conform_fixed",
-                                     "mesh_timeout"};
+const char* const kSharedParams[] = {
+    "material",      "element_order", "elements",    "edge_length", "refine_surface",
+    "conform_fixed", "mesh_timeout",  "focus_x",     "focus_y",     "focus_z",
+    "focus_radius",  "focus_ratio",   "focus_growth"};
 
 double cpuSecondsNow() {
   double s = 0;
