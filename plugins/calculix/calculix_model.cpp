@@ -29,6 +29,7 @@ class CalculixModel final : public Model {
           "ccx not found (install CalculiX, e.g. Debian's calculix-ccx, or set DEFORM_CCX to "
           "the program)");
     m_timeout = p.real("timeout");
+    m_maxMemory = p.real("max_memory") > 0 ? p.real("max_memory") : halfPhysicalMemory();
     m_increments.initial = p.real("initial_increment");
     m_increments.maximum = std::max(m_increments.initial, p.real("max_increment"));
     m_increments.minimum = std::min(m_increments.initial, p.real("min_increment"));
@@ -141,8 +142,8 @@ class CalculixModel final : public Model {
       loads.forces.insert(loads.forces.end(), shares.begin(), shares.end());
     }
 
-    const CcxRun run =
-        runCcx(m_ccx, m_modelDeck + ccxStepDeck(m_model, loads, m_increments), m_timeout);
+    const CcxRun run = runCcx(m_ccx, m_modelDeck + ccxStepDeck(m_model, loads, m_increments),
+                              m_timeout, 1, m_maxMemory);
     ++m_runs;
     m_wallMs += 1e3 * run.wallSeconds;
     m_cpuMs += 1e3 * run.cpuSeconds;
@@ -237,6 +238,7 @@ class CalculixModel final : public Model {
 
   std::string m_ccx;
   double m_timeout = 3600;
+  double m_maxMemory = 0;  ///< bytes, the ccx child's RLIMIT_AS
   CcxIncrements m_increments;
   CcxModel m_model;
   std::string m_modelDeck;

@@ -10,6 +10,7 @@
 
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -73,8 +74,13 @@ std::string findCcx() {
   return "";
 }
 
-CcxRun runCcx(const std::string& ccx, const std::string& input, double timeoutSeconds,
-              int threads) {
+double halfPhysicalMemory() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && page > 0 ? 0.5 * double(pages) * double(page) : 0.0;
+}
+
+CcxRun runCcx(const std::string& ccx, const std::string& input, double timeoutSeconds, int threads,
+              double maxMemoryBytes) {
   CcxRun run;
   std::string tmpl = (fs::temp_directory_path() / "deform_ccx.XXXXXX").string();
   if (!::mkdtemp(tmpl.data())) {
@@ -114,6 +120,8 @@ CcxRun runCcx(const std::string& ccx, const std::string& input, double timeoutSe
   std::string prog = ccx, dash = "-i", job = "job";
   char* argv[] = {prog.data(), dash.data(), job.data(), nullptr};
   const std::string dirStr = dir.string(), logStr = (dir / "ccx.log").string();
+  struct rlimit memory {};
+  memory.rlim_cur = memory.rlim_max = maxMemoryBytes > 0 ? rlim_t(maxMemoryBytes) : RLIM_INFINITY;
 
   const auto t0 = std::chrono::steady_clock::now();
   const pid_t pid = ::fork();
@@ -125,6 +133,7 @@ CcxRun runCcx(const std::string& ccx, const std::string& input, double timeoutSe
     ::setpgid(0, 0);
     // ccx dies with the process that started it (a harness killed at its timeout).
     ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (maxMemoryBytes > 0 && ::setrlimit(RLIMIT_AS, &memory) != 0) ::_exit(126);
     if (::chdir(dirStr.c_str()) != 0) ::_exit(126);
     const int in = ::open("/dev/null", O_RDONLY);
     const int log = ::open(logStr.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
@@ -170,6 +179,11 @@ CcxRun runCcx(const std::string& ccx, const std::string& input, double timeoutSe
     why << "ccx exited with status " << WEXITSTATUS(status) << ": " << ccxErrorText(log);
   } else if (!fs::exists(dir / "job.dat")) {
     why << "ccx wrote no job.dat: " << ccxErrorText(log);
+  }
+  if (!timedOut && !why.str().empty() && maxMemoryBytes > 0) {
+    char limit[64];
+    std::snprintf(limit, sizeof limit, "%.3g GB", maxMemoryBytes / 1e9);
+    why << " (its memory was limited to " << limit << ", calculix's max_memory)";
   }
   run.message = why.str();
   if (!run.message.empty()) return run;

@@ -27,8 +27,13 @@ struct CcxRun {
 /// Writes `input` to JOB.inp in a fresh folder under the system's temporary folder, runs
 /// `ccx -i JOB` there (stdin /dev/null, stdout and stderr to a file, OMP_NUM_THREADS and
 /// CCX_NPROC_* set to `threads`), kills it (SIGKILL) after `timeoutSeconds`, reads JOB.dat and
-/// removes the folder. Never throws for a ccx failure: `ok` is false and `message` says why.
+/// removes the folder. With `maxMemoryBytes` > 0 the child's address space is limited to it
+/// (RLIMIT_AS): a ccx whose factorisation fills in without bound fails alone, and a failed run's
+/// message names the limit. Never throws for a ccx failure: `ok` is false and `message` says why.
 CcxRun runCcx(const std::string& ccx, const std::string& input, double timeoutSeconds,
-              int threads = 1);
+              int threads = 1, double maxMemoryBytes = 0);
+
+/// Half of this machine's physical memory, bytes (calculix's default `max_memory`).
+double halfPhysicalMemory();
 
 }  // namespace deform::calculix

@@ -27,6 +27,9 @@ std::vector<deform::ParamSpec> calculixParams() {
       ParamSpec::integer("max_increments", 1000, 1, 1000000, "ccx's increments per solve"),
       ParamSpec::real("timeout", "s", 3600.0, 1.0, 604800.0,
                       "wall-clock limit of one ccx run (killed after it: a failed run)"),
+      ParamSpec::real("max_memory", "B", 0.0, 0.0, 1e15,
+                      "address-space limit of one ccx run (a run past it fails alone, not the "
+                      "machine); 0: half of the machine's physical memory"),
   };
   // reference_fem's tet mesh parameters after "element_order" (organ_tets.h): the same values
   // mesh the same tets.

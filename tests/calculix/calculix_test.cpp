@@ -172,6 +172,22 @@ TEST(Calculix, CcxPastItsDeadlineIsKilledAndReported) {
   EXPECT_LT(run.wallSeconds, 10);
 }
 
+TEST(Calculix, CcxPastItsMemoryLimitFailsAloneAndTheMessageNamesTheLimit) {
+  // dd allocates a buffer of its block size: 400 MB is past a 200 MB address-space limit, 20 MB
+  // is not (that run then fails only for writing no job.dat).
+  const calculix::CcxRun hungry =
+      calculix::runCcx(fakeCcx("hungry", "exec dd if=/dev/zero of=/dev/null bs=400M count=1"),
+                       "*NODE\n", 30, 1, 2e8);
+  EXPECT_FALSE(hungry.ok);
+  EXPECT_NE(hungry.message.find("exited with status"), std::string::npos) << hungry.message;
+  EXPECT_NE(hungry.message.find("its memory was limited to 0.2 GB"), std::string::npos)
+      << hungry.message;
+  const calculix::CcxRun modest = calculix::runCcx(
+      fakeCcx("modest", "exec dd if=/dev/zero of=/dev/null bs=20M count=1"), "*NODE\n", 30, 1, 2e8);
+  EXPECT_NE(modest.message.find("wrote no job.dat"), std::string::npos) << modest.message;
+  EXPECT_GT(calculix::halfPhysicalMemory(), 1e8);
+}
+
 TEST(Calculix, CcxErrorLinesBecomeTheMessage) {
   const std::string fake = fakeCcx("error", "echo ' *ERROR in fake: no such keyword'; exit 201");
   const calculix::CcxRun run = calculix::runCcx(fake, "*NODE\n", 30);
