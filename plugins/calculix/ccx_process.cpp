@@ -180,7 +180,12 @@ CcxRun runCcx(const std::string& ccx, const std::string& input, double timeoutSe
   } else if (!fs::exists(dir / "job.dat")) {
     why << "ccx wrote no job.dat: " << ccxErrorText(log);
   }
-  if (!timedOut && !why.str().empty() && maxMemoryBytes > 0) {
+  // The limit is named unless ccx said why itself (an *ERROR line not about memory, such as
+  // "increment size smaller than minimum"): an allocation that failed under it rarely says so.
+  const bool ccxSaidWhy = log.find("*ERROR") != std::string::npos &&
+                          log.find("alloc") == std::string::npos &&
+                          log.find("memory") == std::string::npos;
+  if (!timedOut && !why.str().empty() && maxMemoryBytes > 0 && !ccxSaidWhy) {
     char limit[64];
     std::snprintf(limit, sizeof limit, "%.3g GB", maxMemoryBytes / 1e9);
     why << " (its memory was limited to " << limit << ", calculix's max_memory)";

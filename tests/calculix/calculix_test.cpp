@@ -185,6 +185,11 @@ TEST(Calculix, CcxPastItsMemoryLimitFailsAloneAndTheMessageNamesTheLimit) {
   const calculix::CcxRun modest = calculix::runCcx(
       fakeCcx("modest", "exec dd if=/dev/zero of=/dev/null bs=20M count=1"), "*NODE\n", 30, 1, 2e8);
   EXPECT_NE(modest.message.find("wrote no job.dat"), std::string::npos) << modest.message;
+  // A ccx that says why it stopped, and not for memory, is not blamed on the limit.
+  const calculix::CcxRun said = calculix::runCcx(
+      fakeCcx("said", "echo ' *ERROR: increment size smaller than minimum'; exit 201"), "*NODE\n",
+      30, 1, 2e8);
+  EXPECT_EQ(said.message.find("memory"), std::string::npos) << said.message;
   EXPECT_GT(calculix::halfPhysicalMemory(), 1e8);
 }
 
