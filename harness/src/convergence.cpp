@@ -1,5 +1,6 @@
 // The reference's mesh convergence from three runs of the reference plugin (see convergence.h).
 #include <deform/engine/interaction.h>
+#include <deform/geometry/organ_tets.h>
 #include <deform/geometry/tet_mesher.h>
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
@@ -7,6 +8,7 @@
 #include <deform_harness/convergence.h>
 #include <deform_harness/json_file.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -373,13 +375,19 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
       ownH = params["edge_length"].get<double>();
     if (params.contains("elements") && params["elements"].is_number_integer())
       ownN = params["elements"].get<long long>();
-    p.graded = params.contains("focus_radius") && params["focus_radius"].is_number() &&
-               params["focus_radius"].get<double>() > 0 &&
-               !(params.contains("focus_ratio") && params["focus_ratio"].is_number() &&
-                 params["focus_ratio"].get<double>() >= 1);
   }
   try {
-    for (const ParamSpec& spec : loader.load(ref.value("plugin", "")).params) {
+    const std::vector<ParamSpec>& specs = loader.load(ref.value("plugin", "")).params;
+    // Graded as the plugin meshes it: its resolved params' grading (organ_tets.h), where it
+    // takes the organ's tet mesh parameters.
+    if (std::any_of(specs.begin(), specs.end(),
+                    [](const ParamSpec& s) { return s.key == "focus_radius"; })) {
+      const nlohmann::json given =
+          nlohmann::json::parse(ref.value("params", ojson::object()).dump());
+      p.graded = organTetOptions(resolveParams(specs, given, sceneFile, "/reference/params"))
+                     .grading.active();
+    }
+    for (const ParamSpec& spec : specs) {
       if (spec.key == "edge_length") {
         p.byEdgeLength = true;
         if (ownH <= 0 && std::holds_alternative<double>(spec.defaultValue))
@@ -390,7 +398,7 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
         ownN = std::get<long long>(spec.defaultValue);
     }
   } catch (const std::exception&) {
-    // no such plugin: the levels report it
+    // no such plugin, or params it refuses: the levels report it
   }
   if (ownN <= 0) ownN = 5000;
   if (options.baseEdgeLength > 0) {
@@ -644,7 +652,7 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
   std::vector<MatX3> displacement;
   std::vector<std::string> ids;
   std::vector<SceneCase> cases = levelCases(prepared, options, options.hRatios, 0, out, ids);
-  out.graded = prepared.graded && prepared.byEdgeLength;
+  out.graded = prepared.graded;
   runLevels(cases, ids, 0, organ, prepared.volume, out.graded, loader, options, progress, out,
             displacement);
   size_t expected = 3;

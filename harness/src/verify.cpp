@@ -1,5 +1,6 @@
 // `deformbench verify`: reference_fem against CalculiX on one mesh (verify.h).
 #include <deform/engine/scene.h>
+#include <deform/geometry/organ_tets.h>
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
 #include <deform/sdk/error.h>
@@ -23,11 +24,13 @@ using ojson = nlohmann::ordered_json;
 namespace {
 
 /// The parameters that fix the mesh and the constitutive model: both plugins declare them with
-/// the same meaning, so the same values give the same tets.
-const char* const kSharedParams[] = {
-    "material",      "element_order", "elements",    "edge_length", "refine_surface",
-    "conform_fixed", "mesh_timeout",  "focus_x",     "focus_y",     "focus_z",
-    "focus_radius",  "focus_ratio",   "focus_growth"};
+/// the same meaning, so the same values give the same tets: the material, the element order and
+/// the organ's tet mesh parameters (organ_tets.h, which both plugins insert).
+std::vector<std::string> sharedParams() {
+  std::vector<std::string> keys = {"material", "element_order"};
+  for (const ParamSpec& p : withOrganTetParams({}, 0)) keys.push_back(p.key);
+  return keys;
+}
 
 double cpuSecondsNow() {
   double s = 0;
@@ -170,7 +173,7 @@ VerifyParams verifyParams(const std::string& sceneFile, const Scene& scene,
   std::vector<std::string>& notes = out.notes;
   // The scene's reference parameters; the other solver takes the shared ones.
   nlohmann::json shared = nlohmann::json::object();
-  for (const char* k : kSharedParams)
+  for (const std::string& k : sharedParams())
     if (spec.params.contains(k)) shared[k] = spec.params[k];
   nlohmann::json refGiven = spec.plugin == "reference_fem" ? spec.params : shared;
   const nlohmann::json ccxGiven = spec.plugin == "calculix" ? spec.params : shared;
