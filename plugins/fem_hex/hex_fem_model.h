@@ -28,7 +28,7 @@
 // then crept near the jaws by 0.07 mm per 50 ms step instead of settling.)
 #pragma once
 
-#include "cholesky_solver.h"
+#include <deform/kernels/cholesky_solver.h>
 #include "hex_element.h"
 #include "hex_grid.h"
 

@@ -1,9 +1,9 @@
-#include "cholesky_solver.h"
+#include <deform/kernels/cholesky_solver.h>
 
 #include <algorithm>
 #include <cstring>
 
-namespace deform::fem_hex {
+namespace deform {
 
 namespace {
 
@@ -185,4 +185,4 @@ void CholeskySolver::solveFloatInto(const VecX& b, VecX& x) {
   for (size_t k = 0; k < n; ++k) x[m_perm[k]] = m_y[k];
 }
 
-}  // namespace deform::fem_hex
+}  // namespace deform

@@ -1,13 +1,13 @@
 // The float copy of a supernodal factor (the PCG's preconditioner) against CHOLMOD's own double
 // solve of the same factor.
-#include "cholesky_solver.h"
+#include <deform/kernels/cholesky_solver.h>
 
 #include <gtest/gtest.h>
 
 #include <random>
 #include <vector>
 
-namespace deform::fem_hex {
+namespace deform {
 namespace {
 
 /// The 7-point Laplacian of an n^3 grid plus `shift` I: SPD, with a supernodal factor at n = 12.
@@ -64,4 +64,4 @@ TEST(CholeskySolver, NoFloatCopyOfASimplicialFactor) {
 }
 
 }  // namespace
-}  // namespace deform::fem_hex
+}  // namespace deform

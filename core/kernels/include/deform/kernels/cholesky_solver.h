@@ -1,13 +1,14 @@
-// fem_hex kernels: deform::SparseCholesky (CHOLMOD through Eigen) plus an allocation-free solve
-// (cholmod_solve2 with workspaces kept between calls), for the per-step loop, and a float copy of
-// a supernodal factor for the PCG's preconditioner.
+// deformbench SDK: deform::SparseCholesky (CHOLMOD through Eigen) plus an allocation-free solve
+// (cholmod_solve2 with workspaces kept between calls) and a float copy of a supernodal factor, the
+// preconditioner of a conjugate-gradient solve (fem_hex's per-step PCG, reference_fem's inexact
+// Newton). The triangular solves are memory-bound: the float copy halves the bytes they stream.
 #pragma once
 
 #include <deform/kernels/sparse.h>
 
 #include <vector>
 
-namespace deform::fem_hex {
+namespace deform {
 
 class CholeskySolver : public SparseCholesky {
  public:
@@ -30,6 +31,8 @@ class CholeskySolver : public SparseCholesky {
   /// Returns false, and keeps no copy, when the factor is simplicial or failed.
   bool buildFloatFactor();
   bool hasFloatFactor() const { return !m_lf.empty(); }
+  /// Forgets the float copy (solveFloatInto is then unavailable until the next build).
+  void dropFloatFactor() { m_lf.clear(); }
   /// x ~= A^{-1} b by the float copy: both triangular solves in single precision (half the
   /// factor's memory traffic, twice the vector lanes). A preconditioner, not a direct solve: its
   /// error grows with the condition of A. Requires hasFloatFactor(). No allocation.
@@ -45,4 +48,4 @@ class CholeskySolver : public SparseCholesky {
   std::vector<int> m_super, m_pi, m_px, m_rows, m_perm;
 };
 
-}  // namespace deform::fem_hex
+}  // namespace deform
