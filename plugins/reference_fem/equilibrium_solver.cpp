@@ -204,7 +204,8 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
   }
   m_haveFactor = false;
   installCholmodAllocator();  // large pages for the factor (see sparse.h)
-  m_chol = std::make_unique<SparseCholesky>();
+  m_chol = std::make_unique<CholeskySolver>();
+  m_chol->setKind(CholeskySolver::Kind::Supernodal);
   m_chol->cholmod().print = 0;  // a non-PD matrix is handled here, not printed
   if (nf > 0) {
     m_chol->cholmod().nmethods = 1;  // m_Kff is already in fill-reducing order
@@ -312,6 +313,8 @@ bool EquilibriumSolver::factorize(const VecX& x, const InertiaTerms* in, bool in
       ScopedTimer timer(m_report->factorSeconds);
       const SerialOpenMpScope serial;
       m_chol->factorize(m_Kff);
+      m_chol->dropFloatFactor();
+      if (m_floatPreconditioner && m_chol->info() == Eigen::Success) m_chol->buildFloatFactor();
     }
     if (m_chol->info() == Eigen::Success) {
       if (attempt > 0) ++fallbacks;
@@ -330,7 +333,15 @@ int EquilibriumSolver::preconditionedCg(const VecX& b, Real tolerance, int maxIt
   ScopedTimer timer(m_report->solveSeconds);
   const SparseMatrix& K = m_Kff;  // the exact tangent (assembled this iteration)
   xOut = VecX::Zero(b.size());
-  VecX r = b, z = m_chol->solve(r), p = z, q(b.size());
+  VecX r = b, z, p, q(b.size());
+  const auto precondition = [&] {
+    if (m_chol->hasFloatFactor())
+      m_chol->solveFloatInto(r, z);
+    else
+      z = m_chol->solve(r);
+  };
+  precondition();
+  p = z;
   Real rz = r.dot(z);
   for (int it = 1; it <= maxIterations; ++it) {
     q.noalias() = K.selfadjointView<Eigen::Lower>() * p;
@@ -341,7 +352,7 @@ int EquilibriumSolver::preconditionedCg(const VecX& b, Real tolerance, int maxIt
     r -= a * q;
     ++m_report->pcgIterations;
     if (r.norm() <= tolerance) return it;
-    z = m_chol->solve(r);
+    precondition();
     const Real rzNew = r.dot(z);
     p = z + (rzNew / rz) * p;
     rz = rzNew;
@@ -434,6 +445,7 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
   const auto start = Clock::now();
   SolveReport rep;
   m_report = &rep;
+  m_floatPreconditioner = opt.floatPreconditioner;
   const int ndof = 3 * m_sys.numNodes();
   // Constrained nodes and their final targets; fixed wins over prescribed.
   VecX target = x;

@@ -55,6 +55,7 @@
 #include "mean_dilatation_tet.h"
 #include "quadratic_tet.h"
 
+#include <deform/kernels/cholesky_solver.h>
 #include <deform/kernels/fem_tet.h>
 #include <deform/kernels/sparse.h>
 #include <deform/sdk/mesh.h>
@@ -121,6 +122,11 @@ struct SolveOptions {
   /// load with no equilibrium in reach otherwise alternates accepted and rejected increments
   /// near the smallest step for as long as it is left to (no answer in 900 s, issue H1).
   int maxFailedLoadSteps = 40;
+  /// The CG iterations of the inexact Newton steps precondition with a float copy of the factor
+  /// (CholeskySolver::solveFloatInto: half the memory traffic of the triangular solves, which
+  /// dominate a CG iteration; the CG and every direct solve stay in double, so the tolerance and
+  /// the answer are the same). Off: CHOLMOD's double solve.
+  bool floatPreconditioner = false;
 };
 
 struct SolveReport {
@@ -340,9 +346,10 @@ class EquilibriumSolver {
   bool m_factorProjected = false;   ///< that factor is of a projected (or shifted) tangent
   long long m_factorNonZeros = 0;
   double m_factorFlops = 0;
-  std::unique_ptr<SparseCholesky> m_chol;
+  std::unique_ptr<CholeskySolver> m_chol;
   VecX m_gradient;
-  SolveReport* m_report = nullptr;  ///< the report of the running solve (timings), else null
+  SolveReport* m_report = nullptr;     ///< the report of the running solve (timings), else null
+  bool m_floatPreconditioner = false;  ///< SolveOptions::floatPreconditioner of the running solve
 };
 
 /// Convenience: static equilibrium of `system` under `loads` from the rest state. Returns the 3N

@@ -24,6 +24,11 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::real("newton_tolerance", "1", 1e-8, 1e-14, 1e-2,
                       "converged when |free residual| <= this * max(|external force|, |reaction|)"),
       ParamSpec::integer("max_newton_iterations", 100, 1, 10000, "Newton iterations per load step"),
+      ParamSpec::choice("preconditioner_precision", "auto", {"auto", "float32", "float64"},
+                        "number type of the triangular solves that precondition the inexact "
+                        "Newton's CG (float32: a float copy of the factor, half the memory "
+                        "traffic; the CG, every direct solve and the answer stay in double); "
+                        "auto: float32 unless the volumetric term is mean_dilatation"),
       ParamSpec::integer("max_load_halvings", 10, 0, 30,
                          "a failed load step is halved at most this many times"),
       ParamSpec::real("rayleigh_alpha", "1/s", 0.0, 0.0, 1e6,
@@ -45,6 +50,7 @@ ReferenceFemConfig configFromParams(const ParamValues& p) {
   c.options.tolerance = p.real("newton_tolerance");
   c.options.maxIterations = int(p.integer("max_newton_iterations"));
   c.options.maxHalvings = int(p.integer("max_load_halvings"));
+  c.preconditioner = p.choice("preconditioner_precision");
   c.rayleighAlpha = p.real("rayleigh_alpha");
   c.rayleighBeta = p.real("rayleigh_beta");
   c.mesh = organTetOptions(p);

@@ -9,6 +9,7 @@
 #include <deform/sdk/params.h>
 
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace deform::reference_fem {
@@ -22,9 +23,12 @@ struct ReferenceFemConfig {
   ElementOrder order = ElementOrder::Quadratic;
   VolumetricChoice volumetric = VolumetricChoice::Auto;  ///< resolved against the organ's nu
   SolveOptions options;                                  ///< Newton tolerance and caps
-  Real rayleighAlpha = 0;                                ///< 1/s (dynamic only)
-  Real rayleighBeta = 0;                                 ///< s (dynamic only)
-  OrganTetOptions mesh;  ///< deform/geometry/organ_tets.h (calculix meshes the same way)
+  /// "auto", "float32", "float64": SolveOptions::floatPreconditioner, auto resolved at init
+  /// (float32 unless the volumetric term is mean_dilatation).
+  std::string preconditioner = "auto";
+  Real rayleighAlpha = 0;  ///< 1/s (dynamic only)
+  Real rayleighBeta = 0;   ///< s (dynamic only)
+  OrganTetOptions mesh;    ///< deform/geometry/organ_tets.h (calculix meshes the same way)
 };
 
 std::vector<ParamSpec> paramSpecs();
