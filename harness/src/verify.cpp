@@ -4,6 +4,7 @@
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
 #include <deform/sdk/error.h>
+#include <deform/sdk/mesh.h>
 #include <deform_harness/cases.h>
 #include <deform_harness/format.h>
 #include <deform_harness/metrics.h>
@@ -13,8 +14,12 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
+#include <functional>
+#include <map>
+#include <memory>
 
 namespace deform::harness {
 
@@ -57,6 +62,13 @@ class TimedModel final : public Model {
     t.wallS = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     t.cpuS = cpuSecondsNow() - c0;
     steps.push_back(t);
+    if (record) {
+      StepInput copy = in;
+      copy.contact = nullptr;
+      inputs.push_back(std::move(copy));
+      solved.push_back(m_model.nodes());
+      forces.push_back(m_model.graspForces());
+    }
     return s;
   }
   const MatX3& nodes() const override { return m_model.nodes(); }
@@ -68,6 +80,11 @@ class TimedModel final : public Model {
   std::vector<Vec3> graspForces() const override { return m_model.graspForces(); }
 
   std::vector<VerifySolverTimes> steps;
+  /// With `record`: per step() call, its input, the nodes after it and the grasp forces.
+  bool record = false;
+  std::vector<StepInput> inputs;
+  std::vector<MatX3> solved;
+  std::vector<std::vector<Vec3>> forces;
 
  private:
   Model& m_model;
@@ -76,11 +93,17 @@ class TimedModel final : public Model {
 struct SolverRun {
   RunRecord rec;
   std::vector<VerifySolverTimes> stepTimes;  ///< one per step() call, in order
+  /// With `record` (solve()): the nodes at rest and, per step() call, as TimedModel's.
+  MatX3 rest;
+  std::vector<StepInput> inputs;
+  std::vector<MatX3> solved;
+  std::vector<std::vector<Vec3>> forces;
 };
 
 /// runModel() with each step timed (wall and CPU).
 SolverRun solve(const ModelInfo& info, const ParamValues& params, const Scene& scene,
-                const Organ& organ, Cache& cache, const VerifyOptions& options) {
+                const Organ& organ, Cache& cache, const VerifyOptions& options,
+                bool record = false) {
   SolverRun out;
   RunRecord& rec = out.rec;
   rec.model = rec.plugin = rec.label = info.name;
@@ -108,6 +131,8 @@ SolverRun solve(const ModelInfo& info, const ParamValues& params, const Scene& s
     return out;
   }
   TimedModel timed(*model);
+  timed.record = record;
+  if (record) out.rest = model->nodes();
   try {
     rec.counts = model->counts();
     RunOptions o;
@@ -120,8 +145,162 @@ SolverRun solve(const ModelInfo& info, const ParamValues& params, const Scene& s
     rec.message = e.what();
   }
   out.stepTimes = timed.steps;
+  out.inputs = std::move(timed.inputs);
+  out.solved = std::move(timed.solved);
+  out.forces = std::move(timed.forces);
   return out;
 }
+
+/// The equilibrium check of one compared instant (VerifyEquilibrium): CalculiX's elements at
+/// reference_fem's answer. Every node but the fixed ones is prescribed where reference_fem put
+/// it (a node constraint each, on top of the instant's grasps), so ccx solves nothing: its
+/// reaction at a node is the node's internal force, and the calculix plugin reports minus that
+/// net of the node's external force. At a node reference_fem left free that is the residual of
+/// its answer under CalculiX's elements; at the held nodes it is the grasp's reaction.
+class EquilibriumCheck {
+ public:
+  EquilibriumCheck(const ModelInfo& ccxInfo, ParamValues params, const Scene& scene,
+                   const Organ& organ, Cache& cache, const MatX3& referenceRest)
+      : m_info(ccxInfo),
+        m_params(std::move(params)),
+        m_scene(scene),
+        m_organ(organ),
+        m_cache(cache) {
+    // One increment: the prescribed field is the answer, nothing to converge.
+    m_params.set("initial_increment", 1.0);
+    m_params.set("max_increment", 1.0);
+    // The nodes as calculix numbers them (organ_tets.h, as the plugin builds them).
+    const OrganTets tets = organTets(organ, organTetOptions(m_params), cache);
+    m_surfaceNode = tets.surfaceNode;
+    std::function<int(int, int)> edgeNode;
+    if (m_params.integer("element_order") == 2) {
+      auto q = std::make_shared<QuadraticTetNodes>(addMidsideNodes(tets.mesh));
+      m_nodes = q->V;
+      edgeNode = [q](int a, int b) { return q->edgeNode(a, b); };
+    } else {
+      m_nodes = tets.mesh.V;
+    }
+    m_patch = std::make_unique<GraspedPatchNodes>(organ.surface, m_surfaceNode, m_nodes,
+                                                  tetBoundaryNodes(tets.mesh, edgeNode));
+    m_fixed.assign(size_t(m_nodes.rows()), 0);
+    for (int n : fixedNodeIndices(m_nodes, organ.fixed, organ.surface)) m_fixed[size_t(n)] = 7;
+    for (const auto& [n, axes] : rollerNodeAxes(m_nodes, organ.fixed)) m_fixed[size_t(n)] |= axes;
+    // reference_fem's row of each of these nodes, by rest position (its isolated clamped nodes
+    // come before its midside nodes).
+    std::map<std::array<long long, 3>, int> at;
+    const auto key = [](const MatX3& V, Eigen::Index i) {
+      return std::array<long long, 3>{std::llround(V(i, 0) * 1e9), std::llround(V(i, 1) * 1e9),
+                                      std::llround(V(i, 2) * 1e9)};
+    };
+    for (Eigen::Index i = 0; i < referenceRest.rows(); ++i)
+      at.emplace(key(referenceRest, i), int(i));
+    m_referenceRow.assign(size_t(m_nodes.rows()), -1);
+    for (Eigen::Index i = 0; i < m_nodes.rows(); ++i) {
+      const auto it = at.find(key(m_nodes, i));
+      if (it == at.end() || (referenceRest.row(it->second) - m_nodes.row(i)).norm() > 1e-9) {
+        m_problem = "reference_fem's nodes are not calculix's (node " + std::to_string(i) +
+                    " has no counterpart)";
+        return;
+      }
+      m_referenceRow[size_t(i)] = it->second;
+    }
+  }
+
+  VerifyEquilibrium check(int step, double time, const StepInput& input, const MatX3& solved,
+                          const std::vector<Vec3>& referenceForces) {
+    VerifyEquilibrium e;
+    e.step = step;
+    e.time = time;
+    if (!m_problem.empty()) {
+      e.status = m_problem;
+      return e;
+    }
+    StepInput in = input;
+    in.nodeConstraints.clear();
+    std::vector<int> constrained;
+    for (Eigen::Index n = 0; n < m_nodes.rows(); ++n) {
+      if (m_fixed[size_t(n)] == 7) continue;
+      NodeGrasp g;
+      g.nodes = {int(n)};
+      g.targets = solved.row(m_referenceRow[size_t(n)]);
+      in.nodeConstraints.push_back(std::move(g));
+      constrained.push_back(int(n));
+    }
+    std::vector<char> held(size_t(m_nodes.rows()), 0);
+    for (const GraspInput& g : in.grasps) {
+      for (int v : g.vertices)
+        if (const int n = m_surfaceNode[size_t(v)]; n >= 0) held[size_t(n)] = 1;
+      for (const GraspedPatchNodes::Held& h : m_patch->held(g.vertices)) held[size_t(h.node)] = 1;
+    }
+    std::unique_ptr<Model> model;
+    try {
+      model = m_info.create();
+      const ModelSetup setup{m_organ, m_params, m_cache, m_scene.dt, m_scene.gravity};
+      model->init(setup);
+      TimedModel timed(*model);
+      timed.step(in);
+      e.calculix = timed.steps.back();
+    } catch (const std::exception& ex) {
+      e.status = std::string("calculix failed: ") + ex.what();
+      return e;
+    }
+    const std::vector<Vec3> forces = model->graspForces();
+    const size_t grasps = in.grasps.size();
+    if (forces.size() != grasps + constrained.size()) {
+      e.status = "calculix reported " + std::to_string(forces.size()) + " forces, not " +
+                 std::to_string(grasps + constrained.size());
+      return e;
+    }
+    // The force scale: the largest of the loads' total, the weight and the grasps' forces.
+    double scale = 0;
+    for (const PointLoad& l : in.loads) scale += l.force.norm();
+    scale = std::max(scale, m_organ.material.density *
+                                std::abs(signedVolume(m_organ.surface.V, m_organ.surface.F)) *
+                                in.gravity.norm());
+    e.graspForceRelative = 0;
+    for (size_t g = 0; g < grasps; ++g) {
+      scale = std::max(scale, forces[g].norm());
+      if (g < referenceForces.size()) scale = std::max(scale, referenceForces[g].norm());
+    }
+    double r2 = 0, rmax = 0;
+    for (size_t k = 0; k < constrained.size(); ++k) {
+      const int n = constrained[k];
+      if (held[size_t(n)]) continue;
+      Vec3 r = -forces[grasps + k];
+      for (int a = 0; a < 3; ++a)
+        if (m_fixed[size_t(n)] & (1 << a)) r(a) = 0;  // a roller's reaction
+      r2 += r.squaredNorm();
+      rmax = std::max(rmax, r.norm());
+      ++e.freeNodes;
+    }
+    e.forceScale = scale;
+    if (!(scale > 0)) {
+      e.status = "no load: nothing to compare the residual with";
+      return e;
+    }
+    e.status = "ok";
+    e.residualRelative = std::sqrt(r2) / scale;
+    e.maxRelative = rmax / scale;
+    for (size_t g = 0; g < grasps && g < referenceForces.size(); ++g)
+      e.graspForceRelative =
+          std::max(e.graspForceRelative, (forces[g] - referenceForces[g]).norm() / scale);
+    if (grasps == 0) e.graspForceRelative = NAN;
+    return e;
+  }
+
+ private:
+  const ModelInfo& m_info;
+  ParamValues m_params;
+  const Scene& m_scene;
+  const Organ& m_organ;
+  Cache& m_cache;
+  MatX3 m_nodes;
+  std::vector<int> m_surfaceNode;
+  std::unique_ptr<GraspedPatchNodes> m_patch;
+  std::vector<int> m_fixed;         ///< per node: the axes a support holds (7: all)
+  std::vector<int> m_referenceRow;  ///< per node: its row in reference_fem's nodes
+  std::string m_problem;            ///< why no check can be made, if so
+};
 
 VerifySolver describe(const SolverRun& run) {
   VerifySolver s;
@@ -232,6 +411,19 @@ ojson verifyJson(const VerifyResult& result, const Scene& scene, const std::stri
          {"formulation_max_relative", numberOrNull(in.formulationMaxRelative)},
          {"reference_fem", timesJson(in.reference)},
          {"calculix", timesJson(in.calculix)}});
+  doc["equilibrium_goal"] = kEquilibriumGoal;
+  doc["equilibrium_agrees"] = result.equilibriumAgrees;
+  doc["equilibrium"] = ojson::array();
+  for (const VerifyEquilibrium& e : result.equilibrium)
+    doc["equilibrium"].push_back({{"step", e.step},
+                                  {"time_s", e.time},
+                                  {"status", e.status},
+                                  {"free_nodes", e.freeNodes},
+                                  {"force_scale_n", e.forceScale},
+                                  {"residual_relative", numberOrNull(e.residualRelative)},
+                                  {"max_residual_relative", numberOrNull(e.maxRelative)},
+                                  {"grasp_force_relative", numberOrNull(e.graspForceRelative)},
+                                  {"calculix", timesJson(e.calculix)}});
   return doc;
 }
 
@@ -271,8 +463,14 @@ VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
     ref.rec.message = "not run: calculix cannot run this scene";
   } else {
     // reference_fem first: it meshes (or finds the mesh in the cache); calculix reads the same.
-    ref = solve(refInfo, params.reference, scene, organ, cache, options);
-    ccx = solve(ccxInfo, params.calculix, scene, organ, cache, options);
+    ref = solve(refInfo, params.reference, scene, organ, cache, options, true);
+    if (options.equilibriumOnly) {
+      ccx.rec.model = ccxInfo.name;
+      ccx.rec.status = RunStatus::Unsupported;
+      ccx.rec.message = "its own solve not run (--equilibrium-only)";
+    } else {
+      ccx = solve(ccxInfo, params.calculix, scene, organ, cache, options);
+    }
   }
   SolverRun formulation;
   formulation.rec.model = refInfo.name;
@@ -292,6 +490,27 @@ VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
     const size_t i = size_t(it - solveSteps.begin());
     return it != solveSteps.end() && i < r.stepTimes.size() ? r.stepTimes[i] : VerifySolverTimes{};
   };
+  // The equilibrium check at each of reference_fem's compared instants, whether or not ccx's
+  // own solve got there.
+  if (ref.rec.status == RunStatus::Ok && !ref.rec.compared.empty()) {
+    EquilibriumCheck check(ccxInfo, params.calculix, scene, organ, cache, ref.rest);
+    result.equilibriumAgrees = true;
+    for (const SurfaceSnapshot& a : ref.rec.compared) {
+      const auto it = std::find(solveSteps.begin(), solveSteps.end(), a.step);
+      const size_t i = size_t(it - solveSteps.begin());
+      VerifyEquilibrium e;
+      if (it != solveSteps.end() && i < ref.inputs.size()) {
+        e = check.check(a.step, a.time, ref.inputs[i], ref.solved[i], ref.forces[i]);
+      } else {
+        e.step = a.step;
+        e.time = a.time;
+        e.status = "reference_fem's solve of this instant was not recorded";
+      }
+      result.equilibriumAgrees =
+          result.equilibriumAgrees && e.status == "ok" && e.residualRelative <= kEquilibriumGoal;
+      result.equilibrium.push_back(e);
+    }
+  }
   if (ref.rec.status != RunStatus::Ok || ccx.rec.status != RunStatus::Ok) {
     result.message = "no comparison: reference_fem " + result.reference.status +
                      (ref.rec.message.empty() ? "" : " (" + ref.rec.message + ")") + ", calculix " +

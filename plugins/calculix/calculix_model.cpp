@@ -5,6 +5,7 @@
 #include <deform/geometry/organ_tets.h>
 #include <deform/geometry/tet_embedding.h>
 #include <deform/sdk/error.h>
+#include <deform/sdk/mesh.h>
 
 #include <algorithm>
 #include <chrono>
@@ -72,6 +73,16 @@ class CalculixModel final : public Model {
       for (int k = 0; k < 3; ++k)
         if (axes & (1 << k)) m_model.fixedDofs[size_t(node)][size_t(k)] = true;
     m_modelDeck = ccxModelDeck(m_model);
+    // rho * integral of each node's shape function: its share of a body force (straight-sided
+    // tets: a P1 corner V/4; a P2 corner -V/20 and a midside node V/5).
+    m_bodyShare.assign(size_t(m_model.nodes.rows()), 0.0);
+    for (Eigen::Index t = 0; t < m_model.elements.rows(); ++t) {
+      const auto x = [&](int a) { return m_model.nodes.row(m_model.elements(t, a)).transpose(); };
+      const Real mass = m_model.density * std::abs(tetVolume(x(0), x(1), x(2), x(3)));
+      for (int a = 0; a < m_model.elements.cols(); ++a)
+        m_bodyShare[size_t(m_model.elements(t, a))] +=
+            m_model.elements.cols() == 10 ? mass * (a < 4 ? -0.05 : 0.2) : 0.25 * mass;
+    }
     m_restSurface = organ.surface.V;
     m_pinnedOutside = 0;
     for (int n : m_surfaceNode) m_pinnedOutside += n < 0;
@@ -152,15 +163,25 @@ class CalculixModel final : public Model {
     const MatX3 u = ccxLastDisplacements(run.dat, int(m_model.nodes.rows()), time);
     if (std::abs(time - 1.0) > 1e-6)
       throw std::runtime_error("ccx: the step stopped at " + std::to_string(time) + " of its load");
-    // The force on each grasp's tool: minus the reactions (RF, the force the prescribed
-    // displacements exert on the tissue) at the nodes it holds, as reference_fem's minus the
-    // energy gradient there. A sliding plate's free dofs carry no reaction (to ccx's tolerance).
+    // The force on each grasp's tool: minus the reactions at the nodes it holds, as
+    // reference_fem's minus the energy gradient there. ccx's RF at a prescribed dof is the
+    // internal force alone (loads and body forces there are not in it), so the node's external
+    // force is added back: -(RF - f_ext). A sliding plate's free dofs carry no reaction (to
+    // ccx's tolerance).
     double forceTime = 0;
     const MatX3 rf = ccxLastReactionForces(run.dat, int(m_model.nodes.rows()), forceTime);
+    std::map<int, Vec3> external;
+    for (const auto& [node, f] : loads.forces) {
+      auto it = external.emplace(node, Vec3::Zero()).first;
+      it->second += f;
+    }
     m_graspForces.clear();
     for (const std::set<int>& nodes : holds) {
       Vec3 f = Vec3::Zero();
-      for (int n : nodes) f -= rf.row(n).transpose();
+      for (int n : nodes) {
+        f += m_bodyShare[size_t(n)] * in.gravity - rf.row(n).transpose();
+        if (const auto it = external.find(n); it != external.end()) f += it->second;
+      }
       m_graspForces.push_back(f);
     }
     m_nodes = m_model.nodes + u;
@@ -253,6 +274,7 @@ class CalculixModel final : public Model {
   long long m_pinnedOutside = 0;
   MatX3 m_nodes, m_surface;
   std::vector<Vec3> m_graspForces;  ///< N, per grasp then node constraint, of the last step
+  std::vector<Real> m_bodyShare;    ///< kg: rho times the integral of each node's shape function
   long long m_runs = 0;
   double m_wallMs = 0, m_cpuMs = 0;
   PhaseTimes m_phase;

@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # verify_test.sh DEFORMBENCH WORK: `deformbench verify` on the small cantilever scene writes
 # verify.json with its fields and prints one line per compared instant; the two solvers agree
-# (same mesh, same discrete problem) well within the 1% goal. Without ccx: calculix is
-# unsupported, said in verify.json and on stdout, exit 0.
+# (same mesh, same discrete problem) well within the 1% goal, and CalculiX's elements find
+# reference_fem's answer in equilibrium (and its grasp force, gravity's share at the held nodes
+# included); with a loose Newton tolerance they do not. Without ccx: calculix is unsupported,
+# said in verify.json and on stdout, exit 0.
 set -euo pipefail
 exe=$(readlink -f "$1") work=$2
 here=$(cd "$(dirname "$0")" && pwd)
@@ -40,9 +42,36 @@ for i, t in zip(v["instants"], (0.01, 0.02)):
     for s in ("reference_fem", "calculix"):
         assert i[s]["wall_s"] > 0 and i[s]["cpu_s"] > 0, (s, i)
 assert v["agrees"] is True
+assert len(v["equilibrium"]) == 2 and v["equilibrium_agrees"] is True, v["equilibrium"]
+for e in v["equilibrium"]:
+    assert e["status"] == "ok" and e["free_nodes"] > 1000 and e["force_scale_n"] > 0.1, e
+    assert e["residual_relative"] < 1e-6 and e["max_residual_relative"] <= e["residual_relative"], e
+assert v["equilibrium"][1]["grasp_force_relative"] < 1e-6, v["equilibrium"][1]
 PY
 lines=$(grep -c '^t = ' "$work/out.txt" || true)
-if [ "$have_ccx" = 1 ] && [ "$lines" != 2 ]; then fail "expected 2 lines, got $lines"; fi
+if [ "$have_ccx" = 1 ] && [ "$lines" != 4 ]; then fail "expected 4 lines, got $lines"; fi
+# reference_fem stopped at 1% of its residual: the equilibrium check sees it (CalculiX's own
+# solve skipped).
+if [ "$have_ccx" = 1 ]; then
+  python3 - "$here/cantilever.json" "$work/loose.json" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+s["reference"]["params"]["newton_tolerance"] = 1e-2
+json.dump(s, open(sys.argv[2], "w"))
+PY
+  "$exe" verify "$work/loose.json" --out "$work/vl" --equilibrium-only >"$work/outl.txt" 2>&1 \
+    || { cat "$work/outl.txt"; fail "verify --equilibrium-only exited $?"; }
+  python3 - "$work/vl/verify.json" <<'PY'
+import json, sys
+v = json.load(open(sys.argv[1]))
+assert v["solvers"][1]["status"] == "unsupported" and v["instants"] == [], v["solvers"][1]
+assert "--equilibrium-only" in v["solvers"][1]["message"], v["solvers"][1]
+assert v["equilibrium_agrees"] is False, v["equilibrium"]
+assert max(e["residual_relative"] for e in v["equilibrium"]) > 1e-3, v["equilibrium"]
+PY
+  grep -q "equilibrium check did not pass" "$work/outl.txt" \
+    || { cat "$work/outl.txt"; fail "no equilibrium warning"; }
+fi
 # Nearly incompressible (nu 0.45): reference_fem is compared in C3D10's formulation (volumetric =
 # displacement), so the solvers still agree; the scene's mean-dilatation reference is solved
 # beside it and its difference reported, not part of the goal.

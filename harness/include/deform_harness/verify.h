@@ -36,6 +36,9 @@ struct VerifyOptions {
   std::filesystem::path outDir;
   std::optional<std::filesystem::path> cacheDir;  ///< nullopt: default; empty: no cache
   int maxSteps = -1;
+  /// Skip CalculiX's own solve (it does not finish some scenes in hours): the equilibrium check
+  /// alone (VerifyEquilibrium).
+  bool equilibriumOnly = false;
 };
 
 struct VerifySolverTimes {
@@ -53,6 +56,26 @@ struct VerifyInstant {
   /// Nearly incompressible scenes: the scene's formulation (mean dilatation) against the
   /// compared reference_fem run (volumetric = displacement), relative as above; NaN otherwise.
   double formulationRmsRelative = NAN, formulationMaxRelative = NAN;
+};
+
+/// The equilibrium check of a compared instant: CalculiX's C3D10 (or C3D4) elements evaluated at
+/// reference_fem's answer, every node but the fixed ones prescribed there, so ccx solves nothing
+/// and needs no Newton iteration (it checks the scenes whose loads ccx's own solve does not
+/// reach). The residual is the internal minus the external force at the nodes reference_fem
+/// left free (a roller's held axes excluded), relative to the force scale: the largest of the
+/// loads' total, the organ's weight and the grasps' forces.
+struct VerifyEquilibrium {
+  int step = 0;
+  double time = 0;
+  std::string status;  ///< "ok", or why there is no figure
+  int freeNodes = 0;
+  double forceScale = 0;          ///< N
+  double residualRelative = NAN;  ///< 2-norm of the free nodes' residual forces / forceScale
+  double maxRelative = NAN;       ///< the largest node's residual force / forceScale
+  /// The largest |grasp force by CalculiX's elements - reference_fem's| / forceScale (NaN
+  /// without a grasp).
+  double graspForceRelative = NAN;
+  VerifySolverTimes calculix;
 };
 
 struct VerifySolver {
@@ -73,12 +96,17 @@ struct VerifyResult {
   VerifySolver formulation;
   std::vector<VerifyInstant> instants;
   bool agrees = false;  ///< both ran and every instant's rms_relative <= kVerifyGoal
+  /// One per reference_fem compared instant (empty when reference_fem did not run).
+  std::vector<VerifyEquilibrium> equilibrium;
+  /// Every equilibrium check ran and its residual_relative <= kEquilibriumGoal.
+  bool equilibriumAgrees = false;
   std::string message;  ///< why there is no comparison, if there is none
   std::vector<std::string> notes;
   std::filesystem::path jsonPath;
 };
 
 inline constexpr double kVerifyGoal = 0.01;
+inline constexpr double kEquilibriumGoal = 1e-4;
 
 /// Runs both solvers and writes OUT/verify.json (format deformbench-verify/1). Throws
 /// InputError for bad input (the scene, a reference that is neither reference_fem nor calculix,
