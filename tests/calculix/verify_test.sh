@@ -66,6 +66,7 @@ import json, sys
 v = json.load(open(sys.argv[1]))
 assert v["solvers"][1]["status"] == "unsupported" and v["instants"] == [], v["solvers"][1]
 assert "--equilibrium-only" in v["solvers"][1]["message"], v["solvers"][1]
+assert v["message"] == "" and any("--equilibrium-only" in n for n in v["notes"]), v
 assert v["equilibrium_agrees"] is False, v["equilibrium"]
 assert max(e["residual_relative"] for e in v["equilibrium"]) > 1e-3, v["equilibrium"]
 PY
