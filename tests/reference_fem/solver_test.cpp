@@ -412,23 +412,36 @@ TEST(SerialOpenMpScope, RestoresMaxActiveLevels) {
   dlclose(gomp);
 }
 
+namespace {
+
+TetMesh columnMesh() {
+  return structuredBoxTets(Vec3(0, -kB / 2, -kH / 2), Vec3(kL, kB / 2, kH / 2), Vec3i(10, 2, 2));
+}
+
+/// The column clamped at x = 0 under axial compression at 20x the clamped-free Euler load
+/// pi^2 E I / (4 L^2), tilted by 0.1%.
+LoadCase bucklingLoad(const FemSystem& sys) {
+  LoadCase lc;
+  for (int i = 0; i < sys.numNodes(); ++i)
+    if (std::abs(sys.rest().V(i, 0)) < 1e-12) lc.fixedNodes.push_back(i);
+  const Real critical = M_PI * M_PI * kE * kI / (4 * kL * kL);
+  lc.nodeForces = tractionForces(sys, Vec3(-20 * critical, 0, -0.001 * critical) / kA,
+                                 [](const Vec3& p) { return std::abs(p(0) - kL) < 1e-12; });
+  return lc;
+}
+
+}  // namespace
+
 // Past its buckling load a column's straight path is unstable, so Newton crosses states whose
 // exact tangent is indefinite and takes projected steps. Once a projected tangent is
 // factorised, the next projected steps are solved by CG with that factor instead of a
 // factorisation each (before, every projected step was one: projectedSteps == spdFallbacks; on
 // the P2 liver phantom this took the liver-poke solve from 64 to 4 factorisations).
 TEST(ReferenceFemSolve, ProjectedStepsReuseTheProjectedFactor) {
-  const TetMesh mesh =
-      structuredBoxTets(Vec3(0, -kB / 2, -kH / 2), Vec3(kL, kB / 2, kH / 2), Vec3i(10, 2, 2));
+  const TetMesh mesh = columnMesh();
   const FemSystem sys(mesh, material(kE, kNu, kRho), MaterialModel::NeoHookean,
                       ElementOrder::Quadratic);
-  LoadCase lc;
-  for (int i = 0; i < sys.numNodes(); ++i)
-    if (std::abs(sys.rest().V(i, 0)) < 1e-12) lc.fixedNodes.push_back(i);
-  // Axial compression at 20x the clamped-free Euler load pi^2 E I / (4 L^2), tilted by 0.1%.
-  const Real critical = M_PI * M_PI * kE * kI / (4 * kL * kL);
-  lc.nodeForces = tractionForces(sys, Vec3(-20 * critical, 0, -0.001 * critical) / kA,
-                                 [](const Vec3& p) { return std::abs(p(0) - kL) < 1e-12; });
+  const LoadCase lc = bucklingLoad(sys);
   SolveReport rep;
   const VecX x = solveEquilibrium(sys, lc, {}, &rep);
   ASSERT_TRUE(rep.converged);
@@ -450,16 +463,9 @@ TEST(ReferenceFemSolve, ProjectedStepsReuseTheProjectedFactor) {
 // solved with it and without, takes CG iterations both ways and lands on the same answer to the
 // solver's tolerance.
 TEST(ReferenceFemSolve, FloatPreconditionerGivesTheDoubleAnswer) {
-  const TetMesh mesh =
-      structuredBoxTets(Vec3(0, -kB / 2, -kH / 2), Vec3(kL, kB / 2, kH / 2), Vec3i(10, 2, 2));
-  const FemSystem sys(mesh, material(kE, kNu, kRho), MaterialModel::NeoHookean,
+  const FemSystem sys(columnMesh(), material(kE, kNu, kRho), MaterialModel::NeoHookean,
                       ElementOrder::Quadratic);
-  LoadCase lc;
-  for (int i = 0; i < sys.numNodes(); ++i)
-    if (std::abs(sys.rest().V(i, 0)) < 1e-12) lc.fixedNodes.push_back(i);
-  const Real critical = M_PI * M_PI * kE * kI / (4 * kL * kL);
-  lc.nodeForces = tractionForces(sys, Vec3(-20 * critical, 0, -0.001 * critical) / kA,
-                                 [](const Vec3& p) { return std::abs(p(0) - kL) < 1e-12; });
+  const LoadCase lc = bucklingLoad(sys);
   VecX x[2];
   for (const bool useFloat : {false, true}) {
     SolveOptions opt;
