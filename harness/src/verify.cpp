@@ -169,8 +169,22 @@ class EquilibriumCheck {
     // One increment: the prescribed field is the answer, nothing to converge.
     m_params.set("initial_increment", 1.0);
     m_params.set("max_increment", 1.0);
+    try {
+      prepare(referenceRest);
+    } catch (const std::exception& e) {
+      m_problem = std::string("the nodes could not be matched: ") + e.what();
+    }
+  }
+
+  VerifyEquilibrium check(int step, double time, const StepInput& input, const MatX3& solved,
+                          const std::vector<Vec3>& referenceForces);
+
+ private:
+  /// The nodes as calculix numbers them, the held and fixed ones, and reference_fem's row of
+  /// each.
+  void prepare(const MatX3& referenceRest) {
     // The nodes as calculix numbers them (organ_tets.h, as the plugin builds them).
-    const OrganTets tets = organTets(organ, organTetOptions(m_params), cache);
+    const OrganTets tets = organTets(m_organ, organTetOptions(m_params), m_cache);
     m_surfaceNode = tets.surfaceNode;
     std::function<int(int, int)> edgeNode;
     if (m_params.integer("element_order") == 2) {
@@ -180,11 +194,11 @@ class EquilibriumCheck {
     } else {
       m_nodes = tets.mesh.V;
     }
-    m_patch = std::make_unique<GraspedPatchNodes>(organ.surface, m_surfaceNode, m_nodes,
+    m_patch = std::make_unique<GraspedPatchNodes>(m_organ.surface, m_surfaceNode, m_nodes,
                                                   tetBoundaryNodes(tets.mesh, edgeNode));
     m_fixed.assign(size_t(m_nodes.rows()), 0);
-    for (int n : fixedNodeIndices(m_nodes, organ.fixed, organ.surface)) m_fixed[size_t(n)] = 7;
-    for (const auto& [n, axes] : rollerNodeAxes(m_nodes, organ.fixed)) m_fixed[size_t(n)] |= axes;
+    for (int n : fixedNodeIndices(m_nodes, m_organ.fixed, m_organ.surface)) m_fixed[size_t(n)] = 7;
+    for (const auto& [n, axes] : rollerNodeAxes(m_nodes, m_organ.fixed)) m_fixed[size_t(n)] |= axes;
     // reference_fem's row of each of these nodes, by rest position (its isolated clamped nodes
     // come before its midside nodes).
     std::map<std::array<long long, 3>, int> at;
@@ -206,89 +220,6 @@ class EquilibriumCheck {
     }
   }
 
-  VerifyEquilibrium check(int step, double time, const StepInput& input, const MatX3& solved,
-                          const std::vector<Vec3>& referenceForces) {
-    VerifyEquilibrium e;
-    e.step = step;
-    e.time = time;
-    if (!m_problem.empty()) {
-      e.status = m_problem;
-      return e;
-    }
-    StepInput in = input;
-    in.nodeConstraints.clear();
-    std::vector<int> constrained;
-    for (Eigen::Index n = 0; n < m_nodes.rows(); ++n) {
-      if (m_fixed[size_t(n)] == 7) continue;
-      NodeGrasp g;
-      g.nodes = {int(n)};
-      g.targets = solved.row(m_referenceRow[size_t(n)]);
-      in.nodeConstraints.push_back(std::move(g));
-      constrained.push_back(int(n));
-    }
-    std::vector<char> held(size_t(m_nodes.rows()), 0);
-    for (const GraspInput& g : in.grasps) {
-      for (int v : g.vertices)
-        if (const int n = m_surfaceNode[size_t(v)]; n >= 0) held[size_t(n)] = 1;
-      for (const GraspedPatchNodes::Held& h : m_patch->held(g.vertices)) held[size_t(h.node)] = 1;
-    }
-    std::unique_ptr<Model> model;
-    try {
-      model = m_info.create();
-      const ModelSetup setup{m_organ, m_params, m_cache, m_scene.dt, m_scene.gravity};
-      model->init(setup);
-      TimedModel timed(*model);
-      timed.step(in);
-      e.calculix = timed.steps.back();
-    } catch (const std::exception& ex) {
-      e.status = std::string("calculix failed: ") + ex.what();
-      return e;
-    }
-    const std::vector<Vec3> forces = model->graspForces();
-    const size_t grasps = in.grasps.size();
-    if (forces.size() != grasps + constrained.size()) {
-      e.status = "calculix reported " + std::to_string(forces.size()) + " forces, not " +
-                 std::to_string(grasps + constrained.size());
-      return e;
-    }
-    // The force scale: the largest of the loads' total, the weight and the grasps' forces.
-    double scale = 0;
-    for (const PointLoad& l : in.loads) scale += l.force.norm();
-    scale = std::max(scale, m_organ.material.density *
-                                std::abs(signedVolume(m_organ.surface.V, m_organ.surface.F)) *
-                                in.gravity.norm());
-    e.graspForceRelative = 0;
-    for (size_t g = 0; g < grasps; ++g) {
-      scale = std::max(scale, forces[g].norm());
-      if (g < referenceForces.size()) scale = std::max(scale, referenceForces[g].norm());
-    }
-    double r2 = 0, rmax = 0;
-    for (size_t k = 0; k < constrained.size(); ++k) {
-      const int n = constrained[k];
-      if (held[size_t(n)]) continue;
-      Vec3 r = -forces[grasps + k];
-      for (int a = 0; a < 3; ++a)
-        if (m_fixed[size_t(n)] & (1 << a)) r(a) = 0;  // a roller's reaction
-      r2 += r.squaredNorm();
-      rmax = std::max(rmax, r.norm());
-      ++e.freeNodes;
-    }
-    e.forceScale = scale;
-    if (!(scale > 0)) {
-      e.status = "no load: nothing to compare the residual with";
-      return e;
-    }
-    e.status = "ok";
-    e.residualRelative = std::sqrt(r2) / scale;
-    e.maxRelative = rmax / scale;
-    for (size_t g = 0; g < grasps && g < referenceForces.size(); ++g)
-      e.graspForceRelative =
-          std::max(e.graspForceRelative, (forces[g] - referenceForces[g]).norm() / scale);
-    if (grasps == 0) e.graspForceRelative = NAN;
-    return e;
-  }
-
- private:
   const ModelInfo& m_info;
   ParamValues m_params;
   const Scene& m_scene;
@@ -301,6 +232,93 @@ class EquilibriumCheck {
   std::vector<int> m_referenceRow;  ///< per node: its row in reference_fem's nodes
   std::string m_problem;            ///< why no check can be made, if so
 };
+
+VerifyEquilibrium EquilibriumCheck::check(int step, double time, const StepInput& input,
+                                          const MatX3& solved,
+                                          const std::vector<Vec3>& referenceForces) {
+  VerifyEquilibrium e;
+  e.step = step;
+  e.time = time;
+  if (!m_problem.empty()) {
+    e.status = m_problem;
+    return e;
+  }
+  StepInput in = input;
+  in.nodeConstraints.clear();
+  std::vector<int> constrained;
+  for (Eigen::Index n = 0; n < m_nodes.rows(); ++n) {
+    if (m_fixed[size_t(n)] == 7) continue;
+    NodeGrasp g;
+    g.nodes = {int(n)};
+    g.targets = solved.row(m_referenceRow[size_t(n)]);
+    in.nodeConstraints.push_back(std::move(g));
+    constrained.push_back(int(n));
+  }
+  std::vector<char> held(size_t(m_nodes.rows()), 0);
+  for (const GraspInput& g : in.grasps) {
+    for (int v : g.vertices)
+      if (const int n = m_surfaceNode[size_t(v)]; n >= 0) held[size_t(n)] = 1;
+    for (const GraspedPatchNodes::Held& h : m_patch->held(g.vertices)) held[size_t(h.node)] = 1;
+  }
+  std::unique_ptr<Model> model;
+  try {
+    model = m_info.create();
+    const ModelSetup setup{m_organ, m_params, m_cache, m_scene.dt, m_scene.gravity};
+    model->init(setup);
+    TimedModel timed(*model);
+    const StepStatus status = timed.step(in);
+    e.calculix = timed.steps.back();
+    if (status != StepStatus::Ok) {
+      e.status = "calculix's step did not end ok (non-finite nodes)";
+      return e;
+    }
+  } catch (const std::exception& ex) {
+    e.status = std::string("calculix failed: ") + ex.what();
+    return e;
+  }
+  const std::vector<Vec3> forces = model->graspForces();
+  const size_t grasps = in.grasps.size();
+  if (forces.size() != grasps + constrained.size()) {
+    e.status = "calculix reported " + std::to_string(forces.size()) + " forces, not " +
+               std::to_string(grasps + constrained.size());
+    return e;
+  }
+  // The force scale: the largest of the loads' total, the weight and the grasps' forces.
+  double scale = 0;
+  for (const PointLoad& l : in.loads) scale += l.force.norm();
+  scale = std::max(scale, m_organ.material.density *
+                              std::abs(signedVolume(m_organ.surface.V, m_organ.surface.F)) *
+                              in.gravity.norm());
+  e.graspForceRelative = 0;
+  for (size_t g = 0; g < grasps; ++g) {
+    scale = std::max(scale, forces[g].norm());
+    if (g < referenceForces.size()) scale = std::max(scale, referenceForces[g].norm());
+  }
+  double r2 = 0, rmax = 0;
+  for (size_t k = 0; k < constrained.size(); ++k) {
+    const int n = constrained[k];
+    if (held[size_t(n)]) continue;
+    Vec3 r = -forces[grasps + k];
+    for (int a = 0; a < 3; ++a)
+      if (m_fixed[size_t(n)] & (1 << a)) r(a) = 0;  // a roller's reaction
+    r2 += r.squaredNorm();
+    rmax = std::max(rmax, r.norm());
+    ++e.freeNodes;
+  }
+  e.forceScale = scale;
+  if (!(scale > 0)) {
+    e.status = "no load: nothing to compare the residual with";
+    return e;
+  }
+  e.status = "ok";
+  e.residualRelative = std::sqrt(r2) / scale;
+  e.maxRelative = rmax / scale;
+  for (size_t g = 0; g < grasps && g < referenceForces.size(); ++g)
+    e.graspForceRelative =
+        std::max(e.graspForceRelative, (forces[g] - referenceForces[g]).norm() / scale);
+  if (grasps == 0) e.graspForceRelative = NAN;
+  return e;
+}
 
 VerifySolver describe(const SolverRun& run) {
   VerifySolver s;
