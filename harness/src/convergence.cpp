@@ -561,26 +561,57 @@ void estimateFromLevels(const std::vector<MatX3>& displacement, const std::vecto
   richardsonRms(h0, h1, h2, out.rms01, out.rms12, peak, out, of);
 }
 
-/// Runs the level cases (ids[k] is level first + k of out.levels) and appends each level's
-/// surface displacement to `displacement` where it ran to its compared instant.
-void runLevels(std::vector<SceneCase>& cases, const std::vector<std::string>& ids, size_t first,
-               const Organ& organ, double volume, bool graded, PluginLoader& loader,
-               const ConvergeOptions& options, Progress* progress, ConvergenceResult& out,
-               std::vector<MatX3>& displacement) {
-  if (progress) progress->addTotal(int(cases.size()));
-  const auto started = [&](size_t k) {
-    const ConvergenceLevelResult& level = out.levels[first + k];
+namespace {
+
+/// One study in flight (runConvergences): its inputs, the levels so far and the batch of level
+/// cases it has out.
+struct Study {
+  const ConvergenceStudyInput* input = nullptr;
+  PreparedStudy prepared;
+  std::vector<char> include;
+  ConvergenceResult out;
+  std::vector<MatX3> displacement;
+  bool done = false;  ///< cached, or could not be prepared
+  size_t expected = 3;
+  std::optional<ConvergenceResult> threeLevels;  ///< before a finer level was added
+  // The batch: its cases (ids[k] is level first + k of out.levels) and their surfaces.
+  std::vector<SceneCase> cases;
+  std::vector<std::string> ids;
+  size_t first = 0;
+  std::vector<std::optional<MatX3>> surfaces;
+};
+
+/// Runs every study's batch of level cases, together (to the first study's dispatcher, when its
+/// levels are child processes), and appends each level's surface displacement to its study where
+/// it ran to its compared instant.
+void runLevelBatches(std::vector<Study*>& studies, PluginLoader& loader, Progress* progress) {
+  std::vector<std::pair<Study*, size_t>> at;  // (study, k) of each case of the batch
+  std::vector<SceneCase> all;
+  for (Study* st : studies) {
+    st->surfaces.assign(st->cases.size(), std::nullopt);
+    for (size_t k = 0; k < st->cases.size(); ++k) {
+      at.emplace_back(st, k);
+      all.push_back(st->cases[k]);
+    }
+  }
+  if (all.empty()) return;
+  if (progress) progress->addTotal(int(all.size()));
+  const auto started = [&](size_t i) {
+    const auto& [st, k] = at[i];
+    const ConvergenceLevelResult& level = st->out.levels[st->first + k];
     if (progress)
-      progress->start(ids[k] + (level.targetH > 0
-                                    ? " (h " + fixed(1e3 * level.targetH, 2) + " mm)"
-                                    : " (" + std::to_string(level.targetElements) + " elements)"));
+      progress->start(st->ids[k] +
+                      (level.targetH > 0
+                           ? " (h " + fixed(1e3 * level.targetH, 2) + " mm)"
+                           : " (" + std::to_string(level.targetElements) + " elements)"));
   };
   // A level's outcome: its status, elements and surface at the last compared instant.
-  std::vector<std::optional<MatX3>> surfaces(cases.size());
-  const auto finished = [&](size_t k, const CaseResult& c, double wallS) {
-    ConvergenceLevelResult& level = out.levels[first + k];
+  const auto finished = [&](size_t i, const CaseResult& c, double wallS) {
+    const auto& [st, k] = at[i];
+    ConvergenceLevelResult& level = st->out.levels[st->first + k];
+    const std::string& id = st->ids[k];
     level.solveS = wallS;
-    const RunRecord* run = c.run(ids[k]);
+    const RunRecord* run = c.run(id);
     if (!c.missing.empty()) {
       level.status = "missing plugin: " + c.missing.begin()->second;
     } else if (!run) {
@@ -594,107 +625,162 @@ void runLevels(std::vector<SceneCase>& cases, const std::vector<std::string>& id
     if (run && run->status == RunStatus::Ok && run->valid && level.elements > 0) {
       MatX3 x;
       if (!run->compared.empty()) {
-        surfaces[k] = run->compared.back().positions;
-      } else if (options.child && readComparedSurface(comparedSurfaceFile(c.outDir, ids[k]), x)) {
-        surfaces[k] = std::move(x);
+        st->surfaces[k] = run->compared.back().positions;
+      } else if (st->input->options.child &&
+                 readComparedSurface(comparedSurfaceFile(c.outDir, id), x)) {
+        st->surfaces[k] = std::move(x);
       }
     }
-    if (progress) progress->finish(ids[k], level.status);
+    if (progress) progress->finish(id, level.status);
   };
-  if (options.child) {
-    runSceneCases(cases, loader, options.dispatcher, started,
-                  [&](size_t k, CaseResult&& c) { finished(k, c, c.wallS); });
+  const ConvergeOptions& shared = studies.front()->input->options;
+  if (shared.child) {
+    runSceneCases(all, loader, shared.dispatcher, started,
+                  [&](size_t i, CaseResult&& c) { finished(i, c, c.wallS); });
   } else {
-    for (size_t k = 0; k < cases.size(); ++k) {
-      started(k);
+    for (size_t i = 0; i < all.size(); ++i) {
+      started(i);
       const auto t0 = std::chrono::steady_clock::now();
-      const CaseResult c = runSceneCase(cases[k].scene, cases[k].sceneFile, cases[k].outDir, loader,
-                                        cases[k].options);
-      finished(k, c, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+      const CaseResult c =
+          runSceneCase(all[i].scene, all[i].sceneFile, all[i].outDir, loader, all[i].options);
+      finished(i, c, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     }
   }
-  for (size_t k = 0; k < cases.size(); ++k) {
-    ConvergenceLevelResult& level = out.levels[first + k];
-    if (!surfaces[k] || surfaces[k]->rows() < organ.surface.numVertices()) continue;
-    const MatX3 u = surfaces[k]->topRows(organ.surface.numVertices()) - organ.surface.V;
-    displacement.push_back(u);
-    level.h =
-        graded && level.targetH > 0 ? level.targetH : std::cbrt(volume / double(level.elements));
-    level.peakDisplacement = u.rowwise().norm().maxCoeff();
+  for (Study* st : studies) {
+    const Organ& organ = st->prepared.organ;
+    for (size_t k = 0; k < st->cases.size(); ++k) {
+      ConvergenceLevelResult& level = st->out.levels[st->first + k];
+      const std::optional<MatX3>& surface = st->surfaces[k];
+      if (!surface || surface->rows() < organ.surface.numVertices()) continue;
+      const MatX3 u = surface->topRows(organ.surface.numVertices()) - organ.surface.V;
+      st->displacement.push_back(u);
+      level.h = st->out.graded && level.targetH > 0
+                    ? level.targetH
+                    : std::cbrt(st->prepared.volume / double(level.elements));
+      level.peakDisplacement = u.rowwise().norm().maxCoeff();
+    }
+    st->cases.clear();
+    st->ids.clear();
   }
+}
+
+/// Prepares a study: its cached result (done), or its first three levels as its batch.
+void startStudy(Study& st, PluginLoader& loader) {
+  const ConvergenceStudyInput& in = *st.input;
+  const ConvergeOptions& options = in.options;
+  try {
+    st.prepared = prepareStudy(in.scene, in.sceneFile, loader, options);
+  } catch (const std::exception& e) {
+    st.out.message = e.what();
+    st.done = true;
+    return;
+  }
+  const std::optional<CacheKey>& key = st.prepared.key;
+  if (key) {
+    Cache cache(options.cacheDir ? *options.cacheDir : Cache::defaultDir());
+    if (auto hit = cache.get(kCacheKind, *key)) {
+      try {
+        ByteReader r(*hit);
+        st.out = fromJson(ojson::parse(r.string()));
+        st.out.cached = true;
+        fs::create_directories(options.outDir);
+        writeFileAtomic(options.outDir / "convergence.json",
+                        toJson(st.out, in.sceneFile).dump(2) + "\n");
+        st.done = true;
+        return;
+      } catch (const std::exception&) {
+        // An entry of another layout: recompute and overwrite it.
+        st.out = ConvergenceResult();
+      }
+    }
+  }
+  st.include = comparedVertices(st.prepared.parsed, st.prepared.organ, st.prepared.exclude);
+  st.out.graded = st.prepared.graded;
+  st.first = 0;
+  st.cases = levelCases(st.prepared, options, options.hRatios, 0, st.out, st.ids);
+}
+
+/// After the first three levels: the estimate, and where the surface bounds the coarse pair and
+/// the estimate is not converged, one level finer than the last as the study's next batch.
+void estimateOrRefine(Study& st) {
+  if (st.done) return;
+  if (st.displacement.size() != 3) {
+    st.out.reason = "levels_failed";
+    st.out.message = "no estimate: not every level ran to its compared instant";
+    return;
+  }
+  estimateFromLevels(st.displacement, st.include, st.out);
+  const ConvergeOptions& options = st.input->options;
+  if (options.finerWhenBound && !st.out.converged &&
+      st.out.levels[0].h / st.out.levels[1].h < kMinLevelRatio) {
+    st.threeLevels = st.out;
+    st.first = 3;
+    st.cases = levelCases(st.prepared, options, {options.hRatios.back() / kFinerLevelStep}, 3,
+                          st.out, st.ids);
+    st.expected = 4;
+  }
+}
+
+/// After the finer level: the estimate from the last three levels; writes convergence.json and
+/// keeps a study whose every level ran in the cache.
+void finishStudy(Study& st) {
+  if (st.done) return;
+  if (st.threeLevels) {
+    if (st.displacement.size() == 4) {
+      st.out.finerLevelAdded = true;
+      st.out.reason.clear();
+      st.out.message.clear();
+      st.out.boundRelative = NAN;
+      estimateFromLevels(st.displacement, st.include, st.out);
+    } else {
+      std::vector<ConvergenceLevelResult> levels = st.out.levels;
+      st.out = *st.threeLevels;
+      st.out.levels = levels;
+      st.out.message += "; the finer level added did not run to its compared instant";
+    }
+  }
+  const ConvergenceStudyInput& in = *st.input;
+  const ojson doc = toJson(st.out, in.sceneFile);
+  writeFileAtomic(in.options.outDir / "convergence.json", doc.dump(2) + "\n");
+  // Only a study whose every level ran is kept: a missing plugin or a failed level may not
+  // recur.
+  if (st.prepared.key && st.displacement.size() == st.expected) {
+    Cache cache(in.options.cacheDir ? *in.options.cacheDir : Cache::defaultDir());
+    ByteWriter w;
+    w.string(doc.dump());
+    cache.put(kCacheKind, *st.prepared.key, w.bytes());
+  }
+}
+
+}  // namespace
+
+std::vector<ConvergenceResult> runConvergences(const std::vector<ConvergenceStudyInput>& inputs,
+                                               PluginLoader& loader, Progress* progress) {
+  std::vector<Study> studies(inputs.size());
+  for (size_t i = 0; i < inputs.size(); ++i) {
+    studies[i].input = &inputs[i];
+    startStudy(studies[i], loader);
+  }
+  std::vector<Study*> open;
+  for (Study& st : studies)
+    if (!st.done) open.push_back(&st);
+  if (!open.empty()) {
+    runLevelBatches(open, loader, progress);
+    for (Study* st : open) estimateOrRefine(*st);
+    runLevelBatches(open, loader, progress);  // the finer levels, where asked for
+    for (Study* st : open) finishStudy(*st);
+  }
+  std::vector<ConvergenceResult> out;
+  for (Study& st : studies) out.push_back(std::move(st.out));
+  return out;
 }
 
 ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFile,
                                  PluginLoader& loader, const ConvergeOptions& options,
                                  Progress* progress) {
-  PreparedStudy prepared = prepareStudy(scene, sceneFile, loader, options);
-  const Organ& organ = prepared.organ;
-  const std::optional<CacheKey>& key = prepared.key;
-  const fs::path cacheDir = options.cacheDir ? *options.cacheDir : Cache::defaultDir();
-  Cache cache(cacheDir);
-  if (key) {
-    if (auto hit = cache.get(kCacheKind, *key)) {
-      try {
-        ByteReader r(*hit);
-        ConvergenceResult out = fromJson(ojson::parse(r.string()));
-        out.cached = true;
-        fs::create_directories(options.outDir);
-        writeFileAtomic(options.outDir / "convergence.json", toJson(out, sceneFile).dump(2) + "\n");
-        return out;
-      } catch (const std::exception&) {
-        // An entry of another layout: recompute and overwrite it.
-      }
-    }
-  }
-
-  const std::vector<char> include = comparedVertices(prepared.parsed, organ, prepared.exclude);
-  ConvergenceResult out;
-  std::vector<MatX3> displacement;
-  std::vector<std::string> ids;
-  std::vector<SceneCase> cases = levelCases(prepared, options, options.hRatios, 0, out, ids);
-  out.graded = prepared.graded;
-  runLevels(cases, ids, 0, organ, prepared.volume, out.graded, loader, options, progress, out,
-            displacement);
-  size_t expected = 3;
-  if (displacement.size() == 3) {
-    estimateFromLevels(displacement, include, out);
-    // The surface bounds the coarse pair: one level finer than the last instead.
-    if (options.finerWhenBound && !out.converged &&
-        out.levels[0].h / out.levels[1].h < kMinLevelRatio) {
-      const ConvergenceResult threeLevels = out;
-      std::vector<std::string> finerIds;
-      std::vector<SceneCase> finer = levelCases(
-          prepared, options, {options.hRatios.back() / kFinerLevelStep}, 3, out, finerIds);
-      runLevels(finer, finerIds, 3, organ, prepared.volume, out.graded, loader, options, progress,
-                out, displacement);
-      expected = 4;
-      if (displacement.size() == 4) {
-        out.finerLevelAdded = true;
-        out.reason.clear();
-        out.message.clear();
-        out.boundRelative = NAN;
-        estimateFromLevels(displacement, include, out);
-      } else {
-        std::vector<ConvergenceLevelResult> levels = out.levels;
-        out = threeLevels;
-        out.levels = levels;
-        out.message += "; the finer level added did not run to its compared instant";
-      }
-    }
-  } else {
-    out.reason = "levels_failed";
-    out.message = "no estimate: not every level ran to its compared instant";
-  }
-  const ojson doc = toJson(out, sceneFile);
-  writeFileAtomic(options.outDir / "convergence.json", doc.dump(2) + "\n");
-  // Only a study whose every level ran is kept: a missing plugin or a failed level may not
-  // recur.
-  if (key && displacement.size() == expected) {
-    ByteWriter w;
-    w.string(doc.dump());
-    cache.put(kCacheKind, *key, w.bytes());
-  }
-  return out;
+  // The single study throws what the batch records: a scene that cannot be prepared.
+  prepareStudy(scene, sceneFile, loader, options);
+  return runConvergences({{scene, sceneFile, options}}, loader, progress).front();
 }
 
 ConvergeOptions referenceCheckOptions() {

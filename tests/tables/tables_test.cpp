@@ -586,6 +586,31 @@ TEST_F(TempDir, ConvergeLevelsRefineByEdgeLength) {
     EXPECT_NE(convergenceSummary(f).find("of level 2 (the reference"), std::string::npos)
         << convergenceSummary(f);
   }
+  // The same studies at once (as the tables check their references), with one that cannot be
+  // prepared among them: each gets its own answer, the broken one a message.
+  std::vector<ConvergenceStudyInput> batch = {
+      {scene, (m_dir / "scene.json").string(), o},
+      {nlohmann::ordered_json{{"name", "no-reference"}}, (m_dir / "bad.json").string(), o},
+      {gradedScene, (m_dir / "graded.json").string(), graded},
+      {scene, (m_dir / "scene.json").string(), finer}};
+  for (size_t i = 0; i < batch.size(); ++i)
+    batch[i].options.outDir = m_dir / ("batch" + std::to_string(i));
+  const std::vector<ConvergenceResult> all = runConvergences(batch, loader, nullptr);
+  ASSERT_EQ(all.size(), 4u);
+  EXPECT_TRUE(all[1].levels.empty());
+  EXPECT_FALSE(all[1].message.empty());
+  const ConvergenceResult* alone[] = {&r, nullptr, &g, &f};
+  for (size_t i : {0, 2, 3}) {
+    ASSERT_EQ(all[i].levels.size(), alone[i]->levels.size()) << i;
+    for (size_t k = 0; k < all[i].levels.size(); ++k)
+      EXPECT_EQ(all[i].levels[k].elements, alone[i]->levels[k].elements) << i << " " << k;
+    EXPECT_EQ(all[i].d01, alone[i]->d01) << i;
+    EXPECT_EQ(all[i].d12, alone[i]->d12) << i;
+    EXPECT_EQ(all[i].finerLevelAdded, alone[i]->finerLevelAdded) << i;
+    EXPECT_EQ(readJson(batch[i].options.outDir / "convergence.json")["levels"].size(),
+              all[i].levels.size())
+        << i;
+  }
 }
 
 TEST(ReferenceCheck, SaysWhyRichardsonDoesNotApply) {

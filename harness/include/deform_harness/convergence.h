@@ -174,6 +174,21 @@ ConvergenceResult runConvergence(const nlohmann::ordered_json& scene, const std:
                                  PluginLoader& loader, const ConvergeOptions& options,
                                  Progress* progress);
 
+/// One study of runConvergences: the scene, its file (as runConvergence's) and its options.
+struct ConvergenceStudyInput {
+  nlohmann::ordered_json scene;
+  std::string sceneFile;
+  ConvergeOptions options;
+};
+
+/// runConvergence for several studies at once, each with its own outDir: the first three levels
+/// of every study go to the dispatcher together, then the finer levels the estimates ask for, so
+/// the studies' levels run side by side (the first study's `child` and `dispatcher` serve all).
+/// Each result is its study's runConvergence; a study whose scene cannot be prepared gets
+/// `message` instead of a throw.
+std::vector<ConvergenceResult> runConvergences(const std::vector<ConvergenceStudyInput>& studies,
+                                               PluginLoader& loader, Progress* progress);
+
 /// One line: "estimated discretisation error X% of the peak (levels a / b / c tets, h ..., p =
 /// q)", or why there is no estimate and the bound.
 std::string convergenceSummary(const ConvergenceResult& r);

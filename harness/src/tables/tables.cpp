@@ -44,23 +44,24 @@ std::string percentCell(double fraction) {
 
 /// The convergence study of case c's reference (convergence.h) at three levels, the finest being
 /// the reference the table used (same params, same target count: the same mesh and answer), so
-/// the estimate is the error of the figures in the table.
-ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& loader,
-                              const TablesOptions& o, Progress* progress) {
-  ReferenceCheck out;
+/// the estimate is the error of the figures in the table. A reference that did not run is not
+/// checked: `out` gets its cell and no study is returned.
+std::optional<ConvergenceStudyInput> referenceStudy(const Case& c, const CaseResult& r,
+                                                    const TablesOptions& o, ReferenceCheck& out) {
   const std::string what = "reference (" + c.id + ")";
   const ojson& ref = c.scene["reference"];
   const std::string plugin = ref.value("plugin", "");
   const RunRecord* run = r.run(ref.value("label", plugin));
-  const ojson& params = ref["params"];
-  const std::string order = "P" + std::to_string(params.value("element_order", 1));
+  const std::string order = "P" + std::to_string(ref["params"].value("element_order", 1));
   if (!run || run->status != RunStatus::Ok) {
     out.note = what + ": convergence not checked: " + statusOf(r, plugin, run);
     out.cell = order + ", not checked (" + statusOf(r, plugin, run) + ")";
-    return out;
+    return std::nullopt;
   }
   // The reference's own size h: levels 2h, 1.4h, h, and h / 1.4 where the surface bounds them.
-  ConvergeOptions co = referenceCheckOptions();
+  ConvergenceStudyInput in{c.scene, (o.outDir / "scenes" / (c.id + ".json")).string(),
+                           referenceCheckOptions()};
+  ConvergeOptions& co = in.options;
   co.outDir = o.outDir / "convergence" / c.id;
   co.cacheDir = o.cases.cacheDir;
   co.reuseSolves = true;  // the finest level is the case's reference, solved once
@@ -68,16 +69,21 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
   // time with --jobs 2, on the ranks with --mpi), or in this process with --in-process.
   co.child = o.cases.child;
   co.dispatcher = o.cases.dispatcher;
-  const fs::path sceneFile = o.outDir / "scenes" / (c.id + ".json");
-  if (progress) progress->start("reference check " + c.id);
-  ConvergenceResult res;
-  try {
-    res = runConvergence(c.scene, sceneFile.string(), loader, co, nullptr);
-  } catch (const std::exception& e) {
-    res.message = e.what();
-  }
+  return in;
+}
+
+/// The cell, note and warning of case c's reference from its study.
+ReferenceCheck referenceCheckOf(const Case& c, const CaseResult& r, const ConvergenceResult& res,
+                                const TablesOptions& o) {
+  ReferenceCheck out;
+  const std::string what = "reference (" + c.id + ")";
+  const ojson& ref = c.scene["reference"];
+  const std::string plugin = ref.value("plugin", "");
+  const RunRecord* run = r.run(ref.value("label", plugin));
+  const ojson& params = ref["params"];
+  const std::string order = "P" + std::to_string(params.value("element_order", 1));
   std::string elements = "? tets";
-  if (run->counts.count("elements"))
+  if (run && run->counts.count("elements"))
     elements = std::to_string(run->counts.at("elements")) + " tets";
   out.cell = order + ", " + elements + ", ";
   if (res.graded) out.cell += "graded toward the interaction, ";
@@ -92,13 +98,9 @@ ReferenceCheck checkReference(const Case& c, const CaseResult& r, PluginLoader& 
   out.note = what + ": " + plugin + " " + order + " " +
              params.value("material", std::string("neo_hookean")) + ", " + elements + ", " +
              convergenceSummary(res) + "; study in " +
-             relativeTo(co.outDir / "convergence.json", o.outDir) + ".";
+             relativeTo(o.outDir / "convergence" / c.id / "convergence.json", o.outDir) + ".";
   const std::string w = convergenceWarning(res);
   if (!w.empty()) out.warning = "warning: " + what + ": " + w + ".";
-  if (progress)
-    progress->finish("reference check " + c.id,
-                     (w.empty() ? std::string("converged") : std::string("not shown converged")) +
-                         (res.cached ? " (cached)" : ""));
   return out;
 }
 
@@ -264,7 +266,8 @@ Results runCases(const std::vector<const Case*>& order, PluginLoader& loader,
   return results;
 }
 
-/// Each distinct reference the tables check, once (the hybrid tables share theirs).
+/// Each distinct reference the tables check, once (the hybrid tables share theirs); the studies'
+/// levels run side by side (runConvergences).
 std::map<std::string, ReferenceCheck> checkReferences(const std::vector<TableDef>& defs,
                                                       const std::vector<const Case*>& order,
                                                       const Results& results, PluginLoader& loader,
@@ -280,9 +283,26 @@ std::map<std::string, ReferenceCheck> checkReferences(const std::vector<TableDef
         for (const Case* c : order)
           if (c->id == id) toCheck.push_back(c);
       }
-  if (progress) progress->addTotal(int(toCheck.size()));
+  std::vector<ConvergenceStudyInput> studies;
+  std::vector<const Case*> studied;
   for (const Case* c : toCheck)
-    checks[c->id] = checkReference(*c, results.at(c->id), loader, options, progress);
+    if (auto in = referenceStudy(*c, results.at(c->id), options, checks[c->id])) {
+      studies.push_back(std::move(*in));
+      studied.push_back(c);
+    }
+  if (progress) progress->addTotal(int(studied.size()));
+  for (const Case* c : studied)
+    if (progress) progress->start("reference check " + c->id);
+  const std::vector<ConvergenceResult> res = runConvergences(studies, loader, nullptr);
+  for (size_t i = 0; i < studied.size(); ++i) {
+    const Case& c = *studied[i];
+    checks[c.id] = referenceCheckOf(c, results.at(c.id), res[i], options);
+    if (progress)
+      progress->finish("reference check " + c.id,
+                       (checks[c.id].warning.empty() ? std::string("converged")
+                                                     : std::string("not shown converged")) +
+                           (res[i].cached ? " (cached)" : ""));
+  }
   return checks;
 }
 
