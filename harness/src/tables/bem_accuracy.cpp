@@ -4,6 +4,9 @@
 #include "table_kit.h"
 
 #include <fstream>
+#include <functional>
+#include <memory>
+#include <mutex>
 
 namespace deform::harness::tables {
 
@@ -39,27 +42,46 @@ ojson bemStaticRowsFromFile(const fs::path& file) {
   return ojson::array();
 }
 
-/// The static measure for the given (coarse, fine) pairs from the plugin's measure (each row
-/// cached in cacheDir by the plugin). Throws saying why it is unavailable (plugin not found, no
-/// such measure, the plugin's error).
-ojson bemStaticRowsFromPlugin(PluginLoader& loader, const std::vector<std::pair<int, int>>& pairs,
-                              const fs::path& cacheDir) {
+using StaticMeasure = std::function<nlohmann::json(const nlohmann::json& request)>;
+
+/// The plugin's static measure function (looked up in the calling thread: the loader is not
+/// shared with the thread that runs it). Throws saying why it is unavailable (plugin not found,
+/// no such measure).
+StaticMeasure bemStaticMeasure(PluginLoader& loader) {
   const ModelInfo& info = loader.load(kBemStaticPlugin);
   const auto measure = info.measures.find(kBemStaticMeasure);
   if (measure == info.measures.end())
     throw std::runtime_error(loader.locate(kBemStaticPlugin) + ": no measure " + kBemStaticMeasure +
                              " (an older plugin)");
+  return measure->second;
+}
+
+/// The static measure for the given (coarse, fine) pairs (each row cached in cacheDir by the
+/// plugin). Throws the plugin's error.
+ojson bemStaticRowsFromPlugin(const StaticMeasure& measure,
+                              const std::vector<std::pair<int, int>>& pairs,
+                              const fs::path& cacheDir) {
   nlohmann::json q = {{"organ", "phantom:liver"}, {"cache_dir", cacheDir.string()}};
   q["rows"] = nlohmann::json::array();
   for (const auto& [c, f] : pairs) q["rows"].push_back({c, f});
   nlohmann::json reply;
   try {
-    reply = measure->second(q);
+    reply = measure(q);
   } catch (const std::exception& e) {
     throw std::runtime_error(std::string("particle_bem static accuracy: ") + e.what());
   }
   return ojson::parse(reply.value("rows", nlohmann::json::array()).dump());
 }
+
+/// The static measure's rows, computed once: by TableDef::background in its thread, or by the
+/// rows when nothing ran it.
+struct BemStatics {
+  std::mutex mutex;
+  bool done = false;
+  ojson rows = ojson::array();
+  std::string error;  ///< why the plugin's rows are missing
+  bool fromFile = false;
+};
 
 }  // namespace
 
@@ -135,38 +157,61 @@ TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader, Progress* pro
   }
   const bool quick = o.quick;
   const fs::path cacheDir = o.cases.cacheDir ? *o.cases.cacheDir : Cache::defaultDir();
+  std::vector<std::pair<int, int>> pairs;
+  for (const auto& p : kBemTable2)
+    if (!quick || (p.coarse == 284 && p.fine != 574)) pairs.emplace_back(p.coarse, p.fine);
+  // The static measure: the file's rows when the user put one there, else the plugin's; it
+  // needs no case, so buildTables runs it beside the reference checks.
+  auto statics = std::make_shared<BemStatics>();
+  StaticMeasure measure;
+  std::string lookupError;
+  try {
+    measure = bemStaticMeasure(loader);
+  } catch (const std::exception& e) {
+    lookupError = e.what();
+  }
+  const fs::path staticFile = o.outDir / kBemStaticFile;
+  const auto compute = [statics, measure, lookupError, pairs, cacheDir, staticFile] {
+    const std::lock_guard<std::mutex> lock(statics->mutex);
+    if (statics->done) return;
+    statics->done = true;
+    statics->rows = bemStaticRowsFromFile(staticFile);
+    if (!statics->rows.empty()) {
+      statics->fromFile = true;
+    } else if (!lookupError.empty()) {
+      statics->error = "static measure not computed: " + lookupError;
+    } else {
+      try {
+        statics->rows = bemStaticRowsFromPlugin(measure, pairs, cacheDir);
+      } catch (const std::exception& e) {
+        statics->error = std::string("static measure not computed: ") + e.what();
+      }
+    }
+  };
+  t.background = compute;
   // The static measure is one more step of the command's progress (minutes when not cached).
   if (progress) progress->addTotal(1);
-  t.rows = [quick, cacheDir, &loader, progress](const Results& res, const fs::path& dir) {
-    // The static measure: the file's rows when the user put one there, else the plugin's.
-    ojson statics = bemStaticRowsFromFile(dir / kBemStaticFile);
-    std::string staticError;
-    if (statics.empty()) {
-      std::vector<std::pair<int, int>> pairs;
-      for (const auto& p : kBemTable2)
-        if (!quick || (p.coarse == 284 && p.fine != 574)) pairs.emplace_back(p.coarse, p.fine);
-      const std::string what = "bem-accuracy static measure (particle_bem)";
-      if (progress) progress->start(what);
-      try {
-        statics = bemStaticRowsFromPlugin(loader, pairs, cacheDir);
-      } catch (const std::exception& e) {
-        staticError = std::string("static measure not computed: ") + e.what();
-      }
-      int cached = 0;
-      for (const ojson& s : statics) cached += s.value("cached", false) ? 1 : 0;
-      if (progress)
-        progress->finish(what, staticError.empty()
-                                   ? "ok (" + std::to_string(cached) + " of " +
-                                         std::to_string(statics.size()) + " rows cached)"
-                                   : "not computed");
+  t.rows = [quick, statics, compute, progress](const Results& res, const fs::path& dir) {
+    const std::string what = "bem-accuracy static measure (particle_bem)";
+    if (progress) progress->start(what);
+    compute();  // done already when buildTables ran it beside the checks
+    const ojson& statics_ = statics->rows;
+    const std::string& staticError = statics->error;
+    if (statics->fromFile) {
+      if (progress) progress->addTotal(-1);  // read from the file: no step
     } else if (progress) {
-      progress->addTotal(-1);  // read from the file: no step
+      int cached = 0;
+      for (const ojson& s : statics_) cached += s.value("cached", false) ? 1 : 0;
+      progress->finish(what, staticError.empty()
+                                 ? "ok (" + std::to_string(cached) + " of " +
+                                       std::to_string(statics_.size()) + " rows cached)"
+                                 : "not computed");
     }
     std::vector<ojson> rows;
     for (const auto& p : kBemTable2) {
       ojson row;
       row["coarse_vertices"] = p.coarse;
-      for (const ojson& s : statics)
+      for (const ojson& s : statics_)
         if (s.value("coarse_vertices", -1) == p.coarse && s.value("fine_vertices", -1) == p.fine) {
           row["static_loss_ratio"] = s.value("loss_ratio", ojson(nullptr));
           // The solved fine surface (the plugin's rows; the file's rows name it fine_vertices).

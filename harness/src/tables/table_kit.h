@@ -144,6 +144,10 @@ struct TableDef {
   std::vector<TableColumn> columns;
   std::vector<Case> cases;
   std::function<std::vector<ojson>(const Results&, const fs::path& outDir)> rows;
+  /// The table's own work that needs no case (may be empty): buildTables runs it in a thread of
+  /// its own beside the reference checks, before rows(). It must not touch the loader or the
+  /// progress (neither is shared between threads), and rows() must do it when it did not run.
+  std::function<void()> background;
 };
 
 TableDef tableDef(const std::string& name, const std::string& title, const std::string& source,
