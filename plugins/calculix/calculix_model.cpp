@@ -166,8 +166,8 @@ class CalculixModel final : public Model {
     // The force on each grasp's tool: minus the reactions at the nodes it holds, as
     // reference_fem's minus the energy gradient there. ccx's RF at a prescribed dof is the
     // internal force alone (loads and body forces there are not in it), so the node's external
-    // force is added back: -(RF - f_ext). A sliding plate's free dofs carry no reaction (to
-    // ccx's tolerance).
+    // force is added back on its prescribed dofs: -(RF - f_ext). A sliding plate's free dofs
+    // carry no reaction (to ccx's tolerance).
     double forceTime = 0;
     const MatX3 rf = ccxLastReactionForces(run.dat, int(m_model.nodes.rows()), forceTime);
     std::map<int, Vec3> external;
@@ -179,8 +179,12 @@ class CalculixModel final : public Model {
     for (const std::set<int>& nodes : holds) {
       Vec3 f = Vec3::Zero();
       for (int n : nodes) {
-        f += m_bodyShare[size_t(n)] * in.gravity - rf.row(n).transpose();
-        if (const auto it = external.find(n); it != external.end()) f += it->second;
+        Vec3 fn = m_bodyShare[size_t(n)] * in.gravity;
+        if (const auto it = external.find(n); it != external.end()) fn += it->second;
+        if (!held.count(n))  // a sliding plate's node: its normal dof alone is prescribed
+          for (int k = 0; k < 3; ++k)
+            if (!heldDof.count({n, k})) fn(k) = 0;
+        f += fn - rf.row(n).transpose();
       }
       m_graspForces.push_back(f);
     }
