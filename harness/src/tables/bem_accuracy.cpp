@@ -192,14 +192,14 @@ TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader, Progress* pro
   // The static measure is one more step of the command's progress (minutes when not cached).
   if (progress) progress->addTotal(1);
   t.rows = [quick, statics, compute, progress](const Results& res, const fs::path& dir) {
-    const std::string what = "bem-accuracy static measure (particle_bem)";
-    if (progress) progress->start(what);
     compute();  // done already when buildTables ran it beside the checks
     const ojson& statics_ = statics->rows;
     const std::string& staticError = statics->error;
     if (statics->fromFile) {
       if (progress) progress->addTotal(-1);  // read from the file: no step
     } else if (progress) {
+      const std::string what = "bem-accuracy static measure (particle_bem)";
+      progress->start(what);
       int cached = 0;
       for (const ojson& s : statics_) cached += s.value("cached", false) ? 1 : 0;
       progress->finish(what, staticError.empty()
