@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <exception>
 #include <fstream>
 
 namespace deform::harness {
@@ -571,7 +572,8 @@ struct Study {
   std::vector<char> include;
   ConvergenceResult out;
   std::vector<MatX3> displacement;
-  bool done = false;  ///< cached, or could not be prepared
+  bool done = false;         ///< cached, or could not be prepared
+  std::exception_ptr error;  ///< why it could not be prepared (runConvergence rethrows it)
   size_t expected = 3;
   std::optional<ConvergenceResult> threeLevels;  ///< before a finer level was added
   // The batch: its cases (ids[k] is level first + k of out.levels) and their surfaces.
@@ -672,6 +674,7 @@ void startStudy(Study& st, PluginLoader& loader) {
     st.prepared = prepareStudy(in.scene, in.sceneFile, loader, options);
   } catch (const std::exception& e) {
     st.out.message = e.what();
+    st.error = std::current_exception();
     st.done = true;
     return;
   }
@@ -752,10 +755,9 @@ void finishStudy(Study& st) {
   }
 }
 
-}  // namespace
-
-std::vector<ConvergenceResult> runConvergences(const std::vector<ConvergenceStudyInput>& inputs,
-                                               PluginLoader& loader, Progress* progress) {
+/// The studies of runConvergences, run together.
+std::vector<Study> runStudies(const std::vector<ConvergenceStudyInput>& inputs,
+                              PluginLoader& loader, Progress* progress) {
   std::vector<Study> studies(inputs.size());
   for (size_t i = 0; i < inputs.size(); ++i) {
     studies[i].input = &inputs[i];
@@ -770,8 +772,15 @@ std::vector<ConvergenceResult> runConvergences(const std::vector<ConvergenceStud
     runLevelBatches(open, loader, progress);  // the finer levels, where asked for
     for (Study* st : open) finishStudy(*st);
   }
+  return studies;
+}
+
+}  // namespace
+
+std::vector<ConvergenceResult> runConvergences(const std::vector<ConvergenceStudyInput>& inputs,
+                                               PluginLoader& loader, Progress* progress) {
   std::vector<ConvergenceResult> out;
-  for (Study& st : studies) out.push_back(std::move(st.out));
+  for (Study& st : runStudies(inputs, loader, progress)) out.push_back(std::move(st.out));
   return out;
 }
 
@@ -779,8 +788,10 @@ ConvergenceResult runConvergence(const ojson& scene, const std::string& sceneFil
                                  PluginLoader& loader, const ConvergeOptions& options,
                                  Progress* progress) {
   // The single study throws what the batch records: a scene that cannot be prepared.
-  prepareStudy(scene, sceneFile, loader, options);
-  return runConvergences({{scene, sceneFile, options}}, loader, progress).front();
+  const std::vector<ConvergenceStudyInput> input = {{scene, sceneFile, options}};
+  std::vector<Study> studies = runStudies(input, loader, progress);
+  if (studies.front().error) std::rethrow_exception(studies.front().error);
+  return std::move(studies.front().out);
 }
 
 ConvergeOptions referenceCheckOptions() {
