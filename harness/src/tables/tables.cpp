@@ -43,27 +43,42 @@ std::string percentCell(double fraction) {
   return buf;
 }
 
+/// Case c's reference as its check names it: the words, plugin, order, run and study folder.
+struct CheckedReference {
+  std::string what, plugin, order;
+  const ojson& ref;
+  const RunRecord* run;
+  fs::path studyDir;
+};
+
+CheckedReference checkedReference(const Case& c, const CaseResult& r, const TablesOptions& o) {
+  const ojson& ref = c.scene["reference"];
+  const std::string plugin = ref.value("plugin", "");
+  return {"reference (" + c.id + ")",
+          plugin,
+          "P" + std::to_string(ref["params"].value("element_order", 1)),
+          ref,
+          r.run(ref.value("label", plugin)),
+          o.outDir / "convergence" / c.id};
+}
+
 /// The convergence study of case c's reference (convergence.h) at three levels, the finest being
 /// the reference the table used (same params, same target count: the same mesh and answer), so
 /// the estimate is the error of the figures in the table. A reference that did not run is not
 /// checked: `out` gets its cell and no study is returned.
 std::optional<ConvergenceStudyInput> referenceStudy(const Case& c, const CaseResult& r,
                                                     const TablesOptions& o, ReferenceCheck& out) {
-  const std::string what = "reference (" + c.id + ")";
-  const ojson& ref = c.scene["reference"];
-  const std::string plugin = ref.value("plugin", "");
-  const RunRecord* run = r.run(ref.value("label", plugin));
-  const std::string order = "P" + std::to_string(ref["params"].value("element_order", 1));
-  if (!run || run->status != RunStatus::Ok) {
-    out.note = what + ": convergence not checked: " + statusOf(r, plugin, run);
-    out.cell = order + ", not checked (" + statusOf(r, plugin, run) + ")";
+  const CheckedReference ref = checkedReference(c, r, o);
+  if (!ref.run || ref.run->status != RunStatus::Ok) {
+    out.note = ref.what + ": convergence not checked: " + statusOf(r, ref.plugin, ref.run);
+    out.cell = ref.order + ", not checked (" + statusOf(r, ref.plugin, ref.run) + ")";
     return std::nullopt;
   }
   // The reference's own size h: levels 2h, 1.4h, h, and h / 1.4 where the surface bounds them.
   ConvergenceStudyInput in{c.scene, (o.outDir / "scenes" / (c.id + ".json")).string(),
                            referenceCheckOptions()};
   ConvergeOptions& co = in.options;
-  co.outDir = o.outDir / "convergence" / c.id;
+  co.outDir = ref.studyDir;
   co.cacheDir = o.cases.cacheDir;
   co.reuseSolves = true;  // the finest level is the case's reference, solved once
   // The levels run as the cases ran: child processes through the tables' dispatcher (two at a
@@ -77,16 +92,11 @@ std::optional<ConvergenceStudyInput> referenceStudy(const Case& c, const CaseRes
 ReferenceCheck referenceCheckOf(const Case& c, const CaseResult& r, const ConvergenceResult& res,
                                 const TablesOptions& o) {
   ReferenceCheck out;
-  const std::string what = "reference (" + c.id + ")";
-  const ojson& ref = c.scene["reference"];
-  const std::string plugin = ref.value("plugin", "");
-  const RunRecord* run = r.run(ref.value("label", plugin));
-  const ojson& params = ref["params"];
-  const std::string order = "P" + std::to_string(params.value("element_order", 1));
+  const CheckedReference ref = checkedReference(c, r, o);
   std::string elements = "? tets";
-  if (run && run->counts.count("elements"))
-    elements = std::to_string(run->counts.at("elements")) + " tets";
-  out.cell = order + ", " + elements + ", ";
+  if (ref.run && ref.run->counts.count("elements"))
+    elements = std::to_string(ref.run->counts.at("elements")) + " tets";
+  out.cell = ref.order + ", " + elements + ", ";
   if (res.graded) out.cell += "graded toward the interaction, ";
   if (std::isfinite(res.relativeError)) {
     out.cell += "error " + percentCell(res.relativeError) + " (est.)";
@@ -96,12 +106,12 @@ ReferenceCheck referenceCheckOf(const Case& c, const CaseResult& r, const Conver
     if (std::isfinite(res.boundRelative))
       out.cell += ", levels differ by " + percentCell(res.boundRelative);
   }
-  out.note = what + ": " + plugin + " " + order + " " +
-             params.value("material", std::string("neo_hookean")) + ", " + elements + ", " +
-             convergenceSummary(res) + "; study in " +
-             relativeTo(o.outDir / "convergence" / c.id / "convergence.json", o.outDir) + ".";
+  out.note = ref.what + ": " + ref.plugin + " " + ref.order + " " +
+             ref.ref["params"].value("material", std::string("neo_hookean")) + ", " + elements +
+             ", " + convergenceSummary(res) + "; study in " +
+             relativeTo(ref.studyDir / "convergence.json", o.outDir) + ".";
   const std::string w = convergenceWarning(res);
-  if (!w.empty()) out.warning = "warning: " + what + ": " + w + ".";
+  if (!w.empty()) out.warning = "warning: " + ref.what + ": " + w + ".";
   return out;
 }
 
