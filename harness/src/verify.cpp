@@ -50,6 +50,13 @@ double cpuSecondsNow() {
 
 /// Forwards to a model and records the wall and CPU time of each step() (the CPU time includes
 /// the child processes the step waited for: ccx).
+/// One step() of a recorded run: its input, the nodes after it and the grasp forces.
+struct RecordedSolve {
+  StepInput input;
+  MatX3 nodes;
+  std::vector<Vec3> graspForces;
+};
+
 class TimedModel final : public Model {
  public:
   explicit TimedModel(Model& m) : m_model(m) {}
@@ -63,11 +70,9 @@ class TimedModel final : public Model {
     t.cpuS = cpuSecondsNow() - c0;
     steps.push_back(t);
     if (record) {
-      StepInput copy = in;
-      copy.contact = nullptr;
-      inputs.push_back(std::move(copy));
-      solved.push_back(m_model.nodes());
-      forces.push_back(m_model.graspForces());
+      StepInput input = in;
+      input.contact = nullptr;
+      solves.push_back({std::move(input), m_model.nodes(), m_model.graspForces()});
     }
     return s;
   }
@@ -80,11 +85,8 @@ class TimedModel final : public Model {
   std::vector<Vec3> graspForces() const override { return m_model.graspForces(); }
 
   std::vector<VerifySolverTimes> steps;
-  /// With `record`: per step() call, its input, the nodes after it and the grasp forces.
-  bool record = false;
-  std::vector<StepInput> inputs;
-  std::vector<MatX3> solved;
-  std::vector<std::vector<Vec3>> forces;
+  bool record = false;                ///< keep `solves`
+  std::vector<RecordedSolve> solves;  ///< with `record`: one per step() call, in order
 
  private:
   Model& m_model;
@@ -93,11 +95,9 @@ class TimedModel final : public Model {
 struct SolverRun {
   RunRecord rec;
   std::vector<VerifySolverTimes> stepTimes;  ///< one per step() call, in order
-  /// With `record` (solve()): the nodes at rest and, per step() call, as TimedModel's.
+  /// With `record` (solve()): the nodes at rest and, per step() call, the solve.
   MatX3 rest;
-  std::vector<StepInput> inputs;
-  std::vector<MatX3> solved;
-  std::vector<std::vector<Vec3>> forces;
+  std::vector<RecordedSolve> solves;
 };
 
 /// runModel() with each step timed (wall and CPU).
@@ -145,9 +145,7 @@ SolverRun solve(const ModelInfo& info, const ParamValues& params, const Scene& s
     rec.message = e.what();
   }
   out.stepTimes = timed.steps;
-  out.inputs = std::move(timed.inputs);
-  out.solved = std::move(timed.solved);
-  out.forces = std::move(timed.forces);
+  out.solves = std::move(timed.solves);
   return out;
 }
 
@@ -173,11 +171,19 @@ class EquilibriumCheck {
       prepare(referenceRest);
     } catch (const std::exception& e) {
       m_problem = std::string("the nodes could not be matched: ") + e.what();
+      return;
+    }
+    // One calculix model for every instant: each step is a ccx run of its own.
+    try {
+      m_model = m_info.create();
+      m_model->init(ModelSetup{m_organ, m_params, m_cache, m_scene.dt, m_scene.gravity});
+    } catch (const std::exception& e) {
+      m_problem = std::string("calculix failed: ") + e.what();
     }
   }
 
-  VerifyEquilibrium check(int step, double time, const StepInput& input, const MatX3& solved,
-                          const std::vector<Vec3>& referenceForces);
+  /// The check at one of reference_fem's recorded solves.
+  VerifyEquilibrium check(int step, double time, const RecordedSolve& solve);
 
  private:
   /// The nodes as calculix numbers them, the held and fixed ones, and reference_fem's row of
@@ -185,7 +191,6 @@ class EquilibriumCheck {
   void prepare(const MatX3& referenceRest) {
     // The nodes as calculix numbers them (organ_tets.h, as the plugin builds them).
     const OrganTets tets = organTets(m_organ, organTetOptions(m_params), m_cache);
-    m_surfaceNode = tets.surfaceNode;
     std::function<int(int, int)> edgeNode;
     if (m_params.integer("element_order") == 2) {
       auto q = std::make_shared<QuadraticTetNodes>(addMidsideNodes(tets.mesh));
@@ -194,8 +199,10 @@ class EquilibriumCheck {
     } else {
       m_nodes = tets.mesh.V;
     }
-    m_patch = std::make_unique<GraspedPatchNodes>(m_organ.surface, m_surfaceNode, m_nodes,
+    m_patch = std::make_unique<GraspedPatchNodes>(m_organ.surface, tets.surfaceNode, m_nodes,
                                                   tetBoundaryNodes(tets.mesh, edgeNode));
+    m_weight = m_organ.material.density *
+               std::abs(signedVolume(m_organ.surface.V, m_organ.surface.F));  // kg
     m_fixed.assign(size_t(m_nodes.rows()), 0);
     for (int n : fixedNodeIndices(m_nodes, m_organ.fixed, m_organ.surface)) m_fixed[size_t(n)] = 7;
     for (const auto& [n, axes] : rollerNodeAxes(m_nodes, m_organ.fixed)) m_fixed[size_t(n)] |= axes;
@@ -226,16 +233,16 @@ class EquilibriumCheck {
   const Organ& m_organ;
   Cache& m_cache;
   MatX3 m_nodes;
-  std::vector<int> m_surfaceNode;
   std::unique_ptr<GraspedPatchNodes> m_patch;
   std::vector<int> m_fixed;         ///< per node: the axes a support holds (7: all)
   std::vector<int> m_referenceRow;  ///< per node: its row in reference_fem's nodes
+  Real m_weight = 0;                ///< the organ's mass, kg
+  std::unique_ptr<Model> m_model;   ///< the calculix model the checks step
   std::string m_problem;            ///< why no check can be made, if so
 };
 
-VerifyEquilibrium EquilibriumCheck::check(int step, double time, const StepInput& input,
-                                          const MatX3& solved,
-                                          const std::vector<Vec3>& referenceForces) {
+VerifyEquilibrium EquilibriumCheck::check(int step, double time, const RecordedSolve& solve) {
+  const std::vector<Vec3>& referenceForces = solve.graspForces;
   VerifyEquilibrium e;
   e.step = step;
   e.time = time;
@@ -243,29 +250,22 @@ VerifyEquilibrium EquilibriumCheck::check(int step, double time, const StepInput
     e.status = m_problem;
     return e;
   }
-  StepInput in = input;
+  StepInput in = solve.input;
   in.nodeConstraints.clear();
   std::vector<int> constrained;
   for (Eigen::Index n = 0; n < m_nodes.rows(); ++n) {
     if (m_fixed[size_t(n)] == 7) continue;
     NodeGrasp g;
     g.nodes = {int(n)};
-    g.targets = solved.row(m_referenceRow[size_t(n)]);
+    g.targets = solve.nodes.row(m_referenceRow[size_t(n)]);
     in.nodeConstraints.push_back(std::move(g));
     constrained.push_back(int(n));
   }
   std::vector<char> held(size_t(m_nodes.rows()), 0);
-  for (const GraspInput& g : in.grasps) {
-    for (int v : g.vertices)
-      if (const int n = m_surfaceNode[size_t(v)]; n >= 0) held[size_t(n)] = 1;
-    for (const GraspedPatchNodes::Held& h : m_patch->held(g.vertices)) held[size_t(h.node)] = 1;
-  }
-  std::unique_ptr<Model> model;
+  for (const GraspInput& g : in.grasps)
+    for (int n : m_patch->nodes(g.vertices)) held[size_t(n)] = 1;
   try {
-    model = m_info.create();
-    const ModelSetup setup{m_organ, m_params, m_cache, m_scene.dt, m_scene.gravity};
-    model->init(setup);
-    TimedModel timed(*model);
+    TimedModel timed(*m_model);
     const StepStatus status = timed.step(in);
     e.calculix = timed.steps.back();
     if (status != StepStatus::Ok) {
@@ -276,7 +276,7 @@ VerifyEquilibrium EquilibriumCheck::check(int step, double time, const StepInput
     e.status = std::string("calculix failed: ") + ex.what();
     return e;
   }
-  const std::vector<Vec3> forces = model->graspForces();
+  const std::vector<Vec3> forces = m_model->graspForces();
   const size_t grasps = in.grasps.size();
   if (forces.size() != grasps + constrained.size()) {
     e.status = "calculix reported " + std::to_string(forces.size()) + " forces, not " +
@@ -286,10 +286,7 @@ VerifyEquilibrium EquilibriumCheck::check(int step, double time, const StepInput
   // The force scale: the largest of the loads' total, the weight and the grasps' forces.
   double scale = 0;
   for (const PointLoad& l : in.loads) scale += l.force.norm();
-  scale = std::max(scale, m_organ.material.density *
-                              std::abs(signedVolume(m_organ.surface.V, m_organ.surface.F)) *
-                              in.gravity.norm());
-  e.graspForceRelative = 0;
+  scale = std::max(scale, m_weight * in.gravity.norm());
   for (size_t g = 0; g < grasps; ++g) {
     scale = std::max(scale, forces[g].norm());
     if (g < referenceForces.size()) scale = std::max(scale, referenceForces[g].norm());
@@ -313,10 +310,10 @@ VerifyEquilibrium EquilibriumCheck::check(int step, double time, const StepInput
   e.status = "ok";
   e.residualRelative = std::sqrt(r2) / scale;
   e.maxRelative = rmax / scale;
+  if (grasps > 0) e.graspForceRelative = 0;
   for (size_t g = 0; g < grasps && g < referenceForces.size(); ++g)
     e.graspForceRelative =
         std::max(e.graspForceRelative, (forces[g] - referenceForces[g]).norm() / scale);
-  if (grasps == 0) e.graspForceRelative = NAN;
   return e;
 }
 
@@ -517,8 +514,8 @@ VerifyResult runVerify(const std::string& sceneFile, PluginLoader& loader,
       const auto it = std::find(solveSteps.begin(), solveSteps.end(), a.step);
       const size_t i = size_t(it - solveSteps.begin());
       VerifyEquilibrium e;
-      if (it != solveSteps.end() && i < ref.inputs.size()) {
-        e = check.check(a.step, a.time, ref.inputs[i], ref.solved[i], ref.forces[i]);
+      if (it != solveSteps.end() && i < ref.solves.size()) {
+        e = check.check(a.step, a.time, ref.solves[i]);
       } else {
         e.step = a.step;
         e.time = a.time;

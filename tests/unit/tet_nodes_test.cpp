@@ -6,6 +6,7 @@
 #include <deform/sdk/error.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 
 namespace deform {
@@ -179,6 +180,11 @@ TEST(GraspedPatchNodes, HoldsTheMidsideNodesOfGraspedTrianglesAndEdges) {
   ASSERT_EQ(edge.size(), 1u);
   EXPECT_NEAR((q.V.row(edge[0].node) - 0.5 * (q.V.row(4) + q.V.row(5))).norm(), 0, 1e-12);
   EXPECT_TRUE(patch.held({5, 6}).empty());
+  // nodes(): the four vertices' own nodes and the five held, sorted, each once.
+  std::vector<int> all = {4, 5, 6, 7};
+  for (const auto& h : top) all.push_back(h.node);
+  std::sort(all.begin(), all.end());
+  EXPECT_EQ(patch.nodes({7, 5, 4, 6, 4}), all);
 }
 
 TEST(TetEmbedding, PointsFollowAnAffineMapExactlyLinearAndQuadratic) {

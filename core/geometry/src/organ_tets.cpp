@@ -290,6 +290,17 @@ GraspedPatchNodes::GraspedPatchNodes(const SurfaceMesh& surface, std::vector<int
     if (n >= 0 && n < int(nodes.rows())) m_isVertexNode[size_t(n)] = 1;
 }
 
+std::vector<int> GraspedPatchNodes::nodes(const std::vector<int>& graspedVertices) const {
+  std::vector<int> out;
+  for (int v : graspedVertices)
+    if (v >= 0 && v < int(m_surfaceNode.size()) && m_surfaceNode[size_t(v)] >= 0)
+      out.push_back(m_surfaceNode[size_t(v)]);
+  for (const Held& h : held(graspedVertices)) out.push_back(h.node);
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
 std::vector<GraspedPatchNodes::Held> GraspedPatchNodes::held(
     const std::vector<int>& graspedVertices) const {
   std::vector<Held> out;

@@ -129,6 +129,10 @@ class GraspedPatchNodes {
   /// vertices' own nodes; each once.
   std::vector<Held> held(const std::vector<int>& graspedVertices) const;
 
+  /// Every node a grasp of these surface vertices holds: the vertices' own nodes (those that
+  /// have one) and held()'s; each once, sorted. (A model leaves out those its support fixes.)
+  std::vector<int> nodes(const std::vector<int>& graspedVertices) const;
+
  private:
   SurfaceMesh m_surface;
   std::vector<int> m_surfaceNode;
