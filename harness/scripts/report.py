@@ -792,6 +792,7 @@ def run_report():
                                    if a) or "-",
                 "points": "%s of %s" % (m.get("valid_points"), m.get("points")),
                 "slope_resolution": e50.get("slope_resolution"),
+                "descent_all": (eall.get("descent_resolution") or {}).get("text"),
                 "slope_effort": e50.get("slope_effort"),
                 "floor_50": (e50.get("floor") or {}).get("text"),
                 "floor_all": (eall.get("floor") or {}).get("text")})
@@ -802,6 +803,7 @@ def run_report():
             parts.append(html_table([("model", "model"), ("axes", "axes"),
                                      ("points", "valid points"),
                                      ("slope_resolution", "slope along resolution"),
+                                     ("descent_all", "rmse_all along resolution, to its floor"),
                                      ("slope_effort", "slope along effort"),
                                      ("floor_50", "rmse_50"), ("floor_all", "rmse_all")],
                                     summary))

@@ -76,13 +76,14 @@ void markPareto(std::vector<SweepPoint>& points) {
 
 namespace {
 
-/// Least-squares slope of ln(error) against ln(ms) over the usable points; NaN with fewer than
-/// two distinct times.
-double logSlope(const std::vector<const SweepPoint*>& points, double SweepPoint::*err) {
+/// Least-squares slope of ln(error - below) against ln(ms) over the usable points whose error is
+/// above `below`; NaN with fewer than two distinct times.
+double logSlope(const std::vector<const SweepPoint*>& points, double SweepPoint::*err,
+                double below = 0) {
   std::vector<std::pair<double, double>> xy;
   for (const SweepPoint* p : points)
-    if (usable(*p, p->*err) && p->msMedian > 0 && p->*err > 0)
-      xy.emplace_back(std::log(p->msMedian), std::log(p->*err));
+    if (usable(*p, p->*err) && p->msMedian > 0 && p->*err > below)
+      xy.emplace_back(std::log(p->msMedian), std::log(p->*err - below));
   if (xy.size() < 2) return NAN;
   double mx = 0, my = 0;
   for (const auto& [x, y] : xy) mx += x, my += y;
@@ -138,6 +139,12 @@ std::vector<const SweepPoint*> alongAxis(const std::vector<const SweepPoint*>& c
   return line;
 }
 
+/// Aitken's delta-squared limit of three errors falling geometrically; NaN where they do not.
+double aitkenLimit(double e1, double e2, double e3) {
+  const double d1 = e2 - e1, d2 = e3 - e2;
+  return d1 < 0 && d2 < 0 && d2 > d1 ? std::max(0.0, e3 - d2 * d2 / (d2 - d1)) : NAN;
+}
+
 /// The floor of one curve (SweepFloor) on error `err`. The most accurate valid point is looked at
 /// along each axis: where a costlier value of the axis exists, it bought no accuracy; where the
 /// point is at the axis' costliest value, the axis' last step tells whether the error still falls.
@@ -189,16 +196,61 @@ SweepFloor curveFloor(const std::vector<const SweepPoint*>& curve, double SweepP
   }
   // Still falling: Aitken's delta-squared over the last three errors along that axis.
   const size_t n = fallingLine.size();
-  if (n >= 3 && usable(*fallingLine[n - 3], fallingLine[n - 3]->*err)) {
-    const double e1 = fallingLine[n - 3]->*err, e2 = fallingLine[n - 2]->*err, e3 = best.*err;
-    const double d1 = e2 - e1, d2 = e3 - e2;
-    if (d1 < 0 && d2 < 0 && d2 > d1) f.estimateM = std::max(0.0, e3 - d2 * d2 / (d2 - d1));
-  }
+  if (n >= 3 && usable(*fallingLine[n - 3], fallingLine[n - 3]->*err))
+    f.estimateM = aitkenLimit(fallingLine[n - 3]->*err, fallingLine[n - 2]->*err, best.*err);
   f.text = "still falling along " + fallingAxis + " (slope " + fixed(f.lastSlope, 2) + " at " +
            fixed(best.msMedian, 3) + " ms, best " + mm(best.*err) + ")" +
            (std::isfinite(f.estimateM) ? "; floor estimated at " + mm(f.estimateM)
                                        : "; no floor in reach of the sweep");
   return f;
+}
+
+/// A resolution whose most accurate point costs less than this factor times its coarsest point
+/// costs nothing measurable (the timing noise of a sweep's points is about that).
+constexpr double kSameCost = 1.1;
+
+/// The descent along one axis' line (SweepMetricSummary::Descent) on error `err`.
+SweepMetricSummary::Descent lineDescent(const std::vector<const SweepPoint*>& line,
+                                        double SweepPoint::*err) {
+  SweepMetricSummary::Descent d;
+  std::vector<const SweepPoint*> valid;
+  for (const SweepPoint* p : line)
+    if (usable(*p, p->*err) && p->msMedian > 0 && p->*err > 0) valid.push_back(p);
+  if (valid.size() < 2) return d;
+  const auto best = std::min_element(
+      valid.begin(), valid.end(),
+      [err](const SweepPoint* a, const SweepPoint* b) { return a->*err < b->*err; });
+  std::vector<const SweepPoint*> fall(valid.begin(), best + 1);
+  d.reached = best + 1 != valid.end();
+  double below = 0;  // what is taken off each error before its logarithm
+  const size_t n = fall.size();
+  if (d.reached) {
+    d.floorM = (*best)->*err;
+  } else if (n >= 3) {
+    d.floorM = aitkenLimit(fall[n - 3]->*err, fall[n - 2]->*err, fall[n - 1]->*err);
+    d.estimated = std::isfinite(d.floorM);
+    if (d.estimated) below = d.floorM;
+  }
+  for (const SweepPoint* p : fall) d.points += p->*err > below ? 1 : 0;
+  const double msFrom = fall.front()->msMedian, msTo = fall.back()->msMedian;
+  const std::string toFloor = d.reached     ? " down to its floor " + mm(d.floorM)
+                              : d.estimated ? " toward an estimated floor of " + mm(d.floorM)
+                                            : " (still falling, no floor estimated)";
+  if (fall.size() == 1) {
+    d.text = "no descent: its cheapest resolution is its most accurate (" + mm(d.floorM) + ")";
+  } else if (msTo < kSameCost * msFrom) {
+    // The most accurate resolution costs no more than the coarsest (the time of the steps
+    // elsewhere dominates): a slope against time would only be the timing noise.
+    d.text = "falls from " + mm(fall.front()->*err) + " to " + mm(fall.back()->*err) + toFloor +
+             " at no extra cost (" + fixed(msFrom, 3) + " to " + fixed(msTo, 3) + " ms)";
+    d.sameCost = true;
+  } else {
+    d.slope = logSlope(fall, err, below);
+    if (std::isfinite(d.slope))
+      d.text = "slope " + fixed(d.slope, 2) + toFloor + " over " + std::to_string(d.points) +
+               " points (" + fixed(msFrom, 3) + " to " + fixed(msTo, 3) + " ms)";
+  }
+  return d;
 }
 
 SweepMetricSummary metricSummary(const std::vector<const SweepPoint*>& curve,
@@ -212,6 +264,9 @@ SweepMetricSummary metricSummary(const std::vector<const SweepPoint*>& curve,
   std::vector<const SweepPoint*> valid, front;
   validAndFront(curve, err, valid, front);
   s.slopeFront = logSlope(front, err);
+  // The descent: along resolution through the most accurate point, at its effort value.
+  if (!m.resolutionParam.empty() && !front.empty())
+    s.descent = lineDescent(alongAxis(curve, true, *front.back()), err);
   s.floor = curveFloor(curve, err);
   return s;
 }
@@ -490,6 +545,14 @@ void writeSweepFiles(const std::vector<SweepPoint>& points,
       return ojson{{"slope_resolution", num(s.slopeResolution)},
                    {"slope_effort", num(s.slopeEffort)},
                    {"slope_front", num(s.slopeFront)},
+                   {"descent_resolution",
+                    {{"slope", num(s.descent.slope)},
+                     {"floor_m", num(s.descent.floorM)},
+                     {"reached", s.descent.reached},
+                     {"estimated", s.descent.estimated},
+                     {"same_cost", s.descent.sameCost},
+                     {"points", s.descent.points},
+                     {"text", s.descent.text}}},
                    {"floor",
                     {{"known", f.known},
                      {"reached", f.reached},

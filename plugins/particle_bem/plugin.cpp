@@ -71,7 +71,8 @@ DEFORM_PLUGIN(registry) {
       deform::particle_bem::paramSpecs());
   // What the harness's sweep, bench and stability run it with (registry.h).
   // The BEM surface's resolution; the particles follow it with no iterative solve (no effort).
-  info.resolution = {"coarse_vertices", {150LL, 300LL, 600LL, 1200LL}, {150LL, 300LL, 600LL}};
+  info.resolution = {
+      "coarse_vertices", {150LL, 300LL, 600LL, 1200LL, 2400LL}, {150LL, 300LL, 600LL}};
   info.presets["bench"] = {{{"coarse_vertices", 300LL}}};
   info.presets["stability_quick"] = {{{"coarse_vertices", 200LL}, {"points", 150LL}}};
   info.measures["static_accuracy"] = deform::particle_bem::staticAccuracyMeasure;

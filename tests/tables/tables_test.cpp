@@ -1385,6 +1385,43 @@ TEST(Sweep, SlopesAlongTheAxesAndTheFloor) {
   EXPECT_NEAR(s[0].rmse50.floor.errorM, 2e-3 + 1e-3 / 64, 1e-12);
   EXPECT_NE(s[0].rmse50.floor.text.find("floor 2.02 mm"), std::string::npos)
       << s[0].rmse50.floor.text;
+  // The descent along resolution: the floor reached at the finest point is no floor of the line
+  // (nothing costlier bought nothing), so the floor is estimated and taken off: the excess falls
+  // at slope -2 exactly, where ln(error) alone reads about -0.19.
+  const SweepMetricSummary::Descent& d = s[0].rmse50.descent;
+  EXPECT_FALSE(d.reached);
+  EXPECT_TRUE(d.estimated);
+  EXPECT_NEAR(d.floorM, 2e-3, 1e-12);
+  EXPECT_NEAR(d.slope, -2, 1e-6) << d.text;
+  EXPECT_NEAR(s[0].rmse50.slopeResolution, -0.185, 0.01);
+  EXPECT_NE(d.text.find("toward an estimated floor of 2 mm over 4 points"), std::string::npos)
+      << d.text;
+  // A finest resolution worse than the one before: the descent stops at the most accurate point
+  // and is fitted on the error itself, up to it.
+  std::vector<SweepPoint> past = gridPoints(0, false);
+  past.back().rmseNearest = 1e-3;  // above the 4-element point's 1/16 mm
+  s = summariseSweep(past);
+  EXPECT_TRUE(s[0].rmse50.descent.reached);
+  EXPECT_EQ(s[0].rmse50.descent.points, 3);
+  EXPECT_NEAR(s[0].rmse50.descent.slope, -2, 1e-9);
+  EXPECT_NEAR(s[0].rmse50.descent.floorM, 1e-3 / 16, 1e-15);
+  // A resolution that costs no measurable time: the fall is given, never a slope against time.
+  std::vector<SweepPoint> free = gridPoints(0, false);
+  for (SweepPoint& p : free) p.msMedian = 1 + 0.01 * p.resolution.get<double>();
+  s = summariseSweep(free);
+  EXPECT_TRUE(s[0].rmse50.descent.sameCost);
+  EXPECT_TRUE(std::isnan(s[0].rmse50.descent.slope));
+  EXPECT_NE(s[0].rmse50.descent.text.find("falls from 1 mm to 0.0156 mm"), std::string::npos)
+      << s[0].rmse50.descent.text;
+  // Also when one point between is slow (noise): the most accurate costs what the coarsest does.
+  free[1].msMedian = 1.5;
+  EXPECT_TRUE(summariseSweep(free)[0].rmse50.descent.sameCost) << s[0].rmse50.descent.text;
+  // With an effort axis the descent runs through the most accurate point: at effort 1 (8 ms),
+  // not at the costliest effort.
+  s = summariseSweep(gridPoints(0, true));
+  EXPECT_NEAR(s[0].rmse50.descent.slope, -2, 1e-6) << s[0].rmse50.descent.text;
+  EXPECT_NE(s[0].rmse50.descent.text.find("(1.000 to 8.000 ms)"), std::string::npos)
+      << s[0].rmse50.descent.text;
   // One valid point: no floor can be told.
   std::vector<SweepPoint> one = gridPoints(0, false);
   for (size_t i = 1; i < one.size(); ++i) one[i].valid = false;

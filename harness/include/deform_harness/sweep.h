@@ -85,6 +85,23 @@ struct SweepMetricSummary {
   /// effort value), along the effort axis (at the finest resolution) and over the front. NaN
   /// where fewer than two valid points lie on the line.
   double slopeResolution = NAN, slopeEffort = NAN, slopeFront = NAN;
+  /// The descent along the resolution axis through the most accurate point (at its effort
+  /// value), from the line's coarsest point to its most accurate one. Where a finer resolution is
+  /// less accurate (`reached`), the slope of ln(error) up to the most accurate point; where the
+  /// error still falls at the finest, of ln(error - floor) with the floor extrapolated (Aitken's
+  /// delta-squared over the last three errors) when one can be, else of ln(error). So a
+  /// discretisation converging toward the model's own error reads as its rate of approach, with
+  /// the floor it approaches beside it.
+  struct Descent {
+    double slope = NAN;
+    double floorM = NAN;  ///< the most accurate error (reached), the estimate, or NaN (none)
+    bool reached = false, estimated = false;
+    /// The most accurate point costs less than 1.1 times the coarsest: the resolution costs
+    /// nothing measurable and no slope is given (NaN); the text gives the fall.
+    bool sameCost = false;
+    int points = 0;    ///< points fitted
+    std::string text;  ///< one line: "slope -0.43 toward an estimated floor of 0.907 mm"
+  } descent;
   SweepFloor floor;
 };
 

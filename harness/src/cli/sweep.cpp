@@ -112,6 +112,13 @@ int cmdSweep(SweepArgs& args, const CLI::App& cmd) {
     };
     std::cout << slope(m.resolutionParam, m.rmse50.slopeResolution)
               << slope(m.effortParam, m.rmse50.slopeEffort) << m.rmse50.floor.text << "\n";
+    // The resolution axis' descent on both errors: rmse_50 is the tissue at the tool, rmse_all
+    // the whole organ, where a discretisation's convergence shows first.
+    for (const auto& [name, s] :
+         {std::pair{"rmse_50", &m.rmse50}, std::pair{"rmse_all", &m.rmseAll}})
+      if (!s->descent.text.empty())
+        std::cout << "    along " << m.resolutionParam << ", " << name << ": " << s->descent.text
+                  << "\n";
   }
   std::set<std::string> notes;  // the calibrated points' (the same for most of them)
   for (const SweepPoint& p : points)
