@@ -38,7 +38,7 @@ done
 source scripts/cmake_tools.sh
 cmake_tools "$build"  # generator, launcher
 cmake -S . -B "$build" "${generator[@]}" "${launcher[@]}" -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
-  -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g" -DDEFORM_SANITIZE=ON \
+  -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-O1 -gline-tables-only" -DDEFORM_SANITIZE=ON \
   -DDEFORM_BUILD_FUZZERS=ON -DDEFORM_BUILD_TESTS=OFF -DDEFORM_BUILD_BENCHMARKS=OFF \
   "${plugin_flags[@]}" >/dev/null
 build_targets=()
