@@ -237,7 +237,7 @@ SweepMetricSummary::Descent lineDescent(const std::vector<const SweepPoint*>& li
                               : d.estimated ? " toward an estimated floor of " + mm(d.floorM)
                                             : " (still falling, no floor estimated)";
   if (fall.size() == 1) {
-    d.text = "no descent: its cheapest resolution is its most accurate (" + mm(d.floorM) + ")";
+    d.text = "no descent: its coarsest resolution is its most accurate (" + mm(d.floorM) + ")";
   } else if (msTo < kSameCost * msFrom) {
     // The most accurate resolution costs no more than the coarsest (the time of the steps
     // elsewhere dominates): a slope against time would only be the timing noise.
