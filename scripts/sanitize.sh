@@ -86,8 +86,7 @@ for d in plugins/*/; do
   grep -Eq "deform_add_(kernel_)?plugin\(${p}\b" "$d/CMakeLists.txt" 2>/dev/null &&
     targets+=("deform_$p") && built_plugins+=("$p")
 done
-# A plugin asked for by name that has no plugin target is an error, not a silent skip (pbd and
-# massspring went unsanitized for a day when their CMakeLists moved to deform_add_kernel_plugin).
+# A plugin asked for by name that has no plugin target is an error, never a silent skip.
 for p in $plugins; do
   [[ $quick -eq 1 || " ${built_plugins[*]} " == *" $p "* ]] || {
     echo "sanitize.sh: plugin $p has no deform_add_plugin or deform_add_kernel_plugin target" >&2
