@@ -48,8 +48,6 @@ double cpuSecondsNow() {
   return s;
 }
 
-/// Forwards to a model and records the wall and CPU time of each step() (the CPU time includes
-/// the child processes the step waited for: ccx).
 /// One step() of a recorded run: its input, the nodes after it and the grasp forces.
 struct RecordedSolve {
   StepInput input;
@@ -57,6 +55,8 @@ struct RecordedSolve {
   std::vector<Vec3> graspForces;
 };
 
+/// Forwards to a model and records the wall and CPU time of each step() (the CPU time includes
+/// the child processes the step waited for: ccx).
 class TimedModel final : public Model {
  public:
   explicit TimedModel(Model& m) : m_model(m) {}
