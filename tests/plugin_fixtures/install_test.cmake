@@ -23,6 +23,7 @@ function(run what)
     message(FATAL_ERROR "${what} failed (${rc}):\n${out}\n${err}")
   endif()
   set(RUN_OUTPUT "${out}" PARENT_SCOPE)
+  set(RUN_ERROR "${err}" PARENT_SCOPE)
 endfunction()
 
 set(prefix ${WORK_DIR}/prefix)
@@ -102,11 +103,16 @@ run_gtest(InstalledPlugin.FoundInRelocatedInstall --unset=DEFORM_PLUGIN_PATH
 set(deformbench ${prefix}/bin/deformbench)
 
 # 5. The example next to pbd in its scene (no reference and 150 steps: seconds), then the report.
+#    The installed copy must load the pbd installed beside it.
 file(GLOB pbd ${BUILD_DIR}/plugins/deform_pbd.so)
 if(pbd)
   run("deformbench run compare_with_pbd.json" ${CMAKE_COMMAND} -E env --unset=DEFORM_PLUGIN_PATH
       ${deformbench} --plugin-dir ${build} run ${EXAMPLE_DIR}/compare_with_pbd.json
-      --out ${WORK_DIR}/compare --no-reference --no-cache --steps 150 --strict)
+      --out ${WORK_DIR}/compare --no-reference --no-cache --steps 150 --strict --explain)
+  # The installed copy runs its own pbd, not the build tree's (which it also knows of).
+  if(NOT "${RUN_OUTPUT}${RUN_ERROR}" MATCHES "loaded plugin ${libdir}/deformbench/plugins/deform_pbd.so")
+    message(FATAL_ERROR "the installed deformbench did not load its own pbd:\n${RUN_OUTPUT}${RUN_ERROR}")
+  endif()
   file(READ ${WORK_DIR}/compare/results.json results)
   foreach(label tethered pbd)
     string(JSON n LENGTH "${results}" runs)

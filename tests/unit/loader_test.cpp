@@ -190,7 +190,15 @@ TEST(PluginLoader, DiscoverFindsTheFixturesThroughDeformPluginPath) {
   ASSERT_GE(dirs.size(), 3u);
   EXPECT_EQ(dirs[0], "/nonexistent/a");  // empty entries are skipped
   EXPECT_EQ(dirs[1], kFixtures);
-  EXPECT_EQ(dirs[2], DEFORM_BUILD_PLUGIN_DIR);  // then the build tree
+  // Then the running copy's own folders (beside the loaded core library, or PREFIX/lib next to
+  // PREFIX/bin), and only after them the build tree: an installed copy keeps its own plugins.
+  const auto build = std::find(dirs.begin(), dirs.end(), DEFORM_BUILD_PLUGIN_DIR);
+  ASSERT_NE(build, dirs.end());
+  EXPECT_GE(build - dirs.begin(), 3);
+  const std::string own = "/lib/deformbench/plugins";
+  for (auto d = dirs.begin() + 2; d != build; ++d)
+    EXPECT_TRUE(d->size() > own.size() && d->compare(d->size() - own.size(), own.size(), own) == 0)
+        << *d;
 
   PluginLoader loader;
   EXPECT_EQ(loader.searchPath(), dirs);

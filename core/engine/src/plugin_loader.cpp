@@ -144,20 +144,23 @@ std::vector<std::string> PluginLoader::defaultSearchPath() {
       start = end + 1;
     }
   }
+  // The plugin folders of the copy that is running come first: beside wherever
+  // libdeform_engine.so was actually loaded from, and PREFIX/lib/deformbench/plugins next to
+  // PREFIX/bin/deformbench (relocated installs). Only then the build tree's, which would
+  // otherwise hand an installed copy the plugins of whatever was last built there, and the
+  // configured install prefix's.
+  if (const fs::path lib = coreLibraryDir(); !lib.empty()) {
+    dirs.push_back((lib / "deformbench" / "plugins").lexically_normal().string());
+  }
+  if (const fs::path exe = executableDir(); !exe.empty()) {
+    dirs.push_back((exe / ".." / "lib" / "deformbench" / "plugins").lexically_normal().string());
+  }
 #ifdef DEFORM_BUILD_PLUGIN_DIR
   dirs.emplace_back(DEFORM_BUILD_PLUGIN_DIR);
 #endif
 #ifdef DEFORM_INSTALL_PLUGIN_DIR
   dirs.emplace_back(DEFORM_INSTALL_PLUGIN_DIR);
 #endif
-  // Relocated installs: PREFIX/bin/deformbench next to PREFIX/lib/deformbench/plugins, and the
-  // plugin folder beside wherever libdeform_engine.so was actually loaded from.
-  if (const fs::path exe = executableDir(); !exe.empty()) {
-    dirs.push_back((exe / ".." / "lib" / "deformbench" / "plugins").lexically_normal().string());
-  }
-  if (const fs::path lib = coreLibraryDir(); !lib.empty()) {
-    dirs.push_back((lib / "deformbench" / "plugins").lexically_normal().string());
-  }
   std::vector<std::string> unique;
   std::set<std::string> seen;
   for (std::string& d : dirs) {
