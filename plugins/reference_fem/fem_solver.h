@@ -333,7 +333,7 @@ class EquilibriumSolver {
   std::vector<int> m_freeIndex;  ///< dof -> free index or -1
   /// Full-pattern value index -> free value index or -1, and element lower-triangle entry ->
   /// free value index. Large (7 and 16 MB on the 51k-tet liver) and rebuilt per constraint set:
-  /// on cached huge pages (see LargePageAllocator).
+  /// on cached blocks that are not faulted in again (see LargePageAllocator).
   std::vector<int, LargePageAllocator<int>> m_fullToFree;
   std::vector<int, LargePageAllocator<int>> m_elementFreeSlots;
   /// Free block, lower triangle. Its values are the tangent of the current Newton iteration:

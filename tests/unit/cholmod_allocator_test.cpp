@@ -95,7 +95,7 @@ TEST(LargePageAllocator, LargeVectorsAreOnAlignedReusedBlocksAndSmallOnesOnMallo
   {
     Vector v(n, 7);
     first = v.data();
-    EXPECT_EQ(reinterpret_cast<uintptr_t>(first) % (size_t(2) << 20), 0u);  // huge-page aligned
+    EXPECT_EQ(reinterpret_cast<uintptr_t>(first) % (size_t(2) << 20), 0u);  // 2 MiB aligned
     EXPECT_EQ(v[n - 1], 7);
   }
   Vector w(n, -1);  // the freed block comes back, its content overwritten

@@ -98,7 +98,11 @@ class PageCache {
 
  private:
   static void* map(size_t size) {
-    // Over-map by one page to align the block to a 2 MiB boundary (huge pages need it).
+    // Over-map by one page to align the block to a 2 MiB boundary, so that where the system
+    // makes every large mapping a transparent huge page (THP "always") the block is one. No
+    // MADV_HUGEPAGE of our own: on a VM whose host backs freed memory lazily, a fresh 2 MiB page
+    // cost ~7 ms to fault in, and a 39k-dof Neo-Hookean solve was 20% slower with the advice
+    // (docs/notes/reference_fem-history.md, 2026-11-30).
     void* raw =
         mmap(nullptr, size + kPage, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (raw == MAP_FAILED) return nullptr;
@@ -107,11 +111,7 @@ class PageCache {
     if (aligned > base) munmap(raw, aligned - base);
     const uintptr_t end = base + size + kPage;
     if (end > aligned + size) munmap(reinterpret_cast<void*>(aligned + size), end - aligned - size);
-    void* p = reinterpret_cast<void*>(aligned);
-#ifdef MADV_HUGEPAGE
-    madvise(p, size, MADV_HUGEPAGE);  // advice only: without THP the pages stay 4 KiB
-#endif
-    return p;
+    return reinterpret_cast<void*>(aligned);
   }
 
   std::mutex m_mutex;

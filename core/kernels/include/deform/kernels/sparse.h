@@ -40,17 +40,18 @@ class SerialOpenMpScope {
 };
 
 /// Routes CHOLMOD's large allocations (>= 2 MiB: the factor's values, the supernodal update
-/// workspace, permuted copies of the matrix) to memory mapped in 2 MiB-aligned blocks advised
-/// for transparent huge pages (madvise MADV_HUGEPAGE), and keeps freed blocks for reuse (up to
-/// 1 GiB); smaller requests go to malloc. Why: each numerical factorisation allocates and frees
-/// tens of MB, which glibc returns to the kernel and page-faults back in 4 KiB at a time
-/// (measured on the 51k-tet liver Neo-Hookean solve: 48,800 minor faults and 0.3-0.5 s of
-/// kernel time out of 2.8 s; 1,450 faults with large pages). Installs itself once per process
-/// (SuiteSparse's allocator hooks are global); memory CHOLMOD obtained before is still freed
-/// correctly. Thread-safe. Call before creating a SparseCholesky.
+/// workspace, permuted copies of the matrix) to memory mapped in 2 MiB-aligned blocks, and keeps
+/// freed blocks for reuse (up to 1 GiB); smaller requests go to malloc. Why: each numerical
+/// factorisation allocates and frees tens of MB, which glibc returns to the kernel and
+/// page-faults back in 4 KiB at a time (measured on the 51k-tet liver Neo-Hookean solve: 48,800
+/// minor faults and 0.3-0.5 s of kernel time out of 2.8 s). The blocks are not advised for
+/// transparent huge pages: on a VM whose host backs freed memory lazily that was 20% slower
+/// (see sparse.cpp). Installs itself once per process (SuiteSparse's allocator hooks are
+/// global); memory CHOLMOD obtained before is still freed correctly. Thread-safe. Call before
+/// creating a SparseCholesky.
 void installCholmodAllocator();
 
-/// Large-array memory from the same cached, huge-page-advised 2 MiB-aligned mappings that
+/// Large-array memory from the same cached 2 MiB-aligned mappings that
 /// installCholmodAllocator() gives CHOLMOD (requests under 2 MiB go to malloc). For arrays that
 /// are rebuilt per solve (index tables of tens of MB): glibc maps and unmaps those each time and
 /// the kernel faults them in 4 KiB at a time (measured on the 51k-tet liver: a fault costs ~14 us
