@@ -229,7 +229,7 @@ void HexFemModel::initialize(const Organ& organ, const HexFemConfig& config, Rea
   buildPattern();
   assembleValues(false);
   m_baseValues = Eigen::Map<const VecX>(m_A.valuePtr(), m_A.nonZeros());
-  installCholmodAllocator();  // large pages for the factor (see sparse.h)
+  installCholmodAllocator();  // the factor on cached blocks (see sparse.h)
   m_chol.setKind(config.cholesky);
   if (m_numDofs > 0) {
     // Analysed once per model: worth trying every ordering CHOLMOD has (AMD, METIS, nested

@@ -60,7 +60,7 @@ void CoarseLinearFem::init(const TetMesh& mesh, const Material& material,
     const Real eps = 1e-8 * m_K.diagonal().mean();
     for (int i = 0; i < m_numFree; ++i) m_K.coeffRef(i, i) += eps;
   }
-  installCholmodAllocator();  // large pages for the factor (see sparse.h)
+  installCholmodAllocator();  // the factor on cached blocks (see sparse.h)
   m_chol = std::make_unique<SparseCholesky>();
   if (m_numFree > 0) {
     const SerialOpenMpScope serial;  // CHOLMOD's own OpenMP threads: see sparse.h

@@ -203,7 +203,7 @@ void EquilibriumSolver::prepareConstraints(const std::vector<int>& dofs) {
       throw std::logic_error("reference_fem: stiffness pattern without a diagonal entry");
   }
   m_haveFactor = false;
-  installCholmodAllocator();  // large pages for the factor (see sparse.h)
+  installCholmodAllocator();  // the factor on cached blocks (see sparse.h)
   m_chol = std::make_unique<CholeskySolver>();
   m_chol->setKind(CholeskySolver::Kind::Supernodal);
   m_chol->cholmod().print = 0;  // a non-PD matrix is handled here, not printed

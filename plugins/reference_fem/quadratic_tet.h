@@ -82,16 +82,16 @@ struct QuadraticTetEvaluation {
 /// K += w G^T D G, the stiffness of one quadrature point of weight w (m^3) with shape gradients G
 /// and stress derivative D = dP/dF (vec(F)(i + 3 j) = F(i, j)). vec(F)(i + 3 j) depends on
 /// x_b(k) through delta_ik G(j, b): DG(r, 3 b + k) = sum_l D(r, k + 3 l) G(l, b), and
-/// K(3 a + i, .) += w sum_j G(j, a) DG(i + 3 j, .).
+/// K(3 a + i, c) += w sum_j G(j, a) DG(i + 3 j, c): column c of K, read as a 3 x 10 matrix, gains
+/// w V_c G with V_c column c of DG read as a 3 x 3 matrix (contiguous, no strided rows).
 inline void addPointStiffness(const Mat9& D, const Mat3x10& G, Real w, Mat30& K) {
   Eigen::Matrix<Real, 9, 30> DG;
   for (int b = 0; b < 10; ++b)
     for (int k = 0; k < 3; ++k)
       DG.col(3 * b + k) = D.col(k) * G(0, b) + D.col(k + 3) * G(1, b) + D.col(k + 6) * G(2, b);
-  for (int a = 0; a < 10; ++a)
-    for (int i = 0; i < 3; ++i)
-      K.row(3 * a + i) +=
-          w * (G(0, a) * DG.row(i) + G(1, a) * DG.row(i + 3) + G(2, a) * DG.row(i + 6));
+  const Mat3x10 wG = w * G;
+  for (int c = 0; c < 30; ++c)
+    Eigen::Map<Mat3x10>(K.col(c).data()).noalias() += Eigen::Map<const Mat3>(DG.col(c).data()) * wG;
 }
 
 template <class Material>
