@@ -211,6 +211,9 @@ def check_sweep(path):
         for k in ("ms_median", "rmse_50", "rmse_all", "max"):
             check_number(path, "points[%d].%s" % (i, k), p.get(k), minimum=0)
     check_number(path, "haptic_budget_ms", doc.get("haptic_budget_ms"), minimum=0)
+    if doc.get("reference_check") is not None:
+        check_object(path, "reference_check", doc["reference_check"])
+        check_string(path, "reference_check.summary", doc["reference_check"].get("summary"))
     return doc
 
 
@@ -807,6 +810,15 @@ def run_report():
                                      ("slope_effort", "slope along effort"),
                                      ("floor_50", "rmse_50"), ("floor_all", "rmse_all")],
                                     summary))
+        check = sweep.get("reference_check")
+        if check:
+            said = html.escape(check["summary"] + ("; warning: " + check["warning"]
+                                                   if check.get("warning") else ""))
+        else:
+            said = ("not estimated (no check of it in the cache: <code>deformbench converge "
+                    "SCENE --out DIR --of-reference</code> makes one)")
+        parts.append("<p>The reference's own discretisation error, the yardstick of every "
+                     "floor above: %s.</p>" % said)
         for r in rows:
             if r.get("valid") is False:
                 r["status"] = "invalid (%s)" % r.get("invalid_reason", "")

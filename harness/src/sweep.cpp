@@ -1,6 +1,7 @@
 // Error against run time: sweeping each model over its two cost axes (see sweep.h).
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
+#include <deform_harness/convergence.h>
 #include <deform_harness/json_file.h>
 #include <deform_harness/sweep.h>
 
@@ -480,12 +481,29 @@ std::string interactionName(const Scene& scene) {
 void writeSweepFiles(const std::vector<SweepPoint>& points,
                      const std::vector<std::string>& pointResults, const std::string& sceneFile,
                      const Scene& parsed, const std::string& refStatus, const std::string& results,
-                     const SweepOptions& options) {
+                     const std::optional<ConvergenceResult>& check, const SweepOptions& options) {
   ojson doc;
   doc["format"] = "deformbench-sweep/1";
   doc["scene"] = {{"name", parsed.name}, {"file", sceneFile}, {"sha256", parsed.sha256}};
   doc["reference"] = parsed.reference->model;
   doc["reference_status"] = refStatus;
+  // The reference's own discretisation error (its cached check, `converge --of-reference`): the
+  // yardstick's uncertainty beside the models' floors; null when none is cached.
+  doc["reference_check"] = nullptr;
+  if (check) {
+    ojson levels = ojson::array();
+    for (const ConvergenceLevelResult& l : check->levels)
+      levels.push_back({{"elements", l.elements}, {"h_m", l.h}, {"status", l.status}});
+    const std::string warning = convergenceWarning(*check);
+    doc["reference_check"] = {
+        {"summary", convergenceSummary(*check)},
+        {"warning", warning.empty() ? ojson(nullptr) : ojson(warning)},
+        {"converged", check->converged},
+        {"relative_error", num(check->relativeError)},
+        {"bound_relative", num(check->boundRelative)},
+        {"reason", check->reason.empty() ? ojson(nullptr) : ojson(check->reason)},
+        {"levels", levels}};
+  }
   doc["quick"] = options.quick;
   doc["haptic_budget_ms"] = 1.0;
   doc["nearest_to"] = interactionName(parsed);
@@ -693,7 +711,10 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   }
   markPareto(points);
 
-  writeSweepFiles(points, pointResults, sceneFile, parsed, refStatus, results, options);
+  const bool noCache = options.cases.cacheDir && options.cases.cacheDir->empty();
+  const std::optional<ConvergenceResult> check =
+      noCache ? std::nullopt : cachedReferenceCheck(sceneFile, loader, options.cases.cacheDir);
+  writeSweepFiles(points, pointResults, sceneFile, parsed, refStatus, results, check, options);
   return points;
 }
 

@@ -11,7 +11,8 @@
 #                     the collect step; running them by hand then the collect step gives the
 #                     serial points
 #   converge_jobs     --jobs 2 and a --slurm plan run by hand give the in-process study (levels
-#                     without their wall times)
+#                     without their wall times); a sweep prints and writes the reference's check
+#                     once `converge --of-reference` has cached it
 set -euo pipefail
 mode=$1 exe=$(readlink -f "$2") plugins=$(readlink -f "$3") toy=$(readlink -f "$4") work=$5
 here=$(cd "$(dirname "$0")" && pwd)
@@ -104,6 +105,24 @@ converge_jobs)
   for i in 0 1 2; do (export SLURM_ARRAY_TASK_ID=$i; bash "$work/slurm/job.sbatch"); done
   bash "$work/slurm/collect.sbatch" > "$work/collect.log" 2>&1 || { cat "$work/collect.log"; fail collect; }
   study "$work/slurm_out" | diff "$work/serial.study" - || fail "--slurm: another study"
+  # sweep shows the reference's own check once one is cached, and says how to get one before.
+  swc() { "${db[@]}" sweep "$here/converge_cube.json" --quick --no-plot --cache-dir "$work/cache" "$@"; }
+  swc --out "$work/sw0" > "$work/sw0.log" 2>&1 || { cat "$work/sw0.log"; fail "sweep before"; }
+  grep -q "^reference: discretisation error not estimated" "$work/sw0.log" || { cat "$work/sw0.log"; fail "no hint"; }
+  python3 -c 'import json,sys; assert json.load(open(sys.argv[1]))["reference_check"] is None' \
+    "$work/sw0/sweep.json" || fail "a reference_check without a study"
+  "${db[@]}" converge "$here/converge_cube.json" --of-reference --cache-dir "$work/cache" \
+    --out "$work/check" > "$work/check.log" 2>&1 || { cat "$work/check.log"; fail "the check"; }
+  swc --out "$work/sw1" > "$work/sw1.log" 2>&1 || { cat "$work/sw1.log"; fail "sweep after"; }
+  grep -q "^reference: .*(cached study)$" "$work/sw1.log" || { cat "$work/sw1.log"; fail "no check line"; }
+  python3 - "$work/sw1/sweep.json" "$work/check/convergence.json" <<'PY' || fail "reference_check"
+import json, sys
+s, c = (json.load(open(f)) for f in sys.argv[1:])
+r = s["reference_check"]
+assert [l["elements"] for l in r["levels"]] == [l["elements"] for l in c["levels"]], r
+assert r["converged"] == c["converged"] and r["reason"] == c["reason"], (r, c)
+assert (r["relative_error"] is None) == (c["relative_error"] is None), (r, c)
+PY
   ;;
 *) echo "unknown mode $mode"; exit 2 ;;
 esac

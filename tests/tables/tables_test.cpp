@@ -1218,6 +1218,9 @@ TEST_F(TempDir, ReportHasTheSectionsAndPictures) {
                 {"scene", {{"name", "toy-lift"}}},
                 {"reference", "toy"},
                 {"haptic_budget_ms", 1.0},
+                {"reference_check",
+                 {{"summary", "estimated discretisation error 0.5% of the peak <demo>"},
+                  {"warning", nullptr}}},
                 {"points", json::array()}};
   for (int i = 0; i < 3; ++i)
     sweep["points"].push_back({{"model", "toy"},
@@ -1256,6 +1259,10 @@ TEST_F(TempDir, ReportHasTheSectionsAndPictures) {
   EXPECT_NE(html.find("id=\"table-results\""), std::string::npos);
   EXPECT_NE(html.find("<section id=\"sweep\">"), std::string::npos);
   EXPECT_NE(html.find("toy(gain=0.5)"), std::string::npos);
+  // The sweep's yardstick: the reference's own check, escaped.
+  EXPECT_NE(html.find("own discretisation error, the yardstick of every floor above: estimated "
+                      "discretisation error 0.5% of the peak &lt;demo&gt;."),
+            std::string::npos);
   if (!matplotlibAvailable()) GTEST_SKIP() << "matplotlib missing: pictures not checked";
   EXPECT_NE(html.find("<section id=\"organs\">"), std::string::npos);
   size_t images = 0;

@@ -141,6 +141,11 @@ struct ChildArgs {
 void addChildArgs(CLI::App* cmd, ChildArgs& c, const std::string& what);
 bool childArgsGiven(const CLI::App& cmd);
 
+/// run and sweep: one line on the scene's reference `label`, its cached check's estimate (or why
+/// there is none), or how to get one; nothing with --no-cache (cacheDir set and empty).
+void printCachedReferenceCheck(const std::string& label, const std::string& sceneFile,
+                               PluginLoader& loader, const std::optional<fs::path>& cacheDir);
+
 /// The child-process options (nullopt: in this process) and the dispatcher of sweep / converge.
 std::optional<ChildCaseOptions> childOptions(const ChildArgs& c, PluginLoader& loader,
                                              double defaultTimeoutS);

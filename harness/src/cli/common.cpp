@@ -3,6 +3,7 @@
 
 #include <deform_harness/calibration.h>
 #include <deform_harness/child_process.h>
+#include <deform_harness/convergence.h>
 #include <deform_harness/scripts.h>
 
 #include <algorithm>
@@ -246,6 +247,23 @@ std::optional<ChildCaseOptions> childOptions(const ChildArgs& c, PluginLoader& l
   child.resume = c.resume;
   child.retryFailed = c.retryFailed;
   return child;
+}
+
+void printCachedReferenceCheck(const std::string& label, const std::string& sceneFile,
+                               PluginLoader& loader, const std::optional<fs::path>& cacheDir) {
+  if (cacheDir && cacheDir->empty()) return;  // --no-cache: nothing to look up
+  const std::optional<ConvergenceResult> check = cachedReferenceCheck(sceneFile, loader, cacheDir);
+  if (!check) {
+    std::cout << "reference" << (label.empty() ? "" : " " + label)
+              << ": discretisation error not estimated (`deformbench "
+              << "converge " << sceneFile << " --out DIR --of-reference` estimates it, then `run` "
+              << "and `sweep` print it)\n";
+    return;
+  }
+  std::cout << "reference" << (label.empty() ? "" : " " + label) << ": "
+            << convergenceSummary(*check);
+  const std::string w = convergenceWarning(*check);
+  std::cout << (w.empty() ? "" : "; warning: " + w) << " (cached study)\n";
 }
 
 }  // namespace deform::harness::cli

@@ -2,7 +2,6 @@
 #include "cli.h"
 
 #include <deform/engine/plugin_loader.h>
-#include <deform_harness/convergence.h>
 #include <deform_harness/runner.h>
 
 #include <algorithm>
@@ -159,17 +158,7 @@ void printReferenceCheck(const std::string& sceneFile, const BenchmarkResult& re
   const auto ref = std::find_if(result.runs.begin(), result.runs.end(),
                                 [](const RunRecord& r) { return r.isReference; });
   if (ref == result.runs.end() || ref->status != RunStatus::Ok) return;
-  if (cacheDir && cacheDir->empty()) return;  // --no-cache: nothing to look up
-  const std::optional<ConvergenceResult> check = cachedReferenceCheck(sceneFile, loader, cacheDir);
-  if (!check) {
-    std::cout << "reference " << ref->label
-              << ": discretisation error not estimated (`deformbench converge " << sceneFile
-              << " --out DIR --of-reference` estimates it, then `run` prints it)\n";
-    return;
-  }
-  std::cout << "reference " << ref->label << ": " << convergenceSummary(*check);
-  const std::string w = convergenceWarning(*check);
-  std::cout << (w.empty() ? "" : "; warning: " + w) << " (cached study)\n";
+  printCachedReferenceCheck(ref->label, sceneFile, loader, cacheDir);
 }
 
 int cmdRun(const RunArgs& a) {

@@ -120,6 +120,8 @@ int cmdSweep(SweepArgs& args, const CLI::App& cmd) {
         std::cout << "    along " << m.resolutionParam << ", " << name << ": " << s->descent.text
                   << "\n";
   }
+  // The yardstick's own uncertainty, beside the floors above (sweep.json reference_check).
+  if (!points.empty()) printCachedReferenceCheck("", scene, loader, o.cases.cacheDir);
   std::set<std::string> notes;  // the calibrated points' (the same for most of them)
   for (const SweepPoint& p : points)
     if (!p.note.empty() && notes.insert(p.note).second) std::cout << "note: " << p.note << "\n";
