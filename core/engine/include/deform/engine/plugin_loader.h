@@ -2,7 +2,8 @@
 // deform_NAME.so (or libdeform_NAME.so) in one of the search folders, in this order:
 // $DEFORM_PLUGIN_PATH (colon-separated), the running copy's own plugin folder (beside the loaded
 // libdeform_engine.so, or PREFIX/lib/deformbench/plugins next to PREFIX/bin), the build tree, the
-// configured install prefix. Only the plugins a scene names are loaded. Each failure is a distinct PluginError naming the file.
+// configured install prefix. Only the plugins a scene names are loaded. Each failure is a
+// distinct PluginError naming the file.
 #pragma once
 
 #include <deform/sdk/error.h>
