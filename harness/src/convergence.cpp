@@ -445,6 +445,7 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
 std::optional<ConvergenceResult> cachedReferenceCheck(const std::string& sceneFile,
                                                       PluginLoader& loader,
                                                       const std::optional<fs::path>& cacheDir) {
+  if (cacheDir && cacheDir->empty()) return std::nullopt;  // --no-cache
   try {
     std::ifstream in(sceneFile);
     const ojson scene = ojson::parse(in);

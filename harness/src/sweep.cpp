@@ -1,7 +1,6 @@
 // Error against run time: sweeping each model over its two cost axes (see sweep.h).
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/cache.h>
-#include <deform_harness/convergence.h>
 #include <deform_harness/json_file.h>
 #include <deform_harness/sweep.h>
 
@@ -597,7 +596,8 @@ void writeSweepFiles(const std::vector<SweepPoint>& points,
 }  // namespace
 
 std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loader,
-                                 const SweepOptions& options, Progress* progress) {
+                                 const SweepOptions& options, Progress* progress,
+                                 std::optional<ConvergenceResult>* referenceCheck) {
   ojson scene = readJsonFile(sceneFile, "scene file");
   // Validate the scene as given (unknown keys, ranges) before anything runs.
   const Scene parsed = parseSceneFile(sceneFile);
@@ -711,10 +711,10 @@ std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loa
   }
   markPareto(points);
 
-  const bool noCache = options.cases.cacheDir && options.cases.cacheDir->empty();
   const std::optional<ConvergenceResult> check =
-      noCache ? std::nullopt : cachedReferenceCheck(sceneFile, loader, options.cases.cacheDir);
+      cachedReferenceCheck(sceneFile, loader, options.cases.cacheDir);
   writeSweepFiles(points, pointResults, sceneFile, parsed, refStatus, results, check, options);
+  if (referenceCheck) *referenceCheck = check;
   return points;
 }
 

@@ -159,7 +159,8 @@ struct ConvergeOptions {
 ConvergeOptions referenceCheckOptions();
 
 /// The cached check of the scene's reference (kReferenceCheckRatios, its own size), if a
-/// study of exactly that scene and plugin build is in the cache; nothing is run.
+/// study of exactly that scene and plugin build is in the cache; nothing is run. cacheDir set and
+/// empty (--no-cache): nothing is read, nullopt.
 std::optional<ConvergenceResult> cachedReferenceCheck(
     const std::string& sceneFile, PluginLoader& loader,
     const std::optional<std::filesystem::path>& cacheDir);

@@ -10,10 +10,12 @@
 #include <deform/sdk/registry.h>
 #include <deform_harness/calibration.h>
 #include <deform_harness/cases.h>
+#include <deform_harness/convergence.h>
 #include <deform_harness/progress.h>
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -139,8 +141,10 @@ struct SweepOptions {
 };
 
 /// Runs the sweep of a scene; writes sweep.json and sweep.csv (and the scene it ran into
-/// DIR/sweep_scene.json). Throws InputError for a bad scene.
+/// DIR/sweep_scene.json). Throws InputError for a bad scene. referenceCheck, if given, gets the
+/// reference's cached check that sweep.json's reference_check holds (cachedReferenceCheck).
 std::vector<SweepPoint> runSweep(const std::string& sceneFile, PluginLoader& loader,
-                                 const SweepOptions& options, Progress* progress);
+                                 const SweepOptions& options, Progress* progress,
+                                 std::optional<ConvergenceResult>* referenceCheck = nullptr);
 
 }  // namespace deform::harness

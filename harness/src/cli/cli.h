@@ -5,6 +5,7 @@
 
 #include <deform/engine/plugin_loader.h>
 #include <deform_harness/cases.h>
+#include <deform_harness/convergence.h>
 #include <deform_harness/dispatch.h>
 #include <deform_harness/runner.h>
 
@@ -142,9 +143,11 @@ void addChildArgs(CLI::App* cmd, ChildArgs& c, const std::string& what);
 bool childArgsGiven(const CLI::App& cmd);
 
 /// run and sweep: one line on the scene's reference `label`, its cached check's estimate (or why
-/// there is none), or how to get one; nothing with --no-cache (cacheDir set and empty).
-void printCachedReferenceCheck(const std::string& label, const std::string& sceneFile,
-                               PluginLoader& loader, const std::optional<fs::path>& cacheDir);
+/// there is none) or, with no check cached, how to get one; nothing with --no-cache (cacheDir
+/// set and empty).
+void printReferenceCheckLine(const std::string& label, const std::string& sceneFile,
+                             const std::optional<ConvergenceResult>& check,
+                             const std::optional<fs::path>& cacheDir);
 
 /// The child-process options (nullopt: in this process) and the dispatcher of sweep / converge.
 std::optional<ChildCaseOptions> childOptions(const ChildArgs& c, PluginLoader& loader,

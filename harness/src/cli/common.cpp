@@ -3,7 +3,6 @@
 
 #include <deform_harness/calibration.h>
 #include <deform_harness/child_process.h>
-#include <deform_harness/convergence.h>
 #include <deform_harness/scripts.h>
 
 #include <algorithm>
@@ -249,10 +248,10 @@ std::optional<ChildCaseOptions> childOptions(const ChildArgs& c, PluginLoader& l
   return child;
 }
 
-void printCachedReferenceCheck(const std::string& label, const std::string& sceneFile,
-                               PluginLoader& loader, const std::optional<fs::path>& cacheDir) {
-  if (cacheDir && cacheDir->empty()) return;  // --no-cache: nothing to look up
-  const std::optional<ConvergenceResult> check = cachedReferenceCheck(sceneFile, loader, cacheDir);
+void printReferenceCheckLine(const std::string& label, const std::string& sceneFile,
+                             const std::optional<ConvergenceResult>& check,
+                             const std::optional<fs::path>& cacheDir) {
+  if (cacheDir && cacheDir->empty()) return;  // --no-cache: nothing was looked up
   if (!check) {
     std::cout << "reference" << (label.empty() ? "" : " " + label)
               << ": discretisation error not estimated (`deformbench "

@@ -158,7 +158,8 @@ void printReferenceCheck(const std::string& sceneFile, const BenchmarkResult& re
   const auto ref = std::find_if(result.runs.begin(), result.runs.end(),
                                 [](const RunRecord& r) { return r.isReference; });
   if (ref == result.runs.end() || ref->status != RunStatus::Ok) return;
-  printCachedReferenceCheck(ref->label, sceneFile, loader, cacheDir);
+  printReferenceCheckLine(ref->label, sceneFile, cachedReferenceCheck(sceneFile, loader, cacheDir),
+                          cacheDir);
 }
 
 int cmdRun(const RunArgs& a) {

@@ -84,9 +84,10 @@ int cmdSweep(SweepArgs& args, const CLI::App& cmd) {
     o.calibrateChild = trial;
   }
   std::vector<SweepPoint> points;
+  std::optional<ConvergenceResult> referenceCheck;
   {
     Progress progress(0, "sweep");
-    points = runSweep(scene, loader, o, &progress);
+    points = runSweep(scene, loader, o, &progress, &referenceCheck);
   }
   size_t w = 6;
   for (const SweepPoint& p : points) w = std::max(w, p.label.size() + 2);
@@ -121,7 +122,7 @@ int cmdSweep(SweepArgs& args, const CLI::App& cmd) {
                   << "\n";
   }
   // The yardstick's own uncertainty, beside the floors above (sweep.json reference_check).
-  if (!points.empty()) printCachedReferenceCheck("", scene, loader, o.cases.cacheDir);
+  if (!points.empty()) printReferenceCheckLine("", scene, referenceCheck, o.cases.cacheDir);
   std::set<std::string> notes;  // the calibrated points' (the same for most of them)
   for (const SweepPoint& p : points)
     if (!p.note.empty() && notes.insert(p.note).second) std::cout << "note: " << p.note << "\n";
