@@ -11,6 +11,7 @@
 #include <btBulletDynamicsCommon.h>
 #include <deform/geometry/tet_mesher.h>
 #include <deform/geometry/tet_nodes.h>
+#include <deform/kernels/cholesky_solver.h>
 #include <deform/sdk/cache.h>
 
 #include <algorithm>
@@ -40,14 +41,166 @@ VecX lumpedMasses(const TetMesh& mesh, Real density) {
 
 namespace {
 
-// btDeformableBodySolver keeps its Newton and Krylov iteration caps protected.
+// The preconditioner of Bullet's CG (parameter "preconditioner"), z = P^-1 r:
+//   rest_factor: P = M + dt D + dt^2 K of the body at rest (header comment), factorised by
+//                CHOLMOD, the held nodes (inverse mass 0) pinned by a penalty on their diagonal;
+//                refactorised when the held set or dt changes;
+//   none:        P = I, what Bullet 3.24 applies in its implicit projection form (the world hands
+//                the solver its mass preconditioner, which is filled only in the explicit
+//                Lagrange-multiplier branch and is otherwise the identity).
+// It also counts Bullet's CG iterations, which Bullet's solver discards: btConjugateGradient
+// applies the preconditioner first to its search direction p, then to its residual r once
+// before the loop and once per iteration, all three vectors members at fixed addresses. A call
+// on any vector but r therefore starts a solve, and a solve's iterations are its r calls less 1.
+class CgPreconditioner : public Preconditioner {
+ public:
+  btDeformableBackwardEulerObjective* objective = nullptr;  // for its projection
+  int cap = 0;                                              // CG iteration cap
+  long long solves = 0, iterations = 0, cappedSolves = 0;
+  long long cappedSteps = 0;  // steps with a solve that reached the cap
+
+  // Assembles P at rest: lumped masses plus, per tet with shape-function gradients g_a and volume
+  // V, the linear-elastic blocks V (cMu ((g_a . g_b) I + g_b g_a^T) + cLambda g_a g_b^T).
+  void build(const TetMesh& mesh, const VecX& mass, Real cMu, Real cLambda) {
+    const int n = mesh.numVertices();
+    std::vector<Triplet> t;
+    t.reserve(size_t(mesh.numTets()) * 144 + size_t(n) * 3);
+    for (int i = 0; i < n; ++i)
+      for (int d = 0; d < 3; ++d) t.emplace_back(3 * i + d, 3 * i + d, mass(i));
+    for (int e = 0; e < mesh.numTets(); ++e) {
+      const auto r = mesh.T.row(e);
+      Mat3 dm;
+      for (int k = 0; k < 3; ++k) dm.col(k) = (mesh.V.row(r(k + 1)) - mesh.V.row(r(0))).transpose();
+      const Real volume = std::abs(dm.determinant()) / 6.0;
+      if (!(volume > 0)) continue;
+      const Mat3 inv = dm.inverse();  // row k: the gradient of node k + 1's shape function
+      std::array<Vec3, 4> g;
+      for (int k = 0; k < 3; ++k) g[size_t(k + 1)] = inv.row(k).transpose();
+      g[0] = -(g[1] + g[2] + g[3]);
+      for (int a = 0; a < 4; ++a)
+        for (int b = 0; b < 4; ++b) {
+          const Vec3 &ga = g[size_t(a)], &gb = g[size_t(b)];
+          const Mat3 block = volume * (cMu * (ga.dot(gb) * Mat3::Identity() + gb * ga.transpose()) +
+                                       cLambda * ga * gb.transpose());
+          for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) t.emplace_back(3 * r(a) + i, 3 * r(b) + j, block(i, j));
+        }
+    }
+    m_rest.resize(3 * n, 3 * n);
+    m_rest.setFromTriplets(t.begin(), t.end());
+    m_rest.makeCompressed();
+    m_diagonal.resize(size_t(3 * n));
+    for (int c = 0; c < 3 * n; ++c)
+      m_diagonal[size_t(c)] = int(&m_rest.coeffRef(c, c) - m_rest.valuePtr());
+    m_matrix = m_rest;
+    installCholmodAllocator();
+    m_chol.analyzePattern(m_matrix);
+    m_factored = false;
+    m_held.clear();
+    m_r.resize(3 * n);
+    m_z.resize(3 * n);
+  }
+
+  // Before each step: refactorises when the held nodes (inverse mass 0) changed. Returns false
+  // when the factorisation failed (the step then runs with the identity).
+  bool update(const btSoftBody& body) {
+    if (m_rest.rows() == 0) return true;
+    std::vector<char> held(size_t(body.m_nodes.size()));
+    for (int i = 0; i < body.m_nodes.size(); ++i) held[size_t(i)] = body.m_nodes[i].m_im == 0;
+    if (m_factored && held == m_held) return m_ok;
+    m_held = std::move(held);
+    std::copy_n(m_rest.valuePtr(), m_rest.nonZeros(), m_matrix.valuePtr());
+    for (size_t i = 0; i < m_held.size(); ++i)
+      if (m_held[i])
+        for (int d = 0; d < 3; ++d) m_matrix.valuePtr()[m_diagonal[3 * i + size_t(d)]] *= 1e8;
+    {
+      const SerialOpenMpScope serial;
+      m_chol.factorize(m_matrix);
+    }
+    m_ok = m_chol.info() == Eigen::Success;
+    m_factored = true;
+    return m_ok;
+  }
+
+  void operator()(const TVStack& x, TVStack& b) override {
+    count(&x);
+    const int n = int(m_r.size()) / 3;
+    if (m_ok && m_factored && x.size() >= n) {
+      for (int i = 0; i < n; ++i)
+        for (int d = 0; d < 3; ++d) m_r(3 * i + d) = x[i][d];
+      if (m_chol.solveInto(m_r, m_z)) {
+        for (int i = 0; i < n; ++i) b[i].setValue(m_z(3 * i), m_z(3 * i + 1), m_z(3 * i + 2));
+        for (int i = n; i < x.size(); ++i) b[i] = x[i];
+        if (objective) objective->project(b);
+        return;
+      }
+    }
+    for (int i = 0; i < x.size(); ++i) b[i] = x[i];
+  }
+  void reinitialize(bool) override {}
+
+  // Closes the step's last solve (call after each step).
+  void finishStep() {
+    finishSolve();
+    if (m_stepCapped) ++cappedSteps;
+    m_stepCapped = false;
+  }
+
+ private:
+  void finishSolve() {
+    if (m_inSolve && m_residualCalls > 0) {
+      const long long k = m_residualCalls - 1;
+      iterations += k;
+      if (k >= cap) {
+        ++cappedSolves;
+        m_stepCapped = true;
+      }
+    }
+    m_inSolve = false;
+  }
+  void count(const void* x) {
+    if (m_learnResidual) {  // the second call ever: the residual's address
+      m_residual = x;
+      m_learnResidual = false;
+    }
+    if (x == m_residual) {
+      ++m_residualCalls;
+      return;
+    }
+    finishSolve();
+    ++solves;
+    m_inSolve = true;
+    m_residualCalls = 0;
+    if (!m_residual) m_learnResidual = true;
+  }
+
+  SparseMatrix m_rest, m_matrix;
+  std::vector<int> m_diagonal;  // value index of each diagonal entry
+  CholeskySolver m_chol;
+  std::vector<char> m_held;
+  bool m_factored = false, m_ok = false;
+  VecX m_r, m_z;
+  const void* m_residual = nullptr;
+  bool m_learnResidual = false, m_inSolve = false, m_stepCapped = false;
+  long long m_residualCalls = 0;
+};
+
+// btDeformableBodySolver keeps its Newton and Krylov iteration caps protected. The world hands it
+// Bullet's mass preconditioner before every step (setPreconditioner); it keeps ours.
 class ConfigurableDeformableSolver : public btDeformableBodySolver {
  public:
+  CgPreconditioner preconditioner;
+
   void setLimits(int newton, int krylov, Real krylovTolerance) {
     m_maxNewtonIterations = newton;
     m_cg.m_maxIterations = krylov;
     m_cr.m_maxIterations = krylov;
     m_cg.m_tolerance = krylovTolerance;
+    preconditioner.cap = krylov;
+    preconditioner.objective = m_objective;
+  }
+  void setPreconditioner(int /*bullet's choice*/) override {
+    m_objective->m_preconditioner = &preconditioner;
   }
 };
 
@@ -195,6 +348,15 @@ void BulletDeformableModel::build() {
   world.setUseProjection(true);
   w.deformableSolver.setLimits(m_config.newtonIterations, m_config.krylovIterations,
                                m_config.krylovTolerance);
+  if (m_config.preconditioner == CgPreconditioning::RestFactor) {
+    // Bullet's damping differentials: beta times its own elastic parameters (the Neo-Hookean's
+    // mu', lambda'; the linear force's mu, lambda; its alpha M enters no differential).
+    const bool neo = m_config.force == ElasticForce::NeoHookean;
+    const Real muDamp = m_config.dampingBeta * (neo ? 4.0 / 3.0 * mu : mu);
+    const Real lambdaDamp = m_config.dampingBeta * (neo ? lambda + 5.0 / 6.0 * mu : lambda);
+    w.deformableSolver.preconditioner.build(m_mesh, m_mass, m_dt * m_dt * mu + m_dt * muDamp,
+                                            m_dt * m_dt * lambda + m_dt * lambdaDamp);
+  }
 
   m_tail.grasped.clear();
   m_graspForces.clear();
@@ -229,7 +391,9 @@ StepStatus BulletDeformableModel::step(const StepInput& in) {
     }
   bullet_common::aimSlidingNodes(b, m_tail, dt);  // free along their plate (bullet_peer_step.h)
 
-  w.world->stepSimulation(dt, 0, dt);  // exactly one internal step of length dt
+  w.deformableSolver.preconditioner.update(b);  // the held set is final here
+  w.world->stepSimulation(dt, 0, dt);           // exactly one internal step of length dt
+  w.deformableSolver.preconditioner.finishStep();
   // Before finishBulletStep puts them back on the plate.
   m_slidingForces = bullet_common::slidingPlateForces(b, m_tail, in.grasps.size(), dt);
   m_stepGrasps = in.grasps.size();
@@ -282,6 +446,16 @@ void BulletDeformableModel::computeGraspForces(std::size_t numGrasps) const {
 
 void BulletDeformableModel::reset() {
   build();
+}
+
+NumericCounters BulletDeformableModel::numericCounters() const {
+  const CgPreconditioner& p = m_world->deformableSolver.preconditioner;
+  // A step whose CG stopped at its cap is not the backward Euler step: the harness makes the run
+  // invalid on unconverged_steps.
+  return {{"cg_solves", p.solves},
+          {"cg_iterations", p.iterations},
+          {"cg_capped_solves", p.cappedSolves},
+          {"unconverged_steps", p.cappedSteps}};
 }
 
 Counts BulletDeformableModel::counts() const {

@@ -7,9 +7,10 @@
 //   v+
 //
 // solved by Bullet's conjugate gradient in its projection form (fixed and kinematic nodes' dv
-// projected to 0; up to `krylov_iterations`, relative tolerance `krylov_tolerance`), repeated for
-// `newton_iterations` Newton steps (Bullet's default 1). Elasticity per tetrahedron with constant
-// deformation gradient F = Ds Dm^-1, either
+// projected to 0; up to `krylov_iterations`, relative tolerance `krylov_tolerance`; preconditioned
+// by the factor of that matrix at rest, or not at all as in Bullet: `preconditioner`), repeated
+// for `newton_iterations` Newton steps (Bullet's default 1). Elasticity per tetrahedron with
+// constant deformation gradient F = Ds Dm^-1, either
 //   linear_elasticity (btDeformableLinearElasticityForce): P = 2 mu eps + lambda tr(eps) I,
 //                      eps = (F + F^T)/2 - I (small strain, not rotation invariant), damping
 //                      D = alpha M + beta K (Rayleigh form);
@@ -45,6 +46,8 @@
 namespace deform::bullet_deformable {
 
 enum class ElasticForce { LinearElasticity, NeoHookean };
+/// The preconditioner of Bullet's CG (model .cpp, CgPreconditioner).
+enum class CgPreconditioning { RestFactor, None };
 
 /// Resolved parameters (see paramSpecs() for units, ranges and meaning).
 struct DeformableConfig {
@@ -55,6 +58,7 @@ struct DeformableConfig {
   int newtonIterations = 1;
   int krylovIterations = 300;
   Real krylovTolerance = 1.1920928955078125e-07;  ///< FLT_EPSILON, see paramSpecs()
+  CgPreconditioning preconditioner = CgPreconditioning::RestFactor;
 };
 
 std::vector<ParamSpec> paramSpecs();
@@ -82,6 +86,8 @@ class BulletDeformableModel final : public Model {
   void reset() override;
   Counts counts() const override;
   PhaseTimes phaseTimes() const override { return m_phase; }
+  /// Bullet's CG since init or reset: solves, iterations, solves that reached the cap.
+  NumericCounters numericCounters() const override;
   /// Per grasp: the elastic and damping forces Bullet's force object computes at the held nodes
   /// (positions at the end of the step), summed; a sliding plate: the normal momentum it takes
   /// back per step / dt (header comment). Computed when first asked after a step (one more
