@@ -43,8 +43,8 @@ namespace {
 
 // The preconditioner of Bullet's CG (parameter "preconditioner"), z = P^-1 r:
 //   rest_factor: P = M + dt D + dt^2 K of the body at rest (header comment), factorised by
-//                CHOLMOD, the held nodes (inverse mass 0) pinned by a penalty on their diagonal;
-//                refactorised when the held set or dt changes;
+//                CHOLMOD at the scene's dt, the held nodes (inverse mass 0) pinned by a penalty
+//                on their diagonal; refactorised when the held set changes;
 //   none:        P = I, what Bullet 3.24 applies in its implicit projection form (the world hands
 //                the solver its mass preconditioner, which is filled only in the explicit
 //                Lagrange-multiplier branch and is otherwise the identity).
