@@ -30,9 +30,8 @@ std::vector<ParamSpec> paramSpecs() {
                          "iteration (Bullet's default 300)"),
       ParamSpec::real("krylov_tolerance", "1", 1.1920928955078125e-07, 1e-30, 1.0,
                       "CG stops when r^T P^-1 r < tol min(1, b^T P^-1 b), P the preconditioner; "
-                      "default FLT_EPSILON, "
-                      "the value of Bullet's single-precision build (its double build uses "
-                      "DBL_EPSILON and then always runs to the cap)"),
+                      "default FLT_EPSILON, the value of Bullet's single-precision build (its "
+                      "double build uses DBL_EPSILON and then always runs to the cap)"),
       ParamSpec::choice("preconditioner", "rest_factor", {"rest_factor", "none"},
                         "preconditioner of Bullet's CG: the Cholesky factor of the implicit "
                         "step's matrix M + dt D + dt^2 K at rest, or none (the identity, what "
