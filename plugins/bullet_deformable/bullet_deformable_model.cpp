@@ -12,6 +12,7 @@
 #include <deform/geometry/tet_mesher.h>
 #include <deform/geometry/tet_nodes.h>
 #include <deform/kernels/cholesky_solver.h>
+#include <deform/kernels/fem_tet.h>
 #include <deform/sdk/cache.h>
 
 #include <algorithm>
@@ -59,32 +60,26 @@ class CgPreconditioner : public Preconditioner {
   long long solves = 0, iterations = 0, cappedSolves = 0;
   long long cappedSteps = 0;  // steps with a solve that reached the cap
 
-  // Assembles P at rest: lumped masses plus, per tet with shape-function gradients g_a and volume
-  // V, the linear-elastic blocks V (cMu ((g_a . g_b) I + g_b g_a^T) + cLambda g_a g_b^T).
+  // Assembles P at rest: lumped masses plus each tet's linear-elastic stiffness (fem_tet.h) with
+  // the Lame parameters (cMu, cLambda).
   void build(const TetMesh& mesh, const VecX& mass, Real cMu, Real cLambda) {
     const int n = mesh.numVertices();
     std::vector<Triplet> t;
     t.reserve(size_t(mesh.numTets()) * 144 + size_t(n) * 3);
     for (int i = 0; i < n; ++i)
       for (int d = 0; d < 3; ++d) t.emplace_back(3 * i + d, 3 * i + d, mass(i));
+    const LinearMaterial material{{cMu, cLambda}};
     for (int e = 0; e < mesh.numTets(); ++e) {
-      const auto r = mesh.T.row(e);
-      Mat3 dm;
-      for (int k = 0; k < 3; ++k) dm.col(k) = (mesh.V.row(r(k + 1)) - mesh.V.row(r(0))).transpose();
-      const Real volume = std::abs(dm.determinant()) / 6.0;
-      if (!(volume > 0)) continue;
-      const Mat3 inv = dm.inverse();  // row k: the gradient of node k + 1's shape function
-      std::array<Vec3, 4> g;
-      for (int k = 0; k < 3; ++k) g[size_t(k + 1)] = inv.row(k).transpose();
-      g[0] = -(g[1] + g[2] + g[3]);
-      for (int a = 0; a < 4; ++a)
-        for (int b = 0; b < 4; ++b) {
-          const Vec3 &ga = g[size_t(a)], &gb = g[size_t(b)];
-          const Mat3 block = volume * (cMu * (ga.dot(gb) * Mat3::Identity() + gb * ga.transpose()) +
-                                       cLambda * ga * gb.transpose());
-          for (int i = 0; i < 3; ++i)
-            for (int j = 0; j < 3; ++j) t.emplace_back(3 * r(a) + i, 3 * r(b) + j, block(i, j));
-        }
+      std::array<Vec3, 4> X;
+      for (int k = 0; k < 4; ++k) X[size_t(k)] = mesh.V.row(mesh.T(e, k)).transpose();
+      TetRest rest;
+      if (!makeTetRest(X[0], X[1], X[2], X[3], rest)) continue;
+      TetEvaluation k;
+      evaluateTet(material, rest, X, TetEvalMode::Stiffness, k);
+      for (int i = 0; i < 12; ++i)
+        for (int j = 0; j < 12; ++j)
+          t.emplace_back(3 * mesh.T(e, i / 3) + i % 3, 3 * mesh.T(e, j / 3) + j % 3,
+                         k.stiffness(i, j));
     }
     m_rest.resize(3 * n, 3 * n);
     m_rest.setFromTriplets(t.begin(), t.end());
@@ -95,20 +90,23 @@ class CgPreconditioner : public Preconditioner {
     m_matrix = m_rest;
     installCholmodAllocator();
     m_chol.analyzePattern(m_matrix);
-    m_factored = false;
-    m_held.clear();
+    m_ok = false;
+    m_held.assign(size_t(n), -1);  // no held set factorised yet
     m_r.resize(3 * n);
     m_z.resize(3 * n);
   }
 
-  // Before each step: refactorises when the held nodes (inverse mass 0) changed. Returns false
-  // when the factorisation failed (the step then runs with the identity).
-  bool update(const btSoftBody& body) {
-    if (m_rest.rows() == 0) return true;
-    std::vector<char> held(size_t(body.m_nodes.size()));
-    for (int i = 0; i < body.m_nodes.size(); ++i) held[size_t(i)] = body.m_nodes[i].m_im == 0;
-    if (m_factored && held == m_held) return m_ok;
-    m_held = std::move(held);
+  // Before each step: refactorises when the held nodes (inverse mass 0) changed. A failed
+  // factorisation leaves the identity for the steps until the next change.
+  void update(const btSoftBody& body) {
+    if (m_rest.rows() == 0) return;
+    bool changed = false;
+    for (int i = 0; i < body.m_nodes.size(); ++i) {
+      const char held = body.m_nodes[i].m_im == 0;
+      changed |= held != m_held[size_t(i)];
+      m_held[size_t(i)] = held;
+    }
+    if (!changed) return;
     std::copy_n(m_rest.valuePtr(), m_rest.nonZeros(), m_matrix.valuePtr());
     for (size_t i = 0; i < m_held.size(); ++i)
       if (m_held[i])
@@ -118,14 +116,12 @@ class CgPreconditioner : public Preconditioner {
       m_chol.factorize(m_matrix);
     }
     m_ok = m_chol.info() == Eigen::Success;
-    m_factored = true;
-    return m_ok;
   }
 
   void operator()(const TVStack& x, TVStack& b) override {
     count(&x);
     const int n = int(m_r.size()) / 3;
-    if (m_ok && m_factored && x.size() >= n) {
+    if (m_ok && x.size() >= n) {
       for (int i = 0; i < n; ++i)
         for (int d = 0; d < 3; ++d) m_r(3 * i + d) = x[i][d];
       if (m_chol.solveInto(m_r, m_z)) {
@@ -177,8 +173,8 @@ class CgPreconditioner : public Preconditioner {
   SparseMatrix m_rest, m_matrix;
   std::vector<int> m_diagonal;  // value index of each diagonal entry
   CholeskySolver m_chol;
-  std::vector<char> m_held;
-  bool m_factored = false, m_ok = false;
+  std::vector<char> m_held;  // per node: held at the last factorisation (-1: none yet)
+  bool m_ok = false;         // a factor of P for m_held is ready
   VecX m_r, m_z;
   const void* m_residual = nullptr;
   bool m_learnResidual = false, m_inSolve = false, m_stepCapped = false;
