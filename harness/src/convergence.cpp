@@ -7,6 +7,7 @@
 #include <deform_harness/cases.h>
 #include <deform_harness/convergence.h>
 #include <deform_harness/json_file.h>
+#include <deform_harness/runner.h>
 
 #include <algorithm>
 #include <chrono>
@@ -167,7 +168,8 @@ namespace {
 constexpr const char* kCacheKind = "harness.convergence";
 // 2: RMS differences; 3: levels by edge length, reasons, RMS orders; 4: order-2 upper estimate
 // 5: a finer level where the surface bounds the coarse ones (finer_level_added, estimated_level)
-constexpr const char* kCacheVersion = "harness.convergence/5";
+// 6: a level whose surface passes through itself is invalid (and the message names the level)
+constexpr const char* kCacheVersion = "harness.convergence/6";
 
 ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   ojson doc;
@@ -634,6 +636,19 @@ void runLevelBatches(std::vector<Study*>& studies, PluginLoader& loader, Progres
         st->surfaces[k] = std::move(x);
       }
     }
+    // A level whose surface passes through itself away from the held vertices is no state of
+    // the solid (as a reference that does is invalid: computeRunErrors).
+    if (st->surfaces[k]) {
+      const Organ& organ = st->prepared.organ;
+      const long long pairs = selfIntersectionOf(organ.surface, *st->surfaces[k],
+                                                 heldSurfaceVertices(st->prepared.parsed, organ))
+                                  .free;
+      if (pairs > 0) {
+        level.status = "invalid (its surface passes through itself (" + std::to_string(pairs) +
+                       (pairs == 1 ? " pair" : " pairs") + " of triangles))";
+        st->surfaces[k].reset();
+      }
+    }
     if (progress) progress->finish(id, level.status);
   };
   const ConvergeOptions& shared = studies.front()->input->options;
@@ -711,6 +726,14 @@ void estimateOrRefine(Study& st) {
   if (st.displacement.size() != 3) {
     st.out.reason = "levels_failed";
     st.out.message = "no estimate: not every level ran to its compared instant";
+    // Say which level and why (an invalid level carries its reason in its status).
+    for (size_t i = 0; i < st.out.levels.size(); ++i) {
+      const ConvergenceLevelResult& l = st.out.levels[i];
+      if (l.status == "ok") continue;
+      st.out.message = "no estimate: level " + std::to_string(i) + " (" +
+                       std::to_string(l.elements) + " tets) is " + l.status;
+      break;
+    }
     return;
   }
   estimateFromLevels(st.displacement, st.include, st.out);

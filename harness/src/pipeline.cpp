@@ -3,6 +3,7 @@
 #include "solve_cache.h"
 
 #include <deform/engine/interaction.h>
+#include <deform/geometry/mesh_check.h>
 #include <deform/internal/atomic_file.h>
 #include <deform/sdk/contact.h>
 #include <deform_harness/results.h>
@@ -18,7 +19,9 @@
 #include <fstream>
 #include <iomanip>
 #include <iterator>
+#include <limits>
 #include <memory>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -45,12 +48,97 @@ void markReferenceValidity(const RunRecord& ref, std::vector<RunRecord>& runs) {
   }
 }
 
+/// "150 pairs of triangles" (and "; 12 more at the edge of the held region" when asked).
+std::string pairsText(long long n) {
+  return std::to_string(n) + (n == 1 ? " pair" : " pairs") + " of triangles";
+}
+
+/// The first compared instant (else the end of the run) at which the run's surface passes
+/// through itself, as "at t = 1 s" with the pairs counted; nullopt when none does.
+std::optional<std::pair<std::string, SelfIntersectionCount>> selfIntersection(
+    const RunRecord& r, const SurfaceMesh& rest, const std::vector<int>& held) {
+  const auto found = [](const SelfIntersectionCount& c) { return c.free + c.atHeld > 0; };
+  for (const SurfaceSnapshot& c : r.compared) {
+    if (const SelfIntersectionCount n = selfIntersectionOf(rest, c.positions, held); found(n)) {
+      std::ostringstream at;
+      at << "at t = " << c.time << " s";
+      return std::make_pair(at.str(), n);
+    }
+  }
+  if (!r.compared.empty()) return std::nullopt;
+  const SelfIntersectionCount n = selfIntersectionOf(rest, r.finalSurface, held);
+  if (!found(n)) return std::nullopt;
+  return std::make_pair(std::string("at the end of the run"), n);
+}
+
+/// A surface that passes through itself is no state of the solid: the reference (which has no
+/// self-contact) is then invalid, and a model's run says so in its notes. A fold of the reference
+/// only at the edge of what the scene holds (a clamp's box, a grasp's jaws: rigid regions without
+/// contact) is the scene's idealised boundary, which every model shares: a note.
+void checkSelfIntersections(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs) {
+  const std::vector<int> held = heldSurfaceVertices(scene, organ);
+  for (RunRecord& r : runs) {
+    if (r.status != RunStatus::Ok) continue;
+    const auto at = selfIntersection(r, organ.surface, held);
+    if (!at) continue;
+    const auto& [when, n] = *at;
+    if (!r.isReference) {
+      r.notes.push_back("the surface passes through itself " + when + " (" +
+                        pairsText(n.free + n.atHeld) + ")");
+    } else if (n.free > 0 && r.valid) {
+      r.valid = false;
+      r.invalidReason =
+          "its surface passes through itself " + when + " (" + pairsText(n.free) +
+          (n.atHeld > 0 ? ", and " + std::to_string(n.atHeld) + " at a held edge" : std::string()) +
+          "): no state of a solid (the reference has no self-contact)";
+    } else if (n.free == 0) {
+      r.notes.push_back("the surface folds through itself at the edge of the held region " + when +
+                        " (" + pairsText(n.atHeld) +
+                        "): the clamp or the jaws are rigid regions without contact");
+    }
+  }
+}
+
 }  // namespace
+
+std::vector<int> heldSurfaceVertices(const Scene& scene, const Organ& organ) {
+  std::vector<int> held = rmseExcludedVertices(scene, organ.surface.V);  // grasped
+  if (!organ.fixed.empty()) {
+    const std::vector<int> fixed = fixedNodeIndices(organ.surface.V, organ.fixed, organ.surface);
+    held.insert(held.end(), fixed.begin(), fixed.end());
+  }
+  return held;
+}
+
+SelfIntersectionCount selfIntersectionOf(const SurfaceMesh& rest, const MatX3& positions,
+                                         const std::vector<int>& held) {
+  SelfIntersectionCount out;
+  const int nv = rest.numVertices();
+  if (positions.rows() < nv || !findSelfIntersections(rest, 1).ok()) return out;
+  const SelfIntersectionReport s =
+      findSelfIntersections({positions.topRows(nv), rest.F}, std::numeric_limits<int>::max());
+  // The held region's edge: its vertices and their neighbours (a fold there spans the strip).
+  std::vector<char> isHeld(size_t(nv), 0), atEdge(size_t(nv), 0);
+  for (int v : held)
+    if (v >= 0 && v < nv) isHeld[size_t(v)] = 1;
+  const auto touches = [&](const std::vector<char>& mark, int t) {
+    for (int k = 0; k < 3; ++k)
+      if (mark[size_t(rest.F(t, k))]) return true;
+    return false;
+  };
+  for (int t = 0; t < rest.numFaces(); ++t)
+    if (touches(isHeld, t))
+      for (int k = 0; k < 3; ++k) atEdge[size_t(rest.F(t, k))] = 1;
+  const auto touchesHeld = [&](int t) { return touches(atEdge, t); };
+  for (const auto& [a, b] : s.listed) (touchesHeld(a) || touchesHeld(b) ? out.atHeld : out.free)++;
+  return out;
+}
 
 void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs) {
   const auto ref =
       std::find_if(runs.begin(), runs.end(), [](const RunRecord& r) { return r.isReference; });
   if (ref == runs.end()) return;
+  checkSelfIntersections(scene, organ, runs);
   markReferenceValidity(*ref, runs);
   if (ref->status != RunStatus::Ok) {
     for (RunRecord& r : runs) {

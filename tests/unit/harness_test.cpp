@@ -1,6 +1,7 @@
 // The harness: error metrics on hand-made arrays, step statistics, the runner (status, timing
 // records, divergence, failures, unsupported scenes, reset reproducibility) and results.json.
 #include <deform/engine/interaction.h>
+#include <deform/geometry/mesh_check.h>
 #include <deform_harness/metrics.h>
 #include <deform_harness/results.h>
 #include <deform_harness/runner.h>
@@ -628,6 +629,70 @@ TEST(Runner, ACollapseWhereTheReferenceHoldsStillIsInvalid) {
   runs[0].invalidReason.clear();
   computeRunErrors(f.scene, f.organ, runs);
   EXPECT_TRUE(runs[0].valid) << runs[0].invalidReason;
+}
+
+// A surface that passes through itself is no state of a solid: a reference that ends there is
+// invalid (its models read "against an invalid reference"), and a model's run says so in a note.
+TEST(Runner, AReferenceWhoseSurfacePassesThroughItselfIsInvalid) {
+  Fixture f;
+  // Two 0.1 m cubes' surfaces in place of the tet: the grasp holds a corner of the first; corner
+  // 15 of the second, 0.3 m away, is then pushed through its bottom face.
+  const MatX3 corners =
+      (MatX3(8, 3) << 0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1, 1, 0, 1, 0, 1, 1, 1, 1, 1)
+          .finished() *
+      0.1;
+  const MatX3i faces = (MatX3i(12, 3) << 0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4, 2, 6,
+                        7, 2, 7, 3, 0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5)
+                           .finished();
+  f.organ.surface.V.resize(16, 3);
+  f.organ.surface.V << corners, corners.rowwise() + Vec3(0.3, 0, 0).transpose();
+  f.organ.surface.F.resize(24, 3);
+  f.organ.surface.F << faces, faces.array() + 8;
+  ASSERT_TRUE(findSelfIntersections(f.organ.surface).ok());
+  MatX3 through = f.organ.surface.V;
+  through.row(15) = Vec3(0.32, 0.03, -0.05).transpose();
+  ASSERT_FALSE(findSelfIntersections({through, f.organ.surface.F}).ok());
+
+  std::vector<RunRecord> runs(3);
+  for (RunRecord& r : runs) {
+    r.status = RunStatus::Ok;
+    r.compared = {snapshotAt(50, 0.5, f.organ.surface.V), snapshotAt(100, 1.0, through)};
+    r.finalSurface = through;
+  }
+  runs[1].compared[1].positions = f.organ.surface.V;  // this model stays clear
+  runs[2].isReference = true;
+  runs[2].label = "ref";
+  computeRunErrors(f.scene, f.organ, runs);
+  EXPECT_FALSE(runs[2].valid);
+  EXPECT_EQ(runs[2].invalidReason.rfind("its surface passes through itself at t = 1 s (", 0), 0u)
+      << runs[2].invalidReason;
+  EXPECT_FALSE(*runs[0].referenceValid);
+  EXPECT_TRUE(runs[0].valid) << "a model's own fold is a note";
+  ASSERT_FALSE(runs[0].notes.empty());
+  EXPECT_EQ(runs[0].notes.front().rfind("the surface passes through itself at t = 1 s", 0), 0u);
+  EXPECT_TRUE(runs[1].notes.empty());
+
+  // The same reference at rest throughout is valid.
+  runs[2] = runs[1];
+  runs[2].isReference = true;
+  computeRunErrors(f.scene, f.organ, runs);
+  EXPECT_TRUE(runs[2].valid) << runs[2].invalidReason;
+  EXPECT_TRUE(*runs[0].referenceValid);
+
+  // Where the grasp holds corner 15, every intersecting triangle touches a held vertex: a fold at
+  // the edge of a rigid region the scene gives no contact, noted, the reference still valid.
+  for (KeyFrame& k : f.scene.tools[0].trajectory) k.pos = Vec3(0.4, 0.1, 0.1);
+  EXPECT_EQ(
+      selfIntersectionOf(f.organ.surface, through, heldSurfaceVertices(f.scene, f.organ)).free, 0);
+  runs[2].compared[1].positions = through;
+  computeRunErrors(f.scene, f.organ, runs);
+  EXPECT_TRUE(runs[2].valid) << runs[2].invalidReason;
+  ASSERT_FALSE(runs[2].notes.empty());
+  EXPECT_EQ(runs[2].notes.back().rfind("the surface folds through itself at the edge of the held "
+                                       "region at t = 1 s (",
+                                       0),
+            0u)
+      << runs[2].notes.back();
 }
 
 TEST(Metrics, GraspSceneRmseKLeavesOutTheGraspedVertices) {

@@ -214,9 +214,26 @@ void invalidateIfNotOk(RunRecord& record);
 /// record.prescribedMotion), with the ratio.
 std::string outrunNote(const Scene& scene, const RunRecord& record);
 
+/// Where `positions` (#V rows of rest's vertices, moved) pass through themselves on rest's
+/// faces: the intersecting pairs of triangles, split into those with a vertex in `held` or next
+/// to it (a fold at the edge of a clamp or a grasp, whose rigid region the scene gives no
+/// contact) and the others. Both 0 when rest itself self-intersects (nothing to judge).
+/// The surface vertices the scene holds: those its grasps hold (rmseExcludedVertices) and those
+/// in its fixed region.
+std::vector<int> heldSurfaceVertices(const Scene& scene, const Organ& organ);
+
+struct SelfIntersectionCount {
+  long long free = 0, atHeld = 0;
+};
+SelfIntersectionCount selfIntersectionOf(const SurfaceMesh& rest, const MatX3& positions,
+                                         const std::vector<int>& held = {});
+
 /// Errors of every ok model run against the reference run (if there is one and it is ok), and
 /// each model run's referenceValid: false when the reference is invalid, failed, diverged or
-/// unsupported (the errors, where there are any, are then against an invalid reference).
+/// unsupported (the errors, where there are any, are then against an invalid reference). A
+/// reference whose surface passes through itself at a compared instant away from the held
+/// vertices (fixed or grasped) is invalid first (no state of a solid); a fold at a held region's
+/// edge, and a model's run that passes through itself, get a note.
 void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs);
 
 struct BenchmarkResult {
