@@ -21,7 +21,8 @@
 // cases. Without it the cases run in this process (library callers, tests).
 //
 // Reference check (issue F2): after the cases, each distinct reference a table uses
-// (method-comparison: one per organ; the hybrid tables: per phantom the 20 N downward case) is
+// (method-comparison: one per organ; the hybrid tables: per phantom and direction the largest
+// force whose reference is valid) is
 // run through the convergence study of convergence.h at 2, 1.4 and 1 x its edge length, the
 // finest level being the table's reference itself, in this process and cached. The table's notes
 // get "reference (CASE): ..., estimated discretisation error X% of the peak (levels ..., p = ...)"

@@ -193,6 +193,10 @@ const CaseResult* caseOrSkipped(const Results& res, const std::string& id, bool 
   return nullptr;
 }
 
+std::vector<std::string> checkedCases(const TableDef& d, const Results& results) {
+  return d.pickChecks ? d.pickChecks(results) : d.checks;
+}
+
 TableDef tableDef(const std::string& name, const std::string& title, const std::string& source,
                   std::vector<TableColumn> cols) {
   TableDef t;

@@ -141,6 +141,9 @@ struct TableDef {
   std::vector<std::string> notes;
   /// Cases whose reference the table checks for convergence: one per distinct reference.
   std::vector<std::string> checks;
+  /// When set, picks the checked cases from the results instead (the hybrid tables: per phantom
+  /// and direction, the largest load whose reference is valid).
+  std::function<std::vector<std::string>(const Results&)> pickChecks;
   std::vector<TableColumn> columns;
   std::vector<Case> cases;
   std::function<std::vector<ojson>(const Results&, const fs::path& outDir)> rows;
@@ -149,6 +152,9 @@ struct TableDef {
   /// progress (neither is shared between threads), and rows() must do it when it did not run.
   std::function<void()> background;
 };
+
+/// The cases whose reference table d checks: d.pickChecks(results) when set, else d.checks.
+std::vector<std::string> checkedCases(const TableDef& d, const Results& results);
 
 TableDef tableDef(const std::string& name, const std::string& title, const std::string& source,
                   std::vector<TableColumn> cols);
@@ -162,6 +168,10 @@ TableDef metaballsConstruction(const TablesOptions& o);
 TableDef methodComparison(const TablesOptions& o, long long refElements);
 TableDef bemTiming(const TablesOptions& o);
 TableDef bemAccuracy(const TablesOptions& o, PluginLoader& loader, Progress* progress);
+/// The hybrid cases whose reference the tables check (their pickChecks): per phantom and
+/// direction, the one with the largest force whose reference is valid; where none is, the
+/// largest (its cell says why).
+std::vector<std::string> hybridChecks(const Results& res, bool quick);
 /// hybrid-accuracy (timing false) or hybrid-timing: the same cases, other figures.
 TableDef hybridTable(const TablesOptions& o, long long refElements, bool timing);
 /// verification: reference_fem at its defaults (and CalculiX when its plugin loads) against

@@ -288,7 +288,7 @@ std::map<std::string, ReferenceCheck> checkReferences(const std::vector<TableDef
   if (!options.referenceCheck) return checks;
   std::vector<const Case*> toCheck;
   for (const TableDef& d : defs)
-    for (const std::string& id : d.checks)
+    for (const std::string& id : checkedCases(d, results))
       if (!checks.count(id) && results.count(id)) {
         checks[id] = {};
         for (const Case* c : order)
@@ -327,15 +327,16 @@ Table assembleTable(const TableDef& d, const Results& results,
           .notes = d.notes,
           .columns = d.columns,
           .rows = {}};
-  if (!d.checks.empty() && !options.referenceCheck)
+  const std::vector<std::string> checked = checkedCases(d, results);
+  if (!checked.empty() && !options.referenceCheck)
     t.notes.push_back("reference: convergence not checked (--no-reference-check).");
-  for (const std::string& id : d.checks) {
+  for (const std::string& id : checked) {
     if (!checks.count(id)) continue;
     t.notes.push_back(checks.at(id).note);
     if (!checks.at(id).warning.empty()) t.notes.push_back(checks.at(id).warning);
   }
   // Every row judged against a checked reference says which one and its estimated error.
-  const bool referenceColumn = !d.checks.empty() && options.referenceCheck;
+  const bool referenceColumn = !checked.empty() && options.referenceCheck;
   if (referenceColumn) {
     auto at = std::find_if(t.columns.begin(), t.columns.end(),
                            [](const TableColumn& c) { return c.key == "status"; });
@@ -344,13 +345,16 @@ Table assembleTable(const TableDef& d, const Results& results,
   for (ojson row : d.rows(results, options.outDir)) {
     // A row whose reference is not shown converged to 1% is flagged in its status, not only
     // noted under the table: the row of the checked case, and the rows sharing its reference
-    // set-up (the hybrid tables check one case per phantom).
-    for (const std::string& id : d.checks) {
+    // set-up (the hybrid tables check one case per phantom and direction).
+    for (const std::string& id : checked) {
       if (!checks.count(id)) continue;
       const std::string scene = row.value("scene", "");
       const std::string phantom = row.value("phantom", "");
-      const bool covered = scene == "scenes/" + id + ".json" ||
-                           (!phantom.empty() && id.rfind("hybrid/" + phantom + "_", 0) == 0);
+      const std::string direction = row.value("direction", "");
+      const std::string group =
+          "hybrid/" + phantom + "_" + (direction.empty() ? "" : direction + "_");
+      const bool covered =
+          scene == "scenes/" + id + ".json" || (!phantom.empty() && id.rfind(group, 0) == 0);
       if (!covered) continue;
       row["reference"] =
           checks.at(id).cell + (scene == "scenes/" + id + ".json" ? "" : " (study of " + id + ")");
