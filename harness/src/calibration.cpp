@@ -546,6 +546,9 @@ class Calibrator {
             r.status = std::isfinite(r.value) ? "ok" : why;
           } else if (!run->error) {
             r.status = "no error" + noErrorWhy(c, *run);
+          } else if (!run->referenceValid.value_or(true)) {
+            // An error against a state that is not the solid's fits nothing.
+            r.status = "against an invalid reference: " + run->referenceInvalidReason;
           } else {
             r.value = metricOf(*run->error, m_o.metric);
             r.status = std::isfinite(r.value) ? "ok" : "no metric";

@@ -10,7 +10,8 @@
 #               it records the other parameters the training ran with, and a run or sweep
 #               point of the calibrated model with another value of one gets a note; `sweep
 #               --calibrate` fits the point itself (and refuses --calibration beside it); `run
-#               --calibration shipped --calibrated-twins` runs the model and its twin
+#               --calibration shipped --calibrated-twins` runs the model and its twin; a
+#               validation scene with an invalid reference scores nothing and says why
 #   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0,
 #               a reference that crashes in every trial (CRASHING_PLUGIN_DIR, the optional fifth
 #               argument: no trial can be scored, so nothing is fitted): one stderr line each and
@@ -68,6 +69,19 @@ assert c["failed_runs"] == len(diverged)
 worst = max(float(r["objective"]) for r in rows)
 assert all(float(r["objective"]) == worst for r in diverged), "a diverged trial not scored worst"
 print("gain", gain, "trials", len(rows), "diverged", len(diverged))
+PY
+  # A validation scene whose reference is invalid (the toy at gain 0 does not follow the grasp)
+  # fits nothing: its status says so and the validation mean is null, not a number against it.
+  sed 's/"gain": 0.4/"gain": 0.0/' "$here/toy_reference.json" >"$work/toy_invalid_reference.json"
+  "${db[@]}" calibrate "$here/toy_reference.json" --model toy --out "$work/cal_invalid" \
+    --budget 2 --validate "$work/toy_invalid_reference.json" --no-cache >"$work/invalid.txt" 2>&1 \
+    || { cat "$work/invalid.txt"; fail "calibrate with an invalid validation reference"; }
+  python3 - "$work/cal_invalid/calibration.json" <<'PY'
+import json, sys
+v = json.load(open(sys.argv[1]))["validation"]
+assert v["after"] is None, v
+status = v["per_scene"][0]["status_after"]
+assert status.startswith("against an invalid reference: the reference toy(gain=0) is invalid: "), status
 PY
   "${db[@]}" run "$here/toy_reference.json" --out "$work/run" --no-cache --explain \
     --calibration "$work/cal/calibration.json" >"$work/run.txt" 2>&1 || { cat "$work/run.txt"; fail run; }
