@@ -48,7 +48,7 @@ void markReferenceValidity(const RunRecord& ref, std::vector<RunRecord>& runs) {
   }
 }
 
-/// "150 pairs of triangles" (and "; 12 more at the edge of the held region" when asked).
+/// "150 pairs of triangles".
 std::string pairsText(long long n) {
   return std::to_string(n) + (n == 1 ? " pair" : " pairs") + " of triangles";
 }
