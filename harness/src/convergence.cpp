@@ -639,10 +639,8 @@ void runLevelBatches(std::vector<Study*>& studies, PluginLoader& loader, Progres
     // A level whose surface passes through itself away from the held vertices is no state of
     // the solid (as a reference that does is invalid: computeRunErrors).
     if (st->surfaces[k]) {
-      const Organ& organ = st->prepared.organ;
-      const long long pairs = selfIntersectionOf(organ.surface, *st->surfaces[k],
-                                                 heldSurfaceVertices(st->prepared.parsed, organ))
-                                  .free;
+      const long long pairs =
+          SelfIntersectionCheck(st->prepared.parsed, st->prepared.organ)(*st->surfaces[k]).free;
       if (pairs > 0) {
         level.status = "invalid (its surface passes through itself (" + std::to_string(pairs) +
                        (pairs == 1 ? " pair" : " pairs") + " of triangles))";

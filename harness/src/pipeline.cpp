@@ -56,17 +56,17 @@ std::string pairsText(long long n) {
 /// The first compared instant (else the end of the run) at which the run's surface passes
 /// through itself, as "at t = 1 s" with the pairs counted; nullopt when none does.
 std::optional<std::pair<std::string, SelfIntersectionCount>> selfIntersection(
-    const RunRecord& r, const SurfaceMesh& rest, const std::vector<int>& held) {
+    const RunRecord& r, const SelfIntersectionCheck& check) {
   const auto found = [](const SelfIntersectionCount& c) { return c.free + c.atHeld > 0; };
   for (const SurfaceSnapshot& c : r.compared) {
-    if (const SelfIntersectionCount n = selfIntersectionOf(rest, c.positions, held); found(n)) {
+    if (const SelfIntersectionCount n = check(c.positions); found(n)) {
       std::ostringstream at;
       at << "at t = " << c.time << " s";
       return std::make_pair(at.str(), n);
     }
   }
   if (!r.compared.empty()) return std::nullopt;
-  const SelfIntersectionCount n = selfIntersectionOf(rest, r.finalSurface, held);
+  const SelfIntersectionCount n = check(r.finalSurface);
   if (!found(n)) return std::nullopt;
   return std::make_pair(std::string("at the end of the run"), n);
 }
@@ -76,10 +76,10 @@ std::optional<std::pair<std::string, SelfIntersectionCount>> selfIntersection(
 /// only at the edge of what the scene holds (a clamp's box, a grasp's jaws: rigid regions without
 /// contact) is the scene's idealised boundary, which every model shares: a note.
 void checkSelfIntersections(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs) {
-  const std::vector<int> held = heldSurfaceVertices(scene, organ);
+  const SelfIntersectionCheck check(scene, organ);
   for (RunRecord& r : runs) {
     if (r.status != RunStatus::Ok) continue;
-    const auto at = selfIntersection(r, organ.surface, held);
+    const auto at = selfIntersection(r, check);
     if (!at) continue;
     const auto& [when, n] = *at;
     if (!r.isReference) {
@@ -101,36 +101,35 @@ void checkSelfIntersections(const Scene& scene, const Organ& organ, std::vector<
 
 }  // namespace
 
-std::vector<int> heldSurfaceVertices(const Scene& scene, const Organ& organ) {
-  std::vector<int> held = rmseExcludedVertices(scene, organ.surface.V);  // grasped
-  if (!organ.fixed.empty()) {
-    const std::vector<int> fixed = fixedNodeIndices(organ.surface.V, organ.fixed, organ.surface);
-    held.insert(held.end(), fixed.begin(), fixed.end());
+SelfIntersectionCheck::SelfIntersectionCheck(const Scene& scene, const Organ& organ)
+    : m_rest(organ.surface), m_judged(findSelfIntersections(organ.surface, 1).ok()) {
+  if (!m_judged) return;
+  // The vertices the scene holds (grasped, fixed), then the held region's edge: them and their
+  // neighbours (a fold there spans the strip).
+  const int nv = m_rest.numVertices();
+  std::vector<char> held(size_t(nv), 0);
+  for (int v : rmseExcludedVertices(scene, m_rest.V)) held[size_t(v)] = 1;
+  if (!organ.fixed.empty())
+    for (int v : fixedNodeIndices(m_rest.V, organ.fixed, m_rest)) held[size_t(v)] = 1;
+  m_atEdge.assign(size_t(nv), 0);
+  for (int t = 0; t < m_rest.numFaces(); ++t) {
+    const auto f = m_rest.F.row(t);
+    if (held[size_t(f(0))] || held[size_t(f(1))] || held[size_t(f(2))])
+      for (int k = 0; k < 3; ++k) m_atEdge[size_t(f(k))] = 1;
   }
-  return held;
 }
 
-SelfIntersectionCount selfIntersectionOf(const SurfaceMesh& rest, const MatX3& positions,
-                                         const std::vector<int>& held) {
+SelfIntersectionCount SelfIntersectionCheck::operator()(const MatX3& positions) const {
   SelfIntersectionCount out;
-  const int nv = rest.numVertices();
-  if (positions.rows() < nv || !findSelfIntersections(rest, 1).ok()) return out;
+  const int nv = m_rest.numVertices();
+  if (!m_judged || positions.rows() < nv) return out;
   const SelfIntersectionReport s =
-      findSelfIntersections({positions.topRows(nv), rest.F}, std::numeric_limits<int>::max());
-  // The held region's edge: its vertices and their neighbours (a fold there spans the strip).
-  std::vector<char> isHeld(size_t(nv), 0), atEdge(size_t(nv), 0);
-  for (int v : held)
-    if (v >= 0 && v < nv) isHeld[size_t(v)] = 1;
-  const auto touches = [&](const std::vector<char>& mark, int t) {
-    for (int k = 0; k < 3; ++k)
-      if (mark[size_t(rest.F(t, k))]) return true;
-    return false;
+      findSelfIntersections({positions.topRows(nv), m_rest.F}, std::numeric_limits<int>::max());
+  const auto atEdge = [&](int t) {
+    const auto f = m_rest.F.row(t);
+    return m_atEdge[size_t(f(0))] || m_atEdge[size_t(f(1))] || m_atEdge[size_t(f(2))];
   };
-  for (int t = 0; t < rest.numFaces(); ++t)
-    if (touches(isHeld, t))
-      for (int k = 0; k < 3; ++k) atEdge[size_t(rest.F(t, k))] = 1;
-  const auto touchesHeld = [&](int t) { return touches(atEdge, t); };
-  for (const auto& [a, b] : s.listed) (touchesHeld(a) || touchesHeld(b) ? out.atHeld : out.free)++;
+  for (const auto& [a, b] : s.listed) (atEdge(a) || atEdge(b) ? out.atHeld : out.free)++;
   return out;
 }
 

@@ -682,8 +682,7 @@ TEST(Runner, AReferenceWhoseSurfacePassesThroughItselfIsInvalid) {
   // Where the grasp holds corner 15, every intersecting triangle touches a held vertex: a fold at
   // the edge of a rigid region the scene gives no contact, noted, the reference still valid.
   for (KeyFrame& k : f.scene.tools[0].trajectory) k.pos = Vec3(0.4, 0.1, 0.1);
-  EXPECT_EQ(
-      selfIntersectionOf(f.organ.surface, through, heldSurfaceVertices(f.scene, f.organ)).free, 0);
+  EXPECT_EQ(SelfIntersectionCheck(f.scene, f.organ)(through).free, 0);
   runs[2].compared[1].positions = through;
   computeRunErrors(f.scene, f.organ, runs);
   EXPECT_TRUE(runs[2].valid) << runs[2].invalidReason;

@@ -214,19 +214,26 @@ void invalidateIfNotOk(RunRecord& record);
 /// record.prescribedMotion), with the ratio.
 std::string outrunNote(const Scene& scene, const RunRecord& record);
 
-/// Where `positions` (#V rows of rest's vertices, moved) pass through themselves on rest's
-/// faces: the intersecting pairs of triangles, split into those with a vertex in `held` or next
-/// to it (a fold at the edge of a clamp or a grasp, whose rigid region the scene gives no
-/// contact) and the others. Both 0 when rest itself self-intersects (nothing to judge).
-/// The surface vertices the scene holds: those its grasps hold (rmseExcludedVertices) and those
-/// in its fixed region.
-std::vector<int> heldSurfaceVertices(const Scene& scene, const Organ& organ);
-
 struct SelfIntersectionCount {
   long long free = 0, atHeld = 0;
 };
-SelfIntersectionCount selfIntersectionOf(const SurfaceMesh& rest, const MatX3& positions,
-                                         const std::vector<int>& held = {});
+
+/// Judges moved copies of the organ's surface for triangles that pass through each other: the
+/// intersecting pairs, split into those with a vertex the scene holds (grasped or fixed) or next
+/// to it (a fold at the edge of a clamp or a grasp, rigid regions the scene gives no contact) and
+/// the others. The rest surface is checked and the held region's edge marked once, here; a rest
+/// surface that self-intersects itself gives nothing to judge (both counts 0).
+class SelfIntersectionCheck {
+ public:
+  SelfIntersectionCheck(const Scene& scene, const Organ& organ);
+  /// positions: at least #V rows, the first #V the organ's surface vertices moved.
+  SelfIntersectionCount operator()(const MatX3& positions) const;
+
+ private:
+  const SurfaceMesh& m_rest;
+  bool m_judged = false;       ///< the rest surface is free of self-intersections
+  std::vector<char> m_atEdge;  ///< per vertex: held, or a neighbour of a held vertex
+};
 
 /// Errors of every ok model run against the reference run (if there is one and it is ok), and
 /// each model run's referenceValid: false when the reference is invalid, failed, diverged or

@@ -192,11 +192,12 @@ std::vector<ojson> hybridRows(const Results& res, const fs::path& dir, bool quic
 // stand for the smaller ones, and pulling and pressing are studied apart. One study per phantom
 // and direction keeps the cost at about one case's reference x 1.5 per group, not per row.
 std::vector<std::string> hybridChecks(const Results& res, bool quick) {
+  const std::vector<HybridCase> cases = hybridCases(quick);
   std::vector<std::string> out;
   for (const HybridPhantom& p : kHybridPhantoms)
     for (bool up : {false, true}) {
       std::vector<HybridCase> group;
-      for (const HybridCase& hc : hybridCases(quick))
+      for (const HybridCase& hc : cases)
         if (hc.phantom == &p && hc.up == up) group.push_back(hc);
       if (group.empty()) continue;
       std::sort(group.begin(), group.end(),
