@@ -637,11 +637,19 @@ void assessValidity(const Scene& scene, RunRecord& rec) {
   if (scene.compareAtEquilibrium && rec.status == RunStatus::Ok && !rec.settledAt)
     invalid("did not settle");
   // A solver that counts the solves it gave up on (numeric "unconverged_steps") left a state
-  // that is not the equilibrium or the step the scene asked for.
+  // that is not the equilibrium or the step the scene asked for; those it stopped where the
+  // surface passed through itself (numeric "solves_stopped_at_fold", reference_fem) are named.
   if (const auto it = rec.numeric.find("unconverged_steps");
-      rec.status == RunStatus::Ok && it != rec.numeric.end() && it->second > 0)
+      rec.status == RunStatus::Ok && it != rec.numeric.end() && it->second > 0) {
+    const auto folds = rec.numeric.find("solves_stopped_at_fold");
+    const long long folded = folds == rec.numeric.end() ? 0 : folds->second;
     invalid(std::to_string(it->second) + (it->second == 1 ? " solve" : " solves") +
-            " did not converge");
+            " did not converge" +
+            (folded > 0 ? " (" + std::to_string(folded) +
+                              " stopped short of its load where the surface passed through "
+                              "itself, away from the held nodes)"
+                        : std::string()));
+  }
   // A tet network that turned over 0.5% of its tets inside out (numeric "inverted_tets" against
   // counts "elements") has folded through itself: its state is no deformation of the solid it
   // models, and its error measures the fold. A few slivers inverted under a load stay valid (the

@@ -510,6 +510,10 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
       t = tn;
       ++rep.loadSteps;
       dt = std::min<Real>(2 * dt, 1);
+      if (t < 1 && !in && opt.admissible && !opt.admissible(x)) {
+        rep.stoppedEarly = true;
+        break;
+      }
     } else {
       ++rep.failedLoadSteps;
       dt = 0.5 * (tn - t);  // half of the increment that failed (not of a doubled one)

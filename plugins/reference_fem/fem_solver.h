@@ -127,6 +127,14 @@ struct SolveOptions {
   /// dominate a CG iteration; the CG and every direct solve stay in double, so the tolerance and
   /// the answer are the same). Off: CHOLMOD's double solve.
   bool floatPreconditioner = false;
+  /// Quasi-static solves: false when state x is no state of the solid (the model's use: its
+  /// surface passes through itself away from the held nodes; the reference has no self-contact).
+  /// An accepted load step short of the whole load whose state it refuses ends the solve there
+  /// (not converged, SolveReport::stoppedEarly): further along a load's path lies only a deeper
+  /// fold. Newton's iterates are not checked (tried: rejecting a load step whose iterate folded
+  /// after 10 iterations on an indefinite tangent made the hybrid tables' 5 N liver, P2, take
+  /// over 150 Newton iterations instead of 78).
+  std::function<bool(const VecX& x)> admissible;
 };
 
 struct SolveReport {
@@ -146,6 +154,9 @@ struct SolveReport {
   int pcgIterations = 0;         ///< conjugate-gradient iterations (preconditioned by a factor)
   long long factorNonZeros = 0;  ///< nonzeros of the Cholesky factor L (CHOLMOD's analysis)
   double factorFlops = 0;        ///< flops of one numerical factorisation (CHOLMOD's analysis)
+  /// SolveOptions::admissible refused an accepted state: the solve ended there, short of its
+  /// load (the state is that load step's equilibrium).
+  bool stoppedEarly = false;
   /// Wall-time breakdown of `seconds` (s): pattern analysis (when the constrained set is new:
   /// ordering, the free block's pattern and element slots, symbolic factorisation),
   /// stiffness assembly (element tangents, projection, scatter), numerical factorisation,

@@ -31,6 +31,10 @@ std::vector<ParamSpec> paramSpecs() {
                         "auto: float32 unless the volumetric term is mean_dilatation"),
       ParamSpec::integer("max_load_halvings", 10, 0, 30,
                          "a failed load step is halved at most this many times"),
+      ParamSpec::flag("stop_at_fold", true,
+                      "a quasi-static solve stops (not converged) at the first load step whose "
+                      "surface passes through itself away from the held nodes: the reference has "
+                      "no self-contact, so the rest of the load only deepens the fold"),
       ParamSpec::real("rayleigh_alpha", "1/s", 0.0, 0.0, 1e6,
                       "mass-proportional damping (dynamic only)"),
       ParamSpec::real("rayleigh_beta", "s", 0.0, 0.0, 10.0,
@@ -50,6 +54,7 @@ ReferenceFemConfig configFromParams(const ParamValues& p) {
   c.options.tolerance = p.real("newton_tolerance");
   c.options.maxIterations = int(p.integer("max_newton_iterations"));
   c.options.maxHalvings = int(p.integer("max_load_halvings"));
+  c.stopAtFold = p.flag("stop_at_fold");
   c.preconditioner = p.choice("preconditioner_precision");
   c.rayleighAlpha = p.real("rayleigh_alpha");
   c.rayleighBeta = p.real("rayleigh_beta");

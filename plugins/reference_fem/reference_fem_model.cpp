@@ -3,12 +3,14 @@
 // behind each choice).
 #include "reference_fem_model.h"
 
+#include <deform/geometry/mesh_check.h>
 #include <deform/geometry/organ_tets.h>
 #include <deform/geometry/tet_embedding.h>
 #include <deform/sdk/contact.h>
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <map>
 #include <memory>
 
@@ -36,6 +38,10 @@ class ReferenceFemModel final : public Model {
     m_beta = config.rayleighBeta;
     m_dt = setup.dt;
     const Organ& organ = setup.organ;
+    m_surfaceF = organ.surface.F;
+    // A rest surface that already passes through itself is not judged (as the harness does).
+    m_stopAtFold = config.stopAtFold && m_solveKind == SolveKind::QuasiStatic &&
+                   findSelfIntersections(organ.surface, 1).ok();
     OrganTets tets = organTets(organ, config.mesh, setup.cache);
     TetMesh mesh = std::move(tets.mesh);
     m_surfaceNode = std::move(tets.surfaceNode);
@@ -180,7 +186,17 @@ class ReferenceFemModel final : public Model {
 
     SolveReport rep;
     if (m_solveKind == SolveKind::QuasiStatic) {
-      rep = m_solver->solveStatic(lc, m_x, m_fPrev, m_options);
+      SolveOptions options = m_options;
+      if (m_stopAtFold) {
+        std::vector<char> held(m_isFixed);
+        for (int n : lc.prescribedNodes) held[size_t(n)] = 1;
+        for (const auto& dof : lc.prescribedDofs) held[size_t(dof.first / 3)] = 1;
+        options.admissible = [this, nearHeld = nearHeldVertices(held)](const VecX& x) {
+          return freeSelfIntersections(x, nearHeld) == 0;
+        };
+      }
+      rep = m_solver->solveStatic(lc, m_x, m_fPrev, options);
+      m_stoppedAtFold += rep.stoppedEarly;
       // The next step starts from this state: in equilibrium with the forces it reached.
       m_fPrev = m_system->externalForce(lc);
     } else {
@@ -236,6 +252,7 @@ class ReferenceFemModel final : public Model {
     m_graspForces.clear();
     m_unconverged = m_spdFallbacks = m_projectedSteps = 0;
     m_newtonIterations = m_factorizations = m_pcgIterations = m_failedLoadSteps = 0;
+    m_stoppedAtFold = 0;
     m_lastIterations = m_lastLoadSteps = 0;
     m_phase.clear();
     updatePositions();
@@ -262,7 +279,8 @@ class ReferenceFemModel final : public Model {
             {"newton_iterations", m_newtonIterations},
             {"factorizations", m_factorizations},
             {"pcg_iterations", m_pcgIterations},
-            {"failed_load_steps", m_failedLoadSteps}};
+            {"failed_load_steps", m_failedLoadSteps},
+            {"solves_stopped_at_fold", m_stoppedAtFold}};
   }
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
@@ -300,6 +318,39 @@ class ReferenceFemModel final : public Model {
     return added;
   }
 
+  /// Per surface vertex: on a triangle with a vertex whose node is held (fixed, grasped, in
+  /// contact). The harness's rule for where a fold is the held region's edge, not the solid's.
+  std::vector<char> nearHeldVertices(const std::vector<char>& heldNode) const {
+    std::vector<char> near(m_surfaceNode.size(), 0);
+    for (Eigen::Index f = 0; f < m_surfaceF.rows(); ++f) {
+      bool touches = false;
+      for (int k = 0; k < 3; ++k)
+        touches = touches || heldNode[size_t(m_surfaceNode[size_t(m_surfaceF(f, k))])];
+      if (touches)
+        for (int k = 0; k < 3; ++k) near[size_t(m_surfaceF(f, k))] = 1;
+    }
+    return near;
+  }
+
+  /// Pairs of the organ's triangles at state x that intersect with no vertex near a held node.
+  long long freeSelfIntersections(const VecX& x, const std::vector<char>& nearHeld) const {
+    SurfaceMesh surface;
+    surface.F = m_surfaceF;
+    surface.V.resize(Eigen::Index(m_surfaceNode.size()), 3);
+    for (size_t i = 0; i < m_surfaceNode.size(); ++i)
+      surface.V.row(Eigen::Index(i)) = x.segment<3>(3 * m_surfaceNode[i]).transpose();
+    const SelfIntersectionReport r =
+        findSelfIntersections(surface, std::numeric_limits<int>::max());
+    const auto near = [&](int t) {
+      for (int k = 0; k < 3; ++k)
+        if (nearHeld[size_t(m_surfaceF(t, k))]) return true;
+      return false;
+    };
+    long long free = 0;
+    for (const auto& [a, b] : r.listed) free += !near(a) && !near(b);
+    return free;
+  }
+
   void updatePositions() {
     const int n = m_system->numNodes();
     m_nodes = Eigen::Map<const MatX3>(m_x.data(), n, 3);
@@ -326,6 +377,8 @@ class ReferenceFemModel final : public Model {
   int m_meshedNodes = 0;          ///< corner nodes of the tets; isolated clamped ones follow
   long long m_isolatedNodes = 0;  ///< surface vertices inside a clipped-off fixed box
   MatX3i m_contactF;              ///< organ triangles as node rows (contact proxy)
+  MatX3i m_surfaceF;              ///< the organ's triangles (surface vertex rows)
+  bool m_stopAtFold = false;      ///< SolveOptions::admissible checks the surface
   VecX m_x, m_v, m_fPrev;
   MatX3 m_nodes, m_surface;
   std::vector<Vec3> m_graspForces;
@@ -333,7 +386,7 @@ class ReferenceFemModel final : public Model {
   long long m_unconverged = 0, m_spdFallbacks = 0, m_projectedSteps = 0, m_lastIterations = 0,
             m_lastLoadSteps = 0;
   long long m_newtonIterations = 0, m_factorizations = 0, m_pcgIterations = 0,
-            m_failedLoadSteps = 0;  ///< totals over the run
+            m_failedLoadSteps = 0, m_stoppedAtFold = 0;  ///< totals over the run
   PhaseTimes m_phase;
 };
 

@@ -26,6 +26,7 @@ struct ReferenceFemConfig {
   /// "auto", "float32", "float64": SolveOptions::floatPreconditioner, auto resolved at init
   /// (float32 unless the volumetric term is mean_dilatation).
   std::string preconditioner = "auto";
+  bool stopAtFold = true;  ///< quasi-static: stop a solve whose surface passes through itself
   Real rayleighAlpha = 0;  ///< 1/s (dynamic only)
   Real rayleighBeta = 0;   ///< s (dynamic only)
   OrganTetOptions mesh;    ///< deform/geometry/organ_tets.h (calculix meshes the same way)
