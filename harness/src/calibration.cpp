@@ -544,6 +544,10 @@ class Calibrator {
             r.value = run->valid ? markerRmsOf(c.outDir / "results.json", "calibrated", why) : NAN;
             if (!run->valid) why = "invalid: " + run->invalidReason;
             r.status = std::isfinite(r.value) ? "ok" : why;
+          } else if (!run->valid) {
+            // A run that did not do what the scene asked (it did not settle, let go of its
+            // grasp, collapsed, gave up on a solve) fits nothing, however small its error.
+            r.status = "invalid: " + run->invalidReason;
           } else if (!run->error) {
             r.status = "no error" + noErrorWhy(c, *run);
           } else if (!run->referenceValid.value_or(true)) {

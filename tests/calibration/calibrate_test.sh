@@ -11,7 +11,8 @@
 #               point of the calibrated model with another value of one gets a note; `sweep
 #               --calibrate` fits the point itself (and refuses --calibration beside it); `run
 #               --calibration shipped --calibrated-twins` runs the model and its twin; a
-#               validation scene with an invalid reference scores nothing and says why
+#               validation scene with an invalid reference scores nothing and says why, and
+#               neither does a trial whose own run is invalid
 #   bad_input   unknown model, no calibratable parameter, a scene without a reference, budget 0,
 #               a reference that crashes in every trial (CRASHING_PLUGIN_DIR, the optional fifth
 #               argument: no trial can be scored, so nothing is fitted): one stderr line each and
@@ -60,7 +61,8 @@ assert c["train"]["after"] < 0.05 * c["train"]["before"], c["train"]
 assert c["validation"]["after"] < 0.05 * c["validation"]["before"], c["validation"]
 assert 1 <= c["evaluations"] <= 16 and c["wall_s"] > 0
 assert c["organs"] == ["phantom:gallbladder, resolution 0.3"], c["organs"]
-assert c["held"] == {"iterations": 20, "mode": "rigid", "diverge_below": 0.2}, c["held"]
+assert c["held"] == {"iterations": 20, "mode": "rigid", "diverge_below": 0.2,
+                     "unconverged_below": 0.0}, c["held"]
 rows = list(csv.DictReader(open(os.path.join(d, "trials.csv"))))
 assert len(rows) == c["evaluations"], (len(rows), c["evaluations"])
 diverged = [r for r in rows if "diverged" in r["status"]]
@@ -82,6 +84,22 @@ v = json.load(open(sys.argv[1]))["validation"]
 assert v["after"] is None, v
 status = v["per_scene"][0]["status_after"]
 assert status.startswith("against an invalid reference: the reference toy(gain=0) is invalid: "), status
+PY
+  # A trial whose own run is invalid (a solve that gave up, here below gain 0.5) fits nothing,
+  # however small its error: the best gain is the smallest valid one, not the reference's 0.4.
+  sed 's/"diverge_below": 0.2/"diverge_below": 0.2, "unconverged_below": 0.5/' \
+    "$here/toy_reference.json" >"$work/toy_unconverged.json"
+  "${db[@]}" calibrate "$work/toy_unconverged.json" --model toy --out "$work/cal_unconverged" \
+    --budget 12 --no-cache >"$work/unconverged.txt" 2>&1 \
+    || { cat "$work/unconverged.txt"; fail "calibrate with invalid trial runs"; }
+  python3 - "$work/cal_unconverged" <<'PY'
+import csv, json, sys
+c = json.load(open(sys.argv[1] + "/calibration.json"))
+rows = list(csv.DictReader(open(sys.argv[1] + "/trials.csv")))
+invalid = [r for r in rows if "invalid: 1 solve did not converge" in r["status"]]
+assert invalid, [r["status"] for r in rows]
+assert all(float(r["gain"]) < 0.5 for r in invalid), invalid
+assert c["params"]["gain"] >= 0.5, c["params"]
 PY
   "${db[@]}" run "$here/toy_reference.json" --out "$work/run" --no-cache --explain \
     --calibration "$work/cal/calibration.json" >"$work/run.txt" 2>&1 || { cat "$work/run.txt"; fail run; }

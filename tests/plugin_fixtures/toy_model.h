@@ -34,6 +34,7 @@ class RigidFollowModel final : public StillModel {
     StillModel::init(setup);
     m_gain = setup.params.real("gain");
     m_divergeBelow = setup.params.real("diverge_below");
+    m_unconvergedBelow = setup.params.real("unconverged_below");
   }
   StepStatus step(const StepInput& in) override {
     Vec3 sum = Vec3::Zero();
@@ -49,10 +50,15 @@ class RigidFollowModel final : public StillModel {
     if (m_gain < m_divergeBelow) m_x(0, 0) = std::numeric_limits<Real>::quiet_NaN();
     return StepStatus::Ok;
   }
+  // A stand-in for a solver that gives up (calibration tests): the run is invalid.
+  NumericCounters numericCounters() const override {
+    return {{"unconverged_steps", m_gain < m_unconvergedBelow ? 1 : 0}};
+  }
 
  private:
   Real m_gain = 1;
   Real m_divergeBelow = 0;
+  Real m_unconvergedBelow = 0;
 };
 
 inline ModelInfo toyInfo(const std::string& name) {
@@ -68,7 +74,10 @@ inline ModelInfo toyInfo(const std::string& name) {
   info.params = {gain, ParamSpec::integer("iterations", 20, 1, 1000, "unused"),
                  ParamSpec::choice("mode", "rigid", {"rigid", "none"}, "unused"),
                  ParamSpec::real("diverge_below", "1", 0.0, 0.0, 1.0,
-                                 "NaN positions when gain is below this (calibration tests)")};
+                                 "NaN positions when gain is below this (calibration tests)"),
+                 ParamSpec::real("unconverged_below", "1", 0.0, 0.0, 1.0,
+                                 "reports a solve that did not converge when gain is below this "
+                                 "(calibration tests: the run is invalid)")};
   info.create = [] { return std::make_unique<RigidFollowModel>(); };
   return info;
 }
