@@ -19,7 +19,6 @@
 #include <fstream>
 #include <iomanip>
 #include <iterator>
-#include <limits>
 #include <memory>
 #include <optional>
 #include <set>
@@ -106,31 +105,17 @@ SelfIntersectionCheck::SelfIntersectionCheck(const Scene& scene, const Organ& or
   if (!m_judged) return;
   // The vertices the scene holds (grasped, fixed), then the held region's edge: them and their
   // neighbours (a fold there spans the strip).
-  const int nv = m_rest.numVertices();
-  std::vector<char> held(size_t(nv), 0);
+  std::vector<char> held(size_t(m_rest.numVertices()), 0);
   for (int v : rmseExcludedVertices(scene, m_rest.V)) held[size_t(v)] = 1;
   if (!organ.fixed.empty())
     for (int v : fixedNodeIndices(m_rest.V, organ.fixed, m_rest)) held[size_t(v)] = 1;
-  m_atEdge.assign(size_t(nv), 0);
-  for (int t = 0; t < m_rest.numFaces(); ++t) {
-    const auto f = m_rest.F.row(t);
-    if (held[size_t(f(0))] || held[size_t(f(1))] || held[size_t(f(2))])
-      for (int k = 0; k < 3; ++k) m_atEdge[size_t(f(k))] = 1;
-  }
+  m_atEdge = heldRegionAndEdge(m_rest.F, held);
 }
 
 SelfIntersectionCount SelfIntersectionCheck::operator()(const MatX3& positions) const {
-  SelfIntersectionCount out;
   const int nv = m_rest.numVertices();
-  if (!m_judged || positions.rows() < nv) return out;
-  const SelfIntersectionReport s =
-      findSelfIntersections({positions.topRows(nv), m_rest.F}, std::numeric_limits<int>::max());
-  const auto atEdge = [&](int t) {
-    const auto f = m_rest.F.row(t);
-    return m_atEdge[size_t(f(0))] || m_atEdge[size_t(f(1))] || m_atEdge[size_t(f(2))];
-  };
-  for (const auto& [a, b] : s.listed) (atEdge(a) || atEdge(b) ? out.atHeld : out.free)++;
-  return out;
+  if (!m_judged || positions.rows() < nv) return {};
+  return countSelfIntersections({positions.topRows(nv), m_rest.F}, m_atEdge);
 }
 
 void computeRunErrors(const Scene& scene, const Organ& organ, std::vector<RunRecord>& runs) {

@@ -10,7 +10,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <limits>
 #include <map>
 #include <memory>
 
@@ -188,10 +187,12 @@ class ReferenceFemModel final : public Model {
     if (m_solveKind == SolveKind::QuasiStatic) {
       SolveOptions options = m_options;
       if (m_stopAtFold) {
-        std::vector<char> held(m_isFixed);
-        for (int n : lc.prescribedNodes) held[size_t(n)] = 1;
-        for (const auto& dof : lc.prescribedDofs) held[size_t(dof.first / 3)] = 1;
-        options.admissible = [this, nearHeld = nearHeldVertices(held)](const VecX& x) {
+        // The surface vertices whose node is held: fixed, grasped, in contact.
+        std::vector<char> heldNode(m_isFixed), held(m_surfaceNode.size());
+        for (int n : lc.prescribedNodes) heldNode[size_t(n)] = 1;
+        for (const auto& dof : lc.prescribedDofs) heldNode[size_t(dof.first / 3)] = 1;
+        for (size_t v = 0; v < held.size(); ++v) held[v] = heldNode[size_t(m_surfaceNode[v])];
+        options.admissible = [this, nearHeld = heldRegionAndEdge(m_surfaceF, held)](const VecX& x) {
           return freeSelfIntersections(x, nearHeld) == 0;
         };
       }
@@ -318,37 +319,15 @@ class ReferenceFemModel final : public Model {
     return added;
   }
 
-  /// Per surface vertex: on a triangle with a vertex whose node is held (fixed, grasped, in
-  /// contact). The harness's rule for where a fold is the held region's edge, not the solid's.
-  std::vector<char> nearHeldVertices(const std::vector<char>& heldNode) const {
-    std::vector<char> near(m_surfaceNode.size(), 0);
-    for (Eigen::Index f = 0; f < m_surfaceF.rows(); ++f) {
-      bool touches = false;
-      for (int k = 0; k < 3; ++k)
-        touches = touches || heldNode[size_t(m_surfaceNode[size_t(m_surfaceF(f, k))])];
-      if (touches)
-        for (int k = 0; k < 3; ++k) near[size_t(m_surfaceF(f, k))] = 1;
-    }
-    return near;
-  }
-
-  /// Pairs of the organ's triangles at state x that intersect with no vertex near a held node.
+  /// Pairs of the organ's triangles at state x that intersect away from the held nodes and
+  /// their neighbours (nearHeld: heldRegionAndEdge of the surface vertices whose node is held).
   long long freeSelfIntersections(const VecX& x, const std::vector<char>& nearHeld) const {
     SurfaceMesh surface;
     surface.F = m_surfaceF;
     surface.V.resize(Eigen::Index(m_surfaceNode.size()), 3);
     for (size_t i = 0; i < m_surfaceNode.size(); ++i)
       surface.V.row(Eigen::Index(i)) = x.segment<3>(3 * m_surfaceNode[i]).transpose();
-    const SelfIntersectionReport r =
-        findSelfIntersections(surface, std::numeric_limits<int>::max());
-    const auto near = [&](int t) {
-      for (int k = 0; k < 3; ++k)
-        if (nearHeld[size_t(m_surfaceF(t, k))]) return true;
-      return false;
-    };
-    long long free = 0;
-    for (const auto& [a, b] : r.listed) free += !near(a) && !near(b);
-    return free;
+    return countSelfIntersections(surface, nearHeld).free;
   }
 
   void updatePositions() {

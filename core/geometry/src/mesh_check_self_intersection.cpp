@@ -458,4 +458,24 @@ void requireNoSelfIntersections(const SurfaceMesh& mesh, const std::string& file
                        "valid volume");
 }
 
+std::vector<char> heldRegionAndEdge(const MatX3i& F, const std::vector<char>& held) {
+  std::vector<char> edge(held.size(), 0);
+  for (Eigen::Index t = 0; t < F.rows(); ++t)
+    if (held[size_t(F(t, 0))] || held[size_t(F(t, 1))] || held[size_t(F(t, 2))])
+      for (int k = 0; k < 3; ++k) edge[size_t(F(t, k))] = 1;
+  return edge;
+}
+
+SelfIntersectionCount countSelfIntersections(const SurfaceMesh& moved,
+                                             const std::vector<char>& nearHeld) {
+  SelfIntersectionCount out;
+  const SelfIntersectionReport s = findSelfIntersections(moved, std::numeric_limits<int>::max());
+  const auto atHeld = [&](int t) {
+    const auto f = moved.F.row(t);
+    return nearHeld[size_t(f(0))] || nearHeld[size_t(f(1))] || nearHeld[size_t(f(2))];
+  };
+  for (const auto& [a, b] : s.listed) (atHeld(a) || atHeld(b) ? out.atHeld : out.free)++;
+  return out;
+}
+
 }  // namespace deform

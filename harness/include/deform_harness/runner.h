@@ -7,6 +7,7 @@
 
 #include <deform/engine/plugin_loader.h>
 #include <deform/engine/scene.h>
+#include <deform/geometry/mesh_check.h>
 #include <deform/sdk/cache.h>
 #include <deform_harness/metrics.h>
 #include <deform_harness/run_record.h>
@@ -213,10 +214,6 @@ void invalidateIfNotOk(RunRecord& record);
 /// more than 1.5x the largest prescribed motion (record.peakDisplacement against
 /// record.prescribedMotion), with the ratio.
 std::string outrunNote(const Scene& scene, const RunRecord& record);
-
-struct SelfIntersectionCount {
-  long long free = 0, atHeld = 0;
-};
 
 /// Judges moved copies of the organ's surface for triangles that pass through each other: the
 /// intersecting pairs, split into those with a vertex the scene holds (grasped or fixed) or next

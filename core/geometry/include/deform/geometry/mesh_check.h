@@ -110,6 +110,19 @@ struct SelfIntersectionReport {
 
 SelfIntersectionReport findSelfIntersections(const SurfaceMesh& mesh, int maxListed = 100);
 
+/// Per vertex of a surface with triangles F: held, or on a triangle with a held vertex (the held
+/// region and its edge, where a fold spans the strip). `held` has one entry per vertex.
+std::vector<char> heldRegionAndEdge(const MatX3i& F, const std::vector<char>& held);
+
+/// The intersecting pairs of `moved`, split into those with a triangle touching a vertex marked
+/// in `nearHeld` (heldRegionAndEdge: a fold at the edge of a clamp or a grasp, rigid regions
+/// without contact) and the others.
+struct SelfIntersectionCount {
+  long long free = 0, atHeld = 0;
+};
+SelfIntersectionCount countSelfIntersections(const SurfaceMesh& moved,
+                                             const std::vector<char>& nearHeld);
+
 /// What untangleSelfIntersections() did.
 struct UntangleReport {
   long long pairsBefore = 0;  ///< intersecting triangle pairs found first
