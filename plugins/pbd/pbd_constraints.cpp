@@ -420,6 +420,100 @@ __attribute__((target("avx512f,avx512vl,avx512dq"))) long long projectPaddedF512
   return degenerate;
 }
 
+// Eight constraints of one colour per step with AVX2 (CPUs without AVX-512). Unlike the AVX-512
+// step, |d| and the division are the scalar reference's own (sqrt and divide, each exactly
+// rounded, and no multiply-add: AVX2 does not imply FMA), so this path and the scalar one agree
+// bit for bit, and rest lengths measured by the scalar lengthOf are at rest here too. A group is
+// computed (loads and arithmetic), then committed (the stores); the loop computes two groups
+// before committing either, so that their sqrt / divide latency chains overlap.
+struct GroupF8 {
+  const int* A;
+  const int* B;
+  __m128 d[8];  // the rows' differences x_a - x_b (lane 3: 0 - 0)
+  __m256 sa, sb;
+  int ok;
+};
+
+__attribute__((target("avx2"), always_inline)) inline void computeGroupF8(
+    const float* x4, const DistanceBatchF& batch, size_t i, GroupF8& g) {
+  const __m256 tiny =
+      _mm256_set1_ps(static_cast<float>(tol::kDegenerateLength * tol::kDegenerateLength));
+  g.A = batch.a + i;
+  g.B = batch.b + i;
+#pragma GCC unroll 8
+  for (int k = 0; k < 8; ++k)
+    g.d[k] = _mm_sub_ps(_mm_load_ps(x4 + g.A[k]), _mm_load_ps(x4 + g.B[k]));
+  // Rows of constraints 4j + m go to 128-bit lane j of z_m; a 4 x 4 transpose inside each lane
+  // gives columns dx, dy, dz in constraint order.
+  __m256 z[4];
+  for (int k = 0; k < 4; ++k)
+    z[k] = _mm256_insertf128_ps(_mm256_castps128_ps256(g.d[k]), g.d[k + 4], 1);
+  const __m256 t0 = _mm256_unpacklo_ps(z[0], z[1]);  // per lane: a.x b.x a.y b.y
+  const __m256 t1 = _mm256_unpackhi_ps(z[0], z[1]);  // a.z b.z a.w b.w
+  const __m256 t2 = _mm256_unpacklo_ps(z[2], z[3]);
+  const __m256 t3 = _mm256_unpackhi_ps(z[2], z[3]);
+  const __m256 dx = _mm256_shuffle_ps(t0, t2, 0x44);
+  const __m256 dy = _mm256_shuffle_ps(t0, t2, 0xEE);
+  const __m256 dz = _mm256_shuffle_ps(t1, t3, 0x44);
+  const __m256 len2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                                    _mm256_mul_ps(dz, dz));
+  const __m256 ok = _mm256_cmp_ps(len2, tiny, _CMP_GT_OQ);
+  // max(tiny, len2) keeps a NaN len2, as std::max(len2, tiny) does.
+  const __m256 len = _mm256_sqrt_ps(_mm256_max_ps(tiny, len2));
+  const __m256 lambda = _mm256_loadu_ps(batch.lambda + i);
+  const __m256 inner = _mm256_sub_ps(_mm256_sub_ps(_mm256_loadu_ps(batch.rest + i), len),
+                                     _mm256_mul_ps(_mm256_loadu_ps(batch.alphaTilde + i), lambda));
+  const __m256 dl = _mm256_and_ps(ok, _mm256_mul_ps(_mm256_loadu_ps(batch.scale + i), inner));
+  _mm256_storeu_ps(batch.lambda + i, _mm256_add_ps(lambda, dl));
+  const __m256 s = _mm256_div_ps(dl, len);
+  g.sa = _mm256_mul_ps(_mm256_loadu_ps(batch.wa + i), s);
+  g.sb = _mm256_mul_ps(_mm256_loadu_ps(batch.wb + i), s);
+  g.ok = __builtin_popcount(_mm256_movemask_ps(ok));
+}
+
+// x_a += sa_k d_k and x_b -= sb_k d_k for the rows of lane j, the factors broadcast in the lane.
+template <int j>
+__attribute__((target("avx2"), always_inline)) inline void commitLaneF4(float* x4,
+                                                                        const GroupF8& g) {
+  const __m128 ca = j == 0 ? _mm256_castps256_ps128(g.sa) : _mm256_extractf128_ps(g.sa, 1);
+  const __m128 cb = j == 0 ? _mm256_castps256_ps128(g.sb) : _mm256_extractf128_ps(g.sb, 1);
+  const auto row = [&]<int m>() {
+    float* pa = x4 + g.A[4 * j + m];
+    float* pb = x4 + g.B[4 * j + m];
+    const __m128 fa = _mm_shuffle_ps(ca, ca, m * 0x55), fb = _mm_shuffle_ps(cb, cb, m * 0x55);
+    _mm_store_ps(pa, _mm_add_ps(_mm_load_ps(pa), _mm_mul_ps(fa, g.d[4 * j + m])));
+    _mm_store_ps(pb, _mm_sub_ps(_mm_load_ps(pb), _mm_mul_ps(fb, g.d[4 * j + m])));
+  };
+  row.template operator()<0>();
+  row.template operator()<1>();
+  row.template operator()<2>();
+  row.template operator()<3>();
+}
+
+__attribute__((target("avx2"))) long long projectPaddedF256(float* x4, const DistanceBatchF& batch,
+                                                            size_t begin, size_t end) {
+  long long degenerate = 0;
+  size_t i = begin;
+  GroupF8 g0, g1;
+  for (; i + 16 <= end; i += 16) {
+    computeGroupF8(x4, batch, i, g0);
+    computeGroupF8(x4, batch, i + 8, g1);
+    commitLaneF4<0>(x4, g0);
+    commitLaneF4<1>(x4, g0);
+    commitLaneF4<0>(x4, g1);
+    commitLaneF4<1>(x4, g1);
+    degenerate += 16 - g0.ok - g1.ok;
+  }
+  for (; i + 8 <= end; i += 8) {
+    computeGroupF8(x4, batch, i, g0);
+    commitLaneF4<0>(x4, g0);
+    commitLaneF4<1>(x4, g0);
+    degenerate += 8 - g0.ok;
+  }
+  for (; i < end; ++i) degenerate += projectPaddedOneF(x4, batch, i);
+  return degenerate;
+}
+
 __attribute__((target("avx512f,avx512vl,avx512dq"))) void lengthsF512(const float* x4, const int* a,
                                                                       const int* b, size_t begin,
                                                                       size_t end, float* len) {
@@ -466,15 +560,28 @@ long long projectDistanceColourPadded(Real* x4, const DistanceBatch& batch, size
   return degenerate;
 }
 
+FloatPath fastestFloatPath() {
+  static const FloatPath kPath = !distanceSimdAvailable()       ? FloatPath::Scalar
+                                 : distanceSimdFloatAvailable() ? FloatPath::Avx512
+                                                                : FloatPath::Avx2;
+  return kPath;
+}
+
 long long projectDistanceColourPaddedF(float* x4, const DistanceBatchF& batch, size_t begin,
-                                       size_t end, bool simd) {
+                                       size_t end, FloatPath path) {
 #ifdef DEFORM_PBD_HAVE_AVX2_PATH
-  static const bool kAvx512 = distanceSimdFloatAvailable();
-  if (simd && kAvx512) return projectPaddedF512(x4, batch, begin, end);
+  if (path == FloatPath::Avx512) return projectPaddedF512(x4, batch, begin, end);
+  if (path == FloatPath::Avx2) return projectPaddedF256(x4, batch, begin, end);
 #endif
   long long degenerate = 0;
   for (size_t i = begin; i < end; ++i) degenerate += projectPaddedOneF(x4, batch, i);
   return degenerate;
+}
+
+long long projectDistanceColourPaddedF(float* x4, const DistanceBatchF& batch, size_t begin,
+                                       size_t end, bool simd) {
+  return projectDistanceColourPaddedF(x4, batch, begin, end,
+                                      simd ? fastestFloatPath() : FloatPath::Scalar);
 }
 
 void distanceLengthsColourF(const float* x4, const int* a, const int* b, size_t begin, size_t end,

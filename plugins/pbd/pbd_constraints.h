@@ -54,16 +54,27 @@ struct DistanceBatchF {
   const float* wb;
 };
 
+/// The paths of projectDistanceColourPaddedF(): the scalar reference (std::sqrt and a division);
+/// AVX2, eight constraints per vector step with the same exactly rounded sqrt and division, so
+/// bit for bit the scalar path; AVX-512 (F, VL, DQ), sixteen per step with 1/|d| from rsqrt14
+/// refined by one Newton step (relative error ~2^-27, below float rounding).
+enum class FloatPath { Scalar, Avx2, Avx512 };
+
+/// The fastest FloatPath this CPU runs (checked once per process).
+FloatPath fastestFloatPath();
+
 /// projectDistanceColourPadded() in single precision: x4 holds four floats per particle
-/// (x, y, z, 0), 16-byte aligned, so 2.2k particles (35 KB) stay in a 48 KB L1 cache. With simd,
-/// on a CPU with AVX-512 (F, VL, DQ) sixteen constraints are projected per vector step with 1/|d|
-/// from rsqrt14 refined by one Newton step (relative error ~2^-27, below float rounding); the
-/// scalar path (simd = false, or no AVX-512) is the reference, with std::sqrt and a division.
-/// Returns the number of degenerate (skipped) constraints.
+/// (x, y, z, 0), 16-byte aligned, so 2.2k particles (35 KB) stay in a 48 KB L1 cache. simd takes
+/// fastestFloatPath(), otherwise the scalar path. Returns the number of degenerate (skipped)
+/// constraints.
 long long projectDistanceColourPaddedF(float* x4, const DistanceBatchF& batch, size_t begin,
                                        size_t end, bool simd = true);
 
-/// Whether projectDistanceColourPaddedF(simd = true) uses AVX-512 on this CPU.
+/// The same on a given path, which this CPU must run (path <= fastestFloatPath()): for tests.
+long long projectDistanceColourPaddedF(float* x4, const DistanceBatchF& batch, size_t begin,
+                                       size_t end, FloatPath path);
+
+/// Whether fastestFloatPath() is AVX-512 on this CPU.
 bool distanceSimdFloatAvailable();
 
 /// len[i] = |x_a - x_b| for constraints [begin, end) of one colour (a, b: row offsets as in

@@ -194,8 +194,8 @@ float* alignedRows(std::vector<float>& storage, const std::vector<Vec3>& x) {
   return p;
 }
 
-// The float colour kernel: SIMD (AVX-512, sixteen per step) against its scalar reference, and
-// both against the double kernel. n = 37: two vector groups and a tail of five.
+// The float colour kernel: the fastest SIMD path of this CPU against its scalar reference, and
+// both against the double kernel. n = 37: two (AVX-512) or four (AVX2) vector steps and a tail.
 TEST(PbdDistanceFloat, ColourKernelMatchesScalarReferenceAndDoublePath) {
   const FloatColour c(37);
   std::vector<float> s1 = c.padded(), s2 = c.padded();
@@ -208,7 +208,7 @@ TEST(PbdDistanceFloat, ColourKernelMatchesScalarReferenceAndDoublePath) {
   b2.lambda = lam2.data();
   EXPECT_EQ(projectDistanceColourPaddedF(simd, b1, 0, c.n, true), 1);
   EXPECT_EQ(projectDistanceColourPaddedF(scalar, b2, 0, c.n, false), 1);
-  // The SIMD path replaces sqrt and division by rsqrt14 + one Newton step (relative error
+  // The AVX-512 path replaces sqrt and division by rsqrt14 + one Newton step (relative error
   // ~2^-27) and may fuse multiply-adds: a few float roundings (2^-24 each) of values below 0.2 m,
   // so 1e-7 m (~12 ulp at 0.2) bounds the difference.
   for (int i = 0; i < 8 * c.n; ++i) EXPECT_NEAR(simd[i], scalar[i], 1e-7) << i;
@@ -234,6 +234,39 @@ TEST(PbdDistanceFloat, ColourKernelMatchesScalarReferenceAndDoublePath) {
   for (int i = 0; i < 2 * c.n; ++i)
     for (int k = 0; k < 3; ++k) moved = std::max(moved, std::abs(x4[4 * i + k] - c.x[i][k]));
   EXPECT_GT(moved, 1e-3);
+}
+
+// The AVX2 path (CPUs without AVX-512) is the scalar reference bit for bit: the same exactly
+// rounded sqrt and division in the same order, and lengths measured on the scalar path are at
+// rest in it. n = 45: two steps of 16, one of 8 and a tail of 5 (the degenerate constraint is 5).
+TEST(PbdDistanceFloat, Avx2ColourKernelIsTheScalarReferenceBitForBit) {
+  if (fastestFloatPath() == FloatPath::Scalar) GTEST_SKIP() << "this CPU has no AVX2";
+  const FloatColour c(45);
+  std::vector<float> s1 = c.padded(), s2 = c.padded();
+  float* avx2 = alignedRows(s1, c.x);
+  float* scalar = alignedRows(s2, c.x);
+  std::vector<float> lam1(c.n, 0.01f), lam2(c.n, 0.01f);
+  const DistanceBatchF b1{c.a4.data(),    c.b4.data(), c.rest.data(), c.at.data(),
+                          c.scale.data(), lam1.data(), c.wa.data(),   c.wb.data()};
+  DistanceBatchF b2 = b1;
+  b2.lambda = lam2.data();
+  EXPECT_EQ(projectDistanceColourPaddedF(avx2, b1, 0, c.n, FloatPath::Avx2), 1);
+  EXPECT_EQ(projectDistanceColourPaddedF(scalar, b2, 0, c.n, FloatPath::Scalar), 1);
+  for (int i = 0; i < 8 * c.n; ++i) EXPECT_EQ(avx2[i], scalar[i]) << i;
+  for (int i = 0; i < c.n; ++i) EXPECT_EQ(lam1[i], lam2[i]) << i;
+  EXPECT_GT(std::abs(avx2[0] - static_cast<float>(c.x[0][0])), 1e-4f);  // it moved
+
+  FloatColour r(45);
+  r.x[2 * 5 + 1] += Vec3(0.01, 0, 0);
+  std::vector<float> s3 = r.padded();
+  float* x = alignedRows(s3, r.x);
+  const std::vector<float> before(x, x + 8 * r.n);
+  std::vector<float> rest(r.n), lam(r.n, 0.0f);
+  distanceLengthsColourF(x, r.a4.data(), r.b4.data(), 0, r.n, rest.data(), false);
+  const DistanceBatchF br{r.a4.data(),    r.b4.data(), rest.data(), r.at.data(),
+                          r.scale.data(), lam.data(),  r.wa.data(), r.wb.data()};
+  EXPECT_EQ(projectDistanceColourPaddedF(x, br, 0, r.n, FloatPath::Avx2), 0);
+  for (int i = 0; i < 8 * r.n; ++i) EXPECT_EQ(x[i], before[i]) << i;
 }
 
 // Rest lengths measured with distanceLengthsColourF give C = 0 bit for bit in the kernel: a
