@@ -202,7 +202,7 @@ Strip<T> makeStrip(int n, unsigned seed) {
 }
 
 TEST(IsometricBending, BatchedDoubleEqualsOneByOne) {
-  const int n = 27;  // six groups of four and a tail of three
+  const int n = 27;  // three pairs of groups of four and a tail of three
   for (bool simd : {false, true}) {
     Strip<double> s = makeStrip<double>(n, 3);
     std::vector<double> ref = s.x4;
@@ -234,7 +234,7 @@ TEST(IsometricBending, BatchedDoubleEqualsOneByOne) {
 }
 
 TEST(IsometricBending, FloatSimdEqualsScalarBitForBit) {
-  const int n = 61;  // AVX-512: two groups of 16 together, one alone; AVX2: 8; a scalar tail
+  const int n = 61;  // AVX-512 / AVX2: pairs of groups of 16 / 8, one group alone, a scalar tail
   Strip<float> a = makeStrip<float>(n, 7), b = makeStrip<float>(n, 7);
   for (int it = 0; it < 3; ++it) {
     projectIsometricColour(a.x4.data(), a.batch(), 0, n, false);

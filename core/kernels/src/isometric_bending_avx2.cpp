@@ -17,7 +17,19 @@ template <class L>
 std::size_t range(typename L::T* x4, const View<typename L::T>& b, std::size_t begin,
                   std::size_t end, typename L::T* measure, long long* degenerate) {
   std::size_t i = begin;
-  for (; i + L::kWidth <= end; i += L::kWidth) *degenerate += hingeGroup<L>(x4, b, i, measure);
+  // Two groups are computed before either is committed, so that their sqrt / divide latency
+  // chains overlap: the hinges of one colour share no movable particle.
+  constexpr std::size_t W = L::kWidth;
+  if (measure == nullptr)
+    for (; i + 2 * W <= end; i += 2 * W) {
+      HingeUpdate<L> u0, u1;
+      hingeCompute<L>(x4, b, i, nullptr, u0);
+      hingeCompute<L>(x4, b, i + W, nullptr, u1);
+      hingeCommit<L>(x4, b, i, u0);
+      hingeCommit<L>(x4, b, i + W, u1);
+      *degenerate += u0.degenerate + u1.degenerate;
+    }
+  for (; i + W <= end; i += W) *degenerate += hingeGroup<L>(x4, b, i, measure);
   return i - begin;
 }
 

@@ -23,24 +23,33 @@ namespace {  // internal linkage on purpose (see the header comment)
 
 using simd::kTinyLength2;
 
-/// Hinges i .. i + L::kWidth - 1. measure == nullptr: project them, return the number of
-/// degenerate ones; otherwise store |v| (0 where degenerate) to measure[i..] and change nothing.
+/// What the projection of hinges i .. i + L::kWidth - 1 adds to their rows: dx_k = w_k s K_k v
+/// for the slots k that move in some lane.
 template <class L>
-inline int hingeGroup(typename L::T* x4, const View<typename L::T>& b, std::size_t i,
-                      typename L::T* measure) {
+struct HingeUpdate {
+  typename L::V vx, vy, vz, s;
+  unsigned slots;
+  int degenerate;
+};
+
+/// The loads and arithmetic of hinges i .. i + L::kWidth - 1: measure == nullptr: the multiplier
+/// update (stored) and u, true; otherwise store |v| (0 where degenerate) to measure[i..], false.
+template <class L>
+inline bool hingeCompute(const typename L::T* x4, const View<typename L::T>& b, std::size_t i,
+                         typename L::T* measure, HingeUpdate<L>& u) {
   using V = typename L::V;
   using T = typename L::T;
   V x[4], y[4], z[4];
   for (int k = 0; k < 4; ++k) L::loadRows(x4, b.p[k] + i, x[k], y[k], z[k]);
   const V K0 = L::load(b.K[0] + i), K1 = L::load(b.K[1] + i), K2 = L::load(b.K[2] + i),
           K3 = L::load(b.K[3] + i);
-  const V vx = K0 * x[0] + K1 * x[1] + K2 * x[2] + K3 * x[3];
-  const V vy = K0 * y[0] + K1 * y[1] + K2 * y[2] + K3 * y[3];
-  const V vz = K0 * z[0] + K1 * z[1] + K2 * z[2] + K3 * z[3];
-  const V l2 = vx * vx + vy * vy + vz * vz;
+  u.vx = K0 * x[0] + K1 * x[1] + K2 * x[2] + K3 * x[3];
+  u.vy = K0 * y[0] + K1 * y[1] + K2 * y[2] + K3 * y[3];
+  u.vz = K0 * z[0] + K1 * z[1] + K2 * z[2] + K3 * z[3];
+  const V l2 = u.vx * u.vx + u.vy * u.vy + u.vz * u.vz;
   typename L::M ok;
   const V len = simd::clampedLength<L>(l2, ok);
-  if (simd::measureLength<L>(measure, i, ok, len)) return 0;
+  if (simd::measureLength<L>(measure, i, ok, len)) return false;
   const V rest = L::load(b.rest + i);
   V lambda = L::load(b.lambda + i);
   const V C = len - rest;
@@ -48,20 +57,38 @@ inline int hingeGroup(typename L::T* x4, const View<typename L::T>& b, std::size
                          L::set1(T(0)));
   lambda = lambda + dl;
   L::store(b.lambda + i, lambda);
-  // dx_k = w_k dl g_k, g_k = K_k v / |v|; a slot immovable in every lane adds exactly 0.
-  unsigned slots = 0xFu;
+  // A slot immovable in every lane adds exactly 0 and is skipped.
+  u.slots = 0xFu;
   if (b.movable != nullptr) {
-    slots = 0;
-    for (int l = 0; l < L::kWidth; ++l) slots |= b.movable[i + l];
+    u.slots = 0;
+    for (int l = 0; l < L::kWidth; ++l) u.slots |= b.movable[i + l];
   }
-  const V s = dl / len;
-  for (int k = 0; k < 4; ++k) {
-    if (!(slots & (1u << k))) continue;
-    const V c = L::load(b.wK[k] + i) * s;
-    L::addRows(x4, b.p[k] + i, c * vx, c * vy, c * vz);
-  }
+  u.s = dl / len;
   // Degenerate: |v| = 0 where the rest value asks for a bend (a flat hinge at rest is fine).
-  return L::count(L::band(L::notMask(ok), L::ne(rest, L::set1(T(0)))));
+  u.degenerate = L::count(L::band(L::notMask(ok), L::ne(rest, L::set1(T(0)))));
+  return true;
+}
+
+/// The stores of hinges i .. i + L::kWidth - 1: dx_k = w_k dl g_k, g_k = K_k v / |v|.
+template <class L>
+inline void hingeCommit(typename L::T* x4, const View<typename L::T>& b, std::size_t i,
+                        const HingeUpdate<L>& u) {
+  for (int k = 0; k < 4; ++k) {
+    if (!(u.slots & (1u << k))) continue;
+    const typename L::V c = L::load(b.wK[k] + i) * u.s;
+    L::addRows(x4, b.p[k] + i, c * u.vx, c * u.vy, c * u.vz);
+  }
+}
+
+/// Hinges i .. i + L::kWidth - 1. measure == nullptr: project them, return the number of
+/// degenerate ones; otherwise store |v| (0 where degenerate) to measure[i..] and change nothing.
+template <class L>
+inline int hingeGroup(typename L::T* x4, const View<typename L::T>& b, std::size_t i,
+                      typename L::T* measure) {
+  HingeUpdate<L> u;
+  if (!hingeCompute<L>(x4, b, i, measure, u)) return 0;
+  hingeCommit<L>(x4, b, i, u);
+  return u.degenerate;
 }
 
 }  // namespace
