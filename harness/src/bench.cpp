@@ -190,9 +190,15 @@ bool sameIdleMachine(const json& a, const json& b, std::string& why) {
     why = "a file does not record its machine's cores and load";
     return false;
   }
-  if (ma.value("cpu", "") != mb.value("cpu", "") || ma["cores"] != mb["cores"]) {
-    why = "other machines (" + ma.value("cpu", "?") + ", " + ma["cores"].dump() + " cores; " +
-          mb.value("cpu", "?") + ", " + mb["cores"].dump() + " cores)";
+  // One model name ("AMD EPYC") covers CPUs with and without AVX-512: an older file without
+  // vector_units matches nothing.
+  const auto cpu = [](const json& m) {
+    return m.value("cpu", "?") + " " + m.value("vector_units", "(vector units unknown)");
+  };
+  if (!ma.contains("vector_units") || !mb.contains("vector_units") || cpu(ma) != cpu(mb) ||
+      ma["cores"] != mb["cores"]) {
+    why = "other machines (" + cpu(ma) + ", " + ma["cores"].dump() + " cores; " + cpu(mb) + ", " +
+          mb["cores"].dump() + " cores)";
     return false;
   }
   const double cores = ma["cores"].get<double>();
@@ -235,6 +241,7 @@ ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* prog
   ojson doc;
   doc["format"] = "deformbench-bench/1";
   doc["machine"] = {{"cpu", machine.cpu},
+                    {"vector_units", machine.vectorUnits},
                     {"cores", long(::sysconf(_SC_NPROCESSORS_ONLN))},
                     {"load_average", loadAverage()},
                     {"compiler", machine.compiler},

@@ -49,6 +49,17 @@ std::string cpuModel() {
   return "";
 }
 
+std::string vectorUnits() {
+#if defined(__x86_64__) && defined(__GNUC__)
+  if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+      __builtin_cpu_supports("avx512dq"))
+    return "avx512";
+  return __builtin_cpu_supports("avx2") ? "avx2" : "sse2";
+#else
+  return "";
+#endif
+}
+
 std::string gitDescribe() {
   const std::string src = DEFORM_SOURCE_DIR;
   if (src.empty() || !fs::exists(fs::path(src) / ".git")) return "";
@@ -72,6 +83,7 @@ json finite(double v) {
 MachineInfo machineInfo() {
   MachineInfo m;
   m.cpu = cpuModel();
+  m.vectorUnits = vectorUnits();
 #if defined(__clang__)
   m.compiler = std::string("Clang ") + __clang_version__;
 #elif defined(__GNUC__)
@@ -412,9 +424,13 @@ json resultsJson(const Scene& scene, const Organ& organ, const std::vector<std::
                   {"log", organLog}};
   if (scene.surfaces != SurfaceOutput::None) doc["organ"]["rest_surface"] = kRestSurfaceFile;
   doc["interaction"] = interactionJson(scene, organ);
-  doc["machine"] = {
-      {"cpu", machine.cpu}, {"compiler", machine.compiler},   {"build_type", machine.buildType},
-      {"git", machine.git}, {"timestamp", machine.timestamp}, {"deformbench", machine.version}};
+  doc["machine"] = {{"cpu", machine.cpu},
+                    {"vector_units", machine.vectorUnits},
+                    {"compiler", machine.compiler},
+                    {"build_type", machine.buildType},
+                    {"git", machine.git},
+                    {"timestamp", machine.timestamp},
+                    {"deformbench", machine.version}};
   doc["runs"] = json::array();
   for (const RunRecord& r : runs) doc["runs"].push_back(runJson(r));
   return doc;

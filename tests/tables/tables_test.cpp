@@ -1179,10 +1179,23 @@ TEST(Bench, CompareJudgesEachCaseByItsRatioToPbdInTheSameRun) {
   EXPECT_EQ(compareBench(oldDoc, newDoc, 0.5).regressions, 0) << "40% is under a 50% threshold";
   // The same idle machine: absolute times are judged too (PBD's 2x is a regression).
   json a = oldDoc, b = newDoc;
-  for (json* d : {&a, &b}) (*d)["machine"] = {{"cpu", "X"}, {"cores", 2}, {"load_average", {0.1}}};
+  for (json* d : {&a, &b})
+    (*d)["machine"] = {
+        {"cpu", "X"}, {"vector_units", "avx512"}, {"cores", 2}, {"load_average", {0.1}}};
   const BenchComparison same = compareBench(a, b, 0.25);
   EXPECT_TRUE(same.absolute) << same.absoluteWhy;
   EXPECT_EQ(same.rows[0].verdict, "SLOWER");
+  // The same model name without AVX-512 (or a file that does not say) is another machine.
+  for (const json units : {json("avx2"), json()}) {
+    json moved = b;
+    if (units.is_null())
+      moved["machine"].erase("vector_units");
+    else
+      moved["machine"]["vector_units"] = units;
+    const BenchComparison other = compareBench(a, moved, 0.25);
+    EXPECT_FALSE(other.absolute);
+    EXPECT_NE(other.absoluteWhy.find("other machines"), std::string::npos) << other.absoluteWhy;
+  }
   b["machine"]["load_average"] = {1.5};  // busy: over half its cores
   const BenchComparison busy = compareBench(a, b, 0.25);
   EXPECT_FALSE(busy.absolute);

@@ -14,7 +14,10 @@ namespace deform::harness {
 
 /// Where and with what the results were produced.
 struct MachineInfo {
-  std::string cpu;        ///< /proc/cpuinfo model name
+  std::string cpu;  ///< /proc/cpuinfo model name
+  /// The widest vector unit the kernels use here: "avx512" (F, VL, DQ), "avx2", "sse2", or ""
+  /// off x86-64. One model name covers CPUs with and without AVX-512, whose speeds differ 2-5x.
+  std::string vectorUnits;
   std::string compiler;   ///< e.g. "GCC 12.2.0"
   std::string buildType;  ///< CMAKE_BUILD_TYPE of the harness
   std::string git;        ///< git describe of the source tree, "" when unavailable
