@@ -1186,7 +1186,7 @@ TEST(Bench, CompareJudgesEachCaseByItsRatioToPbdInTheSameRun) {
   EXPECT_TRUE(same.absolute) << same.absoluteWhy;
   EXPECT_EQ(same.rows[0].verdict, "SLOWER");
   // The same model name without AVX-512 (or a file that does not say) is another machine.
-  for (const json units : {json("avx2"), json()}) {
+  for (const json& units : {json("avx2"), json()}) {
     json moved = b;
     if (units.is_null())
       moved["machine"].erase("vector_units");
