@@ -144,7 +144,11 @@ void BM_LiverSpringPass(benchmark::State& state) {
   state.counters["ns_per_spring"] =
       benchmark::Counter(double(a.size()) * 1e-9, benchmark::Counter::kIsIterationInvariantRate |
                                                       benchmark::Counter::kInvert);
-  state.SetLabel(simd && massspring::rows::simdAvailable() ? "avx512" : "scalar");
+  const massspring::rows::Simd path =
+      simd ? massspring::rows::simdPath() : massspring::rows::Simd::Scalar;
+  state.SetLabel(path == massspring::rows::Simd::Avx512 ? "avx512"
+                 : path == massspring::rows::Simd::Avx2 ? "avx2"
+                                                        : "scalar");
 }
 
 BENCHMARK(BM_LiverSpringPass)->Arg(1)->Arg(0)->Unit(benchmark::kMicrosecond);

@@ -1,5 +1,5 @@
-// Scalar path and dispatch of explicit_rows.h (compiled with -ffp-contract=off, like the AVX-512
-// unit, so that both round alike).
+// Scalar path and dispatch of explicit_rows.h (compiled with -ffp-contract=off, like the AVX2 and
+// AVX-512 units, so that all round alike).
 #include "explicit_rows.h"
 
 #include <cmath>
@@ -62,36 +62,49 @@ bool integrateScalar(double* xv, const double* f4, std::size_t n, const Integrat
 
 }  // namespace
 
-bool simdAvailable() {
+Simd simdPath() {
 #ifdef DEFORM_MS_HAVE_AVX512
-  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-         __builtin_cpu_supports("avx512dq");
+  static const Simd kPath = __builtin_cpu_supports("avx512f") &&
+                                    __builtin_cpu_supports("avx512vl") &&
+                                    __builtin_cpu_supports("avx512dq")
+                                ? Simd::Avx512
+                            : __builtin_cpu_supports("avx2") ? Simd::Avx2
+                                                             : Simd::Scalar;
+  return kPath;
 #else
-  return false;
+  return Simd::Scalar;
 #endif
 }
 
-long long addSpringForces(const double* xv, const SpringArrays& s, double* f4, bool simd) {
+long long addSpringForces(const double* xv, const SpringArrays& s, double* f4, Simd path) {
   long long degenerate = 0;
   std::size_t done = 0;
 #ifdef DEFORM_MS_HAVE_AVX512
-  static const bool kAvx512 = simdAvailable();
-  if (simd && kAvx512) done = detail::addSpringForcesAvx512(xv, s, f4, &degenerate);
+  if (path == Simd::Avx512) done = detail::addSpringForcesAvx512(xv, s, f4, &degenerate);
+  if (path == Simd::Avx2) done = detail::addSpringForcesAvx2(xv, s, f4, &degenerate);
 #else
-  (void)simd;
+  (void)path;
 #endif
   addSpringForcesScalar(xv, s, done, f4, &degenerate);
   return degenerate;
 }
 
-bool integrate(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args, bool simd) {
+long long addSpringForces(const double* xv, const SpringArrays& s, double* f4, bool simd) {
+  return addSpringForces(xv, s, f4, simd ? simdPath() : Simd::Scalar);
+}
+
+bool integrate(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args, Simd path) {
 #ifdef DEFORM_MS_HAVE_AVX512
-  static const bool kAvx512 = simdAvailable();
-  if (simd && kAvx512) return detail::integrateAvx512(xv, f4, n, args);
+  if (path == Simd::Avx512) return detail::integrateAvx512(xv, f4, n, args);
+  if (path == Simd::Avx2) return detail::integrateAvx2(xv, f4, n, args);
 #else
-  (void)simd;
+  (void)path;
 #endif
   return integrateScalar(xv, f4, n, args);
+}
+
+bool integrate(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args, bool simd) {
+  return integrate(xv, f4, n, args, simd ? simdPath() : Simd::Scalar);
 }
 
 }  // namespace deform::massspring::rows

@@ -1,12 +1,13 @@
 // The explicit integrators' inner loops (symplectic and explicit Euler) on node rows: each node's
 // position and velocity as one row of eight doubles (x, y, z, 0, vx, vy, vz, 0: one 64-byte cache
-// line) and its force as a row of four (fx, fy, fz, 0). A scalar path and an AVX-512 one
-// (explicit_rows_avx512.cpp, eight springs per vector step, chosen at run time) do the same
-// operations in the same order as MassSpringModel::springForces() and the integration loop did
-// before them, without fused multiply-adds (both files are compiled with -ffp-contract=off): the
-// results are identical bit for bit on either path.
+// line) and its force as a row of four (fx, fy, fz, 0). A scalar path, an AVX2 one
+// (explicit_rows_avx2.cpp, four springs per vector step) and an AVX-512 one
+// (explicit_rows_avx512.cpp, eight), the fastest chosen at run time, do the same operations in
+// the same order as MassSpringModel::springForces() and the integration loop did before them,
+// without fused multiply-adds (the files are compiled with -ffp-contract=off): the results are
+// identical bit for bit on every path.
 //
-// Plain types only: the AVX-512 unit includes this header and nothing with inline library code
+// Plain types only: the vector units include this header and nothing with inline library code
 // (see deform/kernels/simd_rows_avx2.h for why).
 #pragma once
 
@@ -44,6 +45,15 @@ static inline void addSpringPair(double* fa, double* fb, double m, double d0, do
 /// Springs of (near) zero length (|d|^2 <= 1e-24 m^2) add nothing; returns their number.
 long long addSpringForces(const double* xv, const SpringArrays& s, double* f4, bool simd = true);
 
+/// The paths of addSpringForces() and integrate(), all with the same bits.
+enum class Simd { Scalar, Avx2, Avx512 };
+
+/// The path the simd = true calls take on this CPU (checked once per process).
+Simd simdPath();
+
+/// addSpringForces() on a given path, which this CPU must run (path <= simdPath()): for tests.
+long long addSpringForces(const double* xv, const SpringArrays& s, double* f4, Simd path);
+
 /// One explicit substep of n nodes: a = f w + g - alpha v; symplectic: v += h a, x += h v;
 /// explicit: x += h v, v += h a (a from the old v). Nodes with w == 0 do not move. Returns false
 /// when a coordinate leaves [c - half, c + half] or a velocity is not finite (NaN included).
@@ -59,11 +69,15 @@ struct IntegrateArgs {
 bool integrate(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args,
                bool simd = true);
 
-/// Whether the simd = true calls use AVX-512 on this CPU.
-bool simdAvailable();
+/// integrate() on a given path, which this CPU must run: for tests.
+bool integrate(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args, Simd path);
 
 namespace detail {
-// AVX-512 bodies (explicit_rows_avx512.cpp): the springs [0, return value) / every node.
+// The vector bodies (explicit_rows_avx2.cpp, explicit_rows_avx512.cpp): the springs
+// [0, return value) / every node.
+std::size_t addSpringForcesAvx2(const double* xv, const SpringArrays& s, double* f4,
+                                long long* degenerate);
+bool integrateAvx2(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args);
 std::size_t addSpringForcesAvx512(const double* xv, const SpringArrays& s, double* f4,
                                   long long* degenerate);
 bool integrateAvx512(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args);
