@@ -3,7 +3,7 @@
 # --tests adds what only the test suite needs (a single-node Slurm for dispatch_slurm_e2e).
 set -euo pipefail
 PACKAGES=(
-  build-essential cmake pkg-config git
+  build-essential cmake ninja-build pkg-config git
   libeigen3-dev libsuitesparse-dev libbullet-dev libode-dev libgmsh-dev libqhull-dev
   libnanoflann-dev nlohmann-json3-dev libcli11-dev libssl-dev
   libcgal-dev libgmp-dev libmpfr-dev
