@@ -70,14 +70,10 @@ done
 # lines, and the build takes about a third less time than with -g (SANITIZE_DEBUG=-g for a
 # debugger's variables).
 debug=${SANITIZE_DEBUG:--g1}
-# --ci: CGAL's box clipping (core/geometry/src/box_clip.cpp) without ASan, UBSan only: half of
-# its 184 s of compile; the other modes sanitize it fully.
-cgal=ON
-[[ $ci -eq 1 ]] && cgal=OFF
 cmake -S . -B "$build" "${generator[@]}" "${compilers[@]}" "${launcher[@]}" "${with[@]}" \
   -DCMAKE_BUILD_TYPE=Debug \
   -DCMAKE_CXX_FLAGS_DEBUG="-O1 $debug" -DCMAKE_C_FLAGS_DEBUG="-O1 $debug" -DDEFORM_SANITIZE=ON \
-  -DDEFORM_HARNESS_DEBUG_OPT=-O0 -DDEFORM_SANITIZE_CGAL=$cgal -DDEFORM_BUILD_TESTS=ON -DDEFORM_BUILD_BENCHMARKS=OFF >/dev/null
+  -DDEFORM_HARNESS_DEBUG_OPT=-O0 -DDEFORM_BUILD_TESTS=ON -DDEFORM_BUILD_BENCHMARKS=OFF >/dev/null
 
 # The plugins are MODULE libraries named deform_<plugin>; the test programs load them.
 targets=(deform_engine deformbench)  # deform_core is an INTERFACE target (no rule of its own)
