@@ -95,8 +95,8 @@ long long addSpringForces(const double* xv, const SpringArrays& s, double* f4, b
 
 bool integrate(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args, Simd path) {
 #ifdef DEFORM_MS_HAVE_AVX512
-  if (path == Simd::Avx512) return detail::integrateAvx512(xv, f4, n, args);
-  if (path == Simd::Avx2) return detail::integrateAvx2(xv, f4, n, args);
+  // The update is four-wide either way: the AVX2 body serves AVX-512 CPUs too.
+  if (path != Simd::Scalar) return detail::integrateAvx2(xv, f4, n, args);
 #else
   (void)path;
 #endif

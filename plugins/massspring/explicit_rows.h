@@ -74,13 +74,12 @@ bool integrate(double* xv, const double* f4, std::size_t n, const IntegrateArgs&
 
 namespace detail {
 // The vector bodies (explicit_rows_avx2.cpp, explicit_rows_avx512.cpp): the springs
-// [0, return value) / every node.
+// [0, return value) / every node (one four-wide update for both).
 std::size_t addSpringForcesAvx2(const double* xv, const SpringArrays& s, double* f4,
                                 long long* degenerate);
 bool integrateAvx2(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args);
 std::size_t addSpringForcesAvx512(const double* xv, const SpringArrays& s, double* f4,
                                   long long* degenerate);
-bool integrateAvx512(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args);
 }  // namespace detail
 
 }  // namespace deform::massspring::rows

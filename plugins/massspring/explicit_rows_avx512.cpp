@@ -1,6 +1,6 @@
-// AVX-512 bodies of explicit_rows.h. Compiled with -mavx512f -mavx512vl -mavx512dq
-// -ffp-contract=off and entered only after the run-time CPU check in explicit_rows.cpp; includes
-// nothing but the intrinsics and the plain header.
+// The AVX-512 spring pass of explicit_rows.h (the node update is the AVX2 unit's on both). Compiled
+// with -mavx512f -mavx512vl -mavx512dq -ffp-contract=off and entered only after the run-time CPU
+// check in explicit_rows.cpp; includes nothing but the intrinsics and the plain header.
 #if defined(__x86_64__) && defined(__GNUC__)
 // GCC 12 reports -Wmaybe-uninitialized inside its own AVX-512 intrinsics (their _mm512_undefined_*
 // pass-through operands, GCC bug 105593, fixed in GCC 13); nothing in this file is uninitialised.
@@ -8,8 +8,6 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
 #include <immintrin.h>
-
-#include <cfloat>
 
 #include "explicit_rows.h"
 
@@ -79,47 +77,6 @@ std::size_t addSpringForcesAvx512(const double* xv, const SpringArrays& s, doubl
     *degenerate += 8 - __builtin_popcount(ok);
   }
   return i;
-}
-
-namespace {
-
-template <bool kSymplectic>
-bool integrateRows(double* xv, const double* f4, std::size_t n, const IntegrateArgs& p) {
-  const __m256d g = _mm256_set_pd(0.0, p.g[2], p.g[1], p.g[0]);
-  const __m256d c = _mm256_set_pd(0.0, p.c[2], p.c[1], p.c[0]);
-  const __m256d alpha = _mm256_set1_pd(p.alpha), h = _mm256_set1_pd(p.h);
-  const __m256d half = _mm256_set1_pd(p.half), vmax = _mm256_set1_pd(DBL_MAX);
-  const __m256d sign = _mm256_set1_pd(-0.0);
-  __mmask8 ok = 0xF;
-  for (std::size_t i = 0; i < n; ++i) {
-    double* px = xv + 8 * i;
-    __m256d X = _mm256_loadu_pd(px), V = _mm256_loadu_pd(px + 4);
-    const double w = p.w[i];
-    if (w != 0.0) {  // fixed (or massless) nodes stay at rest
-      const __m256d a = _mm256_sub_pd(
-          _mm256_add_pd(_mm256_mul_pd(_mm256_loadu_pd(f4 + 4 * i), _mm256_set1_pd(w)), g),
-          _mm256_mul_pd(alpha, V));
-      if constexpr (kSymplectic) {
-        V = _mm256_add_pd(V, _mm256_mul_pd(h, a));
-        X = _mm256_add_pd(X, _mm256_mul_pd(h, V));
-      } else {
-        X = _mm256_add_pd(X, _mm256_mul_pd(h, V));
-        V = _mm256_add_pd(V, _mm256_mul_pd(h, a));
-      }
-      _mm256_storeu_pd(px, X);
-      _mm256_storeu_pd(px + 4, V);
-    }
-    ok &= _mm256_cmp_pd_mask(_mm256_andnot_pd(sign, _mm256_sub_pd(X, c)), half, _CMP_LE_OQ) &
-          _mm256_cmp_pd_mask(_mm256_andnot_pd(sign, V), vmax, _CMP_LE_OQ);
-  }
-  return ok == 0xF;
-}
-
-}  // namespace
-
-bool integrateAvx512(double* xv, const double* f4, std::size_t n, const IntegrateArgs& args) {
-  return args.symplectic ? integrateRows<true>(xv, f4, n, args)
-                         : integrateRows<false>(xv, f4, n, args);
 }
 
 }  // namespace deform::massspring::rows::detail
