@@ -181,10 +181,10 @@ double relativeSpread(const json& c) {
 
 /// Whether absolute times of two bench files may be compared, and if not, why.
 bool sameIdleMachine(const json& a, const json& b, std::string& why) {
-  const auto m = [](const json& d) {
+  const auto machineOf = [](const json& d) {
     return d.contains("machine") ? d["machine"] : json::object();
   };
-  const json ma = m(a), mb = m(b);
+  const json ma = machineOf(a), mb = machineOf(b);
   if (!ma.contains("load_average") || !mb.contains("load_average") || !ma.contains("cores") ||
       !mb.contains("cores")) {
     why = "a file does not record its machine's cores and load";
