@@ -9,8 +9,9 @@
 # -rss_limit_mb (also the malloc limit), -max_len (bytes). A crash, sanitizer report, leak,
 # timeout or out-of-memory writes a reproducer into build-fuzz/artifacts/<target>/ and makes the
 # script exit 1 after all targets ran, printing every reproducer path.
-# Environment: FUZZ_JOBS (build parallelism, default nproc), FUZZ_TIMEOUT (default 10),
-# FUZZ_RSS_MB (default 2048), FUZZ_MAX_LEN (default 16384), FUZZ_BUILD_DIR (default build-fuzz).
+# Environment: FUZZ_JOBS (build parallelism, default nproc), FUZZ_PARALLEL (targets fuzzed side
+# by side, default nproc), FUZZ_TIMEOUT (default 10), FUZZ_RSS_MB (default 2048), FUZZ_MAX_LEN
+# (default 16384), FUZZ_BUILD_DIR (default build-fuzz).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -48,26 +49,27 @@ cmake --build "$build" -j "$jobs" --target "${build_targets[@]}"
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:allocator_may_return_null=0}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 
-failed=()
-for t in "${targets[@]}"; do
-  bin=$build/fuzz/fuzz_$t
-  seeds=tests/fuzz/corpus/$t
-  regressions=tests/fuzz/regressions/$t
-  work=$build/corpus/$t
-  artifacts=$build/artifacts/$t
-  log=$build/logs/fuzz_$t.log
+# One target: replay its regressions, then fuzz. What it prints goes to logs/fuzz_<t>.out, a
+# failure's line to logs/fuzz_<t>.failed (the targets run side by side, FUZZ_PARALLEL at a time).
+fuzz_one() {
+  local t=$1
+  local bin=$build/fuzz/fuzz_$t seeds=tests/fuzz/corpus/$t regressions=tests/fuzz/regressions/$t
+  local work=$build/corpus/$t artifacts=$build/artifacts/$t log=$build/logs/fuzz_$t.log
+  local failed=$build/logs/fuzz_$t.failed
+  rm -f "$failed"
   mkdir -p "$work" "$artifacts" "$(dirname "$log")"
-  common=(-timeout="$timeout" -rss_limit_mb="$rss" -max_len="$maxlen"
+  local common=(-timeout="$timeout" -rss_limit_mb="$rss" -max_len="$maxlen"
     -artifact_prefix="$artifacts/")
   if compgen -G "$regressions/*" >/dev/null; then
     echo "== $t: replaying $regressions"
     if ! "$bin" "${common[@]}" "$regressions"/* >"$log.replay" 2>&1; then
       tail -n 40 "$log.replay"
-      failed+=("$t: a saved regression input fails again (see $log.replay)")
-      continue
+      echo "$t: a saved regression input fails again (see $log.replay)" >"$failed"
+      return
     fi
   fi
   echo "== $t: fuzzing for ${seconds}s (log $log)"
+  local before
   before=$(ls "$artifacts" | wc -l)
   if "$bin" "${common[@]}" -max_total_time="$seconds" -print_final_stats=1 "$work" "$seeds" \
     >"$log" 2>&1; then
@@ -75,12 +77,25 @@ for t in "${targets[@]}"; do
     echo
   else
     grep -m1 -A25 -E "^==[0-9]+==|^SUMMARY|ERROR:" "$log" || tail -n 40 "$log"
-    found=$(ls -t "$artifacts" | head -n 1)
-    failed+=("$t: reproducer $artifacts/$found (log $log)")
+    echo "$t: reproducer $artifacts/$(ls -t "$artifacts" | head -n 1) (log $log)" >"$failed"
   fi
-  if [[ $(ls "$artifacts" | wc -l) -gt $before && ${#failed[@]} -eq 0 ]]; then
-    failed+=("$t: new files in $artifacts")
+  if [[ $(ls "$artifacts" | wc -l) -gt $before && ! -f $failed ]]; then
+    echo "$t: new files in $artifacts" >"$failed"
   fi
+}
+
+# Each fuzzer is one process on one core: FUZZ_PARALLEL of them at a time (default nproc).
+parallel=${FUZZ_PARALLEL:-$(nproc)}
+mkdir -p "$build/logs"
+for t in "${targets[@]}"; do
+  while [[ $(jobs -rp | wc -l) -ge $parallel ]]; do wait -n || true; done
+  fuzz_one "$t" >"$build/logs/fuzz_$t.out" 2>&1 &
+done
+wait
+failed=()
+for t in "${targets[@]}"; do
+  cat "$build/logs/fuzz_$t.out"
+  [[ -f $build/logs/fuzz_$t.failed ]] && failed+=("$(cat "$build/logs/fuzz_$t.failed")")
 done
 
 if [[ ${#failed[@]} -gt 0 ]]; then

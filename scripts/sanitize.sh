@@ -125,24 +125,39 @@ export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:strict_strin
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 export DEFORM_CACHE_DIR=$PWD/$build/test-cache
 
+# The test programs, one process each on one core. With two cores or more they run beside the
+# conformance suite below (each lane one process at a time; their output is printed after it).
+run_test_programs() {
+  local status=0 t bin filter positive start
+  for t in "${tests[@]}"; do
+    bin=$build/tests/$t
+    [[ -x $bin ]] || continue
+    filter=()
+    positive=""
+    [[ $t == deform_conformance_tests ]] && positive=$conformance_filter
+    if [[ -n $positive || -n $exclude ]]; then
+      filter=(--gtest_filter="${positive}${exclude:+-$exclude}")
+    fi
+    echo "== $t ${filter[*]}"
+    start=$SECONDS
+    if ! "$bin" "${filter[@]}" --gtest_brief=1; then
+      echo "sanitize.sh: $t FAILED (sanitizer report or failing test above)"
+      status=1
+    fi
+    echo "== $t took $((SECONDS - start))s"
+  done
+  return $status
+}
 status=0
-for t in "${tests[@]}"; do
-  bin=$build/tests/$t
-  [[ -x $bin ]] || continue
-  filter=()
-  positive=""
-  [[ $t == deform_conformance_tests ]] && positive=$conformance_filter
-  if [[ -n $positive || -n $exclude ]]; then
-    filter=(--gtest_filter="${positive}${exclude:+-$exclude}")
-  fi
-  echo "== $t ${filter[*]}"
-  start=$SECONDS
-  if ! "$bin" "${filter[@]}" --gtest_brief=1; then
-    echo "sanitize.sh: $t FAILED (sanitizer report or failing test above)"
-    status=1
-  fi
-  echo "== $t took $((SECONDS - start))s"
-done
+programs_log=$build/test-programs.log
+programs_pid=""
+if [[ $jobs -ge 2 && $quick -eq 0 && ${#built_plugins[@]} -gt 0 ]]; then
+  echo "== the test programs run beside the conformance suite (output: $programs_log, shown after)"
+  run_test_programs >"$programs_log" 2>&1 &
+  programs_pid=$!
+else
+  run_test_programs || status=1
+fi
 # The conformance suite (deformbench conformance) on each built plugin, with the known failures
 # of tests/conformance/expected_failures.txt.
 if [[ $quick -eq 0 && ${#built_plugins[@]} -gt 0 ]]; then
@@ -173,6 +188,10 @@ if [[ $quick -eq 0 && ${#built_plugins[@]} -gt 0 ]]; then
     fi
     echo "== conformance of $p took $((SECONDS - start))s"
   done
+fi
+if [[ -n $programs_pid ]]; then
+  wait "$programs_pid" || status=1
+  cat "$programs_log"
 fi
 if ctest --test-dir "$build" -N -R '^cli_' 2>/dev/null | grep -q 'Total Tests: [1-9]'; then
   echo "== deformbench CLI tests (ctest -R '^cli_' -E '$cli_exclude')"
