@@ -10,7 +10,9 @@
 #                                  the unit tests, the CLI error tests and the conformance suite
 #                                  (deformbench conformance + the contact conformance program)
 #                                  for the plugins in SANITIZE_CI_PLUGINS only (default below),
-#                                  its "scenes" check on SANITIZE_CI_SCENES (default liver_poke.json)
+#                                  its "scenes" check on SANITIZE_CI_SCENES (default liver_poke.json);
+#                                  UBSan on the core and the plugins only (the harness and the
+#                                  test programs under ASan alone)
 #   scripts/sanitize.sh --no-run   build only (combine with --quick or --ci)
 # SANITIZE_PLUGINS='a b' limits the plugins built (and the conformance suite) in any mode.
 # Tests too slow under the sanitizers (ASan + UBSan at -O1 runs the numerics 3-10x slower) are
@@ -70,10 +72,15 @@ done
 # lines, and the build takes about a third less time than with -g (SANITIZE_DEBUG=-g for a
 # debugger's variables).
 debug=${SANITIZE_DEBUG:--g1}
+# --ci: the harness and the test programs with ASan only (DEFORM_SANITIZE_GLUE_UB, the top
+# CMakeLists.txt); the core and the plugins under both. Without --ci everything gets both.
+glue_ub=ON
+[[ $ci -eq 1 ]] && glue_ub=OFF
 cmake -S . -B "$build" "${generator[@]}" "${compilers[@]}" "${launcher[@]}" "${with[@]}" \
   -DCMAKE_BUILD_TYPE=Debug \
   -DCMAKE_CXX_FLAGS_DEBUG="-O1 $debug" -DCMAKE_C_FLAGS_DEBUG="-O1 $debug" -DDEFORM_SANITIZE=ON \
-  -DDEFORM_HARNESS_DEBUG_OPT=-O0 -DDEFORM_BUILD_TESTS=ON -DDEFORM_BUILD_BENCHMARKS=OFF >/dev/null
+  -DDEFORM_SANITIZE_GLUE_UB=$glue_ub -DDEFORM_HARNESS_DEBUG_OPT=-O0 -DDEFORM_BUILD_TESTS=ON \
+  -DDEFORM_BUILD_BENCHMARKS=OFF >/dev/null
 
 # The plugins are MODULE libraries named deform_<plugin>; the test programs load them.
 targets=(deform_engine deformbench)  # deform_core is an INTERFACE target (no rule of its own)
