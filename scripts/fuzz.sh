@@ -89,13 +89,18 @@ parallel=${FUZZ_PARALLEL:-$(nproc)}
 mkdir -p "$build/logs"
 for t in "${targets[@]}"; do
   while [[ $(jobs -rp | wc -l) -ge $parallel ]]; do wait -n || true; done
-  fuzz_one "$t" >"$build/logs/fuzz_$t.out" 2>&1 &
+  rm -f "$build/logs/fuzz_$t.done"
+  { fuzz_one "$t" && touch "$build/logs/fuzz_$t.done"; } >"$build/logs/fuzz_$t.out" 2>&1 &
 done
 wait
 failed=()
 for t in "${targets[@]}"; do
   cat "$build/logs/fuzz_$t.out"
-  [[ -f $build/logs/fuzz_$t.failed ]] && failed+=("$(cat "$build/logs/fuzz_$t.failed")")
+  if [[ -f $build/logs/fuzz_$t.failed ]]; then
+    failed+=("$(cat "$build/logs/fuzz_$t.failed")")
+  elif [[ ! -f $build/logs/fuzz_$t.done ]]; then
+    failed+=("$t: the script's run of it stopped early (see $build/logs/fuzz_$t.out)")
+  fi
 done
 
 if [[ ${#failed[@]} -gt 0 ]]; then
