@@ -24,6 +24,12 @@ jobs=${FUZZ_JOBS:-$(nproc)}
 timeout=${FUZZ_TIMEOUT:-10}
 rss=${FUZZ_RSS_MB:-2048}
 maxlen=${FUZZ_MAX_LEN:-16384}
+# Each fuzzer is one process on one core: FUZZ_PARALLEL of them at a time (default nproc).
+parallel=${FUZZ_PARALLEL:-$(nproc)}
+if [[ ! $parallel =~ ^[1-9][0-9]*$ ]]; then
+  echo "fuzz.sh: FUZZ_PARALLEL must be a whole number of at least 1, got '$parallel'" >&2
+  exit 2
+fi
 
 if ! command -v clang++ >/dev/null; then
   echo "fuzz.sh: clang++ not found (the fuzzers need clang's libFuzzer)" >&2
@@ -55,8 +61,8 @@ fuzz_one() {
   local t=$1
   local bin=$build/fuzz/fuzz_$t seeds=tests/fuzz/corpus/$t regressions=tests/fuzz/regressions/$t
   local work=$build/corpus/$t artifacts=$build/artifacts/$t log=$build/logs/fuzz_$t.log
-  local failed=$build/logs/fuzz_$t.failed
-  rm -f "$failed"
+  local failed_file=$build/logs/fuzz_$t.failed
+  rm -f "$failed_file"
   mkdir -p "$work" "$artifacts" "$(dirname "$log")"
   local common=(-timeout="$timeout" -rss_limit_mb="$rss" -max_len="$maxlen"
     -artifact_prefix="$artifacts/")
@@ -64,7 +70,7 @@ fuzz_one() {
     echo "== $t: replaying $regressions"
     if ! "$bin" "${common[@]}" "$regressions"/* >"$log.replay" 2>&1; then
       tail -n 40 "$log.replay"
-      echo "$t: a saved regression input fails again (see $log.replay)" >"$failed"
+      echo "$t: a saved regression input fails again (see $log.replay)" >"$failed_file"
       return
     fi
   fi
@@ -77,15 +83,13 @@ fuzz_one() {
     echo
   else
     grep -m1 -A25 -E "^==[0-9]+==|^SUMMARY|ERROR:" "$log" || tail -n 40 "$log"
-    echo "$t: reproducer $artifacts/$(ls -t "$artifacts" | head -n 1) (log $log)" >"$failed"
+    echo "$t: reproducer $artifacts/$(ls -t "$artifacts" | head -n 1) (log $log)" >"$failed_file"
   fi
-  if [[ $(ls "$artifacts" | wc -l) -gt $before && ! -f $failed ]]; then
-    echo "$t: new files in $artifacts" >"$failed"
+  if [[ $(ls "$artifacts" | wc -l) -gt $before && ! -f $failed_file ]]; then
+    echo "$t: new files in $artifacts" >"$failed_file"
   fi
 }
 
-# Each fuzzer is one process on one core: FUZZ_PARALLEL of them at a time (default nproc).
-parallel=${FUZZ_PARALLEL:-$(nproc)}
 mkdir -p "$build/logs"
 for t in "${targets[@]}"; do
   while [[ $(jobs -rp | wc -l) -ge $parallel ]]; do wait -n || true; done
