@@ -140,7 +140,7 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
   m_isoColours = orderByColour(m_iso, N, [](const IsometricHinge& c) {
     return std::array{c.p[0], c.p[1], c.p[2], c.p[3]};
   });
-  orderByColour(m_tet, N, [](const TetVolumeConstraint& c) {
+  m_tetColours = orderByColour(m_tet, N, [](const TetVolumeConstraint& c) {
     return std::array{c.p[0], c.p[1], c.p[2], c.p[3]};
   });
 
@@ -205,6 +205,7 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
     m_distWbF.resize(m_distance.size());
   }
   initIsometric();
+  initTets();
   reset();
 }
 
@@ -378,6 +379,7 @@ void PbdModel::refreshHotData(Real dt) {
     }
   }
   refreshIsometricHotData(dt);
+  refreshTetHotData(dt);
   m_hotDt = dt;
 }
 
@@ -475,20 +477,19 @@ void PbdModel::projectAll(Real dt) {
     if (!m_iso.empty()) projectIsometric();
     const bool volumeNow =
         m_hasVolume && (m_config.volumeEverySweep || it + 1 == m_config.iterations);
-    if (!m_dihedral.empty() || !m_tet.empty()) {
+    if (!m_dihedral.empty()) {
       unpackPositions();
       m_degenerate += projectFourPoint(
           m_dihedral, W, m_lambdaBend, m_p,
           [&](const DihedralConstraint& c, const Vec3* x, const Real* w, Real& lambda, Vec3* dx) {
             return projectDihedral(x, w, c.restAngle, c.compliance * invDt2, m_kBend, lambda, dx);
           });
-      m_degenerate += projectFourPoint(
-          m_tet, W, m_lambdaTet, m_p,
-          [&](const TetVolumeConstraint& c, const Vec3* x, const Real* w, Real& lambda, Vec3* dx) {
-            return projectTetVolume(x, w, c.restVolume, c.compliance * invDt2, m_kVolume, lambda,
-                                    dx);
-          });
       packed = false;
+    }
+    if (!m_tet.empty()) {
+      if (!packed) packPositions();
+      packed = true;
+      projectTets();
     }
     if (volumeNow) {
       if (!packed) packPositions();
@@ -595,6 +596,7 @@ StepStatus PbdModel::step(const StepInput& in) {
     std::fill(m_lambdaDist.begin(), m_lambdaDist.end(), 0.0);
   std::fill(m_lambdaBend.begin(), m_lambdaBend.end(), 0.0);
   std::fill(m_lambdaTet.begin(), m_lambdaTet.end(), 0.0);
+  std::fill(m_lambdaTetF.begin(), m_lambdaTetF.end(), 0.0f);
   m_lambdaVolume = 0;
   projectAll(dt);
   // Contact last, on the surface triangles, so that no surface point ends the step inside an
@@ -702,7 +704,7 @@ void PbdModel::computeGraspForces(const StepInput& in, Real dt) {
     g[2] = e3.cross(e1) / 6.0;
     g[3] = e1.cross(e2) / 6.0;
     g[0] = -(g[1] + g[2] + g[3]);
-    for (int k = 0; k < 4; ++k) add(c.p[k], (m_lambdaTet[i] * invDt2) * g[k]);
+    for (int k = 0; k < 4; ++k) add(c.p[k], (lambdaTet(i) * invDt2) * g[k]);
   }
   addIsometricGraspForces(invDt2, nodeForce);
   if (m_hasVolume) {

@@ -12,6 +12,7 @@
 
 #include <deform/geometry/tet_embedding.h>
 #include <deform/kernels/isometric_bending.h>
+#include <deform/kernels/tet_volume_batch.h>
 #include <deform/sdk/model.h>
 #include <deform/sdk/params.h>
 
@@ -105,6 +106,13 @@ class PbdModel final : public Model {
   void refreshIsometricHotData(Real dt);
   void projectIsometric();
   void addIsometricGraspForces(Real invDt2, MatX3& nodeForce);
+  // Tet volume constraints (pbd_tets.cpp): the batches, their hot data and one sweep.
+  void initTets();
+  void refreshTetHotData(Real dt);
+  void projectTets();
+  Real lambdaTet(size_t i) const {
+    return m_f32 ? static_cast<Real>(m_lambdaTetF[i]) : m_lambdaTet[i];
+  }
   Real lambdaDist(size_t i) const {
     return m_f32 ? static_cast<Real>(m_lambdaDistF[i]) : m_lambdaDist[i];
   }
@@ -141,6 +149,14 @@ class PbdModel final : public Model {
       m_lambdaIsoF;
   std::vector<int> m_graspIso;
   std::vector<TetVolumeConstraint> m_tet;
+  // Tet volume constraints in colour order as structure of arrays (pbd_tets.cpp), projected on
+  // the packed positions like the hinges: m_tetColours the start of each colour, plus the end;
+  // per-step inverse masses and alpha / dt^2 refreshed with the hot data. The float form's rest
+  // volumes are measured in float from the packed rest positions (C = 0 exactly at rest).
+  std::vector<size_t> m_tetColours;
+  std::vector<int> m_tetP[4];  // 4 * particle index
+  std::vector<Real> m_tetW[4], m_tetRest, m_tetFloor, m_tetAlphaTilde;
+  std::vector<float> m_tetWF[4], m_tetRestF, m_tetFloorF, m_tetAlphaTildeF, m_lambdaTetF;
   MatX4i m_tets;  // tet input: the tets (for inverted_tets)
   TetEmbedding m_markerEmbedding;
   bool m_hasVolume = false;

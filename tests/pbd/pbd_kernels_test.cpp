@@ -5,10 +5,13 @@
 #include "../support/meshes.h"
 #include "pbd_constraints.h"
 
+#include <deform/kernels/tet_volume_batch.h>
+
 #include <gtest/gtest.h>
 
 #include <cstdint>
 #include <random>
+#include <vector>
 
 namespace deform::pbd {
 namespace {
@@ -459,6 +462,103 @@ TEST(PbdTetVolume, NothingMovesAtRestAndDegenerateIsRefused) {
 }
 
 // ---- global surface volume ----
+
+// A colour of 13 tets on 52 particles (no two share a particle; particle 0 immovable), their
+// rest volumes, the stretched positions x4 and the batch's arrays; tet 5 collapsed to a segment.
+template <class T>
+struct TetColour {
+  static constexpr int kTets = 13;
+  std::vector<T> x4, w[4], rest, floor, alphaTilde, lambda;
+  std::vector<int> p[4];
+  std::vector<Real> restD;  // the double rest volumes (projectTetVolume's)
+  explicit TetColour(Real compliance) {
+    std::mt19937 rng(11);
+    x4.assign(4 * 4 * kTets, T(0));
+    for (int k = 0; k < 4; ++k) {
+      p[k].resize(kTets);
+      w[k].resize(kTets);
+    }
+    for (int t = 0; t < kTets; ++t) {
+      Vec3 x[4] = {Vec3(0, 0, 0), Vec3(0.01, 0, 0), Vec3(0, 0.01, 0), Vec3(0, 0, 0.01)};
+      for (auto& q : x) q += randomVec(rng, 0.002) + Vec3(0.03 * t, 0, 0);
+      if (t == 5) x[2] = x[3] = 0.5 * (x[0] + x[1]);  // a segment: refused
+      restD.push_back(t == 5 ? 1e-6 : tetVolume(x[0], x[1], x[2], x[3]));
+      for (int k = 0; k < 4; ++k) {
+        const int particle = 4 * t + k;
+        p[k][t] = 4 * particle;
+        w[k][t] = T(particle == 0 ? 0.0 : 1.0 + 0.25 * ((t + k) % 3));
+        const Vec3 moved = t == 5 ? x[k] : Vec3(x[k] * 1.1 + randomVec(rng, 5e-4));
+        for (int c = 0; c < 3; ++c) x4[4 * particle + c] = T(moved[c]);
+      }
+    }
+    for (const Real v0 : restD) {
+      rest.push_back(T(v0));
+      floor.push_back(T(tetVolumeGradientFloor(v0)));
+      alphaTilde.push_back(T(compliance * 1e-9));  // |g|^2 is ~1e-10 m^4
+    }
+    lambda.assign(kTets, T(0));
+  }
+  TetVolumeBatch<T> batch(T k) {
+    return {{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
+            {w[0].data(), w[1].data(), w[2].data(), w[3].data()},
+            rest.data(),
+            floor.data(),
+            alphaTilde.data(),
+            lambda.data(),
+            k};
+  }
+};
+
+TEST(PbdTetVolume, ColourKernelIsTheOneAtATimeRuleBitForBit) {
+  for (const Real compliance : {0.0, 1.0}) {
+    for (const bool simd : {false, true}) {
+      TetColour<Real> c(compliance);
+      std::vector<Real> x4 = c.x4, lambda(TetColour<Real>::kTets, 0.0);
+      int refused = 0;
+      for (int it = 0; it < 3; ++it) {
+        EXPECT_EQ(
+            projectTetVolumeColour(c.x4.data(), c.batch(0.8), 0, TetColour<Real>::kTets, simd), 1);
+        for (int t = 0; t < TetColour<Real>::kTets; ++t) {
+          Vec3 x[4], dx[4];
+          Real w[4];
+          for (int k = 0; k < 4; ++k) {
+            x[k] = Vec3(x4[c.p[k][t]], x4[c.p[k][t] + 1], x4[c.p[k][t] + 2]);
+            w[k] = c.w[k][t];
+          }
+          if (!projectTetVolume(x, w, c.restD[t], c.alphaTilde[t], 0.8, lambda[t], dx)) {
+            ++refused;
+            continue;
+          }
+          for (int k = 0; k < 4; ++k)
+            for (int d = 0; d < 3; ++d) x4[c.p[k][t] + d] += dx[k][d];
+        }
+      }
+      EXPECT_EQ(refused, 3);
+      for (size_t i = 0; i < x4.size(); ++i) ASSERT_EQ(c.x4[i], x4[i]) << i;
+      for (int t = 0; t < TetColour<Real>::kTets; ++t) EXPECT_EQ(c.lambda[t], lambda[t]);
+      EXPECT_EQ(c.x4[0], TetColour<Real>(compliance).x4[0]);  // the immovable particle
+    }
+  }
+}
+
+TEST(PbdTetVolume, FloatPathsAgreeAndMeasuredRestVolumesAreExactlyAtRest) {
+  TetColour<float> scalar(1.0), vector(1.0);
+  for (int it = 0; it < 3; ++it) {
+    projectTetVolumeColour(scalar.x4.data(), scalar.batch(1.0f), 0, 13, false);
+    projectTetVolumeColour(vector.x4.data(), vector.batch(1.0f), 0, 13, true);
+  }
+  EXPECT_EQ(scalar.x4, vector.x4);
+  EXPECT_EQ(scalar.lambda, vector.lambda);
+  EXPECT_NE(scalar.x4, TetColour<float>(1.0).x4);  // it moved something
+  // Volumes measured with the kernel's own arithmetic are its rest: nothing moves.
+  TetColour<float> rest(0.0);
+  std::vector<float> measured(13);
+  tetVolumesColour(rest.x4.data(), rest.batch(1.0f), 0, 13, measured.data());
+  rest.rest = measured;
+  const std::vector<float> before = rest.x4;
+  projectTetVolumeColour(rest.x4.data(), rest.batch(1.0f), 0, 13);
+  EXPECT_EQ(rest.x4, before);
+}
 
 TEST(PbdSurfaceVolume, RestoresVolumeConservesMomentumAndRestsAtRest) {
   const SurfaceMesh m = testing::uvEllipsoid(8, 12, 0.05, 0.04, 0.03);
