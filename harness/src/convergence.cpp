@@ -150,6 +150,11 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
   }
 }
 
+double finerLevelBestRelativeError(double h1, double h2, double d12, double peak) {
+  if (!(h2 > 0) || !(h1 / h2 >= kMinLevelRatio) || !(peak > 0)) return 0;
+  return d12 / (std::pow(h1 / h2, 4) - 1) / peak;
+}
+
 void richardsonRms(double h0, double h1, double h2, double rms01, double rms12, double peak,
                    ConvergenceResult& out, EstimateOf of) {
   out.rmsOrder = out.rmsRelativeError = NAN;
@@ -738,6 +743,19 @@ void estimateOrRefine(Study& st) {
   const ConvergeOptions& options = st.input->options;
   if (options.finerWhenBound && !st.out.converged &&
       st.out.levels[0].h / st.out.levels[1].h < kMinLevelRatio) {
+    // A finer level costs about three times the reference's solve: not run where its estimate
+    // could not reach 1% even at order 4 (the differences of a diverging or folding load).
+    const double peak = st.out.levels[2].peakDisplacement;
+    const double best =
+        finerLevelBestRelativeError(st.out.levels[1].h, st.out.levels[2].h, st.out.d12, peak);
+    if (best > 0.01) {
+      st.out.message += "; no finer level added: the finest pair differs by " +
+                        fixedDigits(100 * st.out.d12 / peak, 2) +
+                        "% of the peak, so a finer level converging at order 4 from there would "
+                        "still estimate " +
+                        fixedDigits(100 * best, 2) + "%, above 1%";
+      return;
+    }
     st.threeLevels = st.out;
     st.first = 3;
     st.cases = levelCases(st.prepared, options, {options.hRatios.back() / kFinerLevelStep}, 3,

@@ -642,6 +642,27 @@ TEST_F(TempDir, ConvergeLevelsRefineByEdgeLength) {
   }
 }
 
+TEST(ReferenceCheck, AddsAFinerLevelOnlyWhereItCouldShowOnePercent) {
+  // The bound is what the analysis itself would estimate for the middle level if a finer level
+  // continued the finest pair's convergence at order 4 (the highest it credits).
+  const double h1 = 0.0129, h2 = 0.01, h3 = h2 / kFinerLevelStep, peak = 0.45;
+  for (const double d12 : {0.0986, 0.006}) {
+    const double best = finerLevelBestRelativeError(h1, h2, d12, peak);
+    const double d23 =
+        d12 * (std::pow(h2, 4) - std::pow(h3, 4)) / (std::pow(h1, 4) - std::pow(h2, 4));
+    ConvergenceResult fourth;
+    richardsonEstimate(h1, h2, h3, d12, d23, peak, fourth, EstimateOf::Middle);
+    EXPECT_NEAR(fourth.order, 4, 1e-6);
+    EXPECT_NEAR(fourth.relativeError, best, 1e-9 * best);
+  }
+  // hybrid/sphere_down_20N's P1 levels in `tables all` (22% of the peak apart): 12%, no level.
+  EXPECT_GT(finerLevelBestRelativeError(h1, h2, 0.0986, peak), 0.12);
+  EXPECT_LT(finerLevelBestRelativeError(h1, h2, 0.006, peak), 0.01);
+  // A finest pair too close to bound anything, or no peak: a finer level may show anything.
+  EXPECT_EQ(finerLevelBestRelativeError(0.0105, h2, 0.0986, peak), 0.0);
+  EXPECT_EQ(finerLevelBestRelativeError(h1, h2, 0.0986, 0.0), 0.0);
+}
+
 TEST(ReferenceCheck, SaysWhyRichardsonDoesNotApply) {
   const double h0 = 0.01, h1 = 0.0071, h2 = 0.005, peak = 0.01;
   // Differences that grow with refinement: not monotone; the spread bounds the error.

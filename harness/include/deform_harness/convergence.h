@@ -113,6 +113,13 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
 void richardsonRms(double h0, double h1, double h2, double rms01, double rms12, double peak,
                    ConvergenceResult& out, EstimateOf of = EstimateOf::Finest);
 
+/// The smallest error relative to the peak that a level finer than a study's three could
+/// estimate for the middle one of the last three (ConvergeOptions::finerWhenBound): its finest
+/// pair h1 > h2 differs by d12, and a finer level converging from there at the highest order the
+/// analysis credits (4) gives d12 / ((h1 / h2)^4 - 1). 0 where h1 / h2 is below kMinLevelRatio
+/// (the pair bounds nothing) or peak is not positive.
+double finerLevelBestRelativeError(double h1, double h2, double d12, double peak);
+
 /// Level sizes of `converge`: h, h/1.4, h/2 from the reference's own h.
 inline const std::vector<double> kRefineRatios = {1.0, 1.0 / 1.4, 0.5};
 
@@ -149,7 +156,8 @@ struct ConvergeOptions {
   /// vertices are nodes, so a fine surface bounds the coarse levels) and the estimate is not
   /// converged: run a fourth level at hRatios.back() / kFinerLevelStep and estimate the error of
   /// the third level (the reference, in a check of it) from the last three levels
-  /// (EstimateOf::Middle). The reference itself is not changed.
+  /// (EstimateOf::Middle). The reference itself is not changed. No level is added where even
+  /// that could not show 1% (finerLevelBestRelativeError above it): the message says so.
   bool finerWhenBound = false;
 };
 
