@@ -337,6 +337,69 @@ BemMatrices assembleBem(const SurfaceMesh& s, Real young, Real poisson, const Be
   return out;
 }
 
+namespace {
+
+/// A graded quadrature point of a support face: position y, the face's shape functions N at y,
+/// and its weight dw.
+struct QuadraturePoint {
+  Vec3 y;
+  Real N[3], dw;
+};
+
+/// The same points as structure of arrays, for supportSums().
+struct SupportPoints {
+  std::vector<Real> y0, y1, y2, n0, n1, n2, dw;
+  void assign(const std::vector<QuadraturePoint>& points) {
+    for (std::vector<Real>* v : {&y0, &y1, &y2, &n0, &n1, &n2, &dw}) v->clear();
+    for (const QuadraturePoint& p : points) {
+      y0.push_back(p.y[0]);
+      y1.push_back(p.y[1]);
+      y2.push_back(p.y[2]);
+      n0.push_back(p.N[0]);
+      n1.push_back(p.N[1]);
+      n2.push_back(p.N[2]);
+      dw.push_back(p.dw);
+    }
+  }
+};
+
+/// S[k] = sum_q N_k(y_q) U*(y_q - x) dw_q over the points (U*(r) = cu (c34 I + r r^T / |r|^2) /
+/// |r|, symmetric: xx, yy, zz, xy, xz, yz); a point at x adds nothing. The hot loop of
+/// singularSupport() (every point for every node): a vector reduction (omp simd, compiled for
+/// AVX2 where the CPU has it), so its sums are in lane order, not point order.
+__attribute__((target_clones("avx2", "default"))) void supportSums(const SupportPoints& p, Real x0,
+                                                                   Real x1, Real x2, Real cu,
+                                                                   Real c34, Real S[3][6]) {
+  const Real *y0 = p.y0.data(), *y1 = p.y1.data(), *y2 = p.y2.data(), *n0 = p.n0.data(),
+             *n1 = p.n1.data(), *n2 = p.n2.data(), *dw = p.dw.data();
+  const int m = static_cast<int>(p.dw.size());
+  Real a0 = 0, a1 = 0, a2 = 0, a3 = 0, a4 = 0, a5 = 0, b0 = 0, b1 = 0, b2 = 0, b3 = 0, b4 = 0,
+       b5 = 0, c0 = 0, c1 = 0, c2 = 0, c3 = 0, c4 = 0, c5 = 0;
+#pragma omp simd reduction(+ : a0, a1, a2, a3, a4, a5, b0, b1, b2, b3, b4, b5, c0, c1, c2, c3, c4, c5)
+  for (int q = 0; q < m; ++q) {
+    const Real r0 = y0[q] - x0, r1 = y1[q] - x1, r2 = y2[q] - x2;
+    const Real l2 = r0 * r0 + r1 * r1 + r2 * r2;
+    // Arithmetic rather than a branch, so that the loop vectorises: a point at x adds 0.
+    const Real at = l2 > 0 ? Real(1) : Real(0);
+    const Real inv = at / std::sqrt(l2 + (1 - at));
+    const Real c = cu * inv * dw[q], d = c * inv * inv, diag = c * c34;
+    const Real u0 = diag + d * r0 * r0, u1 = diag + d * r1 * r1, u2 = diag + d * r2 * r2,
+               u3 = d * r0 * r1, u4 = d * r0 * r2, u5 = d * r1 * r2;
+    a0 += n0[q] * u0, a1 += n0[q] * u1, a2 += n0[q] * u2, a3 += n0[q] * u3, a4 += n0[q] * u4,
+        a5 += n0[q] * u5;
+    b0 += n1[q] * u0, b1 += n1[q] * u1, b2 += n1[q] * u2, b3 += n1[q] * u3, b4 += n1[q] * u4,
+        b5 += n1[q] * u5;
+    c0 += n2[q] * u0, c1 += n2[q] * u1, c2 += n2[q] * u2, c3 += n2[q] * u3, c4 += n2[q] * u4,
+        c5 += n2[q] * u5;
+  }
+  const Real out[3][6] = {
+      {a0, a1, a2, a3, a4, a5}, {b0, b1, b2, b3, b4, b5}, {c0, c1, c2, c3, c4, c5}};
+  for (int k = 0; k < 3; ++k)
+    for (int e = 0; e < 6; ++e) S[k][e] = out[k][e];
+}
+
+}  // namespace
+
 SingularSupport singularSupport(const SurfaceMesh& s, Real young, Real poisson,
                                 const std::vector<int>& fixed) {
   const int n = s.numVertices(), nf = s.numFaces();
@@ -396,11 +459,8 @@ SingularSupport singularSupport(const SurfaceMesh& s, Real young, Real poisson,
   // Per face: its graded quadrature points, then for every node the three 3 x 3 sums
   // sum_q N_k(y_q) U*(y_q - x_i) dw_q, accumulated in registers (U* symmetric: six entries) and
   // added to delta once per face and node.
-  struct QuadraturePoint {
-    Vec3 y;
-    Real N[3], dw;
-  };
   std::vector<QuadraturePoint> points;
+  SupportPoints soa;
   const Real cu = K.displacementScale(), c34 = K.displacementDiagonal();
   for (size_t f = 0; f < faces.size(); ++f) {
     const Vec3 A = s.V.row(faces[f][0]).transpose(), B = s.V.row(faces[f][1]).transpose(),
@@ -432,20 +492,10 @@ SingularSupport singularSupport(const SurfaceMesh& s, Real young, Real poisson,
             }
             points.push_back(pt);
           }
+    soa.assign(points);
     for (int i = 0; i < n; ++i) {
-      const Real x0 = s.V(i, 0), x1 = s.V(i, 1), x2 = s.V(i, 2);
-      Real S[3][6] = {};  // per corner k: xx, yy, zz, xy, xz, yz
-      for (const QuadraturePoint& pt : points) {
-        const Real r0 = pt.y[0] - x0, r1 = pt.y[1] - x1, r2 = pt.y[2] - x2;
-        const Real l2 = r0 * r0 + r1 * r1 + r2 * r2;
-        if (l2 == 0) continue;
-        const Real inv = 1 / std::sqrt(l2);
-        const Real c = cu * inv * pt.dw, d = c * inv * inv, diag = c * c34;
-        const Real u[6] = {diag + d * r0 * r0, diag + d * r1 * r1, diag + d * r2 * r2,
-                           d * r0 * r1,        d * r0 * r2,        d * r1 * r2};
-        for (int k = 0; k < 3; ++k)
-          for (int e = 0; e < 6; ++e) S[k][e] += pt.N[k] * u[e];
-      }
+      Real S[3][6];  // per corner k: xx, yy, zz, xy, xz, yz
+      supportSums(soa, s.V(i, 0), s.V(i, 1), s.V(i, 2), cu, c34, S);
       for (int k = 0; k < 3; ++k) {
         auto block = out.delta.block<3, 3>(3 * i, 3 * column[faces[f][k]]);
         block(0, 0) += S[k][0];
