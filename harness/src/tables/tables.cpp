@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <future>
 #include <map>
 #include <set>
@@ -247,10 +248,20 @@ std::string caseSummary(const CaseResult& r, bool child) {
 
 /// Runs every case (with its --calibration twins, recorded in `twins`) through the dispatcher
 /// (options.cases.dispatcher: serial, --jobs, MPI or Slurm); the results are keyed by case id, so
-/// the tables do not depend on the finishing order.
+/// the tables do not depend on the finishing order. `onSlotFree` is called once, in this thread,
+/// when a case finishes with every case handed out (a worker is then idle to the end), or after
+/// the last case when that never happened.
 Results runCases(const std::vector<const Case*>& order, PluginLoader& loader,
-                 const TablesOptions& options, Progress* progress, Twins& twins) {
+                 const TablesOptions& options, Progress* progress, Twins& twins,
+                 const std::function<void()>& onSlotFree) {
   Results results;
+  size_t started = 0;
+  bool slotFreed = false;
+  const auto slotFree = [&] {
+    if (slotFreed) return;
+    slotFreed = true;
+    if (onSlotFree) onSlotFree();
+  };
   std::vector<SceneCase> sceneCases;
   for (const Case* c : order) {
     CaseOptions co = options.cases;
@@ -267,13 +278,16 @@ Results runCases(const std::vector<const Case*>& order, PluginLoader& loader,
   runSceneCases(
       sceneCases, loader, options.cases.dispatcher,
       [&](size_t i) {
+        ++started;
         if (progress) progress->start(order[i]->id);
       },
       [&](size_t i, CaseResult&& r) {
         const Case* c = order[i];
         if (progress) progress->finish(c->id, caseSummary(r, options.cases.child.has_value()));
         results.emplace(c->id, std::move(r));
+        if (started == order.size()) slotFree();
       });
+  slotFree();
   return results;
 }
 
@@ -400,11 +414,14 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
   if (progress) progress->addTotal(int(order.size()));
 
   Twins twins;  // --calibration
-  const Results results = runCases(order, loader, options, progress, twins);
-  // The tables' own work that needs no case runs beside the reference checks.
+  // The tables' own work that needs no case starts when the cases leave a worker idle (every
+  // case handed out and one finished), not earlier, so that it never shares a core with a
+  // timed case on a machine the dispatcher fills; it runs on beside the reference checks.
   std::vector<std::future<void>> background;
-  for (const TableDef& d : defs)
-    if (d.background) background.push_back(std::async(std::launch::async, d.background));
+  const Results results = runCases(order, loader, options, progress, twins, [&] {
+    for (const TableDef& d : defs)
+      if (d.background) background.push_back(std::async(std::launch::async, d.background));
+  });
   const std::map<std::string, ReferenceCheck> checks =
       checkReferences(defs, order, results, loader, options, progress);
   for (std::future<void>& f : background) f.get();
