@@ -365,6 +365,10 @@ BenchComparison compareBench(const json& oldDoc, const json& newDoc, double thre
     } else {
       row.verdict = "not compared";
     }
+    // Another configuration under the same id (a preset changed): its figures are shown but
+    // not judged.
+    if (o.value("params", json::object()) != c.value("params", json::object()))
+      row.verdict = "params changed";
     if (row.verdict == std::string("SLOWER")) ++out.regressions;
     out.rows.push_back(row);
   }

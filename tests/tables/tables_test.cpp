@@ -1198,6 +1198,14 @@ TEST(Bench, CompareJudgesEachCaseByItsRatioToPbdInTheSameRun) {
   EXPECT_EQ(verdict["new/s"], "new");
   EXPECT_EQ(verdict["gone/s"], "missing");
   EXPECT_EQ(compareBench(oldDoc, newDoc, 0.5).regressions, 0) << "40% is under a 50% threshold";
+  // A case whose preset changed between the files is another configuration: not judged.
+  json changed = newDoc;
+  changed["cases"][1]["params"] = {{"integrator", "symplectic_euler"}};
+  const BenchComparison p = compareBench(oldDoc, changed, 0.25);
+  EXPECT_EQ(p.regressions, 0);
+  EXPECT_EQ(p.rows[1].id, "a/s");
+  EXPECT_EQ(p.rows[1].verdict, "params changed");
+  EXPECT_NEAR(p.rows[1].xRatio, 1.4, 1e-12) << "its figures are still shown";
   // The same idle machine: absolute times are judged too (PBD's 2x is a regression).
   json a = oldDoc, b = newDoc;
   for (json* d : {&a, &b})

@@ -35,8 +35,9 @@ struct BenchComparison {
     /// The case's time over PBD's on the same scene in the same run (x PBD), in each file, and
     /// new over old; NaN for PBD itself or where a file has no PBD case on that scene.
     double oldXPbd = NAN, newXPbd = NAN, xRatio = NAN;
-    /// "ok", "SLOWER", "faster", "new", "missing", "not timed", or "not compared" (PBD itself,
-    /// or a case with no PBD beside it, when the two machines do not match)
+    /// "ok", "SLOWER", "faster", "new", "missing", "not timed", "not compared" (PBD itself,
+    /// or a case with no PBD beside it, when the two machines do not match), or "params changed"
+    /// (the files ran the case with other parameters: not judged)
     std::string verdict;
   };
   std::vector<Row> rows;
