@@ -375,7 +375,8 @@ __attribute__((target_clones("avx2", "default"))) void supportSums(const Support
   const int m = static_cast<int>(p.dw.size());
   Real a0 = 0, a1 = 0, a2 = 0, a3 = 0, a4 = 0, a5 = 0, b0 = 0, b1 = 0, b2 = 0, b3 = 0, b4 = 0,
        b5 = 0, c0 = 0, c1 = 0, c2 = 0, c3 = 0, c4 = 0, c5 = 0;
-#pragma omp simd reduction(+ : a0, a1, a2, a3, a4, a5, b0, b1, b2, b3, b4, b5, c0, c1, c2, c3, c4, c5)
+#pragma omp simd reduction(+ : a0, a1, a2, a3, a4, a5, b0, b1, b2, b3, b4, b5) \
+    reduction(+ : c0, c1, c2, c3, c4, c5)
   for (int q = 0; q < m; ++q) {
     const Real r0 = y0[q] - x0, r1 = y1[q] - x1, r2 = y2[q] - x2;
     const Real l2 = r0 * r0 + r1 * r1 + r2 * r2;

@@ -28,7 +28,6 @@ void PbdModel::initIsometric() {
     m_isoWKF[k].clear();
   }
   m_isoRestF.clear();
-  const size_t nColours = m_isoColours.size() - 1;
   if (!m_f32 && n > 0) {
     // Rest values measured by the batch kernel itself (as projectIsometric() will evaluate C).
     m_p = m_rest;
@@ -36,11 +35,9 @@ void PbdModel::initIsometric() {
     const IsometricBatch<Real> b = isometricBatch(m_isoP, m_isoK, m_isoWK, m_isoRest,
                                                   m_isoAlphaTilde, m_isoScale, m_lambdaIso);
     std::vector<Real> rest(n);
-    for (size_t c = 0; c < nColours; ++c) {
-      const size_t b0 = m_isoColours[c], e = m_isoColours[c + 1];
-      for (size_t i = b0; i < e; i = (c == 63 ? i + 1 : e))
-        isometricLengthsColour(p4(), b, i, c == 63 ? i + 1 : e, rest.data());
-    }
+    forEachIndependentRun(m_isoColours, [&](size_t i, size_t e) {
+      isometricLengthsColour(p4(), b, i, e, rest.data());
+    });
     m_isoRest = rest;
   }
   if (m_f32 && n > 0) {
@@ -58,11 +55,9 @@ void PbdModel::initIsometric() {
     packPositions();
     const IsometricBatch<float> b = isometricBatch(m_isoP, m_isoKF, m_isoWKF, m_isoRestF,
                                                    m_isoAlphaTildeF, m_isoScaleF, m_lambdaIsoF);
-    for (size_t c = 0; c < nColours; ++c) {
-      const size_t b0 = m_isoColours[c], e = m_isoColours[c + 1];
-      for (size_t i = b0; i < e; i = (c == 63 ? i + 1 : e))
-        isometricLengthsColour(p4f(), b, i, c == 63 ? i + 1 : e, m_isoRestF.data());
-    }
+    forEachIndependentRun(m_isoColours, [&](size_t i, size_t e) {
+      isometricLengthsColour(p4f(), b, i, e, m_isoRestF.data());
+    });
   }
 }
 
@@ -89,16 +84,10 @@ void PbdModel::refreshIsometricHotData(Real dt) {
 }
 
 void PbdModel::projectIsometric() {
-  const size_t nColours = m_isoColours.size() - 1;
   const auto sweep = [&](auto* x4, const auto& b) {
-    for (size_t c = 0; c < nColours; ++c) {
-      const size_t b0 = m_isoColours[c], e = m_isoColours[c + 1];
-      if (c == 63) {  // overflow colour: not independent, one at a time
-        for (size_t i = b0; i < e; ++i) m_degenerate += projectIsometricColour(x4, b, i, i + 1);
-      } else {
-        m_degenerate += projectIsometricColour(x4, b, b0, e);
-      }
-    }
+    forEachIndependentRun(m_isoColours, [&](size_t i, size_t e) {
+      m_degenerate += projectIsometricColour(x4, b, i, e);
+    });
   };
   if (m_f32)
     sweep(p4f(), isometricBatch(m_isoP, m_isoKF, m_isoWKF, m_isoRestF, m_isoAlphaTildeF,

@@ -192,12 +192,9 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
     }
     // Measured colour by colour like projectAll() projects them (same arithmetic, see
     // distanceLengthsColourF), so that the rest state is exactly at rest.
-    for (size_t c = 0; c + 1 < m_distColours.size(); ++c) {
-      const size_t b = m_distColours[c], e = m_distColours[c + 1];
-      for (size_t i = b; i < e; i = (c == 63 ? i + 1 : e))
-        distanceLengthsColourF(x, m_distA4.data(), m_distB4.data(), i, c == 63 ? i + 1 : e,
-                               m_distRestF.data());
-    }
+    forEachIndependentRun(m_distColours, [&](size_t i, size_t e) {
+      distanceLengthsColourF(x, m_distA4.data(), m_distB4.data(), i, e, m_distRestF.data());
+    });
     if (m_hasVolume) m_restVolumeF = surfaceVolumePaddedF(x, N, m_surfaceF);
     m_distAlphaTildeF.resize(m_distance.size());
     m_distScaleF.resize(m_distance.size());
@@ -451,7 +448,6 @@ void PbdModel::projectAll(Real dt) {
   const DistanceBatchF batchF{m_distA4.data(),          m_distB4.data(),     m_distRestF.data(),
                               m_distAlphaTildeF.data(), m_distScaleF.data(), m_lambdaDistF.data(),
                               m_distWaF.data(),         m_distWbF.data()};
-  const size_t nColours = m_distColours.empty() ? 0 : m_distColours.size() - 1;
   Real* x4 = p4();
   float* x4f = p4f();
   const auto project = [&](size_t b, size_t e) {
@@ -466,14 +462,8 @@ void PbdModel::projectAll(Real dt) {
   for (int it = 0; it < m_config.iterations; ++it) {
     if (!packed) packPositions();
     packed = true;
-    for (size_t c = 0; c < nColours; ++c) {
-      const size_t b = m_distColours[c], e = m_distColours[c + 1];
-      if (c == 63) {  // overflow colour: not independent, go one at a time
-        for (size_t i = b; i < e; ++i) m_degenerate += project(i, i + 1);
-      } else {
-        m_degenerate += project(b, e);
-      }
-    }
+    forEachIndependentRun(m_distColours,
+                          [&](size_t i, size_t e) { m_degenerate += project(i, e); });
     if (!m_iso.empty()) projectIsometric();
     const bool volumeNow =
         m_hasVolume && (m_config.volumeEverySweep || it + 1 == m_config.iterations);

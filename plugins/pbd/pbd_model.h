@@ -24,6 +24,21 @@ enum class StiffnessMode { Classic, Xpbd };
 /// Number type of the solver state of the distance and global volume constraints (see README.md,
 /// "Precision"); the interface, the state between steps and the other constraints stay double.
 enum class Precision { Float32, Float64 };
+/// Calls run(begin, end) on each run of constraints that may be projected together, in colour
+/// order: colours[c] .. colours[c + 1] is colour c (see orderByColour in pbd_model.cpp), whose
+/// constraints share no movable particle, except colour 63, which collects every constraint once
+/// 63 colours are used and so goes one constraint at a time.
+template <class Run>
+void forEachIndependentRun(const std::vector<size_t>& colours, Run&& run) {
+  for (size_t c = 0; c + 1 < colours.size(); ++c) {
+    const size_t begin = colours[c], end = colours[c + 1];
+    if (c == 63)
+      for (size_t i = begin; i < end; ++i) run(i, i + 1);
+    else
+      run(begin, end);
+  }
+}
+
 /// The bending constraint of `bending = true`: the isometric (Bergou et al. 2006) hinge of
 /// deform/kernels/isometric_bending.h, or the dihedral angle of deform/kernels/pbd_kernels.h.
 enum class BendingModel { Isometric, Dihedral };

@@ -3,9 +3,25 @@
 // double, like the distance constraints and the hinges), so a sweep needs no unpacking for them.
 #include "pbd_model.h"
 
-#include <array>
-
 namespace deform::pbd {
+
+namespace {
+
+/// The batch over tet fields kept one vector each (p[4], w[4]: arrays of four vectors).
+template <class T>
+TetVolumeBatch<T> tetBatch(const std::vector<int>* p, const std::vector<T>* w,
+                           const std::vector<T>& rest, const std::vector<T>& floor,
+                           const std::vector<T>& alphaTilde, std::vector<T>& lambda, T k) {
+  return {{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
+          {w[0].data(), w[1].data(), w[2].data(), w[3].data()},
+          rest.data(),
+          floor.data(),
+          alphaTilde.data(),
+          lambda.data(),
+          k};
+}
+
+}  // namespace
 
 void PbdModel::initTets() {
   const size_t n = m_tet.size();
@@ -37,19 +53,11 @@ void PbdModel::initTets() {
   // projectTets() projects them: C = 0 exactly at rest.
   m_p = m_rest;
   packPositions();
-  const TetVolumeBatch<float> b{
-      {m_tetP[0].data(), m_tetP[1].data(), m_tetP[2].data(), m_tetP[3].data()},
-      {m_tetWF[0].data(), m_tetWF[1].data(), m_tetWF[2].data(), m_tetWF[3].data()},
-      m_tetRestF.data(),
-      m_tetFloorF.data(),
-      m_tetAlphaTildeF.data(),
-      m_lambdaTetF.data(),
-      1.0f};
-  for (size_t c = 0; c + 1 < m_tetColours.size(); ++c) {
-    const size_t b0 = m_tetColours[c], e = m_tetColours[c + 1];
-    for (size_t i = b0; i < e; i = (c == 63 ? i + 1 : e))
-      tetVolumesColour(p4f(), b, i, c == 63 ? i + 1 : e, m_tetRestF.data());
-  }
+  const TetVolumeBatch<float> b =
+      tetBatch(m_tetP, m_tetWF, m_tetRestF, m_tetFloorF, m_tetAlphaTildeF, m_lambdaTetF, 1.0f);
+  forEachIndependentRun(m_tetColours, [&](size_t i, size_t e) {
+    tetVolumesColour(p4f(), b, i, e, m_tetRestF.data());
+  });
 }
 
 void PbdModel::refreshTetHotData(Real dt) {
@@ -66,40 +74,17 @@ void PbdModel::refreshTetHotData(Real dt) {
 }
 
 void PbdModel::projectTets() {
-  const size_t nColours = m_tetColours.size() - 1;
   const auto sweep = [&](auto* x4, const auto& b) {
-    for (size_t c = 0; c < nColours; ++c) {
-      const size_t b0 = m_tetColours[c], e = m_tetColours[c + 1];
-      if (c == 63) {  // overflow colour: not independent, one at a time
-        for (size_t i = b0; i < e; ++i) m_degenerate += projectTetVolumeColour(x4, b, i, i + 1);
-      } else {
-        m_degenerate += projectTetVolumeColour(x4, b, b0, e);
-      }
-    }
+    forEachIndependentRun(m_tetColours, [&](size_t i, size_t e) {
+      m_degenerate += projectTetVolumeColour(x4, b, i, e);
+    });
   };
-  const auto ptrs = [](auto& v) {
-    return std::array{v[0].data(), v[1].data(), v[2].data(), v[3].data()};
-  };
-  const auto p = ptrs(m_tetP);
-  if (m_f32) {
-    const auto w = ptrs(m_tetWF);
-    sweep(p4f(), TetVolumeBatch<float>{{p[0], p[1], p[2], p[3]},
-                                       {w[0], w[1], w[2], w[3]},
-                                       m_tetRestF.data(),
-                                       m_tetFloorF.data(),
-                                       m_tetAlphaTildeF.data(),
-                                       m_lambdaTetF.data(),
-                                       static_cast<float>(m_kVolume)});
-  } else {
-    const auto w = ptrs(m_tetW);
-    sweep(p4(), TetVolumeBatch<Real>{{p[0], p[1], p[2], p[3]},
-                                     {w[0], w[1], w[2], w[3]},
-                                     m_tetRest.data(),
-                                     m_tetFloor.data(),
-                                     m_tetAlphaTilde.data(),
-                                     m_lambdaTet.data(),
-                                     m_kVolume});
-  }
+  if (m_f32)
+    sweep(p4f(), tetBatch(m_tetP, m_tetWF, m_tetRestF, m_tetFloorF, m_tetAlphaTildeF, m_lambdaTetF,
+                          static_cast<float>(m_kVolume)));
+  else
+    sweep(p4(),
+          tetBatch(m_tetP, m_tetW, m_tetRest, m_tetFloor, m_tetAlphaTilde, m_lambdaTet, m_kVolume));
 }
 
 }  // namespace deform::pbd

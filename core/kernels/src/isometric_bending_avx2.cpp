@@ -1,13 +1,14 @@
 // AVX2 lanes for isometric_bending_math.h: eight hinges per __m256 (float) or four per __m256d
 // (double). Compiled with -mavx2 -ffp-contract=off (core/CMakeLists.txt) and called only after a
 // run-time CPU check (isometric_bending.cpp); includes nothing but the intrinsics, the lanes of
-// deform/kernels/simd_lanes_avx2.h and the internal-linkage math header.
+// deform/kernels/simd_lanes_avx2.h, the internal-linkage math header and paired_groups.h.
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <deform/kernels/simd_lanes_avx2.h>
 #include <immintrin.h>
 
 #include "isometric_bending_avx2.h"
 #include "isometric_bending_math.h"
+#include "paired_groups.h"
 
 namespace deform::pbd::isobatch {
 
@@ -16,21 +17,11 @@ namespace {
 template <class L>
 std::size_t range(typename L::T* x4, const View<typename L::T>& b, std::size_t begin,
                   std::size_t end, typename L::T* measure, long long* degenerate) {
-  std::size_t i = begin;
-  // Two groups are computed before either is committed, so that their sqrt / divide latency
-  // chains overlap: the hinges of one colour share no movable particle.
-  constexpr std::size_t W = L::kWidth;
-  if (measure == nullptr)
-    for (; i + 2 * W <= end; i += 2 * W) {
-      HingeUpdate<L> u0, u1;
-      hingeCompute<L>(x4, b, i, nullptr, u0);
-      hingeCompute<L>(x4, b, i + W, nullptr, u1);
-      hingeCommit<L>(x4, b, i, u0);
-      hingeCommit<L>(x4, b, i + W, u1);
-      *degenerate += u0.degenerate + u1.degenerate;
-    }
-  for (; i + W <= end; i += W) *degenerate += hingeGroup<L>(x4, b, i, measure);
-  return i - begin;
+  return simd::pairedGroups<L::kWidth, HingeUpdate<L>>(
+      begin, end, measure != nullptr, degenerate,
+      [&](std::size_t i, HingeUpdate<L>& u) { hingeCompute<L>(x4, b, i, nullptr, u); },
+      [&](std::size_t i, const HingeUpdate<L>& u) { hingeCommit<L>(x4, b, i, u); },
+      [&](std::size_t i) { return hingeGroup<L>(x4, b, i, measure); });
 }
 
 }  // namespace

@@ -1,11 +1,12 @@
 // AVX2 lanes for tet_volume_math.h: eight tets per __m256 (float) or four per __m256d (double).
 // Compiled with -mavx2 -ffp-contract=off (core/kernels/CMakeLists.txt) and called only after a
 // run-time CPU check (tet_volume.cpp); includes nothing but the intrinsics, the lanes of
-// deform/kernels/simd_lanes_avx2.h and the internal-linkage math header.
+// deform/kernels/simd_lanes_avx2.h, the internal-linkage math header and paired_groups.h.
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <deform/kernels/simd_lanes_avx2.h>
 #include <immintrin.h>
 
+#include "paired_groups.h"
 #include "tet_volume_avx2.h"
 #include "tet_volume_math.h"
 
@@ -16,21 +17,11 @@ namespace {
 template <class L>
 std::size_t range(typename L::T* x4, const View<typename L::T>& b, std::size_t begin,
                   std::size_t end, typename L::T* measure, long long* degenerate) {
-  std::size_t i = begin;
-  // Two groups are computed before either is committed, so that their divide latencies overlap:
-  // the tets of one colour share no movable particle.
-  constexpr std::size_t W = L::kWidth;
-  if (measure == nullptr)
-    for (; i + 2 * W <= end; i += 2 * W) {
-      TetUpdate<L> u0, u1;
-      tetCompute<L>(x4, b, i, nullptr, u0);
-      tetCompute<L>(x4, b, i + W, nullptr, u1);
-      tetCommit<L>(x4, b, i, u0);
-      tetCommit<L>(x4, b, i + W, u1);
-      *degenerate += u0.degenerate + u1.degenerate;
-    }
-  for (; i + W <= end; i += W) *degenerate += tetGroup<L>(x4, b, i, measure);
-  return i - begin;
+  return simd::pairedGroups<L::kWidth, TetUpdate<L>>(
+      begin, end, measure != nullptr, degenerate,
+      [&](std::size_t i, TetUpdate<L>& u) { tetCompute<L>(x4, b, i, nullptr, u); },
+      [&](std::size_t i, const TetUpdate<L>& u) { tetCommit<L>(x4, b, i, u); },
+      [&](std::size_t i) { return tetGroup<L>(x4, b, i, measure); });
 }
 
 }  // namespace
