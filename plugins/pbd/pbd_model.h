@@ -21,9 +21,11 @@
 namespace deform::pbd {
 
 enum class StiffnessMode { Classic, Xpbd };
-/// Number type of the solver state of the distance and global volume constraints (see README.md,
-/// "Precision"); the interface, the state between steps and the other constraints stay double.
+/// Number type of the solver state of the distance, isometric bending, tet volume and global
+/// volume constraints (see README.md, "Precision"); the interface, the state between steps and the
+/// dihedral constraints stay double.
 enum class Precision { Float32, Float64 };
+
 /// Calls run(begin, end) on each run of constraints that may be projected together, in colour
 /// order: colours[c] .. colours[c + 1] is colour c (see orderByColour in pbd_model.cpp), whose
 /// constraints share no movable particle, except colour 63, which collects every constraint once

@@ -36,8 +36,9 @@ std::vector<ParamSpec> paramSpecs() {
       common_params::damping(1.0, 1e4, 0.01,
                              "velocity damping rate: v <- v exp(-damping dt) each step"),
       common_params::precision(
-          "number type of the distance and global volume projections (positions "
-          "relative to the organ's centre); state between steps stays double"),
+          "number type of the distance, isometric bending, tet volume and global volume "
+          "projections (positions relative to the organ's centre); state between steps stays "
+          "double"),
   };
 }
 
