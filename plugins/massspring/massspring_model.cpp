@@ -446,7 +446,8 @@ StepStatus MassSpringModel::step(const StepInput& in) {
   if (penalty) {
     // Penalty contact: a force on the surface triangles for this step (explicit in the contact).
     m_contactForce.setZero(m_x.rows(), 3);
-    const ContactProxy proxy{.nodes = &m_x, .velocity = m_v.data(), .faces = &m_contactF};
+    const ContactProxy proxy{
+        .nodes = &m_x, .velocity = m_v.data(), .faces = &m_contactF, .embedding = {}};
     respondToContact(*in.contact, proxy, ContactResponse::Penalty, h, m_contactForce.data());
   }
 
@@ -549,7 +550,8 @@ StepStatus MassSpringModel::step(const StepInput& in) {
                              .invMass = &m_contactInvMass,
                              .velocity = m_v.data(),
                              .atStepStart = &m_stepStart,
-                             .faces = &m_contactF};
+                             .faces = &m_contactF,
+                             .embedding = {}};
     respondToContact(*in.contact, proxy, ContactResponse::Project, h);
   }
   if (!m_surfaceIdentity)

@@ -594,7 +594,7 @@ StepStatus PbdModel::step(const StepInput& in) {
   // the velocity like any other projection (w = 0 for fixed and grasped nodes).
   if (in.contact) {
     const ContactProxy proxy{
-        .nodes = &m_p, .invMass = &m_w, .atStepStart = &m_x, .faces = &m_contactF};
+        .nodes = &m_p, .invMass = &m_w, .atStepStart = &m_x, .faces = &m_contactF, .embedding = {}};
     respondToContact(*in.contact, proxy, ContactResponse::Project, dt);
   }
   const auto t2 = Clock::now();
