@@ -363,13 +363,19 @@ struct SupportPoints {
   }
 };
 
+// supportSums() in an AVX2 clone as well where the compiler targets x86-64 (chosen at load).
+#if defined(__x86_64__) && defined(__GNUC__)
+#define DEFORM_BEM_AVX2_CLONE __attribute__((target_clones("avx2", "default")))
+#else
+#define DEFORM_BEM_AVX2_CLONE
+#endif
+
 /// S[k] = sum_q N_k(y_q) U*(y_q - x) dw_q over the points (U*(r) = cu (c34 I + r r^T / |r|^2) /
 /// |r|, symmetric: xx, yy, zz, xy, xz, yz); a point at x adds nothing. The hot loop of
 /// singularSupport() (every point for every node): a vector reduction (omp simd, compiled for
 /// AVX2 where the CPU has it), so its sums are in lane order, not point order.
-__attribute__((target_clones("avx2", "default"))) void supportSums(const SupportPoints& p, Real x0,
-                                                                   Real x1, Real x2, Real cu,
-                                                                   Real c34, Real S[3][6]) {
+DEFORM_BEM_AVX2_CLONE void supportSums(const SupportPoints& p, Real x0, Real x1, Real x2, Real cu,
+                                       Real c34, Real S[3][6]) {
   const Real *y0 = p.y0.data(), *y1 = p.y1.data(), *y2 = p.y2.data(), *n0 = p.n0.data(),
              *n1 = p.n1.data(), *n2 = p.n2.data(), *dw = p.dw.data();
   const int m = static_cast<int>(p.dw.size());
@@ -381,8 +387,8 @@ __attribute__((target_clones("avx2", "default"))) void supportSums(const Support
     const Real r0 = y0[q] - x0, r1 = y1[q] - x1, r2 = y2[q] - x2;
     const Real l2 = r0 * r0 + r1 * r1 + r2 * r2;
     // Arithmetic rather than a branch, so that the loop vectorises: a point at x adds 0.
-    const Real at = l2 > 0 ? Real(1) : Real(0);
-    const Real inv = at / std::sqrt(l2 + (1 - at));
+    const Real away = l2 > 0 ? Real(1) : Real(0);
+    const Real inv = away / std::sqrt(l2 + (1 - away));
     const Real c = cu * inv * dw[q], d = c * inv * inv, diag = c * c34;
     const Real u0 = diag + d * r0 * r0, u1 = diag + d * r1 * r1, u2 = diag + d * r2 * r2,
                u3 = d * r0 * r1, u4 = d * r0 * r2, u5 = d * r1 * r2;
