@@ -6,10 +6,12 @@
 #pragma once
 
 #include <deform/kernels/pbd_kernels.h>
+#include <deform/kernels/tet_volume_batch.h>
 #include <deform/sdk/types.h>
 
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 namespace deform::pbd {
 
@@ -109,12 +111,26 @@ inline bool projectTetVolume(const Vec3 x[4], const Real w[4], Real restVolume, 
     denom += w[i] * g2;
   }
   // A tet collapsed to a point or a segment has vanishing gradients (|g|^2 ~ V0^(4/3) at rest).
-  const Real scale = std::cbrt(std::abs(restVolume));
-  if (denom + alphaTilde <= 0 || gsum <= 1e-20 * scale * scale * scale * scale) return false;
+  if (denom + alphaTilde <= 0 || gsum <= tetVolumeGradientFloor(restVolume)) return false;
   const Real dl = multiplierUpdate(vol - restVolume, denom, alphaTilde, k, lambda);
   lambda += dl;
   for (int i = 0; i < 4; ++i) dx[i] = w[i] * dl * g[i];
   return true;
+}
+
+/// The batch over tet fields kept one vector each (p[4], w[4]: arrays of four vectors), as the
+/// solver stores them (deform/kernels/tet_volume_batch.h).
+template <class T>
+TetVolumeBatch<T> tetVolumeBatch(const std::vector<int>* p, const std::vector<T>* w,
+                                 const std::vector<T>& rest, const std::vector<T>& floor,
+                                 const std::vector<T>& alphaTilde, std::vector<T>& lambda, T k) {
+  return {{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
+          {w[0].data(), w[1].data(), w[2].data(), w[3].data()},
+          rest.data(),
+          floor.data(),
+          alphaTilde.data(),
+          lambda.data(),
+          k};
 }
 
 /// Global volume constraint of a closed, outward-oriented triangle surface, C = V(x) - V0 with

@@ -155,7 +155,6 @@ void PbdModel::init(const Organ& organ, const PbdConfig& config) {
 
   m_lambdaDist.assign(m_distance.size(), 0.0);
   m_lambdaBend.assign(m_dihedral.size(), 0.0);
-  m_lambdaTet.assign(m_tet.size(), 0.0);
   m_distA.resize(m_distance.size());
   m_distB.resize(m_distance.size());
   m_distRest.resize(m_distance.size());
@@ -585,8 +584,10 @@ StepStatus PbdModel::step(const StepInput& in) {
   else
     std::fill(m_lambdaDist.begin(), m_lambdaDist.end(), 0.0);
   std::fill(m_lambdaBend.begin(), m_lambdaBend.end(), 0.0);
-  std::fill(m_lambdaTet.begin(), m_lambdaTet.end(), 0.0);
-  std::fill(m_lambdaTetF.begin(), m_lambdaTetF.end(), 0.0f);
+  if (m_f32)
+    std::fill(m_lambdaTetF.begin(), m_lambdaTetF.end(), 0.0f);
+  else
+    std::fill(m_lambdaTet.begin(), m_lambdaTet.end(), 0.0);
   m_lambdaVolume = 0;
   projectAll(dt);
   // Contact last, on the surface triangles, so that no surface point ends the step inside an

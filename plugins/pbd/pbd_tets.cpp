@@ -5,24 +5,6 @@
 
 namespace deform::pbd {
 
-namespace {
-
-/// The batch over tet fields kept one vector each (p[4], w[4]: arrays of four vectors).
-template <class T>
-TetVolumeBatch<T> tetBatch(const std::vector<int>* p, const std::vector<T>* w,
-                           const std::vector<T>& rest, const std::vector<T>& floor,
-                           const std::vector<T>& alphaTilde, std::vector<T>& lambda, T k) {
-  return {{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
-          {w[0].data(), w[1].data(), w[2].data(), w[3].data()},
-          rest.data(),
-          floor.data(),
-          alphaTilde.data(),
-          lambda.data(),
-          k};
-}
-
-}  // namespace
-
 void PbdModel::initTets() {
   const size_t n = m_tet.size();
   for (int k = 0; k < 4; ++k) {
@@ -53,8 +35,8 @@ void PbdModel::initTets() {
   // projectTets() projects them: C = 0 exactly at rest.
   m_p = m_rest;
   packPositions();
-  const TetVolumeBatch<float> b =
-      tetBatch(m_tetP, m_tetWF, m_tetRestF, m_tetFloorF, m_tetAlphaTildeF, m_lambdaTetF, 1.0f);
+  const TetVolumeBatch<float> b = tetVolumeBatch(m_tetP, m_tetWF, m_tetRestF, m_tetFloorF,
+                                                 m_tetAlphaTildeF, m_lambdaTetF, 1.0f);
   forEachIndependentRun(m_tetColours, [&](size_t i, size_t e) {
     tetVolumesColour(p4f(), b, i, e, m_tetRestF.data());
   });
@@ -80,11 +62,11 @@ void PbdModel::projectTets() {
     });
   };
   if (m_f32)
-    sweep(p4f(), tetBatch(m_tetP, m_tetWF, m_tetRestF, m_tetFloorF, m_tetAlphaTildeF, m_lambdaTetF,
-                          static_cast<float>(m_kVolume)));
+    sweep(p4f(), tetVolumeBatch(m_tetP, m_tetWF, m_tetRestF, m_tetFloorF, m_tetAlphaTildeF,
+                                m_lambdaTetF, static_cast<float>(m_kVolume)));
   else
-    sweep(p4(),
-          tetBatch(m_tetP, m_tetW, m_tetRest, m_tetFloor, m_tetAlphaTilde, m_lambdaTet, m_kVolume));
+    sweep(p4(), tetVolumeBatch(m_tetP, m_tetW, m_tetRest, m_tetFloor, m_tetAlphaTilde, m_lambdaTet,
+                               m_kVolume));
 }
 
 }  // namespace deform::pbd

@@ -498,15 +498,7 @@ struct TetColour {
     }
     lambda.assign(kTets, T(0));
   }
-  TetVolumeBatch<T> batch(T k) {
-    return {{p[0].data(), p[1].data(), p[2].data(), p[3].data()},
-            {w[0].data(), w[1].data(), w[2].data(), w[3].data()},
-            rest.data(),
-            floor.data(),
-            alphaTilde.data(),
-            lambda.data(),
-            k};
-  }
+  TetVolumeBatch<T> batch(T k) { return tetVolumeBatch(p, w, rest, floor, alphaTilde, lambda, k); }
 };
 
 TEST(PbdTetVolume, ColourKernelIsTheOneAtATimeRuleBitForBit) {
