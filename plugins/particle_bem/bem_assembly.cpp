@@ -339,27 +339,21 @@ BemMatrices assembleBem(const SurfaceMesh& s, Real young, Real poisson, const Be
 
 namespace {
 
-/// A graded quadrature point of a support face: position y, the face's shape functions N at y,
-/// and its weight dw.
-struct QuadraturePoint {
-  Vec3 y;
-  Real N[3], dw;
-};
-
-/// The same points as structure of arrays, for supportSums().
+/// The graded quadrature points of one support face as structure of arrays, for supportSums():
+/// positions y, the face's shape functions N at y, and the weights dw.
 struct SupportPoints {
   std::vector<Real> y0, y1, y2, n0, n1, n2, dw;
-  void assign(const std::vector<QuadraturePoint>& points) {
+  void clear() {
     for (std::vector<Real>* v : {&y0, &y1, &y2, &n0, &n1, &n2, &dw}) v->clear();
-    for (const QuadraturePoint& p : points) {
-      y0.push_back(p.y[0]);
-      y1.push_back(p.y[1]);
-      y2.push_back(p.y[2]);
-      n0.push_back(p.N[0]);
-      n1.push_back(p.N[1]);
-      n2.push_back(p.N[2]);
-      dw.push_back(p.dw);
-    }
+  }
+  void add(const Vec3& y, Real N0, Real N1, Real N2, Real w) {
+    y0.push_back(y[0]);
+    y1.push_back(y[1]);
+    y2.push_back(y[2]);
+    n0.push_back(N0);
+    n1.push_back(N1);
+    n2.push_back(N2);
+    dw.push_back(w);
   }
 };
 
@@ -466,8 +460,7 @@ SingularSupport singularSupport(const SurfaceMesh& s, Real young, Real poisson,
   // Per face: its graded quadrature points, then for every node the three 3 x 3 sums
   // sum_q N_k(y_q) U*(y_q - x_i) dw_q, accumulated in registers (U* symmetric: six entries) and
   // added to delta once per face and node.
-  std::vector<QuadraturePoint> points;
-  SupportPoints soa;
+  SupportPoints points;
   const Real cu = K.displacementScale(), c34 = K.displacementDiagonal();
   for (size_t f = 0; f < faces.size(); ++f) {
     const Vec3 A = s.V.row(faces[f][0]).transpose(), B = s.V.row(faces[f][1]).transpose(),
@@ -483,26 +476,18 @@ SingularSupport singularSupport(const SurfaceMesh& s, Real young, Real poisson,
             const Real sig = br[si] + (br[si + 1] - br[si]) * gx[q];
             const Real wq = gw[p] * gw[q] * (br[ti + 1] - br[ti]) * (br[si + 1] - br[si]);
             const Real t2 = tau * tau;
-            QuadraturePoint pt;
             if (edgeType[f]) {  // y = (1 - t)((1 - sig) A + sig B) + t C, dA = 2 area (1 - t)
-              pt.y = (1 - t2) * ((1 - sig) * A + sig * B) + t2 * C;
-              pt.N[0] = (1 - t2) * (1 - sig);
-              pt.N[1] = (1 - t2) * sig;
-              pt.N[2] = t2;
-              pt.dw = 4 * area * (1 - t2) * (1 - tau) * wq;  // (w - 1) dA with t = tau^2
+              points.add((1 - t2) * ((1 - sig) * A + sig * B) + t2 * C, (1 - t2) * (1 - sig),
+                         (1 - t2) * sig, t2,
+                         4 * area * (1 - t2) * (1 - tau) * wq);  // (w - 1) dA with t = tau^2
             } else {  // y = A + rho ((1 - sig)(B - A) + sig (C - A)), dA = 2 area rho
-              pt.y = A + t2 * ((1 - sig) * (B - A) + sig * (C - A));
-              pt.N[0] = 1 - t2;
-              pt.N[1] = t2 * (1 - sig);
-              pt.N[2] = t2 * sig;
-              pt.dw = 4 * area * t2 * (1 - tau) * wq;
+              points.add(A + t2 * ((1 - sig) * (B - A) + sig * (C - A)), 1 - t2, t2 * (1 - sig),
+                         t2 * sig, 4 * area * t2 * (1 - tau) * wq);
             }
-            points.push_back(pt);
           }
-    soa.assign(points);
     for (int i = 0; i < n; ++i) {
       Real S[3][6];  // per corner k: xx, yy, zz, xy, xz, yz
-      supportSums(soa, s.V(i, 0), s.V(i, 1), s.V(i, 2), cu, c34, S);
+      supportSums(points, s.V(i, 0), s.V(i, 1), s.V(i, 2), cu, c34, S);
       for (int k = 0; k < 3; ++k) {
         auto block = out.delta.block<3, 3>(3 * i, 3 * column[faces[f][k]]);
         block(0, 0) += S[k][0];
