@@ -266,8 +266,9 @@ class HexFemModel : public Model {
   double m_msAssembly = 0, m_msSolve = 0, m_msSurface = 0;
   long long m_rotationNotConverged = 0, m_pcgNotConverged = 0, m_ignoredGraspNodes = 0;
   long long m_rotationSvd = 0, m_rotationIterations = 0;  // SVD fallbacks, Newton steps
-  long long m_unconvergedSteps = 0;  // steps with a rotation or the CG solve not converged
-  long long m_pcgIterations = 0;     // CG iterations over the run
+  long long m_unconvergedSteps = 0;         // steps with a rotation or the CG solve not converged
+  long long m_pcgIterations = 0;            // CG iterations over the run
+  long long m_preconditionerRefreshes = 0;  // factors of the rotated system after CG gave up
 };
 
 }  // namespace deform::fem_hex

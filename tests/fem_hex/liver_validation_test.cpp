@@ -179,7 +179,8 @@ TEST(FemHexLiverValidation, ValidationScenesMatchTheShippedScenes) {
   }
 }
 
-// A run whose steps gave up (here the CG solve, capped at one iteration) is invalid: fem_hex
+// A run whose steps gave up (here the CG solve, capped at one iteration at a tolerance below
+// round-off, which refactorising at the current rotations cannot meet) is invalid: fem_hex
 // reports them as numeric unconverged_steps, which the harness's validity rule reads (issue 35
 // item 4; an unconverged rotation counts the same way). The same run uncapped stays valid.
 TEST(FemHexLiverValidation, UnconvergedStepsMakeTheRunInvalid) {
@@ -195,7 +196,7 @@ TEST(FemHexLiverValidation, UnconvergedStepsMakeTheRunInvalid) {
       {"models",
        {{{"plugin", "fem_hex"},
          {"label", "capped"},
-         {"params", {{"elements", 100}, {"pcg_max_iterations", 1}, {"pcg_tolerance", 1e-12}}}},
+         {"params", {{"elements", 100}, {"pcg_max_iterations", 1}, {"pcg_tolerance", 1e-15}}}},
         {{"plugin", "fem_hex"}, {"label", "default"}, {"params", {{"elements", 100}}}}}}};
   const Scene scene = parseScene(j, "capped.json");
   const Organ organ = loadOrgan(scene);
