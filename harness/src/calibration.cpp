@@ -292,7 +292,29 @@ CalibrationParams readCalibrationFile(const std::string& file) {
     c.material = m;
   }
   if (doc.contains("truth_cube") && doc["truth_cube"].is_object()) c.truthCube = doc["truth_cube"];
+  if (doc.contains("at_bound")) {
+    const json& b = doc["at_bound"];
+    if (!b.is_object() || !std::all_of(b.begin(), b.end(), [](const json& v) {
+          return v.is_string() && (v.get<std::string>() == "min" || v.get<std::string>() == "max");
+        }))
+      throw InputError(file, "/at_bound", "\"at_bound\" must be an object of \"min\" or \"max\"");
+    c.atBound = b;
+  }
   return c;
+}
+
+std::string boundWords(const CalibrationParams& c, const std::string& key) {
+  if (!c.atBound.contains(key)) return "";
+  return c.atBound[key] == "max" ? "at its upper bound" : "at its lower bound";
+}
+
+std::string calibrationBoundNote(const CalibrationParams& c) {
+  std::string list;
+  for (const auto& [k, v] : c.atBound.items())
+    list += (list.empty() ? "" : ", ") + k + " fitted " + boundWords(c, k);
+  return list.empty() ? ""
+                      : "calibration " + c.file + ": " + list +
+                            " (the best fit may lie beyond the searched range)";
 }
 
 std::vector<std::pair<std::string, std::string>> addCalibratedTwins(

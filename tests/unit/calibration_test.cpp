@@ -254,6 +254,43 @@ TEST(Calibration, HeldParametersNameWhatARunChanged) {
   std::filesystem::remove_all(dir);
 }
 
+// "at_bound": a fit that ended at a bound of its search says so in every calibrated run's notes
+// and in the Truth Cube table's note; a malformed entry is refused by its place.
+TEST(Calibration, FitsAtABoundAreNamedWhereTheRunsAreRead) {
+  const auto dir = std::filesystem::temp_directory_path() / "deform_calibration_bound_test";
+  std::filesystem::create_directories(dir);
+  const auto file = (dir / "calibration.json").string();
+  {
+    std::ofstream(file) << R"({"format": "deformbench-calibration/1", "model": "pbd",
+      "plugin": "pbd", "params": {"thickness": 0.06, "damping": 3},
+      "material": {"poisson": 0.4999},
+      "at_bound": {"thickness": "max", "material.poisson": "max"}})";
+  }
+  const CalibrationParams c = readCalibrationFile(file);
+  EXPECT_EQ(boundWords(c, "thickness"), "at its upper bound");
+  EXPECT_EQ(boundWords(c, "damping"), "");
+  EXPECT_EQ(calibrationBoundNote(c), "calibration " + file +
+                                         ": material.poisson fitted at its upper bound, thickness "
+                                         "fitted at its upper bound (the best fit may lie beyond "
+                                         "the searched range)");
+  {
+    std::ofstream(file) << R"({"format": "deformbench-calibration/1", "model": "pbd",
+      "plugin": "pbd", "params": {"damping": 3}, "at_bound": {}})";
+  }
+  EXPECT_EQ(calibrationBoundNote(readCalibrationFile(file)), "");
+  {
+    std::ofstream(file) << R"({"format": "deformbench-calibration/1", "model": "pbd",
+      "plugin": "pbd", "params": {}, "at_bound": {"thickness": "upper"}})";
+  }
+  try {
+    readCalibrationFile(file);
+    ADD_FAILURE() << "an \"at_bound\" of another word was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/at_bound"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove_all(dir);
+}
+
 // The shipped calibrations (calibrations/<organ>/, scripts/ship_calibrations.sh): every phantom
 // with a training set ships a fit of every calibratable model built here, made on that organ at
 // resolution 1 from exactly the folder's training scenes, validated on its held-out ones, and no

@@ -81,8 +81,8 @@ struct PlannedRun {
   ParamValues params;
   std::string label;
   bool isReference = false;
-  /// calibrationDifferenceNote() of the --calibration it takes ("" when none or no difference):
-  /// added to the run's notes.
+  /// calibrationDifferenceNote() and calibrationBoundNote() of the --calibration it takes ("" when
+  /// none or neither says anything): added to the run's notes.
   std::string calibrationNote;
   /// The calibration file whose parameters it runs with ("" when none): results.json
   /// "calibration".
@@ -113,6 +113,10 @@ struct CalibrationParams {
   /// calibrate --truth-cube: {"level": 1-based level trained on, "strain", "contact"}; else
   /// empty.
   nlohmann::json truthCube = nlohmann::json::object();
+  /// calibration.json "at_bound": each fitted parameter that ended at a bound of its search
+  /// range, "min" or "max" ({"thickness": "max"}; the organ's material as "material.poisson").
+  /// Empty: none, or a file written before it was recorded.
+  nlohmann::json atBound = nlohmann::json::object();
 };
 
 /// The parameters in which a run of c's model (its resolved params, as in results.json) differs
@@ -125,6 +129,12 @@ std::vector<std::string> calibrationDifferences(const CalibrationParams& c,
 /// FILE was fitted with other parameters: network = "volume" (fitted with "surface")`.
 std::string calibrationDifferenceNote(const CalibrationParams& c, const nlohmann::json& resolved,
                                       const std::vector<std::string>& except = {});
+/// The note a calibrated run gets when c fitted a parameter at a bound of its search ("" when
+/// none): `calibration FILE: thickness fitted at its upper bound (the best fit may lie beyond)`.
+std::string calibrationBoundNote(const CalibrationParams& c);
+/// "at its upper bound" / "at its lower bound" for a fitted parameter (`material.poisson` for the
+/// organ's material) that c.atBound names, else "".
+std::string boundWords(const CalibrationParams& c, const std::string& key);
 
 /// The organ a calibration is fitted on, as written in calibration.json "organs": the mesh
 /// ("phantom:NAME" or the file's absolute path) with its resolution (phantoms) or scale (files),
