@@ -128,7 +128,7 @@ run = json.load(open(sys.argv[1]))["runs"][0]
 assert sys.argv[2] in run.get("notes", []), run.get("notes")
 assert abs(run["params"]["gain"] - json.load(open(sys.argv[1].replace("run_iter/results.json", "cal/calibration.json")))["params"]["gain"]) < 1e-12
 PY
-  # A fit at a bound of its search: every calibrated run says so in its notes.
+  # A fit at a bound of its search: every calibrated run and sweep point says so in its notes.
   python3 - "$work/cal/calibration.json" "$work/bound.json" <<'PY'
 import json, sys
 c = json.load(open(sys.argv[1]))
@@ -137,10 +137,15 @@ json.dump(c, open(sys.argv[2], "w"))
 PY
   "${db[@]}" run "$here/toy_reference.json" --out "$work/run_bound" --no-cache \
     --calibration "$work/bound.json" >"$work/run_bound.txt" 2>&1 || { cat "$work/run_bound.txt"; fail run_bound; }
-  python3 - "$work/run_bound/results.json" "calibration $work/bound.json: gain fitted at its upper bound" <<'PY'
+  "${db[@]}" sweep "$here/toy_reference.json" --out "$work/sweep_bound" --no-cache --no-plot \
+    --calibration "$work/bound.json" >"$work/sweep_bound.txt" 2>&1 || { cat "$work/sweep_bound.txt"; fail sweep_bound; }
+  python3 - "$work/run_bound/results.json" "$work/sweep_bound/sweep.json" \
+    "calibration $work/bound.json: gain fitted at its upper bound" <<'PY'
 import json, sys
 run = json.load(open(sys.argv[1]))["runs"][0]
-assert any(n.startswith(sys.argv[2]) for n in run.get("notes", [])), run.get("notes")
+assert any(n.startswith(sys.argv[3]) for n in run.get("notes", [])), run.get("notes")
+p = {q["label"]: q for q in json.load(open(sys.argv[2]))["points"]}
+assert p["toy+cal"]["note"].startswith(sys.argv[3]) and p["toy"]["note"] == "", p
 PY
   "${db[@]}" sweep "$work/other_iterations.json" --out "$work/sweep_iter" --no-cache --no-plot \
     --calibration "$work/cal/calibration.json" >"$work/sweep_iter.txt" 2>&1 || { cat "$work/sweep_iter.txt"; fail sweep_iter; }
