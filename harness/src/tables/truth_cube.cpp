@@ -372,7 +372,7 @@ struct Source {
   std::string calibrationNote;
 };
 
-/// "fitted poisson = 0.4999 (at its upper bound), thickness = 0.01 (FILE)", and the plate it was
+/// "fitted poisson = 0.4999 at its upper bound, thickness = 0.01 (FILE)", and the plate it was
 /// fitted with when it is not the table's.
 std::string fittedNote(const CalibrationParams& c, const std::string& contact) {
   std::string values;
@@ -380,7 +380,7 @@ std::string fittedNote(const CalibrationParams& c, const std::string& contact) {
     for (const auto& [k, v] : set->items()) {
       const std::string bound = boundWords(c, set == &c.material ? "material." + k : k);
       appendTo(values, k + " = " + (v.is_number() ? formatG(v.get<double>()) : v.dump()) +
-                           (bound.empty() ? "" : " (" + bound + ")"));
+                           (bound.empty() ? "" : " " + bound));
     }
   const std::string fitted = c.truthCube.value("contact", std::string());
   return "fitted " + values + " (" + c.file + ")" +
