@@ -130,7 +130,8 @@ std::vector<std::string> calibrationDifferences(const CalibrationParams& c,
 std::string calibrationDifferenceNote(const CalibrationParams& c, const nlohmann::json& resolved,
                                       const std::vector<std::string>& except = {});
 /// The note a calibrated run gets when c fitted a parameter at a bound of its search ("" when
-/// none): `calibration FILE: thickness fitted at its upper bound (the best fit may lie beyond)`.
+/// none): `calibration FILE: thickness fitted at its upper bound (the best fit may lie beyond the
+/// searched range)`.
 std::string calibrationBoundNote(const CalibrationParams& c);
 /// "at its upper bound" / "at its lower bound" for a fitted parameter (`material.poisson` for the
 /// organ's material) that c.atBound names, else "".
