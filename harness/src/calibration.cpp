@@ -303,6 +303,14 @@ CalibrationParams readCalibrationFile(const std::string& file) {
   return c;
 }
 
+std::string calibratedRunNote(const CalibrationParams& c, const json& resolved,
+                              const std::vector<std::string>& except) {
+  std::string note = calibrationDifferenceNote(c, resolved, except);
+  const std::string bound = calibrationBoundNote(c);
+  if (!bound.empty()) note += (note.empty() ? "" : "; ") + bound;
+  return note;
+}
+
 std::string boundWords(const CalibrationParams& c, const std::string& key) {
   if (!c.atBound.contains(key)) return "";
   return c.atBound[key] == "max" ? "at its upper bound" : "at its lower bound";

@@ -70,9 +70,7 @@ std::vector<PlannedRun> planRuns(const Scene& scene, PluginLoader& loader,
     }
     run.params = resolveParams(run.info->params, given, scene.file, spec->jsonPath + "/params");
     if (calibration) {
-      run.calibrationNote = calibrationDifferenceNote(*calibration, paramsToJson(run.params));
-      const std::string bound = calibrationBoundNote(*calibration);
-      if (!bound.empty()) run.calibrationNote += (run.calibrationNote.empty() ? "" : "; ") + bound;
+      run.calibrationNote = calibratedRunNote(*calibration, paramsToJson(run.params));
       run.calibrationFile = calibration->file;
     }
     if (options.explain) {

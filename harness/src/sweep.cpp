@@ -434,11 +434,8 @@ void fillPoint(SweepPoint& s, const Planned& planned, const CaseResult& c) {
   const RunRecord* r = c.run(s.label);
   // A calibrated point whose other parameters differ from those of the fit (the knob apart).
   const CalibrationParams* calibration = planned.calibration;
-  if (r && calibration) {
-    s.note = calibrationDifferenceNote(*calibration, r->params, {s.resolutionParam, s.effortParam});
-    const std::string bound = calibrationBoundNote(*calibration);
-    if (!bound.empty()) s.note += (s.note.empty() ? "" : "; ") + bound;
-  }
+  if (r && calibration)
+    s.note = calibratedRunNote(*calibration, r->params, {s.resolutionParam, s.effortParam});
   if (c.missing.count(s.plugin)) {
     s.status = "missing plugin: " + c.missing.at(s.plugin);
   } else if (!r) {

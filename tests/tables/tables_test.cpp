@@ -271,7 +271,8 @@ TEST_F(TempDir, CalibrationsApplyToTheirOrganAndTheirRowsKeepValidity) {
                              {"model", "massspring"},
                              {"params", {{"thickness", t}}},
                              {"organs", {organ}},
-                             {"held", {{"network", "volume"}}}}
+                             {"held", {{"network", "volume"}}},
+                             {"at_bound", {{"thickness", "max"}}}}
                             .dump();
     return readCalibrationFile(f.string());
   };
@@ -300,6 +301,11 @@ TEST_F(TempDir, CalibrationsApplyToTheirOrganAndTheirRowsKeepValidity) {
     EXPECT_NE(
         row["note"].get<std::string>().find(
             "was fitted with other parameters: network = \"surface\" (fitted with \"volume\")"),
+        std::string::npos)
+        << row.dump();
+    EXPECT_NE(
+        row["note"].get<std::string>().find("; calibration " + (m_dir / "cube.json").string() +
+                                            ": thickness fitted at its upper bound"),
         std::string::npos)
         << row.dump();
   }

@@ -81,8 +81,8 @@ struct PlannedRun {
   ParamValues params;
   std::string label;
   bool isReference = false;
-  /// calibrationDifferenceNote() and calibrationBoundNote() of the --calibration it takes ("" when
-  /// none or neither says anything): added to the run's notes.
+  /// calibratedRunNote() of the --calibration it takes ("" when none or it says nothing): added
+  /// to the run's notes.
   std::string calibrationNote;
   /// The calibration file whose parameters it runs with ("" when none): results.json
   /// "calibration".
@@ -133,6 +133,10 @@ std::string calibrationDifferenceNote(const CalibrationParams& c, const nlohmann
 /// none): `calibration FILE: thickness fitted at its upper bound (the best fit may lie beyond the
 /// searched range)`.
 std::string calibrationBoundNote(const CalibrationParams& c);
+/// What a run at c's parameters says of them: calibrationDifferenceNote() and
+/// calibrationBoundNote(), "; "-joined ("" when neither says anything).
+std::string calibratedRunNote(const CalibrationParams& c, const nlohmann::json& resolved,
+                              const std::vector<std::string>& except = {});
 /// "at its upper bound" / "at its lower bound" for a fitted parameter (`material.poisson` for the
 /// organ's material) that c.atBound names, else "".
 std::string boundWords(const CalibrationParams& c, const std::string& key);

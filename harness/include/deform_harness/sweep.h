@@ -56,8 +56,7 @@ struct SweepPoint {
   bool pareto = false;         ///< on its model's front (default and calibrated apart)
   bool paretoOverall = false;  ///< on the front of every model's points
   bool calibrated = false;     ///< run at a --calibration file's parameters (its own front)
-  /// Calibrated points: calibrationDifferenceNote() (the knob apart) and calibrationBoundNote(),
-  /// "; "-joined, "" when neither says anything.
+  /// Calibrated points: calibratedRunNote() (the knob apart), "" when it says nothing.
   std::string note;
 };
 

@@ -195,13 +195,14 @@ Table calibrationTable(const std::vector<const Case*>& order, const Twins& twins
       }
       row["status"] = status.empty() ? "ok" : status;
       // A twin whose other parameters are not those its calibration was fitted with (e.g. a
-      // surface network's thickness on a volume network) says so.
+      // surface network's thickness on a volume network), or whose fit ended at a bound of its
+      // search, says so.
       std::string note;
       if (b) {
         const CalibrationParams* cal =
             calibrationFor(calibrations, b->plugin, b->model,
                            calibrationOrgan(c->scene.value("organ", ojson::object())), true);
-        if (cal) note = calibrationDifferenceNote(*cal, b->params);
+        if (cal) note = calibratedRunNote(*cal, b->params);
       }
       row["note"] = note;
       t.rows.push_back(row);
