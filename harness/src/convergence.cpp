@@ -83,6 +83,11 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
   out.d12 = d12;
   out.reason.clear();
   out.message.clear();
+  // The order of the upper estimates: the lower of the elements' rates (energy norm 1 and
+  // displacements 2 for linear tets; 2 and 3 for quadratic ones). Linear tets' displacements
+  // reach order 2 only in the asymptotic range, which a mesh bounded by the organ's surface
+  // rarely does.
+  const int upperOrder = out.elementOrder <= 1 ? 1 : 2;
   const auto noEstimate = [&](const std::string& reason, const std::string& message) {
     out.reason = reason;
     out.message = "no Richardson estimate: " + message;
@@ -91,16 +96,16 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
   if (const auto [reason, message] = levelsProblem(h0, h1, h2); !reason.empty()) {
     noEstimate(reason, message);
     // Only the coarse pair too close (the surface bounds the coarsest level) and the finest pair
-    // apart: a two-level estimate at order 2 (the lower of P2's rates) with Roache's safety
-    // factor 3 for two grids (Roache 1994, J. Fluids Eng. 116:405).
+    // apart: a two-level estimate at the elements' lower rate with Roache's safety factor 3 for
+    // two grids (Roache 1994, J. Fluids Eng. 116:405).
     if (reason == "levels_too_close" && h1 / h2 >= kMinLevelRatio && d12 > 0) {
       constexpr double kTwoLevelSafety = 3;
-      out.errorEstimate = kTwoLevelSafety * extrapolatedError(h1, h2, d12, 2, of);
+      out.errorEstimate = kTwoLevelSafety * extrapolatedError(h1, h2, d12, upperOrder, of);
       out.relativeError = peak > 0 ? out.errorEstimate / peak : NAN;
       out.converged = out.relativeError <= 0.01;
       out.message += "; the finest pair (h ratio " + fixedDigits(h1 / h2, 2) +
-                     ") extrapolated at order 2 with Roache's two-grid safety factor 3, an upper "
-                     "estimate";
+                     ") extrapolated at order " + std::to_string(upperOrder) +
+                     " with Roache's two-grid safety factor 3, an upper estimate";
     }
     return;
   }
@@ -117,14 +122,12 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
     return;
   }
   // Differences that shrink faster than order 4 (the coarse level is the one out of the
-  // asymptotic range): the finest pair is extrapolated at order kUpperEstimateOrder instead, the
-  // lower of the quadratic element's rates (energy 2, displacements 3), which overstates the
-  // error while the levels converge at least that fast (a conservative two-level estimate in the
-  // manner of Roache's grid convergence index).
-  constexpr double kUpperEstimateOrder = 2;
+  // asymptotic range): the finest pair is extrapolated at the elements' lower rate instead,
+  // which overstates the error while the levels converge at least that fast (a conservative
+  // two-level estimate in the manner of Roache's grid convergence index).
   if (!std::isfinite(p) || p > 4) {
     out.order = std::isfinite(p) ? p : NAN;
-    out.errorEstimate = extrapolatedError(h1, h2, d12, kUpperEstimateOrder, of);
+    out.errorEstimate = extrapolatedError(h1, h2, d12, upperOrder, of);
     out.relativeError = peak > 0 ? out.errorEstimate / peak : NAN;
     out.asymptotic = false;
     out.converged = out.relativeError <= 0.01;
@@ -133,7 +136,8 @@ void richardsonEstimate(double h0, double h1, double h2, double d01, double d12,
                                     : std::string("the differences shrink faster than any order "
                                                   "up to 20")) +
                   " (" + mm(d01) + " then " + mm(d12) +
-                  "): the finest pair extrapolated at order 2 instead, an upper estimate";
+                  "): the finest pair extrapolated at order " + std::to_string(upperOrder) +
+                  " instead, an upper estimate";
     out.boundRelative = peak > 0 ? std::max(d01, d12) / peak : NAN;
     return;
   }
@@ -174,7 +178,8 @@ constexpr const char* kCacheKind = "harness.convergence";
 // 2: RMS differences; 3: levels by edge length, reasons, RMS orders; 4: order-2 upper estimate
 // 5: a finer level where the surface bounds the coarse ones (finer_level_added, estimated_level)
 // 6: a level whose surface passes through itself is invalid (and the message names the level)
-constexpr const char* kCacheVersion = "harness.convergence/6";
+// 7: upper estimates at the reference's element order (element_order)
+constexpr const char* kCacheVersion = "harness.convergence/7";
 
 ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   ojson doc;
@@ -209,6 +214,7 @@ ojson toJson(const ConvergenceResult& r, const std::string& sceneFile) {
   doc["finer_level_added"] = r.finerLevelAdded;
   doc["graded"] = r.graded;
   doc["estimated_level"] = r.estimatedLevel;
+  doc["element_order"] = r.elementOrder;
   return doc;
 }
 
@@ -247,6 +253,7 @@ ConvergenceResult fromJson(const ojson& doc) {
   r.finerLevelAdded = doc.value("finer_level_added", false);
   r.graded = doc.value("graded", false);
   r.estimatedLevel = doc.value("estimated_level", int(r.levels.size()) - 1);
+  r.elementOrder = doc.value("element_order", 2);
   return r;
 }
 
@@ -296,7 +303,7 @@ std::string convergenceSummary(const ConvergenceResult& r) {
                 " (the reference; the last level, finer, was added because the surface bounds "
                 "the coarse ones)"
           : "";
-  if (!r.asymptotic && !(r.order < 0.5))  // faster than order 4: the upper estimate at order 2
+  if (!r.asymptotic && !(r.order < 0.5))  // faster than order 4: the upper estimate
     return "estimated discretisation error" + whose + " at most " + percent(r.relativeError) +
            " of the peak (levels " + levels + "; " + r.message + rms + ")";
   return "estimated discretisation error" + whose + " " + percent(r.relativeError) +
@@ -347,6 +354,7 @@ struct PreparedStudy {
   bool ownSize = false;
   /// The reference's params grade its mesh toward a point (ConvergenceResult::graded).
   bool graded = false;
+  int elementOrder = 2;  ///< ConvergenceResult::elementOrder
   Organ organ;
   double volume = 0, exclude = 0;
   std::optional<CacheKey> key;
@@ -387,13 +395,17 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
   try {
     const std::vector<ParamSpec>& specs = loader.load(ref.value("plugin", "")).params;
     // Graded as the plugin meshes it: its resolved params' grading (organ_tets.h), where it
-    // takes the organ's tet mesh parameters.
-    if (std::any_of(specs.begin(), specs.end(),
-                    [](const ParamSpec& s) { return s.key == "focus_radius"; })) {
-      const nlohmann::json given =
-          nlohmann::json::parse(ref.value("params", ojson::object()).dump());
-      p.graded = organTetOptions(resolveParams(specs, given, sceneFile, "/reference/params"))
-                     .grading.active();
+    // takes the organ's tet mesh parameters; and its element order, where it has one.
+    const auto has = [&](const char* key) {
+      return std::any_of(specs.begin(), specs.end(),
+                         [&](const ParamSpec& s) { return s.key == key; });
+    };
+    if (has("focus_radius") || has("element_order")) {
+      const ParamValues values =
+          resolveParams(specs, nlohmann::json::parse(ref.value("params", ojson::object()).dump()),
+                        sceneFile, "/reference/params");
+      if (has("focus_radius")) p.graded = organTetOptions(values).grading.active();
+      if (has("element_order")) p.elementOrder = int(values.integer("element_order"));
     }
     for (const ParamSpec& spec : specs) {
       if (spec.key == "edge_length") {
@@ -718,6 +730,7 @@ void startStudy(Study& st, PluginLoader& loader) {
   }
   st.include = comparedVertices(st.prepared.parsed, st.prepared.organ, st.prepared.exclude);
   st.out.graded = st.prepared.graded;
+  st.out.elementOrder = st.prepared.elementOrder;
   st.first = 0;
   st.cases = levelCases(st.prepared, options, options.hRatios, 0, st.out, st.ids);
 }

@@ -383,6 +383,7 @@ TEST_F(TempDir, UnderResolvedReferenceIsWarnedInTheTableAndTheStudyIsCached) {
   EXPECT_EQ(study["levels"][0]["target_elements"], 100);
   EXPECT_EQ(study["cached"], false);
   EXPECT_EQ(study["converged"], false);
+  EXPECT_EQ(study["element_order"], 1) << "upper estimates at the linear tets' order";
   const json results = readJson(out / "runs/hybrid/cube_down_20N/results.json");
   long long referenceTets = -1;
   for (const auto& run : results["runs"])
@@ -515,6 +516,14 @@ TEST(ReferenceCheck, RichardsonRecoversTheOrderAndTheWarningFollowsTheEstimate) 
     EXPECT_NE(fast.message.find("p = 6.00 is above 4"), std::string::npos) << fast.message;
     EXPECT_EQ(fast.converged, fast.relativeError <= 0.01);
     EXPECT_EQ(convergenceWarning(fast).empty(), fast.converged) << convergenceWarning(fast);
+    // A linear-tet reference: at order 1, its elements' lower rate, a larger upper estimate.
+    ConvergenceResult linear;
+    linear.elementOrder = 1;
+    richardsonEstimate(h0, h1, h2, c * (h6(h0) - h6(h1)), d12, 0.01, linear);
+    EXPECT_NEAR(linear.errorEstimate, d12 * h2 / (h1 - h2), 1e-12 * d12);
+    EXPECT_GT(linear.errorEstimate, fast.errorEstimate);
+    EXPECT_NE(linear.message.find("extrapolated at order 1 instead"), std::string::npos)
+        << linear.message;
   }
   // Levels that do not refine: no estimate, and the warning says the convergence is unknown.
   ConvergenceResult flat;
@@ -695,6 +704,12 @@ TEST(ReferenceCheck, SaysWhyRichardsonDoesNotApply) {
   EXPECT_TRUE(close.converged);
   EXPECT_NE(convergenceSummary(close).find("at most 0.114%"), std::string::npos)
       << convergenceSummary(close);
+  ConvergenceResult closeLinear;  // the same levels of linear tets: at order 1
+  closeLinear.elementOrder = 1;
+  richardsonEstimate(h0, h1c, h2, 2e-5, 1e-5, peak, closeLinear);
+  EXPECT_NEAR(closeLinear.errorEstimate, 3 * 1e-5 * h2 / (h1c - h2), 1e-15);
+  EXPECT_NE(closeLinear.message.find("at order 1 with Roache's"), std::string::npos)
+      << closeLinear.message;
   // Both pairs too close: no estimate.
   ConvergenceResult tooClose;
   richardsonEstimate(h0, h0 / 1.05, h0 / 1.1, 2e-5, 1e-5, peak, tooClose);

@@ -63,7 +63,7 @@ struct ConvergenceResult {
   double order = NAN;  ///< observed p
   double errorEstimate = NAN, relativeError = NAN;
   bool asymptotic = false;  ///< 0.5 <= p <= 4
-  /// relativeError <= 1%, with asymptotic or with the upper estimate at order 2 (p > 4)
+  /// relativeError <= 1%, with asymptotic or with the upper estimate (p > 4, elementOrder)
   bool converged = false;
   /// Why Richardson does not apply (or its estimate is unreliable), "" when it does:
   /// "levels_failed", "not_refining", "levels_too_close", "coincide", "not_monotone",
@@ -87,6 +87,11 @@ struct ConvergenceResult {
   bool graded = false;
   /// Index into `levels` of the level whose error errorEstimate is (-1: not set).
   int estimatedLevel = -1;
+  /// The reference's element order (its `element_order` param; 2 for a plugin without one).
+  /// Where the levels allow only an upper estimate (two levels, or an observed order above 4),
+  /// the finest pair is extrapolated at this order, the lower of its elements' rates (the
+  /// energy norm's): 1 for linear tets, 2 for quadratic ones.
+  int elementOrder = 2;
   /// estimatedLevel where it is set, else the last level (a result built by hand).
   size_t estimatedIndex() const {
     return estimatedLevel >= 0 ? size_t(estimatedLevel) : levels.size() - 1;
