@@ -534,13 +534,20 @@ fs::path defaultConformanceScenesDir() {
 
 std::vector<CheckResult> runConformance(PluginLoader& loader, Cache& cache,
                                         const ConformanceOptions& o) {
-  for (const std::string& c : o.checks) {
-    if (!listed(conformanceCheckNames(), c)) {
-      std::string known;
-      for (const auto& n : conformanceCheckNames()) known += (known.empty() ? "" : ", ") + n;
-      throw InputError("--check", "", "unknown check '" + c + "' (known: " + known + ")");
+  for (const auto& [option, names] :
+       {std::pair{"--check", &o.checks}, std::pair{"--skip-check", &o.skipChecks}}) {
+    for (const std::string& c : *names) {
+      if (!listed(conformanceCheckNames(), c)) {
+        std::string known;
+        for (const auto& n : conformanceCheckNames()) known += (known.empty() ? "" : ", ") + n;
+        throw InputError(option, "", "unknown check '" + c + "' (known: " + known + ")");
+      }
     }
   }
+  const auto wanted = [&o](const std::string& check) {
+    return listed(o.checks, check) &&
+           std::find(o.skipChecks.begin(), o.skipChecks.end(), check) == o.skipChecks.end();
+  };
   std::vector<std::string> plugins = o.plugins;
   if (plugins.empty()) plugins = loader.discover();
   if (plugins.empty()) {
@@ -581,13 +588,13 @@ std::vector<CheckResult> runConformance(PluginLoader& loader, Cache& cache,
       load.outcome = CheckOutcome::Failed;
       load.detail = e.what();
     }
-    if (listed(o.checks, "load")) finish(load);
+    if (wanted("load")) finish(load);
     if (!models) continue;
     for (const ModelInfo& info : *models) {
       if (!listed(o.models, info.name)) continue;
       ++modelsSeen;
       for (const CheckDef& def : checks()) {
-        if (!listed(o.checks, def.name)) continue;
+        if (!wanted(def.name)) continue;
         CheckResult r;
         r.plugin = plugin;
         r.model = info.name;

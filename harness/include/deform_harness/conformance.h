@@ -34,6 +34,8 @@ struct ConformanceOptions {
   std::vector<std::string> models;
   /// Check names to run; empty: all of them (conformanceCheckNames()).
   std::vector<std::string> checks;
+  /// Check names not to run, even where `checks` names them.
+  std::vector<std::string> skipChecks;
   /// "PLUGIN/CHECK" or "PLUGIN/MODEL/CHECK" entries known to fail: such a failure is reported
   /// "xfail" and does not fail the run; such a check passing is "XPASS" and does (so that the
   /// entry gets removed).

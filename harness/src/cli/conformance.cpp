@@ -14,7 +14,7 @@ namespace deform::harness::cli {
 namespace {
 
 struct ConformanceArgs {
-  std::vector<std::string> plugins, models, checks, expectedFailures;
+  std::vector<std::string> plugins, models, checks, skipChecks, expectedFailures;
   std::string scenes;
   std::string cacheDir;
   bool noCache = false;
@@ -24,6 +24,7 @@ struct ConformanceArgs {
     conformance->add_option("--plugin", plugins, "plugin to check (repeatable; default: all)");
     conformance->add_option("--model", models, "model to check (repeatable; default: all)");
     conformance->add_option("--check", checks, "check to run (repeatable; default: all)");
+    conformance->add_option("--skip-check", skipChecks, "check not to run (repeatable)");
     conformance->add_option("--expect-fail", expectedFailures,
                             "PLUGIN/CHECK or PLUGIN/MODEL/CHECK known to fail: reported xfail, "
                             "and a failure if it passes (repeatable)");
@@ -55,6 +56,7 @@ int cmdConformance(const ConformanceArgs& a) {
   }
   o.models = a.models;
   o.checks = a.checks;
+  o.skipChecks = a.skipChecks;
   o.expectedFailures = a.expectedFailures;
   o.scenesDir = a.scenes.empty() ? defaultConformanceScenesDir() : fs::path(a.scenes);
   if (!a.scenes.empty() && !fs::is_directory(o.scenesDir))
