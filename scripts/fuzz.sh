@@ -11,7 +11,9 @@
 # script exit 1 after all targets ran, printing every reproducer path.
 # Environment: FUZZ_JOBS (build parallelism, default nproc), FUZZ_PARALLEL (targets fuzzed side
 # by side, default nproc), FUZZ_TIMEOUT (default 10), FUZZ_RSS_MB (default 2048), FUZZ_MAX_LEN
-# (default 16384), FUZZ_BUILD_DIR (default build-fuzz).
+# (default 16384), FUZZ_BUILD_DIR (default build-fuzz), FUZZ_REUSE=1 (FUZZ_BUILD_DIR is a build
+# configured elsewhere with the fuzzers, such as scripts/sanitize.sh --ci's build-asan with clang:
+# the targets are built there as configured, without a configure step of this script's).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -42,12 +44,20 @@ for p in PBD MASSSPRING REFERENCE_FEM FEM_HEX METABALLS PARTICLE_BEM HYBRID_FEM_
   BULLET_SOFTBODY BULLET_DEFORMABLE; do
   plugin_flags+=("-DDEFORM_WITH_${p}=OFF")
 done
-source scripts/cmake_tools.sh
-cmake_tools "$build"  # generator, launcher
-cmake -S . -B "$build" "${generator[@]}" "${launcher[@]}" -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
-  -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-O1 -gline-tables-only" -DDEFORM_SANITIZE=ON \
-  -DDEFORM_BUILD_FUZZERS=ON -DDEFORM_BUILD_TESTS=OFF -DDEFORM_BUILD_BENCHMARKS=OFF \
-  "${plugin_flags[@]}" >/dev/null
+if [[ ${FUZZ_REUSE:-0} == 1 ]]; then
+  if ! grep -q '^DEFORM_BUILD_FUZZERS:BOOL=ON' "$build/CMakeCache.txt" 2>/dev/null; then
+    echo "fuzz.sh: FUZZ_REUSE=1 but $build is not a build configured with the fuzzers" >&2
+    exit 2
+  fi
+else
+  source scripts/cmake_tools.sh
+  cmake_tools "$build"  # generator, launcher
+  cmake -S . -B "$build" "${generator[@]}" "${launcher[@]}" -DCMAKE_C_COMPILER=clang \
+    -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=Debug \
+    -DCMAKE_CXX_FLAGS_DEBUG="-O1 -gline-tables-only" -DDEFORM_SANITIZE=ON \
+    -DDEFORM_BUILD_FUZZERS=ON -DDEFORM_BUILD_TESTS=OFF -DDEFORM_BUILD_BENCHMARKS=OFF \
+    "${plugin_flags[@]}" >/dev/null
+fi
 build_targets=()
 for t in "${targets[@]}"; do build_targets+=("fuzz_$t"); done
 cmake --build "$build" -j "$jobs" --target "${build_targets[@]}"

@@ -10,9 +10,14 @@
 #                                  the unit tests, the CLI error tests and the conformance suite
 #                                  (deformbench conformance + the contact conformance program)
 #                                  for the plugins in SANITIZE_CI_PLUGINS only (default below),
-#                                  its "scenes" check on SANITIZE_CI_SCENES (default liver_poke.json);
+#                                  its "scenes" check on SANITIZE_CI_SCENES (default liver_poke.json),
+#                                  without the checks in SANITIZE_CI_SKIP_CHECKS (default contact);
 #                                  UBSan on the core and the plugins only (the harness and the
-#                                  test programs under ASan alone)
+#                                  test programs under ASan alone); with clang (the default of
+#                                  --ci where it is installed) the same build also holds the
+#                                  libFuzzer targets (tests/fuzz), which scripts/fuzz.sh then runs
+#                                  without a build of its own (FUZZ_BUILD_DIR=build-asan
+#                                  FUZZ_REUSE=1, as .ci/run does)
 #   scripts/sanitize.sh --no-run   build only (combine with --quick or --ci)
 # SANITIZE_PLUGINS='a b' limits the plugins built (and the conformance suite) in any mode.
 # Tests too slow under the sanitizers (ASan + UBSan at -O1 runs the numerics 3-10x slower) are
@@ -21,8 +26,8 @@
 # SANITIZE_EXCLUDE='' to run everything. The deformbench CLI tests (ctest -R '^cli_') run too,
 # except those matching SANITIZE_CLI_EXCLUDE (a ctest -E regex; default: the full scene runs).
 # Environment: SANITIZE_JOBS (build parallelism, default nproc), SANITIZE_BUILD_DIR (build-asan),
-# SANITIZE_CC / SANITIZE_CXX (compiler, default the system's cc / c++), SANITIZE_DEBUG (the
-# debug-information flag, default -g1).
+# SANITIZE_CC / SANITIZE_CXX (compiler, default the system's cc / c++; with --ci clang / clang++
+# when installed), SANITIZE_DEBUG (the debug-information flag, default -g1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -51,9 +56,20 @@ cli_exclude=${SANITIZE_CLI_EXCLUDE-'^cli_run_'}
 plugins=${SANITIZE_PLUGINS-}
 [[ $ci -eq 1 && -z $plugins ]] && plugins=${SANITIZE_CI_PLUGINS-"pbd massspring reference_fem"}
 
+# --ci prefers clang: on the 2-core CI machine it compiled this build's files in about two thirds
+# of gcc 12's time, and its build can hold the fuzzers too (one instrumented core for both steps
+# of .ci/run instead of two builds; tests/README.md, "CI").
+cc=${SANITIZE_CC:-} cxx=${SANITIZE_CXX:-}
+if [[ $ci -eq 1 && -z $cc && -z $cxx ]] && command -v clang >/dev/null &&
+  command -v clang++ >/dev/null; then
+  cc=clang cxx=clang++
+fi
 compilers=()
-[[ -n ${SANITIZE_CC:-} ]] && compilers+=(-DCMAKE_C_COMPILER="$SANITIZE_CC")
-[[ -n ${SANITIZE_CXX:-} ]] && compilers+=(-DCMAKE_CXX_COMPILER="$SANITIZE_CXX")
+[[ -n $cc ]] && compilers+=(-DCMAKE_C_COMPILER="$cc")
+[[ -n $cxx ]] && compilers+=(-DCMAKE_CXX_COMPILER="$cxx")
+# The fuzzers with --ci and clang: tests/fuzz instruments the core with SanitizerCoverage.
+fuzzers=OFF
+[[ $ci -eq 1 && $(basename "${cxx:-c++}") == clang++* ]] && fuzzers=ON
 source scripts/cmake_tools.sh
 cmake_tools "$build"  # generator, launcher
 # With a plugin subset the other plugins are not configured at all (the conformance program
@@ -80,7 +96,7 @@ cmake -S . -B "$build" "${generator[@]}" "${compilers[@]}" "${launcher[@]}" "${w
   -DCMAKE_BUILD_TYPE=Debug \
   -DCMAKE_CXX_FLAGS_DEBUG="-O1 $debug" -DCMAKE_C_FLAGS_DEBUG="-O1 $debug" -DDEFORM_SANITIZE=ON \
   -DDEFORM_SANITIZE_GLUE_UB=$glue_ub -DDEFORM_HARNESS_DEBUG_OPT=-O0 -DDEFORM_BUILD_TESTS=ON \
-  -DDEFORM_BUILD_BENCHMARKS=OFF >/dev/null
+  -DDEFORM_BUILD_BENCHMARKS=OFF -DDEFORM_BUILD_FUZZERS=$fuzzers >/dev/null
 
 # The plugins are MODULE libraries named deform_<plugin>; the test programs load them.
 targets=(deform_engine deformbench)  # deform_core is an INTERFACE target (no rule of its own)
@@ -124,6 +140,7 @@ for t in "${tests[@]}"; do
     exit 1
   }
 done
+[[ $fuzzers == ON ]] && targets+=(deform_fuzzers)
 echo "sanitize.sh: building ${targets[*]}"
 cmake --build "$build" -j "$jobs" --target "${targets[@]}"
 [[ $run -eq 1 ]] || exit 0
@@ -179,17 +196,21 @@ if [[ $quick -eq 0 && ${#built_plugins[@]} -gt 0 ]]; then
   # --ci: the "scenes" check runs one shipped scene (SANITIZE_CI_SCENES), not all of them: under
   # the sanitizers reference_fem took 440 s over the six; the Release suite (ctest
   # conformance_<plugin>) runs them all.
-  scenes=()
+  # --ci leaves out the checks in SANITIZE_CI_SKIP_CHECKS (default: contact; under clang's
+  # sanitizers reference_fem's took 160 s of its 216): the contact conformance program's instances
+  # of the same plugins, run here too, press, grasp and rest objects on each one.
+  ci_args=()
   if [[ $ci -eq 1 ]]; then
     rm -rf "$build/ci-scenes" && mkdir -p "$build/ci-scenes"
     for f in ${SANITIZE_CI_SCENES-liver_poke.json}; do cp "scenes/$f" "$build/ci-scenes/"; done
-    scenes=(--scenes "$build/ci-scenes")
+    ci_args=(--scenes "$build/ci-scenes")
+    for c in ${SANITIZE_CI_SKIP_CHECKS-contact}; do ci_args+=(--skip-check "$c"); done
   fi
   for p in "${built_plugins[@]}"; do
-    echo "== deformbench conformance --plugin $p ${scenes[*]}"
+    echo "== deformbench conformance --plugin $p ${ci_args[*]}"
     start=$SECONDS
     if ! "$build/bin/deformbench" --plugin-dir "$build/plugins" conformance --plugin "$p" \
-      "${xfail[@]}" "${scenes[@]}"; then
+      "${xfail[@]}" "${ci_args[@]}"; then
       echo "sanitize.sh: conformance of $p FAILED (sanitizer report or failing check above)"
       status=1
     fi
