@@ -4,6 +4,7 @@
 // signal. Also the progress callback of long runs and the --retry-failed rule of child tasks.
 #include <deform/engine/plugin_loader.h>
 #include <deform/engine/scene.h>
+#include <deform/internal/sanitizers.h>
 #include <deform_harness/dispatch.h>
 #include <deform_harness/run_isolation.h>
 #include <gtest/gtest.h>
@@ -38,14 +39,9 @@ ModelInfo rigidInfo() {
 
 // AddressSanitizer catches a child's SIGSEGV itself and exits instead of dying by the signal,
 // so the crash tests run in the plain build only.
-#if defined(__SANITIZE_ADDRESS__)
+#if DEFORM_ASAN
 #define SKIP_UNDER_ASAN() GTEST_SKIP() << "ASan handles the child's SIGSEGV itself"
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define SKIP_UNDER_ASAN() GTEST_SKIP() << "ASan handles the child's SIGSEGV itself"
-#endif
-#endif
-#ifndef SKIP_UNDER_ASAN
+#else
 #define SKIP_UNDER_ASAN() (void)0
 #endif
 

@@ -1,4 +1,5 @@
 #include <deform/engine/plugin_loader.h>
+#include <deform/internal/sanitizers.h>
 #include <dlfcn.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -26,19 +27,7 @@ using RegisterFn = void (*)(Registry&);
 // still hold (libgomp, through CHOLMOD) would otherwise read as a leak at exit, once
 // LeakSanitizer no longer sees the unmapped memory that points to it (clang 14's runtime reported
 // 8 bytes of libgomp's; gcc 12's did not).
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define DEFORM_KEEP_PLUGINS_MAPPED 1
-#endif
-#endif
-#if defined(__SANITIZE_ADDRESS__)
-#define DEFORM_KEEP_PLUGINS_MAPPED 1
-#endif
-#ifdef DEFORM_KEEP_PLUGINS_MAPPED
-constexpr int kLoadFlags = RTLD_NOW | RTLD_LOCAL | RTLD_NODELETE;
-#else
-constexpr int kLoadFlags = RTLD_NOW | RTLD_LOCAL;
-#endif
+constexpr int kLoadFlags = RTLD_NOW | RTLD_LOCAL | (DEFORM_ASAN ? RTLD_NODELETE : 0);
 
 std::string join(const std::vector<std::string>& parts, const char* sep) {
   std::string s;
