@@ -393,19 +393,18 @@ PreparedStudy prepareStudy(const ojson& scene, const std::string& sceneFile, Plu
       ownN = params["elements"].get<long long>();
   }
   try {
-    const std::vector<ParamSpec>& specs = loader.load(ref.value("plugin", "")).params;
+    const ModelInfo& info = loader.load(ref.value("plugin", ""));
+    const std::vector<ParamSpec>& specs = info.params;
     // Graded as the plugin meshes it: its resolved params' grading (organ_tets.h), where it
     // takes the organ's tet mesh parameters; and its element order, where it has one.
-    const auto has = [&](const char* key) {
-      return std::any_of(specs.begin(), specs.end(),
-                         [&](const ParamSpec& s) { return s.key == key; });
-    };
-    if (has("focus_radius") || has("element_order")) {
+    const bool tetMesh = info.param("focus_radius") != nullptr;
+    const bool ordered = info.param("element_order") != nullptr;
+    if (tetMesh || ordered) {
       const ParamValues values =
           resolveParams(specs, nlohmann::json::parse(ref.value("params", ojson::object()).dump()),
                         sceneFile, "/reference/params");
-      if (has("focus_radius")) p.graded = organTetOptions(values).grading.active();
-      if (has("element_order")) p.elementOrder = int(values.integer("element_order"));
+      if (tetMesh) p.graded = organTetOptions(values).grading.active();
+      if (ordered) p.elementOrder = int(values.integer("element_order"));
     }
     for (const ParamSpec& spec : specs) {
       if (spec.key == "edge_length") {
