@@ -638,17 +638,27 @@ void assessValidity(const Scene& scene, RunRecord& rec) {
     invalid("did not settle");
   // A solver that counts the solves it gave up on (numeric "unconverged_steps") left a state
   // that is not the equilibrium or the step the scene asked for; those it stopped where the
-  // surface passed through itself (numeric "solves_stopped_at_fold", reference_fem) are named.
+  // surface passed through itself (numeric "solves_stopped_at_fold", reference_fem) and those that
+  // spent their budget of Newton iterations ("solves_out_of_budget") are named.
   if (const auto it = rec.numeric.find("unconverged_steps");
       rec.status == RunStatus::Ok && it != rec.numeric.end() && it->second > 0) {
-    const auto folds = rec.numeric.find("solves_stopped_at_fold");
-    const long long folded = folds == rec.numeric.end() ? 0 : folds->second;
+    const auto count = [&](const char* key) {
+      const auto c = rec.numeric.find(key);
+      return c == rec.numeric.end() ? 0LL : c->second;
+    };
+    std::string why;
+    const auto because = [&why](const std::string& part) {
+      why += (why.empty() ? "" : "; ") + part;
+    };
+    if (const long long folded = count("solves_stopped_at_fold"); folded > 0)
+      because(std::to_string(folded) +
+              " stopped short of its load where the surface passed through itself, "
+              "away from the held nodes");
+    if (const long long spent = count("solves_out_of_budget"); spent > 0)
+      because(std::to_string(spent) +
+              " gave up at its budget of Newton iterations (max_solve_newton_iterations)");
     invalid(std::to_string(it->second) + (it->second == 1 ? " solve" : " solves") +
-            " did not converge" +
-            (folded > 0 ? " (" + std::to_string(folded) +
-                              " stopped short of its load where the surface passed through "
-                              "itself, away from the held nodes)"
-                        : std::string()));
+            " did not converge" + (why.empty() ? std::string() : " (" + why + ")"));
   }
   // A tet network that turned over 0.5% of its tets inside out (numeric "inverted_tets" against
   // counts "elements") has folded through itself: its state is no deformation of the solid it

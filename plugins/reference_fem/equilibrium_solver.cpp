@@ -516,6 +516,7 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
       }
     } else {
       ++rep.failedLoadSteps;
+      if (rep.outOfBudget) break;
       dt = 0.5 * (tn - t);  // half of the increment that failed (not of a doubled one)
       if (dt < minStep || rep.failedLoadSteps >= opt.maxFailedLoadSteps) break;
     }
@@ -541,6 +542,11 @@ bool EquilibriumSolver::loadStep(Newton& s, VecX& xs, const VecX& f, const VecX&
     s.haveG = false;
     rep.residual = residual(s, s.g, f);
     if (!s.lift && rep.residual <= s.opt.tolerance * rep.forceScale) return true;
+    if (s.opt.maxSolveIterations > 0 && rep.newtonIterations >= s.opt.maxSolveIterations &&
+        s.nf > 0) {
+      rep.outOfBudget = true;
+      return false;
+    }
     if (it == s.opt.maxIterations || s.nf == 0) {
       if (s.nf == 0) {
         xs += s.dc;

@@ -122,6 +122,11 @@ struct SolveOptions {
   /// load with no equilibrium in reach otherwise alternates accepted and rejected increments
   /// near the smallest step for as long as it is left to (no answer in 900 s, issue H1).
   int maxFailedLoadSteps = 40;
+  /// Newton iterations of one solve over all its load steps; reaching it ends the solve (not
+  /// converged, SolveReport::outOfBudget). 0: no limit beyond maxIterations per load step and
+  /// maxFailedLoadSteps. Bounds a solve that crosses a long non-convex stretch, or has no
+  /// equilibrium within reach, in a time known beforehand (deterministic, unlike a wall clock).
+  int maxSolveIterations = 0;
   /// The CG iterations of the inexact Newton steps precondition with a float copy of the factor
   /// (CholeskySolver::solveFloatInto: half the memory traffic of the triangular solves, which
   /// dominate a CG iteration; the CG and every direct solve stay in double, so the tolerance and
@@ -157,6 +162,9 @@ struct SolveReport {
   /// SolveOptions::admissible refused an accepted state: the solve ended there, short of its
   /// load (the state is that load step's equilibrium).
   bool stoppedEarly = false;
+  /// The solve used SolveOptions::maxSolveIterations Newton iterations and gave up, short of its
+  /// load.
+  bool outOfBudget = false;
   /// Wall-time breakdown of `seconds` (s): pattern analysis (when the constrained set is new:
   /// ordering, the free block's pattern and element slots, symbolic factorisation),
   /// stiffness assembly (element tangents, projection, scatter), numerical factorisation,

@@ -24,6 +24,9 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::real("newton_tolerance", "1", 1e-8, 1e-14, 1e-2,
                       "converged when |free residual| <= this * max(|external force|, |reaction|)"),
       ParamSpec::integer("max_newton_iterations", 100, 1, 10000, "Newton iterations per load step"),
+      ParamSpec::integer("max_solve_newton_iterations", 0, 0, 1000000,
+                         "Newton iterations of one solve over all its load steps; a solve that "
+                         "reaches them gives up, not converged (0: no such limit)"),
       ParamSpec::choice("preconditioner_precision", "auto", {"auto", "float32", "float64"},
                         "number type of the triangular solves that precondition the inexact "
                         "Newton's CG (float32: a float copy of the factor, half the memory "
@@ -54,6 +57,7 @@ ReferenceFemConfig configFromParams(const ParamValues& p) {
   c.options.tolerance = p.real("newton_tolerance");
   c.options.maxIterations = int(p.integer("max_newton_iterations"));
   c.options.maxHalvings = int(p.integer("max_load_halvings"));
+  c.options.maxSolveIterations = int(p.integer("max_solve_newton_iterations"));
   c.stopAtFold = p.flag("stop_at_fold");
   c.preconditioner = p.choice("preconditioner_precision");
   c.rayleighAlpha = p.real("rayleigh_alpha");

@@ -212,6 +212,7 @@ class ReferenceFemModel final : public Model {
     m_factorizations += rep.factorizations;
     m_pcgIterations += rep.pcgIterations;
     m_failedLoadSteps += rep.failedLoadSteps;
+    m_outOfBudget += rep.outOfBudget;
     if (!rep.converged) ++m_unconverged;
 
     m_graspForces.clear();
@@ -253,7 +254,7 @@ class ReferenceFemModel final : public Model {
     m_graspForces.clear();
     m_unconverged = m_spdFallbacks = m_projectedSteps = 0;
     m_newtonIterations = m_factorizations = m_pcgIterations = m_failedLoadSteps = 0;
-    m_stoppedAtFold = 0;
+    m_stoppedAtFold = m_outOfBudget = 0;
     m_lastIterations = m_lastLoadSteps = 0;
     m_phase.clear();
     updatePositions();
@@ -281,7 +282,8 @@ class ReferenceFemModel final : public Model {
             {"factorizations", m_factorizations},
             {"pcg_iterations", m_pcgIterations},
             {"failed_load_steps", m_failedLoadSteps},
-            {"solves_stopped_at_fold", m_stoppedAtFold}};
+            {"solves_stopped_at_fold", m_stoppedAtFold},
+            {"solves_out_of_budget", m_outOfBudget}};
   }
   std::vector<Vec3> graspForces() const override { return m_graspForces; }
 
@@ -365,7 +367,7 @@ class ReferenceFemModel final : public Model {
   long long m_unconverged = 0, m_spdFallbacks = 0, m_projectedSteps = 0, m_lastIterations = 0,
             m_lastLoadSteps = 0;
   long long m_newtonIterations = 0, m_factorizations = 0, m_pcgIterations = 0,
-            m_failedLoadSteps = 0, m_stoppedAtFold = 0;  ///< totals over the run
+            m_failedLoadSteps = 0, m_stoppedAtFold = 0, m_outOfBudget = 0;  ///< totals over the run
   PhaseTimes m_phase;
 };
 

@@ -39,7 +39,7 @@ struct Outcome {
   Real tipDrop = 0;         ///< m, of the loaded vertices (mean)
 };
 
-Outcome pressDown(bool stopAtFold) {
+Outcome pressDown(bool stopAtFold, long long newtonBudget = 0) {
   const Organ organ = twoSlabs();
   const ModelInfo& info = deform::testing::loader().load("reference_fem");
   ParamValues p = ParamValues::defaults(info.params);
@@ -49,6 +49,7 @@ Outcome pressDown(bool stopAtFold) {
   // Six Newton iterations per load step: the whole load fails at once and is halved, so the solve
   // accepts states short of its load (a harder problem's Newton gets there by itself).
   p.set("max_newton_iterations", 6LL);
+  p.set("max_solve_newton_iterations", newtonBudget);
   std::unique_ptr<Model> m = info.create();
   m->init(ModelSetup{organ, p, deform::testing::cache(), 0.01, Vec3::Zero()});
   StepInput in;
@@ -85,7 +86,18 @@ TEST(ReferenceFemFold, ASolveStopsWhereItsSurfacePassesThroughItself) {
 
   const Outcome full = pressDown(false);
   EXPECT_EQ(full.numeric.at("solves_stopped_at_fold"), 0);
+  EXPECT_EQ(full.numeric.at("solves_out_of_budget"), 0);
   EXPECT_GT(full.freePairs, 0);
   EXPECT_GT(full.tipDrop, stopped.tipDrop);
   EXPECT_GT(full.numeric.at("newton_iterations"), stopped.numeric.at("newton_iterations"));
+}
+
+// A budget of Newton iterations per solve (max_solve_newton_iterations) ends a solve that has not
+// converged within it: not converged, counted apart, after exactly that many iterations.
+TEST(ReferenceFemFold, ASolveGivesUpAtItsNewtonBudget) {
+  const Outcome spent = pressDown(false, 4);
+  EXPECT_EQ(spent.numeric.at("solves_out_of_budget"), 1);
+  EXPECT_EQ(spent.numeric.at("unconverged_steps"), 1);
+  EXPECT_EQ(spent.numeric.at("newton_iterations"), 4);
+  EXPECT_EQ(spent.numeric.at("solves_stopped_at_fold"), 0);
 }

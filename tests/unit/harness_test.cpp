@@ -385,6 +385,14 @@ TEST(Runner, ARunWithUnconvergedSolvesIsInvalid) {
   ASSERT_EQ(gaveUp.status, RunStatus::Ok) << gaveUp.message;
   EXPECT_FALSE(gaveUp.valid);
   EXPECT_EQ(gaveUp.invalidReason, "2 solves did not converge");
+  // reference_fem's counts of why: stopped at a fold, out of its Newton budget.
+  const RunRecord why = runWith(f, [](RigidTestModel& m) {
+    m.unconverged = 2;
+    m.extraNumeric = {{"solves_stopped_at_fold", 0}, {"solves_out_of_budget", 1}};
+  });
+  EXPECT_EQ(why.invalidReason,
+            "2 solves did not converge (1 gave up at its budget of Newton iterations "
+            "(max_solve_newton_iterations))");
   const RunRecord converged = runWith(f, [](RigidTestModel&) {});
   EXPECT_TRUE(converged.valid) << converged.invalidReason;
 }

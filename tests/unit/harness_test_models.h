@@ -23,6 +23,7 @@ class RigidTestModel : public Model {
   bool ignoreGrasps = false;      ///< a model that holds nothing
   Vec3 drift = Vec3::Zero();      ///< m per step, always (a model that never settles)
   long long unconverged = 0;      ///< reported as numeric "unconverged_steps"
+  NumericCounters extraNumeric;   ///< reported beside those
   long long inverted = -1;        ///< >= 0: reported as numeric "inverted_tets"
   long long elements = 0;         ///< > 0: reported as counts "elements"
   long long fixedNodes = -1;      ///< >= 0: reported as counts "fixed_nodes" (its own rule)
@@ -78,6 +79,7 @@ class RigidTestModel : public Model {
   NumericCounters numericCounters() const override {
     NumericCounters c{{"degenerate", 0}, {"unconverged_steps", unconverged}};
     if (inverted >= 0) c["inverted_tets"] = inverted;
+    c.insert(extraNumeric.begin(), extraNumeric.end());
     return c;
   }
 
