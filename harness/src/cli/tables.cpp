@@ -34,7 +34,8 @@ struct TablesArgs {
     tables
         ->add_option(
             "--reference-elements", referenceElements,
-            "target tets of the reference FEM, quadratic (default 20000; 4000 with --quick)")
+            "target tets of the reference FEM, quadratic (default 20000, 4000 with --quick; the "
+            "hybrid tables 4000)")
         ->check(positiveValue(true));
     tables->add_flag("--no-reference-check", noReferenceCheck,
                      "skip the convergence study of each table's reference (three solves at 2, "

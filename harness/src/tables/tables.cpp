@@ -393,13 +393,15 @@ std::vector<Table> buildTables(const std::vector<std::string>& names, PluginLoad
       options.referenceElements > 0
           ? options.referenceElements
           : (options.quick ? kQuickReferenceElements : kReferenceElements);
+  const long long hybridElements =
+      options.referenceElements > 0 ? options.referenceElements : kHybridReferenceElements;
   const std::map<std::string, std::function<TableDef()>> make = {
       {"metaballs-construction", [&] { return metaballsConstruction(options); }},
       {"method-comparison", [&] { return methodComparison(options, refElements); }},
       {"bem-timing", [&] { return bemTiming(options); }},
       {"bem-accuracy", [&] { return bemAccuracy(options, loader, progress); }},
-      {"hybrid-accuracy", [&] { return hybridTable(options, refElements, false); }},
-      {"hybrid-timing", [&] { return hybridTable(options, refElements, true); }},
+      {"hybrid-accuracy", [&] { return hybridTable(options, hybridElements, false); }},
+      {"hybrid-timing", [&] { return hybridTable(options, hybridElements, true); }},
       {"verification", [&] { return verification(options, loader); }},
       {"truth-cube", [&] { return truthCube(options, loader); }}};
   std::vector<TableDef> defs;
