@@ -80,8 +80,11 @@ struct RotationExtraction {
 /// near the solution (the error contracts by sym(A) / tr(A)), so a cap of 8 iterations never
 /// reaches a 1e-9 rad tolerance from an error above 1e-5 rad. Their step is kept where the
 /// Newton matrix is not positive definite (far from the maximum); a step is clamped at 1 rad.
-/// Stops when |omega| <= tolerance (rad). When maxIterations are used up, R is taken from the
-/// SVD of F (exact; reported in `svd`). Not converged only when F or q is not finite.
+/// Stops when |omega| <= tolerance (rad), or after a Newton step small enough that the angle it
+/// leaves, at most 4 tr(A)^3 / det(H) |omega|^2 with H = tr(A) I - sym(A), is within the
+/// tolerance (so a warm start evaluates the gradient once per step taken, not once more to see it
+/// vanish). When maxIterations are used up, R is taken from the SVD of F (exact; reported in
+/// `svd`). Not converged only when F or q is not finite.
 RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations,
                                        Real tolerance = 1e-12);
 
