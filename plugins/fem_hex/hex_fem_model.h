@@ -83,6 +83,9 @@ struct HexFemConfig {
   Real rayleighStiffness = 0;  ///< beta, s
   Real pcgTolerance = 1e-3;    ///< relative CG residual (see step()), D^-1 norm, D = diag(A0)
   int pcgMaxIterations = 50;
+  /// CG starts from the last velocities corrected along the last step's change of velocity by
+  /// the step that minimises the error's energy norm (step()); false: from the last velocities.
+  bool pcgProjectedStart = true;
   /// The PCG preconditioner's triangular solves in float (a float copy of a supernodal factor);
   /// direct solves (linear, refactor) always use the double factor.
   bool floatPreconditioner = true;
@@ -260,7 +263,10 @@ class HexFemModel : public Model {
   std::vector<int> m_touchedGrasped;  // carrying set m_touched was built for
   std::vector<char> m_elemMark;
   mutable MatX m_U, m_KU;  // 24 x E element vectors in, K0 times them out
-  VecX m_v0, m_vOld, m_r, m_z, m_p, m_w, m_fext, m_rd, m_zd;
+  VecX m_v0, m_vOld, m_dv, m_r, m_z, m_p, m_w, m_fext, m_rd, m_zd;
+  /// The squared residual's reduction by the last step's first CG iteration (0: none yet): whether
+  /// the next step's start is worth projecting (step()).
+  Real m_firstReduction2 = 0;
   std::vector<Vec3> m_graspForces;
   int m_lastIterations = 0;
   double m_msAssembly = 0, m_msSolve = 0, m_msSurface = 0;

@@ -24,7 +24,7 @@ std::vector<ParamSpec> paramSpecs() {
                          "crosses; their stiffness and mass are scaled by it (at least 0.1), so "
                          "the voxel grid's overhang adds neither; 0: every cell counts whole"),
       ParamSpec::choice("corotational_solver", "pcg", {"pcg", "refactor"},
-                        "pcg: CG warm-started from the last velocities, preconditioned by the "
+                        "pcg: CG warm-started (pcg_start), preconditioned by the "
                         "prefactored rest system; refactor: assemble and refactorise R K0 R^T "
                         "every step"),
       ParamSpec::real("rayleigh_mass", "1/s", 0.1, 0.0, 1e4,
@@ -41,6 +41,11 @@ std::vector<ParamSpec> paramSpecs() {
                         "refactorised when the grasped set changes; rest_grasped: the same (kept "
                         "for scenes that name it)"),
       ParamSpec::integer("pcg_max_iterations", 50, 1, 100000, "CG iteration cap per step"),
+      ParamSpec::choice("pcg_start", "projected", {"projected", "last_velocity"},
+                        "CG's start: projected: the last velocities corrected along the last "
+                        "step's change of velocity by its energy-norm optimal step (a smooth "
+                        "motion then needs one iteration where it needed two); last_velocity: "
+                        "the last velocities"),
       ParamSpec::choice("preconditioner_precision", "float32", {"float32", "float64"},
                         "number type of the PCG preconditioner's two triangular solves (float32: "
                         "a float copy of a supernodal factor, half its memory traffic; the CG "
@@ -86,6 +91,7 @@ HexFemConfig configFromParams(const ParamValues& p) {
       "pcg_preconditioner",
       {{"rest", PcgPreconditioner::Rest}, {"rest_grasped", PcgPreconditioner::RestGrasped}});
   c.pcgMaxIterations = static_cast<int>(p.integer("pcg_max_iterations"));
+  c.pcgProjectedStart = p.choice("pcg_start") == "projected";
   c.rotationIterations = static_cast<int>(p.integer("rotation_iterations"));
   c.clamp = p.choiceAs<Clamp>(
       "clamp", {{"points", Clamp::Points}, {"cells", Clamp::Cells}, {"nodes", Clamp::Nodes}});
