@@ -202,6 +202,7 @@ class HexFemModel : public Model {
   VecX m_mass;               // 3N, lumped, per DOF
   VecX m_invDiag;            // 3N, inverse diagonal of the rest system (1/mass on fixed nodes)
   MatX3 m_rest;
+  VecX m_restRows;  ///< m_rest node by node (x, y, z per node), for the element pass's gather
   std::vector<int> m_fixedList;
   std::vector<char> m_isFixed;   // N
   std::vector<int> m_dofOfNode;  // N, first reduced DOF or -1 when fixed

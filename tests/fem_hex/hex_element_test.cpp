@@ -217,6 +217,56 @@ TEST(HexElement, ElementProductIsTheAscendingSumOnEveryPath) {
   EXPECT_LT((KU - K0 * U).norm(), 1e-13 * (K0 * U).norm());
 }
 
+// The corotational gather and scatter of the element pass (element_product.h) on this CPU's path:
+// u_i = R^T (a x_n) - b X_n and out_n += s R f_i, each sum in the order written out below without
+// fused multiply-adds (bit for bit), and Eigen's products within round-off. Nodes are shared
+// between elements, as in a grid, so the scatter's accumulation order matters too.
+TEST(HexElement, RotatedGatherAndScatterAreTheWrittenSumsOnEveryPath) {
+  std::mt19937 rng(5);
+  std::normal_distribution<Real> n01;
+  std::uniform_int_distribution<int> node(0, 9);
+  const int E = 5, N = 10;
+  std::vector<int> hexes(8 * E);
+  for (int& h : hexes) h = node(rng);
+  std::vector<Mat3> R(E);
+  for (Mat3& r : R) r = rotation(Vec3(n01(rng), n01(rng), n01(rng)), n01(rng));
+  VecX x(3 * N), X(3 * N), fill(E);
+  for (int i = 0; i < 3 * N; ++i) x[i] = n01(rng), X[i] = n01(rng);
+  for (int e = 0; e < E; ++e) fill[e] = 0.5 + 0.1 * e;
+  const Real a = 1.3, b = 0.7, scale = -2.0;
+  MatX U(24, E), KU(24, E);
+  gatherRotated(hexes.data(), R[0].data(), x.data(), X.data(), a, b, U.data(), E);
+  for (int i = 0; i < 24 * E; ++i) KU.data()[i] = n01(rng);
+  VecX out = VecX::Zero(3 * N), outEigen = VecX::Zero(3 * N);
+  scatterRotated(hexes.data(), R[0].data(), KU.data(), fill.data(), scale, out.data(), E);
+  VecX expectedOut = VecX::Zero(3 * N);
+  for (int e = 0; e < E; ++e)
+    for (int i = 0; i < 8; ++i) {
+      const int n = hexes[8 * e + i];
+      const Vec3 v = a * x.segment<3>(3 * n);
+      for (int c = 0; c < 3; ++c) {
+        volatile Real t0 = R[e](0, c) * v[0], t1 = R[e](1, c) * v[1], t2 = R[e](2, c) * v[2];
+        volatile Real u = t0 + t1;
+        u = u + t2;
+        volatile Real rest = b * X[3 * n + c];
+        EXPECT_EQ(U(3 * i + c, e), u - rest) << "element " << e << " node " << i;
+      }
+      const Vec3 ref = R[e].transpose() * v - b * X.segment<3>(3 * n);
+      EXPECT_LT((U.col(e).segment<3>(3 * i) - ref).norm(), 1e-14 * (1 + ref.norm()));
+      const Mat3 sR = scale * fill[e] * R[e];
+      for (int row = 0; row < 3; ++row) {
+        volatile Real t0 = sR(row, 0) * KU(3 * i, e), t1 = sR(row, 1) * KU(3 * i + 1, e);
+        volatile Real t2 = sR(row, 2) * KU(3 * i + 2, e);
+        volatile Real f = t0 + t1;
+        f = f + t2;
+        expectedOut[3 * n + row] = expectedOut[3 * n + row] + f;
+      }
+      outEigen.segment<3>(3 * n) += sR * KU.col(e).segment<3>(3 * i);
+    }
+  for (int k = 0; k < 3 * N; ++k) EXPECT_EQ(out[k], expectedOut[k]) << "entry " << k;
+  EXPECT_LT((out - outEigen).norm(), 1e-13 * outEigen.norm());
+}
+
 TEST(HexElement, PatchTestLinearFieldIsReproducedAtInteriorNodes) {
   // 4 x 4 x 4 cells: impose u = A X + c on the boundary nodes, solve K_ii u_i = -K_ib u_b.
   VoxelGrid vox;
