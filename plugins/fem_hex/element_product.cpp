@@ -1,11 +1,19 @@
 // The element pass (element_product.h): the scalar paths, and the run-time choice of the AVX2
-// ones.
-// Compiled with -ffp-contract=off (CMakeLists.txt): no fused multiply-add, as on the AVX2 path.
+// ones. Compiled with -ffp-contract=off (CMakeLists.txt): no fused multiply-add, as on the AVX2
+// paths.
 #include "element_product.h"
 
 namespace deform::fem_hex {
 
 namespace {
+
+#if defined(DEFORM_FEM_HEX_AVX2)
+/// Whether this CPU runs the AVX2 units (built on x86-64 with GCC or Clang only).
+bool avx2() {
+  static const bool kAvx2 = __builtin_cpu_supports("avx2");
+  return kAvx2;
+}
+#endif
 
 void multiplyElementsScalar(const double* K0, const double* U, double* KU, int E) {
   for (int e = 0; e < E; ++e) {
@@ -62,11 +70,7 @@ void scatterRotatedScalar(const int* hexes, const double* R, const double* KU, c
 void gatherRotated(const int* hexes, const double* R, const double* in, const double* rest,
                    double a, double b, double* U, int E) {
 #if defined(DEFORM_FEM_HEX_AVX2)
-  static const bool kAvx2 = __builtin_cpu_supports("avx2");
-  if (kAvx2) {
-    detail::gatherRotatedAvx2(hexes, R, in, rest, a, b, U, E);
-    return;
-  }
+  if (avx2()) return detail::gatherRotatedAvx2(hexes, R, in, rest, a, b, U, E);
 #endif
   gatherRotatedScalar(hexes, R, in, rest, a, b, U, E);
 }
@@ -74,22 +78,14 @@ void gatherRotated(const int* hexes, const double* R, const double* in, const do
 void scatterRotated(const int* hexes, const double* R, const double* KU, const double* fill,
                     double scale, double* out, int E) {
 #if defined(DEFORM_FEM_HEX_AVX2)
-  static const bool kAvx2 = __builtin_cpu_supports("avx2");
-  if (kAvx2) {
-    detail::scatterRotatedAvx2(hexes, R, KU, fill, scale, out, E);
-    return;
-  }
+  if (avx2()) return detail::scatterRotatedAvx2(hexes, R, KU, fill, scale, out, E);
 #endif
   scatterRotatedScalar(hexes, R, KU, fill, scale, out, E);
 }
 
 void multiplyElements(const double* K0, const double* U, double* KU, int E) {
 #if defined(DEFORM_FEM_HEX_AVX2)
-  static const bool kAvx2 = __builtin_cpu_supports("avx2");
-  if (kAvx2) {
-    detail::multiplyElementsAvx2(K0, U, KU, E);
-    return;
-  }
+  if (avx2()) return detail::multiplyElementsAvx2(K0, U, KU, E);
 #endif
   multiplyElementsScalar(K0, U, KU, E);
 }
