@@ -1,9 +1,14 @@
-// The float copy of a supernodal factor (the PCG's preconditioner) against CHOLMOD's own double
-// solve of the same factor.
+// The float and half copies of a supernodal factor (the PCG's preconditioner) against CHOLMOD's
+// own double solve of the same factor.
 #include <deform/kernels/cholesky_solver.h>
 
 #include <gtest/gtest.h>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
+#include <cmath>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -53,6 +58,81 @@ TEST(CholeskySolver, FloatSolveOfASupernodalFactorMatchesTheDoubleSolve) {
   // A solve of the matrix itself: A x = b.
   const SparseMatrix full = A.selfadjointView<Eigen::Lower>();
   EXPECT_LT((full * xf - b).norm(), 1e-4 * b.norm());
+}
+
+/// A random right-hand side of A's size.
+VecX randomVector(Eigen::Index n) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<Real> u(-1, 1);
+  VecX b(n);
+  for (Eigen::Index i = 0; i < n; ++i) b[i] = u(rng);
+  return b;
+}
+
+// The half copy (11 significant bits) solves to about the precision of its values, and both
+// copies' vectorised paths agree with the plain loops to float round-off. The 12^3 grid's widest
+// supernode spans many triangle blocks.
+TEST(CholeskySolver, HalfSolveAndEveryPathMatchTheDoubleSolve) {
+  const SparseMatrix A = gridLaplacian(12, 1.0);
+  CholeskySolver chol;
+  ASSERT_NO_FATAL_FAILURE(factorise(chol, A, CholeskySolver::Kind::Supernodal));
+  const VecX b = randomVector(A.rows());
+  VecX xd;
+  ASSERT_TRUE(chol.solveInto(b, xd));
+  for (const auto precision :
+       {CholeskySolver::Precision::Float32, CholeskySolver::Precision::Float16}) {
+    const bool half = precision == CholeskySolver::Precision::Float16;
+    ASSERT_TRUE(chol.buildFloatFactor(precision));
+    EXPECT_EQ(chol.floatFactorIsHalf(), half);
+    VecX fast, plain;
+    chol.solveFloatInto(b, fast);
+    chol.solveFloatInto(b, plain, true);
+    const Real error = (fast - xd).norm() / xd.norm();
+    EXPECT_LT(error, half ? 2e-3 : 1e-5) << half;
+    EXPECT_GT(error, half ? 1e-5 : 0.0) << half;  // it did run in that precision
+    EXPECT_LT((fast - plain).norm(), 1e-5 * xd.norm()) << half;
+  }
+  chol.dropFloatFactor();
+  EXPECT_FALSE(chol.hasFloatFactor());
+}
+
+// binary16 rounding: to nearest, ties to even, through the subnormals and up to infinity; every
+// half value converts to float and back unchanged.
+TEST(CholeskySolver, HalfConversionRoundsToNearestEven) {
+  const auto half = [](float f) { return CholeskySolver::toHalf(f); };
+  EXPECT_EQ(half(1.0f), 0x3c00);
+  EXPECT_EQ(half(1.0f + std::ldexp(1.0f, -11)), 0x3c00);      // a tie: to the even 1
+  EXPECT_EQ(half(1.0f + 3 * std::ldexp(1.0f, -11)), 0x3c02);  // a tie: to the even 1 + 2^-9
+  EXPECT_EQ(half(1.0f + std::ldexp(1.0f, -11) + std::ldexp(1.0f, -20)), 0x3c01);
+  EXPECT_EQ(half(-2.0f), 0xc000);
+  EXPECT_EQ(half(std::ldexp(1.0f, -24)), 0x0001);  // the smallest subnormal
+  EXPECT_EQ(half(std::ldexp(1.0f, -25)), 0x0000);  // a tie: to zero
+  EXPECT_EQ(half(3 * std::ldexp(1.0f, -25)), 0x0002);
+  EXPECT_EQ(half(std::ldexp(1.0f, -14) - std::ldexp(1.0f, -26)), 0x0400);  // up to the normals
+  EXPECT_EQ(half(65504.0f), 0x7bff);
+  EXPECT_EQ(half(65519.0f), 0x7bff);
+  EXPECT_EQ(half(65520.0f), 0x7c00);  // a tie: to infinity
+  EXPECT_EQ(half(INFINITY), 0x7c00);
+  EXPECT_TRUE(std::isnan(CholeskySolver::fromHalf(half(NAN))));
+  for (uint32_t h = 0; h < 0x10000; ++h) {
+    if ((h & 0x7c00u) == 0x7c00u && (h & 0x3ffu)) continue;  // NaN
+    ASSERT_EQ(half(CholeskySolver::fromHalf(uint16_t(h))), h) << h;
+  }
+#if defined(__x86_64__) && defined(__GNUC__)
+  // The copy is converted by F16C where the CPU has it: the same rounding.
+  if (__builtin_cpu_supports("f16c")) {
+    const auto f16c = [](float f) __attribute__((target("f16c"))) {
+      return _cvtss_sh(f, 0);
+    };
+    for (uint64_t bits = 0; bits < (uint64_t(1) << 32); bits += 65521) {
+      float f;
+      const uint32_t b = uint32_t(bits);
+      std::memcpy(&f, &b, 4);
+      if (std::isnan(f)) continue;
+      ASSERT_EQ(half(f), f16c(f)) << f;
+    }
+  }
+#endif
 }
 
 TEST(CholeskySolver, NoFloatCopyOfASimplicialFactor) {
