@@ -278,7 +278,8 @@ Counts HexFemModel::counts() const {
           {"cholesky_factor_nonzeros", m_factorNonZeros},
           {"cholesky_flops_per_factor_nonzero", std::llround(m_flopsPerFactorNonZero)},
           {"cholesky_supernodal", m_chol.isSupernodal() ? 1 : 0},
-          {"preconditioner_float32", m_chol.hasFloatFactor() ? 1 : 0}};
+          {"preconditioner_float32", m_chol.hasFloatFactor() && !m_chol.floatFactorIsHalf()},
+          {"preconditioner_float16", m_chol.floatFactorIsHalf() ? 1 : 0}};
 }
 
 PhaseTimes HexFemModel::phaseTimes() const {
@@ -428,7 +429,11 @@ void HexFemModel::factorize(bool withGrasps) {
   m_factorOk = m_chol.info() == Eigen::Success;
   const bool pcg =
       m_config.elastic == ElasticModel::Corotational && m_config.solver == CorotationalSolver::Pcg;
-  if (pcg && m_config.floatPreconditioner) m_chol.buildFloatFactor();  // none if it failed
+  if (pcg && m_config.preconditionerPrecision != PreconditionerPrecision::Float64) {
+    m_chol.buildFloatFactor(m_config.preconditionerPrecision == PreconditionerPrecision::Float16
+                                ? CholeskySolver::Precision::Float16
+                                : CholeskySolver::Precision::Float32);  // none if it failed
+  }
   m_factorNonZeros = static_cast<long long>(m_chol.cholmod().lnz);
   m_factorVerts = withGrasps ? m_graspVerts : std::vector<int>{};
 }

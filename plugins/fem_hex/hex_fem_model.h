@@ -49,6 +49,8 @@ enum class CorotationalSolver { Refactor, Pcg };
 /// Both now include the held points' penalty and are refactorised when the grasped set changes
 /// (RestGrasped is kept as a name for scenes that set it; it behaves as Rest).
 enum class PcgPreconditioner { Rest, RestGrasped };
+/// Number type of the PCG preconditioner's triangular solves.
+enum class PreconditionerPrecision { Float64, Float32, Float16 };
 /// How the fixed region holds: Points (the grid nodes inside the region are pinned and the
 /// clamped surface points are held at rest by the penalty), Cells (the grid nodes inside the
 /// region and every node of the cells carrying a clamped surface vertex are pinned: up to a cell
@@ -86,9 +88,10 @@ struct HexFemConfig {
   /// CG starts from the last velocities corrected along the last step's change of velocity by
   /// the step that minimises the error's energy norm (step()); false: from the last velocities.
   bool pcgProjectedStart = true;
-  /// The PCG preconditioner's triangular solves in float (a float copy of a supernodal factor);
-  /// direct solves (linear, refactor) always use the double factor.
-  bool floatPreconditioner = true;
+  /// The PCG preconditioner's triangular solves on a float or half copy of a supernodal factor
+  /// (Float64: on CHOLMOD's double factor); direct solves (linear, refactor) always use the
+  /// double factor.
+  PreconditionerPrecision preconditionerPrecision = PreconditionerPrecision::Float32;
   PcgPreconditioner pcgPreconditioner = PcgPreconditioner::Rest;
   int rotationIterations = 8;  ///< max iterations of the warm-started rotation extraction
   Clamp clamp = Clamp::Points;

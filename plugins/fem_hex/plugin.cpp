@@ -46,7 +46,7 @@ std::vector<ParamSpec> paramSpecs() {
                         "step's change of velocity by its energy-norm optimal step (a smooth "
                         "motion then needs one iteration where it needed two); last_velocity: "
                         "the last velocities"),
-      ParamSpec::choice("preconditioner_precision", "float32", {"float32", "float64"},
+      ParamSpec::choice("preconditioner_precision", "float32", {"float16", "float32", "float64"},
                         "number type of the PCG preconditioner's two triangular solves (float32: "
                         "a float copy of a supernodal factor, half its memory traffic; the CG "
                         "itself and every direct solve stay in double)"),
@@ -73,7 +73,10 @@ std::vector<ParamSpec> paramSpecs() {
 HexFemConfig configFromParams(const ParamValues& p) {
   HexFemConfig c;
   c.elements = p.integer("elements");
-  c.floatPreconditioner = p.choice("preconditioner_precision") == "float32";
+  c.preconditionerPrecision = p.choiceAs<PreconditionerPrecision>(
+      "preconditioner_precision", {{"float64", PreconditionerPrecision::Float64},
+                                   {"float32", PreconditionerPrecision::Float32},
+                                   {"float16", PreconditionerPrecision::Float16}});
   c.cellSize = p.real("cell_size");
   c.elastic = p.choiceAs<ElasticModel>("formulation", {{"corotational", ElasticModel::Corotational},
                                                        {"linear", ElasticModel::Linear}});

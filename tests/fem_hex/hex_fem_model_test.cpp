@@ -265,8 +265,9 @@ TEST(HexFemModel, ResetReproducesTheTrajectoryBitForBit) {
   }
 }
 
-// With the double and with the float preconditioner (a supernodal factor, so that the float copy
-// exists): the CG converges to the same answer, the float one in at most a few more iterations.
+// With the double, the float and the half preconditioner (a supernodal factor, so that the
+// copies exist): the CG converges to the same answer, the float and half ones in at most a few
+// more iterations.
 TEST(HexFemModel, PcgAgreesWithRefactorisation) {
   TestModel b;
   b.initialize(makeOrgan(liverLike()),
@@ -274,21 +275,24 @@ TEST(HexFemModel, PcgAgreesWithRefactorisation) {
                fixedBelow(2, -0.035));
   const std::vector<MatX3> sb = liftTrajectory(b, 40);
   const Real moved = (sb.back() - liverLike().V).cwiseAbs().maxCoeff();
-  std::map<bool, long long> iterations;
-  for (const bool single : {false, true}) {
+  using P = PreconditionerPrecision;
+  std::map<P, long long> iterations;
+  for (const P precision : {P::Float64, P::Float32, P::Float16}) {
     HexFemConfig pcg = config(ElasticModel::Corotational, CorotationalSolver::Pcg);
     pcg.pcgTolerance = 1e-10;
     pcg.cholesky = CholeskySolver::Kind::Supernodal;
-    pcg.floatPreconditioner = single;
+    pcg.preconditionerPrecision = precision;
     TestModel a;
     a.initialize(makeOrgan(liverLike()), pcg, 1e-3, fixedBelow(2, -0.035));
     const std::vector<MatX3> sa = liftTrajectory(a, 40);
-    EXPECT_EQ(a.counts().at("preconditioner_float32"), single ? 1 : 0);
-    EXPECT_LT((sa.back() - sb.back()).cwiseAbs().maxCoeff(), 1e-6 * moved) << single;
+    EXPECT_EQ(a.counts().at("preconditioner_float32"), precision == P::Float32 ? 1 : 0);
+    EXPECT_EQ(a.counts().at("preconditioner_float16"), precision == P::Float16 ? 1 : 0);
+    EXPECT_LT((sa.back() - sb.back()).cwiseAbs().maxCoeff(), 1e-6 * moved) << int(precision);
     EXPECT_EQ(a.numericCounters().at("pcg_not_converged"), 0);
-    iterations[single] = a.numericCounters().at("pcg_iterations");
+    iterations[precision] = a.numericCounters().at("pcg_iterations");
   }
-  EXPECT_LE(iterations[true], iterations[false] * 3 / 2 + 40);
+  EXPECT_LE(iterations[P::Float32], iterations[P::Float64] * 3 / 2 + 40);
+  EXPECT_LE(iterations[P::Float16], iterations[P::Float64] * 3 / 2 + 40);
 }
 
 TEST(HexFemModel, GravitySagsAPinnedOrgan) {
