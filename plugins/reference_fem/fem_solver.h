@@ -130,8 +130,10 @@ struct SolveOptions {
   /// The CG iterations of the inexact Newton steps precondition with a float copy of the factor
   /// (CholeskySolver::solveFloatInto: half the memory traffic of the triangular solves, which
   /// dominate a CG iteration; the CG and every direct solve stay in double, so the tolerance and
-  /// the answer are the same). Off: CHOLMOD's double solve.
+  /// the answer are the same). Off: CHOLMOD's double solve. halfPreconditioner: the copy in
+  /// IEEE binary16 (CholeskySolver::Precision::Float16, a quarter of the double factor's bytes).
   bool floatPreconditioner = false;
+  bool halfPreconditioner = false;
   /// Quasi-static solves: false when state x is no state of the solid (the model's use: its
   /// surface passes through itself away from the held nodes; the reference has no self-contact).
   /// An accepted load step short of the whole load whose state it refuses ends the solve there
@@ -369,6 +371,7 @@ class EquilibriumSolver {
   VecX m_gradient;
   SolveReport* m_report = nullptr;     ///< the report of the running solve (timings), else null
   bool m_floatPreconditioner = false;  ///< SolveOptions::floatPreconditioner of the running solve
+  bool m_halfPreconditioner = false;   ///< SolveOptions::halfPreconditioner of the running solve
 };
 
 /// Convenience: static equilibrium of `system` under `loads` from the rest state. Returns the 3N

@@ -27,11 +27,13 @@ std::vector<ParamSpec> paramSpecs() {
       ParamSpec::integer("max_solve_newton_iterations", 0, 0, 1000000,
                          "Newton iterations of one solve over all its load steps; a solve that "
                          "reaches them gives up, not converged (0: no such limit)"),
-      ParamSpec::choice("preconditioner_precision", "auto", {"auto", "float32", "float64"},
+      ParamSpec::choice("preconditioner_precision", "auto",
+                        {"auto", "float16", "float32", "float64"},
                         "number type of the triangular solves that precondition the inexact "
                         "Newton's CG (float32: a float copy of the factor, half the memory "
-                        "traffic; the CG, every direct solve and the answer stay in double); "
-                        "auto: float32 unless the volumetric term is mean_dilatation"),
+                        "traffic; float16: a half copy, a quarter; the CG, every direct solve "
+                        "and the answer stay in double); auto: float16 (float32 on a CPU without "
+                        "F16C) unless the volumetric term is mean_dilatation (then float64)"),
       ParamSpec::integer("max_load_halvings", 10, 0, 30,
                          "a failed load step is halved at most this many times"),
       ParamSpec::flag("stop_at_fold", true,

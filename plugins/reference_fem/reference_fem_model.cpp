@@ -6,6 +6,7 @@
 #include <deform/geometry/mesh_check.h>
 #include <deform/geometry/organ_tets.h>
 #include <deform/geometry/tet_embedding.h>
+#include <deform/kernels/cholesky_solver.h>
 #include <deform/sdk/contact.h>
 
 #include <algorithm>
@@ -28,11 +29,15 @@ class ReferenceFemModel final : public Model {
         resolveVolumetricFormulation(config.volumetric, model, order, setup.organ.material.poisson);
     m_options = config.options;
     // Measured (docs/notes/reference_fem-history.md): the float copy takes 8-13% off the P2 liver
-    // solves at nu 0.3; under mean dilatation (nu >= 0.45) the CG paths it changes cost as many
+    // solves at nu 0.3, the half copy another 10-30% (where the CPU converts halves in hardware);
+    // under mean dilatation (nu >= 0.45) the CG paths the float copy changes cost as many
     // factorisations as it saves.
+    const bool autoCopy =
+        config.preconditioner == "auto" && volumetric != VolumetricFormulation::MeanDilatation;
     m_options.floatPreconditioner =
-        config.preconditioner == "float32" ||
-        (config.preconditioner == "auto" && volumetric != VolumetricFormulation::MeanDilatation);
+        config.preconditioner == "float32" || config.preconditioner == "float16" || autoCopy;
+    m_options.halfPreconditioner =
+        config.preconditioner == "float16" || (autoCopy && CholeskySolver::halfIsFast());
     m_alpha = config.rayleighAlpha;
     m_beta = config.rayleighBeta;
     m_dt = setup.dt;

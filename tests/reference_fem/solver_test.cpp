@@ -462,26 +462,29 @@ TEST(ReferenceFemSolve, ProjectedStepsReuseTheProjectedFactor) {
   EXPECT_LE(2 * rep.spdFallbacks, rep.projectedSteps);
 }
 
-// The float copy of the factor preconditions CG only: the buckled column of the test above,
-// solved with it and without, takes CG iterations both ways and lands on the same answer to the
-// solver's tolerance.
-TEST(ReferenceFemSolve, FloatPreconditionerGivesTheDoubleAnswer) {
+// The float and half copies of the factor precondition CG only: the buckled column of the test
+// above, solved with each and without, takes CG iterations every way and lands on the same answer
+// to the solver's tolerance.
+TEST(ReferenceFemSolve, FloatAndHalfPreconditionersGiveTheDoubleAnswer) {
   const FemSystem sys(columnMesh(), material(kE, kNu, kRho), MaterialModel::NeoHookean,
                       ElementOrder::Quadratic);
   const LoadCase lc = bucklingLoad(sys);
-  VecX x[2];
-  for (const bool useFloat : {false, true}) {
+  VecX x[3];
+  for (const int copy : {0, 1, 2}) {  // none, float, half
     SolveOptions opt;
-    opt.floatPreconditioner = useFloat;
+    opt.floatPreconditioner = copy > 0;
+    opt.halfPreconditioner = copy == 2;
     SolveReport rep;
-    x[useFloat] = solveEquilibrium(sys, lc, opt, &rep);
-    ASSERT_TRUE(rep.converged) << useFloat;
-    EXPECT_GT(rep.pcgIterations, 0) << useFloat;
+    x[copy] = solveEquilibrium(sys, lc, opt, &rep);
+    ASSERT_TRUE(rep.converged) << copy;
+    EXPECT_GT(rep.pcgIterations, 0) << copy;
   }
   Real peak = 0;
   for (int i = 0; i < sys.numNodes(); ++i)
     peak = std::max(peak, (x[0].segment<3>(3 * i) - sys.rest().V.row(i).transpose()).norm());
   EXPECT_LT((x[1] - x[0]).cwiseAbs().maxCoeff(), 1e-6 * peak);
+  EXPECT_LT((x[2] - x[0]).cwiseAbs().maxCoeff(), 1e-6 * peak);
+  EXPECT_GT((x[2] - x[1]).cwiseAbs().maxCoeff(), 0.0);  // the half copy did precondition
 }
 
 // A solve that cannot finish gives up after SolveOptions::maxFailedLoadSteps rejected load
