@@ -432,23 +432,19 @@ void CholeskySolver::solveFloatInto(const VecX& b, VecX& x, bool portable) {
   const size_t n = m_perm.size();
   for (size_t k = 0; k < n; ++k) m_y[k] = static_cast<float>(b[m_perm[k]]);
   const int nsuper = static_cast<int>(m_super.size()) - 1;
-  const float *scale = m_scale.data(), *dinv = m_dinv.data();
-  const int *super = m_super.data(), *pi = m_pi.data(), *px = m_px.data(), *rows = m_rows.data();
-  float *y = m_y.data(), *t = m_t.data();
+  const auto run = [&](auto kernel, const auto* values) {
+    kernel(values, m_scale.data(), m_dinv.data(), m_super.data(), m_pi.data(), m_px.data(),
+           m_rows.data(), nsuper, m_y.data(), m_t.data());
+  };
+  const bool vector = !portable;
+#if !(defined(__x86_64__) && defined(__GNUC__))
+  const auto solveHalfF16c = solveHalfPortable;
+  const auto solveFloatAvx2 = solveFloatPortable;
+#endif
   if (!m_lh.empty()) {
-#if defined(__x86_64__) && defined(__GNUC__)
-    if (haveF16c() && !portable) {
-      solveHalfF16c(m_lh.data(), scale, dinv, super, pi, px, rows, nsuper, y, t);
-    } else
-#endif
-      solveHalfPortable(m_lh.data(), scale, dinv, super, pi, px, rows, nsuper, y, t);
+    run(vector && haveF16c() ? solveHalfF16c : solveHalfPortable, m_lh.data());
   } else {
-#if defined(__x86_64__) && defined(__GNUC__)
-    if (haveAvx2() && !portable) {
-      solveFloatAvx2(m_lf.data(), scale, dinv, super, pi, px, rows, nsuper, y, t);
-    } else
-#endif
-      solveFloatPortable(m_lf.data(), scale, dinv, super, pi, px, rows, nsuper, y, t);
+    run(vector && haveAvx2() ? solveFloatAvx2 : solveFloatPortable, m_lf.data());
   }
   x.resize(b.size());
   for (size_t k = 0; k < n; ++k) x[m_perm[k]] = m_y[k];
