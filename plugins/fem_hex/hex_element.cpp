@@ -1,5 +1,7 @@
 #include "hex_element.h"
 
+#include "rotation_step.h"
+
 #include <Eigen/Cholesky>
 #include <Eigen/SVD>
 
@@ -182,28 +184,12 @@ Quat rotationFromSvd(const Mat3& F) {
 RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations, Real tolerance) {
   RotationExtraction out;
   if (!F.allFinite() || !q.coeffs().allFinite()) return out;  // converged stays false
+  // The step's arithmetic is rotation_step.h's, shared with the batch paths (rotation_batch.h).
+  double qw = q.w(), qx = q.x(), qy = q.y(), qz = q.z();
   for (; out.iterations < maxIterations; ++out.iterations) {
-    const Mat3 R = q.toRotationMatrix();
-    // Gradient of tr(R^T F) under R <- exp([omega]) R: g = sum_i r_i x f_i. Its Hessian is
-    // -(tr(A) I - sym(A)), A = F R^T.
-    const Vec3 g = R.col(0).cross(F.col(0)) + R.col(1).cross(F.col(1)) + R.col(2).cross(F.col(2));
-    const Mat3 A = F * R.transpose();
-    const Real trA = A.trace();
-    const Mat3 H = trA * Mat3::Identity() - 0.5 * (A + A.transpose());
-    // H is symmetric: its adjugate's rows are cross products of its rows, det = h0 . (h1 x h2).
-    // H is positive definite when its leading minors are (Sylvester).
-    const Vec3 c0 = H.col(1).cross(H.col(2)), c1 = H.col(2).cross(H.col(0));
-    const Vec3 c2 = H.col(0).cross(H.col(1));
-    const Real det = H.col(0).dot(c0);
-    const bool newton =
-        trA > 0 && H(0, 0) > 0 && H(0, 0) * H(1, 1) - H(0, 1) * H(0, 1) > 0 && det > 0;
-    Vec3 omega;
-    if (newton) {
-      omega = (c0 * g.x() + c1 * g.y() + c2 * g.z()) / det;  // Newton step, H^-1 g
-    } else {
-      omega = g / (std::abs(trA) + 1e-300);  // Müller et al.'s step, far from the maximum
-    }
-    Real w = omega.norm();
+    const auto s = rotation::rotationStep<double, bool>(F.data(), qw, qx, qy, qz);
+    double omega[3] = {s.omega[0], s.omega[1], s.omega[2]};
+    double w = s.w;
     if (!(w > tolerance)) {
       out.converged = std::isfinite(w);
       break;
@@ -213,23 +199,28 @@ RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations
     // 2 tr(A) and lambda_min(H) >= det / lambda_max^2, that factor is at most 4 tr(A)^3 / det.
     // Where the step after this one would be below the tolerance, it is not taken: one
     // evaluation of g and H less per element and time step in the usual warm-started case.
-    const bool last = newton && w * w * 4 * trA * trA * trA <= tolerance * det;
+    const bool last = s.newton && rotation::isLastStep(w, s.trA, s.det, tolerance);
     if (w > 1) {  // a Newton step beyond a radian is outside its quadratic model
-      omega /= w;
+      for (double& o : omega) o /= w;
       w = 1;
     }
     // Near convergence (the usual case when warm-started) the first-order quaternion of the
     // axis-angle update avoids sin/cos; the fixed point omega = 0 is the same either way.
-    q = (w < 1e-3 ? Quat(1, 0.5 * omega.x(), 0.5 * omega.y(), 0.5 * omega.z())
-                  : Quat(Eigen::AngleAxis<Real>(w, omega / w))) *
-        q;
-    q.normalize();
+    if (w < 1e-3) {
+      rotation::rotateAndNormalise(1.0, 0.5 * omega[0], 0.5 * omega[1], 0.5 * omega[2], qw, qx, qy,
+                                   qz);
+    } else {
+      const double sinHalf = std::sin(0.5 * w) / w;
+      rotation::rotateAndNormalise(std::cos(0.5 * w), sinHalf * omega[0], sinHalf * omega[1],
+                                   sinHalf * omega[2], qw, qx, qy, qz);
+    }
     if (last) {
       ++out.iterations;
       out.converged = true;
       break;
     }
   }
+  q = Quat(qw, qx, qy, qz);
   if (!out.converged && out.iterations >= maxIterations) {
     // Far from the warm start (or a maximum too flat for Newton's step): the exact rotation.
     q = rotationFromSvd(F);
@@ -237,6 +228,12 @@ RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations
     out.converged = q.coeffs().allFinite();
   }
   return out;
+}
+
+Mat3 rotationMatrixOf(const Quat& q) {
+  Mat3 R;
+  rotation::rotationMatrix(q.w(), q.x(), q.y(), q.z(), R.data());
+  return R;
 }
 
 int extractRotation(const Mat3& F, Quat& q, int maxIterations, Real tolerance) {

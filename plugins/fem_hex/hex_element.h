@@ -88,6 +88,10 @@ struct RotationExtraction {
 RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations,
                                        Real tolerance = 1e-12);
 
+/// The rotation matrix of the unit quaternion q, by the arithmetic of the batch paths
+/// (rotation_batch.h), so that both give the same bits.
+Mat3 rotationMatrixOf(const Quat& q);
+
 /// extractRotationInfo, returning the number of iterations.
 int extractRotation(const Mat3& F, Quat& q, int maxIterations, Real tolerance = 1e-12);
 

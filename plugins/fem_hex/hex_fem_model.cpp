@@ -1,6 +1,7 @@
 #include "hex_fem_model.h"
 
 #include "element_product.h"
+#include "rotation_batch.h"
 
 #include <deform/sdk/contact.h>
 
@@ -526,10 +527,23 @@ void HexFemModel::updateInverseDiagonal() {
 bool HexFemModel::updateRotations() {
   bool converged = true;
   const Mat38 G = hexShapeGradients(Vec3::Constant(m_grid.cellSize), Vec3::Zero());
-  for (int e = 0; e < m_grid.numHexes(); ++e) {
+  const int E = m_grid.numHexes();
+  // F = sum_a x_a (grad N_a)^T into f (column-major), summed over the nodes in order.
+  const auto gradientInto = [&](int e, double* f, int stride) {
     const auto& hex = m_grid.hexes[e];
-    Mat3 F = Mat3::Zero();
-    for (int a = 0; a < 8; ++a) F.noalias() += m_x.row(hex[a]).transpose() * G.col(a).transpose();
+    for (int k = 0; k < 9; ++k) f[k * stride] = 0.0;
+    for (int a = 0; a < 8; ++a) {
+      const double* x = m_x.data() + 3 * hex[a];
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) f[(i + 3 * j) * stride] += x[i] * G(j, a);
+    }
+  };
+  const auto gradient = [&](int e) {
+    Mat3 F;
+    gradientInto(e, F.data(), 1);
+    return F;
+  };
+  const auto extract = [&](int e, const Mat3& F) {
     const RotationExtraction r = extractRotationInfo(F, m_q[e], m_config.rotationIterations, 1e-9);
     m_rotationIterations += r.iterations;
     m_rotationSvd += r.svd ? 1 : 0;
@@ -537,8 +551,40 @@ bool HexFemModel::updateRotations() {
       ++m_rotationNotConverged;
       converged = false;
     }
-    m_R[e] = m_q[e].toRotationMatrix();
+    m_R[e] = rotationMatrixOf(m_q[e]);
+  };
+  // Blocks of L elements iterate on vector lanes (rotation_batch.h); an element that needs a
+  // large step starts again on the scalar path, which gives the same bits.
+  const int L = m_config.rotationIterations >= 1 ? rotationBatchLanes() : 1;
+  int e0 = 0;
+  if (L > 1) {
+    constexpr int kMaxLanes = 8;
+    double F[9 * kMaxLanes], q[4 * kMaxLanes], R[9 * kMaxLanes];
+    signed char outcome[kMaxLanes];
+    for (; e0 + L <= E; e0 += L) {
+      for (int l = 0; l < L; ++l) {
+        gradientInto(e0 + l, F + l, L);
+        const Quat& ql = m_q[e0 + l];
+        q[l] = ql.w(), q[L + l] = ql.x(), q[2 * L + l] = ql.y(), q[3 * L + l] = ql.z();
+      }
+      const bool finite = Eigen::Map<const Eigen::VectorXd>(F, 9 * L).allFinite() &&
+                          Eigen::Map<const Eigen::VectorXd>(q, 4 * L).allFinite();
+      if (finite) rotationSteps(F, q, R, outcome, 1e-9, m_config.rotationIterations);
+      for (int l = 0; l < L; ++l) {
+        const int e = e0 + l;
+        if (!finite || outcome[l] == 0) {
+          Mat3 Fl;
+          for (int k = 0; k < 9; ++k) Fl.data()[k] = F[k * L + l];
+          extract(e, Fl);
+          continue;
+        }
+        m_rotationIterations += outcome[l] - 1;
+        m_q[e] = Quat(q[l], q[L + l], q[2 * L + l], q[3 * L + l]);
+        for (int k = 0; k < 9; ++k) m_R[e].data()[k] = R[k * L + l];
+      }
+    }
   }
+  for (int e = e0; e < E; ++e) extract(e, gradient(e));
   return converged;
 }
 

@@ -2,14 +2,17 @@
 #include "../support/finite_difference.h"
 #include "element_product.h"
 #include "hex_grid.h"
+#include "rotation_batch.h"
 
 #include <gtest/gtest.h>
 #include <Eigen/Dense>
 
 #include <algorithm>
 #include <cstdio>
+#include <cstring>
 #include <limits>
 #include <random>
+#include <vector>
 
 namespace deform::fem_hex {
 namespace {
@@ -189,6 +192,81 @@ TEST(HexElement, RotationExtractionOfInvertedOrFarStartsIsTheSvdMaximiser) {
   Mat3 F = Mat3::Identity();
   F(1, 2) = std::numeric_limits<Real>::quiet_NaN();
   EXPECT_FALSE(extractRotationInfo(F, q, 8, 1e-9).converged);
+}
+
+// The rotations' steps on vector lanes (rotation_batch.h) against the scalar extractRotationInfo,
+// lane by lane: where a lane finishes (steps below 1e-3 rad until one is below the tolerance or
+// is the last by its bound) its quaternion, rotation matrix and step count are the scalar path's
+// bits; where it does not, it leaves q alone. Warm starts from the converged rotation up to 0.3 rad
+// off, an inverted F and a NaN, on every width this CPU runs.
+TEST(HexElement, RotationLanesAreTheScalarPathBitForBit) {
+  std::vector<std::pair<int, void (*)(const double*, double*, double*, signed char*, double, int)>>
+      paths;
+#if defined(__x86_64__) && defined(__GNUC__)
+  if (__builtin_cpu_supports("avx2")) paths.push_back({4, detail::rotationStepsAvx2});
+  if (__builtin_cpu_supports("avx512f")) paths.push_back({8, detail::rotationStepsAvx512});
+#endif
+  if (paths.empty()) GTEST_SKIP() << "no vector path on this CPU";
+  std::mt19937 rng(5);
+  std::normal_distribution<Real> n01;
+  std::uniform_real_distribution<Real> stretch(0.7, 1.4);
+  const Real offsets[] = {0, 1e-10, 1e-8, 1e-6, 1e-4, 1e-2, 0.3};
+  for (const auto& [L, run] : paths) {
+    int finished = 0, lanes = 0;
+    for (int block = 0; block < 400; ++block) {
+      std::vector<Mat3> Fs(static_cast<size_t>(L));
+      std::vector<Quat> qs(static_cast<size_t>(L));
+      std::vector<double> F(size_t(9 * L)), q(size_t(4 * L)), R(size_t(9 * L));
+      std::vector<signed char> outcome(static_cast<size_t>(L));
+      for (int l = 0; l < L; ++l) {
+        const Mat3 Rtrue = rotation(Vec3(n01(rng), n01(rng), n01(rng)), 3.0 * n01(rng));
+        const Mat3 S = Vec3(stretch(rng), stretch(rng), stretch(rng)).asDiagonal();
+        Mat3 Fl = Rtrue * S;
+        if (block % 50 == 7 && l == 1) Fl.col(0) = -Fl.col(0);  // inverted
+        if (block % 50 == 9 && l == 2) Fl(1, 1) = std::numeric_limits<Real>::quiet_NaN();
+        Quat ql = Quat(Rtrue);
+        const Real off = offsets[size_t(block + l) % std::size(offsets)];
+        if (off == 0) {
+          extractRotationInfo(Fl, ql, 8, 1e-9);  // the converged rotation: no step
+        } else {
+          ql = Quat(rotation(Vec3(n01(rng), n01(rng), n01(rng)), off) * Rtrue);
+        }
+        Fs[size_t(l)] = Fl;
+        qs[size_t(l)] = ql;
+        for (int k = 0; k < 9; ++k) F[size_t(k * L + l)] = Fl.data()[k];
+        q[size_t(l)] = ql.w(), q[size_t(L + l)] = ql.x(), q[size_t(2 * L + l)] = ql.y();
+        q[size_t(3 * L + l)] = ql.z();
+      }
+      run(F.data(), q.data(), R.data(), outcome.data(), 1e-9, 8);
+      for (int l = 0; l < L; ++l) {
+        Quat scalar = qs[size_t(l)];
+        const RotationExtraction r = extractRotationInfo(Fs[size_t(l)], scalar, 8, 1e-9);
+        const double lane[4] = {q[size_t(l)], q[size_t(L + l)], q[size_t(2 * L + l)],
+                                q[size_t(3 * L + l)]};
+        ++lanes;
+        if (outcome[size_t(l)] == 0) {
+          const double start[4] = {qs[size_t(l)].w(), qs[size_t(l)].x(), qs[size_t(l)].y(),
+                                   qs[size_t(l)].z()};
+          EXPECT_EQ(std::memcmp(lane, start, sizeof lane), 0) << "L " << L << " lane " << l;
+          // Not finished on the lanes: the scalar path took a step (and looked again).
+          EXPECT_TRUE(r.iterations >= 1 || !r.converged) << "L " << L << " lane " << l;
+          continue;
+        }
+        ++finished;
+        EXPECT_EQ(r.iterations, outcome[size_t(l)] - 1) << "L " << L << " lane " << l;
+        EXPECT_TRUE(r.converged && !r.svd);
+        const double want[4] = {scalar.w(), scalar.x(), scalar.y(), scalar.z()};
+        EXPECT_EQ(std::memcmp(lane, want, sizeof lane), 0) << "L " << L << " lane " << l;
+        const Mat3 Rs = rotationMatrixOf(scalar);
+        for (int k = 0; k < 9; ++k)
+          EXPECT_EQ(std::memcmp(&R[size_t(k * L + l)], Rs.data() + k, sizeof(double)), 0)
+              << "L " << L << " lane " << l << " entry " << k;
+      }
+    }
+    // The starts within 1e-4 rad are finished on the lanes.
+    EXPECT_GT(finished, lanes / 2) << "L " << L;
+    std::printf("%d lanes: %d of %d finished on the vector path\n", L, finished, lanes);
+  }
 }
 
 // The element pass's product K0 U (element_product.h) on the path this CPU takes (AVX2 where it
