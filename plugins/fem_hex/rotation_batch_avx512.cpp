@@ -11,16 +11,8 @@
 namespace deform::fem_hex::rotation {
 
 typedef double Lanes __attribute__((vector_size(64)));
-using LaneMask = decltype(Lanes{} > 0.0);
-
 inline Lanes lanesSqrt(Lanes x) {
   return (Lanes)_mm512_sqrt_pd((__m512d)x);
-}
-inline Lanes lanesAbs(Lanes x) {
-  return (Lanes)((LaneMask)x & (LaneMask{} + 0x7fffffffffffffffLL));
-}
-inline Lanes lanesSelect(LaneMask m, Lanes a, Lanes b) {
-  return (Lanes)(((LaneMask)a & m) | ((LaneMask)b & ~m));
 }
 
 }  // namespace deform::fem_hex::rotation

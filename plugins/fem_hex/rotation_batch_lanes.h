@@ -1,9 +1,26 @@
-// The body of the batch paths of rotation_batch.h for one vector type V of L doubles. Included by
-// the vector units after they declare lanesSqrt, lanesAbs and lanesSelect for V and its mask
-// type (rotation_step.h names them unqualified, so they must be declared before it).
+// The body of the batch paths of rotation_batch.h for one GCC vector type V of L doubles.
+// Included by the vector units after they declare lanesSqrt for V: rotation_step.h names the
+// lane operations unqualified, so every overload must be declared before it.
 #pragma once
 
 #include <cstring>
+
+namespace deform::fem_hex::rotation {
+
+/// |x| on vector lanes (the sign bit cleared).
+template <class V>
+inline V lanesAbs(V x) {
+  using Mask = decltype(x > 0.0);
+  return (V)((Mask)x & (Mask{} + 0x7fffffffffffffffLL));
+}
+
+/// Lane by lane m ? a : b, m the result of a comparison (all bits set or none).
+template <class Mask, class V>
+inline V lanesSelect(Mask m, V a, V b) {
+  return (V)(((Mask)a & m) | ((Mask)b & ~m));
+}
+
+}  // namespace deform::fem_hex::rotation
 
 #include "rotation_step.h"
 
