@@ -314,10 +314,8 @@ bool EquilibriumSolver::factorize(const VecX& x, const InertiaTerms* in, bool in
       const SerialOpenMpScope serial;
       m_chol->factorize(m_Kff);
       m_chol->dropFloatFactor();
-      if (m_floatPreconditioner && m_chol->info() == Eigen::Success) {
-        m_chol->buildFloatFactor(m_halfPreconditioner ? CholeskySolver::Precision::Float16
-                                                      : CholeskySolver::Precision::Float32);
-      }
+      if (m_preconditionerCopy && m_chol->info() == Eigen::Success)
+        m_chol->buildFloatFactor(*m_preconditionerCopy);
     }
     if (m_chol->info() == Eigen::Success) {
       if (attempt > 0) ++fallbacks;
@@ -448,8 +446,7 @@ SolveReport EquilibriumSolver::solve(const LoadCase& loads, VecX& x, const VecX&
   const auto start = Clock::now();
   SolveReport rep;
   m_report = &rep;
-  m_floatPreconditioner = opt.floatPreconditioner;
-  m_halfPreconditioner = opt.halfPreconditioner;
+  m_preconditionerCopy = opt.preconditionerCopy;
   const int ndof = 3 * m_sys.numNodes();
   // Constrained nodes and their final targets; fixed wins over prescribed.
   VecX target = x;

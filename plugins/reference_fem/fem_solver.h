@@ -64,6 +64,7 @@
 #include <array>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -127,13 +128,12 @@ struct SolveOptions {
   /// maxFailedLoadSteps. Bounds a solve that crosses a long non-convex stretch, or has no
   /// equilibrium within reach, in a time known beforehand (deterministic, unlike a wall clock).
   int maxSolveIterations = 0;
-  /// The CG iterations of the inexact Newton steps precondition with a float copy of the factor
-  /// (CholeskySolver::solveFloatInto: half the memory traffic of the triangular solves, which
-  /// dominate a CG iteration; the CG and every direct solve stay in double, so the tolerance and
-  /// the answer are the same). Off: CHOLMOD's double solve. halfPreconditioner: the copy in
-  /// IEEE binary16 (CholeskySolver::Precision::Float16, a quarter of the double factor's bytes).
-  bool floatPreconditioner = false;
-  bool halfPreconditioner = false;
+  /// The CG iterations of the inexact Newton steps precondition with a float (Float32, half the
+  /// double factor's bytes) or half (Float16, a quarter) copy of the factor
+  /// (CholeskySolver::solveFloatInto: the triangular solves dominate a CG iteration and stream the
+  /// whole factor; the CG and every direct solve stay in double, so the tolerance and the answer
+  /// are the same). None: CHOLMOD's double solve.
+  std::optional<CholeskySolver::Precision> preconditionerCopy;
   /// Quasi-static solves: false when state x is no state of the solid (the model's use: its
   /// surface passes through itself away from the held nodes; the reference has no self-contact).
   /// An accepted load step short of the whole load whose state it refuses ends the solve there
@@ -369,9 +369,9 @@ class EquilibriumSolver {
   double m_factorFlops = 0;
   std::unique_ptr<CholeskySolver> m_chol;
   VecX m_gradient;
-  SolveReport* m_report = nullptr;     ///< the report of the running solve (timings), else null
-  bool m_floatPreconditioner = false;  ///< SolveOptions::floatPreconditioner of the running solve
-  bool m_halfPreconditioner = false;   ///< SolveOptions::halfPreconditioner of the running solve
+  SolveReport* m_report = nullptr;  ///< the report of the running solve (timings), else null
+  /// SolveOptions::preconditionerCopy of the running solve.
+  std::optional<CholeskySolver::Precision> m_preconditionerCopy;
 };
 
 /// Convenience: static equilibrium of `system` under `loads` from the rest state. Returns the 3N

@@ -32,12 +32,18 @@ class ReferenceFemModel final : public Model {
     // solves at nu 0.3, the half copy another 10-30% (where the CPU converts halves in hardware);
     // under mean dilatation (nu >= 0.45) the CG paths the float copy changes cost as many
     // factorisations as it saves.
-    const bool autoCopy =
-        config.preconditioner == "auto" && volumetric != VolumetricFormulation::MeanDilatation;
-    m_options.floatPreconditioner =
-        config.preconditioner == "float32" || config.preconditioner == "float16" || autoCopy;
-    m_options.halfPreconditioner =
-        config.preconditioner == "float16" || (autoCopy && CholeskySolver::halfIsFast());
+    using Precision = CholeskySolver::Precision;
+    if (config.preconditioner == "float16") {
+      m_options.preconditionerCopy = Precision::Float16;
+    } else if (config.preconditioner == "float32") {
+      m_options.preconditionerCopy = Precision::Float32;
+    } else if (config.preconditioner == "auto" &&
+               volumetric != VolumetricFormulation::MeanDilatation) {
+      m_options.preconditionerCopy =
+          CholeskySolver::halfIsFast() ? Precision::Float16 : Precision::Float32;
+    } else {
+      m_options.preconditionerCopy.reset();  // float64, or auto under mean dilatation
+    }
     m_alpha = config.rayleighAlpha;
     m_beta = config.rayleighBeta;
     m_dt = setup.dt;

@@ -23,9 +23,9 @@ struct ReferenceFemConfig {
   ElementOrder order = ElementOrder::Quadratic;
   VolumetricChoice volumetric = VolumetricChoice::Auto;  ///< resolved against the organ's nu
   SolveOptions options;                                  ///< Newton tolerance and caps
-  /// "auto", "float16", "float32", "float64": SolveOptions::floatPreconditioner and
-  /// halfPreconditioner, auto resolved at init (float16, float32 without F16C,
-  /// unless the volumetric term is mean_dilatation, then float64).
+  /// "auto", "float16", "float32", "float64": SolveOptions::preconditionerCopy, auto resolved
+  /// at init (float16, float32 without F16C, unless the volumetric term is mean_dilatation, then
+  /// float64).
   std::string preconditioner = "auto";
   bool stopAtFold = true;  ///< quasi-static: stop a solve whose surface passes through itself
   Real rayleighAlpha = 0;  ///< 1/s (dynamic only)

@@ -472,8 +472,9 @@ TEST(ReferenceFemSolve, FloatAndHalfPreconditionersGiveTheDoubleAnswer) {
   VecX x[3];
   for (const int copy : {0, 1, 2}) {  // none, float, half
     SolveOptions opt;
-    opt.floatPreconditioner = copy > 0;
-    opt.halfPreconditioner = copy == 2;
+    if (copy > 0)
+      opt.preconditionerCopy =
+          copy == 2 ? CholeskySolver::Precision::Float16 : CholeskySolver::Precision::Float32;
     SolveReport rep;
     x[copy] = solveEquilibrium(sys, lc, opt, &rep);
     ASSERT_TRUE(rep.converged) << copy;
