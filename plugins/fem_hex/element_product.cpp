@@ -5,15 +5,16 @@
 
 namespace deform::fem_hex {
 
-namespace {
-
+bool hasAvx2Units() {
 #if defined(DEFORM_FEM_HEX_AVX2)
-/// Whether this CPU runs the AVX2 units (built on x86-64 with GCC or Clang only).
-bool avx2() {
   static const bool kAvx2 = __builtin_cpu_supports("avx2");
   return kAvx2;
-}
+#else
+  return false;
 #endif
+}
+
+namespace {
 
 void multiplyElementsScalar(const double* K0, const double* U, double* KU, int E) {
   for (int e = 0; e < E; ++e) {
@@ -70,7 +71,7 @@ void scatterRotatedScalar(const int* hexes, const double* R, const double* KU, c
 void gatherRotated(const int* hexes, const double* R, const double* in, const double* rest,
                    double a, double b, double* U, int E) {
 #if defined(DEFORM_FEM_HEX_AVX2)
-  if (avx2()) return detail::gatherRotatedAvx2(hexes, R, in, rest, a, b, U, E);
+  if (hasAvx2Units()) return detail::gatherRotatedAvx2(hexes, R, in, rest, a, b, U, E);
 #endif
   gatherRotatedScalar(hexes, R, in, rest, a, b, U, E);
 }
@@ -78,14 +79,14 @@ void gatherRotated(const int* hexes, const double* R, const double* in, const do
 void scatterRotated(const int* hexes, const double* R, const double* KU, const double* fill,
                     double scale, double* out, int E) {
 #if defined(DEFORM_FEM_HEX_AVX2)
-  if (avx2()) return detail::scatterRotatedAvx2(hexes, R, KU, fill, scale, out, E);
+  if (hasAvx2Units()) return detail::scatterRotatedAvx2(hexes, R, KU, fill, scale, out, E);
 #endif
   scatterRotatedScalar(hexes, R, KU, fill, scale, out, E);
 }
 
 void multiplyElements(const double* K0, const double* U, double* KU, int E) {
 #if defined(DEFORM_FEM_HEX_AVX2)
-  if (avx2()) return detail::multiplyElementsAvx2(K0, U, KU, E);
+  if (hasAvx2Units()) return detail::multiplyElementsAvx2(K0, U, KU, E);
 #endif
   multiplyElementsScalar(K0, U, KU, E);
 }

@@ -6,6 +6,10 @@
 
 namespace deform::fem_hex {
 
+/// Whether this CPU runs fem_hex's AVX2 units (false where they are not built: x86-64 with GCC
+/// or Clang only). The one CPU check behind every AVX2 path of the plugin.
+bool hasAvx2Units();
+
 /// KU = K0 U: K0 24 x 24, U and KU 24 x E, all column-major. Each entry is summed over K0's
 /// columns in ascending order (the AVX2 path: four rows per register, two elements per pass).
 void multiplyElements(const double* K0, const double* U, double* KU, int E);

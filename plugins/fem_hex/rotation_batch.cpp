@@ -1,13 +1,13 @@
 // The run-time choice of the batch path of rotation_batch.h.
 #include "rotation_batch.h"
 
+#include "element_product.h"
+
 namespace deform::fem_hex {
 
 int rotationBatchLanes() {
 #if defined(DEFORM_FEM_HEX_AVX2)
-  static const int kLanes = __builtin_cpu_supports("avx512f") ? 8
-                            : __builtin_cpu_supports("avx2")  ? 4
-                                                              : 1;
+  static const int kLanes = !hasAvx2Units() ? 1 : __builtin_cpu_supports("avx512f") ? 8 : 4;
   return kLanes;
 #else
   return 1;
