@@ -169,6 +169,9 @@ Mat3 hexCentreGradient(const Vec3& size, const Mat38& x) {
 
 namespace {
 
+/// The scalar lane of rotation_step.h.
+using Lane = simd::ScalarLanes<double>;
+
 Quat rotationFromSvd(const Mat3& F) {
   // The maximiser of tr(R^T F) over proper rotations: R = U diag(1, 1, det(U V^T)) V^T.
   const Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
@@ -187,7 +190,7 @@ RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations
   // The step's arithmetic is rotation_step.h's, shared with the batch paths (rotation_batch.h).
   double qw = q.w(), qx = q.x(), qy = q.y(), qz = q.z();
   for (; out.iterations < maxIterations; ++out.iterations) {
-    const auto s = rotation::rotationStep<double, bool>(F.data(), qw, qx, qy, qz);
+    const auto s = rotation::rotationStep<Lane>(F.data(), qw, qx, qy, qz);
     double omega[3] = {s.omega[0], s.omega[1], s.omega[2]};
     double w = s.w;
     if (!(w > tolerance)) {
@@ -199,7 +202,7 @@ RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations
     // 2 tr(A) and lambda_min(H) >= det / lambda_max^2, that factor is at most 4 tr(A)^3 / det.
     // Where the step after this one would be below the tolerance, it is not taken: one
     // evaluation of g and H less per element and time step in the usual warm-started case.
-    const bool last = s.newton && rotation::isLastStep(w, s.trA, s.det, tolerance);
+    const bool last = s.newton && rotation::isLastStep<Lane>(w, s.trA, s.det, tolerance);
     if (w > 1) {  // a Newton step beyond a radian is outside its quadratic model
       for (double& o : omega) o /= w;
       w = 1;
@@ -207,12 +210,12 @@ RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations
     // Near convergence (the usual case when warm-started) the first-order quaternion of the
     // axis-angle update avoids sin/cos; the fixed point omega = 0 is the same either way.
     if (w < 1e-3) {
-      rotation::rotateAndNormalise(1.0, 0.5 * omega[0], 0.5 * omega[1], 0.5 * omega[2], qw, qx, qy,
-                                   qz);
+      rotation::rotateAndNormalise<Lane>(1.0, 0.5 * omega[0], 0.5 * omega[1], 0.5 * omega[2], qw,
+                                         qx, qy, qz);
     } else {
       const double sinHalf = std::sin(0.5 * w) / w;
-      rotation::rotateAndNormalise(std::cos(0.5 * w), sinHalf * omega[0], sinHalf * omega[1],
-                                   sinHalf * omega[2], qw, qx, qy, qz);
+      rotation::rotateAndNormalise<Lane>(std::cos(0.5 * w), sinHalf * omega[0], sinHalf * omega[1],
+                                         sinHalf * omega[2], qw, qx, qy, qz);
     }
     if (last) {
       ++out.iterations;
@@ -232,7 +235,7 @@ RotationExtraction extractRotationInfo(const Mat3& F, Quat& q, int maxIterations
 
 Mat3 rotationMatrixOf(const Quat& q) {
   Mat3 R;
-  rotation::rotationMatrix(q.w(), q.x(), q.y(), q.z(), R.data());
+  rotation::rotationMatrix<Lane>(q.w(), q.x(), q.y(), q.z(), R.data());
   return R;
 }
 

@@ -6,16 +6,7 @@
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #endif
-#include <immintrin.h>
-
-namespace deform::fem_hex::rotation {
-
-typedef double Lanes __attribute__((vector_size(64)));
-inline Lanes lanesSqrt(Lanes x) {
-  return (Lanes)_mm512_sqrt_pd((__m512d)x);
-}
-
-}  // namespace deform::fem_hex::rotation
+#include <deform/kernels/simd_lanes_avx512.h>
 
 #include "rotation_batch.h"
 #include "rotation_batch_lanes.h"
@@ -24,7 +15,7 @@ namespace deform::fem_hex::detail {
 
 void rotationStepsAvx512(const double* F, double* q, double* R, signed char* outcome,
                          double tolerance, int maxSteps) {
-  rotation::stepsOnLanes<rotation::Lanes, 8>(F, q, R, outcome, tolerance, maxSteps);
+  rotation::stepsOnLanes<simd::Avx512Double8>(F, q, R, outcome, tolerance, maxSteps);
 }
 
 }  // namespace deform::fem_hex::detail

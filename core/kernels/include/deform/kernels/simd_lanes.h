@@ -1,7 +1,8 @@
-// deformbench kernels: the lane interface of the batched constraint kernels (the core's isometric
-// bending, the hybrid FEM+PBD model's batched projections). A kernel written once as a template
-// over L runs one constraint per call with ScalarLanes<T> (the reference, and the tail of each
-// colour) or eight / four per call with the AVX2 lanes of deform/kernels/simd_lanes_avx2.h.
+// deformbench kernels: the lane interface of the batched kernels (the core's isometric bending,
+// the hybrid FEM+PBD model's batched projections, fem_hex's element rotations). A kernel written
+// once as a template over L runs one item per call with ScalarLanes<T> (the reference, and the
+// tail of each colour) or eight / four per call with the AVX2 lanes of
+// deform/kernels/simd_lanes_avx2.h (eight doubles: deform/kernels/simd_lanes_avx512.h).
 //
 // L::T is the scalar, L::V a vector of kWidth lanes, L::M a lane mask. Positions are padded rows
 // (x, y, z, 0): loadRows / addRows take each lane's row offset in scalars, loadPoints /
@@ -28,6 +29,7 @@ struct ScalarLanes {
   static V abs(V a) { return std::fabs(a); }
   static M gt(V a, V b) { return a > b; }
   static M lt(V a, V b) { return a < b; }
+  static M le(V a, V b) { return a <= b; }
   static M ne(V a, V b) { return a != b; }
   static M band(M a, M b) { return a && b; }
   static M notMask(M a) { return !a; }

@@ -57,6 +57,7 @@ struct Avx2Double4 : Avx2Rows<double> {
   static V abs(V a) { return _mm256_andnot_pd(_mm256_set1_pd(-0.0), a); }
   static M gt(V a, V b) { return _mm256_cmp_pd(a, b, _CMP_GT_OQ); }
   static M lt(V a, V b) { return _mm256_cmp_pd(a, b, _CMP_LT_OQ); }
+  static M le(V a, V b) { return _mm256_cmp_pd(a, b, _CMP_LE_OQ); }
   static M ne(V a, V b) { return _mm256_cmp_pd(a, b, _CMP_NEQ_OQ); }
   static M band(M a, M b) { return _mm256_and_pd(a, b); }
   static M notMask(M a) { return _mm256_xor_pd(a, _mm256_castsi256_pd(_mm256_set1_epi64x(-1))); }
@@ -79,6 +80,7 @@ struct Avx2Float8 : Avx2Rows<float> {
   static V max(V a, V b) { return _mm256_max_ps(a, b); }
   static M gt(V a, V b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
   static M lt(V a, V b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
+  static M le(V a, V b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
   static M ne(V a, V b) { return _mm256_cmp_ps(a, b, _CMP_NEQ_OQ); }
   static M band(M a, M b) { return _mm256_and_ps(a, b); }
   static M notMask(M a) { return _mm256_xor_ps(a, _mm256_castsi256_ps(_mm256_set1_epi32(-1))); }
