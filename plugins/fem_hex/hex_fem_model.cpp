@@ -531,12 +531,13 @@ bool HexFemModel::updateRotations() {
   // F = sum_a x_a (grad N_a)^T into f (column-major), summed over the nodes in order.
   const auto gradientInto = [&](int e, double* f, int stride) {
     const auto& hex = m_grid.hexes[e];
-    for (int k = 0; k < 9; ++k) f[k * stride] = 0.0;
+    double sum[9] = {};  // summed in registers, then stored: the compiler cannot tell f from m_x
     for (int a = 0; a < 8; ++a) {
       const double* x = m_x.data() + 3 * hex[a];
       for (int j = 0; j < 3; ++j)
-        for (int i = 0; i < 3; ++i) f[(i + 3 * j) * stride] += x[i] * G(j, a);
+        for (int i = 0; i < 3; ++i) sum[i + 3 * j] += x[i] * G(j, a);
     }
+    for (int k = 0; k < 9; ++k) f[k * stride] = sum[k];
   };
   const auto gradient = [&](int e) {
     Mat3 F;
