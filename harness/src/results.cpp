@@ -4,6 +4,7 @@
 #include <deform/sdk/cache.h>
 #include <deform_harness/results.h>
 #include <deform_harness/runner.h>
+#include <dlfcn.h>
 
 #include <array>
 #include <chrono>
@@ -60,6 +61,23 @@ std::string vectorUnits() {
 #endif
 }
 
+/// The kernels of the OpenBLAS the plugins loaded (openblas_get_corename: "Cooperlake",
+/// "Haswell", ...; OPENBLAS_CORETYPE overrides OpenBLAS's own choice), "" when none is loaded or
+/// the BLAS is another. The plugins load it with RTLD_LOCAL, so it is found by its file name.
+std::string loadedBlasKernels() {
+  for (const char* lib : {"libblas.so.3", "libopenblas.so.0"}) {
+    void* handle = ::dlopen(lib, RTLD_NOW | RTLD_NOLOAD);
+    if (!handle) continue;
+    using CoreNameFn = char* (*)();
+    const auto coreName = reinterpret_cast<CoreNameFn>(::dlsym(handle, "openblas_get_corename"));
+    const char* name = coreName ? coreName() : nullptr;
+    std::string kernels = name ? name : "";
+    ::dlclose(handle);
+    if (!kernels.empty()) return kernels;
+  }
+  return "";
+}
+
 std::string gitDescribe() {
   const std::string src = DEFORM_SOURCE_DIR;
   if (src.empty() || !fs::exists(fs::path(src) / ".git")) return "";
@@ -84,6 +102,7 @@ MachineInfo machineInfo() {
   MachineInfo m;
   m.cpu = cpuModel();
   m.vectorUnits = vectorUnits();
+  m.blas = loadedBlasKernels();
 #if defined(__clang__)
   m.compiler = std::string("Clang ") + __clang_version__;
 #elif defined(__GNUC__)
@@ -426,6 +445,7 @@ json resultsJson(const Scene& scene, const Organ& organ, const std::vector<std::
   doc["interaction"] = interactionJson(scene, organ);
   doc["machine"] = {{"cpu", machine.cpu},
                     {"vector_units", machine.vectorUnits},
+                    {"blas", machine.blas},
                     {"compiler", machine.compiler},
                     {"build_type", machine.buildType},
                     {"git", machine.git},

@@ -18,6 +18,10 @@ struct MachineInfo {
   /// The widest vector unit the kernels use here: "avx512" (F, VL, DQ), "avx2", "sse2", or ""
   /// off x86-64. One model name covers CPUs with and without AVX-512, whose speeds differ 2-5x.
   std::string vectorUnits;
+  /// Kernels of the OpenBLAS the plugins loaded ("Cooperlake", "Haswell": openblas_get_corename,
+  /// which the environment's OPENBLAS_CORETYPE overrides), "" when none is loaded yet or the BLAS
+  /// is another. The reference's and fem_hex's factorisations run 15-20% apart between kernels.
+  std::string blas;
   std::string compiler;   ///< e.g. "GCC 12.2.0"
   std::string buildType;  ///< CMAKE_BUILD_TYPE of the harness
   std::string git;        ///< git describe of the source tree, "" when unavailable
