@@ -25,7 +25,8 @@ import json, sys
 doc = json.load(open(sys.argv[1]))
 m = doc.get("machine", {})
 load = lambda k: " ".join(f"{x:.2f}" for x in m.get(k, [])) or "-"
-print(f"machine: {m.get('cpu', '?')}, {m.get('cores', '?')} cores; load average {load('load_average')}"
+print(f"machine: {m.get('cpu', '?')}, {m.get('vector_units', '?')}, {m.get('cores', '?')} cores,"
+      f" OpenBLAS kernels {m.get('blas') or '?'}; load average {load('load_average')}"
       f" at the start, {load('load_average_end')} at the end")
 print(f"{'case':40s} {'status':9s} {'median ms':>10s} {'min':>8s} {'max':>8s} {'x PBD':>7s}")
 for c in doc["cases"]:

@@ -201,6 +201,13 @@ bool sameIdleMachine(const json& a, const json& b, std::string& why) {
           mb["cores"].dump() + " cores)";
     return false;
   }
+  // OpenBLAS's kernels (which the environment can choose) move the step times of the models that
+  // solve with CHOLMOD or dense BLAS; a file from before `blas` was recorded is not refused.
+  const std::string blasA = ma.value("blas", ""), blasB = mb.value("blas", "");
+  if (!blasA.empty() && !blasB.empty() && blasA != blasB) {
+    why = "other OpenBLAS kernels (" + blasA + "; " + blasB + ")";
+    return false;
+  }
   const double cores = ma["cores"].get<double>();
   for (const json* d : {&ma, &mb}) {
     const json& l = (*d)["load_average"];

@@ -1261,6 +1261,16 @@ TEST(Bench, CompareJudgesEachCaseByItsRatioToPbdInTheSameRun) {
     EXPECT_FALSE(other.absolute);
     EXPECT_NE(other.absoluteWhy.find("other machines"), std::string::npos) << other.absoluteWhy;
   }
+  // Other OpenBLAS kernels (OPENBLAS_CORETYPE) on the same CPU; one file not saying is no bar.
+  json kernels = b;
+  kernels["machine"]["blas"] = "Haswell";
+  EXPECT_TRUE(compareBench(a, kernels, 0.25).absolute);
+  a["machine"]["blas"] = "Cooperlake";
+  const BenchComparison otherBlas = compareBench(a, kernels, 0.25);
+  EXPECT_FALSE(otherBlas.absolute);
+  EXPECT_NE(otherBlas.absoluteWhy.find("other OpenBLAS kernels (Cooperlake; Haswell)"),
+            std::string::npos)
+      << otherBlas.absoluteWhy;
   b["machine"]["load_average"] = {1.5};  // busy: over half its cores
   const BenchComparison busy = compareBench(a, b, 0.25);
   EXPECT_FALSE(busy.absolute);
