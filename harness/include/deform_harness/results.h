@@ -20,7 +20,8 @@ struct MachineInfo {
   std::string vectorUnits;
   /// Kernels of the OpenBLAS the plugins loaded ("Cooperlake", "Haswell": openblas_get_corename,
   /// which the environment's OPENBLAS_CORETYPE overrides), "" when none is loaded yet or the BLAS
-  /// is another. The reference's and fem_hex's factorisations run 15-20% apart between kernels.
+  /// is another. reference_fem's factorisations took 14-27% less with the AVX-512 kernels than
+  /// with the AVX2 ones on the AMD EPYC VM (docs/notes/h6-amd-ratios.md).
   std::string blas;
   std::string compiler;   ///< e.g. "GCC 12.2.0"
   std::string buildType;  ///< CMAKE_BUILD_TYPE of the harness
