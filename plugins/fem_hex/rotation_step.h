@@ -62,13 +62,13 @@ inline RotationStep<L> rotationStep(const typename L::V* f, typename L::V qw, ty
   const auto a = [&](int i, int j) {
     return (f[i] * r[j] + f[i + 3] * r[j + 3]) + f[i + 6] * r[j + 6];
   };
-  const V half = L::set1(-0.5), zero = L::set1(0.0);
+  const V minusHalf = L::set1(-0.5), zero = L::set1(0.0);
   const V a00 = a(0, 0), a11 = a(1, 1), a22 = a(2, 2);
   const V trA = (a00 + a11) + a22;
   const V h00 = trA - a00, h11 = trA - a11, h22 = trA - a22;
-  const V h01 = half * (a(0, 1) + a(1, 0));
-  const V h02 = half * (a(0, 2) + a(2, 0));
-  const V h12 = half * (a(1, 2) + a(2, 1));
+  const V h01 = minusHalf * (a(0, 1) + a(1, 0));
+  const V h02 = minusHalf * (a(0, 2) + a(2, 0));
+  const V h12 = minusHalf * (a(1, 2) + a(2, 1));
   // The adjugate of the symmetric H: its columns are cross products of H's columns.
   const V c0x = h11 * h22 - h12 * h12, c0y = h12 * h02 - h01 * h22, c0z = h01 * h12 - h11 * h02;
   const V c1x = h12 * h02 - h22 * h01, c1y = h22 * h00 - h02 * h02, c1z = h02 * h01 - h12 * h00;
