@@ -299,7 +299,7 @@ ojson runBench(PluginLoader& loader, const BenchOptions& options, Progress* prog
     doc["cases"].push_back(entry);
   }
   doc["machine"]["load_average_end"] = loadAverage();
-  doc["machine"]["blas"] = machineInfo().blas;  // the cases have loaded their plugins by now
+  doc["machine"]["blas"] = loadedBlasKernels();  // the cases have loaded their plugins by now
   // Each case's ratio to PBD on its scene, in this run: what CI compares across machines.
   const json plain = json::parse(doc.dump());
   for (size_t i = 0; i < doc["cases"].size(); ++i) {

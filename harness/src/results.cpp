@@ -61,23 +61,6 @@ std::string vectorUnits() {
 #endif
 }
 
-/// The kernels of the OpenBLAS the plugins loaded (openblas_get_corename: "Cooperlake",
-/// "Haswell", ...; OPENBLAS_CORETYPE overrides OpenBLAS's own choice), "" when none is loaded or
-/// the BLAS is another. The plugins load it with RTLD_LOCAL, so it is found by its file name.
-std::string loadedBlasKernels() {
-  for (const char* lib : {"libblas.so.3", "libopenblas.so.0"}) {
-    void* handle = ::dlopen(lib, RTLD_NOW | RTLD_NOLOAD);
-    if (!handle) continue;
-    using CoreNameFn = char* (*)();
-    const auto coreName = reinterpret_cast<CoreNameFn>(::dlsym(handle, "openblas_get_corename"));
-    const char* name = coreName ? coreName() : nullptr;
-    std::string kernels = name ? name : "";
-    ::dlclose(handle);
-    if (!kernels.empty()) return kernels;
-  }
-  return "";
-}
-
 std::string gitDescribe() {
   const std::string src = DEFORM_SOURCE_DIR;
   if (src.empty() || !fs::exists(fs::path(src) / ".git")) return "";
@@ -97,6 +80,21 @@ json finite(double v) {
 }
 
 }  // namespace
+
+// The plugins load OpenBLAS with RTLD_LOCAL, so it is found by its file name.
+std::string loadedBlasKernels() {
+  for (const char* lib : {"libblas.so.3", "libopenblas.so.0"}) {
+    void* handle = ::dlopen(lib, RTLD_NOW | RTLD_NOLOAD);
+    if (!handle) continue;
+    using CoreNameFn = char* (*)();
+    const auto coreName = reinterpret_cast<CoreNameFn>(::dlsym(handle, "openblas_get_corename"));
+    const char* name = coreName ? coreName() : nullptr;
+    std::string kernels = name ? name : "";
+    ::dlclose(handle);
+    if (!kernels.empty()) return kernels;
+  }
+  return "";
+}
 
 MachineInfo machineInfo() {
   MachineInfo m;

@@ -30,6 +30,8 @@ struct MachineInfo {
   std::string version;    ///< deformbench version
 };
 MachineInfo machineInfo();
+/// MachineInfo::blas alone: the kernels of the OpenBLAS loaded in this process, "" when none is.
+std::string loadedBlasKernels();
 
 /// Folder name for a run label: letters, digits, '.', '-' and '_' kept, everything else '_'.
 std::string sanitizeLabel(const std::string& label);
